@@ -1,0 +1,36 @@
+# Two commands on a fresh machine:  make demo   and   make test
+SHELL := /bin/bash
+.DEFAULT_GOAL := help
+RUN := scripts/run.sh
+
+help:
+	@echo "make demo       run the node graph on the default input, write out/ (bag, animation, plots)"
+	@echo "make test       bootstrap if needed and run the test suite"
+	@echo "make setup      only bootstrap (venv / ROS 2, launch tooling, colcon build)"
+	@echo "make build-db   build the motion database from ../shared/mocap/cmu (or built-in motions)"
+	@echo "make evaluate   accuracy table of every method on the sensor-model streams"
+	@echo "make bench      end-to-end latency/throughput benchmark"
+	@echo "make soak       10-minute soak of the running graph"
+
+setup:
+	@scripts/setup.sh
+
+test:
+	@scripts/run-tests.sh
+
+demo:
+	@$(RUN) ros2 run kinect_bringup demo
+
+build-db:
+	@$(RUN) ros2 run skeleton_core build_db $(ARGS)
+
+evaluate:
+	@$(RUN) ros2 run kinect_bringup evaluate $(ARGS)
+
+bench:
+	@$(RUN) ros2 run kinect_bringup bench $(ARGS)
+
+soak:
+	@$(RUN) ros2 run kinect_bringup soak $(ARGS)
+
+.PHONY: help setup test demo build-db evaluate bench soak

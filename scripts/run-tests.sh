@@ -1,0 +1,20 @@
+#!/usr/bin/env bash
+# The one test command (README, `make test`, .ci/run): bootstrap if needed, then pytest.
+#   scripts/run-tests.sh [pytest args]      e.g. scripts/run-tests.sh -k reliability
+set -euo pipefail
+root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
+"$root/scripts/setup.sh"
+set +u
+# shellcheck disable=SC1091
+source "$root/scripts/env.sh"
+set -u
+cd "$root"
+# each run gets its own DDS domain (tests/conftest.py refines this per worker)
+export ROS_DOMAIN_ID="${KP_TEST_DOMAIN_ID:-$(( 1 + $$ % 100 ))}"
+set +e
+python -m pytest tests "$@"
+rc=$?
+set -e
+[ "$rc" = 5 ] && { echo "pytest: no tests were collected"; exit 1; }
+exit "$rc"

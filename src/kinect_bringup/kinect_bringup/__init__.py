@@ -1,0 +1,1 @@
+"""Launch files, parameter files, the one-process pipeline, the demo, benchmark and soak commands."""

@@ -1,0 +1,1 @@
+"""MuJoCo physics character PD-tracking reconstructed postures (Shum & Ho 2012), with virtual joints, objects and pushes."""

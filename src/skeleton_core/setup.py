@@ -1,0 +1,25 @@
+from setuptools import find_packages, setup
+
+package_name = 'skeleton_core'
+
+setup(
+    name=package_name,
+    version='0.1.0',
+    packages=find_packages(exclude=['test']),
+    data_files=[
+        ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
+        ('share/' + package_name, ['package.xml']),
+    ],
+    install_requires=['setuptools'],
+    zip_safe=True,
+    maintainer='Kinect Posture Team',
+    maintainer_email='robotics@example.com',
+    description='Skeleton model, mocap import, motion database, sensor model and evaluation.',
+    license='Apache-2.0',
+    entry_points={
+        'console_scripts': [
+            'build_db = skeleton_core.database_cli:main',
+            'import_uiprmd = skeleton_core.uiprmd_cli:main',
+        ],
+    },
+)

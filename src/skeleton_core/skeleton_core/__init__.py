@@ -1,0 +1,1 @@
+"""Pure-Python core of the Kinect posture pipeline (no rclpy). See :mod:`skeleton_core.model`."""

@@ -1,0 +1,181 @@
+"""Conversions between ``skeleton_msgs`` messages and numpy arrays, with validation.
+
+The library works on :class:`SkeletonFrame` (numpy arrays); nodes convert at the boundary with
+:func:`skeleton_from_msg` / :func:`skeleton_to_msg`. Message classes are imported lazily, so this
+module imports no rclpy and the rest of the library can be used without a ROS 2 installation.
+
+Malformed input raises :class:`SkeletonFormatError` with a short, user-readable cause
+(``SkeletonFormatError.cause`` is a stable key nodes use to log once per cause and count drops).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from typing import Iterable, List, Optional
+
+import numpy as np
+
+from .model import NUM_JOINTS, TRACKING_STATES
+
+MAX_ABS_COORDINATE = 50.0  # m; anything farther from the sensor is garbage, not a person
+
+
+class SkeletonFormatError(ValueError):
+    """A skeleton message or array that cannot be used. ``cause`` is a short stable key."""
+
+    def __init__(self, cause: str, detail: str):
+        super().__init__(f'{cause}: {detail}')
+        self.cause = cause
+        self.detail = detail
+
+
+@dataclass
+class SkeletonFrame:
+    """One user's skeleton as arrays (REP-103, metres, in ``frame_id``)."""
+
+    positions: np.ndarray                     # (20, 3) float64
+    tracking_state: np.ndarray                # (20,) uint8
+    reliability: np.ndarray = field(default_factory=lambda: np.full(NUM_JOINTS, np.nan, np.float32))
+    orientations: Optional[np.ndarray] = None  # (20, 4) x, y, z, w; None = unknown (identity)
+    user_id: int = 0
+    stamp_ns: int = 0
+    frame_id: str = ''
+
+    def copy(self, **changes) -> 'SkeletonFrame':
+        out = replace(self, positions=self.positions.copy(),
+                      tracking_state=self.tracking_state.copy(),
+                      reliability=self.reliability.copy(),
+                      orientations=None if self.orientations is None else self.orientations.copy())
+        return replace(out, **changes) if changes else out
+
+
+def validate_arrays(positions, tracking_state=None, reliability=None, orientations=None):
+    """Check shapes and values; return them as arrays or raise :class:`SkeletonFormatError`."""
+    p = np.asarray(positions, dtype=float)
+    if p.shape != (NUM_JOINTS, 3):
+        raise SkeletonFormatError('wrong length', f'positions must be ({NUM_JOINTS}, 3), got {p.shape}')
+    if not np.all(np.isfinite(p)):
+        bad = np.flatnonzero(~np.isfinite(p).all(axis=1)).tolist()
+        raise SkeletonFormatError('non-finite position', f'joints {bad} are NaN or infinite')
+    if np.any(np.abs(p) > MAX_ABS_COORDINATE):
+        raise SkeletonFormatError('coordinate out of range',
+                                  f'|coordinate| > {MAX_ABS_COORDINATE} m')
+    if tracking_state is None:
+        t = np.full(NUM_JOINTS, 2, np.uint8)
+    else:
+        t = np.asarray(tracking_state)
+        if t.shape != (NUM_JOINTS,):
+            raise SkeletonFormatError('wrong length',
+                                      f'tracking_state must have {NUM_JOINTS} entries, got {t.shape}')
+        if not np.all(np.isin(t, TRACKING_STATES)):
+            raise SkeletonFormatError('unknown tracking state',
+                                      f'values {sorted(set(t.tolist()) - set(TRACKING_STATES))}')
+        t = t.astype(np.uint8)
+    if reliability is None or len(reliability) == 0:
+        r = np.full(NUM_JOINTS, np.nan, np.float32)
+    else:
+        r = np.asarray(reliability, dtype=np.float32)
+        if r.shape != (NUM_JOINTS,):
+            raise SkeletonFormatError('wrong length',
+                                      f'reliability must have {NUM_JOINTS} entries, got {r.shape}')
+        finite = np.isfinite(r)
+        if np.any(np.isinf(r)) or np.any((r[finite] < 0.0) | (r[finite] > 1.0)):
+            raise SkeletonFormatError('reliability out of range', 'values must be NaN or in [0, 1]')
+    q = None
+    if orientations is not None and len(orientations) > 0:
+        q = np.asarray(orientations, dtype=float)
+        if q.shape != (NUM_JOINTS, 4):
+            raise SkeletonFormatError('wrong length',
+                                      f'orientations must be ({NUM_JOINTS}, 4), got {q.shape}')
+        if not np.all(np.isfinite(q)):
+            raise SkeletonFormatError('non-finite orientation', 'NaN or infinite quaternion')
+        n = np.linalg.norm(q, axis=1)
+        zero = n < 1e-9  # a default-constructed message: identity
+        q[zero] = (0.0, 0.0, 0.0, 1.0)
+        n[zero] = 1.0
+        q = q / n[:, None]
+    return p, t, r, q
+
+
+def stamp_to_ns(stamp) -> int:
+    return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
+
+
+def ns_to_stamp(ns: int, stamp=None):
+    if stamp is None:
+        from builtin_interfaces.msg import Time
+        stamp = Time()
+    stamp.sec = int(ns // 1_000_000_000)
+    stamp.nanosec = int(ns % 1_000_000_000)
+    return stamp
+
+
+def skeleton_from_msg(msg) -> SkeletonFrame:
+    """``skeleton_msgs/Skeleton`` -> :class:`SkeletonFrame` (validated)."""
+    pos = [(pt.x, pt.y, pt.z) for pt in msg.positions]
+    if len(pos) != NUM_JOINTS:
+        raise SkeletonFormatError('wrong length',
+                                  f'positions must have {NUM_JOINTS} entries, got {len(pos)}')
+    quats = [(q.x, q.y, q.z, q.w) for q in msg.orientations]
+    p, t, r, q = validate_arrays(np.array(pos), np.asarray(msg.tracking_state, dtype=np.int64),
+                                 np.asarray(msg.reliability, dtype=np.float32),
+                                 np.array(quats) if quats else None)
+    return SkeletonFrame(positions=p, tracking_state=t, reliability=r, orientations=q,
+                         user_id=int(msg.user_id), stamp_ns=stamp_to_ns(msg.header.stamp),
+                         frame_id=msg.header.frame_id)
+
+
+def skeleton_to_msg(frame: SkeletonFrame, msg=None):
+    """:class:`SkeletonFrame` -> ``skeleton_msgs/Skeleton`` (validated first)."""
+    from geometry_msgs.msg import Point, Quaternion
+    from skeleton_msgs.msg import Skeleton
+
+    p, t, r, q = validate_arrays(frame.positions, frame.tracking_state, frame.reliability,
+                                 frame.orientations)
+    msg = Skeleton() if msg is None else msg
+    msg.header.frame_id = frame.frame_id
+    ns_to_stamp(frame.stamp_ns, msg.header.stamp)
+    msg.user_id = int(frame.user_id)
+    msg.positions = [Point(x=float(a), y=float(b), z=float(c)) for a, b, c in p]
+    if q is None:
+        msg.orientations = [Quaternion(x=0.0, y=0.0, z=0.0, w=1.0) for _ in range(NUM_JOINTS)]
+    else:
+        msg.orientations = [Quaternion(x=float(a), y=float(b), z=float(c), w=float(d))
+                            for a, b, c, d in q]
+    msg.tracking_state = t.tobytes() if isinstance(msg.tracking_state, bytes) else t.tolist()
+    msg.reliability = r.astype(np.float32).tolist()
+    return msg
+
+
+def frames_to_array_msg(frames: Iterable[SkeletonFrame], stamp_ns: int, frame_id: str):
+    """A list of frames -> ``skeleton_msgs/SkeletonArray``."""
+    from skeleton_msgs.msg import SkeletonArray
+
+    out = SkeletonArray()
+    out.header.frame_id = frame_id
+    ns_to_stamp(stamp_ns, out.header.stamp)
+    out.skeletons = [skeleton_to_msg(f) for f in frames]
+    return out
+
+
+def frames_from_array_msg(msg, errors: Optional[List[SkeletonFormatError]] = None
+                          ) -> List[SkeletonFrame]:
+    """``skeleton_msgs/SkeletonArray`` -> frames. Malformed skeletons are skipped and, when
+    ``errors`` is given, appended to it; duplicate user ids keep the first skeleton."""
+    out: List[SkeletonFrame] = []
+    seen = set()
+    for sk in msg.skeletons:
+        try:
+            f = skeleton_from_msg(sk)
+        except SkeletonFormatError as e:
+            if errors is not None:
+                errors.append(e)
+            continue
+        if f.user_id in seen:
+            if errors is not None:
+                errors.append(SkeletonFormatError('duplicate user id', f'user {f.user_id}'))
+            continue
+        seen.add(f.user_id)
+        if not f.frame_id:
+            f.frame_id = msg.header.frame_id
+        out.append(f)
+    return out

@@ -1,0 +1,159 @@
+"""Posture geometry shared by the database, the reconstruction and the evaluation.
+
+* :func:`normalize` / :func:`denormalize` — remove (and restore) the global translation and the
+  rotation about the vertical axis (Shum & Ho 2012, Sec. 5; Shum et al. 2013, Sec. V-A).
+* :func:`retarget` — Shum & Ho 2012, Eq. 3-4: keep every segment's direction, impose the target
+  body's segment lengths, from the root down the hierarchy.
+* quaternion helpers (x, y, z, w order, as geometry_msgs), including a proper weighted average.
+
+All functions take (..., 20, 3) arrays in REP-103 (z up) and work on batches.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Optional
+
+import numpy as np
+
+from .model import (HIP_LEFT, HIP_RIGHT, NUM_JOINTS, PARENTS, ROOT, SEGMENT_CHILDREN,
+                    SHOULDER_LEFT, SHOULDER_RIGHT, Body)
+
+
+@dataclass
+class NormalizeTransform:
+    """What :func:`normalize` removed: yaw (rad, about +z) and root translation (m)."""
+
+    yaw: np.ndarray          # (...)
+    translation: np.ndarray  # (..., 3)
+
+
+def _rotz(yaw: np.ndarray) -> np.ndarray:
+    c, s = np.cos(yaw), np.sin(yaw)
+    z, o = np.zeros_like(c), np.ones_like(c)
+    return np.stack([np.stack([c, -s, z], -1), np.stack([s, c, z], -1),
+                     np.stack([z, z, o], -1)], -2)
+
+
+def facing_yaw(positions: np.ndarray, weights: Optional[np.ndarray] = None) -> np.ndarray:
+    """Heading (rad) of a body from its hip and shoulder lines: 0 when facing +x.
+
+    ``weights`` (..., 20) in [0, 1] down-weight unreliable joints (a pair counts with the smaller
+    weight of its two joints); when both lines are unusable the heading is 0.
+    """
+    p = np.asarray(positions, dtype=float)
+    hips = p[..., HIP_LEFT, :] - p[..., HIP_RIGHT, :]
+    shoulders = p[..., SHOULDER_LEFT, :] - p[..., SHOULDER_RIGHT, :]
+    if weights is None:
+        wh = ws = 1.0
+    else:
+        w = np.asarray(weights, dtype=float)
+        wh = np.minimum(w[..., HIP_LEFT], w[..., HIP_RIGHT])[..., None]
+        ws = np.minimum(w[..., SHOULDER_LEFT], w[..., SHOULDER_RIGHT])[..., None]
+    left = wh * hips + ws * shoulders
+    # left-pointing vector -> forward = left rotated by -90 deg about z
+    fx, fy = left[..., 1], -left[..., 0]
+    return np.arctan2(fy, fx)
+
+
+def normalize(positions: np.ndarray, weights: Optional[np.ndarray] = None):
+    """Move the root to the origin and turn the body to face +x.
+
+    Returns ``(normalized, transform)``; ``denormalize(normalized, transform)`` gives the input back.
+    """
+    p = np.asarray(positions, dtype=float)
+    yaw = facing_yaw(p, weights)
+    t = p[..., ROOT, :].copy()
+    r_inv = _rotz(-yaw)  # (..., 3, 3)
+    out = np.einsum('...ij,...kj->...ki', r_inv, p - t[..., None, :])
+    return out, NormalizeTransform(yaw=yaw, translation=t)
+
+
+def denormalize(normalized: np.ndarray, transform: NormalizeTransform) -> np.ndarray:
+    """Inverse of :func:`normalize`."""
+    r = _rotz(transform.yaw)
+    return np.einsum('...ij,...kj->...ki', r, np.asarray(normalized, float)) + \
+        transform.translation[..., None, :]
+
+
+def retarget(positions: np.ndarray, body: Body,
+             lengths: Optional[np.ndarray] = None) -> np.ndarray:
+    """Shum & Ho 2012 Eq. 3-4: ``P'_i = P'_j + L(i, j) (P_i - P_j) / |P_i - P_j|`` from the root down.
+
+    ``lengths`` (19,) overrides the body's segment lengths (e.g. a user's own). A zero-length
+    segment takes the direction of the standard T-pose.
+    """
+    p = np.asarray(positions, dtype=float)
+    seg_len = body.segment_lengths if lengths is None else np.asarray(lengths, float)
+    bone = np.zeros(NUM_JOINTS)
+    bone[list(SEGMENT_CHILDREN)] = seg_len
+    rest_dir = body.rest_offsets / np.maximum(np.linalg.norm(body.rest_offsets, axis=1), 1e-12)[:, None]
+    out = np.empty_like(p)
+    out[..., ROOT, :] = p[..., ROOT, :]
+    for j in range(1, NUM_JOINTS):
+        par = PARENTS[j]
+        d = p[..., j, :] - p[..., par, :]
+        n = np.linalg.norm(d, axis=-1, keepdims=True)
+        unit = np.where(n > 1e-9, d / np.maximum(n, 1e-12), rest_dir[j])
+        out[..., j, :] = out[..., par, :] + bone[j] * unit
+    return out
+
+
+# ---------------------------------------------------------------------------------------------
+# Quaternions (x, y, z, w)
+# ---------------------------------------------------------------------------------------------
+def quat_multiply(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    ax, ay, az, aw = np.moveaxis(np.asarray(a, float), -1, 0)
+    bx, by, bz, bw = np.moveaxis(np.asarray(b, float), -1, 0)
+    return np.stack([aw * bx + ax * bw + ay * bz - az * by,
+                     aw * by - ax * bz + ay * bw + az * bx,
+                     aw * bz + ax * by - ay * bx + az * bw,
+                     aw * bw - ax * bx - ay * by - az * bz], -1)
+
+
+def quat_conjugate(q: np.ndarray) -> np.ndarray:
+    q = np.array(q, dtype=float)
+    q[..., :3] *= -1.0
+    return q
+
+
+def quat_rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Rotate vectors ``v`` (..., 3) by unit quaternions ``q`` (..., 4)."""
+    q = np.asarray(q, float)
+    u, w = q[..., :3], q[..., 3:4]
+    v = np.asarray(v, float)
+    t = 2.0 * np.cross(u, v)
+    return v + w * t + np.cross(u, t)
+
+
+def quat_from_yaw(yaw: np.ndarray) -> np.ndarray:
+    yaw = np.asarray(yaw, float)
+    z = np.zeros_like(yaw)
+    return np.stack([z, z, np.sin(yaw / 2), np.cos(yaw / 2)], -1)
+
+
+def quat_average(quats: np.ndarray, weights: Optional[np.ndarray] = None) -> np.ndarray:
+    """Weighted average of unit quaternions along axis -2 (Markley et al. 2007: the principal
+    eigenvector of sum w q q^T), sign-invariant. ``quats`` (..., K, 4), ``weights`` (..., K)."""
+    q = np.asarray(quats, float)
+    w = np.ones(q.shape[:-1]) if weights is None else np.asarray(weights, float)
+    m = np.einsum('...k,...ki,...kj->...ij', w, q, q)
+    _, vecs = np.linalg.eigh(m)
+    avg = vecs[..., :, -1]
+    # deterministic sign: w >= 0
+    return avg * np.where(avg[..., 3:4] < 0, -1.0, 1.0)
+
+
+def swing_twist(q: np.ndarray, axis: np.ndarray):
+    """Split rotations ``q`` (..., 4) into swing * twist, twist about unit ``axis`` (..., 3).
+
+    Returns ``(swing, twist_angle)``, twist angle in (-pi, pi].
+    """
+    q = np.asarray(q, float)
+    a = np.asarray(axis, float)
+    proj = np.sum(q[..., :3] * a, axis=-1)
+    angle = 2.0 * np.arctan2(proj, q[..., 3])
+    angle = (angle + np.pi) % (2 * np.pi) - np.pi
+    half = angle / 2.0
+    twist = np.concatenate([a * np.sin(half)[..., None], np.cos(half)[..., None]], -1)
+    swing = quat_multiply(q, quat_conjugate(twist))
+    return swing, angle
