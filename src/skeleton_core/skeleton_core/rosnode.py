@@ -1,0 +1,175 @@
+"""Small rclpy adapters shared by every node: validated parameters with descriptors, diagnostics,
+and a ``main()`` runner with a clean Ctrl-C shutdown.
+
+This is the only module of ``skeleton_core`` that imports rclpy; library modules never import it.
+"""
+from __future__ import annotations
+
+import math
+import sys
+from dataclasses import dataclass
+from typing import Any, Callable, Dict, Iterable, Optional, Sequence
+
+import rclpy
+from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
+                                SetParametersResult)
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+
+from .health import Health
+
+
+@dataclass
+class ParamSpec:
+    """One ROS parameter: default, description, and what is valid."""
+
+    name: str
+    default: Any
+    description: str
+    range: Optional[tuple] = None          # (lo, hi) inclusive, for int/float
+    choices: Optional[Sequence[Any]] = None  # allowed values (strings, ints)
+    read_only: bool = False
+    validator: Optional[Callable[[Any], Optional[str]]] = None  # returns an error text or None
+
+    def check(self, value: Any) -> Optional[str]:
+        if isinstance(self.default, bool) != isinstance(value, bool):
+            return f'{self.name} must be a bool'
+        if isinstance(self.default, float) and isinstance(value, (int, float)):
+            if not math.isfinite(float(value)):
+                return f'{self.name} must be finite'
+        if self.range is not None and isinstance(value, (int, float)) and not isinstance(value, bool):
+            lo, hi = self.range
+            if not (lo <= value <= hi):
+                return f'{self.name}={value} is outside [{lo}, {hi}]'
+        if self.choices is not None and value not in self.choices:
+            return f'{self.name}={value!r} is not one of {list(self.choices)}'
+        if self.validator is not None:
+            return self.validator(value)
+        return None
+
+    def descriptor(self) -> ParameterDescriptor:
+        d = ParameterDescriptor(description=self.description, read_only=self.read_only)
+        if self.choices is not None:
+            d.additional_constraints = f'one of {list(self.choices)}'
+        if self.range is not None and not isinstance(self.default, bool):
+            lo, hi = self.range
+            if isinstance(self.default, float):
+                d.floating_point_range = [FloatingPointRange(from_value=float(lo), to_value=float(hi))]
+            elif isinstance(self.default, int):
+                d.integer_range = [IntegerRange(from_value=int(lo), to_value=int(hi), step=1)]
+        return d
+
+
+class Parameters:
+    """Declares :class:`ParamSpec` s on a node, validates every set (out-of-range sets are refused
+    with a reason) and keeps the current values in ``values``; ``on_change(changed_dict)`` runs after
+    a successful set so the node can push new values into its library objects."""
+
+    def __init__(self, node: Node, specs: Iterable[ParamSpec],
+                 on_change: Optional[Callable[[Dict[str, Any]], Optional[str]]] = None):
+        self._node = node
+        self.specs = {s.name: s for s in specs}
+        self.values: Dict[str, Any] = {}
+        self._on_change = on_change
+        for s in self.specs.values():
+            p = node.declare_parameter(s.name, s.default, s.descriptor())
+            value = p.value
+            if isinstance(s.default, float) and isinstance(value, int):
+                value = float(value)
+            err = s.check(value)
+            if err is not None:
+                raise ValueError(f'invalid parameter: {err}')
+            self.values[s.name] = value
+        node.add_on_set_parameters_callback(self._on_set)
+
+    def __getitem__(self, name: str) -> Any:
+        return self.values[name]
+
+    def _on_set(self, params: Sequence[Parameter]) -> SetParametersResult:
+        changed = {}
+        for p in params:
+            spec = self.specs.get(p.name)
+            if spec is None:
+                continue
+            value = p.value
+            if isinstance(spec.default, float) and isinstance(value, int) and not isinstance(value, bool):
+                value = float(value)
+            err = spec.check(value)
+            if err is None and spec.read_only:
+                err = f'{p.name} is read-only'
+            if err is not None:
+                self._node.get_logger().warning(f'refused parameter change: {err}')
+                return SetParametersResult(successful=False, reason=err)
+            changed[p.name] = value
+        if changed and self._on_change is not None:
+            err = self._on_change(changed)
+            if err:
+                self._node.get_logger().warning(f'refused parameter change: {err}')
+                return SetParametersResult(successful=False, reason=err)
+        self.values.update(changed)
+        if changed:
+            self._node.get_logger().info(
+                'parameters set: ' + ', '.join(f'{k}={v!r}' for k, v in changed.items()))
+        return SetParametersResult(successful=True)
+
+
+class DiagnosticsPublisher:
+    """Publishes a node's :class:`Health` on ``/diagnostics`` (diagnostic_msgs/DiagnosticArray)."""
+
+    def __init__(self, node: Node, health: Health, period_s: float = 1.0,
+                 extra: Optional[Callable[[], Dict[str, Any]]] = None):
+        from diagnostic_msgs.msg import DiagnosticArray  # noqa: F401 (fail early if missing)
+        self._node = node
+        self._health = health
+        self._extra = extra
+        self._pub = node.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        self._timer = node.create_timer(period_s, self._publish)
+
+    def _publish(self) -> None:
+        from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+        snap = self._health.snapshot()
+        if self._extra is not None:
+            snap.update(self._extra())
+        st = DiagnosticStatus()
+        st.name = f'{self._node.get_fully_qualified_name()}'
+        st.hardware_id = 'kinect_posture'
+        dropped = snap.get('dropped_total', 0)
+        if snap.get('received', 0) > 0 and snap.get('rate_hz', 0.0) == 0.0:
+            st.level, st.message = DiagnosticStatus.WARN, 'no output for > 2 s'
+        elif dropped:
+            st.level, st.message = DiagnosticStatus.OK, f'running, {dropped} inputs dropped'
+        else:
+            st.level, st.message = DiagnosticStatus.OK, 'running'
+        st.values = [KeyValue(key=str(k), value=(f'{v:.3f}' if isinstance(v, float) else str(v)))
+                     for k, v in snap.items()]
+        msg = DiagnosticArray()
+        msg.header.stamp = self._node.get_clock().now().to_msg()
+        msg.status = [st]
+        self._pub.publish(msg)
+
+
+def run_node(node_factory: Callable[..., Node], args=None, executor=None) -> int:
+    """Standard ``main()``: init, build the node (a start-up error is one clear line and exit 1),
+    spin until Ctrl-C / SIGTERM, shut down cleanly."""
+    from rclpy.executors import ExternalShutdownException
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = node_factory()
+    except (ValueError, FileNotFoundError, RuntimeError, OSError) as e:
+        print(f'[ERROR] {e}', file=sys.stderr)
+        if rclpy.ok():
+            rclpy.try_shutdown()
+        return 1
+    try:
+        if executor is None:
+            rclpy.spin(node)
+        else:
+            executor.add_node(node)
+            executor.spin()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
