@@ -116,7 +116,9 @@ def skeleton_from_msg(msg) -> SkeletonFrame:
         raise SkeletonFormatError('wrong length',
                                   f'positions must have {NUM_JOINTS} entries, got {len(pos)}')
     quats = [(q.x, q.y, q.z, q.w) for q in msg.orientations]
-    p, t, r, q = validate_arrays(np.array(pos), np.asarray(msg.tracking_state, dtype=np.int64),
+    ts = msg.tracking_state
+    ts = np.frombuffer(ts, dtype=np.uint8) if isinstance(ts, (bytes, bytearray)) else np.asarray(ts)
+    p, t, r, q = validate_arrays(np.array(pos), ts.astype(np.int64),
                                  np.asarray(msg.reliability, dtype=np.float32),
                                  np.array(quats) if quats else None)
     return SkeletonFrame(positions=p, tracking_state=t, reliability=r, orientations=q,
