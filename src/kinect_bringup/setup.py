@@ -27,6 +27,7 @@ setup(
             'bench = kinect_bringup.bench:main',
             'soak = kinect_bringup.soak:main',
             'evaluate = kinect_bringup.evaluate:main',
+            'recorder = kinect_bringup.recorder:main',
         ],
     },
 )

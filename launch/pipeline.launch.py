@@ -1,0 +1,97 @@
+"""The whole node graph: driver -> reliability -> completion / optimizer -> physics -> viz.
+
+    ros2 launch kinect_bringup pipeline.launch.py                      # synthetic source, method C
+    ros2 launch kinect_bringup pipeline.launch.py source:=replay replay_file:=out/demo.mcap
+    ros2 launch kinect_bringup pipeline.launch.py source:=live method:=A physics:=false rviz:=true
+
+Parameters come from the package's config/<node>.yaml files (the same files the one-process
+`pipeline` executable reads); launch arguments override the few that users change most.
+"""
+import os
+
+from ament_index_python.packages import get_package_share_directory
+from launch import LaunchDescription
+from launch.actions import DeclareLaunchArgument, GroupAction, OpaqueFunction
+from launch.conditions import IfCondition
+from launch.substitutions import LaunchConfiguration
+from launch_ros.actions import Node, PushRosNamespace
+
+ARGS = [
+    ('source', 'synthetic', 'skeleton source: synthetic | replay | live'),
+    ('replay_file', '', 'bag (.mcap) or CSV file for source:=replay'),
+    ('scenario', 'b', 'synthetic source scenario class (Shum 2013 Table IV): a | b | c'),
+    ('num_users', '1', 'synthetic source: number of users (1-6)'),
+    ('seed', '0', 'synthetic source: random seed'),
+    ('database', '', 'motion database file ("" = built-in / CMU default, built and cached)'),
+    ('method', 'C', 'reconstruction driving the character: A (completion) | B | C (optimizer)'),
+    ('physics', 'true', 'run the MuJoCo physics character'),
+    ('viz', 'true', 'run the RViz marker node'),
+    ('rviz', 'false', 'start RViz with the bundled config'),
+    ('record', '', 'record every pipeline topic to this MCAP file ("" = no recording)'),
+    ('namespace', '', 'namespace for all nodes'),
+    ('config_dir', '', 'directory with <node>.yaml parameter files ("" = the installed config)'),
+    ('log_level', 'info', 'log level of all nodes'),
+]
+
+
+def _nodes(context):
+    def arg(name):
+        return LaunchConfiguration(name).perform(context)
+
+    config_dir = arg('config_dir') or os.path.join(
+        get_package_share_directory('kinect_bringup'), 'config')
+
+    def params(name, **overrides):
+        out = []
+        path = os.path.join(config_dir, f'{name}.yaml')
+        if os.path.isfile(path):
+            out.append(path)
+        if overrides:
+            out.append(overrides)
+        return out
+
+    method = arg('method').upper()
+    if method not in ('A', 'B', 'C'):
+        raise RuntimeError(f"method:={arg('method')} is not one of A, B, C")
+    common = dict(output='screen', emulate_tty=True,
+                  arguments=['--ros-args', '--log-level', arg('log_level')])
+    db = arg('database')
+    db_over = {'database': db} if db else {}
+
+    driver_over = {'source': arg('source'), 'scenario': arg('scenario'),
+                   'num_users': int(arg('num_users')), 'seed': int(arg('seed'))}
+    if arg('replay_file'):
+        driver_over['replay_file'] = arg('replay_file')
+    nodes = [
+        Node(package='kinect_driver', executable='driver', name='driver',
+             parameters=params('driver', **driver_over), **common),
+        Node(package='pose_reconstruction', executable='reliability', name='reliability',
+             parameters=params('reliability'), **common),
+        Node(package='pose_reconstruction', executable='completion', name='completion',
+             parameters=params('completion', **db_over), **common),
+        Node(package='pose_reconstruction', executable='optimizer', name='optimizer',
+             parameters=params('optimizer', method='B' if method == 'B' else 'C', **db_over),
+             **common),
+    ]
+    if arg('physics').lower() in ('true', '1', 'yes'):
+        topic = '/posture/completed' if method == 'A' else '/posture/reconstructed'
+        nodes.append(Node(package='physics_sim', executable='physics', name='physics',
+                          parameters=params('physics', input_topic=topic), **common))
+    if arg('viz').lower() in ('true', '1', 'yes'):
+        nodes.append(Node(package='viz', executable='viz', name='viz',
+                          parameters=params('viz'), **common))
+    if arg('record'):
+        nodes.append(Node(package='kinect_bringup', executable='recorder', name='recorder',
+                          parameters=params('recorder', output=arg('record')), **common))
+    ns = arg('namespace')
+    return [GroupAction(([PushRosNamespace(ns)] if ns else []) + nodes)]
+
+
+def generate_launch_description():
+    rviz_config = os.path.join(get_package_share_directory('viz'), 'rviz', 'pipeline.rviz')
+    return LaunchDescription(
+        [DeclareLaunchArgument(n, default_value=d, description=t) for n, d, t in ARGS] + [
+            OpaqueFunction(function=_nodes),
+            Node(package='rviz2', executable='rviz2', name='rviz2', arguments=['-d', rviz_config],
+                 condition=IfCondition(LaunchConfiguration('rviz')), output='screen'),
+        ])

@@ -1,0 +1,112 @@
+"""The node graph as data, shared by the launch file's users, the one-process ``pipeline``, the demo
+and the benchmark: which nodes exist, where their parameter files are, and the topics between them.
+No rclpy here."""
+from __future__ import annotations
+
+import importlib
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Dict, List, Optional
+
+import yaml
+
+
+@dataclass(frozen=True)
+class NodeInfo:
+    name: str          # node name (also the config file stem)
+    package: str
+    executable: str
+    module: str        # python module holding the Node subclass
+
+
+NODES: Dict[str, NodeInfo] = {n.name: n for n in (
+    NodeInfo('driver', 'kinect_driver', 'driver', 'kinect_driver.driver_node'),
+    NodeInfo('reliability', 'pose_reconstruction', 'reliability', 'pose_reconstruction.reliability_node'),
+    NodeInfo('completion', 'pose_reconstruction', 'completion', 'pose_reconstruction.completion_node'),
+    NodeInfo('optimizer', 'pose_reconstruction', 'optimizer', 'pose_reconstruction.optimizer_node'),
+    NodeInfo('physics', 'physics_sim', 'physics', 'physics_sim.physics_node'),
+    NodeInfo('viz', 'viz', 'viz', 'viz.viz_node'),
+    NodeInfo('recorder', 'kinect_bringup', 'recorder', 'kinect_bringup.recorder'),
+)}
+
+# Topics of the graph and their types (the recorder's default list)
+TOPICS: Dict[str, str] = {
+    '/kinect/skeletons': 'skeleton_msgs/msg/SkeletonArray',
+    '/kinect/ground_truth': 'skeleton_msgs/msg/SkeletonArray',
+    '/kinect/skeletons_reliability': 'skeleton_msgs/msg/SkeletonArray',
+    '/posture/completed': 'skeleton_msgs/msg/SkeletonArray',
+    '/posture/reconstructed': 'skeleton_msgs/msg/SkeletonArray',
+    '/character/skeletons': 'skeleton_msgs/msg/SkeletonArray',
+    '/viz/markers': 'visualization_msgs/msg/MarkerArray',
+}
+
+
+def repo_root() -> Optional[Path]:
+    env = os.environ.get('KINECT_POSTURE_ROOT')
+    if env and (Path(env) / 'config').is_dir():
+        return Path(env)
+    here = Path(__file__).resolve()
+    for parent in here.parents:
+        if (parent / 'config').is_dir() and (parent / 'src').is_dir():
+            return parent
+    return None
+
+
+def config_dir() -> Path:
+    """The YAML parameter files: the installed share/kinect_bringup/config, else the repo's."""
+    try:
+        from ament_index_python.packages import get_package_share_directory
+        d = Path(get_package_share_directory('kinect_bringup')) / 'config'
+        if d.is_dir():
+            return d
+    except Exception:  # noqa: BLE001 - not installed: fall back to the source tree
+        pass
+    root = repo_root()
+    if root is None:
+        raise FileNotFoundError('cannot find the config/ directory (run scripts/setup.sh)')
+    return root / 'config'
+
+
+def params_file(node: str, directory: Optional[Path] = None) -> Optional[Path]:
+    p = Path(directory or config_dir()) / f'{node}.yaml'
+    return p if p.is_file() else None
+
+
+def load_params(node: str, directory: Optional[Path] = None) -> Dict:
+    """The ros__parameters of ``node`` as the launch file would apply them (``/**`` and the node's
+    own key merged, the node's key winning)."""
+    path = params_file(node, directory)
+    if path is None:
+        return {}
+    with open(path) as f:
+        data = yaml.safe_load(f) or {}
+    out: Dict = {}
+    for key in ('/**', node, f'/{node}', f'/**/{node}'):
+        section = data.get(key) or {}
+        out.update(section.get('ros__parameters') or {})
+    return out
+
+
+def node_class(name: str):
+    """The rclpy Node subclass implemented in the node's module."""
+    from rclpy.node import Node
+    mod = importlib.import_module(NODES[name].module)
+    found = [v for v in vars(mod).values()
+             if isinstance(v, type) and issubclass(v, Node) and v is not Node
+             and v.__module__ == mod.__name__]
+    if len(found) != 1:
+        raise RuntimeError(f'{mod.__name__} must define exactly one Node subclass, found {found}')
+    return found[0]
+
+
+def graph_nodes(method: str = 'C', physics: bool = True, viz: bool = True,
+                record: bool = False) -> List[str]:
+    names = ['driver', 'reliability', 'completion', 'optimizer']
+    if physics:
+        names.append('physics')
+    if viz:
+        names.append('viz')
+    if record:
+        names.append('recorder')
+    return names

@@ -1,0 +1,116 @@
+"""``pipeline``: the whole node graph in one process (multi-threaded executor), configured from the
+same ``config/<node>.yaml`` files as ``pipeline.launch.py`` — for machines without ``ros2 launch``.
+
+    ros2 run kinect_bringup pipeline                       # synthetic source, method C, physics, viz
+    ros2 run kinect_bringup pipeline --source replay --replay-file out/demo.mcap --duration 20
+    ros2 run kinect_bringup pipeline --method A --no-physics --record out/run.mcap
+"""
+from __future__ import annotations
+
+import argparse
+import signal
+import sys
+import threading
+from pathlib import Path
+from typing import Dict, List, Optional
+
+from .graph import config_dir, graph_nodes, node_class, params_file
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog='pipeline', description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument('--source', choices=['synthetic', 'replay', 'live'], default=None)
+    p.add_argument('--replay-file', default=None)
+    p.add_argument('--scenario', choices=['a', 'b', 'c'], default=None)
+    p.add_argument('--num-users', type=int, default=None)
+    p.add_argument('--seed', type=int, default=None)
+    p.add_argument('--database', default=None, help='motion database file ("" = default)')
+    p.add_argument('--method', choices=['A', 'B', 'C'], default='C')
+    p.add_argument('--no-physics', action='store_true')
+    p.add_argument('--no-viz', action='store_true')
+    p.add_argument('--record', default='', help='record the pipeline topics to this MCAP file')
+    p.add_argument('--duration', type=float, default=0.0, help='stop after this many seconds (0 = run)')
+    p.add_argument('--config-dir', default=None, help='directory of <node>.yaml files')
+    p.add_argument('--threads', type=int, default=None, help='executor threads (default: cores)')
+    return p
+
+
+def node_overrides(args) -> Dict[str, Dict]:
+    """Per-node parameter overrides from the command line (same meaning as the launch arguments)."""
+    over: Dict[str, Dict] = {n: {} for n in ('driver', 'completion', 'optimizer', 'physics', 'recorder')}
+    for key, attr in (('source', 'source'), ('replay_file', 'replay_file'), ('scenario', 'scenario'),
+                      ('num_users', 'num_users'), ('seed', 'seed')):
+        v = getattr(args, attr)
+        if v is not None:
+            over['driver'][key] = v
+    if args.database is not None:
+        over['completion']['database'] = args.database
+        over['optimizer']['database'] = args.database
+    over['optimizer']['method'] = 'B' if args.method == 'B' else 'C'
+    over['physics']['input_topic'] = '/posture/completed' if args.method == 'A' else '/posture/reconstructed'
+    if args.record:
+        over['recorder']['output'] = str(Path(args.record).resolve())
+    return over
+
+
+def create_nodes(names: List[str], overrides: Dict[str, Dict], directory: Optional[Path] = None,
+                 context=None):
+    """Instantiate the graph's nodes in this process, each with its YAML file and overrides."""
+    from rclpy.parameter import Parameter
+    nodes = []
+    for name in names:
+        cls = node_class(name)
+        cli = []
+        pf = params_file(name, directory)
+        if pf is not None:
+            cli = ['--ros-args', '--params-file', str(pf)]
+        po = [Parameter(k, value=v) for k, v in overrides.get(name, {}).items()]
+        kwargs = dict(cli_args=cli, parameter_overrides=po)
+        if context is not None:
+            kwargs['context'] = context
+        nodes.append(cls(**kwargs))
+    return nodes
+
+
+def main(argv=None) -> int:
+    args = build_parser().parse_args(argv if argv is not None else sys.argv[1:])
+    import rclpy
+    from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+
+    directory = Path(args.config_dir) if args.config_dir else config_dir()
+    names = graph_nodes(args.method, physics=not args.no_physics, viz=not args.no_viz,
+                        record=bool(args.record))
+    rclpy.init(args=None)
+    nodes = []
+    try:
+        nodes = create_nodes(names, node_overrides(args), directory)
+    except (ValueError, FileNotFoundError, RuntimeError, OSError, ImportError) as e:
+        print(f'[pipeline] ERROR: {e}', file=sys.stderr)
+        for n in nodes:
+            n.destroy_node()
+        rclpy.try_shutdown()
+        return 1
+    executor = MultiThreadedExecutor(num_threads=args.threads)
+    for n in nodes:
+        executor.add_node(n)
+    nodes[0].get_logger().info(
+        f'pipeline: {len(nodes)} nodes in one process ({", ".join(names)}), config {directory}')
+    if args.duration > 0:
+        timer = threading.Timer(args.duration, lambda: signal.raise_signal(signal.SIGINT))
+        timer.daemon = True
+        timer.start()
+    try:
+        executor.spin()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        executor.shutdown(timeout_sec=2.0)
+        for n in reversed(nodes):  # recorder last in the list: closes its file first
+            n.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
