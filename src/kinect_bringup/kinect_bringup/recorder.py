@@ -1,0 +1,80 @@
+"""``recorder`` node: records the pipeline's topics to an MCAP bag that ``ros2 bag play`` and Foxglove
+open (rosbag2 itself is not available from the pip wheels). Messages are written as received (log
+time = receive time, publish time = the message's header stamp when it has one)."""
+from __future__ import annotations
+
+import importlib
+import threading
+from pathlib import Path
+
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+
+from skeleton_core.health import Health
+from skeleton_core.rosnode import ParamSpec, Parameters, run_node
+
+from .graph import TOPICS
+
+
+def _msg_class(msgtype: str):
+    pkg, _, name = msgtype.split('/')
+    return getattr(importlib.import_module(f'{pkg}.msg'), name)
+
+
+class RecorderNode(Node):
+    """Subscribes to every configured topic and appends each message to one MCAP file."""
+
+    def __init__(self, **kwargs):
+        super().__init__('recorder', **kwargs)
+        self.params = Parameters(self, [
+            ParamSpec('output', 'out/recording.mcap', 'MCAP file to write (overwritten)',
+                      read_only=True),
+            ParamSpec('topics', list(TOPICS), 'topics to record (types from the graph table)',
+                      read_only=True),
+        ])
+        from skeleton_core.bagio import BagWriter
+        self.health = Health()
+        self.path = Path(self.params['output']).expanduser().resolve()
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._lock = threading.Lock()
+        self._writer = BagWriter(str(self.path))
+        self._writer.__enter__()
+        self.counts = {}
+        qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
+        for topic in self.params['topics']:
+            msgtype = TOPICS.get(topic)
+            if msgtype is None:
+                raise ValueError(f'recorder: unknown topic {topic!r} (known: {sorted(TOPICS)})')
+            self.counts[topic] = 0
+            self.create_subscription(_msg_class(msgtype), topic,
+                                     lambda msg, t=topic, mt=msgtype: self._on_msg(t, mt, msg), qos)
+        self.get_logger().info(f'recording {len(self.counts)} topics to {self.path}')
+
+    def _on_msg(self, topic, msgtype, msg):
+        now = self.get_clock().now().nanoseconds
+        with self._lock:
+            if self._writer is None:
+                return
+            self._writer.write(topic, msg, now, msgtype=msgtype)
+            self.counts[topic] += 1
+        self.health.on_publish()
+
+    def close(self):
+        with self._lock:
+            if self._writer is not None:
+                self._writer.__exit__(None, None, None)
+                self._writer = None
+                self.get_logger().info(
+                    f'wrote {self.path}: ' + ', '.join(f'{t} {n}' for t, n in self.counts.items()))
+
+    def destroy_node(self):
+        self.close()
+        return super().destroy_node()
+
+
+def main(args=None):
+    return run_node(RecorderNode, args)
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())
