@@ -1,0 +1,27 @@
+"""Only the reconstruction nodes (reliability, completion, optimizer), e.g. behind a live driver.
+
+    ros2 launch kinect_bringup reconstruction.launch.py method:=C database:=cache/db.npz
+"""
+import os
+
+from ament_index_python.packages import get_package_share_directory
+from launch import LaunchDescription
+from launch.actions import DeclareLaunchArgument
+from launch.substitutions import LaunchConfiguration
+from launch_ros.actions import Node
+
+
+def generate_launch_description():
+    config = os.path.join(get_package_share_directory('kinect_bringup'), 'config')
+    db = {'database': LaunchConfiguration('database')}
+    return LaunchDescription([
+        DeclareLaunchArgument('method', default_value='C', description='optimizer method: B | C'),
+        DeclareLaunchArgument('database', default_value='', description='database file ("" = default)'),
+        Node(package='pose_reconstruction', executable='reliability', name='reliability',
+             output='screen', parameters=[os.path.join(config, 'reliability.yaml')]),
+        Node(package='pose_reconstruction', executable='completion', name='completion',
+             output='screen', parameters=[os.path.join(config, 'completion.yaml'), db]),
+        Node(package='pose_reconstruction', executable='optimizer', name='optimizer',
+             output='screen', parameters=[os.path.join(config, 'optimizer.yaml'), db,
+                                          {'method': LaunchConfiguration('method')}]),
+    ])

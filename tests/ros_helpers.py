@@ -1,0 +1,124 @@
+"""Helpers for tests that talk to running nodes over real DDS."""
+from __future__ import annotations
+
+import importlib
+import threading
+import time
+from typing import Dict, Iterable, List, Optional
+
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+
+
+def msg_class(msgtype: str):
+    pkg, _, name = msgtype.split('/')
+    return getattr(importlib.import_module(f'{pkg}.msg'), name)
+
+
+class Probe:
+    """A node in its own context and spin thread that records arrival times (and the last few
+    messages) on a set of topics, and can query/set parameters of other nodes."""
+
+    def __init__(self, topics: Dict[str, str], name: str = 'test_probe', keep: int = 50):
+        self.context = rclpy.Context()
+        rclpy.init(context=self.context)
+        self.node = Node(name, context=self.context)
+        self.times: Dict[str, List[float]] = {t: [] for t in topics}
+        self.messages: Dict[str, List] = {t: [] for t in topics}
+        self._keep = keep
+        self._lock = threading.Lock()
+        qos = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE)
+        for topic, msgtype in topics.items():
+            self.node.create_subscription(msg_class(msgtype), topic,
+                                          lambda m, t=topic: self._cb(t, m), qos)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        self._thread = threading.Thread(target=self._spin, daemon=True)
+        self._running = True
+        self._thread.start()
+
+    def _spin(self):
+        while self._running and self.context.ok():
+            try:
+                self.executor.spin_once(timeout_sec=0.05)
+            except Exception:  # noqa: BLE001 - context shut down under us
+                break
+
+    def _cb(self, topic, msg):
+        with self._lock:
+            self.times[topic].append(time.monotonic())
+            self.messages[topic].append(msg)
+            if len(self.messages[topic]) > self._keep:
+                self.messages[topic].pop(0)
+
+    def reset(self):
+        with self._lock:
+            for t in self.times:
+                self.times[t].clear()
+                self.messages[t].clear()
+
+    def wait_for(self, topics: Iterable[str], count: int = 1, timeout: float = 30.0) -> bool:
+        deadline = time.monotonic() + timeout
+        topics = list(topics)
+        while time.monotonic() < deadline:
+            with self._lock:
+                if all(len(self.times[t]) >= count for t in topics):
+                    return True
+            time.sleep(0.05)
+        return False
+
+    def rate(self, topic: str, window: float) -> float:
+        """Messages per second over the last ``window`` seconds."""
+        now = time.monotonic()
+        with self._lock:
+            n = sum(1 for t in self.times[topic] if t > now - window)
+        return n / window
+
+    def counts(self) -> Dict[str, int]:
+        with self._lock:
+            return {t: len(v) for t, v in self.times.items()}
+
+    def last(self, topic: str):
+        with self._lock:
+            return self.messages[topic][-1] if self.messages[topic] else None
+
+    # ---- parameters of other nodes --------------------------------------------------------
+    def _call(self, srv_type, name: str, request, timeout: float = 10.0):
+        client = self.node.create_client(srv_type, name)
+        try:
+            if not client.wait_for_service(timeout_sec=timeout):
+                raise TimeoutError(f'service {name} not available')
+            fut = client.call_async(request)
+            deadline = time.monotonic() + timeout
+            while not fut.done() and time.monotonic() < deadline:
+                time.sleep(0.02)
+            if not fut.done():
+                raise TimeoutError(f'service {name} did not answer')
+            return fut.result()
+        finally:
+            self.node.destroy_client(client)
+
+    def get_parameters(self, node: str, names: Optional[List[str]] = None) -> Dict:
+        from rcl_interfaces.srv import GetParameters, ListParameters
+        from rclpy.parameter import parameter_value_to_python
+        if names is None:
+            res = self._call(ListParameters, f'{node}/list_parameters', ListParameters.Request())
+            names = [n for n in res.result.names if n != 'use_sim_time'
+                     and not n.startswith('qos_overrides')]
+        res = self._call(GetParameters, f'{node}/get_parameters', GetParameters.Request(names=names))
+        return {n: parameter_value_to_python(v) for n, v in zip(names, res.values)}
+
+    def set_parameter(self, node: str, name: str, value):
+        from rcl_interfaces.srv import SetParameters
+        from rclpy.parameter import Parameter
+        req = SetParameters.Request(parameters=[Parameter(name, value=value).to_parameter_msg()])
+        return self._call(SetParameters, f'{node}/set_parameters', req).results[0]
+
+    def close(self):
+        self._running = False
+        self._thread.join(timeout=2)
+        self.executor.shutdown()
+        self.node.destroy_node()
+        rclpy.try_shutdown(context=self.context)
