@@ -10,6 +10,7 @@ from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
+from launch_ros.parameter_descriptions import ParameterValue
 
 
 def generate_launch_description():
@@ -18,7 +19,9 @@ def generate_launch_description():
             ('replay_file', '', 'bag (.mcap) or CSV for source:=replay'),
             ('scenario', 'b', 'synthetic scenario class a | b | c'),
             ('num_users', '1', 'synthetic users (1-6)')]
-    overrides = {name: LaunchConfiguration(name) for name, _, _ in args}
+    types = {'num_users': int}
+    overrides = {name: ParameterValue(LaunchConfiguration(name), value_type=types.get(name, str))
+                 for name, _, _ in args}
     return LaunchDescription(
         [DeclareLaunchArgument(n, default_value=d, description=t) for n, d, t in args] + [
             Node(package='kinect_driver', executable='driver', name='driver', output='screen',

@@ -9,11 +9,12 @@ from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
+from launch_ros.parameter_descriptions import ParameterValue
 
 
 def generate_launch_description():
     config = os.path.join(get_package_share_directory('kinect_bringup'), 'config')
-    db = {'database': LaunchConfiguration('database')}
+    db = {'database': ParameterValue(LaunchConfiguration('database'), value_type=str)}
     return LaunchDescription([
         DeclareLaunchArgument('method', default_value='C', description='optimizer method: B | C'),
         DeclareLaunchArgument('database', default_value='', description='database file ("" = default)'),
@@ -23,5 +24,5 @@ def generate_launch_description():
              output='screen', parameters=[os.path.join(config, 'completion.yaml'), db]),
         Node(package='pose_reconstruction', executable='optimizer', name='optimizer',
              output='screen', parameters=[os.path.join(config, 'optimizer.yaml'), db,
-                                          {'method': LaunchConfiguration('method')}]),
+                                          {'method': ParameterValue(LaunchConfiguration('method'), value_type=str)}]),
     ])
