@@ -1,0 +1,253 @@
+"""``bench``: end-to-end latency, throughput, drops, CPU and memory of the running graph, measured
+through real DDS as a user runs it — for 1, 2, 4 and 6 users, as the one-process ``pipeline`` and as
+separate processes — plus the offline ``process_bag`` speed. Writes Markdown + JSON.
+
+    ros2 run kinect_bringup bench                       # full table (~3 min)
+    ros2 run kinect_bringup bench --users 1,2 --modes pipeline --seconds 8
+
+Latency = probe receive time - the skeleton's capture stamp (the driver stamps each frame when it
+is captured; every node preserves the stamp). A frame is dropped when its capture stamp appears on
+/kinect/skeletons but never on the output topic.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+from typing import Dict, List
+
+import numpy as np
+
+from .graph import repo_root
+from .processes import Graph
+
+BUDGET_MS = 1000.0 / 30.0
+TOPICS = {'/kinect/skeletons': 'input', '/posture/reconstructed': 'reconstructed',
+          '/character/skeletons': 'character'}
+
+
+class LatencyProbe:
+    def __init__(self):
+        import rclpy
+        from rclpy.executors import SingleThreadedExecutor
+        from rclpy.node import Node
+        from rclpy.qos import QoSProfile, ReliabilityPolicy
+        from skeleton_msgs.msg import SkeletonArray
+        self.rclpy = rclpy
+        self.ctx = rclpy.Context()
+        rclpy.init(context=self.ctx)
+        self.node = Node('bench_probe', context=self.ctx)
+        self.lock = threading.Lock()
+        self.recording = False
+        self.stamps: Dict[str, set] = {t: set() for t in TOPICS}
+        self.lat: Dict[str, List[float]] = {t: [] for t in TOPICS}
+        self.count: Dict[str, int] = {t: 0 for t in TOPICS}
+        self.nan = 0
+        qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
+        for t in TOPICS:
+            self.node.create_subscription(SkeletonArray, t, lambda m, t=t: self._cb(t, m), qos)
+        self.ex = SingleThreadedExecutor(context=self.ctx)
+        self.ex.add_node(self.node)
+        self.running = True
+        self.th = threading.Thread(target=self._spin, daemon=True)
+        self.th.start()
+
+    def _spin(self):
+        while self.running:
+            self.ex.spin_once(timeout_sec=0.05)
+
+    def _cb(self, topic, msg):
+        now = time.time_ns()
+        if not self.recording:
+            return
+        with self.lock:
+            self.count[topic] += 1
+            for sk in msg.skeletons:
+                st = sk.header.stamp.sec * 1_000_000_000 + sk.header.stamp.nanosec
+                self.stamps[topic].add((sk.user_id, st))
+                self.lat[topic].append((now - st) / 1e6)
+                if topic != '/kinect/skeletons' and any(
+                        not np.isfinite(p.x + p.y + p.z) for p in sk.positions):
+                    self.nan += 1
+
+    def start(self):
+        with self.lock:
+            for t in TOPICS:
+                self.stamps[t].clear()
+                self.lat[t].clear()
+                self.count[t] = 0
+            self.nan = 0
+            self.recording = True
+
+    def stop(self):
+        self.recording = False
+
+    def close(self):
+        self.running = False
+        self.th.join(timeout=2)
+        self.ex.shutdown()
+        self.node.destroy_node()
+        self.rclpy.try_shutdown(context=self.ctx)
+
+
+def _proc_stats(graph: Graph, seconds: float) -> Dict[str, Dict[str, float]]:
+    import psutil
+    procs = {}
+    for name, p in graph.procs.items():
+        try:
+            ps = psutil.Process(p.pid)
+            ps.cpu_percent(None)
+            procs[name] = ps
+        except psutil.NoSuchProcess:
+            pass
+    time.sleep(seconds)
+    out = {}
+    for name, ps in procs.items():
+        try:
+            out[name] = {'cpu_percent': ps.cpu_percent(None),
+                         'rss_mb': ps.memory_info().rss / 2 ** 20}
+        except psutil.NoSuchProcess:
+            out[name] = {'cpu_percent': float('nan'), 'rss_mb': float('nan')}
+    return out
+
+
+def run_case(probe: LatencyProbe, mode: str, users: int, seconds: float, warmup: float,
+             physics: bool, log_dir: Path) -> Dict:
+    overrides = {'driver': {'num_users': users, 'scenario': 'b'}}
+    pipeline_args = ['--num-users', str(users), '--scenario', 'b', '--no-viz']
+    nodes = ['driver', 'reliability', 'completion', 'optimizer'] + (['physics'] if physics else [])
+    if not physics:
+        pipeline_args.append('--no-physics')
+    graph = Graph(mode, nodes=nodes, overrides=overrides, pipeline_args=pipeline_args,
+                  log_dir=log_dir / f'{mode}_{users}')
+    try:
+        deadline = time.monotonic() + 90
+        while probe.count['/kinect/skeletons'] == 0 and time.monotonic() < deadline:
+            probe.recording = True  # count arrivals to know the graph is up
+            time.sleep(0.2)
+        time.sleep(warmup)
+        probe.start()
+        stats = _proc_stats(graph, seconds)
+        probe.stop()
+    finally:
+        graph.stop()
+    with probe.lock:
+        res = {'mode': mode, 'users': users, 'seconds': seconds, 'processes': stats,
+               'nan_outputs': probe.nan}
+        src = probe.stamps['/kinect/skeletons']
+        for topic, key in TOPICS.items():
+            lat = np.array(probe.lat[topic])
+            r = {'rate_hz': probe.count[topic] / seconds, 'skeletons': int(lat.size)}
+            if lat.size:
+                r.update({f'p{q}_ms': float(np.percentile(lat, q)) for q in (50, 95, 99)})
+            if topic != '/kinect/skeletons' and src:
+                # frames captured in the window that never came out (allow the last 0.2 s in flight)
+                last = max(s for _, s in src) - 200_000_000
+                considered = {s for s in src if s[1] < last}
+                r['dropped'] = len(considered - probe.stamps[topic])
+                r['dropped_fraction'] = r['dropped'] / max(1, len(considered))
+            res[key] = r
+    return res
+
+
+def process_bag_speed(log_dir: Path) -> Dict:
+    """Record 10 s of the synthetic source, then time the offline reconstruction over it."""
+    bag = log_dir / 'bench_input.mcap'
+    try:
+        from skeleton_core.bagio import read_messages  # noqa: F401
+        g = Graph('pipeline', pipeline_args=['--no-physics', '--no-viz', '--record', str(bag)],
+                  log_dir=log_dir / 'record')
+        time.sleep(14)
+        g.stop()
+        if not bag.exists():
+            return {'error': 'recording failed'}
+        out = log_dir / 'bench_output.mcap'
+        t0 = time.monotonic()
+        proc = subprocess.run([sys.executable, '-m', 'pose_reconstruction.process_bag', str(bag),
+                               '--out', str(out), '--method', 'C', '--no-progress'],
+                              capture_output=True, text=True)
+        wall = time.monotonic() - t0
+        if proc.returncode != 0:
+            return {'error': proc.stderr.strip().splitlines()[-1:] or 'process_bag failed'}
+        from skeleton_core.bagio import bag_topics
+        n = bag_topics(str(bag)).get('/kinect/skeletons', (None, 0))[1]
+        return {'frames': n, 'wall_s': wall, 'recorded_s': n / 30.0,
+                'x_real_time': (n / 30.0) / wall if wall > 0 else float('nan')}
+    except Exception as e:  # noqa: BLE001 - report, don't crash the whole benchmark
+        return {'error': str(e)}
+
+
+def to_markdown(results: List[Dict], bag_speed: Dict, commit: str) -> str:
+    lines = [f'# End-to-end benchmark (commit {commit})', '',
+             f'Frame budget {BUDGET_MS:.1f} ms (30 Hz). Latency = receive time - capture stamp, over real DDS.',
+             '', '| mode | users | output | rate Hz | p50 ms | p95 ms | p99 ms | p95/budget | dropped |',
+             '|---|---:|---|---:|---:|---:|---:|---:|---:|']
+    for r in results:
+        for key in ('reconstructed', 'character'):
+            o = r.get(key, {})
+            if not o.get('skeletons'):
+                continue
+            lines.append(f"| {r['mode']} | {r['users']} | {key} | {o['rate_hz']:.1f} | "
+                         f"{o['p50_ms']:.1f} | {o['p95_ms']:.1f} | {o['p99_ms']:.1f} | "
+                         f"{o['p95_ms'] / BUDGET_MS:.2f} | {o.get('dropped', 0)} "
+                         f"({100 * o.get('dropped_fraction', 0):.1f} %) |")
+    lines += ['', '| mode | users | process | CPU % | RSS MB |', '|---|---:|---|---:|---:|']
+    for r in results:
+        for name, s in r['processes'].items():
+            lines.append(f"| {r['mode']} | {r['users']} | {name} | {s['cpu_percent']:.0f} | {s['rss_mb']:.0f} |")
+    lines += ['', f"NaN outputs: {sum(r['nan_outputs'] for r in results)}", '']
+    if 'x_real_time' in bag_speed:
+        lines.append(f"process_bag (method C, no physics): {bag_speed['frames']} frames in "
+                     f"{bag_speed['wall_s']:.2f} s = **{bag_speed['x_real_time']:.1f}x real time**")
+    elif bag_speed:
+        lines.append(f"process_bag: {bag_speed}")
+    return '\n'.join(lines) + '\n'
+
+
+def main(argv=None) -> int:
+    root = repo_root() or Path.cwd()
+    p = argparse.ArgumentParser(prog='bench', description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument('--users', default='1,2,4,6')
+    p.add_argument('--modes', default='pipeline,processes')
+    p.add_argument('--seconds', type=float, default=10.0)
+    p.add_argument('--warmup', type=float, default=4.0)
+    p.add_argument('--no-physics', action='store_true')
+    p.add_argument('--skip-bag', action='store_true')
+    p.add_argument('--out', default=str(root / 'out' / 'bench'))
+    args = p.parse_args(argv)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    try:
+        commit = subprocess.run(['git', 'rev-parse', '--short', 'HEAD'], cwd=root, text=True,
+                                capture_output=True).stdout.strip() or 'unknown'
+    except OSError:
+        commit = 'unknown'
+    from skeleton_core.database import load_or_build_default
+    load_or_build_default()  # build the cache once, outside the measurement
+    probe = LatencyProbe()
+    results = []
+    try:
+        for mode in args.modes.split(','):
+            for users in [int(u) for u in args.users.split(',')]:
+                print(f'[bench] {mode}, {users} user(s) ...', flush=True)
+                results.append(run_case(probe, mode, users, args.seconds, args.warmup,
+                                        not args.no_physics, out / 'logs'))
+    finally:
+        probe.close()
+    bag_speed = {} if args.skip_bag else process_bag_speed(out / 'logs')
+    md = to_markdown(results, bag_speed, commit)
+    (out / 'bench.md').write_text(md)
+    (out / 'bench.json').write_text(json.dumps({'commit': commit, 'results': results,
+                                                'process_bag': bag_speed}, indent=2))
+    print(md)
+    print(f'[bench] wrote {out / "bench.md"} and {out / "bench.json"}')
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

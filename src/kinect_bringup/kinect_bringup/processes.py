@@ -1,0 +1,119 @@
+"""Start and stop the graph as OS processes (one-process ``pipeline`` or one process per node),
+for the benchmark, the soak and the tests. No rclpy here."""
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Dict, List, Optional
+
+from .graph import NODES, config_dir, graph_nodes
+
+
+def executable(node: str) -> List[str]:
+    """Command that runs one node's console script (installed by colcon), or its module."""
+    info = NODES[node]
+    prefix = os.environ.get('COLCON_PREFIX_PATH', '').split(os.pathsep)[0] or None
+    candidates = []
+    if prefix:
+        candidates.append(Path(prefix) / info.package / 'lib' / info.package / info.executable)
+    try:
+        from ament_index_python.packages import get_package_prefix
+        candidates.append(Path(get_package_prefix(info.package)) / 'lib' / info.package / info.executable)
+    except Exception:  # noqa: BLE001
+        pass
+    for c in candidates:
+        if c.is_file():
+            return [sys.executable, str(c)]
+    return [sys.executable, '-c', f'import sys; from {info.module} import main; sys.exit(main())']
+
+
+def _ros_value(v) -> str:
+    if isinstance(v, bool):
+        return 'true' if v else 'false'
+    if isinstance(v, str):
+        return v if v else "''"
+    return str(v)
+
+
+class Graph:
+    """The node graph as running processes; ``stop()`` sends SIGINT like Ctrl-C."""
+
+    def __init__(self, mode: str = 'pipeline', nodes: Optional[List[str]] = None,
+                 overrides: Optional[Dict[str, Dict]] = None, pipeline_args: Optional[List[str]] = None,
+                 log_dir: Optional[Path] = None, env: Optional[Dict[str, str]] = None):
+        self.mode = mode
+        self.procs: Dict[str, subprocess.Popen] = {}
+        self._logs = []
+        self.log_dir = Path(log_dir) if log_dir else None
+        self.env = dict(os.environ, **(env or {}))
+        self.env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+        if mode == 'pipeline':
+            cmd = [sys.executable, '-m', 'kinect_bringup.pipeline'] + list(pipeline_args or [])
+            self._start('pipeline', cmd)
+        elif mode == 'processes':
+            cdir = config_dir()
+            for name in nodes or graph_nodes():
+                cmd = executable(name) + ['--ros-args', '-r', f'__node:={name}']
+                pf = cdir / f'{name}.yaml'
+                if pf.is_file():
+                    cmd += ['--params-file', str(pf)]
+                for k, v in (overrides or {}).get(name, {}).items():
+                    cmd += ['-p', f'{k}:={_ros_value(v)}']
+                self._start(name, cmd)
+        else:
+            raise ValueError(f'unknown mode {mode!r} (pipeline | processes)')
+
+    def _start(self, name: str, cmd: List[str]):
+        if self.log_dir:
+            self.log_dir.mkdir(parents=True, exist_ok=True)
+            out = open(self.log_dir / f'{name}.log', 'w')
+            self._logs.append(out)
+        else:
+            out = subprocess.DEVNULL
+        self.procs[name] = subprocess.Popen(cmd, stdout=out, stderr=subprocess.STDOUT, env=self.env,
+                                            start_new_session=True)
+
+    def restart(self, name: str):
+        """Kill one process and start it again with the same command (robustness tests)."""
+        p = self.procs[name]
+        cmd = p.args
+        self.kill(name)
+        self._start(name, cmd)
+
+    def kill(self, name: str, sig=signal.SIGKILL):
+        p = self.procs[name]
+        if p.poll() is None:
+            os.killpg(p.pid, sig)
+            p.wait(timeout=10)
+
+    def alive(self) -> Dict[str, bool]:
+        return {n: p.poll() is None for n, p in self.procs.items()}
+
+    def stop(self, timeout: float = 15.0) -> Dict[str, int]:
+        for p in self.procs.values():
+            if p.poll() is None:
+                try:
+                    os.killpg(p.pid, signal.SIGINT)
+                except ProcessLookupError:
+                    pass
+        deadline = time.monotonic() + timeout
+        codes = {}
+        for n, p in self.procs.items():
+            try:
+                codes[n] = p.wait(timeout=max(0.1, deadline - time.monotonic()))
+            except subprocess.TimeoutExpired:
+                os.killpg(p.pid, signal.SIGKILL)
+                codes[n] = p.wait()
+        for f in self._logs:
+            f.close()
+        return codes
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.stop()
