@@ -1,0 +1,313 @@
+"""Marker geometry for the RViz layers, as plain Python (no rclpy): the node only converts the
+:class:`MarkerSpec` s built here into ``visualization_msgs/Marker`` messages.
+
+Layers (one marker namespace per layer and user, ``<layer>/user_<id>``):
+
+* ``raw`` — the Kinect skeleton as the papers draw it: purple joint spheres, yellow bones.
+  INFERRED joints are drawn with a lower alpha; NOT_TRACKED joints are hidden (or grey).
+* ``reliability`` — a red square on every joint, side proportional to ``1 - reliability``
+  (Shum et al. 2013, Fig. 3: "unreliable parts indicated as red square"). The square faces the
+  sensor (it lies in the y-z plane of the sensor frame, REP-103 x forward).
+* ``reconstructed`` / ``completed`` — the reconstructed postures (green / blue).
+* ``character`` — the simulated character as capsules (a CYLINDER and two SPHEREs per segment),
+  oriented along the segment, radius from :func:`skeleton_core.model.standard_body` scaled to the
+  character's height, i.e. the sizes the MuJoCo model uses.
+
+:class:`SceneState` keeps the latest frames of every layer, which marker ids were last shown per
+namespace, and turns everything into one list of specs per publish, including DELETE specs for
+markers that are no longer shown (a user disappeared, a joint became reliable, a layer was hidden).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Dict, Iterable, List, Optional, Sequence, Tuple
+
+import numpy as np
+
+from skeleton_core.conversions import SkeletonFrame
+from skeleton_core.model import (INFERRED, NOT_TRACKED, NUM_JOINTS, SEGMENT_CHILDREN,
+                                 SEGMENT_PARENTS, SEGMENTS, estimate_height, standard_body)
+
+LAYERS: Tuple[str, ...] = ('raw', 'reliability', 'reconstructed', 'completed', 'character')
+
+# Marker types (names; the node maps them to visualization_msgs/Marker constants)
+SPHERE, CYLINDER, CUBE, SPHERE_LIST, LINE_LIST = 'SPHERE', 'CYLINDER', 'CUBE', 'SPHERE_LIST', 'LINE_LIST'
+ADD, DELETE = 'ADD', 'DELETE'
+
+# Marker ids inside one skeleton namespace
+JOINTS_ID, BONES_ID = 0, 1
+
+
+@dataclass
+class Style:
+    """Colours (RGBA in [0, 1]) and sizes (m) of every layer. Mirrors the node's parameters."""
+
+    joint_diameter: float = 0.05
+    bone_width: float = 0.015
+    raw_joint_color: Tuple[float, ...] = (0.58, 0.20, 0.80, 1.0)   # purple
+    raw_bone_color: Tuple[float, ...] = (1.0, 0.90, 0.10, 1.0)     # yellow
+    inferred_alpha: float = 0.35
+    not_tracked: str = 'hide'  # 'hide' | 'grey'
+    not_tracked_color: Tuple[float, ...] = (0.5, 0.5, 0.5, 0.5)
+    reliability_color: Tuple[float, ...] = (1.0, 0.0, 0.0, 0.8)    # red
+    reliability_square_max: float = 0.15   # side of the square of a joint with reliability 0
+    reliability_square_min: float = 0.005  # squares smaller than this are not drawn
+    reliability_thickness: float = 0.004
+    reconstructed_color: Tuple[float, ...] = (0.10, 0.85, 0.25, 1.0)  # green
+    completed_color: Tuple[float, ...] = (0.20, 0.55, 1.0, 1.0)       # blue
+    character_color: Tuple[float, ...] = (0.90, 0.72, 0.55, 0.9)
+    character_height: float = 0.0  # m; 0 = estimated from the character's segment lengths
+    offsets: Dict[str, Tuple[float, float, float]] = field(default_factory=dict)  # layer -> shift
+
+
+@dataclass
+class MarkerSpec:
+    """Everything a ``visualization_msgs/Marker`` needs, as plain values."""
+
+    ns: str
+    id: int
+    type: str = SPHERE
+    action: str = ADD
+    frame_id: str = ''
+    stamp_ns: int = 0
+    position: Tuple[float, float, float] = (0.0, 0.0, 0.0)
+    orientation: Tuple[float, float, float, float] = (0.0, 0.0, 0.0, 1.0)  # x, y, z, w
+    scale: Tuple[float, float, float] = (1.0, 1.0, 1.0)
+    color: Tuple[float, float, float, float] = (1.0, 1.0, 1.0, 1.0)
+    points: Optional[np.ndarray] = None   # (N, 3) for *_LIST types
+    colors: Optional[np.ndarray] = None   # (N, 4) per point, or None
+
+
+def namespace(layer: str, user_id: int) -> str:
+    return f'{layer}/user_{int(user_id)}'
+
+
+# --------------------------------------------------------------------------------------------
+# Geometry helpers
+# --------------------------------------------------------------------------------------------
+def quat_z_to(direction: np.ndarray) -> Tuple[float, float, float, float]:
+    """Unit quaternion (x, y, z, w) rotating the +z axis onto ``direction`` (the axis of an RViz
+    CYLINDER is its local z). A zero direction gives the identity."""
+    d = np.asarray(direction, dtype=float)
+    n = np.linalg.norm(d)
+    if n < 1e-12:
+        return (0.0, 0.0, 0.0, 1.0)
+    d = d / n
+    z = np.array([0.0, 0.0, 1.0])
+    c = float(np.dot(z, d))
+    if c < -1.0 + 1e-9:  # opposite: half turn about x
+        return (1.0, 0.0, 0.0, 0.0)
+    axis = np.cross(z, d)
+    # q = (sin(a/2) axis, cos(a/2)) written without trig: w = sqrt((1+c)/2), xyz = axis/(2w)
+    w = np.sqrt(0.5 * (1.0 + c))
+    xyz = axis / (2.0 * w)
+    q = np.array([xyz[0], xyz[1], xyz[2], w])
+    q /= np.linalg.norm(q)
+    return tuple(float(v) for v in q)
+
+
+def reliability_square_side(reliability: np.ndarray, max_side: float) -> np.ndarray:
+    """Side of the red square per joint: ``max_side * (1 - r)``; NaN (unknown) gives NaN."""
+    r = np.asarray(reliability, dtype=float)
+    return max_side * (1.0 - np.clip(r, 0.0, 1.0))
+
+
+def _rgba(c: Sequence[float], alpha: Optional[float] = None) -> Tuple[float, float, float, float]:
+    c = tuple(float(v) for v in c)
+    if len(c) == 3:
+        c = c + (1.0,)
+    if alpha is not None:
+        c = c[:3] + (c[3] * alpha,)
+    return c
+
+
+def _shift(style: Style, layer: str, positions: np.ndarray) -> np.ndarray:
+    off = style.offsets.get(layer)
+    return positions if off is None else positions + np.asarray(off, dtype=float)
+
+
+# --------------------------------------------------------------------------------------------
+# One layer of one user
+# --------------------------------------------------------------------------------------------
+def skeleton_markers(frame: SkeletonFrame, layer: str, joint_color: Sequence[float],
+                     bone_color: Sequence[float], style: Style,
+                     use_tracking_state: bool = True) -> List[MarkerSpec]:
+    """Joints (SPHERE_LIST, per-joint colours) and bones (LINE_LIST) of one skeleton.
+
+    With ``use_tracking_state`` INFERRED joints get ``style.inferred_alpha`` and NOT_TRACKED joints
+    are hidden (``style.not_tracked == 'hide'``) or drawn grey; a bone is drawn with the dimmest of
+    its two joints, and hidden when either is hidden."""
+    ns = namespace(layer, frame.user_id)
+    p = _shift(style, layer, np.asarray(frame.positions, dtype=float))
+    ts = np.asarray(frame.tracking_state) if use_tracking_state else np.full(NUM_JOINTS, 2)
+    visible = np.ones(NUM_JOINTS, bool)
+    jc = np.tile(np.array(_rgba(joint_color)), (NUM_JOINTS, 1))
+    alpha = np.ones(NUM_JOINTS)
+    grey = np.zeros(NUM_JOINTS, bool)
+    alpha[ts == INFERRED] = style.inferred_alpha
+    jc[ts == INFERRED, 3] *= style.inferred_alpha
+    nt = ts == NOT_TRACKED
+    if style.not_tracked == 'hide':
+        visible[nt] = False
+    else:
+        jc[nt] = _rgba(style.not_tracked_color)
+        grey[nt] = True
+    common = dict(ns=ns, frame_id=frame.frame_id, stamp_ns=frame.stamp_ns)
+    out = [MarkerSpec(id=JOINTS_ID, type=SPHERE_LIST,
+                      scale=(style.joint_diameter,) * 3, color=_rgba(joint_color),
+                      points=p[visible], colors=jc[visible], **common)]
+    bc = np.array(_rgba(bone_color))
+    pts, cols = [], []
+    for a, b in SEGMENTS:
+        if not (visible[a] and visible[b]):
+            continue
+        if grey[a] or grey[b]:
+            c = np.array(_rgba(style.not_tracked_color))
+        else:
+            c = bc.copy()
+            c[3] *= min(alpha[a], alpha[b])
+        pts += [p[a], p[b]]
+        cols += [c, c]
+    out.append(MarkerSpec(id=BONES_ID, type=LINE_LIST, scale=(style.bone_width, 0.0, 0.0),
+                          color=tuple(bc), points=np.array(pts).reshape(-1, 3),
+                          colors=np.array(cols).reshape(-1, 4), **common))
+    return out
+
+
+def reliability_markers(frame: SkeletonFrame, style: Style, layer: str = 'reliability'
+                        ) -> Tuple[List[MarkerSpec], List[int]]:
+    """Red squares (flat CUBEs facing the sensor), id = joint index, side ∝ 1 - reliability.
+
+    Returns (specs, ids_without_square): joints with unknown (NaN) reliability or a square smaller
+    than ``style.reliability_square_min`` get no marker (the caller deletes a stale one)."""
+    ns = namespace(layer, frame.user_id)
+    p = _shift(style, layer, np.asarray(frame.positions, dtype=float))
+    side = reliability_square_side(frame.reliability, style.reliability_square_max)
+    specs, none = [], []
+    for j in range(NUM_JOINTS):
+        s = side[j]
+        if not np.isfinite(s) or s < style.reliability_square_min:
+            none.append(j)
+            continue
+        specs.append(MarkerSpec(ns=ns, id=j, type=CUBE, frame_id=frame.frame_id,
+                                stamp_ns=frame.stamp_ns, position=tuple(float(v) for v in p[j]),
+                                scale=(style.reliability_thickness, float(s), float(s)),
+                                color=_rgba(style.reliability_color)))
+    return specs, none
+
+
+def character_height(frame: SkeletonFrame, style: Style) -> float:
+    h = style.character_height
+    if h > 0:
+        return h
+    h = estimate_height(frame.positions)
+    return float(np.clip(h, 0.6, 2.5)) if np.isfinite(h) else 1.75
+
+
+def capsule_markers(frame: SkeletonFrame, style: Style, layer: str = 'character'
+                    ) -> List[MarkerSpec]:
+    """Three markers per segment k: CYLINDER (id 3k) between the two joints, oriented along the
+    segment, and SPHERE caps (ids 3k+1, 3k+2) at both ends; radius = the standard body's segment
+    radius at the character's height (the MuJoCo model's capsule sizes)."""
+    ns = namespace(layer, frame.user_id)
+    p = _shift(style, layer, np.asarray(frame.positions, dtype=float))
+    radii = standard_body(character_height(frame, style)).segment_radii
+    color = _rgba(style.character_color)
+    out = []
+    common = dict(ns=ns, frame_id=frame.frame_id, stamp_ns=frame.stamp_ns, color=color)
+    for k, (a, b) in enumerate(zip(SEGMENT_PARENTS, SEGMENT_CHILDREN)):
+        r = float(radii[k])
+        d = p[b] - p[a]
+        length = float(np.linalg.norm(d))
+        mid = 0.5 * (p[a] + p[b])
+        out.append(MarkerSpec(id=3 * k, type=CYLINDER, position=tuple(float(v) for v in mid),
+                              orientation=quat_z_to(d), scale=(2 * r, 2 * r, max(length, 1e-4)),
+                              **common))
+        for i, j in ((1, a), (2, b)):
+            out.append(MarkerSpec(id=3 * k + i, type=SPHERE,
+                                  position=tuple(float(v) for v in p[j]), scale=(2 * r,) * 3,
+                                  **common))
+    return out
+
+
+def layer_markers(layer: str, frame: SkeletonFrame, style: Style
+                  ) -> Tuple[List[MarkerSpec], List[int]]:
+    """Markers of one layer for one user, and ids of that namespace to delete now."""
+    if layer == 'raw':
+        return skeleton_markers(frame, layer, style.raw_joint_color, style.raw_bone_color, style), []
+    if layer == 'reliability':
+        return reliability_markers(frame, style, layer)
+    if layer == 'reconstructed':
+        return skeleton_markers(frame, layer, style.reconstructed_color, style.reconstructed_color,
+                                style, use_tracking_state=False), []
+    if layer == 'completed':
+        return skeleton_markers(frame, layer, style.completed_color, style.completed_color,
+                                style, use_tracking_state=False), []
+    if layer == 'character':
+        return capsule_markers(frame, style, layer), []
+    raise ValueError(f'unknown layer {layer!r}')
+
+
+# --------------------------------------------------------------------------------------------
+# Scene: latest frames per layer -> markers (with deletes)
+# --------------------------------------------------------------------------------------------
+class SceneState:
+    """Latest skeletons of every layer; :meth:`build` returns the markers to publish now.
+
+    Markers that were shown before and are not shown now (user gone, layer hidden or stale, joint
+    square vanished) come back once as DELETE specs, so RViz never keeps a stale marker.
+    """
+
+    def __init__(self, style: Optional[Style] = None, layers: Iterable[str] = LAYERS,
+                 stale_timeout_s: float = 1.0, default_frame_id: str = 'kinect_link'):
+        self.style = style or Style()
+        self.enabled: Dict[str, bool] = {name: True for name in LAYERS}
+        for name in LAYERS:
+            self.enabled[name] = name in set(layers)
+        self.stale_timeout_s = stale_timeout_s
+        self.default_frame_id = default_frame_id
+        self._frames: Dict[str, List[SkeletonFrame]] = {}
+        self._received_at: Dict[str, float] = {}
+        self._shown: Dict[str, Tuple[str, set]] = {}  # ns -> (frame_id, ids)
+
+    def update(self, layer: str, frames: Sequence[SkeletonFrame], now_s: float) -> None:
+        """Replace the layer's skeletons by ``frames`` (all users seen in one message)."""
+        if layer not in LAYERS:
+            raise ValueError(f'unknown layer {layer!r}')
+        self._frames[layer] = list(frames)
+        self._received_at[layer] = now_s
+
+    def build(self, now_s: float) -> List[MarkerSpec]:
+        out: List[MarkerSpec] = []
+        shown: Dict[str, Tuple[str, set]] = {}
+        for layer in LAYERS:
+            if not self.enabled.get(layer, False):
+                continue
+            t = self._received_at.get(layer)
+            if t is None or now_s - t > self.stale_timeout_s:
+                continue
+            for f in self._frames.get(layer, []):
+                if not f.frame_id:
+                    f = f.copy(frame_id=self.default_frame_id)
+                specs, _ = layer_markers(layer, f, self.style)
+                if not specs:
+                    continue
+                ns = specs[0].ns
+                shown[ns] = (f.frame_id, {s.id for s in specs})
+                out.extend(specs)
+        # deletes: whatever was shown last time and is not shown now
+        for ns, (frame_id, ids) in self._shown.items():
+            now_ids = shown.get(ns, (frame_id, set()))[1]
+            for i in sorted(ids - now_ids):
+                out.append(MarkerSpec(ns=ns, id=i, action=DELETE, frame_id=frame_id))
+        self._shown = shown
+        return out
+
+    def has_stale(self, now_s: float) -> bool:
+        """True when a layer with markers shown has not been updated for ``stale_timeout_s``."""
+        layers = {ns.split('/', 1)[0] for ns in self._shown}
+        return any(now_s - self._received_at.get(layer, -np.inf) > self.stale_timeout_s
+                   for layer in layers)
+
+    def shown_namespaces(self) -> List[str]:
+        return sorted(self._shown)

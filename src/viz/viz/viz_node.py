@@ -1,0 +1,301 @@
+"""``viz`` node: skeleton topics -> ``visualization_msgs/MarkerArray`` for RViz.
+
+Subscribes (names are parameters; relative, so a launch namespace applies):
+  kinect/skeletons               raw Kinect skeletons            -> layer ``raw``
+  kinect/skeletons_reliability   raw + per-joint reliability     -> layer ``reliability`` (red squares)
+  posture/reconstructed          reconstructed postures          -> layer ``reconstructed``
+  posture/completed              completion-only postures        -> layer ``completed`` (off by default)
+  character/skeletons            simulated character             -> layer ``character`` (capsules)
+  physics/objects                environment objects (MarkerArray) -> namespaces ``environment/<ns>``
+Publishes ``viz/markers`` (MarkerArray) at most ``max_rate_hz``, only when something changed, and
+``/diagnostics``. The geometry is in :mod:`viz.markers`; this node adapts messages and parameters.
+"""
+from __future__ import annotations
+
+import time
+from typing import Any, Dict, Optional
+
+import numpy as np
+from rclpy.node import Node
+from rclpy.qos import qos_profile_sensor_data
+from visualization_msgs.msg import Marker, MarkerArray
+
+from skeleton_core.conversions import frames_from_array_msg, ns_to_stamp
+from skeleton_core.health import Health
+from skeleton_core.rosnode import DiagnosticsPublisher, Parameters, ParamSpec, run_node
+
+from . import markers as mk
+
+_TYPES = {mk.SPHERE: Marker.SPHERE, mk.CYLINDER: Marker.CYLINDER, mk.CUBE: Marker.CUBE,
+          mk.SPHERE_LIST: Marker.SPHERE_LIST, mk.LINE_LIST: Marker.LINE_LIST}
+
+
+def _color_ok(name):
+    def check(v):
+        v = list(v)
+        if len(v) != 4 or not all(isinstance(x, float) and 0.0 <= x <= 1.0 for x in v):
+            return f'{name} must be 4 numbers (r, g, b, a) in [0, 1]'
+        return None
+    return check
+
+
+def _offset_ok(name):
+    def check(v):
+        v = list(v)
+        if len(v) != 3 or not all(isinstance(x, float) and abs(x) <= 20.0 for x in v):
+            return f'{name} must be 3 numbers (x, y, z) in metres, |v| <= 20'
+        return None
+    return check
+
+
+def _topic_ok(v):
+    return None if v else 'topic name must not be empty'
+
+
+SPECS = [
+    ParamSpec('raw_topic', 'kinect/skeletons', 'raw skeletons (SkeletonArray)', read_only=True,
+              validator=_topic_ok),
+    ParamSpec('reliability_topic', 'kinect/skeletons_reliability',
+              'skeletons with reliability filled in (SkeletonArray)', read_only=True,
+              validator=_topic_ok),
+    ParamSpec('reconstructed_topic', 'posture/reconstructed', 'reconstructed postures',
+              read_only=True, validator=_topic_ok),
+    ParamSpec('completed_topic', 'posture/completed', 'completion-only postures', read_only=True,
+              validator=_topic_ok),
+    ParamSpec('character_topic', 'character/skeletons', 'simulated character skeletons',
+              read_only=True, validator=_topic_ok),
+    ParamSpec('objects_topic', 'physics/objects',
+              'environment objects (visualization_msgs/MarkerArray), forwarded', read_only=True,
+              validator=_topic_ok),
+    ParamSpec('markers_topic', 'viz/markers', 'output MarkerArray topic', read_only=True,
+              validator=_topic_ok),
+    ParamSpec('show_raw', True, 'draw the raw Kinect skeleton'),
+    ParamSpec('show_reliability', True, 'draw red squares sized by 1 - reliability'),
+    ParamSpec('show_reconstructed', True, 'draw the reconstructed skeleton'),
+    ParamSpec('show_completed', False, 'draw the completion-only skeleton'),
+    ParamSpec('show_character', True, 'draw the simulated character capsules'),
+    ParamSpec('show_objects', True, 'forward environment objects'),
+    ParamSpec('max_rate_hz', 30.0, 'maximum MarkerArray publish rate', range=(0.5, 120.0)),
+    ParamSpec('marker_lifetime_s', 0.5, 'marker lifetime in RViz (0 = forever)', range=(0.0, 60.0)),
+    ParamSpec('stale_timeout_s', 1.0, 'a layer not updated for this long is deleted',
+              range=(0.05, 60.0)),
+    ParamSpec('default_frame_id', 'kinect_link', 'frame used when a message has none',
+              validator=lambda v: None if v else 'default_frame_id must not be empty'),
+    ParamSpec('joint_diameter', 0.05, 'joint sphere diameter (m)', range=(0.001, 0.5)),
+    ParamSpec('bone_width', 0.015, 'bone line width (m)', range=(0.001, 0.2)),
+    ParamSpec('inferred_alpha', 0.35, 'alpha multiplier of INFERRED joints', range=(0.0, 1.0)),
+    ParamSpec('not_tracked', 'hide', 'NOT_TRACKED joints: hide | grey', choices=('hide', 'grey')),
+    ParamSpec('reliability_square_max', 0.15, 'side (m) of the square at reliability 0',
+              range=(0.005, 1.0)),
+    ParamSpec('reliability_square_min', 0.005, 'smaller squares are not drawn (m)',
+              range=(0.0, 0.5)),
+    ParamSpec('character_height', 0.0,
+              'character height for capsule radii (m); 0 = estimate from its segments',
+              range=(0.0, 2.6),
+              validator=lambda v: None if v == 0.0 or v > 0.5 else
+              'character_height must be 0 (auto) or in (0.5, 2.6]'),
+    ParamSpec('raw_joint_color', [0.58, 0.20, 0.80, 1.0], 'raw joints RGBA',
+              validator=_color_ok('raw_joint_color')),
+    ParamSpec('raw_bone_color', [1.0, 0.90, 0.10, 1.0], 'raw bones RGBA',
+              validator=_color_ok('raw_bone_color')),
+    ParamSpec('not_tracked_color', [0.5, 0.5, 0.5, 0.5], 'NOT_TRACKED joints RGBA (grey mode)',
+              validator=_color_ok('not_tracked_color')),
+    ParamSpec('reliability_color', [1.0, 0.0, 0.0, 0.8], 'unreliable-joint squares RGBA',
+              validator=_color_ok('reliability_color')),
+    ParamSpec('reconstructed_color', [0.10, 0.85, 0.25, 1.0], 'reconstructed skeleton RGBA',
+              validator=_color_ok('reconstructed_color')),
+    ParamSpec('completed_color', [0.20, 0.55, 1.0, 1.0], 'completed skeleton RGBA',
+              validator=_color_ok('completed_color')),
+    ParamSpec('character_color', [0.90, 0.72, 0.55, 0.9], 'character capsules RGBA',
+              validator=_color_ok('character_color')),
+    ParamSpec('reconstructed_offset', [0.0, 0.0, 0.0],
+              'shift (m) of the reconstructed/completed layers, e.g. to draw them side by side',
+              validator=_offset_ok('reconstructed_offset')),
+    ParamSpec('character_offset', [0.0, 0.0, 0.0], 'shift (m) of the character layer',
+              validator=_offset_ok('character_offset')),
+]
+
+_LAYER_TOPIC = {'raw': 'raw_topic', 'reliability': 'reliability_topic',
+                'reconstructed': 'reconstructed_topic', 'completed': 'completed_topic',
+                'character': 'character_topic'}
+
+
+def style_from_params(v: Dict[str, Any]) -> mk.Style:
+    off_r = tuple(float(x) for x in v['reconstructed_offset'])
+    off_c = tuple(float(x) for x in v['character_offset'])
+    return mk.Style(
+        joint_diameter=v['joint_diameter'], bone_width=v['bone_width'],
+        raw_joint_color=tuple(v['raw_joint_color']), raw_bone_color=tuple(v['raw_bone_color']),
+        inferred_alpha=v['inferred_alpha'], not_tracked=v['not_tracked'],
+        not_tracked_color=tuple(v['not_tracked_color']),
+        reliability_color=tuple(v['reliability_color']),
+        reliability_square_max=v['reliability_square_max'],
+        reliability_square_min=v['reliability_square_min'],
+        reconstructed_color=tuple(v['reconstructed_color']),
+        completed_color=tuple(v['completed_color']),
+        character_color=tuple(v['character_color']), character_height=v['character_height'],
+        offsets={'reconstructed': off_r, 'completed': off_r, 'character': off_c})
+
+
+def spec_to_msg(spec: mk.MarkerSpec, lifetime_s: float) -> Marker:
+    m = Marker()
+    m.header.frame_id = spec.frame_id
+    ns_to_stamp(spec.stamp_ns, m.header.stamp)
+    m.ns, m.id = spec.ns, int(spec.id)
+    if spec.action == mk.DELETE:
+        m.action = Marker.DELETE
+        return m
+    m.action = Marker.ADD
+    m.type = _TYPES[spec.type]
+    p = m.pose.position
+    p.x, p.y, p.z = (float(v) for v in spec.position)
+    o = m.pose.orientation
+    o.x, o.y, o.z, o.w = (float(v) for v in spec.orientation)
+    m.scale.x, m.scale.y, m.scale.z = (float(v) for v in spec.scale)
+    m.color.r, m.color.g, m.color.b, m.color.a = (float(v) for v in spec.color)
+    secs = int(lifetime_s)
+    m.lifetime.sec, m.lifetime.nanosec = secs, int(round((lifetime_s - secs) * 1e9))
+    m.frame_locked = False
+    if spec.points is not None:
+        from geometry_msgs.msg import Point
+        from std_msgs.msg import ColorRGBA
+        m.points = [Point(x=float(a), y=float(b), z=float(c)) for a, b, c in spec.points]
+        if spec.colors is not None and len(spec.colors) == len(spec.points):
+            m.colors = [ColorRGBA(r=float(r), g=float(g), b=float(b), a=float(a))
+                        for r, g, b, a in spec.colors]
+    return m
+
+
+class VizNode(Node):
+    """Thin adapter: SkeletonArray topics -> :class:`viz.markers.SceneState` -> MarkerArray."""
+
+    def __init__(self, **kwargs):
+        super().__init__('viz', **kwargs)
+        self.health = Health()
+        self.params = Parameters(self, SPECS, on_change=self._on_params)
+        v = self.params.values
+        self.scene = mk.SceneState(style_from_params(v), stale_timeout_s=v['stale_timeout_s'],
+                                   default_frame_id=v['default_frame_id'])
+        self._apply_enabled(v)
+        self._dirty = False
+        self._objects: Optional[MarkerArray] = None
+        self._objects_at = 0.0
+        self._objects_shown: Dict[tuple, str] = {}
+        self._objects_new = False
+        self._pub = self.create_publisher(MarkerArray, v['markers_topic'], 10)
+        from skeleton_msgs.msg import SkeletonArray
+        for layer, key in _LAYER_TOPIC.items():
+            self.create_subscription(SkeletonArray, v[key],
+                                     lambda msg, layer=layer: self._on_skeletons(layer, msg),
+                                     qos_profile_sensor_data)
+        self.create_subscription(MarkerArray, v['objects_topic'], self._on_objects, 10)
+        self._timer = self.create_timer(1.0 / v['max_rate_hz'], self._tick)
+        self._diag = DiagnosticsPublisher(self, self.health, extra=lambda: {
+            'namespaces': len(self.scene.shown_namespaces())})
+        self.get_logger().info(f"publishing markers on {self._pub.topic_name} at <= "
+                               f"{v['max_rate_hz']:g} Hz")
+
+    # ---------------------------------------------------------------- parameters
+    def _apply_enabled(self, v: Dict[str, Any]) -> None:
+        for layer in mk.LAYERS:
+            self.scene.enabled[layer] = bool(v[f'show_{layer}'])
+
+    def _on_params(self, changed: Dict[str, Any]) -> Optional[str]:
+        v = dict(self.params.values)
+        v.update(changed)
+        try:
+            style = style_from_params(v)
+        except (TypeError, ValueError) as e:
+            return str(e)
+        self.scene.style = style
+        self.scene.stale_timeout_s = v['stale_timeout_s']
+        self.scene.default_frame_id = v['default_frame_id']
+        self._apply_enabled(v)
+        if 'max_rate_hz' in changed:
+            self._timer.cancel()
+            self.destroy_timer(self._timer)
+            self._timer = self.create_timer(1.0 / v['max_rate_hz'], self._tick)
+        self._dirty = True
+        return None
+
+    # ---------------------------------------------------------------- inputs
+    def _on_skeletons(self, layer: str, msg) -> None:
+        self.health.on_receive()
+        errors = []
+        frames = frames_from_array_msg(msg, errors)
+        for e in errors:
+            if self.health.on_drop(e.cause):
+                self.get_logger().warning(f'{layer}: dropped a skeleton ({e}); '
+                                          'further drops of this cause are only counted')
+        self.scene.update(layer, frames, time.monotonic())
+        self._dirty = True
+
+    def _on_objects(self, msg: MarkerArray) -> None:
+        self.health.on_receive()
+        self._objects = msg
+        self._objects_at = time.monotonic()
+        self._objects_new = True
+
+    def _object_markers(self, now: float):
+        """Forward a new environment MarkerArray (namespaced ``environment/...``), or DELETE the
+        forwarded objects once they are hidden or stale."""
+        v = self.params.values
+        fresh = self._objects is not None and now - self._objects_at <= v['stale_timeout_s']
+        out = []
+        if v['show_objects'] and fresh:
+            if not self._objects_new:
+                return out
+            self._objects_new = False
+            shown = {}
+            for m in self._objects.markers:
+                if m.action != Marker.ADD:
+                    continue
+                m.ns = f'environment/{m.ns}' if m.ns else 'environment'
+                if not m.header.frame_id:
+                    m.header.frame_id = v['default_frame_id']
+                if m.lifetime.sec == 0 and m.lifetime.nanosec == 0:
+                    lt = v['marker_lifetime_s']
+                    m.lifetime.sec, m.lifetime.nanosec = int(lt), int(round((lt - int(lt)) * 1e9))
+                shown[(m.ns, m.id)] = m.header.frame_id
+                out.append(m)
+            for (ns, i), frame in self._objects_shown.items():
+                if (ns, i) not in shown:
+                    out.append(self._delete(ns, i, frame))
+            self._objects_shown = shown
+        elif self._objects_shown:
+            out = [self._delete(ns, i, frame) for (ns, i), frame in self._objects_shown.items()]
+            self._objects_shown = {}
+            self._objects_new = True  # re-forward if shown again
+        return out
+
+    @staticmethod
+    def _delete(ns: str, i: int, frame: str) -> Marker:
+        m = Marker(action=Marker.DELETE, ns=ns, id=i)
+        m.header.frame_id = frame
+        return m
+
+    # ---------------------------------------------------------------- output
+    def _tick(self) -> None:
+        now = time.monotonic()
+        objects = self._object_markers(now)
+        # without new input, rebuild only when a shown layer went stale (its markers are deleted)
+        if not self._dirty and not objects and not self.scene.has_stale(now):
+            return
+        t0 = time.perf_counter()
+        specs = self.scene.build(now)
+        self._dirty = False
+        if not specs and not objects:
+            return
+        lifetime = self.params.values['marker_lifetime_s']
+        out = MarkerArray()
+        out.markers = [spec_to_msg(s, lifetime) for s in specs] + objects
+        self._pub.publish(out)
+        self.health.on_publish(latency_s=time.perf_counter() - t0)
+
+
+def main(args=None):
+    return run_node(VizNode, args=args)
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())
