@@ -1,0 +1,352 @@
+"""Record and read ROS 2 bags (MCAP) without rclpy.
+
+The files are plain MCAP with the ``ros2`` profile: one ``ros2msg`` schema per message type (the
+complete message definition: the type's ``.msg`` text followed by every dependency, each preceded
+by a line of 80 ``=`` and ``MSG: pkg/msg/Type``, as rosbag2 writes them) and ``cdr``-encoded
+messages. That is what ``rosbag2_storage_mcap`` reads, so the files open in ``ros2 bag play``,
+``ros2 bag info`` and Foxglove.
+
+API::
+
+    with BagWriter('out/run.mcap') as bag:
+        bag.write('/kinect/skeletons', msg, stamp_ns)              # rclpy message or look-alike
+        bag.write('/diagnostics', msg, stamp_ns, 'diagnostic_msgs/msg/DiagnosticArray')
+        bag.write_raw('/kinect/skeletons', cdr_bytes, stamp_ns)    # already-serialized CDR
+
+    for m in read_messages('out/run.mcap', topics=['/kinect/skeletons']):
+        m.topic, m.stamp_ns, m.msgtype, m.msg.skeletons[0].user_id, m.data
+
+    bag_topics('out/run.mcap')  # {'/kinect/skeletons': ('skeleton_msgs/msg/SkeletonArray', 300)}
+
+``stamp_ns`` is the bag's receive (log) time; ``ros2 bag play`` replays on it. Message definitions
+are read from the installed ``share/<pkg>/msg/*.msg`` (ament index / ``AMENT_PREFIX_PATH``), with
+``src/skeleton_msgs/msg`` of this workspace as a fallback. Messages (rclpy messages or any object
+with the fields as attributes, e.g. a decoded one) are encoded from their attributes with the
+schema. The bytes are those rclpy's ``serialize_message`` produces, except that alignment padding
+is always zero (Fast CDR leaves padding bytes uninitialized, so its own output is not even
+repeatable); deserializing them with rclpy gives back an equal message. Unreadable or corrupt
+files raise :class:`BagError` naming the file.
+"""
+from __future__ import annotations
+
+import os
+import re
+from pathlib import Path
+from typing import Any, Dict, Iterable, Iterator, List, NamedTuple, Optional, Tuple
+
+DEFAULT_MSGTYPE = 'skeleton_msgs/msg/SkeletonArray'
+_SEPARATOR = '=' * 80
+_PRIMITIVES = {
+    'bool', 'byte', 'char', 'float32', 'float64', 'int8', 'uint8', 'int16', 'uint16', 'int32',
+    'uint32', 'int64', 'uint64', 'string', 'wstring',
+}
+
+
+class BagError(RuntimeError):
+    """A bag that cannot be written or read (the message names the file)."""
+
+
+class BagMessage(NamedTuple):
+    topic: str
+    stamp_ns: int      # log (receive) time in the bag
+    msgtype: str       # 'pkg/msg/Type'
+    msg: Any           # decoded message: attribute access like a ROS message
+    data: bytes        # raw CDR bytes as stored
+
+
+# --------------------------------------------------------------------------------------------
+# Message definitions
+# --------------------------------------------------------------------------------------------
+def _normalize_type(name: str) -> str:
+    """'pkg/Type' or 'pkg/msg/Type' -> 'pkg/msg/Type'."""
+    parts = name.strip().split('/')
+    if len(parts) == 2:
+        return f'{parts[0]}/msg/{parts[1]}'
+    if len(parts) == 3:
+        return name.strip()
+    raise BagError(f'invalid message type name {name!r} (expected pkg/msg/Type)')
+
+
+def _share_dirs(package: str) -> List[Path]:
+    out: List[Path] = []
+    try:
+        from ament_index_python.packages import get_package_share_directory
+        out.append(Path(get_package_share_directory(package)))
+    except Exception:
+        pass
+    for prefix in os.environ.get('AMENT_PREFIX_PATH', '').split(os.pathsep):
+        if prefix:
+            out.append(Path(prefix) / 'share' / package)
+    # this workspace's sources (skeleton_msgs before it is built / installed)
+    out.append(Path(__file__).resolve().parents[3] / 'src' / package)
+    return out
+
+
+_MSG_TEXT_CACHE: Dict[str, str] = {}
+
+
+def message_text(msgtype: str) -> str:
+    """The ``.msg`` text of one type (without dependencies)."""
+    msgtype = _normalize_type(msgtype)
+    if msgtype in _MSG_TEXT_CACHE:
+        return _MSG_TEXT_CACHE[msgtype]
+    pkg, sub, name = msgtype.split('/')
+    for d in _share_dirs(pkg):
+        f = d / sub / f'{name}.msg'
+        if f.is_file():
+            text = f.read_text()
+            _MSG_TEXT_CACHE[msgtype] = text
+            return text
+    raise BagError(f'no message definition for {msgtype} (looked for {sub}/{name}.msg in the '
+                   f'share directories of {pkg}; is the workspace sourced?)')
+
+
+def _field_types(text: str, package: str) -> List[str]:
+    """Complex field types referenced by a ``.msg`` text, as 'pkg/msg/Type'."""
+    out: List[str] = []
+    for line in text.splitlines():
+        line = line.split('#', 1)[0].strip()
+        if not line:
+            continue
+        tokens = line.split()
+        if len(tokens) < 2:
+            continue
+        if '=' in tokens[1] or (len(tokens) > 2 and tokens[2].startswith('=')):
+            continue  # constant
+        base = re.sub(r'\[.*\]$', '', tokens[0])
+        base = re.sub(r'<=\d+$', '', base)
+        if base in _PRIMITIVES:
+            continue
+        if base == 'Header':
+            dep = 'std_msgs/msg/Header'
+        elif '/' in base:
+            dep = _normalize_type(base)
+        else:
+            dep = f'{package}/msg/{base}'
+        if dep not in out:
+            out.append(dep)
+    return out
+
+
+_FULL_DEF_CACHE: Dict[str, str] = {}
+
+
+def message_definition(msgtype: str) -> str:
+    """The complete ``ros2msg`` definition of a type (rosbag2 / MCAP ``ros2msg`` encoding)."""
+    msgtype = _normalize_type(msgtype)
+    if msgtype in _FULL_DEF_CACHE:
+        return _FULL_DEF_CACHE[msgtype]
+    main = message_text(msgtype)
+    order: List[str] = []
+    todo = _field_types(main, msgtype.split('/')[0])
+    while todo:
+        dep = todo.pop(0)
+        if dep in order or dep == msgtype:
+            continue
+        order.append(dep)
+        todo.extend(_field_types(message_text(dep), dep.split('/')[0]))
+    parts = [main.rstrip('\n')]
+    for dep in order:
+        parts.append(f'{_SEPARATOR}\nMSG: {dep}\n{message_text(dep).rstrip(chr(10))}')
+    full = '\n'.join(parts) + '\n'
+    _FULL_DEF_CACHE[msgtype] = full
+    return full
+
+
+def _is_rclpy_message(msg: Any) -> bool:
+    cls = type(msg)
+    return hasattr(cls, '_TYPE_SUPPORT') and hasattr(msg, 'get_fields_and_field_types')
+
+
+def _rclpy_type_name(msg: Any) -> str:
+    cls = type(msg)
+    module = cls.__module__.split('.')  # e.g. skeleton_msgs.msg._skeleton_array
+    return f'{module[0]}/msg/{cls.__name__}'
+
+
+# --------------------------------------------------------------------------------------------
+# Writer
+# --------------------------------------------------------------------------------------------
+class BagWriter:
+    """Writes an MCAP bag; use as a context manager (or call :meth:`close`)."""
+
+    def __init__(self, path, compression: str = 'zstd', chunk_size: int = 1 << 20):
+        from mcap.writer import CompressionType, Writer
+        self.path = Path(path)
+        try:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            self._file = open(self.path, 'wb')
+        except OSError as e:
+            raise BagError(f'cannot create bag {self.path}: {e.strerror or e}') from None
+        comp = CompressionType.NONE
+        if compression == 'zstd':
+            try:
+                import zstandard  # noqa: F401
+                comp = CompressionType.ZSTD
+            except ImportError:
+                comp = CompressionType.NONE
+        elif compression == 'lz4':
+            comp = CompressionType.LZ4
+        self._writer = Writer(self._file, chunk_size=chunk_size, compression=comp)
+        self._writer.start(profile='ros2', library='kinect_posture skeleton_core.bagio')
+        self._schemas: Dict[str, int] = {}
+        self._encoders: Dict[str, Any] = {}
+        self._channels: Dict[str, Tuple[int, str]] = {}
+        self._sequence: Dict[str, int] = {}
+        self._closed = False
+        self.count = 0
+
+    def __enter__(self) -> 'BagWriter':
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def _channel(self, topic: str, msgtype: str) -> int:
+        ch = self._channels.get(topic)
+        if ch is not None:
+            if ch[1] != msgtype:
+                raise BagError(f'{self.path}: topic {topic} already recorded as {ch[1]}, '
+                               f'cannot also write {msgtype}')
+            return ch[0]
+        sid = self._schemas.get(msgtype)
+        if sid is None:
+            sid = self._writer.register_schema(name=msgtype, encoding='ros2msg',
+                                               data=message_definition(msgtype).encode())
+            self._schemas[msgtype] = sid
+        cid = self._writer.register_channel(topic=topic, message_encoding='cdr', schema_id=sid,
+                                            metadata={})
+        self._channels[topic] = (cid, msgtype)
+        return cid
+
+    def _encode(self, msg: Any, msgtype: str) -> bytes:
+        enc = self._encoders.get(msgtype)
+        if enc is None:
+            from mcap_ros2._dynamic import serialize_dynamic
+            enc = serialize_dynamic(msgtype, message_definition(msgtype))[msgtype]
+            self._encoders[msgtype] = enc
+        try:
+            return enc(msg)
+        except Exception as e:
+            if _is_rclpy_message(msg) and _rclpy_type_name(msg) == msgtype:
+                from rclpy.serialization import serialize_message
+                return serialize_message(msg)
+            raise BagError(f'{self.path}: cannot encode a {msgtype} from {type(msg).__name__}: '
+                           f'{e}') from None
+
+    def write(self, topic: str, msg: Any, stamp_ns: int, msgtype: Optional[str] = None) -> None:
+        """Record ``msg`` on ``topic`` at log time ``stamp_ns``. ``msgtype`` defaults to the rclpy
+        message's own type, else to ``skeleton_msgs/msg/SkeletonArray``."""
+        if msgtype is None:
+            msgtype = _rclpy_type_name(msg) if _is_rclpy_message(msg) else DEFAULT_MSGTYPE
+        msgtype = _normalize_type(msgtype)
+        self.write_raw(topic, self._encode(msg, msgtype), stamp_ns, msgtype)
+
+    def write_raw(self, topic: str, data: bytes, stamp_ns: int,
+                  msgtype: str = DEFAULT_MSGTYPE) -> None:
+        """Record already-serialized CDR bytes."""
+        if self._closed:
+            raise BagError(f'{self.path}: bag already closed')
+        cid = self._channel(topic, _normalize_type(msgtype))
+        seq = self._sequence.get(topic, 0)
+        self._sequence[topic] = seq + 1
+        self._writer.add_message(channel_id=cid, log_time=int(stamp_ns),
+                                 publish_time=int(stamp_ns), sequence=seq, data=bytes(data))
+        self.count += 1
+
+    def close(self) -> None:
+        if not self._closed:
+            self._closed = True
+            try:
+                self._writer.finish()
+            finally:
+                self._file.close()
+
+
+# --------------------------------------------------------------------------------------------
+# Reader
+# --------------------------------------------------------------------------------------------
+def _open(path) -> Tuple[Path, Any]:
+    p = Path(path)
+    if p.is_dir():  # a rosbag2 bag directory: use its single .mcap file
+        files = sorted(p.glob('*.mcap'))
+        if len(files) != 1:
+            raise BagError(f'cannot read bag {p}: expected one .mcap file in the directory, '
+                           f'found {len(files)}')
+        p = files[0]
+    if not p.is_file():
+        raise BagError(f'cannot read bag {p}: no such file')
+    try:
+        f = open(p, 'rb')
+        magic = f.read(8)
+        f.seek(0)
+    except OSError as e:
+        raise BagError(f'cannot read bag {p}: {e.strerror or e}') from None
+    if magic != b'\x89MCAP0\r\n':
+        f.close()
+        hint = ' (sqlite3 bags are not supported: convert with ros2 bag convert)' \
+            if magic.startswith(b'SQLite') else ''
+        raise BagError(f'cannot read bag {p}: not an MCAP file{hint}')
+    return p, f
+
+
+def bag_topics(path) -> Dict[str, Tuple[str, int]]:
+    """{topic: (msgtype, message count)} of a bag."""
+    from mcap.reader import make_reader
+    p, f = _open(path)
+    try:
+        with f:
+            reader = make_reader(f)
+            summary = reader.get_summary()
+            if summary is not None and summary.statistics is not None:
+                counts = summary.statistics.channel_message_counts
+                return {ch.topic: (summary.schemas[ch.schema_id].name
+                                   if ch.schema_id in summary.schemas else '',
+                                   int(counts.get(cid, 0)))
+                        for cid, ch in summary.channels.items()}
+    except BagError:
+        raise
+    except Exception as e:
+        raise BagError(f'cannot read bag {p}: corrupt or truncated MCAP ({e})') from None
+    # no summary (e.g. an unfinished recording): count by scanning
+    out: Dict[str, List] = {}
+    for m in read_messages(p, decode=False):
+        out.setdefault(m.topic, [m.msgtype, 0])[1] += 1
+    return {k: (v[0], v[1]) for k, v in out.items()}
+
+
+def read_messages(path, topics: Optional[Iterable[str]] = None,
+                  decode: bool = True) -> Iterator[BagMessage]:
+    """Messages of a bag in log-time order (optionally only some topics). ``decode=False`` leaves
+    ``msg`` as None (faster when only the raw bytes are needed)."""
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+    p, f = _open(path)
+    topic_list = None if topics is None else list(topics)
+    factory = DecoderFactory()
+    decoders: Dict[int, Any] = {}
+    with f:
+        try:
+            reader = make_reader(f)
+            it = reader.iter_messages(topics=topic_list, log_time_order=True)
+            for schema, channel, message in it:
+                msg = None
+                msgtype = schema.name if schema is not None else ''
+                if decode:
+                    dec = decoders.get(channel.id)
+                    if dec is None:
+                        if schema is None:
+                            raise BagError(f'cannot decode {channel.topic} in {p}: no schema')
+                        dec = factory.decoder_for(channel.message_encoding, schema)
+                        if dec is None:
+                            raise BagError(f'cannot decode {channel.topic} in {p}: encoding '
+                                           f'{channel.message_encoding}/{schema.encoding}')
+                        decoders[channel.id] = dec
+                    msg = dec(message.data)
+                yield BagMessage(channel.topic, int(message.log_time), msgtype, msg,
+                                 bytes(message.data))
+        except BagError:
+            raise
+        except Exception as e:
+            raise BagError(f'cannot read bag {p}: corrupt or truncated MCAP '
+                           f'({type(e).__name__}: {e})') from None

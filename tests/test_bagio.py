@@ -1,0 +1,151 @@
+"""skeleton_core.bagio: MCAP bags written without rclpy, checked against rclpy serialization."""
+import numpy as np
+import pytest
+
+pytest.importorskip('mcap_ros2')
+from skeleton_core import bagio  # noqa: E402
+from skeleton_core.bagio import BagError, BagWriter, bag_topics, read_messages  # noqa: E402
+
+rclpy = pytest.importorskip('rclpy')
+pytest.importorskip('skeleton_msgs.msg', reason='skeleton_msgs not built (run scripts/setup.sh)')
+from rclpy.serialization import deserialize_message, serialize_message  # noqa: E402
+from skeleton_msgs.msg import SkeletonArray  # noqa: E402
+
+from skeleton_core.conversions import (SkeletonFrame, frames_from_array_msg,  # noqa: E402
+                                       frames_to_array_msg)
+from skeleton_core.model import standard_body  # noqa: E402
+
+
+def _array_msg(stamp_ns, users=(1, 4)):
+    frames = []
+    for uid in users:
+        rng = np.random.default_rng(uid + stamp_ns % 97)
+        q = rng.normal(size=(20, 4))
+        q /= np.linalg.norm(q, axis=1, keepdims=True)
+        frames.append(SkeletonFrame(
+            positions=standard_body().rest_positions() + rng.normal(0, 0.05, (20, 3)),
+            tracking_state=rng.integers(0, 3, 20).astype(np.uint8),
+            reliability=rng.random(20).astype(np.float32), orientations=q, user_id=uid,
+            stamp_ns=stamp_ns, frame_id='kinect_depth'))
+    return frames_to_array_msg(frames, stamp_ns, 'kinect_depth')
+
+
+def _same_cdr(ours: bytes, theirs: bytes) -> bool:
+    """Equal bytes except alignment padding (rclpy/Fast CDR leaves padding uninitialized; we zero it)."""
+    if len(ours) != len(theirs):
+        return False
+    diff = [i for i in range(len(ours)) if ours[i] != theirs[i]]
+    return all(ours[i] == 0 for i in diff)
+
+
+def test_skeleton_array_round_trip_matches_rclpy_serialization(tmp_path):
+    path = tmp_path / 'run.mcap'
+    msgs = [_array_msg(1_700_000_000_000_000_000 + k * 33_333_333) for k in range(5)]
+    with BagWriter(path) as bag:
+        for k, m in enumerate(msgs):
+            bag.write('/kinect/skeletons', m, 1000 + k)
+    got = list(read_messages(path))
+    assert [g.stamp_ns for g in got] == [1000 + k for k in range(5)]
+    for g, m in zip(got, msgs):
+        assert g.topic == '/kinect/skeletons' and g.msgtype == 'skeleton_msgs/msg/SkeletonArray'
+        assert _same_cdr(g.data, serialize_message(m))
+        assert deserialize_message(g.data, SkeletonArray) == m
+        # the decoded message has attribute access and converts like a ROS message
+        frames = frames_from_array_msg(g.msg)
+        ref = frames_from_array_msg(m)
+        assert [f.user_id for f in frames] == [1, 4]
+        for a, b in zip(frames, ref):
+            assert np.array_equal(a.positions, b.positions)
+            assert np.array_equal(a.tracking_state, b.tracking_state)
+            assert np.array_equal(a.reliability, b.reliability)
+            assert a.stamp_ns == b.stamp_ns and a.frame_id == b.frame_id
+    assert bag_topics(path) == {'/kinect/skeletons': ('skeleton_msgs/msg/SkeletonArray', 5)}
+
+
+def test_decoded_message_rewrites_to_identical_bytes(tmp_path):
+    with BagWriter(tmp_path / 'a.mcap') as bag:
+        bag.write('/x', _array_msg(42), 7)
+    first = next(read_messages(tmp_path / 'a.mcap'))
+    with BagWriter(tmp_path / 'b.mcap') as bag:
+        bag.write('/y', first.msg, 8)                      # a decoded (non-rclpy) message
+        bag.write_raw('/z', first.data, 9)                 # raw CDR copy
+    second = {m.topic: m for m in read_messages(tmp_path / 'b.mcap')}
+    assert second['/y'].data == first.data
+    assert second['/z'].data == first.data
+    assert list(read_messages(tmp_path / 'b.mcap', topics=['/z']))[0].stamp_ns == 9
+
+
+def test_complete_ros2msg_definition_has_dependencies():
+    text = bagio.message_definition('skeleton_msgs/SkeletonArray')
+    assert text.startswith('# All users seen')
+    for dep in ('std_msgs/msg/Header', 'builtin_interfaces/msg/Time', 'skeleton_msgs/msg/Skeleton',
+                'geometry_msgs/msg/Point', 'geometry_msgs/msg/Quaternion'):
+        assert f'{"=" * 80}\nMSG: {dep}\n' in text
+    assert text.count('MSG: ') == 5
+
+
+def test_other_message_types_round_trip(tmp_path):
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+    from geometry_msgs.msg import Point
+    from visualization_msgs.msg import Marker, MarkerArray
+    diag = DiagnosticArray()
+    diag.header.stamp.sec = 5
+    diag.status = [DiagnosticStatus(level=DiagnosticStatus.WARN, name='driver', message='hi',
+                                    values=[KeyValue(key='rate_hz', value='30.0')])]
+    mk = Marker(ns='skeleton', id=3, type=Marker.LINE_LIST, action=Marker.ADD)
+    mk.header.frame_id = 'world'
+    mk.scale.x = 0.02
+    mk.color.a = 1.0
+    mk.points = [Point(x=1.0, y=2.0, z=3.0), Point(x=-1.0, y=0.5, z=0.0)]
+    markers = MarkerArray(markers=[mk])
+    written = [('/diagnostics', diag, DiagnosticArray), ('/viz/markers', markers, MarkerArray)]
+    try:
+        from tf2_msgs.msg import TFMessage
+        from geometry_msgs.msg import TransformStamped
+        tf = TFMessage(transforms=[TransformStamped(child_frame_id='head_1')])
+        tf.transforms[0].header.frame_id = 'kinect_depth'
+        tf.transforms[0].transform.rotation.w = 1.0
+        written.append(('/tf', tf, TFMessage))
+    except ImportError:
+        pass
+    with BagWriter(tmp_path / 'mixed.mcap') as bag:
+        for k, (topic, msg, _) in enumerate(written):
+            bag.write(topic, msg, k)
+    got = {m.topic: m for m in read_messages(tmp_path / 'mixed.mcap')}
+    for topic, msg, cls in written:
+        assert deserialize_message(got[topic].data, cls) == msg, topic
+        assert _same_cdr(got[topic].data, serialize_message(msg))
+    assert got['/viz/markers'].msg.markers[0].points[0].y == 2.0
+    assert got['/viz/markers'].msgtype == 'visualization_msgs/msg/MarkerArray'
+
+
+@pytest.mark.parametrize('content', [b'', b'hello, this is not a bag', b'SQLite format 3\x00xxxx'])
+def test_unreadable_bag_names_the_file(tmp_path, content):
+    p = tmp_path / 'broken.mcap'
+    p.write_bytes(content)
+    with pytest.raises(BagError, match='broken.mcap'):
+        list(read_messages(p))
+    with pytest.raises(BagError, match='broken.mcap'):
+        bag_topics(p)
+
+
+def test_truncated_and_missing_bags(tmp_path):
+    good = tmp_path / 'good.mcap'
+    with BagWriter(good, compression='none') as bag:
+        for k in range(50):
+            bag.write('/kinect/skeletons', _array_msg(k), k)
+    data = good.read_bytes()
+    cut = tmp_path / 'cut.mcap'
+    cut.write_bytes(data[:len(data) // 2])
+    with pytest.raises(BagError, match='cut.mcap'):
+        list(read_messages(cut))
+    with pytest.raises(BagError, match='nothere.mcap: no such file|nothere.mcap'):
+        list(read_messages(tmp_path / 'nothere.mcap'))
+
+
+def test_topic_type_conflict_is_refused(tmp_path):
+    from diagnostic_msgs.msg import DiagnosticArray
+    with BagWriter(tmp_path / 'c.mcap') as bag:
+        bag.write('/t', _array_msg(1), 1)
+        with pytest.raises(BagError, match='already recorded'):
+            bag.write('/t', DiagnosticArray(), 2)
