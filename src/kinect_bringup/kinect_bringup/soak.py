@@ -1,0 +1,233 @@
+"""``soak``: run the graph (one process per node) for a long time under abuse and check it survives.
+
+    ros2 run kinect_bringup soak                 # 10 minutes (make soak)
+    ros2 run kinect_bringup soak --duration 45   # the shortened soak the test suite runs
+
+While the synthetic driver streams one user, an injector publishes on /kinect/skeletons: visitors
+appearing and vanishing, bursts and gaps, and malformed messages of every kind (fuzz.MUTATIONS);
+parameters are changed at run time; one node at a time is killed (SIGKILL) and restarted. It ends
+with a report: crashes, NaN outputs, RSS growth after warm-up per process, recovery times, and
+exits non-zero when a target is missed (no crash, no NaN, RSS growth < 5 %, every restart recovers).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import random
+import sys
+import time
+from pathlib import Path
+from typing import Dict, List
+
+import numpy as np
+
+from .graph import repo_root
+from .processes import Graph
+
+# run-time parameter changes the soak cycles through: (node, parameter, values)
+PARAM_CHANGES = [
+    ('optimizer', 'k', [20, 30]),
+    ('optimizer', 'steps', [10, 20]),
+    ('reliability', 'reliability_threshold', [0.4, 0.5]),
+    ('physics', 'kp', [None]),  # None: read the current value and set it again
+]
+NODES = ['driver', 'reliability', 'completion', 'optimizer', 'physics']
+KILL_ORDER = ['reliability', 'optimizer', 'physics', 'completion']
+
+
+def main(argv=None) -> int:
+    root = repo_root() or Path.cwd()
+    ap = argparse.ArgumentParser(prog='soak', description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument('--duration', type=float, default=600.0, help='seconds (default 10 min)')
+    ap.add_argument('--kills', type=int, default=None, help='node kills (default: 1 per 2.5 min, >= 1)')
+    ap.add_argument('--seed', type=int, default=0)
+    ap.add_argument('--out', default=str(root / 'out' / 'soak'))
+    args = ap.parse_args(argv)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    rnd = random.Random(args.seed)
+
+    import psutil
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.node import Node
+    from skeleton_msgs.msg import SkeletonArray
+
+    from skeleton_core.database import load_or_build_default
+    from .fuzz import MUTATIONS, malformed, valid_array
+    load_or_build_default()
+
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx)
+    node = Node('soak_injector', context=ctx)
+    pub = node.create_publisher(SkeletonArray, '/kinect/skeletons', 50)
+    outputs = {'/posture/reconstructed': [], '/character/skeletons': [], '/posture/completed': []}
+    nan_outputs = {t: 0 for t in outputs}
+
+    def on_out(topic, msg):
+        outputs[topic].append(time.monotonic())
+        for sk in msg.skeletons:
+            if not all(np.isfinite([p.x + p.y + p.z for p in sk.positions])):
+                nan_outputs[topic] += 1
+
+    for t in outputs:
+        node.create_subscription(SkeletonArray, t, lambda m, t=t: on_out(t, m), 50)
+    ex = SingleThreadedExecutor(context=ctx)
+    ex.add_node(node)
+
+    def spin_for(seconds):
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            ex.spin_once(timeout_sec=min(0.01, max(0.0, end - time.monotonic())))
+
+    graph = Graph('processes', nodes=NODES, overrides={'driver': {'num_users': 1}},
+                  log_dir=out / 'logs')
+    report: Dict = {'duration_s': args.duration, 'malformed_sent': {}, 'param_changes': [],
+                    'kills': [], 'crashes': [], 'rss_mb': {}}
+    rss: Dict[str, List] = {n: [] for n in NODES}
+    expected_dead = set()
+    t_start = time.monotonic()
+    try:
+        # wait for the graph to come up
+        deadline = time.monotonic() + 120
+        while not outputs['/posture/reconstructed'] and time.monotonic() < deadline:
+            spin_for(0.2)
+        if not outputs['/posture/reconstructed']:
+            print('[soak] the graph never produced /posture/reconstructed', file=sys.stderr)
+            report['crashes'].append('no output at start')
+            return 1
+        t0 = time.monotonic()
+        n_kills = args.kills if args.kills is not None else max(1, int(args.duration // 150))
+        kill_times = [t0 + args.duration * (i + 1) / (n_kills + 1) for i in range(n_kills)]
+        next_param = t0 + 5.0
+        next_rss = t0
+        visitors: Dict[int, float] = {}
+        stamp_back = 0
+        i_param = 0
+        while time.monotonic() - t0 < args.duration:
+            now = time.monotonic()
+            ns = time.time_ns()
+            # visitors appear and vanish
+            if rnd.random() < 0.02 and len(visitors) < 3:
+                visitors[rnd.randint(50, 60)] = now + rnd.uniform(1, 6)
+            visitors = {u: t for u, t in visitors.items() if t > now}
+            if visitors and rnd.random() < 0.9:
+                pub.publish(valid_array(ns, sorted(visitors), rng=np.random.default_rng(int(ns % 1000))))
+            # bursts and gaps
+            if rnd.random() < 0.005:
+                for k in range(30):
+                    pub.publish(valid_array(ns + k, (70,)))
+            # malformed messages, and stamps going backwards
+            if rnd.random() < 0.1:
+                kind = rnd.choice(sorted(MUTATIONS))
+                pub.publish(malformed(kind, ns, user_id=rnd.choice([1, 71])))
+                report['malformed_sent'][kind] = report['malformed_sent'].get(kind, 0) + 1
+            if rnd.random() < 0.01:
+                pub.publish(valid_array(ns - 5_000_000_000, (72,)))
+                stamp_back += 1
+            # parameter changes at run time
+            if now > next_param:
+                nname, pname, values = PARAM_CHANGES[i_param % len(PARAM_CHANGES)]
+                i_param += 1
+                next_param = now + 7.0
+                report['param_changes'].append(_set_param(node, ex, nname, pname, values, rnd))
+            # kill one node and restart it
+            if kill_times and now > kill_times[0]:
+                kill_times.pop(0)
+                victim = KILL_ORDER[len(report['kills']) % len(KILL_ORDER)]
+                expected_dead.add(victim)
+                graph.restart(victim)
+                expected_dead.discard(victim)
+                mark = len(outputs['/posture/reconstructed'])
+                t_kill = time.monotonic()
+                report['kills'].append({'node': victim, 't': t_kill - t0, '_mark': mark,
+                                        '_t': t_kill})
+            # watch processes
+            for n, alive in graph.alive().items():
+                if not alive and n not in expected_dead:
+                    code = graph.procs[n].returncode
+                    report['crashes'].append(f'{n} exited with {code} at {now - t0:.0f} s')
+                    expected_dead.add(n)
+            if now > next_rss:
+                next_rss = now + 2.0
+                for n, p in graph.procs.items():
+                    try:
+                        rss[n].append((now - t0, psutil.Process(p.pid).memory_info().rss / 2 ** 20))
+                    except psutil.NoSuchProcess:
+                        pass
+            spin_for(1 / 30)
+        # recovery after each kill: first output after the restart
+        for k in report['kills']:
+            after = [t for t in outputs['/posture/reconstructed'] if t > k['_t']]
+            k['recovered_after_s'] = (after[0] - k['_t']) if after else None
+            k.pop('_mark'), k.pop('_t')
+    finally:
+        codes = graph.stop()
+        ex.shutdown()
+        node.destroy_node()
+        rclpy.try_shutdown(context=ctx)
+    report['exit_codes'] = codes
+    report['stamps_backwards_sent'] = stamp_back
+    report['nan_outputs'] = nan_outputs
+    report['outputs'] = {t: len(v) for t, v in outputs.items()}
+    growth_ok = True
+    restarted = {k['node'] for k in report['kills']}
+    for n, samples in rss.items():
+        if len(samples) < 4:
+            continue
+        warm = [m for t, m in samples if t >= 0.25 * args.duration]
+        if n in restarted or len(warm) < 2:
+            # a restarted process warms up again; judge only processes that ran throughout
+            report['rss_mb'][n] = {'last': samples[-1][1], 'judged': False}
+            continue
+        base, last = warm[0], max(warm[-3:])
+        g = (last - base) / base * 100.0
+        report['rss_mb'][n] = {'after_warmup': base, 'last': last, 'growth_percent': g, 'judged': True}
+        growth_ok &= g < 5.0
+    recovered = all(k.get('recovered_after_s') is not None for k in report['kills'])
+    ok = (not report['crashes'] and sum(nan_outputs.values()) == 0 and growth_ok and recovered)
+    report['ok'] = ok
+    (out / 'soak.json').write_text(json.dumps(report, indent=2, default=str))
+    print(json.dumps(report, indent=2, default=str))
+    print(f'[soak] {"PASSED" if ok else "FAILED"} after {time.monotonic() - t_start:.0f} s; '
+          f'report {out / "soak.json"}, node logs {out / "logs"}')
+    return 0 if ok else 1
+
+
+def _set_param(node, ex, nname, pname, values, rnd) -> Dict:
+    from rcl_interfaces.srv import GetParameters, SetParameters
+    from rclpy.parameter import Parameter, parameter_value_to_python
+
+    def call(srv, name, req):
+        cli = node.create_client(srv, name)
+        try:
+            if not cli.wait_for_service(timeout_sec=2.0):
+                return None
+            fut = cli.call_async(req)
+            end = time.monotonic() + 3.0
+            while not fut.done() and time.monotonic() < end:
+                ex.spin_once(timeout_sec=0.01)
+            return fut.result() if fut.done() else None
+        finally:
+            node.destroy_client(cli)
+
+    value = rnd.choice(values)
+    if value is None:
+        res = call(GetParameters, f'/{nname}/get_parameters', GetParameters.Request(names=[pname]))
+        if res is None or not res.values:
+            return {'node': nname, 'param': pname, 'result': 'unavailable'}
+        value = parameter_value_to_python(res.values[0])
+        if value is None:
+            return {'node': nname, 'param': pname, 'result': 'unknown parameter'}
+    res = call(SetParameters, f'/{nname}/set_parameters',
+               SetParameters.Request(parameters=[Parameter(pname, value=value).to_parameter_msg()]))
+    if res is None:
+        return {'node': nname, 'param': pname, 'result': 'no answer'}
+    r = res.results[0]
+    return {'node': nname, 'param': pname, 'value': value,
+            'result': 'ok' if r.successful else f'refused: {r.reason}'}
+
+
+if __name__ == '__main__':
+    sys.exit(main())
