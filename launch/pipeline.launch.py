@@ -17,13 +17,15 @@ from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node, PushRosNamespace
 
 ARGS = [
-    ('source', 'synthetic', 'skeleton source: synthetic | replay | live'),
+    # '' = keep the value from config/<node>.yaml
+    ('source', '', 'skeleton source: synthetic | replay | live (default: driver.yaml)'),
     ('replay_file', '', 'bag (.mcap) or CSV file for source:=replay'),
-    ('scenario', 'b', 'synthetic source scenario class (Shum 2013 Table IV): a | b | c'),
-    ('num_users', '1', 'synthetic source: number of users (1-6)'),
-    ('seed', '0', 'synthetic source: random seed'),
+    ('scenario', '', 'synthetic source scenario class (Shum 2013 Table IV): a | b | c'),
+    ('num_users', '', 'synthetic source: number of users (1-6)'),
+    ('seed', '', 'synthetic source: random seed'),
     ('database', '', 'motion database file ("" = built-in / CMU default, built and cached)'),
-    ('method', 'C', 'reconstruction driving the character: A (completion) | B | C (optimizer)'),
+    ('method', '', 'reconstruction driving the character: A (completion) | B | C (optimizer); '
+     'default: optimizer.yaml'),
     ('physics', 'true', 'run the MuJoCo physics character'),
     ('viz', 'true', 'run the RViz marker node'),
     ('rviz', 'false', 'start RViz with the bundled config'),
@@ -51,17 +53,21 @@ def _nodes(context):
         return out
 
     method = arg('method').upper()
-    if method not in ('A', 'B', 'C'):
+    if method not in ('', 'A', 'B', 'C'):
         raise RuntimeError(f"method:={arg('method')} is not one of A, B, C")
     common = dict(output='screen', emulate_tty=True,
                   arguments=['--ros-args', '--log-level', arg('log_level')])
     db = arg('database')
     db_over = {'database': db} if db else {}
 
-    driver_over = {'source': arg('source'), 'scenario': arg('scenario'),
-                   'num_users': int(arg('num_users')), 'seed': int(arg('seed'))}
-    if arg('replay_file'):
-        driver_over['replay_file'] = arg('replay_file')
+    driver_over = {}
+    for name, cast in (('source', str), ('scenario', str), ('replay_file', str),
+                       ('num_users', int), ('seed', int)):
+        if arg(name):
+            driver_over[name] = cast(arg(name))
+    opt_over = dict(db_over)
+    if method in ('B', 'C'):
+        opt_over['method'] = method
     nodes = [
         Node(package='kinect_driver', executable='driver', name='driver',
              parameters=params('driver', **driver_over), **common),
@@ -70,13 +76,15 @@ def _nodes(context):
         Node(package='pose_reconstruction', executable='completion', name='completion',
              parameters=params('completion', **db_over), **common),
         Node(package='pose_reconstruction', executable='optimizer', name='optimizer',
-             parameters=params('optimizer', method='B' if method == 'B' else 'C', **db_over),
+             parameters=params('optimizer', **opt_over),
              **common),
     ]
     if arg('physics').lower() in ('true', '1', 'yes'):
-        topic = '/posture/completed' if method == 'A' else '/posture/reconstructed'
+        phys_over = {}
+        if method:
+            phys_over['input_topic'] = '/posture/completed' if method == 'A' else '/posture/reconstructed'
         nodes.append(Node(package='physics_sim', executable='physics', name='physics',
-                          parameters=params('physics', input_topic=topic), **common))
+                          parameters=params('physics', **phys_over), **common))
     if arg('viz').lower() in ('true', '1', 'yes'):
         nodes.append(Node(package='viz', executable='viz', name='viz',
                           parameters=params('viz'), **common))

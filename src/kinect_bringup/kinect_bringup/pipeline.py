@@ -26,7 +26,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--num-users', type=int, default=None)
     p.add_argument('--seed', type=int, default=None)
     p.add_argument('--database', default=None, help='motion database file ("" = default)')
-    p.add_argument('--method', choices=['A', 'B', 'C'], default='C')
+    p.add_argument('--method', choices=['A', 'B', 'C'], default=None,
+                   help='A drives the character from completion; B/C set the optimizer (default: YAML)')
     p.add_argument('--no-physics', action='store_true')
     p.add_argument('--no-viz', action='store_true')
     p.add_argument('--record', default='', help='record the pipeline topics to this MCAP file')
@@ -47,8 +48,11 @@ def node_overrides(args) -> Dict[str, Dict]:
     if args.database is not None:
         over['completion']['database'] = args.database
         over['optimizer']['database'] = args.database
-    over['optimizer']['method'] = 'B' if args.method == 'B' else 'C'
-    over['physics']['input_topic'] = '/posture/completed' if args.method == 'A' else '/posture/reconstructed'
+    if args.method in ('B', 'C'):
+        over['optimizer']['method'] = args.method
+    if args.method:
+        over['physics']['input_topic'] = ('/posture/completed' if args.method == 'A'
+                                          else '/posture/reconstructed')
     if args.record:
         over['recorder']['output'] = str(Path(args.record).resolve())
     return over
