@@ -1,0 +1,168 @@
+"""``ros2 run skeleton_core import_uiprmd``: UI-PRMD Kinect recordings -> MCAP bags.
+
+    ros2 run skeleton_core import_uiprmd --src ../shared/kinect/ui-prmd --out cache/uiprmd
+    ros2 run skeleton_core import_uiprmd --src ../shared/kinect/ui-prmd --calibrate
+
+One bag per repetition, ``<out>/mMM_sSS_eEE.mcap``: ``skeleton_msgs/msg/SkeletonArray`` at 30 Hz on
+``/kinect/skeletons`` (one skeleton, user_id 1, frame ``kinect_link``: REP-103 axes of the sensor,
+origin on the floor below it, see :mod:`skeleton_core.uiprmd`) with monotonic stamps starting at
+``--start-sec``; where a Vicon file exists, the marker-derived joint centres registered into the
+same frame on ``/kinect/ground_truth`` with the same stamps (frames the Vicon recording does not
+cover have no ground-truth message). ``<out>/import_report.json`` lists the clips written, the
+per-session registration (rotation, translation, lags, residual per joint) and every skipped file
+with the reason. Malformed files are reported and skipped; the rest continue.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+SKELETON_TOPIC = '/kinect/skeletons'
+GROUND_TRUTH_TOPIC = '/kinect/ground_truth'
+
+
+def _int_list(text, prefix):
+    if not text:
+        return None
+    out = set()
+    for part in text.split(','):
+        part = part.strip().lower().lstrip(prefix)
+        if part:
+            out.add(int(part))
+    return out
+
+
+def write_clip_bag(path, rc, start_ns: int, user_id: int = 1, frame_id: str = 'kinect_link'):
+    """Write one :class:`~skeleton_core.uiprmd.RealClip` to an MCAP bag; returns message counts."""
+    from .bagio import BagWriter
+    from .conversions import frames_to_array_msg
+    from .model import NUM_JOINTS, TRACKED
+    from .uiprmd import clip_frames
+
+    frames = clip_frames(rc.kinect, start_ns, user_id, frame_id)
+    n_sk = n_gt = 0
+    tmp = Path(str(path) + '.part')
+    with BagWriter(tmp) as bag:
+        for i, f in enumerate(frames):
+            bag.write(SKELETON_TOPIC, frames_to_array_msg([f], f.stamp_ns, frame_id), f.stamp_ns)
+            n_sk += 1
+            if rc.reference is not None and np.isfinite(rc.reference[i]).all():
+                g = f.copy(positions=rc.reference[i].copy(),
+                           tracking_state=np.full(NUM_JOINTS, TRACKED, np.uint8))
+                bag.write(GROUND_TRUTH_TOPIC, frames_to_array_msg([g], f.stamp_ns, frame_id),
+                          f.stamp_ns)
+                n_gt += 1
+    tmp.replace(path)
+    return n_sk, n_gt
+
+
+def build_parser():
+    ap = argparse.ArgumentParser(
+        prog='import_uiprmd',
+        description='Import UI-PRMD Kinect recordings (and the Vicon marker reference) into MCAP '
+                    'bags of skeleton_msgs/SkeletonArray; optionally calibrate the sensor model.')
+    ap.add_argument('--src', default='../shared/kinect/ui-prmd',
+                    help='UI-PRMD folder (with Kinect/ and Vicon/) [%(default)s]')
+    ap.add_argument('--out', default='cache/uiprmd', help='output folder [%(default)s]')
+    ap.add_argument('--subjects', default='', help='e.g. s02,s04 (default: all)')
+    ap.add_argument('--movements', default='', help='e.g. m01,m03 (default: all)')
+    ap.add_argument('--repetitions', default='', help='e.g. 1,2 (default: all)')
+    ap.add_argument('--no-reference', action='store_true', help='skip the Vicon reference')
+    ap.add_argument('--start-sec', type=float, default=1.0,
+                    help='header stamp of the first frame of every bag, s [%(default)s]')
+    ap.add_argument('--user-id', type=int, default=1)
+    ap.add_argument('--frame-id', default='kinect_link')
+    ap.add_argument('--sensor-height', type=float, default=0.0,
+                    help='put the origin this far above the floor (m); 0 = origin on the floor '
+                         'below the sensor [%(default)s]')
+    ap.add_argument('--calibrate', action='store_true',
+                    help='measure the real sensor error and print it next to the sensor model '
+                         '(writes <out>/calibration.{md,json}); no bags unless --bags is given')
+    ap.add_argument('--bags', action='store_true', help='with --calibrate: also write the bags')
+    ap.add_argument('--quiet', action='store_true', help='no progress bar')
+    return ap
+
+
+def main(argv=None):
+    args = build_parser().parse_args(argv)
+    from .uiprmd import load_dataset
+    src = Path(args.src)
+    if not src.is_dir():
+        print(f'import_uiprmd: no UI-PRMD folder at {src}', file=sys.stderr)
+        return 1
+    out = Path(args.out)
+    try:
+        subjects = _int_list(args.subjects, 's')
+        movements = _int_list(args.movements, 'm')
+        reps = _int_list(args.repetitions, 'e')
+    except ValueError as e:
+        print(f'import_uiprmd: bad selection: {e}', file=sys.stderr)
+        return 1
+    progress = None
+    if not args.quiet:
+        try:
+            from tqdm import tqdm
+
+            def progress(it):
+                return tqdm(it, desc='reading', unit='clip')
+        except ImportError:
+            progress = None
+    clips, skipped, regs = load_dataset(src, subjects, movements, reps,
+                                        with_reference=not args.no_reference,
+                                        progress=progress, sensor_height=args.sensor_height)
+    if not clips:
+        print(f'import_uiprmd: no usable clips under {src}', file=sys.stderr)
+        for p, why in skipped:
+            print(f'  skipped {p}: {why}', file=sys.stderr)
+        return 1
+    out.mkdir(parents=True, exist_ok=True)
+    written = []
+    if not args.calibrate or args.bags:
+        it = clips
+        if not args.quiet and progress is not None:
+            from tqdm import tqdm
+            it = tqdm(clips, desc='writing', unit='bag')
+        start_ns = int(round(args.start_sec * 1e9))
+        for rc in it:
+            path = out / f'{rc.clip.name}.mcap'
+            try:
+                n_sk, n_gt = write_clip_bag(path, rc, start_ns, args.user_id, args.frame_id)
+            except Exception as e:  # one bad clip must not stop the import
+                skipped.append((str(path), f'cannot write bag: {e}'))
+                continue
+            written.append({'clip': rc.clip.name, 'bag': str(path), 'skeletons': n_sk,
+                            'ground_truth': n_gt,
+                            'lag_s': None if rc.lag is None else round(rc.lag, 3)})
+    report = {
+        'src': str(src), 'frame_id': args.frame_id, 'sensor_height_m': args.sensor_height,
+        'clips_read': len(clips), 'bags': written,
+        'registration': {s: {'rotation': r.rotation.round(6).tolist(),
+                             'translation_m': r.translation.round(4).tolist(),
+                             'residual_per_joint_mm': (r.residual_per_joint * 1000).round(1)
+                             .tolist()}
+                         for s, r in regs.items()},
+        'skipped': [{'file': p, 'reason': why} for p, why in skipped],
+    }
+    (out / 'import_report.json').write_text(json.dumps(report, indent=1))
+    n_gt = sum(1 for w in written if w['ground_truth'])
+    print(f'import_uiprmd: {len(clips)} clips read, {len(written)} bags written to {out} '
+          f'({n_gt} with {GROUND_TRUTH_TOPIC}), {len(skipped)} skipped')
+    for s, r in regs.items():
+        print(f'  session {s}: registration residual {np.nanmean(r.residual_per_joint) * 1000:.0f} mm '
+              f'mean over joints, t = {np.round(r.translation, 3).tolist()} m')
+    for p, why in skipped:
+        print(f'  skipped {p}: {why}')
+    if args.calibrate:
+        from .calibration import calibrate, write_report
+        result = calibrate(clips, regs)
+        md = write_report(result, out)
+        print(md)
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
