@@ -1,0 +1,167 @@
+"""One simulated character: its body, its target stream (interpolated between 30 Hz frames), its
+virtual-joint state, and its indices into the current MuJoCo model.
+
+A :class:`Character` outlives model rebuilds (characters and objects come and go at run time), so it
+keeps no MuJoCo pointers except the index arrays refreshed by :meth:`Character.bind`.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Dict, Optional
+
+import mujoco
+import numpy as np
+from skeleton_core.geometry import quat_conjugate, quat_multiply
+from skeleton_core.model import (FOOT_LEFT, FOOT_RIGHT, JOINT_NAMES, NUM_JOINTS, SEGMENT_CHILDREN,
+                                 SEGMENT_PARENTS, SEGMENTS, Body)
+
+from .controller import ball_qpos, segment_quats_from_positions
+from .mjcf_body import PIN_JOINTS, ROOT_SEGMENT, joint_anchor
+
+
+def _nlerp(q0: np.ndarray, q1: np.ndarray, s: float) -> np.ndarray:
+    sign = np.where(np.sum(q0 * q1, axis=-1, keepdims=True) < 0, -1.0, 1.0)
+    q = (1.0 - s) * q0 + s * sign * q1
+    return q / np.linalg.norm(q, axis=-1, keepdims=True)
+
+
+def _rotvec(q: np.ndarray) -> np.ndarray:
+    """Rotation vectors (N, 3) of unit quaternions (N, 4) x, y, z, w."""
+    q = q * np.where(q[..., 3:4] < 0, -1.0, 1.0)
+    s = np.linalg.norm(q[..., :3], axis=-1, keepdims=True)
+    ang = 2.0 * np.arctan2(s, q[..., 3:4])
+    return np.where(s > 1e-12, q[..., :3] / np.maximum(s, 1e-12) * ang, 2.0 * q[..., :3])
+
+
+@dataclass
+class Target:
+    """A target posture in the world frame (floor at z = 0): joint positions (20, 3) and segment
+    orientations (19, 4, x y z w) with the simulation time it was received and its input stamp."""
+
+    positions: np.ndarray
+    seg_quats: np.ndarray
+    sim_time: float
+    stamp_ns: int = 0
+
+
+@dataclass
+class PinState:
+    active: bool = False
+    point: np.ndarray = field(default_factory=lambda: np.zeros(3))
+
+
+class Character:
+    """A simulated character following the targets of one user."""
+
+    def __init__(self, user_id: int, body: Body, slot: int, first: Target):
+        self.user_id = int(user_id)
+        self.prefix = f'u{self.user_id}_'
+        self.body = body
+        self.slot = slot
+        self.prev = first
+        self.cur = first
+        self.period = 1.0 / 30.0
+        self.pins: Dict[int, PinState] = {j: PinState() for j in PIN_JOINTS}
+        self.dodge_until = -1.0
+        self.spawned = False   # qpos not yet set from the first target
+        # joint anchors (segment, local point)
+        anchors = [joint_anchor(body, j) for j in range(NUM_JOINTS)]
+        self.joint_seg = np.array([a[0] for a in anchors])
+        self.joint_local = np.array([a[1] for a in anchors])
+        # twist inertia per segment (capsule axial inertia ~ m r^2 / 2)
+        self.axial_inertia = 0.5 * body.segment_masses * body.segment_radii ** 2
+
+    # ------------------------------------------------------------------ model binding
+    def bind(self, model: mujoco.MjModel) -> None:
+        """Look up this character's ids in a (re)built model."""
+        p = self.prefix
+        bid = lambda n: mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, n)  # noqa: E731
+        self.seg_body = np.array([bid(f'{p}seg_{JOINT_NAMES[c]}') for c in SEGMENT_CHILDREN])
+        if np.any(self.seg_body < 0):
+            raise RuntimeError(f'character {self.user_id} missing from the model')
+        self.joint_body = self.seg_body[self.joint_seg]
+        mids = [bid(f'{p}target_{JOINT_NAMES[j]}') for j in range(NUM_JOINTS)]
+        self.mocap_ids = (np.array([model.body_mocapid[m] for m in mids]) if min(mids) >= 0
+                          else None)
+        eid = lambda n: mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_EQUALITY, n)  # noqa: E731
+        self.pin_eq = {j: eid(f'{p}pin_{JOINT_NAMES[j]}') for j in PIN_JOINTS}
+        jid = lambda n: mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, n)  # noqa: E731
+        self.root_qadr = model.jnt_qposadr[jid(f'{p}root')]
+        self.root_dadr = model.jnt_dofadr[jid(f'{p}root')]
+        self.ball_qadr = {}
+        for k, c in enumerate(SEGMENT_CHILDREN):
+            if k != ROOT_SEGMENT:
+                self.ball_qadr[k] = model.jnt_qposadr[jid(f'{p}ball_{JOINT_NAMES[c]}')]
+        dofs = [self.root_dadr + i for i in range(6)]
+        for k, c in enumerate(SEGMENT_CHILDREN):
+            if k != ROOT_SEGMENT:
+                d0 = model.jnt_dofadr[jid(f'{p}ball_{JOINT_NAMES[c]}')]
+                dofs += [d0, d0 + 1, d0 + 2]
+        self.dofs = np.array(dofs)
+        arm = model.dof_armature[self.dofs[6:]].reshape(-1, 3)[:, 0]
+        inertia = self.axial_inertia.copy()
+        others = [k for k in range(len(SEGMENTS)) if k != ROOT_SEGMENT]
+        inertia[others] += arm
+        self.twist_inertia = inertia
+
+    def set_pose(self, model, data, positions: np.ndarray, seg_quats: np.ndarray) -> None:
+        """Put the character in a posture (root at ``positions[0]``) with zero velocity."""
+        qb = ball_qpos(seg_quats)
+        data.qpos[self.root_qadr:self.root_qadr + 3] = positions[0]
+        data.qpos[self.root_qadr + 3:self.root_qadr + 7] = qb[ROOT_SEGMENT]
+        for k, adr in self.ball_qadr.items():
+            data.qpos[adr:adr + 4] = qb[k]
+        data.qvel[self.dofs] = 0.0
+
+    # ------------------------------------------------------------------ targets
+    def push_target(self, target: Target) -> None:
+        """A new target frame: interpolate from where the target is now to it over one frame."""
+        now = target.sim_time
+        p_now, q_now, _, _ = self.target_at(now)
+        dt_stamp = (target.stamp_ns - self.cur.stamp_ns) * 1e-9
+        if self.cur.stamp_ns and target.stamp_ns and 1.0 / 240 <= dt_stamp <= 0.25:
+            self.period = dt_stamp
+        else:
+            self.period = 1.0 / 30.0
+        self.prev = Target(p_now, q_now, now, self.cur.stamp_ns)
+        self.cur = target
+
+    def target_at(self, t: float):
+        """(positions, seg quats, velocities, segment angular velocities) of the target at sim time
+        ``t``: linear interpolation from the previous to the newest frame over one frame period,
+        then held (velocity 0)."""
+        s = (t - self.cur.sim_time) / self.period
+        if s >= 1.0 or self.prev is self.cur:
+            z = np.zeros((NUM_JOINTS, 3))
+            return self.cur.positions, self.cur.seg_quats, z, np.zeros((len(SEGMENTS), 3))
+        s = max(s, 0.0)
+        p = (1.0 - s) * self.prev.positions + s * self.cur.positions
+        v = (self.cur.positions - self.prev.positions) / self.period
+        q = _nlerp(self.prev.seg_quats, self.cur.seg_quats, s)
+        w = _rotvec(quat_multiply(self.cur.seg_quats, quat_conjugate(self.prev.seg_quats))) / self.period
+        return p, q, v, w
+
+    # ------------------------------------------------------------------ state
+    def joint_points(self, data) -> np.ndarray:
+        """World positions (20, 3) of the joint points of the simulated bodies."""
+        xm = data.xmat[self.joint_body].reshape(-1, 3, 3)
+        return data.xpos[self.joint_body] + np.einsum('nij,nj->ni', xm, self.joint_local)
+
+    def segment_quats(self, data) -> np.ndarray:
+        """World orientations (19, 4) x, y, z, w of the segment bodies (rest-relative)."""
+        q = data.xquat[self.seg_body]
+        return np.concatenate([q[:, 1:], q[:, :1]], axis=1)
+
+    def segment_axes(self, points: np.ndarray) -> np.ndarray:
+        d = points[list(SEGMENT_CHILDREN)] - points[list(SEGMENT_PARENTS)]
+        return d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-9)
+
+    @staticmethod
+    def default_seg_quats(positions: np.ndarray, body: Body) -> np.ndarray:
+        return segment_quats_from_positions(positions, body.rest_offsets)
+
+    def foot_ids(self):
+        return (FOOT_LEFT, FOOT_RIGHT)
+
+
+__all__ = ['Character', 'Target', 'PinState']

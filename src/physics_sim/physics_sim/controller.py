@@ -1,0 +1,197 @@
+"""The hybrid PD controller of Shum & Ho 2012 (Sec. 6, Eq. 1-2) and Shum et al. 2013 (Eq. 16-17),
+as plain numpy (no MuJoCo), so the equations can be tested by hand.
+
+* Positional control (Eq. 1/16): for every joint ``F = Ke (p_t - p) + Kd (p'_t - p')``, the same
+  gains for all joints, the force magnitude clamped to ``max_force``. It is applied as an external
+  force at the joint point.
+* Rotational control (Eq. 2/17): a torque about the segment's own axis only,
+  ``T = Ke_i (theta_t - theta) + Kd_i (theta'_t - theta')``, per-segment gains, magnitude clamped to
+  ``max_torque``. ``theta_t - theta`` is the twist (about the current segment axis) of the rotation
+  from the current to the target segment orientation.
+
+Also here: target segment orientations derived from joint positions when the input has none
+(minimal-twist frames hanging from a pelvis frame), and the conversion of a posture into the ball
+joint quaternions of the character.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Optional
+
+import numpy as np
+from skeleton_core.geometry import quat_conjugate, quat_multiply, quat_rotate, swing_twist
+from skeleton_core.model import (HIP_CENTER, HIP_LEFT, HIP_RIGHT, NUM_JOINTS, SEGMENT_CHILDREN,
+                                 SEGMENT_PARENTS, SEGMENTS, SPINE)
+
+from .mjcf_body import ROOT_SEGMENT, body_order, segment_parent_body
+
+
+@dataclass
+class Gains:
+    """Controller gains and limits (the paper hand-tunes one Ke/Kd pair for all joints)."""
+
+    ke: float = 4000.0          # N/m, Eq. 1 elasticity
+    kd: float = 80.0            # N s/m, Eq. 1 damping
+    max_force: float = 800.0    # N, |F| bound
+    twist_ke: float = 400.0     # 1/s^2: Ke_i = twist_ke * I_i (I_i = axial inertia + armature)
+    twist_kd: float = 40.0      # 1/s:   Kd_i = twist_kd * I_i
+    max_torque: float = 50.0    # N m, |T| bound
+
+    def validate(self) -> None:
+        for name in ('ke', 'kd', 'max_force', 'twist_ke', 'twist_kd', 'max_torque'):
+            v = getattr(self, name)
+            if not np.isfinite(v) or v < 0:
+                raise ValueError(f'gain {name} must be finite and >= 0, got {v!r}')
+
+
+def clamp_norm(v: np.ndarray, limit: float) -> np.ndarray:
+    """Scale rows of ``v`` (..., 3) down so their norm is at most ``limit``."""
+    v = np.asarray(v, float)
+    n = np.linalg.norm(v, axis=-1, keepdims=True)
+    scale = np.where(n > limit, limit / np.maximum(n, 1e-300), 1.0)
+    return v * scale
+
+
+def pd_force(p_target, p, v_target, v, ke: float, kd: float, max_force: float) -> np.ndarray:
+    """Eq. 1: ``F = Ke (p_t - p) + Kd (v_t - v)`` per joint, |F| <= max_force. Shapes (N, 3)."""
+    f = ke * (np.asarray(p_target, float) - p) + kd * (np.asarray(v_target, float) - v)
+    return clamp_norm(f, max_force)
+
+
+def twist_error(q_target, q_current, axis) -> np.ndarray:
+    """Angle (rad, (-pi, pi]) about ``axis`` (N, 3) of the twist part of ``q_t * q^-1``."""
+    rel = quat_multiply(q_target, quat_conjugate(q_current))
+    rel = rel * np.where(rel[..., 3:4] < 0, -1.0, 1.0)  # shortest way round
+    _, ang = swing_twist(rel, axis)
+    return ang
+
+
+def pd_twist_torque(angle_err, rate_target, rate, ke_i, kd_i, max_torque: float) -> np.ndarray:
+    """Eq. 2 (scalar per segment): ``T = Ke_i dtheta + Kd_i (theta'_t - theta')`` clamped."""
+    t = np.asarray(ke_i) * angle_err + np.asarray(kd_i) * (np.asarray(rate_target) - rate)
+    return np.clip(t, -max_torque, max_torque)
+
+
+def apply_at_points(forces, points, com) -> np.ndarray:
+    """Wrench (6,) per body at its centre of mass for forces (N, 3) applied at points (N, 3):
+    MuJoCo's ``xfrc_applied`` layout [force, torque]."""
+    forces = np.asarray(forces, float)
+    out = np.zeros(forces.shape[:-1] + (6,))
+    out[..., :3] = forces
+    out[..., 3:] = np.cross(np.asarray(points) - com, forces)
+    return out
+
+
+# -------------------------------------------------------------------------------------------
+# Orientations
+# -------------------------------------------------------------------------------------------
+def _unit(v, fallback):
+    v = np.asarray(v, float)
+    n = np.linalg.norm(v, axis=-1, keepdims=True)
+    return np.where(n > 1e-9, v / np.maximum(n, 1e-12), fallback)
+
+
+def quat_from_matrix(r: np.ndarray) -> np.ndarray:
+    """Rotation matrix (3, 3) -> quaternion (x, y, z, w)."""
+    r = np.asarray(r, float)
+    tr = np.trace(r)
+    if tr > 0:
+        s = 2.0 * np.sqrt(tr + 1.0)
+        q = [(r[2, 1] - r[1, 2]) / s, (r[0, 2] - r[2, 0]) / s, (r[1, 0] - r[0, 1]) / s, 0.25 * s]
+    else:
+        i = int(np.argmax(np.diag(r)))
+        j, k = (i + 1) % 3, (i + 2) % 3
+        s = 2.0 * np.sqrt(max(1.0 + r[i, i] - r[j, j] - r[k, k], 1e-300))
+        q = [0.0, 0.0, 0.0, (r[k, j] - r[j, k]) / s]
+        q[i] = 0.25 * s
+        q[j] = (r[j, i] + r[i, j]) / s
+        q[k] = (r[k, i] + r[i, k]) / s
+    q = np.array(q)
+    q /= np.linalg.norm(q)
+    return q * (-1.0 if q[3] < 0 else 1.0)
+
+
+def quat_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Shortest-arc rotation (x, y, z, w) taking unit vector ``a`` to unit vector ``b`` (rows)."""
+    a = np.asarray(a, float)
+    b = np.asarray(b, float)
+    c = np.cross(a, b)
+    d = np.sum(a * b, axis=-1, keepdims=True)
+    q = np.concatenate([c, 1.0 + d], axis=-1)
+    # opposite vectors: rotate pi about any axis orthogonal to a
+    opp = (1.0 + d[..., 0]) < 1e-9
+    if np.any(opp):
+        ortho = np.cross(a, np.array([1.0, 0.0, 0.0]))
+        small = np.linalg.norm(ortho, axis=-1) < 1e-6
+        ortho = np.where(small[..., None], np.cross(a, np.array([0.0, 1.0, 0.0])), ortho)
+        q = np.where(opp[..., None], np.concatenate([ortho, np.zeros_like(d)], -1), q)
+    return q / np.linalg.norm(q, axis=-1, keepdims=True)
+
+
+def pelvis_quat(positions: np.ndarray) -> np.ndarray:
+    """Pelvis frame (x forward, y left, z up the spine) of a posture, as a rest-relative quaternion."""
+    p = np.asarray(positions, float)
+    y = _unit(p[HIP_LEFT] - p[HIP_RIGHT], np.array([0.0, 1.0, 0.0]))
+    z = p[SPINE] - p[HIP_CENTER]
+    z = _unit(z - np.dot(z, y) * y, np.array([0.0, 0.0, 1.0]))
+    x = np.cross(y, z)
+    return quat_from_matrix(np.stack([x, y, z], axis=1))
+
+
+def segment_quats_from_positions(positions: np.ndarray, rest_offsets: np.ndarray) -> np.ndarray:
+    """World orientation (x, y, z, w) of every segment (19, SEGMENTS order) from joint positions:
+    the root segment follows the pelvis frame; every other segment is its parent body's
+    orientation followed by the shortest arc turning the parent-carried rest direction onto the
+    segment's direction (no twist added)."""
+    p = np.asarray(positions, float)
+    q = np.zeros((len(SEGMENTS), 4))
+    root_q = pelvis_quat(p)
+    rest = np.asarray(rest_offsets, float)
+    for k in body_order():
+        pb = segment_parent_body(k)
+        if pb < 0:
+            q[k] = root_q
+            continue
+        base = q[pb]
+        c, par = SEGMENT_CHILDREN[k], SEGMENT_PARENTS[k]
+        rd = _unit(quat_rotate(base, rest[c]), np.array([0.0, 0.0, 1.0]))
+        td = _unit(p[c] - p[par], rd)
+        q[k] = quat_multiply(quat_between(rd, td), base)
+    return q
+
+
+def joint_quats_to_segment(q_by_joint: np.ndarray) -> np.ndarray:
+    """(20, 4) orientations by child joint (Skeleton.orientations) -> (19, 4) by segment."""
+    return np.asarray(q_by_joint, float)[list(SEGMENT_CHILDREN)]
+
+
+def segment_quats_to_joints(q_seg: np.ndarray) -> np.ndarray:
+    """(19, 4) segment orientations -> (20, 4) by child joint; the root joint gets the root body's."""
+    out = np.zeros((NUM_JOINTS, 4))
+    out[list(SEGMENT_CHILDREN)] = q_seg
+    out[HIP_CENTER] = q_seg[ROOT_SEGMENT]
+    return out
+
+
+def is_identity(q: Optional[np.ndarray]) -> bool:
+    """True when every quaternion is (+/-) identity: Skeleton's "orientations unknown"."""
+    if q is None:
+        return True
+    q = np.asarray(q, float)
+    return bool(np.all(np.abs(np.abs(q[..., 3]) - 1.0) < 1e-9))
+
+
+def ball_qpos(q_seg: np.ndarray) -> np.ndarray:
+    """Ball joint quaternions (w, x, y, z; MuJoCo order) for segment world orientations (19, 4):
+    ``q_local = q_parent^-1 q_child`` (body frames are world-aligned in the rest pose)."""
+    out = np.zeros((len(SEGMENTS), 4))
+    for k in range(len(SEGMENTS)):
+        pb = segment_parent_body(k)
+        loc = q_seg[k] if pb < 0 else quat_multiply(quat_conjugate(q_seg[pb]), q_seg[k])
+        out[k] = (loc[3], loc[0], loc[1], loc[2])
+    return out
+
+
+__all__ = ['Gains', 'clamp_norm', 'pd_force', 'twist_error', 'pd_twist_torque', 'apply_at_points',
+           'quat_between', 'quat_from_matrix', 'pelvis_quat', 'segment_quats_from_positions',
+           'joint_quats_to_segment', 'segment_quats_to_joints', 'is_identity', 'ball_qpos']

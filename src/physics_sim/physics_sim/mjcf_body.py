@@ -1,0 +1,178 @@
+"""MJCF for one simulated character, generated from the skeleton model (Shum & Ho 2012, Sec. 4).
+
+The character has one rigid body per skeleton segment (19, ``model.SEGMENTS``), each a capsule from
+the segment's parent joint to its child joint, with the segment's mass and radius from
+:func:`skeleton_core.model.standard_body`. Bodies are connected by ball joints at the joint points;
+the root body (the HipCenter-Spine segment) carries a free joint at HipCenter. Every body frame has
+its origin at the segment's parent joint and is aligned with the world in the T-pose (facing +x,
+z up), so a body's world quaternion *is* the segment's rotation from the rest posture -- the
+convention of ``Skeleton.orientations``.
+
+Names are prefixed per character (``u<id>_``) so several characters live in one world:
+
+* body ``<p>seg_<ChildJoint>`` for every segment (e.g. ``u3_seg_ElbowLeft``),
+* joint ``<p>root`` (free) and ``<p>ball_<ChildJoint>`` (ball),
+* mocap body ``<p>target_<Joint>`` for each of the 20 joints (only for the constraint controller),
+* equality ``<p>track_<Joint>`` (soft connect to the mocap target) and ``<p>pin_<Foot>`` (virtual
+  joint pinning a foot to the floor; its world anchor is set at run time).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import List, Optional, Tuple
+
+import numpy as np
+from skeleton_core.model import (JOINT_NAMES, NUM_JOINTS, PARENTS, ROOT, SEGMENT_CHILDREN,
+                                 SEGMENT_OF_JOINT, SEGMENTS, SPINE, FOOT_LEFT, FOOT_RIGHT, Body)
+
+ROOT_SEGMENT = SEGMENT_OF_JOINT[SPINE]  # the HipCenter-Spine segment is the root body
+PIN_JOINTS = (FOOT_LEFT, FOOT_RIGHT)
+
+
+def fmt(v) -> str:
+    """Numbers for MJCF attributes (compact, round-trip enough for metres and kilograms)."""
+    return ' '.join(f'{float(x):.6g}' for x in np.atleast_1d(v))
+
+
+def segment_parent_body(k: int) -> int:
+    """Segment index of the body that segment ``k`` hangs from (-1 for the root segment)."""
+    if k == ROOT_SEGMENT:
+        return -1
+    parent_joint = SEGMENTS[k][0]
+    if parent_joint == ROOT:
+        return ROOT_SEGMENT
+    return SEGMENT_OF_JOINT[parent_joint]
+
+
+def body_order() -> List[int]:
+    """Segments in an order where every body comes after the body it hangs from."""
+    order, done = [], set()
+    while len(order) < len(SEGMENTS):
+        for k in range(len(SEGMENTS)):
+            pb = segment_parent_body(k)
+            if k not in done and (pb < 0 or pb in done):
+                order.append(k)
+                done.add(k)
+    return order
+
+
+@dataclass(frozen=True)
+class CharacterParams:
+    """Parameters of the generated character (everything a builder needs besides the body)."""
+
+    joint_damping: float = 2.0      # N m s / rad, ball joints (integrated implicitly)
+    joint_armature: float = 0.02    # kg m^2, ball joints (adds rotor-like inertia: stability)
+    friction: float = 1.0           # sliding friction of the capsules
+    contype: int = 2                # collision bits (see mjcf_world: one bit per character)
+    conaffinity: int = 1
+    rgba: Tuple[float, float, float, float] = (0.85, 0.6, 0.45, 1.0)
+    mocap_targets: bool = False     # add mocap target bodies + soft connect equalities
+    track_solref: Tuple[float, float] = (0.03, 1.0)   # timeconst (s), damping ratio
+    track_solimp: Tuple[float, float, float] = (0.9, 0.95, 0.001)
+    pin_solref: Tuple[float, float] = (0.01, 1.0)
+
+
+def segment_local_end(body: Body, k: int) -> np.ndarray:
+    """The segment's child joint point in its body frame (T-pose offset)."""
+    return np.asarray(body.rest_offsets[SEGMENT_CHILDREN[k]], float)
+
+
+def joint_anchor(body: Body, j: int) -> Tuple[int, np.ndarray]:
+    """(segment, local point) where joint ``j`` lives: the child end of the segment ending at ``j``;
+    the root joint is the origin of the root body."""
+    if j == ROOT:
+        return ROOT_SEGMENT, np.zeros(3)
+    k = SEGMENT_OF_JOINT[j]
+    return k, segment_local_end(body, k)
+
+
+def character_bodies_xml(prefix: str, body: Body, root_pos, params: CharacterParams,
+                         root_quat_wxyz=(1.0, 0.0, 0.0, 0.0)) -> str:
+    """The ``<body>`` tree of one character (to place inside ``<worldbody>``)."""
+    children = {k: [] for k in range(len(SEGMENTS))}
+    for k in body_order():
+        pb = segment_parent_body(k)
+        if pb >= 0:
+            children[pb].append(k)
+    rgba = fmt(params.rgba)
+
+    def emit(k: int, depth: int) -> List[str]:
+        ind = '  ' * depth
+        child = SEGMENT_CHILDREN[k]
+        name = JOINT_NAMES[child]
+        pb = segment_parent_body(k)
+        if pb < 0:
+            head = (f'{ind}<body name="{prefix}seg_{name}" pos="{fmt(root_pos)}" '
+                    f'quat="{fmt(root_quat_wxyz)}">')
+            joint = f'{ind}  <freejoint name="{prefix}root"/>'
+        else:
+            # this body starts at its parent joint = the child end of the parent body
+            pos = segment_local_end(body, pb) if SEGMENTS[k][0] != ROOT else np.zeros(3)
+            head = f'{ind}<body name="{prefix}seg_{name}" pos="{fmt(pos)}">'
+            joint = (f'{ind}  <joint name="{prefix}ball_{name}" type="ball" '
+                     f'damping="{params.joint_damping:.6g}" armature="{params.joint_armature:.6g}"/>')
+        end = segment_local_end(body, k)
+        r = float(body.segment_radii[k])
+        geom = (f'{ind}  <geom name="{prefix}geom_{name}" type="capsule" fromto="0 0 0 {fmt(end)}" '
+                f'size="{r:.6g}" mass="{float(body.segment_masses[k]):.6g}" '
+                f'contype="{params.contype}" conaffinity="{params.conaffinity}" '
+                f'friction="{params.friction:.6g} 0.005 0.0001" rgba="{rgba}"/>')
+        lines = [head, joint, geom]
+        for c in children[k]:
+            lines += emit(c, depth + 1)
+        lines.append(f'{ind}</body>')
+        return lines
+
+    return '\n'.join(emit(ROOT_SEGMENT, 2))
+
+
+def character_mocap_xml(prefix: str, positions: np.ndarray) -> str:
+    """One mocap body per joint (targets of the constraint controller), at ``positions`` (20, 3)."""
+    return '\n'.join(f'    <body name="{prefix}target_{JOINT_NAMES[j]}" mocap="true" '
+                     f'pos="{fmt(positions[j])}"/>' for j in range(NUM_JOINTS))
+
+
+def character_equality_xml(prefix: str, body: Body, params: CharacterParams) -> str:
+    """Foot pins (inactive) and, with mocap targets, the soft tracking connects (active)."""
+    lines = []
+    for j in PIN_JOINTS:
+        k, local = joint_anchor(body, j)
+        lines.append(f'    <connect name="{prefix}pin_{JOINT_NAMES[j]}" '
+                     f'body1="{prefix}seg_{JOINT_NAMES[SEGMENT_CHILDREN[k]]}" body2="world" '
+                     f'anchor="{fmt(local)}" active="false" solref="{fmt(params.pin_solref)}"/>')
+    if params.mocap_targets:
+        for j in range(NUM_JOINTS):
+            k, local = joint_anchor(body, j)
+            lines.append(f'    <connect name="{prefix}track_{JOINT_NAMES[j]}" '
+                         f'body1="{prefix}seg_{JOINT_NAMES[SEGMENT_CHILDREN[k]]}" '
+                         f'body2="{prefix}target_{JOINT_NAMES[j]}" anchor="{fmt(local)}" '
+                         f'solref="{fmt(params.track_solref)}" solimp="{fmt(params.track_solimp)}"/>')
+    return '\n'.join(lines)
+
+
+def character_xml_parts(prefix: str, body: Body, root_pos, params: Optional[CharacterParams] = None,
+                        target_positions: Optional[np.ndarray] = None):
+    """(bodies, mocap bodies, equalities) MJCF fragments for one character."""
+    params = params or CharacterParams()
+    bodies = character_bodies_xml(prefix, body, root_pos, params)
+    mocap = ''
+    if params.mocap_targets:
+        tp = body.rest_positions() if target_positions is None else target_positions
+        mocap = character_mocap_xml(prefix, tp)
+    return bodies, mocap, character_equality_xml(prefix, body, params)
+
+
+def standalone_character_xml(body: Body, params: Optional[CharacterParams] = None,
+                             prefix: str = 'u0_') -> str:
+    """A complete MJCF with just one character (root at the T-pose height) and a floor, for tests."""
+    params = params or CharacterParams()
+    b, m, e = character_xml_parts(prefix, body, (0.0, 0.0, body.root_height), params)
+    return (f'<mujoco model="character">\n  <option timestep="0.002" integrator="implicitfast"/>\n'
+            f'  <worldbody>\n    <geom name="floor" type="plane" size="0 0 0.05"/>\n{b}\n{m}\n'
+            f'  </worldbody>\n  <equality>\n{e}\n  </equality>\n</mujoco>')
+
+
+__all__ = ['CharacterParams', 'ROOT_SEGMENT', 'PIN_JOINTS', 'body_order', 'segment_parent_body',
+           'joint_anchor', 'segment_local_end', 'character_bodies_xml', 'character_mocap_xml',
+           'character_equality_xml', 'character_xml_parts', 'standalone_character_xml', 'fmt',
+           'PARENTS']

@@ -1,0 +1,640 @@
+"""The physics world: characters PD-tracking their users' target postures (Shum & Ho 2012, Sec. 4,
+6, 8; Shum et al. 2013, Sec. VII) in MuJoCo, with virtual joints, objects, pushes and dodging.
+
+Library API (no ROS)::
+
+    sim = Simulation(SimConfig())
+    states = sim.step({user_id: positions_20x3}, duration=1/30)   # -> {user_id: CharacterState}
+    sim.apply_push(user_id, 'Spine', (200, 0, 0), 0.1)
+    sim.throw_ball(position, velocity, radius=0.1, mass=0.5)
+
+Targets arrive in the *sensor* frame (REP-103: x forward from the sensor, z up) and are moved to
+the world (floor at z = 0) with :class:`SensorPose` (sensor height and downward pitch). Every state
+is reported in both frames. Bad targets (NaN, wrong shape) raise ``ValueError`` before anything
+in the simulation changes.
+
+Controllers (``SimConfig.controller``):
+
+* ``explicit_pd`` -- the papers' scheme: Eq. 1 forces at every joint point + Eq. 2 torques about
+  every segment axis, applied as external forces (``xfrc_applied``), integrated explicitly.
+* ``mocap_constraints`` -- the positional PD is replaced by one soft ``connect`` equality per joint
+  between the body point and a mocap body moved along the target; the spring-damper is the
+  constraint's ``solref`` (time constant, damping ratio) and is solved implicitly by MuJoCo's
+  constraint solver, so it stays stable at any stiffness the time step can resolve. Eq. 2 torques
+  are kept as in the paper. Force clamping is then done by the solver's impedance, not max_force.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+from typing import Dict, List, Mapping, Optional, Sequence
+
+import mujoco
+import numpy as np
+from skeleton_core.conversions import validate_arrays
+from skeleton_core.geometry import quat_conjugate, quat_multiply, quat_rotate, retarget
+from skeleton_core.model import (ELBOW_LEFT, ELBOW_RIGHT, HAND_LEFT, HAND_RIGHT, HEAD,
+                                 JOINT_INDEX, JOINT_NAMES, NUM_JOINTS, SEGMENT_OF_JOINT,
+                                 SEGMENTS, SHOULDER_LEFT, SHOULDER_RIGHT, WRIST_LEFT,
+                                 WRIST_RIGHT, Body, estimate_height, standard_body)
+
+from .character import Character, Target
+from .controller import (Gains, apply_at_points, is_identity, joint_quats_to_segment, pd_force,
+                         pd_twist_torque, segment_quats_to_joints, twist_error)
+from .mjcf_body import CharacterParams, joint_anchor
+from .mjcf_world import ALL_BITS, CharacterEntry, ObjectSpec, WorldParams, character_bits, world_xml
+
+CONTROLLERS = ('explicit_pd', 'mocap_constraints')
+
+
+# ---------------------------------------------------------------------------------------------
+# Frames
+# ---------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class SensorPose:
+    """Where the sensor is in the world: ``height`` (m) above the floor and ``pitch`` (rad, positive
+    = tilted down). ``lift`` (m) raises every target so the model's foot capsules (whose axis is at
+    the Kinect foot joint) rest on the floor instead of sinking by their radius."""
+
+    height: float = 0.8
+    pitch: float = 0.0
+    lift: float = 0.0
+
+    def rotation(self) -> np.ndarray:
+        c, s = math.cos(self.pitch), math.sin(self.pitch)
+        return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+
+    def quat(self) -> np.ndarray:
+        return np.array([0.0, math.sin(self.pitch / 2), 0.0, math.cos(self.pitch / 2)])
+
+    def offset(self) -> np.ndarray:
+        return np.array([0.0, 0.0, self.height + self.lift])
+
+    def to_world(self, p: np.ndarray) -> np.ndarray:
+        return np.asarray(p, float) @ self.rotation().T + self.offset()
+
+    def to_sensor(self, p: np.ndarray) -> np.ndarray:
+        return (np.asarray(p, float) - self.offset()) @ self.rotation()
+
+    def quat_to_world(self, q: np.ndarray) -> np.ndarray:
+        return quat_multiply(np.broadcast_to(self.quat(), np.shape(q)), q)
+
+    def quat_to_sensor(self, q: np.ndarray) -> np.ndarray:
+        return quat_multiply(np.broadcast_to(quat_conjugate(self.quat()), np.shape(q)), q)
+
+
+# ---------------------------------------------------------------------------------------------
+# Configuration and state
+# ---------------------------------------------------------------------------------------------
+@dataclass
+class SimConfig:
+    """Everything tunable about the simulation (the node maps each field to a ROS parameter)."""
+
+    timestep: float = 0.002
+    controller: str = 'explicit_pd'
+    gains: Gains = field(default_factory=Gains)
+    # constraint controller (mocap_constraints): soft connect spring = (time constant, damping ratio)
+    track_timeconst: float = 0.02
+    track_dampratio: float = 1.0
+    # character model
+    body_height: float = 0.0        # m; 0 = estimate from the user's first target
+    body_mass: float = 75.0         # kg at 1.75 m (scaled with height^3)
+    retarget: bool = True           # Eq. 3-4: targets to the character's segment lengths
+    joint_damping: float = 2.0
+    joint_armature: float = 0.02
+    friction: float = 1.0
+    # frames
+    sensor_height: float = 0.8
+    sensor_pitch: float = 0.0
+    auto_floor: bool = False        # set the sensor height from the first target's lowest foot
+    lift_feet: bool = True          # raise targets by the foot capsule radius
+    # virtual joints
+    pin_feet: bool = True
+    pin_height: float = 0.04        # m above the standing foot height: pin below this
+    pin_release_height: float = 0.07
+    pin_speed: float = 0.3          # m/s: pin only if the foot target is slower
+    pin_release_distance: float = 0.15  # m: release when the target slides this far from the pin
+    conflict_tolerance: float = 0.05    # m: a virtual joint stretched more than this = conflict
+    conflict_release: float = 0.3       # m: ... and released if stretched more than this
+    # interaction
+    dodge: bool = False
+    dodge_distance: float = 0.45    # m: predicted closest approach to the head
+    dodge_time: float = 0.6         # s: look-ahead
+    dodge_hold: float = 0.5         # s: arms stay up this long after the last threat
+    max_characters: int = 6
+
+    def validate(self) -> None:
+        if self.controller not in CONTROLLERS:
+            raise ValueError(f'controller must be one of {CONTROLLERS}, got {self.controller!r}')
+        if not (1e-4 <= self.timestep <= 0.02):
+            raise ValueError(f'timestep must be in [0.0001, 0.02] s, got {self.timestep}')
+        if self.track_timeconst < 2 * self.timestep:
+            raise ValueError('track_timeconst must be at least 2 x timestep')
+        self.gains.validate()
+
+
+@dataclass
+class CharacterState:
+    """Simulated joint positions (20, 3) and orientations (20, 4, x y z w) in the world and in the
+    sensor frame, with the stamp of the target being tracked."""
+
+    user_id: int
+    positions: np.ndarray
+    orientations: np.ndarray
+    positions_sensor: np.ndarray
+    orientations_sensor: np.ndarray
+    stamp_ns: int
+    pinned: Dict[str, bool]
+    target_world: np.ndarray
+
+
+# ---------------------------------------------------------------------------------------------
+# Simulation
+# ---------------------------------------------------------------------------------------------
+class Simulation:
+    """A MuJoCo world with characters (one per user) and objects."""
+
+    def __init__(self, config: Optional[SimConfig] = None, objects: Sequence[ObjectSpec] = ()):
+        self.config = config or SimConfig()
+        self.config.validate()
+        self.characters: Dict[int, Character] = {}
+        self.objects: List[ObjectSpec] = list(objects)
+        self.holds: Dict[str, tuple] = {}   # object name -> (user_id, hand joint)
+        self.pushes: List[tuple] = []       # (user_id, segment index, force (3,), end time)
+        self.counters: Dict[str, int] = {'constraint_conflict': 0, 'virtual_joint_released': 0,
+                                         'nan_reset': 0, 'refused_target': 0, 'rebuilds': 0,
+                                         'pins': 0}
+        self.sensor: Optional[SensorPose] = None
+        self._obj_state: Dict[str, tuple] = {}
+        self._ball_count = 0
+        self.time = 0.0
+        self._rebuild()
+
+    # ------------------------------------------------------------------ model
+    def _world_params(self) -> WorldParams:
+        c = self.config
+        cp = CharacterParams(joint_damping=c.joint_damping, joint_armature=c.joint_armature,
+                             friction=c.friction,
+                             mocap_targets=(c.controller == 'mocap_constraints'),
+                             track_solref=(c.track_timeconst, c.track_dampratio))
+        return WorldParams(timestep=c.timestep, character=cp)
+
+    def _rebuild(self) -> None:
+        """(Re)compile the world from the current characters and objects, keeping the state of
+        everything that already existed (matched by name)."""
+        old_m = getattr(self, 'model', None)
+        old_d = getattr(self, 'data', None)
+        entries = []
+        for ch in self.characters.values():
+            entries.append(CharacterEntry(ch.prefix, ch.body, tuple(ch.cur.positions[0]), ch.slot,
+                                          ch.cur.positions))
+        xml = world_xml(entries, self.objects, self._world_params())
+        m = mujoco.MjModel.from_xml_string(xml)
+        d = mujoco.MjData(m)
+        self.xml = xml
+        if old_m is not None:
+            self._copy_state(old_m, old_d, m, d)
+        d.time = self.time
+        self.model, self.data = m, d
+        for ch in self.characters.values():
+            ch.bind(m)
+            if not ch.spawned:
+                ch.set_pose(m, d, ch.cur.positions, ch.cur.seg_quats)
+                ch.spawned = True
+        for name, (uid, hand) in list(self.holds.items()):
+            if uid in self.characters and self._obj_id(name) >= 0:
+                self._activate_hold(name, uid, hand, teleport=False)
+            else:
+                del self.holds[name]
+        for ch in self.characters.values():
+            for j, pin in ch.pins.items():
+                if pin.active:
+                    self._set_pin(ch, j, True, pin.point)
+        mujoco.mj_forward(m, d)
+        self.counters['rebuilds'] += 1
+
+    @staticmethod
+    def _copy_state(om, od, m, d) -> None:
+        for j in range(m.njnt):
+            name = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_JOINT, j)
+            oj = mujoco.mj_name2id(om, mujoco.mjtObj.mjOBJ_JOINT, name)
+            if oj < 0:
+                continue
+            nq = {0: 7, 1: 4, 2: 1, 3: 1}[int(m.jnt_type[j])]
+            nv = {0: 6, 1: 3, 2: 1, 3: 1}[int(m.jnt_type[j])]
+            d.qpos[m.jnt_qposadr[j]:m.jnt_qposadr[j] + nq] = od.qpos[om.jnt_qposadr[oj]:om.jnt_qposadr[oj] + nq]
+            d.qvel[m.jnt_dofadr[j]:m.jnt_dofadr[j] + nv] = od.qvel[om.jnt_dofadr[oj]:om.jnt_dofadr[oj] + nv]
+
+    def _obj_id(self, name: str) -> int:
+        return mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_BODY, f'obj_{name}')
+
+    # ------------------------------------------------------------------ targets
+    def _sensor_pose(self, first_world_positions: Optional[np.ndarray] = None) -> SensorPose:
+        if self.sensor is None:
+            c = self.config
+            height = c.sensor_height
+            if c.auto_floor and first_world_positions is not None:
+                rot = SensorPose(0.0, c.sensor_pitch).to_world(first_world_positions)
+                from skeleton_core.model import FOOT_LEFT, FOOT_RIGHT
+                height = -float(min(rot[FOOT_LEFT, 2], rot[FOOT_RIGHT, 2]))
+            lift = 0.0
+            if c.lift_feet:
+                from skeleton_core.model import FOOT_LEFT as FL
+                lift = float(standard_body(max(self._body_height_for(first_world_positions), 0.6))
+                             .segment_radii[SEGMENT_OF_JOINT[FL]])
+            self.sensor = SensorPose(height, c.sensor_pitch, lift)
+        return self.sensor
+
+    def _body_height_for(self, positions: Optional[np.ndarray]) -> float:
+        if self.config.body_height > 0:
+            return self.config.body_height
+        if positions is None:
+            return 1.75
+        h = estimate_height(positions)
+        return float(np.clip(h, 1.0, 2.3)) if np.isfinite(h) else 1.75
+
+    def make_target(self, user_id: int, positions, orientations=None, stamp_ns: int = 0) -> Target:
+        """Validate a sensor-frame target and express it in the world (retargeted if configured).
+        Raises ``ValueError`` for NaN / wrong shapes; nothing in the simulation changes then."""
+        try:
+            p, _, _, q = validate_arrays(positions, orientations=orientations)
+        except ValueError:
+            self.counters['refused_target'] += 1
+            raise
+        sensor = self._sensor_pose(p)
+        pw = sensor.to_world(p)
+        ch = self.characters.get(int(user_id))
+        body = ch.body if ch is not None else self._new_body(pw)
+        if self.config.retarget:
+            pw = retarget(pw, body)
+        if is_identity(q):
+            sq = Character.default_seg_quats(pw, body)
+        else:
+            sq = joint_quats_to_segment(sensor.quat_to_world(q))
+        return Target(pw, sq, self.time, int(stamp_ns))
+
+    def _new_body(self, world_positions: np.ndarray) -> Body:
+        h = self._body_height_for(world_positions)
+        return standard_body(h, self.config.body_mass * (h / 1.75) ** 3)
+
+    def set_target(self, user_id: int, positions, orientations=None, stamp_ns: int = 0) -> None:
+        """Give user ``user_id`` a new target (sensor frame). A new user spawns a character in
+        the target posture."""
+        uid = int(user_id)
+        target = self.make_target(uid, positions, orientations, stamp_ns)
+        ch = self.characters.get(uid)
+        if ch is None:
+            if len(self.characters) >= self.config.max_characters:
+                raise ValueError(f'already {len(self.characters)} characters (max_characters)')
+            used = {c.slot for c in self.characters.values()}
+            slot = min(set(range(30)) - used)
+            body = self._new_body(target.positions)
+            ch = Character(uid, body, slot, target)
+            self.characters[uid] = ch
+            self._rebuild()
+        else:
+            ch.push_target(target)
+
+    def remove_character(self, user_id: int) -> bool:
+        if int(user_id) not in self.characters:
+            return False
+        del self.characters[int(user_id)]
+        self.pushes = [p for p in self.pushes if p[0] != int(user_id)]
+        self._rebuild()
+        return True
+
+    # ------------------------------------------------------------------ objects
+    def add_object(self, spec: ObjectSpec) -> None:
+        if any(o.name == spec.name for o in self.objects):
+            raise ValueError(f'object {spec.name!r} exists')
+        self.objects.append(spec)
+        self._rebuild()
+        oid = self._obj_id(spec.name)
+        adr = self.model.jnt_dofadr[self.model.body_jntadr[oid]]
+        self.data.qvel[adr:adr + 3] = spec.vel
+
+    def remove_object(self, name: str) -> bool:
+        n = len(self.objects)
+        self.objects = [o for o in self.objects if o.name != name]
+        self.holds.pop(name, None)
+        if len(self.objects) != n:
+            self._rebuild()
+            return True
+        return False
+
+    def throw_ball(self, position, velocity, radius: float = 0.1, mass: float = 0.5,
+                   name: Optional[str] = None) -> str:
+        """Add a ball at ``position`` (world) flying at ``velocity`` (m/s); returns its name."""
+        self._ball_count += 1
+        name = name or f'thrown{self._ball_count}'
+        self.add_object(ObjectSpec(name, 'ball', tuple(position), (radius,), mass, tuple(velocity),
+                                   rgba=(0.9, 0.3, 0.2, 1.0)))
+        return name
+
+    def throw_at(self, user_id: int, joint: int = HEAD, speed: float = 6.0, distance: float = 3.0,
+                 radius: float = 0.1, mass: float = 0.5) -> str:
+        """Throw a ball at a character's joint from ``distance`` in front of it (gravity-corrected)."""
+        ch = self.characters[int(user_id)]
+        aim = ch.joint_points(self.data)[joint]
+        fwd = quat_rotate(ch.segment_quats(self.data)[0], np.array([1.0, 0.0, 0.0]))
+        fwd[2] = 0.0
+        fwd /= max(np.linalg.norm(fwd), 1e-9)
+        start = aim + distance * fwd
+        t = distance / speed
+        vel = -fwd * speed + np.array([0.0, 0.0, 0.5 * 9.81 * t])
+        return self.throw_ball(start, vel, radius, mass)
+
+    def object_poses(self) -> Dict[str, tuple]:
+        """name -> (position (3,), quaternion x y z w, spec), world frame."""
+        out = {}
+        for o in self.objects:
+            b = self._obj_id(o.name)
+            q = self.data.xquat[b]
+            out[o.name] = (self.data.xpos[b].copy(), np.array([q[1], q[2], q[3], q[0]]), o)
+        return out
+
+    def hold(self, user_id: int, object_name: str, hand: str = 'right') -> None:
+        """Virtual joint (ball) between a character's hand and a holdable object (Sec. 6.1)."""
+        if int(user_id) not in self.characters:
+            raise ValueError(f'no character {user_id}')
+        spec = next((o for o in self.objects if o.name == object_name), None)
+        if spec is None or not spec.holdable:
+            raise ValueError(f'{object_name!r} is not a holdable object')
+        hand_j = HAND_RIGHT if hand == 'right' else HAND_LEFT
+        self.holds[object_name] = (int(user_id), hand_j)
+        self._activate_hold(object_name, int(user_id), hand_j, teleport=True)
+
+    def release(self, object_name: str) -> None:
+        if object_name in self.holds:
+            uid, hand = self.holds.pop(object_name)
+            e = self._hold_eq(uid, hand, object_name)
+            if e >= 0:
+                self.data.eq_active[e] = 0
+            self._set_object_bits(object_name, ALL_BITS, ALL_BITS)
+
+    def _hold_eq(self, uid, hand, obj) -> int:
+        return mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_EQUALITY,
+                                 f'u{uid}_hold_{obj}_{JOINT_NAMES[hand]}')
+
+    def _set_object_bits(self, name, ct, ca) -> None:
+        b = self._obj_id(name)
+        for g in range(self.model.ngeom):
+            if self.model.geom_bodyid[g] == b:
+                self.model.geom_contype[g] = ct
+                self.model.geom_conaffinity[g] = ca
+
+    def _activate_hold(self, name, uid, hand, teleport: bool) -> None:
+        m, d = self.model, self.data
+        ch = self.characters[uid]
+        spec = next(o for o in self.objects if o.name == name)
+        e = self._hold_eq(uid, hand, name)
+        _, local = joint_anchor(ch.body, hand)
+        m.eq_data[e, 0:3] = local
+        m.eq_data[e, 3:6] = spec.grip
+        d.eq_active[e] = 1
+        bit, aff = character_bits(ch.slot)
+        self._set_object_bits(name, bit, aff)  # the holder's hand does not collide with it
+        if teleport:
+            mujoco.mj_forward(m, d)
+            hand_p = ch.joint_points(d)[hand]
+            oid = self._obj_id(name)
+            adr = m.jnt_qposadr[m.body_jntadr[oid]]
+            q = d.qpos[adr + 3:adr + 7]
+            qx = np.array([q[1], q[2], q[3], q[0]])
+            d.qpos[adr:adr + 3] = hand_p - quat_rotate(qx, spec.grip)
+            dadr = m.jnt_dofadr[m.body_jntadr[oid]]
+            d.qvel[dadr:dadr + 6] = 0.0
+            mujoco.mj_forward(m, d)
+
+    # ------------------------------------------------------------------ pushes
+    def apply_push(self, user_id: int, segment, force, duration: float) -> None:
+        """External force (N, world) on a segment's centre of mass for ``duration`` s. ``segment`` is
+        the segment's child-joint name (e.g. 'Spine'), its SEGMENT_NAMES name, or an index."""
+        uid = int(user_id)
+        if uid not in self.characters:
+            raise ValueError(f'no character {uid}')
+        f = np.asarray(force, float)
+        if f.shape != (3,) or not np.all(np.isfinite(f)):
+            raise ValueError('force must be 3 finite numbers')
+        if not (np.isfinite(duration) and 0.0 < duration <= 5.0):
+            raise ValueError('duration must be in (0, 5] s')
+        k = self.segment_index(segment)
+        self.pushes.append((uid, k, f, self.time + float(duration)))
+
+    @staticmethod
+    def segment_index(segment) -> int:
+        from skeleton_core.model import SEGMENT_NAMES
+        if isinstance(segment, (int, np.integer)):
+            if 0 <= int(segment) < len(SEGMENTS):
+                return int(segment)
+        elif segment in JOINT_INDEX and SEGMENT_OF_JOINT[JOINT_INDEX[segment]] >= 0:
+            return SEGMENT_OF_JOINT[JOINT_INDEX[segment]]
+        elif segment in SEGMENT_NAMES:
+            return SEGMENT_NAMES.index(segment)
+        raise ValueError(f'unknown segment {segment!r} (use a child joint name such as "Spine")')
+
+    # ------------------------------------------------------------------ stepping
+    def step(self, targets=None, duration: Optional[float] = None) -> Dict[int, CharacterState]:
+        """Set targets (``{user_id: positions}`` / ``{user_id: (positions, orientations)}`` or one
+        (20, 3) array for user 0), advance by ``duration`` (default 1/30 s), return the states.
+        All targets are validated before any is applied."""
+        if targets is not None:
+            if not isinstance(targets, Mapping):
+                targets = {0: targets}
+            prepared = []
+            for uid, t in targets.items():
+                if isinstance(t, tuple):
+                    pos, ori = t
+                else:
+                    pos, ori = t, None
+                validate_or_raise = validate_arrays  # raises SkeletonFormatError (a ValueError)
+                try:
+                    validate_or_raise(pos, orientations=ori)
+                except ValueError:
+                    self.counters['refused_target'] += 1
+                    raise
+                prepared.append((uid, pos, ori))
+            for uid, pos, ori in prepared:
+                self.set_target(uid, pos, ori)
+        self.advance(1.0 / 30.0 if duration is None else duration)
+        return self.states()
+
+    def advance(self, duration: float) -> None:
+        """Simulate ``duration`` seconds in fixed time steps."""
+        m, d = self.model, self.data
+        n = max(1, int(round(duration / m.opt.timestep)))
+        if self.config.dodge:
+            self._update_dodge()
+        for _ in range(n):
+            self._control()
+            mujoco.mj_step(m, d)
+            self.time = float(d.time)
+        self._check_health()
+
+    def _control(self) -> None:
+        m, d = self.model, self.data
+        c = self.config
+        g = c.gains
+        d.xfrc_applied[:] = 0.0
+        t = self.time
+        for ch in self.characters.values():
+            p_t, q_t, v_t, w_t = ch.target_at(t)
+            if ch.dodge_until > t:
+                p_t = self._dodge_targets(ch, p_t)
+            pts = ch.joint_points(d)
+            if c.controller == 'explicit_pd':
+                bodies = ch.joint_body
+                cvel = d.cvel[bodies]
+                com = d.subtree_com[m.body_rootid[bodies]]
+                vel = cvel[:, 3:] + np.cross(cvel[:, :3], pts - com)
+                f = pd_force(p_t, pts, v_t, vel, g.ke, g.kd, g.max_force)
+                wr = apply_at_points(f, pts, d.xipos[bodies])
+                np.add.at(d.xfrc_applied, bodies, wr)
+            else:
+                d.mocap_pos[ch.mocap_ids] = p_t
+            # Eq. 2: torque about each segment's own axis
+            axes = ch.segment_axes(pts)
+            err = twist_error(q_t, ch.segment_quats(d), axes)
+            omega = d.cvel[ch.seg_body, :3]
+            rate = np.sum(omega * axes, axis=1)
+            rate_t = np.sum(w_t * axes, axis=1)
+            tau = pd_twist_torque(err, rate_t, rate, g.twist_ke * ch.twist_inertia,
+                                  g.twist_kd * ch.twist_inertia, g.max_torque)
+            d.xfrc_applied[ch.seg_body, 3:] += tau[:, None] * axes
+            if c.pin_feet:
+                self._update_pins(ch, p_t, v_t, pts)
+        for uid, k, f, t_end in self.pushes:
+            if t < t_end and uid in self.characters:
+                d.xfrc_applied[self.characters[uid].seg_body[k], :3] += f
+        self.pushes = [p for p in self.pushes if p[3] > t]
+
+    # ------------------------------------------------------------------ virtual joints
+    def _set_pin(self, ch: Character, j: int, on: bool, point=None) -> None:
+        e = ch.pin_eq[j]
+        if on:
+            self.model.eq_data[e, 3:6] = point
+        self.data.eq_active[e] = 1 if on else 0
+
+    def _update_pins(self, ch: Character, p_t, v_t, pts) -> None:
+        c = self.config
+        floor = self.sensor.lift if self.sensor else 0.0
+        for j, pin in ch.pins.items():
+            h = p_t[j, 2] - floor
+            if not pin.active:
+                if h < c.pin_height and np.linalg.norm(v_t[j]) < c.pin_speed:
+                    pin.active = True
+                    pin.point = pts[j].copy()
+                    self._set_pin(ch, j, True, pin.point)
+                    self.counters['pins'] += 1
+            else:
+                slide = np.linalg.norm(p_t[j, :2] - pin.point[:2])
+                if h > c.pin_release_height or slide > c.pin_release_distance:
+                    pin.active = False
+                    self._set_pin(ch, j, False)
+
+    def _check_health(self) -> None:
+        """Stretched virtual joints are conflicts (counted; released if badly stretched); a
+        non-finite state resets every character to its target."""
+        m, d = self.model, self.data
+        c = self.config
+        for ch in self.characters.values():
+            pts = ch.joint_points(d)
+            for j, pin in ch.pins.items():
+                if pin.active:
+                    gap = float(np.linalg.norm(pts[j] - pin.point))
+                    if gap > c.conflict_tolerance:
+                        self.counters['constraint_conflict'] += 1
+                    if gap > c.conflict_release:
+                        pin.active = False
+                        self._set_pin(ch, j, False)
+                        self.counters['virtual_joint_released'] += 1
+        for name, (uid, hand) in list(self.holds.items()):
+            ch = self.characters.get(uid)
+            if ch is None:
+                continue
+            spec = next(o for o in self.objects if o.name == name)
+            b = self._obj_id(name)
+            grip_w = d.xpos[b] + d.xmat[b].reshape(3, 3) @ spec.grip
+            gap = float(np.linalg.norm(ch.joint_points(d)[hand] - grip_w))
+            if gap > c.conflict_tolerance:
+                self.counters['constraint_conflict'] += 1
+            if gap > c.conflict_release:
+                self.release(name)
+                self.counters['virtual_joint_released'] += 1
+        bad = (not np.all(np.isfinite(d.qpos)) or not np.all(np.isfinite(d.qvel))
+               or d.warning[mujoco.mjtWarning.mjWARN_BADQACC].number > 0)
+        if bad:
+            self.counters['nan_reset'] += 1
+            d.warning[mujoco.mjtWarning.mjWARN_BADQACC].number = 0
+            self.reset_to_targets()
+
+    def reset_to_targets(self) -> None:
+        m, d = self.model, self.data
+        t = self.time
+        mujoco.mj_resetData(m, d)
+        for ch in self.characters.values():
+            for pin in ch.pins.values():
+                pin.active = False
+            ch.set_pose(m, d, ch.cur.positions, ch.cur.seg_quats)
+        d.eq_active[:] = m.eq_active0
+        for name, (uid, hand) in list(self.holds.items()):
+            self._activate_hold(name, uid, hand, teleport=True)
+        d.time = t
+        mujoco.mj_forward(m, d)
+
+    # ------------------------------------------------------------------ dodge (Fig. 4)
+    def _update_dodge(self) -> None:
+        c = self.config
+        d = self.data
+        for ch in self.characters.values():
+            head = ch.joint_points(d)[HEAD]
+            for o in self.objects:
+                if o.kind != 'ball' or o.name in self.holds:
+                    continue
+                b = self._obj_id(o.name)
+                adr = self.model.jnt_dofadr[self.model.body_jntadr[b]]
+                v = d.qvel[adr:adr + 3]
+                r = d.xpos[b] - head
+                vv = float(v @ v)
+                if vv < 1.0:
+                    continue
+                tc = -float(r @ v) / vv
+                if 0.0 < tc < c.dodge_time and np.linalg.norm(r + tc * v) < c.dodge_distance:
+                    ch.dodge_until = self.time + c.dodge_hold
+
+    def _dodge_targets(self, ch: Character, p_t: np.ndarray) -> np.ndarray:
+        """Forearms raised in front of the head (Shum & Ho 2012, Sec. 8.2)."""
+        p = p_t.copy()
+        q0 = ch.cur.seg_quats[0]
+        fwd = quat_rotate(q0, np.array([1.0, 0.0, 0.0]))
+        left = quat_rotate(q0, np.array([0.0, 1.0, 0.0]))
+        up = np.array([0.0, 0.0, 1.0])
+        head = p_t[HEAD]
+        s = ch.body.height / 1.75
+        for side, sh, el, wr, hd in ((1.0, SHOULDER_LEFT, ELBOW_LEFT, WRIST_LEFT, HAND_LEFT),
+                                     (-1.0, SHOULDER_RIGHT, ELBOW_RIGHT, WRIST_RIGHT, HAND_RIGHT)):
+            p[el] = p_t[sh] + s * (0.22 * fwd - 0.05 * up + side * 0.08 * left)
+            p[wr] = head + s * (0.22 * fwd + 0.02 * up + side * 0.06 * left)
+            p[hd] = head + s * (0.24 * fwd + 0.10 * up + side * 0.04 * left)
+        return p
+
+    # ------------------------------------------------------------------ state
+    def state(self, user_id: int) -> CharacterState:
+        ch = self.characters[int(user_id)]
+        d = self.data
+        pts = ch.joint_points(d)
+        q = segment_quats_to_joints(ch.segment_quats(d))
+        sensor = self.sensor or SensorPose(self.config.sensor_height, self.config.sensor_pitch)
+        return CharacterState(
+            user_id=ch.user_id, positions=pts, orientations=q,
+            positions_sensor=sensor.to_sensor(pts), orientations_sensor=sensor.quat_to_sensor(q),
+            stamp_ns=ch.cur.stamp_ns,
+            pinned={JOINT_NAMES[j]: p.active for j, p in ch.pins.items()},
+            target_world=ch.cur.positions.copy())
+
+    def states(self) -> Dict[int, CharacterState]:
+        return {uid: self.state(uid) for uid in self.characters}
+
+
+__all__ = ['Simulation', 'SimConfig', 'SensorPose', 'CharacterState', 'CONTROLLERS', 'Gains',
+           'ObjectSpec']
