@@ -1,0 +1,381 @@
+"""The motion database (Shum et al. 2013 Sec. V-A; Shum & Ho 2012 Sec. 5.1).
+
+Every posture of the input clips is
+
+1. **normalised** (:func:`geometry.normalize`): root moved to the origin, rotation about the
+   vertical axis removed so the body faces +x;
+2. **retargeted** to the standard body (:func:`geometry.retarget`, Shum & Ho 2012 Eq. 3-4), so
+   segment lengths are exactly the standard body's;
+3. given its **twists** (:func:`segment_twists`): for each of the 19 segments, the angle of the
+   twist component of the segment's orientation (normalised frame) about the segment's rest axis,
+   from the swing-twist decomposition ``q = swing * twist(rest_axis)`` (:func:`geometry.swing_twist`).
+   Zero in the T-pose. These are the "rotations along the joint axes" Theta_d of Shum & Ho 2012
+   Sec. 6.2 / Shum 2013 Eq. 17, the target the physics character's axial PD torque tracks; apply the
+   same function to the simulated body's segment orientations to get the current value;
+4. **filtered**: a posture is dropped when the sum over joints of squared position differences
+   (m^2) to an already kept posture is below ``threshold`` (greedy, in clip order).
+
+Default threshold: :data:`DEFAULT_THRESHOLD` = 0.02 m^2 (an RMS joint distance of 3.2 cm over 20
+joints). On the CMU five-class database clips (4,967 frames) it keeps 1,912 postures; on all 73 CMU
+clips (26,537 frames) 6,690 (see ``build_db``). Shum 2013 went 21,590 -> 2,574 and found ~2,000
+postures enough (Sec. VIII-D).
+
+File format (:meth:`MotionDatabase.save`): an uncompressed ``.npz`` of the arrays plus a JSON
+``meta`` string (no pickles); :data:`FORMAT_VERSION` is checked on load.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import logging
+import os
+import time
+import zipfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Dict, List, Optional, Sequence, Tuple
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from .geometry import normalize, quat_from_yaw, quat_multiply, retarget, swing_twist
+from .mocap import FIVE_CLASSES, MOTION_CLASSES, MotionClip, rest_directions
+from .model import JOINT_NAMES, NUM_JOINTS, SEGMENT_CHILDREN, SEGMENT_NAMES, Body, standard_body
+
+__all__ = ['MotionDatabase', 'DatabaseError', 'build_database', 'load_or_build_default',
+           'segment_twists', 'filter_postures', 'DEFAULT_THRESHOLD', 'FORMAT_VERSION',
+           'default_cache_dir', 'default_shared_dir', 'repo_root']
+
+log = logging.getLogger(__name__)
+
+FORMAT_VERSION = 1
+DEFAULT_THRESHOLD = 0.02  # m^2, sum over the 20 joints of squared position differences
+_ALGO_VERSION = 1  # bump when the build changes the output for the same inputs (cache key)
+
+
+class DatabaseError(RuntimeError):
+    """Missing, corrupt or incompatible database file."""
+
+
+@dataclass
+class MotionDatabase:
+    """Normalised, retargeted postures. Arrays are float32 / int32; see module docstring."""
+
+    positions: np.ndarray      # (N, 20, 3)
+    orientations: np.ndarray   # (N, 20, 4) xyzw, normalised frame
+    twists: np.ndarray         # (N, 19) rad, SEGMENTS order
+    clip_index: np.ndarray     # (N,) index into meta['clips']
+    frame_index: np.ndarray    # (N,) frame of the posture in its clip
+    class_names: List[str] = field(default_factory=list)  # per clip
+    meta: Dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        self.positions = np.ascontiguousarray(self.positions, dtype=np.float32)
+        self.orientations = np.ascontiguousarray(self.orientations, dtype=np.float32)
+        self.twists = np.ascontiguousarray(self.twists, dtype=np.float32)
+        self.clip_index = np.ascontiguousarray(self.clip_index, dtype=np.int32)
+        self.frame_index = np.ascontiguousarray(self.frame_index, dtype=np.int32)
+        n = self.positions.shape[0]
+        shapes = {'positions': (self.positions.shape, (n, NUM_JOINTS, 3)),
+                  'orientations': (self.orientations.shape, (n, NUM_JOINTS, 4)),
+                  'twists': (self.twists.shape, (n, NUM_JOINTS - 1)),
+                  'clip_index': (self.clip_index.shape, (n,)),
+                  'frame_index': (self.frame_index.shape, (n,))}
+        for k, (got, want) in shapes.items():
+            if got != want:
+                raise DatabaseError(f'motion database: {k} has shape {got}, expected {want}')
+
+    def __len__(self) -> int:
+        return int(self.positions.shape[0])
+
+    @property
+    def flat(self) -> np.ndarray:
+        """(N, 60) float32 view of the positions."""
+        return self.positions.reshape(len(self), NUM_JOINTS * 3)
+
+    @property
+    def posture_classes(self) -> np.ndarray:
+        """(N,) class name of every posture."""
+        names = np.array(self.class_names + [''], dtype=object)
+        return names[self.clip_index]
+
+    def save(self, path) -> Path:
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        meta = dict(self.meta)
+        meta['format_version'] = FORMAT_VERSION
+        meta['class_names'] = list(self.class_names)
+        tmp = path.with_name(path.name + f'.tmp{os.getpid()}')
+        with open(tmp, 'wb') as f:
+            np.savez(f, positions=self.positions, orientations=self.orientations,
+                     twists=self.twists, clip_index=self.clip_index,
+                     frame_index=self.frame_index, meta=np.array(json.dumps(meta)))
+        os.replace(tmp, path)  # atomic: readers never see a half-written file
+        return path
+
+    @classmethod
+    def load(cls, path) -> 'MotionDatabase':
+        path = Path(path)
+        if not path.is_file():
+            raise DatabaseError(f'motion database {path} does not exist '
+                                f'(build it with `ros2 run skeleton_core build_db`)')
+        try:
+            with np.load(path, allow_pickle=False) as z:
+                missing = {'positions', 'orientations', 'twists', 'clip_index', 'frame_index',
+                           'meta'} - set(z.files)
+                if missing:
+                    raise DatabaseError(f'motion database {path} is missing arrays '
+                                        f'{sorted(missing)}')
+                meta = json.loads(str(z['meta']))
+                version = meta.get('format_version')
+                if version != FORMAT_VERSION:
+                    raise DatabaseError(f'motion database {path} has format version {version}, '
+                                        f'expected {FORMAT_VERSION}: rebuild it')
+                arrays = {k: z[k] for k in ('positions', 'orientations', 'twists', 'clip_index',
+                                            'frame_index')}
+        except DatabaseError:
+            raise
+        except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile,
+                json.JSONDecodeError) as e:
+            raise DatabaseError(f'motion database {path} is corrupt or not a database '
+                                f'({type(e).__name__}: {e})') from None
+        db = cls(class_names=list(meta.pop('class_names', [])), meta=meta, **arrays)
+        if not (np.all(np.isfinite(db.positions)) and np.all(np.isfinite(db.orientations))):
+            raise DatabaseError(f'motion database {path} holds non-finite values')
+        return db
+
+
+# ------------------------------------------------------------------------------------------
+# Building
+# ------------------------------------------------------------------------------------------
+def segment_twists(orientations: np.ndarray, body: Optional[Body] = None) -> np.ndarray:
+    """Twist angle (rad, (-pi, pi]) of every segment about its own rest axis, (..., 19).
+
+    ``orientations`` (..., 20, 4) are segment orientations with the :mod:`mocap` convention
+    (identity = standard T-pose). ``q_seg = swing * twist`` with the twist about the unit rest
+    direction of the segment (``rest_offsets`` of its child joint); the swing then carries the rest
+    axis to the current segment direction. Use the same function on the simulated body.
+    """
+    q = np.asarray(orientations, float)[..., list(SEGMENT_CHILDREN), :]
+    axes = rest_directions(body)[list(SEGMENT_CHILDREN)]
+    _, angle = swing_twist(q, axes)
+    return angle
+
+
+def filter_postures(flat: np.ndarray, threshold: float, chunk: int = 256) -> np.ndarray:
+    """Greedy near-duplicate removal: indices (ascending) of the kept rows of ``flat`` (N, D).
+
+    Row i is kept unless ``sum((flat[i] - flat[k])**2) < threshold`` for an earlier kept row k
+    (same result as the sequential loop). Kept rows live in a KD-tree, rebuilt when the rows
+    kept since the last build (searched by brute force) reach half its size.
+    """
+    x = np.ascontiguousarray(flat, dtype=np.float64)
+    n = x.shape[0]
+    if threshold <= 0 or n == 0:
+        return np.arange(n)
+    r = float(np.sqrt(threshold))
+    kept: List[int] = []
+    tree = None
+    tree_n = 0
+    for s in range(0, n, chunk):
+        c = x[s:s + chunk]
+        covered = np.zeros(len(c), bool)
+        if tree is not None:
+            d, _ = tree.query(c, k=1, distance_upper_bound=r)
+            covered |= d < r
+        recent = kept[tree_n:]
+        if recent:
+            buf = x[recent]
+            d2 = (np.sum(c * c, 1)[:, None] - 2 * c @ buf.T + np.sum(buf * buf, 1)[None])
+            covered |= (d2 < threshold).any(1)
+        cand = np.flatnonzero(~covered)
+        if len(cand):
+            cc = c[cand]
+            d2 = np.sum((cc[:, None, :] - cc[None, :, :]) ** 2, -1)
+            close = d2 < threshold
+            alive = np.ones(len(cand), bool)
+            for a in range(len(cand)):
+                if alive[a]:
+                    kept.append(s + int(cand[a]))
+                    alive[a + 1:] &= ~close[a, a + 1:]
+        if len(kept) - tree_n >= max(512, tree_n // 2):
+            tree = cKDTree(x[kept])
+            tree_n = len(kept)
+    return np.asarray(kept, dtype=np.int64)
+
+
+def _maybe_tqdm(total, desc, enabled):
+    if not enabled:
+        return None
+    try:
+        from tqdm import tqdm
+    except ImportError:  # pragma: no cover
+        return None
+    return tqdm(total=total, desc=desc, unit='frame', leave=False)
+
+
+def build_database(clips: Sequence[MotionClip], body: Optional[Body] = None,
+                   threshold: Optional[float] = DEFAULT_THRESHOLD, progress: bool = True,
+                   meta: Optional[dict] = None):
+    """Normalise, retarget, compute twists and filter the postures of ``clips``.
+
+    Returns ``(db, stats)``; ``stats`` holds ``frames_before``, ``frames_after``, ``clips``,
+    ``threshold``, ``seconds``. ``threshold`` None or <= 0 keeps every posture.
+    """
+    t0 = time.perf_counter()
+    body = standard_body() if body is None else body
+    thr = 0.0 if threshold is None else float(threshold)
+    if not clips:
+        raise ValueError('build_database: no clips given')
+    total = sum(len(c) for c in clips)
+    bar = _maybe_tqdm(total, 'normalising', progress)
+    pos_l, ori_l, ci_l, fi_l = [], [], [], []
+    for k, c in enumerate(clips):
+        norm, tf = normalize(c.positions)
+        pos = retarget(norm, body)
+        q = quat_multiply(quat_from_yaw(-tf.yaw)[:, None, :], c.orientations)
+        q /= np.linalg.norm(q, axis=-1, keepdims=True)
+        q *= np.where(q[..., 3:4] < 0, -1.0, 1.0)
+        pos_l.append(pos)
+        ori_l.append(q)
+        ci_l.append(np.full(len(c), k))
+        fi_l.append(np.arange(len(c)))
+        if bar is not None:
+            bar.update(len(c))
+    if bar is not None:
+        bar.close()
+    pos = np.concatenate(pos_l)
+    ori = np.concatenate(ori_l)
+    ci = np.concatenate(ci_l)
+    fi = np.concatenate(fi_l)
+    t_norm = time.perf_counter() - t0
+    keep = filter_postures(pos.reshape(len(pos), -1), thr)
+    twists = segment_twists(ori[keep], body)
+    m = {
+        'joint_names': list(JOINT_NAMES),
+        'segment_names': list(SEGMENT_NAMES),
+        'threshold': thr,
+        'threshold_unit': 'm^2, sum over joints of squared position differences',
+        'body_height': float(body.height),
+        'body_mass': float(body.mass),
+        'segment_lengths': [float(x) for x in body.segment_lengths],
+        'frames_before': int(total),
+        'frames_after': int(len(keep)),
+        'clips': [c.name for c in clips],
+        'sources': [c.source for c in clips],
+        'clip_frames': [len(c) for c in clips],
+        'clip_fps': [float(c.fps) for c in clips],
+        'twist_definition': 'swing-twist of the segment orientation about its rest axis',
+        'orientation_convention': 'xyzw, identity = standard T-pose facing +x',
+        'built_unix': time.time(),
+    }
+    if meta:
+        m.update(meta)
+    db = MotionDatabase(positions=pos[keep], orientations=ori[keep], twists=twists,
+                        clip_index=ci[keep], frame_index=fi[keep],
+                        class_names=[c.motion_class for c in clips], meta=m)
+    secs = time.perf_counter() - t0
+    stats = {'frames_before': int(total), 'frames_after': int(len(keep)), 'clips': len(clips),
+             'threshold': thr, 'seconds': secs, 'seconds_normalise': t_norm}
+    return db, stats
+
+
+# ------------------------------------------------------------------------------------------
+# Default database with a cache
+# ------------------------------------------------------------------------------------------
+def repo_root() -> Path:
+    """The workspace root (the directory holding ``src/skeleton_core``), else the cwd."""
+    here = Path(__file__).resolve()
+    for p in here.parents:
+        if (p / 'src' / 'skeleton_core').is_dir():
+            return p
+    return Path.cwd()
+
+
+def default_cache_dir() -> Path:
+    env = os.environ.get('KINECT_POSTURE_CACHE')
+    return Path(env) if env else repo_root() / 'cache'
+
+
+def default_shared_dir() -> Optional[Path]:
+    env = os.environ.get('KP_SHARED')
+    p = Path(env) if env else repo_root().parent / 'shared'
+    return p if p.is_dir() else None
+
+
+def _files_digest(files: Sequence[Path]) -> str:
+    h = hashlib.sha256()
+    for f in files:
+        st = f.stat()
+        h.update(f'{f.name}:{st.st_size}:{st.st_mtime_ns};'.encode())
+    return h.hexdigest()
+
+
+def load_or_build_default(source: str = 'auto', cache_dir=None, shared_dir=None,
+                          threshold: Optional[float] = None, classes: Sequence[str] = FIVE_CLASSES,
+                          split: str = 'database', mirror: bool = False,
+                          progress: bool = False, rebuild: bool = False,
+                          stats: Optional[dict] = None) -> MotionDatabase:
+    """The default motion database, from the cache when its inputs have not changed.
+
+    ``source``: ``'cmu'`` (``<shared>/mocap/cmu``), ``'builtin'`` (:mod:`motions`) or ``'auto'``
+    (CMU when the shared folder exists: ``shared_dir``, else ``$KP_SHARED``, else ``../shared``
+    of the repository). ``split``: ``'database'`` (the database part of the split, default) or
+    ``'all'`` (database and dev clips). ``classes`` None: all CMU clips including 'other'.
+    ``mirror`` adds left-right mirrored copies. The cache file name is a hash of the inputs
+    (file names, sizes, mtimes) and every parameter. ``stats`` (dict) receives build statistics
+    plus ``cache_hit`` and ``path``.
+    """
+    from . import mocap, motions  # local: keeps import of this module light
+    thr = DEFAULT_THRESHOLD if threshold is None else float(threshold)
+    if source not in ('auto', 'cmu', 'builtin'):
+        raise ValueError(f"source must be 'auto', 'cmu' or 'builtin', got {source!r}")
+    if split not in ('database', 'all'):
+        raise ValueError(f"split must be 'database' or 'all', got {split!r}")
+    if shared_dir is None:
+        shared_dir = default_shared_dir()
+    cmu_dir = Path(shared_dir) / 'mocap' / 'cmu' if shared_dir is not None else None
+    if source == 'auto':
+        source = 'cmu' if cmu_dir is not None and cmu_dir.is_dir() else 'builtin'
+    if source == 'cmu' and (cmu_dir is None or not cmu_dir.is_dir()):
+        raise DatabaseError(f'CMU mocap folder not found ({cmu_dir or "no shared folder"}); '
+                            f'use source="builtin" or set KP_SHARED')
+    key = {'algo': _ALGO_VERSION, 'format': FORMAT_VERSION, 'source': source, 'threshold': thr,
+           'split': split, 'mirror': bool(mirror), 'height': standard_body().height}
+    if source == 'cmu':
+        key['classes'] = sorted(classes) if classes is not None else None
+        key['files'] = _files_digest(sorted(cmu_dir.glob('*.bvh')) +
+                                     [p for p in [cmu_dir / 'index.csv'] if p.is_file()])
+    else:
+        key['seed'] = 0
+    digest = hashlib.sha256(json.dumps(key, sort_keys=True).encode()).hexdigest()[:16]
+    cache_dir = Path(cache_dir) if cache_dir is not None else default_cache_dir()
+    path = cache_dir / f'motion_db_{source}_{digest}.npz'
+    out_stats = stats if stats is not None else {}
+    if path.is_file() and not rebuild:
+        try:
+            t0 = time.perf_counter()
+            db = MotionDatabase.load(path)
+            log.info('motion database cache hit: %s (%d postures, loaded in %.3f s)', path,
+                     len(db), time.perf_counter() - t0)
+            out_stats.update(cache_hit=True, path=str(path), frames_after=len(db),
+                             frames_before=db.meta.get('frames_before'), skipped=[])
+            return db
+        except DatabaseError as e:
+            log.warning('ignoring unusable cached database: %s', e)
+    skipped: list = []
+    if source == 'cmu':
+        db_clips, dev_clips = mocap.cmu_split(cmu_dir, classes, skipped=skipped) if classes \
+            is not None else mocap.split_clips(mocap.load_cmu_clips(cmu_dir, None, skipped=skipped))
+    else:
+        db_clips, dev_clips = motions.builtin_split()
+    clips = list(db_clips) + (list(dev_clips) if split == 'all' else [])
+    if mirror:
+        clips = clips + [mocap.mirror_clip(c) for c in clips]
+    db, st = build_database(clips, threshold=thr, progress=progress,
+                            meta={'source': source, 'cache_key': key, 'skipped': skipped})
+    db.save(path)
+    log.info('motion database built: %d -> %d postures from %d clips in %.1f s, saved %s',
+             st['frames_before'], st['frames_after'], st['clips'], st['seconds'], path)
+    out_stats.update(st, cache_hit=False, path=str(path), skipped=skipped)
+    return db
