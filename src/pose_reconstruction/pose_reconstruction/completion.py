@@ -1,0 +1,125 @@
+"""Database completion, "method A" (Shum & Ho 2012, Sec. 5-6).
+
+Offline: PCA of the database postures (60-D flattened joint positions, default 7 dimensions kept)
+and the projection of every database posture. Per query: the sensor posture is normalised and
+retargeted to the database's standard body, its missing or unreliable joints (reliability below
+``reliability_threshold``) are replaced by the database mean (Sec. 5.2), it is projected, and the
+nearest database posture by squared distance in the reduced space is taken. Missing / unreliable
+joints and their rotations (Theta) are then substituted from the match (Sec. 6.1-6.2) and the
+result goes back to the sensor frame.
+
+``substitution``:
+* ``'offset'`` (default): a substituted joint hangs off its (output) parent with the match's
+  parent-relative direction and the user's bone length, so a missing hand stays attached to the
+  observed wrist whatever the user's size;
+* ``'absolute'``: the paper's literal substitution of the match's position (normalised space,
+  scaled to the user's height, then back to the sensor frame).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Optional
+
+import numpy as np
+
+from skeleton_core.geometry import denormalize
+from skeleton_core.model import NUM_JOINTS, PARENTS
+
+from .posture_space import (QueryPreparer, as_database_arrays, orientations_to_sensor,
+                            rest_directions)
+
+
+def pca_basis(flat: np.ndarray, dims: int):
+    """Mean (60,) and the first ``dims`` principal axes (dims, 60) of the rows of ``flat``."""
+    mean = flat.mean(axis=0)
+    _, s, vt = np.linalg.svd(flat - mean, full_matrices=False)
+    dims = int(min(dims, vt.shape[0]))
+    return mean, vt[:dims], s[:dims]
+
+
+@dataclass
+class CompletionResult:
+    positions: np.ndarray               # (20, 3) sensor frame
+    orientations: Optional[np.ndarray]  # (20, 4) sensor frame, or None
+    substituted: np.ndarray             # (20,) bool
+    match_index: int
+    match_distance: float               # squared distance in the reduced space
+
+
+class PCACompletion:
+    """Method A. ``complete(positions, reliability, user_height, ...)`` per frame."""
+
+    def __init__(self, db, pca_dims: int = 7, reliability_threshold: float = 0.5,
+                 substitution: str = 'offset'):
+        if substitution not in ('offset', 'absolute'):
+            raise ValueError("substitution must be 'offset' or 'absolute'")
+        self.db = as_database_arrays(db)
+        self.body = self.db.body
+        self.reliability_threshold = float(reliability_threshold)
+        self.substitution = substitution
+        self.preparer = QueryPreparer(self.body, reliability_threshold)
+        self._rest_dirs = rest_directions(self.body)
+        self.set_dims(pca_dims)
+
+    def set_dims(self, pca_dims: int) -> None:
+        if pca_dims < 1:
+            raise ValueError('pca_dims must be >= 1')
+        self.pca_dims = int(pca_dims)
+        self.mean, self.components, _ = pca_basis(self.db.flat, self.pca_dims)
+        self.projected = (self.db.flat - self.mean) @ self.components.T  # (N, d)
+        self._mean_pose = self.mean.reshape(NUM_JOINTS, 3)
+
+    def search(self, query_flat: np.ndarray) -> tuple:
+        """Nearest database posture to a 60-D (already mean-filled) query in the reduced space."""
+        z = self.components @ (query_flat - self.mean)
+        d = np.einsum('nd,nd->n', self.projected - z, self.projected - z)
+        i = int(np.argmin(d))
+        return i, float(d[i])
+
+    def complete(self, positions: np.ndarray, reliability: np.ndarray, user_height: float,
+                 orientations: Optional[np.ndarray] = None,
+                 user_bone_lengths: Optional[np.ndarray] = None) -> CompletionResult:
+        p = np.asarray(positions, float)
+        r = np.asarray(reliability, float)
+        missing = ~(r >= self.reliability_threshold)  # NaN counts as missing
+        prep = self.preparer.prepare(p, np.where(missing, 0.0, 1.0), user_height)
+        q = prep.query.copy()
+        q[missing] = self._mean_pose[missing]  # Shum & Ho 2012 Sec. 5.2
+        idx, dist = self.search(q.reshape(-1))
+        match = self.db.positions[idx]
+        out = p.copy()
+        if missing.any():
+            if self.substitution == 'absolute':
+                full = denormalize(match / prep.scale, prep.transform)
+                out[missing] = full[missing]
+            else:
+                if user_bone_lengths is None:
+                    bone = self.body.bone_lengths_by_joint() / prep.scale
+                else:
+                    bone = np.asarray(user_bone_lengths, float)
+                yaw = float(prep.transform.yaw)
+                c, s = np.cos(yaw), np.sin(yaw)
+                rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+                rel = match - match[[max(k, 0) for k in PARENTS]]
+                n = np.linalg.norm(rel, axis=1, keepdims=True)
+                unit = np.where(n > 1e-9, rel / np.maximum(n, 1e-12), self._rest_dirs)
+                world_off = (unit * bone[:, None]) @ rot.T
+                if missing[0]:
+                    # root missing: place it from the match relative to the observed hips' centre
+                    full = denormalize(match / prep.scale, prep.transform)
+                    out[0] = full[0]
+                for j in range(1, NUM_JOINTS):  # parents first; only a few joints are missing
+                    if missing[j]:
+                        out[j] = out[PARENTS[j]] + world_off[j]
+        ori = None
+        if self.db.orientations is not None:
+            db_q = orientations_to_sensor(self.db.orientations[idx], float(prep.transform.yaw))
+            if orientations is None:
+                ori = db_q
+            else:
+                ori = np.array(orientations, float)
+                ori[missing] = db_q[missing]
+        elif orientations is not None:
+            ori = np.array(orientations, float)
+        return CompletionResult(positions=out, orientations=ori, substituted=missing,
+                                match_index=idx, match_distance=dist)

@@ -1,0 +1,214 @@
+"""What the three reconstruction nodes share: SkeletonArray in -> per-user processing ->
+SkeletonArray out, per-user state with a timeout, stamp checks, Health, diagnostics and
+run-time-changeable, validated parameters.
+
+A node subclass gives its parameter specs and ``make_processor(params) -> object`` with
+``process(frame) -> frame`` and ``reset()``; one processor is kept per user id and rebuilt (state
+dropped) when a parameter changes.
+"""
+from __future__ import annotations
+
+import threading
+import time
+from typing import Any, Callable, Dict, List, Optional
+
+from rclpy.node import Node
+from rclpy.qos import QoSProfile
+
+from skeleton_core.conversions import (SkeletonFormatError, frames_from_array_msg,
+                                       skeleton_to_msg, stamp_to_ns)
+from skeleton_core.health import Health
+from skeleton_core.rosnode import DiagnosticsPublisher, ParamSpec, Parameters
+
+# Reliability parameters (Shum et al. 2013 Sec. IV), shared by every node that may estimate it
+RELIABILITY_SPECS = [
+    ParamSpec('d_min', 0.03, 'Eq. 3: minimum displacement (m) for an angle to count', (0.0, 0.5)),
+    ParamSpec('f_b', 3, 'Eq. 4: frames averaged by the behaviour term', (1, 30)),
+    ParamSpec('theta_floor_deg', 90.0, 'Eq. 4: acceptable angle change (deg)', (0.0, 180.0)),
+    ParamSpec('theta_roof_deg', 135.0, 'Eq. 4: fully unacceptable angle change (deg)',
+              (0.0, 180.0)),
+    ParamSpec('f_total', 6, 'Eq. 8: frames in the Gaussian-weighted window', (1, 60)),
+    ParamSpec('sigma_frames', 2.0, 'Eq. 8: width (frames) of the Gaussian weight', (0.1, 60.0)),
+    ParamSpec('tracked_value', 1.0, 'Eq. 7: R_t of a tracked joint', (0.0, 1.0)),
+    ParamSpec('inferred_value', 0.0, 'Eq. 7: R_t of an inferred joint', (0.0, 1.0)),
+    ParamSpec('not_tracked_value', 0.0, 'Eq. 7: R_t of a not-tracked joint', (0.0, 1.0)),
+    ParamSpec('reference_pose_tolerance_deg', 20.0,
+              'mean segment-direction error (deg) to accept a T-pose / standing reference posture',
+              (1.0, 90.0)),
+    ParamSpec('reference_frames', 15, 'reference segment lengths: median of this many captures',
+              (1, 300)),
+]
+RELIABILITY_NAMES = [s.name for s in RELIABILITY_SPECS]
+
+
+def common_specs(input_topic: str, output_topic: str) -> List[ParamSpec]:
+    return [
+        ParamSpec('input_topic', input_topic, 'SkeletonArray input topic', read_only=True),
+        ParamSpec('output_topic', output_topic, 'SkeletonArray output topic', read_only=True),
+        ParamSpec('qos_depth', 10, 'publisher/subscription queue depth', (1, 1000),
+                  read_only=True),
+        ParamSpec('user_timeout_s', 2.0, "drop a user's state after this long unseen (s)",
+                  (0.05, 3600.0)),
+        ParamSpec('time_jump_reset_s', 1.0,
+                  'a stamp this far back in time (s) restarts every user (bag loop); smaller '
+                  'backward steps are dropped as out of order', (0.0, 3600.0)),
+    ]
+
+
+def check_reliability_params(values: Dict[str, Any]) -> Optional[str]:
+    if values['theta_floor_deg'] >= values['theta_roof_deg']:
+        return 'theta_floor_deg must be below theta_roof_deg'
+    return None
+
+
+class SkeletonArrayNode(Node):
+    """Base class (see module docstring)."""
+
+    def __init__(self, name: str, specs: List[ParamSpec], **kwargs):
+        super().__init__(name, **kwargs)
+        self._lock = threading.RLock()
+        self.health = Health()
+        self._users: Dict[int, Any] = {}
+        self._last_seen: Dict[int, float] = {}
+        self._last_stamp_ns: Optional[int] = None
+        self.params = Parameters(self, specs, on_change=self._on_params)
+        err = self.validate(dict(self.params.values))
+        if err:
+            raise ValueError(f'invalid parameter: {err}')
+        self.setup()
+        from skeleton_msgs.msg import SkeletonArray
+        depth = self.params['qos_depth']
+        self._pub = self.create_publisher(SkeletonArray, self.params['output_topic'],
+                                          QoSProfile(depth=depth))
+        self._sub = self.create_subscription(SkeletonArray, self.params['input_topic'],
+                                             self._on_msg, QoSProfile(depth=depth))
+        self._timer = self.create_timer(0.5, self._purge)
+        self.diagnostics = DiagnosticsPublisher(self, self.health, extra=self.diagnostics_extra)
+        self.get_logger().info(f"{self.params['input_topic']} -> {self.params['output_topic']}")
+
+    # -- hooks -----------------------------------------------------------------------------------
+    def setup(self) -> None:
+        """Called once after parameters are declared (load databases here)."""
+
+    def validate(self, values: Dict[str, Any]) -> Optional[str]:
+        """Cross-parameter checks; return an error text or None."""
+        return None
+
+    def make_processor(self, values: Dict[str, Any]):
+        raise NotImplementedError
+
+    def apply_params(self, values: Dict[str, Any], changed: Dict[str, Any]) -> Optional[str]:
+        """React to a validated change (e.g. reload a database); return an error text or None."""
+        return None
+
+    def diagnostics_extra(self) -> Dict[str, Any]:
+        with self._lock:
+            return {'users': len(self._users)}
+
+    # -- internals -------------------------------------------------------------------------------
+    def _on_params(self, changed: Dict[str, Any]) -> Optional[str]:
+        values = dict(self.params.values)
+        values.update(changed)
+        err = self.validate(values)
+        if err:
+            return err
+        with self._lock:
+            err = self.apply_params(values, changed)
+            if err:
+                return err
+            try:
+                self.make_processor(values)  # refuse values the library rejects
+            except (ValueError, TypeError) as e:
+                return str(e)
+            self._users.clear()  # rebuilt with the new values on the next message
+        return None
+
+    def _drop(self, cause: str, detail: str = '') -> None:
+        if self.health.on_drop(cause):
+            self.get_logger().warning(f'dropping input ({cause}){": " + detail if detail else ""}'
+                                      ' (logged once per cause)')
+
+    def _purge(self) -> None:
+        now = time.monotonic()
+        timeout = self.params['user_timeout_s']
+        with self._lock:
+            for uid in [u for u, t in self._last_seen.items() if now - t > timeout]:
+                self._users.pop(uid, None)
+                self._last_seen.pop(uid, None)
+
+    def _on_msg(self, msg) -> None:
+        t0 = time.monotonic()
+        self.health.on_receive()
+        try:
+            stamp = stamp_to_ns(msg.header.stamp)
+        except Exception:  # noqa: BLE001 - a malformed header is a dropped message, not a crash
+            self._drop('malformed header')
+            return
+        with self._lock:
+            if stamp != 0 and self._last_stamp_ns is not None and stamp <= self._last_stamp_ns:
+                back = (self._last_stamp_ns - stamp) * 1e-9
+                if stamp == self._last_stamp_ns:
+                    self._drop('duplicate stamp')
+                    return
+                if back <= self.params['time_jump_reset_s']:
+                    self._drop('out-of-order stamp', f'{back * 1e3:.1f} ms back in time')
+                    return
+                self.get_logger().info(f'time jumped back {back:.2f} s: restarting every user')
+                self._users.clear()
+                self._last_seen.clear()
+            if stamp != 0:
+                self._last_stamp_ns = stamp
+            errors: List[SkeletonFormatError] = []
+            frames = frames_from_array_msg(msg, errors)
+            for e in errors:
+                self._drop(e.cause, e.detail)
+            out = type(msg)()
+            out.header = msg.header
+            self._purge()
+            for f in frames:
+                proc = self._users.get(f.user_id)
+                if proc is None:
+                    proc = self._users[f.user_id] = self.make_processor(dict(self.params.values))
+                self._last_seen[f.user_id] = time.monotonic()
+                if f.stamp_ns == 0:
+                    f.stamp_ns = stamp
+                try:
+                    res = proc.process(f)
+                    out.skeletons.append(skeleton_to_msg(res))
+                except SkeletonFormatError as e:
+                    self._drop('bad result: ' + e.cause, e.detail)
+                except (ValueError, FloatingPointError, ArithmeticError, IndexError) as e:
+                    self._drop('processing error', f'{type(e).__name__}: {e}')
+                    proc.reset()
+        self._pub.publish(out)
+        self.health.on_publish(latency_s=time.monotonic() - t0)
+
+
+def load_database(path: str, loader: Optional[Callable[[], Any]] = None):
+    """The motion database named by the ``database`` parameter ('' = built-in / CMU default).
+
+    Raises FileNotFoundError / ValueError with one clear line (run_node prints it and exits 1).
+    """
+    if loader is not None:
+        return loader()
+    try:
+        from skeleton_core import database as dbmod
+    except ImportError as e:  # pragma: no cover - the library ships with the workspace
+        raise RuntimeError(f'skeleton_core.database is not available: {e}') from e
+    if not path:
+        try:
+            return dbmod.load_or_build_default()
+        except (FileNotFoundError, ValueError):
+            raise
+        except Exception as e:  # noqa: BLE001
+            raise ValueError(f'cannot build the default motion database: {e}') from e
+    from pathlib import Path
+    p = Path(path).expanduser()
+    if not p.is_file():
+        raise FileNotFoundError(f'motion database {str(p)!r} does not exist')
+    try:
+        return dbmod.MotionDatabase.load(str(p))
+    except (FileNotFoundError, ValueError):
+        raise
+    except Exception as e:  # noqa: BLE001 - corrupt file: one clear line
+        raise ValueError(f'motion database {str(p)!r} cannot be read: {type(e).__name__}: {e}') from e

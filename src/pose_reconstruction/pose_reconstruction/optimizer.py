@@ -1,0 +1,277 @@
+"""Natural-posture-space optimizer, "method C" (Shum et al. 2013, Sec. V-B and VI; Table V).
+
+Per frame, on a query posture already normalised and retargeted to the database's standard body:
+
+1. reliability-weighted K nearest neighbours (Eq. 9, K = 30);
+2. local PCA of the neighbours: the natural posture space (20 dimensions);
+3. minimise ``E = w_c E_c + w_s E_s + w_k E_k + w_m E_m`` (Eq. 10-15, weights 1.0, 0.5, 1.5,
+   0.25) over the latent coordinates, with
+
+   * ``E_c = sum_i R_i |x_i - q_i|^2``                  control (Eq. 9-10)
+   * ``E_s = min_n sum_i |x_i - p^n_i|^2 / 20``          style, closest neighbour (Eq. 11)
+   * ``E_k = sum_s (l_s(x) - L_s)^2 / 19``               kinematics, standard lengths (Eq. 12)
+   * ``E_m = sum_i |x_i - 2 x^-1_i + x^-2_i|^2 / 20``    movement continuity (Eq. 13-14)
+
+   ``solver='stochastic'`` is the paper's local stochastic search (``steps`` x ``samples``, warm
+   started from the previous frame's solution, stopping as soon as no sample improves);
+   ``solver='gauss_newton'`` minimises the same energy in the same latent space by Gauss-Newton
+   (the closest neighbour of E_s and the segment directions of E_k re-linearised each iteration,
+   everything else exactly quadratic), which is deterministic;
+4. target joint orientations: the inverse-distance-weighted average of the neighbours'
+   orientations (Markley average, geometry.quat_average).
+
+Method B is this with every reliability 1 (``Reconstructor(use_reliability=False)``).
+All costs are vectorised over samples, joints and neighbours.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Dict, Optional, Sequence
+
+import numpy as np
+
+from skeleton_core.geometry import quat_average
+from skeleton_core.model import NUM_JOINTS, NUM_SEGMENTS, SEGMENT_CHILDREN, SEGMENT_PARENTS
+
+from .posture_space import as_database_arrays
+
+_SEG_P = np.array(SEGMENT_PARENTS)
+_SEG_C = np.array(SEGMENT_CHILDREN)
+
+SOLVERS = ('stochastic', 'gauss_newton')
+KNN_MODES = ('brute', 'kdtree')
+
+
+@dataclass
+class OptimizerResult:
+    positions: np.ndarray                 # (20, 3) normalised standard-body posture
+    orientations: Optional[np.ndarray]    # (20, 4) normalised frame, or None
+    neighbours: np.ndarray                # (K,) database indices
+    distances: np.ndarray                 # (K,) Eq. 9 distances
+    energy: float
+    terms: Dict[str, float]
+    steps: int                            # optimisation iterations run
+    timings_ms: Dict[str, float] = field(default_factory=dict)
+
+
+class NaturalPostureOptimizer:
+    """Methods B/C core. Stateless apart from the RNG: the caller passes the previous solutions."""
+
+    def __init__(self, db, k: int = 30, pca_dims: int = 20, steps: int = 20, samples: int = 100,
+                 w_control: float = 1.0, w_style: float = 0.5, w_kinematics: float = 1.5,
+                 w_continuity: float = 0.25, step_scale: float = 0.5,
+                 solver: str = 'stochastic', gn_iterations: int = 6, seed: int = 0,
+                 knn: str = 'brute', kdtree_dims: int = 12, kdtree_candidates: int = 4):
+        self.db = as_database_arrays(db)
+        self.body = self.db.body
+        self.L = self.body.segment_lengths.copy()  # (19,)
+        X = self.db.flat
+        self._X = X
+        self._Xsq_joint = np.einsum('njd,njd->nj', self.db.positions, self.db.positions)  # (N, 20)
+        self.seed = seed
+        self.rng = np.random.default_rng(seed)
+        self._kdtree = None
+        self.configure(k=k, pca_dims=pca_dims, steps=steps, samples=samples, w_control=w_control,
+                       w_style=w_style, w_kinematics=w_kinematics, w_continuity=w_continuity,
+                       step_scale=step_scale, solver=solver, gn_iterations=gn_iterations,
+                       knn=knn, kdtree_dims=kdtree_dims, kdtree_candidates=kdtree_candidates)
+
+    def configure(self, **kw) -> None:
+        """Change parameters (validated)."""
+        for name, value in kw.items():
+            if name in ('k', 'pca_dims', 'steps', 'samples', 'gn_iterations', 'kdtree_dims',
+                        'kdtree_candidates'):
+                value = int(value)
+                if value < (0 if name == 'steps' else 1):
+                    raise ValueError(f'{name} must be positive')
+            elif name == 'solver':
+                if value not in SOLVERS:
+                    raise ValueError(f'solver must be one of {SOLVERS}')
+            elif name == 'knn':
+                if value not in KNN_MODES:
+                    raise ValueError(f'knn must be one of {KNN_MODES}')
+            else:
+                value = float(value)
+                if not np.isfinite(value) or value < 0:
+                    raise ValueError(f'{name} must be finite and >= 0')
+            setattr(self, name, value)
+        if self.k < 2:
+            raise ValueError('k must be >= 2')
+        self.k = min(self.k, self.db.size)
+        if self.knn == 'kdtree' and ('knn' in kw or 'kdtree_dims' in kw or self._kdtree is None):
+            self._build_kdtree()
+
+    def reset_rng(self) -> None:
+        self.rng = np.random.default_rng(self.seed)
+
+    # -- 1. KNN (Eq. 9) -----------------------------------------------------------------------
+    def _build_kdtree(self) -> None:
+        from scipy.spatial import cKDTree
+        X = self._X
+        self._kd_mean = X.mean(axis=0)
+        _, _, vt = np.linalg.svd(X - self._kd_mean, full_matrices=False)
+        self._kd_axes = vt[:self.kdtree_dims]
+        self._kdtree = cKDTree((X - self._kd_mean) @ self._kd_axes.T)
+
+    def knn_search(self, query: np.ndarray, weights: np.ndarray):
+        """K nearest database postures under Eq. 9 with per-joint ``weights`` (20,).
+
+        ``knn='brute'``: exact, two BLAS matrix-vector products over the whole database.
+        ``knn='kdtree'``: approximate; a cKDTree in a global PCA space proposes
+        ``kdtree_candidates * K`` postures (unreliable joints filled from the database mean),
+        which are re-ranked exactly by Eq. 9.
+        """
+        w = np.asarray(weights, float)
+        q = np.asarray(query, float)
+        if self.knn == 'kdtree' and self._kdtree is not None:
+            qf = np.where((w >= 0.5)[:, None], q, self._kd_mean.reshape(NUM_JOINTS, 3)).ravel()
+            m = min(self.db.size, self.k * self.kdtree_candidates)
+            _, cand = self._kdtree.query((qf - self._kd_mean) @ self._kd_axes.T, k=m)
+            cand = np.atleast_1d(cand)
+            P = self.db.positions[cand]
+            d = np.einsum('njd,j->n', (P - q) ** 2, w)
+            order = np.argsort(d)[:self.k]
+            return cand[order], d[order]
+        wq = (w[:, None] * q).ravel()
+        d = self._Xsq_joint @ w - 2.0 * (self._X @ wq) + float(np.sum(w * np.sum(q * q, axis=1)))
+        k = self.k
+        idx = np.argpartition(d, k - 1)[:k] if k < len(d) else np.arange(len(d))
+        order = np.argsort(d[idx])
+        idx = idx[order]
+        return idx, np.maximum(d[idx], 0.0)
+
+    # -- energy -------------------------------------------------------------------------------
+    def _setup(self, Y: np.ndarray, query: np.ndarray, weights: np.ndarray,
+               continuity_target: Optional[np.ndarray]):
+        """Local PCA of the neighbours ``Y`` (K, 60) and the constants of the energy."""
+        mu = Y.mean(axis=0)
+        _, s, vt = np.linalg.svd(Y - mu, full_matrices=False)
+        d = int(min(self.pca_dims, vt.shape[0]))
+        V = vt[:d]                                            # (d, 60)
+        zn = (Y - mu) @ V.T                                   # (K, d)
+        res_n = np.maximum(np.sum((Y - mu) ** 2, axis=1) - np.sum(zn ** 2, axis=1), 0.0)
+        sd = s[:d] / np.sqrt(max(len(Y) - 1, 1))
+        return dict(mu=mu, V=V, zn=zn, res_n=res_n, sd=sd, q=query.ravel(),
+                    w60=np.repeat(weights, 3), c=None if continuity_target is None
+                    else continuity_target.ravel())
+
+    def energy(self, Z: np.ndarray, S: dict) -> np.ndarray:
+        """Eq. 15 for a batch of latent samples ``Z`` (M, d) -> (M,)."""
+        terms = self.energy_terms(Z, S)
+        return (self.w_control * terms['control'] + self.w_style * terms['style']
+                + self.w_kinematics * terms['kinematics'] + self.w_continuity * terms['continuity'])
+
+    def energy_terms(self, Z: np.ndarray, S: dict) -> Dict[str, np.ndarray]:
+        X = S['mu'] + Z @ S['V']                                          # (M, 60)
+        ec = ((X - S['q']) ** 2) @ S['w60']                               # Eq. 9-10
+        # Eq. 11 in latent coordinates: |x - y_n|^2 = |z - z_n|^2 + |residual_n|^2
+        dz = (np.sum(Z * Z, axis=1)[:, None] - 2.0 * Z @ S['zn'].T
+              + np.sum(S['zn'] ** 2, axis=1)[None, :] + S['res_n'][None, :])
+        es = np.maximum(dz.min(axis=1), 0.0) / NUM_JOINTS
+        P = X.reshape(len(X), NUM_JOINTS, 3)
+        seg = np.linalg.norm(P[:, _SEG_C] - P[:, _SEG_P], axis=2)         # (M, 19)
+        ek = np.sum((seg - self.L) ** 2, axis=1) / NUM_SEGMENTS           # Eq. 12
+        if S['c'] is None:
+            em = np.zeros(len(X))
+        else:
+            em = np.sum((X - S['c']) ** 2, axis=1) / NUM_JOINTS           # Eq. 13-14
+        return {'control': ec, 'style': es, 'kinematics': ek, 'continuity': em}
+
+    # -- solvers ------------------------------------------------------------------------------
+    def _stochastic(self, z0: np.ndarray, e0: float, S: dict):
+        z, e = z0, e0
+        sigma = self.step_scale * np.maximum(S['sd'], 1e-6)
+        steps = 0
+        for _ in range(self.steps):
+            steps += 1
+            Z = z + self.rng.standard_normal((self.samples, len(z))) * sigma
+            E = self.energy(Z, S)
+            j = int(np.argmin(E))
+            if E[j] < e:
+                z, e = Z[j], float(E[j])
+            else:
+                break  # no sample improves: stop (Sec. VI-E)
+        return z, e, steps
+
+    def _gauss_newton(self, z0: np.ndarray, e0: float, S: dict):
+        V, mu = S['V'], S['mu']
+        d = V.shape[0]
+        Vt = V.T                                              # (60, d)
+        wq = self.w_control * S['w60']
+        # quadratic parts: w_c E_c + w_m E_m (+ w_s E_s for a fixed closest neighbour)
+        H0 = (V * wq) @ Vt                                    # (d, d)
+        g_c = (wq * (mu - S['q'])) @ Vt                       # gradient/2 of E_c at z = 0
+        cm = 0.0 if S['c'] is None else self.w_continuity / NUM_JOINTS
+        g_m = 0.0 if S['c'] is None else cm * ((mu - S['c']) @ Vt)
+        cs = self.w_style / NUM_JOINTS
+        ck = self.w_kinematics / NUM_SEGMENTS
+        Vr = Vt.reshape(NUM_JOINTS, 3, d)
+        dV = Vr[_SEG_C] - Vr[_SEG_P]                          # (19, 3, d)
+        eye = np.eye(d)
+        z, e = z0, e0
+        it = 0
+        for it in range(1, self.gn_iterations + 1):
+            n = int(np.argmin(np.sum((S['zn'] - z) ** 2, axis=1)))  # closest neighbour (E_s)
+            x = (mu + z @ V).reshape(NUM_JOINTS, 3)
+            seg = x[_SEG_C] - x[_SEG_P]
+            ln = np.linalg.norm(seg, axis=1)
+            u = seg / np.maximum(ln, 1e-9)[:, None]
+            Jk = np.einsum('sk,skd->sd', u, dV)                # (19, d)
+            rk = ln - self.L - Jk @ z                          # l(z') ~ rk + Jk z'
+            H = H0 + (cs + cm) * eye + ck * (Jk.T @ Jk)
+            b = -(g_c + g_m - cs * S['zn'][n] + ck * (Jk.T @ rk))
+            z_new = np.linalg.solve(H + 1e-9 * eye, b)
+            e_new = float(self.energy(z_new[None], S)[0])
+            if e_new < e:
+                step = np.linalg.norm(z_new - z)
+                z, e = z_new, e_new
+                if step < 1e-6:
+                    break
+            else:
+                break
+        return z, e, it
+
+    # -- one frame ----------------------------------------------------------------------------
+    def solve(self, query: np.ndarray, weights: np.ndarray,
+              previous: Sequence[np.ndarray] = ()) -> OptimizerResult:
+        """``query`` (20, 3) normalised standard-body posture, ``weights`` (20,) reliabilities,
+        ``previous`` up to two earlier solutions, most recent first, in the query's frame."""
+        t0 = time.perf_counter()
+        w = np.clip(np.asarray(weights, float), 0.0, 1.0)
+        w_knn = w if w.sum() > 1e-6 else np.ones_like(w)
+        idx, dist = self.knn_search(query, w_knn)
+        t1 = time.perf_counter()
+        if len(previous) >= 2:
+            c = 2.0 * previous[0] - previous[1]
+        elif len(previous) == 1:
+            c = previous[0]
+        else:
+            c = None
+        S = self._setup(self._X[idx], np.asarray(query, float), w, c)
+        t2 = time.perf_counter()
+        # initial sample: best of the neighbours' mean, the previous solution and the nearest one
+        starts = [np.zeros(S['V'].shape[0]), S['zn'][0]]
+        if previous:
+            starts.append((previous[0].ravel() - S['mu']) @ S['V'].T)
+        starts = np.asarray(starts)
+        e_starts = self.energy(starts, S)
+        j = int(np.argmin(e_starts))
+        z0, e0 = starts[j], float(e_starts[j])
+        if self.solver == 'gauss_newton':
+            z, e, steps = self._gauss_newton(z0, e0, S)
+        else:
+            z, e, steps = self._stochastic(z0, e0, S)
+        x = (S['mu'] + z @ S['V']).reshape(NUM_JOINTS, 3)
+        t3 = time.perf_counter()
+        ori = None
+        if self.db.orientations is not None:
+            inv = 1.0 / (dist + 1e-6)
+            Q = self.db.orientations[idx]                     # (K, 20, 4)
+            ori = quat_average(np.swapaxes(Q, 0, 1), np.broadcast_to(inv, (NUM_JOINTS, len(idx))))
+        t4 = time.perf_counter()
+        terms = {k: float(v[0]) for k, v in self.energy_terms(z[None], S).items()}
+        return OptimizerResult(
+            positions=x, orientations=ori, neighbours=idx, distances=dist, energy=e, terms=terms,
+            steps=steps, timings_ms={'knn': 1e3 * (t1 - t0), 'local_pca': 1e3 * (t2 - t1),
+                                     'optimise': 1e3 * (t3 - t2), 'orientations': 1e3 * (t4 - t3)})

@@ -1,0 +1,88 @@
+"""``optimizer`` node: methods B / C, the natural-posture-space optimizer (Shum et al. 2013).
+``/kinect/skeletons_reliability`` -> ``/posture/reconstructed`` (SkeletonArray). Input skeletons
+without a reliability get one estimated here (Eq. 1-8); ``method`` B ignores it."""
+from __future__ import annotations
+
+from typing import Any, Dict, Optional
+
+from skeleton_core.rosnode import ParamSpec, run_node
+
+from .node_common import (RELIABILITY_NAMES, RELIABILITY_SPECS, SkeletonArrayNode,
+                          check_reliability_params, common_specs, load_database)
+from .optimizer import KNN_MODES, SOLVERS
+from .posture_space import as_database_arrays
+from .reconstructor import Reconstructor
+
+SPECS = [
+    ParamSpec('database', '', "motion database file ('' = built-in / CMU default)"),
+    ParamSpec('method', 'C', 'C: reliability-weighted (paper); B: every reliability 1',
+              choices=('B', 'C')),
+    ParamSpec('k', 30, 'Table V: neighbours of the KNN search (Eq. 9)', (2, 1000)),
+    ParamSpec('pca_dims', 20, 'Table V: dimensions of the natural posture space', (1, 60)),
+    ParamSpec('steps', 20, 'Table V: maximum optimisation steps', (0, 1000)),
+    ParamSpec('samples', 100, 'Table V: samples per optimisation step', (1, 100000)),
+    ParamSpec('w_control', 1.0, 'Eq. 15: weight of the control term E_c', (0.0, 1000.0)),
+    ParamSpec('w_style', 0.5, 'Eq. 15: weight of the style term E_s', (0.0, 1000.0)),
+    ParamSpec('w_kinematics', 1.5, 'Eq. 15: weight of the kinematics term E_k', (0.0, 1000.0)),
+    ParamSpec('w_continuity', 0.25, 'Eq. 15: weight of the continuity term E_m', (0.0, 1000.0)),
+    ParamSpec('step_scale', 0.5, 'stochastic search: sample spread in neighbour standard deviations',
+              (1e-4, 100.0)),
+    ParamSpec('solver', 'stochastic', 'stochastic (paper) or gauss_newton (deterministic)',
+              choices=SOLVERS),
+    ParamSpec('gn_iterations', 6, 'gauss_newton: maximum iterations', (1, 1000)),
+    ParamSpec('seed', 0, 'random seed of the stochastic search', (0, 2 ** 31 - 1)),
+    ParamSpec('knn', 'brute', 'KNN search: brute (exact BLAS) or kdtree (approximate)',
+              choices=KNN_MODES),
+    ParamSpec('kdtree_dims', 12, 'kdtree: global PCA dimensions of the tree', (1, 60)),
+    ParamSpec('kdtree_candidates', 4, 'kdtree: candidates fetched per neighbour', (1, 100)),
+    ParamSpec('reliable_threshold', 0.5, 'a joint at or above this reliability counts as reliable',
+              (0.0, 1.0)),
+    ParamSpec('trust_sensor_distance', 0.25,
+              'if the nearest database posture is farther than this (RMS m per reliable joint), '
+              'reliable joints keep their observed positions', (0.0, 100.0)),
+    ParamSpec('output_scale', 'user', "user: result retargeted to the user's bone lengths; "
+              'standard: the database body', choices=('user', 'standard')),
+    ParamSpec('use_input_reliability', True,
+              'use the reliability field of the input when it is filled (else estimate it)'),
+]
+CORE_NAMES = [s.name for s in SPECS if s.name not in ('database', 'method')]
+
+
+class OptimizerNode(SkeletonArrayNode):
+    def __init__(self, database_obj=None, **kwargs):
+        self._database_obj = database_obj
+        specs = (common_specs('/kinect/skeletons_reliability', '/posture/reconstructed') + SPECS
+                 + RELIABILITY_SPECS)
+        super().__init__('optimizer', specs, **kwargs)
+
+    def setup(self) -> None:
+        self._load(self.params['database'])
+
+    def _load(self, path: str) -> None:
+        db = self._database_obj if (self._database_obj is not None and not path) else \
+            load_database(path)
+        self.db = as_database_arrays(db)
+        self.get_logger().info(f'motion database: {self.db.size} postures')
+
+    def validate(self, values: Dict[str, Any]) -> Optional[str]:
+        return check_reliability_params(values)
+
+    def apply_params(self, values, changed) -> Optional[str]:
+        if 'database' in changed:
+            try:
+                self._load(changed['database'])
+            except (FileNotFoundError, ValueError, RuntimeError) as e:
+                return str(e)
+        return None
+
+    def make_processor(self, values: Dict[str, Any]):
+        params = {k: values[k] for k in RELIABILITY_NAMES + CORE_NAMES}
+        return Reconstructor(self.db, method=values['method'], **params)
+
+
+def main(args=None) -> int:
+    return run_node(OptimizerNode, args=args)
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())

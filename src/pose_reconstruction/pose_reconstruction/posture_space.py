@@ -1,0 +1,167 @@
+"""Shared helpers of the reconstruction methods: database arrays, fast single-posture
+retargeting, query preparation (normalise + retarget, Shum et al. 2013 Sec. V-B) and the way back
+to the sensor frame.
+
+Everything works on one posture at a time with vectorised numpy (no Python loop over joints), so
+that a query costs tens of microseconds.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Optional
+
+import numpy as np
+
+from skeleton_core.geometry import NormalizeTransform, denormalize, normalize, quat_from_yaw, \
+    quat_multiply
+from skeleton_core.model import (NUM_JOINTS, PARENTS, ROOT, SEGMENT_CHILDREN, SEGMENT_PARENTS,
+                                 Body, standard_body)
+
+_PAR = np.array([max(p, 0) for p in PARENTS])
+_SEG_P = np.array(SEGMENT_PARENTS)
+_SEG_C = np.array(SEGMENT_CHILDREN)
+
+# ANCESTORS[j, k] = 1 when k is j or one of its ancestors, excluding the root: positions relative to
+# the root are ANCESTORS @ parent-relative offsets.
+ANCESTORS = np.zeros((NUM_JOINTS, NUM_JOINTS))
+for _j in range(NUM_JOINTS):
+    _k = _j
+    while _k > 0:
+        ANCESTORS[_j, _k] = 1.0
+        _k = PARENTS[_k]
+# STRICT_ANCESTORS[j, k] = 1 when k is a proper ancestor of j (root included)
+STRICT_ANCESTORS = np.zeros((NUM_JOINTS, NUM_JOINTS), bool)
+for _j in range(NUM_JOINTS):
+    _k = PARENTS[_j]
+    while _k >= 0:
+        STRICT_ANCESTORS[_j, _k] = True
+        _k = PARENTS[_k]
+
+
+@dataclass
+class DatabaseArrays:
+    """The arrays the methods need from a motion database (any object with ``positions``)."""
+
+    positions: np.ndarray                 # (N, 20, 3) normalised, standard body
+    flat: np.ndarray                      # (N, 60) float64
+    orientations: Optional[np.ndarray]    # (N, 20, 4) or None
+    twists: Optional[np.ndarray]          # (N, 19) or None
+    body: Body
+
+    @property
+    def size(self) -> int:
+        return self.flat.shape[0]
+
+
+def as_database_arrays(db, body: Optional[Body] = None) -> DatabaseArrays:
+    """Adapt ``skeleton_core.database.MotionDatabase`` (or any object with ``positions``
+    (N, 20, 3) and optional ``orientations`` / ``twists``) or a bare (N, 20, 3) array."""
+    if isinstance(db, DatabaseArrays):
+        return db
+    pos = np.asarray(getattr(db, 'positions', db), dtype=float)
+    if pos.ndim != 3 or pos.shape[1:] != (NUM_JOINTS, 3) or pos.shape[0] < 2:
+        raise ValueError(f'motion database must hold (N >= 2, 20, 3) positions, got {pos.shape}')
+    if not np.all(np.isfinite(pos)):
+        raise ValueError('motion database holds non-finite positions')
+    ori = getattr(db, 'orientations', None)
+    ori = None if ori is None else np.asarray(ori, dtype=float)
+    if ori is not None and ori.shape != (pos.shape[0], NUM_JOINTS, 4):
+        ori = None
+    tw = getattr(db, 'twists', None)
+    tw = None if tw is None else np.asarray(tw, dtype=float)
+    if body is None:
+        body = getattr(db, 'body', None) or standard_body()
+    return DatabaseArrays(positions=pos, flat=np.ascontiguousarray(pos.reshape(len(pos), -1)),
+                          orientations=ori, twists=tw, body=body)
+
+
+def fast_retarget(positions: np.ndarray, lengths: np.ndarray, rest_dirs: np.ndarray) -> np.ndarray:
+    """Shum & Ho 2012 Eq. 3-4 for one posture or a batch (..., 20, 3), root kept, vectorised.
+
+    ``lengths`` (20,) bone length of the segment ending at each joint (0 for the root),
+    ``rest_dirs`` (20, 3) unit direction used for zero-length segments.
+    """
+    p = np.asarray(positions, float)
+    d = p - p[..., _PAR, :]
+    n = np.linalg.norm(d, axis=-1, keepdims=True)
+    unit = np.where(n > 1e-9, d / np.maximum(n, 1e-12), rest_dirs)
+    off = unit * lengths[:, None]
+    off[..., ROOT, :] = 0.0
+    return p[..., ROOT:ROOT + 1, :] + np.einsum('jk,...kd->...jd', ANCESTORS, off)
+
+
+def bone_lengths(body: Body) -> np.ndarray:
+    return body.bone_lengths_by_joint()
+
+
+def rest_directions(body: Body) -> np.ndarray:
+    o = body.rest_offsets
+    n = np.linalg.norm(o, axis=1, keepdims=True)
+    return np.where(n > 1e-12, o / np.maximum(n, 1e-12), 0.0)
+
+
+@dataclass
+class PreparedQuery:
+    """A sensor posture brought into the database space."""
+
+    query: np.ndarray                 # (20, 3) normalised, retargeted to the standard body
+    transform: NormalizeTransform     # what normalisation removed (yaw, translation)
+    scale: float                      # standard height / user height
+
+
+class QueryPreparer:
+    """Normalise (yaw + translation removed, reliability-weighted heading) and retarget a sensor
+    posture to the database's standard body (Shum et al. 2013 Sec. V-B; Shum & Ho Eq. 3-4).
+
+    A joint below an unreliable ancestor cannot be retargeted along the chain (its parent's
+    direction is garbage), so it is scaled uniformly by standard/user height instead.
+    """
+
+    def __init__(self, body: Body, reliable_threshold: float = 0.5):
+        self.body = body
+        self.lengths = bone_lengths(body)
+        self.rest_dirs = rest_directions(body)
+        self.reliable_threshold = reliable_threshold
+
+    def prepare(self, positions: np.ndarray, reliability: np.ndarray,
+                user_height: float) -> PreparedQuery:
+        w = np.asarray(reliability, float)
+        norm, tf = normalize(positions, np.maximum(w, 1e-3))
+        scale = self.body.height / max(user_height, 0.5)
+        ret = fast_retarget(norm, self.lengths, self.rest_dirs)
+        bad = w < self.reliable_threshold
+        if bad.any():
+            chain_bad = (STRICT_ANCESTORS & bad[None, :]).any(axis=1)
+            ret[chain_bad] = norm[chain_bad] * scale
+        return PreparedQuery(query=ret, transform=tf, scale=scale)
+
+
+def to_sensor_frame(normalized: np.ndarray, transform: NormalizeTransform,
+                    user_bone_lengths: Optional[np.ndarray], rest_dirs: np.ndarray) -> np.ndarray:
+    """Back to the sensor frame: optionally retarget to the user's bone lengths (20,), then
+    restore yaw and translation (geometry.denormalize)."""
+    p = normalized if user_bone_lengths is None else fast_retarget(normalized, user_bone_lengths,
+                                                                    rest_dirs)
+    return denormalize(p, transform)
+
+
+def orientations_to_sensor(quats: np.ndarray, yaw: float) -> np.ndarray:
+    """Rotate normalised-frame orientations (..., 4) back by the removed yaw."""
+    return quat_multiply(quat_from_yaw(np.asarray(yaw, float))[None, :], quats)
+
+
+def user_bone_lengths(segment_lengths_19: np.ndarray) -> np.ndarray:
+    """(19,) segment lengths (SEGMENTS order) -> (20,) by joint."""
+    out = np.zeros(NUM_JOINTS)
+    out[_SEG_C] = segment_lengths_19
+    return out
+
+
+def parent_relative_error(a: np.ndarray, b: np.ndarray) -> float:
+    """Shum et al. 2013 Eq. 18: mean over frames and joints of the distance between parent-relative
+    joint vectors of two posture sequences (..., 20, 3), metres (the root row is left out)."""
+    a = np.asarray(a, float)
+    b = np.asarray(b, float)
+    ra = a[..., _SEG_C, :] - a[..., _SEG_P, :]
+    rb = b[..., _SEG_C, :] - b[..., _SEG_P, :]
+    return float(np.mean(np.linalg.norm(ra - rb, axis=-1)))

@@ -1,0 +1,210 @@
+"""Per-joint reliability of a Kinect skeleton (Shum et al. 2013, Sec. IV, Eq. 1-8).
+
+For every joint ``i`` and frame ``f`` three terms in [0, 1] are computed:
+
+* behaviour ``R_b`` (Eq. 1-4): high-frequency vibration. ``theta_i(f)`` is the angle between two
+  successive displacement vectors (0 when either is shorter than ``d_min``); the mean over the last
+  ``f_b`` angles is mapped linearly from ``theta_floor`` (reliable) to ``theta_roof`` (unreliable);
+* kinematics ``R_k`` (Eq. 5-6): ``1 -`` the mean, over the segments touching the joint, of the
+  relative segment-length difference ``min(|l - l_ref| / l_ref, 1)`` against reference lengths;
+* tracking state ``R_t`` (Eq. 7): 1 tracked, 0 inferred, 0 not tracked;
+
+and the reliability is the Gaussian-weighted sum, over the last ``f_total`` frames, of the
+per-frame minimum of the three (Eq. 8), the most recent frame weighted most.
+
+Reference segment lengths (Sec. IV-B) are captured automatically whenever every joint is tracked
+and the posture is close to one of the two reference postures (T-pose, standing with arms down),
+and refreshed the same way later; until the first capture the standard body scaled to the user's
+estimated height is used.
+"""
+from __future__ import annotations
+
+import collections
+from typing import Deque, Optional, Tuple
+
+import numpy as np
+
+from skeleton_core.geometry import normalize
+from skeleton_core.model import (ELBOW_LEFT, ELBOW_RIGHT, HAND_LEFT, HAND_RIGHT, INFERRED,
+                                 NOT_TRACKED, NUM_JOINTS, NUM_SEGMENTS, SEGMENT_CHILDREN,
+                                 SEGMENT_PARENTS, TRACKED, WRIST_LEFT, WRIST_RIGHT,
+                                 estimate_height, segment_lengths, standard_body)
+
+_SEG_P = np.array(SEGMENT_PARENTS)
+_SEG_C = np.array(SEGMENT_CHILDREN)
+
+# Joint-segment incidence (20, 19): a joint touches the segment ending at it and those leaving it.
+INCIDENCE = np.zeros((NUM_JOINTS, NUM_SEGMENTS))
+INCIDENCE[_SEG_P, np.arange(NUM_SEGMENTS)] = 1.0
+INCIDENCE[_SEG_C, np.arange(NUM_SEGMENTS)] = 1.0
+_INCIDENCE_COUNT = INCIDENCE.sum(axis=1)
+
+
+def reference_directions() -> dict:
+    """Unit segment directions (19, 3) of the two reference postures, facing +x (Fig. 2)."""
+    body = standard_body()
+    rest = body.rest_offsets[_SEG_C]
+    tpose = rest / np.linalg.norm(rest, axis=1, keepdims=True)
+    standing = tpose.copy()
+    seg_of = {c: k for k, c in enumerate(SEGMENT_CHILDREN)}
+    for j in (ELBOW_LEFT, WRIST_LEFT, HAND_LEFT, ELBOW_RIGHT, WRIST_RIGHT, HAND_RIGHT):
+        standing[seg_of[j]] = (0.0, 0.0, -1.0)
+    return {'tpose': tpose, 'standing': standing}
+
+
+_REF_DIRS = reference_directions()
+
+
+def behaviour_term(history: np.ndarray, d_min: float, f_b: int, theta_floor: float,
+                   theta_roof: float) -> Tuple[np.ndarray, np.ndarray]:
+    """Eq. 1-4 on a position history ``(T, 20, 3)`` (oldest first). Angles in radians.
+
+    Returns ``(R_b (20,), theta (T-2, 20))``. Missing angles (short history) count as 0 in the
+    mean over ``f_b`` angles, as do displacements shorter than ``d_min`` (Eq. 3).
+    """
+    h = np.asarray(history, float)
+    if h.shape[0] < 3:
+        return np.ones(h.shape[1]), np.zeros((0, h.shape[1]))
+    d = np.diff(h, axis=0)                      # (T-1, 20, 3), Eq. 1-2
+    n = np.linalg.norm(d, axis=-1)              # (T-1, 20)
+    dot = np.sum(d[1:] * d[:-1], axis=-1)
+    denom = n[1:] * n[:-1]
+    ok = (n[1:] > d_min) & (n[:-1] > d_min)
+    cos = np.where(ok, dot / np.where(ok, denom, 1.0), 1.0)
+    theta = np.where(ok, np.arccos(np.clip(cos, -1.0, 1.0)), 0.0)  # Eq. 3
+    mean = theta[-f_b:].sum(axis=0) / f_b
+    rb = 1.0 - np.maximum(np.minimum(mean, theta_roof) - theta_floor, 0.0) / (theta_roof - theta_floor)
+    return rb, theta
+
+
+def kinematics_term(positions: np.ndarray, reference_lengths: np.ndarray) -> np.ndarray:
+    """Eq. 5-6: ``R_k`` (20,) from the segment-length ratios against ``reference_lengths`` (19,)."""
+    lengths = segment_lengths(positions)
+    ref = np.maximum(np.asarray(reference_lengths, float), 1e-6)
+    ds = np.minimum(np.abs(lengths - ref) / ref, 1.0)           # Eq. 5
+    return 1.0 - (INCIDENCE @ ds) / _INCIDENCE_COUNT            # Eq. 6
+
+
+def tracking_term(tracking_state: np.ndarray, tracked: float = 1.0, inferred: float = 0.0,
+                  not_tracked: float = 0.0) -> np.ndarray:
+    """Eq. 7."""
+    t = np.asarray(tracking_state)
+    out = np.full(t.shape, not_tracked, float)
+    out[t == TRACKED] = tracked
+    out[t == INFERRED] = inferred
+    out[t == NOT_TRACKED] = not_tracked
+    return out
+
+
+def gaussian_weights(n: int, sigma: float) -> np.ndarray:
+    """Normalised Gaussian weights for ``n`` frames, oldest first, the last (most recent) largest."""
+    age = np.arange(n - 1, -1, -1, dtype=float)
+    w = np.exp(-0.5 * (age / sigma) ** 2)
+    return w / w.sum()
+
+
+def reference_pose_match(positions: np.ndarray, tolerance_deg: float) -> Optional[str]:
+    """Which reference posture (``'tpose'`` / ``'standing'``) the skeleton is in, or None.
+
+    Compares segment directions after removing yaw; the mean angle over all segments must be
+    below ``tolerance_deg``.
+    """
+    p, _ = normalize(positions)
+    d = p[_SEG_C] - p[_SEG_P]
+    n = np.linalg.norm(d, axis=1)
+    if np.any(n < 1e-6):
+        return None
+    u = d / n[:, None]
+    best, best_err = None, np.inf
+    for name, ref in _REF_DIRS.items():
+        err = np.degrees(np.mean(np.arccos(np.clip(np.sum(u * ref, axis=1), -1.0, 1.0))))
+        if err < best_err:
+            best, best_err = name, err
+    return best if best_err <= tolerance_deg else None
+
+
+class ReliabilityEstimator:
+    """Streaming per-user reliability (Eq. 1-8). Call :meth:`update` once per frame.
+
+    All parameters are the paper's defaults: ``d_min`` 3 cm, ``f_b`` 3 frames, ``theta_floor``
+    90 deg, ``theta_roof`` 135 deg, tracked/inferred/not tracked 1/0/0, ``f_total`` 6 frames.
+    ``sigma_frames`` is the width of the Gaussian weight of Eq. 8 (the paper does not give it).
+    """
+
+    def __init__(self, d_min: float = 0.03, f_b: int = 3, theta_floor_deg: float = 90.0,
+                 theta_roof_deg: float = 135.0, f_total: int = 6, sigma_frames: float = 2.0,
+                 tracked_value: float = 1.0, inferred_value: float = 0.0,
+                 not_tracked_value: float = 0.0, reference_pose_tolerance_deg: float = 20.0,
+                 reference_frames: int = 15, height: Optional[float] = None,
+                 reference_lengths: Optional[np.ndarray] = None):
+        if not 0 <= theta_floor_deg < theta_roof_deg <= 180:
+            raise ValueError('need 0 <= theta_floor < theta_roof <= 180 degrees')
+        if f_b < 1 or f_total < 1 or sigma_frames <= 0 or d_min < 0:
+            raise ValueError('f_b, f_total must be >= 1, sigma_frames > 0, d_min >= 0')
+        self.d_min = float(d_min)
+        self.f_b = int(f_b)
+        self.theta_floor = np.radians(theta_floor_deg)
+        self.theta_roof = np.radians(theta_roof_deg)
+        self.f_total = int(f_total)
+        self.sigma_frames = float(sigma_frames)
+        self.tracked_value = float(tracked_value)
+        self.inferred_value = float(inferred_value)
+        self.not_tracked_value = float(not_tracked_value)
+        self.reference_pose_tolerance_deg = float(reference_pose_tolerance_deg)
+        self.reference_frames = int(reference_frames)
+        self._fixed_height = height
+        self._fixed_reference = None if reference_lengths is None else np.asarray(reference_lengths, float)
+        self.reset()
+
+    def reset(self) -> None:
+        self._positions: Deque[np.ndarray] = collections.deque(maxlen=self.f_b + 2)
+        self._minima: Deque[np.ndarray] = collections.deque(maxlen=self.f_total)
+        self._heights: Deque[float] = collections.deque(maxlen=30)
+        self._captured: Deque[np.ndarray] = collections.deque(maxlen=self.reference_frames)
+        self.reference_source = 'standard'
+        self.last_terms: Optional[Tuple[np.ndarray, np.ndarray, np.ndarray]] = None
+        self.reliability = np.ones(NUM_JOINTS)
+
+    # -- reference lengths ---------------------------------------------------------------------
+    @property
+    def height(self) -> float:
+        if self._fixed_height is not None:
+            return float(self._fixed_height)
+        if not self._heights:
+            return standard_body().height
+        return float(np.clip(np.median(self._heights), 1.0, 2.3))
+
+    @property
+    def reference_lengths(self) -> np.ndarray:
+        """(19,) the user's reference segment lengths (captured, or standard body at height)."""
+        if self._fixed_reference is not None:
+            return self._fixed_reference
+        if self._captured:
+            return np.median(np.asarray(self._captured), axis=0)
+        return standard_body(self.height).segment_lengths
+
+    def _observe_reference(self, positions: np.ndarray, tracking_state: np.ndarray) -> None:
+        if np.any(tracking_state != TRACKED):
+            return
+        self._heights.append(estimate_height(positions))
+        pose = reference_pose_match(positions, self.reference_pose_tolerance_deg)
+        if pose is not None:
+            self._captured.append(segment_lengths(positions))
+            self.reference_source = pose
+
+    # -- streaming -------------------------------------------------------------------------------
+    def update(self, positions: np.ndarray, tracking_state: np.ndarray) -> np.ndarray:
+        """Add one frame; return the reliability (20,) in [0, 1] (Eq. 8)."""
+        p = np.asarray(positions, float)
+        ts = np.asarray(tracking_state)
+        self._observe_reference(p, ts)
+        self._positions.append(p)
+        rb, _ = behaviour_term(np.asarray(self._positions), self.d_min, self.f_b,
+                               self.theta_floor, self.theta_roof)
+        rk = kinematics_term(p, self.reference_lengths)
+        rt = tracking_term(ts, self.tracked_value, self.inferred_value, self.not_tracked_value)
+        self.last_terms = (rb, rk, rt)
+        self._minima.append(np.minimum(np.minimum(rb, rk), rt))
+        w = gaussian_weights(len(self._minima), self.sigma_frames)
+        self.reliability = np.clip(w @ np.asarray(self._minima), 0.0, 1.0)
+        return self.reliability
