@@ -1,0 +1,105 @@
+"""viz node over real DDS: SkeletonArray in, MarkerArray out; run-time parameter changes."""
+import threading
+import time
+
+import numpy as np
+import pytest
+
+rclpy = pytest.importorskip('rclpy')
+pytest.importorskip('skeleton_msgs.msg', reason='skeleton_msgs not built (run scripts/setup.sh)')
+
+from rclpy.executors import MultiThreadedExecutor  # noqa: E402
+from rclpy.parameter import Parameter  # noqa: E402
+from rclpy.qos import qos_profile_sensor_data  # noqa: E402
+from skeleton_msgs.msg import SkeletonArray  # noqa: E402
+from visualization_msgs.msg import Marker, MarkerArray  # noqa: E402
+
+from skeleton_core.conversions import SkeletonFrame, frames_to_array_msg  # noqa: E402
+from skeleton_core.model import ELBOW_LEFT, NUM_JOINTS, NUM_SEGMENTS, standard_body  # noqa: E402
+from viz.viz_node import VizNode  # noqa: E402
+
+
+def _array(uids, reliability=None):
+    frames = []
+    for uid in uids:
+        r = (np.full(NUM_JOINTS, np.nan, np.float32) if reliability is None else reliability)
+        frames.append(SkeletonFrame(positions=standard_body().rest_positions() + (2.5, 0, 0),
+                                    tracking_state=np.full(NUM_JOINTS, 2, np.uint8),
+                                    reliability=r, user_id=uid, stamp_ns=5_000_000_123,
+                                    frame_id='kinect_link'))
+    return frames_to_array_msg(frames, 5_000_000_123, 'kinect_link')
+
+
+@pytest.fixture
+def graph(rclpy_context):
+    viz = VizNode(context=rclpy_context, parameter_overrides=[
+        Parameter('max_rate_hz', value=20.0), Parameter('stale_timeout_s', value=30.0)])
+    peer = rclpy.create_node('viz_test_peer', context=rclpy_context)
+    ex = MultiThreadedExecutor(num_threads=2, context=rclpy_context)
+    ex.add_node(viz)
+    ex.add_node(peer)
+    th = threading.Thread(target=ex.spin, daemon=True)
+    th.start()
+    yield viz, peer
+    ex.shutdown()
+    th.join(timeout=5)
+    viz.destroy_node()
+    peer.destroy_node()
+
+
+def _wait_for(got, cond, pubs, timeout=10.0):
+    deadline = time.time() + timeout
+    while time.time() < deadline:
+        for pub, msg in pubs:
+            pub.publish(msg)
+        for m in list(got):
+            if cond(m):
+                return m
+        time.sleep(0.05)
+    return None
+
+
+def test_markers_cross_dds_and_hiding_a_layer_takes_effect(graph):
+    viz, peer = graph
+    got = []
+    peer.create_subscription(MarkerArray, '/viz/markers', got.append, 10)
+    raw = peer.create_publisher(SkeletonArray, '/kinect/skeletons', qos_profile_sensor_data)
+    rel = peer.create_publisher(SkeletonArray, '/kinect/skeletons_reliability',
+                                qos_profile_sensor_data)
+    char = peer.create_publisher(SkeletonArray, '/character/skeletons', qos_profile_sensor_data)
+    r = np.ones(NUM_JOINTS, np.float32)
+    r[ELBOW_LEFT] = 0.0
+    pubs = [(raw, _array([1, 4])), (rel, _array([1], r)), (char, _array([1]))]
+
+    want = {'raw/user_1', 'raw/user_4', 'reliability/user_1', 'character/user_1'}
+    msg = _wait_for(got, lambda m: {x.ns for x in m.markers if x.action == Marker.ADD} == want,
+                    pubs)
+    assert msg is not None, f'no MarkerArray with {want}; got {[{x.ns for x in m.markers} for m in got[-3:]]}'
+    by_ns = {}
+    for m in msg.markers:
+        by_ns.setdefault(m.ns, []).append(m)
+    assert sorted(m.type for m in by_ns['raw/user_1']) == [Marker.LINE_LIST, Marker.SPHERE_LIST]
+    joints = next(m for m in by_ns['raw/user_1'] if m.type == Marker.SPHERE_LIST)
+    assert len(joints.points) == NUM_JOINTS and len(joints.colors) == NUM_JOINTS
+    assert [(m.type, m.id) for m in by_ns['reliability/user_1']] == [(Marker.CUBE, ELBOW_LEFT)]
+    assert np.isclose(by_ns['reliability/user_1'][0].scale.y, 0.15, atol=1e-6)  # 0.15 * (1 - 0)
+    assert len(by_ns['character/user_1']) == 3 * NUM_SEGMENTS
+    assert all(m.header.frame_id == 'kinect_link' for m in msg.markers)
+    assert (msg.markers[0].header.stamp.sec, msg.markers[0].header.stamp.nanosec) == (5, 123)
+
+    # refused: out of range / bad colour
+    res = viz.set_parameters([Parameter('max_rate_hz', value=1000.0)])[0]
+    assert not res.successful and 'max_rate_hz' in res.reason
+    res = viz.set_parameters([Parameter('raw_joint_color', value=[1.0, 0.0, 0.0])])[0]
+    assert not res.successful
+
+    # hide the raw layer at run time: its markers are deleted, then no longer sent
+    assert viz.set_parameters([Parameter('show_raw', value=False)])[0].successful
+    got.clear()
+    deleted = _wait_for(got, lambda m: any(x.action == Marker.DELETE and x.ns == 'raw/user_4'
+                                           for x in m.markers), pubs)
+    assert deleted is not None, 'hidden raw layer was not deleted'
+    later = _wait_for(got, lambda m: got.index(m) > got.index(deleted) and
+                      any(x.ns == 'character/user_1' for x in m.markers), pubs)
+    assert later is not None
+    assert not any(x.ns.startswith('raw/') for x in later.markers)
