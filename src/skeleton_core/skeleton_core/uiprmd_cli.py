@@ -158,7 +158,7 @@ def main(argv=None):
         print(f'  skipped {p}: {why}')
     if args.calibrate:
         from .calibration import calibrate, write_report
-        result = calibrate(clips, regs)
+        result = calibrate(clips, regs, src=src)
         md = write_report(result, out)
         print(md)
     return 0
