@@ -47,6 +47,7 @@ class Target:
 @dataclass
 class PinState:
     active: bool = False
+    manual: bool = False   # set through Simulation.pin(): not released by the target
     point: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
 

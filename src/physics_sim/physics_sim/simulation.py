@@ -466,8 +466,9 @@ class Simulation:
         if self.config.dodge:
             self._update_dodge()
         for _ in range(n):
-            self._control()
-            mujoco.mj_step(m, d)
+            mujoco.mj_step1(m, d)   # kinematics + velocities of the current state
+            self._control()         # forces from the current state (not one step old)
+            mujoco.mj_step2(m, d)
             self.time = float(d.time)
         self._check_health()
 
@@ -515,10 +516,33 @@ class Simulation:
             self.model.eq_data[e, 3:6] = point
         self.data.eq_active[e] = 1 if on else 0
 
+    def pin(self, user_id: int, joint: str, point=None) -> None:
+        """Pin a foot joint ('FootLeft'/'FootRight') to a world point (default: where it is) with
+        a virtual ball joint until :meth:`unpin`; it is not released when the target lifts."""
+        ch = self.characters[int(user_id)]
+        j = JOINT_INDEX.get(joint, -1)
+        if j not in ch.pins:
+            raise ValueError(f'only {[JOINT_NAMES[k] for k in ch.pins]} can be pinned')
+        p = ch.joint_points(self.data)[j] if point is None else np.asarray(point, float)
+        if p.shape != (3,) or not np.all(np.isfinite(p)):
+            raise ValueError('pin point must be 3 finite numbers')
+        pin = ch.pins[j]
+        pin.active, pin.manual, pin.point = True, True, p.copy()
+        self._set_pin(ch, j, True, p)
+
+    def unpin(self, user_id: int, joint: str) -> None:
+        ch = self.characters[int(user_id)]
+        j = JOINT_INDEX.get(joint, -1)
+        if j in ch.pins:
+            ch.pins[j].active = ch.pins[j].manual = False
+            self._set_pin(ch, j, False)
+
     def _update_pins(self, ch: Character, p_t, v_t, pts) -> None:
         c = self.config
         floor = self.sensor.lift if self.sensor else 0.0
         for j, pin in ch.pins.items():
+            if pin.manual:
+                continue
             h = p_t[j, 2] - floor
             if not pin.active:
                 if h < c.pin_height and np.linalg.norm(v_t[j]) < c.pin_speed:
@@ -545,7 +569,7 @@ class Simulation:
                     if gap > c.conflict_tolerance:
                         self.counters['constraint_conflict'] += 1
                     if gap > c.conflict_release:
-                        pin.active = False
+                        pin.active = pin.manual = False
                         self._set_pin(ch, j, False)
                         self.counters['virtual_joint_released'] += 1
         for name, (uid, hand) in list(self.holds.items()):

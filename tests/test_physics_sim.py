@@ -1,0 +1,174 @@
+"""The simulated character: settling on a static target, foot pins, pushes, bad targets, several
+characters, held objects, conflicting virtual joints, dodging, frames."""
+import mujoco
+import numpy as np
+import pytest
+
+from skeleton_core.model import (ANKLE_LEFT, FOOT_LEFT, HAND_LEFT, HAND_RIGHT, HIP_LEFT, KNEE_LEFT,
+                                 standard_body, segment_lengths)
+
+from physics_sim.mjcf_world import ObjectSpec
+from physics_sim.simulation import SensorPose, SimConfig, Simulation
+
+BODY = standard_body()
+SENSOR = SensorPose(0.8, 0.0)
+
+
+def tpose_sensor(shift=(2.5, 0.0, 0.0)):
+    """The standard T-pose, feet on the floor, as the sensor (0.8 m high) sees it."""
+    return BODY.rest_positions() + np.array(shift) - np.array([0.0, 0.0, 0.8])
+
+
+def run(sim, target, seconds, uid=1):
+    st = None
+    for _ in range(int(round(seconds * 30))):
+        st = sim.step({uid: target})[uid]
+    return st
+
+
+@pytest.mark.parametrize('controller', ['explicit_pd', 'mocap_constraints'])
+def test_static_tpose_settles(controller):
+    sim = Simulation(SimConfig(controller=controller, body_height=1.75))
+    st = run(sim, tpose_sensor(), 1.0)
+    err = np.linalg.norm(st.positions - st.target_world, axis=1)
+    assert err.mean() < 0.03 and err.max() < 0.05
+    np.testing.assert_allclose(segment_lengths(st.positions), BODY.segment_lengths, atol=1e-6)
+    # reported back in the sensor frame, next to the input
+    assert np.abs(st.positions_sensor - tpose_sensor()).max() < 0.05
+    # settled: nearly at rest
+    root_v = sim.data.qvel[sim.characters[1].root_dadr:sim.characters[1].root_dadr + 3]
+    assert np.linalg.norm(root_v) < 0.05
+    assert sim.counters['nan_reset'] == 0
+
+
+def test_point_velocity_formula_matches_mujoco():
+    sim = Simulation(SimConfig(body_height=1.75))
+    run(sim, tpose_sensor(), 0.1)
+    sim.apply_push(1, 'ElbowLeft', (0.0, 50.0, 80.0), 0.05)
+    sim.advance(0.03)
+    m, d = sim.model, sim.data
+    ch = sim.characters[1]
+    pts = ch.joint_points(d)
+    for j in (HAND_LEFT, KNEE_LEFT):
+        b = ch.joint_body[j]
+        cv = d.cvel[b]
+        v = cv[3:] + np.cross(cv[:3], pts[j] - d.subtree_com[m.body_rootid[b]])
+        res = np.zeros(6)
+        mujoco.mj_objectVelocity(m, d, mujoco.mjtObj.mjOBJ_BODY, b, res, 0)
+        v_ref = res[3:] + np.cross(res[:3], pts[j] - d.xipos[b])  # object-centred = COM
+        np.testing.assert_allclose(v, v_ref, atol=1e-9)
+
+
+def test_feet_pinned_when_standing_released_when_lifted():
+    sim = Simulation(SimConfig(body_height=1.75))
+    st = run(sim, tpose_sensor(), 0.3)
+    assert st.pinned == {'FootLeft': True, 'FootRight': True}
+    lifted = tpose_sensor()
+    # hip flexed 60 degrees, shank vertical: the foot comes ~0.2 m off the floor
+    thigh = np.linalg.norm(BODY.rest_offsets[KNEE_LEFT])
+    lifted[KNEE_LEFT] = lifted[HIP_LEFT] + thigh * np.array([np.sin(1.05), 0.0, -np.cos(1.05)])
+    lifted[ANKLE_LEFT] = lifted[KNEE_LEFT] + BODY.rest_offsets[ANKLE_LEFT]
+    lifted[FOOT_LEFT] = lifted[ANKLE_LEFT] + BODY.rest_offsets[FOOT_LEFT]
+    st = run(sim, lifted, 0.6)
+    assert st.pinned == {'FootLeft': False, 'FootRight': True}
+    assert st.positions[FOOT_LEFT, 2] > 0.15
+    st = run(sim, tpose_sensor(), 1.0)
+    assert st.pinned == {'FootLeft': True, 'FootRight': True}
+
+
+def test_push_changes_velocities_and_pinned_foot_holds():
+    sim = Simulation(SimConfig(body_height=1.75))
+    run(sim, tpose_sensor(), 0.3)
+    ch = sim.characters[1]
+    foot0 = ch.joint_points(sim.data)[FOOT_LEFT].copy()
+    v0 = sim.data.qvel[ch.dofs].copy()
+    sim.apply_push(1, 'ShoulderCenter', (400.0, 0.0, 0.0), 0.1)
+    sim.advance(0.1)
+    v1 = sim.data.qvel[ch.dofs]
+    assert sim.data.qvel[ch.root_dadr] > 0.1        # pushed forward
+    assert np.abs(v1 - v0).max() > 0.3
+    assert np.linalg.norm(ch.joint_points(sim.data)[FOOT_LEFT] - foot0) < 0.01
+    with pytest.raises(ValueError):
+        sim.apply_push(1, 'Nose', (1, 0, 0), 0.1)
+    with pytest.raises(ValueError):
+        sim.apply_push(7, 'Spine', (1, 0, 0), 0.1)
+
+
+@pytest.mark.parametrize('bad', [np.full((20, 3), np.nan), np.zeros((19, 3)), np.zeros(60),
+                                 'garbage'])
+def test_bad_targets_refused_without_changing_the_simulation(bad):
+    sim = Simulation(SimConfig(body_height=1.75))
+    run(sim, tpose_sensor(), 0.1)
+    qpos, t = sim.data.qpos.copy(), sim.time
+    target_before = sim.characters[1].cur.positions.copy()
+    with pytest.raises(ValueError):
+        sim.step({1: tpose_sensor(), 2: bad})
+    assert sim.time == t and 2 not in sim.characters
+    np.testing.assert_array_equal(sim.data.qpos, qpos)
+    np.testing.assert_array_equal(sim.characters[1].cur.positions, target_before)
+    assert sim.counters['refused_target'] == 1
+
+
+def test_several_characters_spawn_and_leave():
+    sim = Simulation(SimConfig(body_height=1.75))
+    for _ in range(15):
+        states = sim.step({1: tpose_sensor((2.5, -1.2, 0.0)), 2: tpose_sensor((2.5, 1.2, 0.0))})
+    assert set(states) == {1, 2}
+    p1_before = states[1].positions.copy()
+    sim.remove_character(2)
+    states = sim.step({1: tpose_sensor((2.5, -1.2, 0.0))})
+    assert set(states) == {1}
+    assert np.abs(states[1].positions - p1_before).max() < 0.02  # state kept across rebuild
+
+
+def test_held_mace_follows_the_hand():
+    sim = Simulation(SimConfig(body_height=1.75),
+                     objects=[ObjectSpec('mace', 'mace', (1.0, 1.0, 0.5), (0.3, 0.06), 2.0)])
+    run(sim, tpose_sensor(), 0.1)
+    sim.hold(1, 'mace', 'right')
+    run(sim, tpose_sensor(), 0.5)
+    grip = sim.data.xpos[sim._obj_id('mace')] + \
+        sim.data.xmat[sim._obj_id('mace')].reshape(3, 3) @ np.array([0, 0, -0.3])
+    hand = sim.characters[1].joint_points(sim.data)[HAND_RIGHT]
+    assert np.linalg.norm(grip - hand) < 0.01
+    held_z = sim.data.xpos[sim._obj_id('mace')][2]
+    sim.release('mace')
+    run(sim, tpose_sensor(), 0.5)
+    assert sim.data.xpos[sim._obj_id('mace')][2] < held_z - 0.2  # no longer held: it drops
+
+
+def test_conflicting_virtual_joints_stay_finite_and_are_reported():
+    sim = Simulation(SimConfig(body_height=1.75))
+    run(sim, tpose_sensor(), 0.2)
+    # feet pinned 3 m apart: impossible for 0.9 m legs
+    sim.pin(1, 'FootLeft', (0.0, 1.5, 0.04))
+    sim.pin(1, 'FootRight', (0.0, -1.5, 0.04))
+    st = run(sim, tpose_sensor(), 0.5)
+    assert np.all(np.isfinite(st.positions))
+    assert sim.counters['constraint_conflict'] > 0
+    assert sim.counters['virtual_joint_released'] > 0
+    np.testing.assert_allclose(segment_lengths(st.positions), BODY.segment_lengths, atol=1e-4)
+
+
+def test_dodge_raises_forearms_to_the_head():
+    heights = {}
+    for dodge in (False, True):
+        sim = Simulation(SimConfig(body_height=1.75, dodge=dodge))
+        run(sim, tpose_sensor(), 0.2)
+        sim.throw_at(1, speed=8.0, distance=3.0)
+        best = np.inf
+        for _ in range(12):
+            st = sim.step({1: tpose_sensor()})[1]
+            head = st.positions[3]
+            best = min(best, np.linalg.norm(st.positions[HAND_LEFT] - head),
+                       np.linalg.norm(st.positions[HAND_RIGHT] - head))
+        heights[dodge] = best
+    assert heights[True] < 0.25 < heights[False]
+
+
+def test_sensor_pose_round_trip_and_pitch():
+    s = SensorPose(0.8, np.deg2rad(10.0), 0.03)
+    p = np.random.default_rng(0).normal(size=(20, 3))
+    np.testing.assert_allclose(s.to_sensor(s.to_world(p)), p, atol=1e-12)
+    fwd = s.to_world(np.array([[1.0, 0.0, 0.0]]))[0]
+    assert fwd[2] < 0.8 + 0.03  # tilted down: a point straight ahead is below the sensor
