@@ -32,8 +32,8 @@ RELIABILITY_SPECS = [
     ParamSpec('tracked_value', 1.0, 'Eq. 7: R_t of a tracked joint', (0.0, 1.0)),
     ParamSpec('inferred_value', 0.0, 'Eq. 7: R_t of an inferred joint', (0.0, 1.0)),
     ParamSpec('not_tracked_value', 0.0, 'Eq. 7: R_t of a not-tracked joint', (0.0, 1.0)),
-    ParamSpec('reference_pose_tolerance_deg', 20.0,
-              'mean segment-direction error (deg) to accept a T-pose / standing reference posture',
+    ParamSpec('reference_pose_tolerance_deg', 25.0,
+              'largest segment-direction error (deg) to accept a T-pose / standing reference posture',
               (1.0, 90.0)),
     ParamSpec('reference_frames', 15, 'reference segment lengths: median of this many captures',
               (1, 300)),
@@ -198,7 +198,7 @@ def load_database(path: str, loader: Optional[Callable[[], Any]] = None):
     if not path:
         try:
             return dbmod.load_or_build_default()
-        except (FileNotFoundError, ValueError):
+        except (FileNotFoundError, ValueError, RuntimeError):
             raise
         except Exception as e:  # noqa: BLE001
             raise ValueError(f'cannot build the default motion database: {e}') from e
@@ -208,7 +208,7 @@ def load_database(path: str, loader: Optional[Callable[[], Any]] = None):
         raise FileNotFoundError(f'motion database {str(p)!r} does not exist')
     try:
         return dbmod.MotionDatabase.load(str(p))
-    except (FileNotFoundError, ValueError):
+    except (FileNotFoundError, ValueError, RuntimeError):
         raise
     except Exception as e:  # noqa: BLE001 - corrupt file: one clear line
         raise ValueError(f'motion database {str(p)!r} cannot be read: {type(e).__name__}: {e}') from e

@@ -25,7 +25,7 @@ from typing import Deque, Optional, Tuple
 import numpy as np
 
 from skeleton_core.geometry import normalize
-from skeleton_core.model import (ELBOW_LEFT, ELBOW_RIGHT, HAND_LEFT, HAND_RIGHT, INFERRED,
+from skeleton_core.model import (ELBOW_LEFT, ELBOW_RIGHT, FOOT_LEFT, FOOT_RIGHT, HAND_LEFT, HAND_RIGHT, INFERRED,
                                  NOT_TRACKED, NUM_JOINTS, NUM_SEGMENTS, SEGMENT_CHILDREN,
                                  SEGMENT_PARENTS, TRACKED, WRIST_LEFT, WRIST_RIGHT,
                                  estimate_height, segment_lengths, standard_body)
@@ -53,6 +53,8 @@ def reference_directions() -> dict:
 
 
 _REF_DIRS = reference_directions()
+_POSE_SEGS = np.array([k for k, c in enumerate(SEGMENT_CHILDREN)
+                       if c not in (HAND_LEFT, HAND_RIGHT, FOOT_LEFT, FOOT_RIGHT)])
 
 
 def behaviour_term(history: np.ndarray, d_min: float, f_b: int, theta_floor: float,
@@ -106,8 +108,8 @@ def gaussian_weights(n: int, sigma: float) -> np.ndarray:
 def reference_pose_match(positions: np.ndarray, tolerance_deg: float) -> Optional[str]:
     """Which reference posture (``'tpose'`` / ``'standing'``) the skeleton is in, or None.
 
-    Compares segment directions after removing yaw; the mean angle over all segments must be
-    below ``tolerance_deg``.
+    Compares segment directions after removing yaw: the largest angle over the segments (hands and
+    feet left out: short and noisy on Kinect) must be below ``tolerance_deg``.
     """
     p, _ = normalize(positions)
     d = p[_SEG_C] - p[_SEG_P]
@@ -117,7 +119,8 @@ def reference_pose_match(positions: np.ndarray, tolerance_deg: float) -> Optiona
     u = d / n[:, None]
     best, best_err = None, np.inf
     for name, ref in _REF_DIRS.items():
-        err = np.degrees(np.mean(np.arccos(np.clip(np.sum(u * ref, axis=1), -1.0, 1.0))))
+        err = np.degrees(np.max(np.arccos(np.clip(np.sum(u[_POSE_SEGS] * ref[_POSE_SEGS], axis=1),
+                                                  -1.0, 1.0))))
         if err < best_err:
             best, best_err = name, err
     return best if best_err <= tolerance_deg else None
@@ -134,7 +137,7 @@ class ReliabilityEstimator:
     def __init__(self, d_min: float = 0.03, f_b: int = 3, theta_floor_deg: float = 90.0,
                  theta_roof_deg: float = 135.0, f_total: int = 6, sigma_frames: float = 2.0,
                  tracked_value: float = 1.0, inferred_value: float = 0.0,
-                 not_tracked_value: float = 0.0, reference_pose_tolerance_deg: float = 20.0,
+                 not_tracked_value: float = 0.0, reference_pose_tolerance_deg: float = 25.0,
                  reference_frames: int = 15, height: Optional[float] = None,
                  reference_lengths: Optional[np.ndarray] = None):
         if not 0 <= theta_floor_deg < theta_roof_deg <= 180:

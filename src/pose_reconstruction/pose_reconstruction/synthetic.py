@@ -14,7 +14,7 @@ from typing import Optional, Tuple
 
 import numpy as np
 
-from skeleton_core.geometry import quat_from_yaw
+from skeleton_core.geometry import normalize, quat_from_yaw
 from skeleton_core.model import (ANKLE_LEFT, ANKLE_RIGHT, ELBOW_LEFT, ELBOW_RIGHT, FOOT_LEFT,
                                  FOOT_RIGHT, HAND_LEFT, HAND_RIGHT, HEAD, HIP_LEFT, HIP_RIGHT,
                                  INFERRED, KNEE_LEFT, KNEE_RIGHT, NUM_JOINTS, PARENTS,
@@ -136,7 +136,8 @@ def random_database(n: int = 3000, seed: int = 0, include: Optional[np.ndarray] 
     ang = random_angles(n, rng)
     if include is not None:
         ang = np.concatenate([ang, include.reshape(-1, len(ANGLE_NAMES))])
-    pos = postures_from_angles(ang).astype(np.float32)
+    pos, _ = normalize(postures_from_angles(ang))  # facing +x as the real database is
+    pos = pos.astype(np.float32)
     return SyntheticDatabase(positions=pos, orientations=segment_orientations(pos),
                              twists=np.zeros((len(pos), NUM_JOINTS - 1), np.float32))
 
@@ -201,3 +202,27 @@ def corrupt_clip(truth: np.ndarray, seed: int = 2, noise: float = 0.01,
 
 def yaw_quaternion(yaw: float) -> np.ndarray:
     return quat_from_yaw(np.asarray(yaw))
+
+
+def performances(angles: np.ndarray, count: int, seed: int = 7, jitter_deg: float = 8.0
+                 ) -> np.ndarray:
+    """``count`` other performances of the motion ``angles`` (T, 15): time-warped (0.8-1.2x,
+    shifted) with a constant per-performance angle offset of ``jitter_deg`` standard deviation.
+    A database holding them contains the kind of motion the user performs (Sec. V-A)."""
+    rng = np.random.default_rng(seed)
+    T = len(angles)
+    out = []
+    for _ in range(count):
+        t = np.clip(np.arange(T) * rng.uniform(0.8, 1.2) + rng.uniform(-10, 10), 0, T - 1)
+        a = np.stack([np.interp(t, np.arange(T), angles[:, k]) for k in range(angles.shape[1])], 1)
+        out.append(a + rng.normal(0.0, np.radians(jitter_deg), angles.shape[1]))
+    return np.concatenate(out)
+
+
+def scenario(frames: int = 150, n_random: int = 2000, n_perf: int = 8, seed: int = 1,
+             height: float = 1.65):
+    """A ready-made test case: ``(db, truth (T, 20, 3), observed, tracking_state)``."""
+    ang, truth = smooth_clip(frames, seed=seed, height=height)
+    db = random_database(n_random, seed=seed + 100, include=performances(ang, n_perf, seed + 6))
+    obs, ts = corrupt_clip(truth, seed=seed + 1)
+    return db, truth, obs, ts

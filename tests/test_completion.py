@@ -1,0 +1,80 @@
+"""Method A: PCA database completion (Shum & Ho 2012, Sec. 5-6)."""
+import numpy as np
+import pytest
+
+from pose_reconstruction.completion import PCACompletion, pca_basis
+from pose_reconstruction.reconstructor import Reconstructor
+from pose_reconstruction.synthetic import random_database, smooth_angles, smooth_clip
+from skeleton_core.conversions import SkeletonFrame
+from skeleton_core.geometry import denormalize, NormalizeTransform
+from skeleton_core.model import LIMB_JOINTS, NUM_JOINTS, TRACKED, standard_body
+
+
+@pytest.fixture(scope='module')
+def db():
+    return random_database(1500, seed=3)
+
+
+def place(p, yaw=0.8, t=(2.0, -0.4, 0.9)):
+    return denormalize(p, NormalizeTransform(yaw=np.asarray(yaw), translation=np.asarray(t)))
+
+
+def test_pca_basis_orthonormal_and_default_dims(db):
+    c = PCACompletion(db)
+    assert c.components.shape == (7, 60)
+    assert np.allclose(c.components @ c.components.T, np.eye(7), atol=1e-9)
+    mean, comps, s = pca_basis(np.asarray(db.flat, float), 60)
+    assert np.all(np.diff(s) <= 1e-9)  # sorted by variance
+
+
+def test_completion_recovers_database_posture_with_missing_limb():
+    # a database of one motion (correlated joints, as real motion is): 7 PCA dimensions hold it
+    db = random_database(0, include=smooth_angles(400, np.random.default_rng(11)))
+    c = PCACompletion(db, pca_dims=7)
+    i = 123
+    truth = place(np.asarray(db.positions[i], float))
+    obs = truth.copy()
+    missing = list(LIMB_JOINTS['left_arm'][1:])  # elbow, wrist, hand lost
+    obs[missing] = truth[0] + 5.0 * np.random.default_rng(0).normal(size=(3, 3))  # garbage
+    rel = np.ones(NUM_JOINTS)
+    rel[missing] = 0.0
+    res = c.complete(obs, rel, standard_body().height)
+    assert res.match_index == i
+    assert np.array_equal(res.substituted, rel < 0.5)
+    # the observed joints are untouched, the missing limb comes back from the database posture
+    keep = rel >= 0.5
+    assert np.allclose(res.positions[keep], obs[keep])
+    assert np.allclose(res.positions[missing], truth[missing], atol=1e-5)
+    # rotations of the substituted joints come from the match, turned into the sensor frame
+    assert res.orientations is not None and res.orientations.shape == (NUM_JOINTS, 4)
+    # paper-literal substitution gives the same result for a standard-size user
+    res2 = PCACompletion(db, substitution='absolute').complete(obs, rel, standard_body().height)
+    assert np.allclose(res2.positions[missing], truth[missing], atol=1e-5)
+
+
+def test_missing_joints_are_mean_filled_before_projection(db):
+    c = PCACompletion(db, pca_dims=7)
+    q = np.asarray(db.positions[5], float).copy()
+    q_far = q.copy()
+    q_far[list(LIMB_JOINTS['right_leg'])[1:]] += 3.0
+    rel = np.ones(NUM_JOINTS)
+    rel[list(LIMB_JOINTS['right_leg'])[1:]] = 0.0
+    # garbage in the missing joints must not change the match
+    a = c.complete(place(q), rel, 1.75).match_index
+    b = c.complete(place(q_far), rel, 1.75).match_index
+    assert a == b
+
+
+def test_reconstructor_method_a_streams_and_preserves_header(db):
+    _, clip = smooth_clip(10, seed=4)
+    r = Reconstructor(db, method='A')
+    for t, p in enumerate(clip):
+        ts = np.full(NUM_JOINTS, TRACKED, np.uint8)
+        f = SkeletonFrame(positions=p, tracking_state=ts, user_id=7, stamp_ns=1000 + t,
+                          frame_id='kinect')
+        out = r.process(f)
+        assert (out.user_id, out.stamp_ns, out.frame_id) == (7, 1000 + t, 'kinect')
+        assert out.reliability.shape == (NUM_JOINTS,) and np.all(np.isfinite(out.reliability))
+    # everything tracked and steady -> nothing substituted
+    assert not r.last_result.substituted.any()
+    assert np.allclose(out.positions, clip[-1])

@@ -1,0 +1,139 @@
+"""Methods B/C: natural-posture-space optimizer (Shum et al. 2013, Sec. V-VI)."""
+import numpy as np
+import pytest
+
+from pose_reconstruction.optimizer import NaturalPostureOptimizer
+from pose_reconstruction.posture_space import parent_relative_error
+from pose_reconstruction.reconstructor import Reconstructor
+from pose_reconstruction.synthetic import random_database, scenario
+from skeleton_core.conversions import SkeletonFrame
+from skeleton_core.model import (ELBOW_RIGHT, HAND_LEFT, HAND_RIGHT, NUM_JOINTS, TRACKED,
+                                 WRIST_RIGHT, segment_lengths, standard_body)
+
+
+@pytest.fixture(scope='module')
+def case():
+    return scenario(frames=90)
+
+
+@pytest.fixture(scope='module')
+def small_db():
+    return random_database(800, seed=5)
+
+
+def run(db, obs, ts, **kw):
+    r = Reconstructor(db, **kw)
+    out = []
+    for t in range(len(obs)):
+        f = SkeletonFrame(positions=obs[t], tracking_state=ts[t], stamp_ns=t)
+        out.append(r.process(f).positions)
+    return np.array(out), r
+
+
+def test_weighted_knn_matches_eq9_brute_force(small_db):
+    opt = NaturalPostureOptimizer(small_db, k=10)
+    q = np.asarray(small_db.positions[42], float) + 0.01
+    w = np.linspace(0.0, 1.0, NUM_JOINTS)
+    idx, d = opt.knn_search(q, w)
+    ref = np.einsum('njd,j->n', (np.asarray(small_db.positions, float) - q) ** 2, w)  # Eq. 9
+    assert set(idx) == set(np.argsort(ref)[:10])
+    assert np.allclose(d, np.sort(ref)[:10], atol=1e-9)
+    # a zero-weight joint does not matter at all
+    q2 = q.copy()
+    q2[0] += 10.0
+    assert list(opt.knn_search(q2, w)[0]) == list(idx)
+
+
+def test_energy_terms_match_equations(small_db):
+    opt = NaturalPostureOptimizer(small_db, k=12, pca_dims=5)
+    q = np.asarray(small_db.positions[3], float)
+    w = np.full(NUM_JOINTS, 0.5)
+    idx, _ = opt.knn_search(q, w)
+    Y = np.asarray(small_db.flat, float)[idx]
+    prev = [q + 0.01, q - 0.02]
+    S = opt._setup(Y, q, w, 2 * prev[0] - prev[1])
+    z = np.random.default_rng(0).normal(size=(3, 5)) * 0.05
+    terms = opt.energy_terms(z, S)
+    x = (S['mu'] + z @ S['V']).reshape(3, NUM_JOINTS, 3)
+    ec = np.einsum('sjd,j->s', (x - q) ** 2, w)
+    es = np.min([np.sum((x - y.reshape(NUM_JOINTS, 3)) ** 2, axis=(1, 2)) for y in Y], axis=0) / 20
+    ek = np.sum((segment_lengths(x) - standard_body().segment_lengths) ** 2, axis=1) / 19
+    em = np.sum((x - 2 * prev[0] + prev[1]) ** 2, axis=(1, 2)) / 20
+    for name, ref in (('control', ec), ('style', es), ('kinematics', ek), ('continuity', em)):
+        assert np.allclose(terms[name], ref, atol=1e-10), name
+    e = opt.energy(z, S)
+    assert np.allclose(e, 1.0 * ec + 0.5 * es + 1.5 * ek + 0.25 * em)
+
+
+def test_keeps_reliable_joint_and_replaces_unreliable_one(case):
+    db, truth, _, _ = case
+    obs = truth.copy()
+    ts = np.full((len(obs), NUM_JOINTS), TRACKED, np.uint8)
+    obs[:, HAND_LEFT] += (0.0, 0.0, 0.6)  # hand reported 60 cm too high ...
+    ts[:, HAND_LEFT] = 1                  # ... and only inferred
+    out, r = run(db, obs, ts, method='C')
+    err = np.linalg.norm(out - truth, axis=2)[10:]
+    assert np.median(err[:, HAND_LEFT]) < 0.15        # replaced (raw error 0.6 m)
+    assert np.median(err[:, ELBOW_RIGHT]) < 0.06      # reliable joints stay where observed
+    # method B trusts the wrong hand and is pulled towards it
+    out_b, _ = run(db, obs, ts, method='B')
+    err_b = np.linalg.norm(out_b - truth, axis=2)[10:]
+    assert np.median(err[:, HAND_LEFT]) < np.median(err_b[:, HAND_LEFT])
+
+
+@pytest.mark.parametrize('solver', ['stochastic', 'gauss_newton'])
+def test_method_c_beats_raw_on_corrupted_clip(case, solver):
+    db, truth, obs, ts = case
+    raw = parent_relative_error(obs, truth)
+    out, r = run(db, obs, ts, method='C', solver=solver)
+    rec = parent_relative_error(out, truth)
+    assert rec < 0.8 * raw, (rec, raw)
+    # the vibrating right wrist (still reported TRACKED) is caught by the behaviour term
+    assert r.reliability.reliability[WRIST_RIGHT] < 0.3
+    assert np.all(np.isfinite(out))
+
+
+def test_stochastic_search_is_seeded_and_stops_early(case):
+    db, truth, obs, ts = case
+    a, ra = run(db, obs[:20], ts[:20], method='C', seed=3)
+    b, _ = run(db, obs[:20], ts[:20], method='C', seed=3)
+    assert np.array_equal(a, b)
+    assert ra.last_result.steps < 20  # no sample improved before the step limit
+
+
+def test_orientations_and_output_scale(case):
+    db, truth, obs, ts = case
+    r = Reconstructor(db, method='C', output_scale='user')
+    f = SkeletonFrame(positions=truth[0], tracking_state=ts[0] * 0 + TRACKED, user_id=3,
+                      stamp_ns=5, frame_id='k')
+    out = r.process(f)
+    q = out.orientations
+    assert q.shape == (NUM_JOINTS, 4) and np.allclose(np.linalg.norm(q, axis=1), 1.0)
+    # the user (1.65 m) keeps a body of their own size, not the database's 1.75 m
+    user = segment_lengths(out.positions).sum()
+    assert user == pytest.approx(standard_body(1.65).segment_lengths.sum(), rel=0.03)
+
+
+def test_trust_sensor_when_database_is_far(small_db):
+    # a posture unlike any database posture (arms stretched up and back, 2.2 m wide)
+    p = standard_body().rest_positions()
+    p[[5, 6, 7], 1] += 0.6
+    p[[9, 10, 11], 1] -= 0.6
+    ts = np.full(NUM_JOINTS, TRACKED, np.uint8)
+    r = Reconstructor(small_db, method='C', trust_sensor_distance=0.05)
+    out = r.process(SkeletonFrame(positions=p, tracking_state=ts))
+    assert np.allclose(out.positions, p)
+    r2 = Reconstructor(small_db, method='C', trust_sensor_distance=100.0)
+    out2 = r2.process(SkeletonFrame(positions=p, tracking_state=ts))
+    assert not np.allclose(out2.positions, p)
+
+
+def test_invalid_parameters_refused(small_db):
+    with pytest.raises(ValueError):
+        Reconstructor(small_db, method='D')
+    with pytest.raises(ValueError):
+        Reconstructor(small_db, method='C', solver='newton')
+    with pytest.raises(ValueError):
+        Reconstructor(small_db, method='C', bogus=1)
+    with pytest.raises(ValueError):
+        NaturalPostureOptimizer(small_db, k=1)

@@ -1,0 +1,136 @@
+"""Reliability measure (Shum et al. 2013, Eq. 1-8) on hand-computed cases."""
+import numpy as np
+import pytest
+
+from pose_reconstruction.reliability import (INCIDENCE, ReliabilityEstimator, behaviour_term,
+                                             gaussian_weights, kinematics_term,
+                                             reference_pose_match, tracking_term)
+from skeleton_core.model import (ELBOW_LEFT, HAND_RIGHT, HIP_CENTER, INFERRED, NOT_TRACKED,
+                                 NUM_JOINTS, SEGMENT_OF_JOINT, SHOULDER_LEFT, TRACKED, WRIST_LEFT,
+                                 segment_lengths, standard_body)
+
+FLOOR, ROOF = np.radians(90.0), np.radians(135.0)
+
+
+def rest():
+    return standard_body().rest_positions()
+
+
+def test_behaviour_vibrating_joint_goes_to_zero():
+    # a joint jumping back and forth by 5 cm: every angle is 180 deg > roof -> R_b = 0
+    base = rest()
+    hist = np.repeat(base[None], 5, axis=0)
+    hist[::2, HAND_RIGHT, 0] += 0.05
+    rb, theta = behaviour_term(hist, 0.03, 3, FLOOR, ROOF)
+    assert np.allclose(np.degrees(theta[:, HAND_RIGHT]), 180.0)
+    assert rb[HAND_RIGHT] == pytest.approx(0.0)
+    # steady joints: displacements below d_min -> angle 0 -> fully reliable
+    assert np.all(rb[np.arange(NUM_JOINTS) != HAND_RIGHT] == 1.0)
+
+
+def test_behaviour_hand_computed_partial_value():
+    # three displacements of 10 cm: +x, +y (90 deg), -x... angles 90, 90 -> one 112.5-deg case:
+    p = np.zeros((5, NUM_JOINTS, 3))
+    moves = [(0.1, 0, 0), (0.1 * np.cos(np.radians(120)), 0.1 * np.sin(np.radians(120)), 0),
+             (0.1, 0, 0), (0.1, 0, 0)]
+    for t, m in enumerate(moves):
+        p[t + 1, 0] = p[t, 0] + m
+    rb, theta = behaviour_term(p, 0.03, 3, FLOOR, ROOF)
+    # angles: 120, 120, 0 deg -> mean 80 deg < floor -> 1.0
+    assert np.degrees(theta[:, 0]) == pytest.approx([120.0, 120.0, 0.0], abs=1e-6)
+    assert rb[0] == pytest.approx(1.0)
+    # f_b = 2 -> mean of the last two angles (120, 0)/2 = 60 -> 1.0; with floor 30, roof 90:
+    rb2, _ = behaviour_term(p, 0.03, 2, np.radians(30), np.radians(90))
+    assert rb2[0] == pytest.approx(1.0 - (60 - 30) / (90 - 30))
+    # slow motion below d_min never counts (Eq. 3)
+    rb3, theta3 = behaviour_term(p * 0.2, 0.03, 3, FLOOR, ROOF)
+    assert np.all(theta3 == 0.0) and rb3[0] == 1.0
+
+
+def test_kinematics_stretched_segment_lowers_both_end_joints():
+    p = rest()
+    ref = segment_lengths(p)
+    q = p.copy()
+    q[WRIST_LEFT:WRIST_LEFT + 2] += (0.0, 0.5 * ref[SEGMENT_OF_JOINT[WRIST_LEFT]], 0.0)  # +50 %
+    rk = kinematics_term(q, ref)
+    # the elbow touches 2 segments (upper arm, forearm): 1 - (0 + 0.5) / 2
+    assert rk[ELBOW_LEFT] == pytest.approx(0.75)
+    # the wrist touches forearm (+50 %) and hand (unchanged): 1 - 0.5 / 2
+    assert rk[WRIST_LEFT] == pytest.approx(0.75)
+    assert rk[SHOULDER_LEFT] == pytest.approx(1.0)
+    # ratio capped at 1 (Eq. 5): a 3x segment gives d = 1
+    q2 = p.copy()
+    q2[WRIST_LEFT:WRIST_LEFT + 2] += (0.0, 2.0 * ref[SEGMENT_OF_JOINT[WRIST_LEFT]], 0.0)
+    assert kinematics_term(q2, ref)[ELBOW_LEFT] == pytest.approx(0.5)
+    # the hip centre touches three segments
+    assert INCIDENCE[HIP_CENTER].sum() == 3
+
+
+def test_tracking_state_term():
+    ts = np.array([TRACKED, INFERRED, NOT_TRACKED] * 6 + [TRACKED, TRACKED], np.uint8)
+    rt = tracking_term(ts)
+    assert list(rt[:3]) == [1.0, 0.0, 0.0]
+    assert list(tracking_term(ts, inferred=0.5)[:3]) == [1.0, 0.5, 0.0]
+
+
+def test_gaussian_weighted_minimum():
+    w = gaussian_weights(6, 2.0)
+    assert w.sum() == pytest.approx(1.0) and np.all(np.diff(w) > 0)  # most recent largest
+    est = ReliabilityEstimator(sigma_frames=2.0)
+    p = rest()
+    ts = np.full(NUM_JOINTS, TRACKED, np.uint8)
+    states = []
+    for f in range(6):
+        t = ts.copy()
+        if f == 3:
+            t[ELBOW_LEFT] = INFERRED  # min(R_b, R_k, R_t) = 0 in that frame only
+        r = est.update(p, t)
+        states.append(r[ELBOW_LEFT])
+    # Eq. 8 by hand: sum of the weights of the frames whose minimum is 1 (all but frame 3;
+    # w is oldest first, so frame f has weight w[f])
+    expected = 1.0 - w[3]
+    assert states[-1] == pytest.approx(expected)
+    assert r[SHOULDER_LEFT] == pytest.approx(1.0)
+    # the minimum of the three terms is used: a stretched, tracked segment lowers reliability
+    est2 = ReliabilityEstimator(reference_lengths=segment_lengths(p))
+    q = p.copy()
+    q[HAND_RIGHT] += (0.0, -0.2, 0.0)
+    r2 = est2.update(q, ts)
+    rb, rk, rt = est2.last_terms
+    assert r2[HAND_RIGHT] == pytest.approx(min(rb[HAND_RIGHT], rk[HAND_RIGHT], rt[HAND_RIGHT]))
+    assert r2[HAND_RIGHT] < 0.5
+
+
+def test_reference_lengths_captured_from_tpose_and_scaled_default():
+    est = ReliabilityEstimator()
+    short = standard_body(1.5)
+    # before any reference pose: the standard body scaled to the estimated height
+    p = short.rest_positions()
+    lowered = p.copy()
+    # arms slightly raised forward: not a reference pose
+    for j, k in ((ELBOW_LEFT, 1), (WRIST_LEFT, 2)):
+        lowered[j] = p[SHOULDER_LEFT] + (0.15 * k, 0.0, 0.1 * k)
+    ts = np.full(NUM_JOINTS, TRACKED, np.uint8)
+    assert reference_pose_match(lowered, 25.0) is None
+    est.update(lowered, ts)
+    assert est.reference_source == 'standard'
+    assert est.height == pytest.approx(1.5, abs=0.02)
+    assert np.allclose(est.reference_lengths, standard_body(est.height).segment_lengths)
+    # a T-pose with every joint tracked: reference lengths become the user's own
+    assert reference_pose_match(p, 25.0) == 'tpose'
+    est.update(p, ts)
+    assert est.reference_source == 'tpose'
+    assert np.allclose(est.reference_lengths, short.segment_lengths)
+    # not captured when a joint is inferred
+    est3 = ReliabilityEstimator()
+    t2 = ts.copy()
+    t2[HAND_RIGHT] = INFERRED
+    est3.update(p, t2)
+    assert est3.reference_source == 'standard'
+
+
+def test_invalid_parameters_refused():
+    with pytest.raises(ValueError):
+        ReliabilityEstimator(theta_floor_deg=140.0, theta_roof_deg=135.0)
+    with pytest.raises(ValueError):
+        ReliabilityEstimator(f_total=0)
