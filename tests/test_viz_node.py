@@ -103,3 +103,21 @@ def test_markers_cross_dds_and_hiding_a_layer_takes_effect(graph):
                       any(x.ns == 'character/user_1' for x in m.markers), pubs)
     assert later is not None
     assert not any(x.ns.startswith('raw/') for x in later.markers)
+
+
+def test_config_file_lists_every_parameter_and_loads(rclpy_context):
+    from pathlib import Path
+
+    import yaml
+
+    from viz.viz_node import SPECS
+    cfg = Path(__file__).resolve().parents[1] / 'config' / 'viz.yaml'
+    values = yaml.safe_load(cfg.read_text())['/**']['ros__parameters']
+    assert set(values) == {s.name for s in SPECS}
+    node = VizNode(context=rclpy_context, cli_args=['--ros-args', '--params-file', str(cfg)])
+    try:
+        for name, v in values.items():
+            got = node.params[name]
+            assert (list(got) if isinstance(v, list) else got) == v, name
+    finally:
+        node.destroy_node()

@@ -1,13 +1,13 @@
 """``viz`` node: skeleton topics -> ``visualization_msgs/MarkerArray`` for RViz.
 
-Subscribes (names are parameters; relative, so a launch namespace applies):
-  kinect/skeletons               raw Kinect skeletons            -> layer ``raw``
-  kinect/skeletons_reliability   raw + per-joint reliability     -> layer ``reliability`` (red squares)
-  posture/reconstructed          reconstructed postures          -> layer ``reconstructed``
-  posture/completed              completion-only postures        -> layer ``completed`` (off by default)
-  character/skeletons            simulated character             -> layer ``character`` (capsules)
-  physics/objects                environment objects (MarkerArray) -> namespaces ``environment/<ns>``
-Publishes ``viz/markers`` (MarkerArray) at most ``max_rate_hz``, only when something changed, and
+Subscribes (names are read-only parameters ``*_topic``):
+  /kinect/skeletons              raw Kinect skeletons            -> layer ``raw``
+  /kinect/skeletons_reliability  raw + per-joint reliability     -> layer ``reliability`` (red squares)
+  /posture/reconstructed         reconstructed postures          -> layer ``reconstructed``
+  /posture/completed             completion-only postures        -> layer ``completed`` (off by default)
+  /character/skeletons           simulated character             -> layer ``character`` (capsules)
+  /physics/objects               environment objects (MarkerArray) -> namespaces ``environment/<ns>``
+Publishes ``/viz/markers`` (MarkerArray) at most ``max_rate_hz``, only when something changed, and
 ``/diagnostics``. The geometry is in :mod:`viz.markers`; this node adapts messages and parameters.
 """
 from __future__ import annotations
@@ -16,6 +16,7 @@ import time
 from typing import Any, Dict, Optional
 
 import numpy as np
+from rclpy.exceptions import InvalidParameterValueException
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
 from visualization_msgs.msg import Marker, MarkerArray
@@ -53,21 +54,21 @@ def _topic_ok(v):
 
 
 SPECS = [
-    ParamSpec('raw_topic', 'kinect/skeletons', 'raw skeletons (SkeletonArray)', read_only=True,
+    ParamSpec('raw_topic', '/kinect/skeletons', 'raw skeletons (SkeletonArray)', read_only=True,
               validator=_topic_ok),
-    ParamSpec('reliability_topic', 'kinect/skeletons_reliability',
+    ParamSpec('reliability_topic', '/kinect/skeletons_reliability',
               'skeletons with reliability filled in (SkeletonArray)', read_only=True,
               validator=_topic_ok),
-    ParamSpec('reconstructed_topic', 'posture/reconstructed', 'reconstructed postures',
+    ParamSpec('reconstructed_topic', '/posture/reconstructed', 'reconstructed postures',
               read_only=True, validator=_topic_ok),
-    ParamSpec('completed_topic', 'posture/completed', 'completion-only postures', read_only=True,
+    ParamSpec('completed_topic', '/posture/completed', 'completion-only postures', read_only=True,
               validator=_topic_ok),
-    ParamSpec('character_topic', 'character/skeletons', 'simulated character skeletons',
+    ParamSpec('character_topic', '/character/skeletons', 'simulated character skeletons',
               read_only=True, validator=_topic_ok),
-    ParamSpec('objects_topic', 'physics/objects',
+    ParamSpec('objects_topic', '/physics/objects',
               'environment objects (visualization_msgs/MarkerArray), forwarded', read_only=True,
               validator=_topic_ok),
-    ParamSpec('markers_topic', 'viz/markers', 'output MarkerArray topic', read_only=True,
+    ParamSpec('markers_topic', '/viz/markers', 'output MarkerArray topic', read_only=True,
               validator=_topic_ok),
     ParamSpec('show_raw', True, 'draw the raw Kinect skeleton'),
     ParamSpec('show_reliability', True, 'draw red squares sized by 1 - reliability'),
@@ -172,7 +173,10 @@ class VizNode(Node):
     def __init__(self, **kwargs):
         super().__init__('viz', **kwargs)
         self.health = Health()
-        self.params = Parameters(self, SPECS, on_change=self._on_params)
+        try:
+            self.params = Parameters(self, SPECS, on_change=self._on_params)
+        except InvalidParameterValueException as e:  # out of a descriptor range at start-up
+            raise ValueError(f'viz: {e}') from None
         v = self.params.values
         self.scene = mk.SceneState(style_from_params(v), stale_timeout_s=v['stale_timeout_s'],
                                    default_frame_id=v['default_frame_id'])
