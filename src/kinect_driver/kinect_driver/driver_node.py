@@ -1,0 +1,271 @@
+"""Node ``driver``: publishes Kinect skeletons (``skeleton_msgs/SkeletonArray``) on
+``/kinect/skeletons`` from one source:
+
+* ``synthetic`` (default): built-in or CMU motion through the Kinect sensor model
+  (:mod:`kinect_driver.sources.synthetic`); optionally the ground truth on ``/kinect/ground_truth``.
+* ``replay``: a recorded bag (MCAP) or CSV file (:mod:`kinect_driver.sources.replay`); bag messages
+  are republished byte for byte unless ``restamp`` is set.
+* ``live``: an OpenNI2 sensor or ``.oni`` recording with the NiTE2 user tracker
+  (:mod:`kinect_driver.sources.openni_live`, docs/live_kinect.md).
+
+A timer runs at the source's rate (rcl timers are drift-free: each deadline is the previous one
+plus the period) and publishes what the source has due, stamped with the capture time. Optional TF
+(``tf2_msgs/TFMessage`` on ``/tf``): one frame per NiTE joint and user named like the ROS 1
+openni2_tracker (``head_1``, ``neck_1``, ``torso_1``, ...), child of the skeleton's frame.
+Parameters: config/driver.yaml. Health on ``/diagnostics``.
+"""
+from __future__ import annotations
+
+from typing import List
+
+from rclpy.node import Node
+from rclpy.qos import QoSProfile
+
+from skeleton_core.conversions import frames_from_array_msg, frames_to_array_msg, ns_to_stamp
+from skeleton_core.health import Health
+from skeleton_core.rosnode import DiagnosticsPublisher, ParamSpec, Parameters, run_node
+
+from .sources import SOURCE_NAMES, SourceError, SourceOutput
+from .tf_names import tf_frames
+
+SKELETONS_TOPIC = '/kinect/skeletons'
+GROUND_TRUTH_TOPIC = '/kinect/ground_truth'
+
+
+def _non_empty(name):
+    return lambda v: None if v else f'{name} must not be empty'
+
+
+PARAMS = [
+    ParamSpec('source', 'synthetic', 'skeleton source: synthetic | replay | live',
+              choices=SOURCE_NAMES, read_only=True),
+    ParamSpec('frame_id', 'kinect_link', 'frame of the published skeletons (the sensor frame, '
+              'REP-103)', read_only=True, validator=_non_empty('frame_id')),
+    ParamSpec('publish_tf', False, 'also broadcast one TF frame per NiTE joint and user '
+              '(head_1, neck_1, ...) on /tf'),
+    ParamSpec('tf_prefix', '', 'prefix of the TF joint frame names'),
+    # synthetic
+    ParamSpec('scenario', 'b', 'synthetic: sensor-model scenario class a | b | c',
+              choices=('a', 'b', 'c', 'clean'), read_only=True),
+    ParamSpec('seed', 0, 'synthetic: random seed of the sensor model and motions',
+              range=(0, 2 ** 31 - 1), read_only=True),
+    ParamSpec('num_users', 1, 'synthetic: number of users side by side', range=(1, 6),
+              read_only=True),
+    ParamSpec('clip', '', "synthetic: motion ('' = built-in motions, a built-in name such as "
+              "builtin_wave, or a CMU BVH path)", read_only=True),
+    ParamSpec('user_spacing', 0.8, 'synthetic: lateral distance between users (m)',
+              range=(0.3, 2.0), read_only=True),
+    ParamSpec('sensor_params', '', "synthetic: sensor model YAML ('' = config/sensor_model.yaml "
+              "or the built-in defaults)", read_only=True),
+    ParamSpec('rate_hz', 30.0, 'synthetic: frame rate (Hz)', range=(1.0, 120.0), read_only=True),
+    ParamSpec('publish_ground_truth', False,
+              'synthetic: publish the noise-free skeletons on /kinect/ground_truth'),
+    # replay
+    ParamSpec('replay_file', '', 'replay: bag (.mcap file or rosbag2 directory) or CSV file',
+              read_only=True),
+    ParamSpec('replay_topic', '/kinect/skeletons', "replay: SkeletonArray topic in the bag ('' = "
+              "the bag's only SkeletonArray topic)", read_only=True),
+    ParamSpec('rate', 1.0, 'replay: speed factor (2 = twice as fast)', range=(0.05, 20.0),
+              read_only=True),
+    ParamSpec('loop', False, 'replay: start again after the last message', read_only=True),
+    ParamSpec('restamp', False, 'replay: stamp messages with the current time instead of the '
+              'recorded stamps', read_only=True),
+    # live
+    ParamSpec('device_uri', '', "live: OpenNI2 device URI ('' = first device) or an .oni "
+              "recording path", read_only=True),
+    ParamSpec('nite2_path', '', 'live: NiTE2 Redist directory (holding libNiTE2.so)',
+              read_only=True),
+    ParamSpec('openni2_path', '', "live: directory of libOpenNI2.so ('' = system libraries)",
+              read_only=True),
+    ParamSpec('max_users', 6, 'live: most users published per frame', range=(1, 6),
+              read_only=True),
+    ParamSpec('tracked_confidence', 0.5, 'live: NiTE joint confidence >= this -> TRACKED',
+              range=(0.0, 1.0), read_only=True),
+    ParamSpec('inferred_confidence', 0.0, 'live: NiTE joint confidence > this -> INFERRED '
+              '(else NOT_TRACKED)', range=(0.0, 1.0), read_only=True),
+    ParamSpec('smoothing', 0.0, 'live: NiTE skeleton smoothing factor (0 = off)',
+              range=(0.0, 0.99), read_only=True),
+    ParamSpec('retry_s', 0.0, 'live: when > 0, keep retrying a missing device every retry_s '
+              'seconds instead of exiting (a device lost mid-run is always retried)',
+              range=(0.0, 60.0), read_only=True),
+]
+
+
+def make_source(v, log=None, clock_ns=None):
+    """The source named by the parameter values ``v`` (not opened)."""
+    name = v['source']
+    if name == 'synthetic':
+        from .sources.synthetic import SyntheticSource
+        return SyntheticSource(scenario=v['scenario'], seed=v['seed'], num_users=v['num_users'],
+                               clip=v['clip'], rate_hz=v['rate_hz'], frame_id=v['frame_id'],
+                               user_spacing=v['user_spacing'], sensor_params=v['sensor_params'],
+                               with_truth=True)
+    if name == 'replay':
+        from .sources.replay import ReplaySource
+        return ReplaySource(v['replay_file'], topic=v['replay_topic'], rate=v['rate'],
+                            loop=v['loop'], frame_id=v['frame_id'])
+    if name == 'live':
+        from .sources.openni_live import LiveSource
+        kw = {} if clock_ns is None else {'clock_ns': clock_ns}
+        return LiveSource(device_uri=v['device_uri'], nite2_path=v['nite2_path'],
+                          openni2_path=v['openni2_path'], frame_id=v['frame_id'],
+                          max_users=v['max_users'], tracked_confidence=v['tracked_confidence'],
+                          inferred_confidence=v['inferred_confidence'], retry_s=v['retry_s'],
+                          smoothing=v['smoothing'], log=log, **kw)
+    raise SourceError(f'unknown source {name!r} (use one of {", ".join(SOURCE_NAMES)})')
+
+
+class DriverNode(Node):
+    def __init__(self, **kwargs):
+        super().__init__('driver', **kwargs)
+        from skeleton_msgs.msg import SkeletonArray
+        self._msg_type = SkeletonArray
+        self.params = Parameters(self, PARAMS)
+        v = self.params.values
+        self.health = Health()
+        qos = QoSProfile(depth=10)
+        self.pub = self.create_publisher(SkeletonArray, SKELETONS_TOPIC, qos)
+        self.truth_pub = self.create_publisher(SkeletonArray, GROUND_TRUTH_TOPIC, qos) \
+            if v['source'] == 'synthetic' else None
+        self.tf_pub = None
+        try:
+            from tf2_msgs.msg import TFMessage
+            self.tf_pub = self.create_publisher(TFMessage, '/tf', qos)
+        except ImportError:
+            if v['publish_tf']:
+                self.get_logger().warning('publish_tf is set but tf2_msgs is not installed: '
+                                          'no TF is published')
+        self._warned = set()
+        self.source = make_source(v, log=self._warn_once, clock_ns=self._now_ns)
+        self._finished_logged = False
+        self._retry_timer = None
+        try:
+            self.source.open()
+            self._started()
+        except SourceError as e:
+            if v['source'] == 'live' and e.retryable and v['retry_s'] > 0:
+                self.get_logger().warning(f'{e} - retrying every {v["retry_s"]:g} s')
+                self._retry_timer = self.create_timer(v['retry_s'], self._retry_open)
+            else:
+                raise RuntimeError(str(e)) from None
+        self.timer = self.create_timer(self.source.period_s, self._tick)
+        self.diagnostics = DiagnosticsPublisher(self, self.health, extra=self.source.status)
+
+    # ------------------------------------------------------------------------------------
+    def _now_ns(self) -> int:
+        return self.get_clock().now().nanoseconds
+
+    def _warn_once(self, text: str) -> None:
+        # the live reader thread reports through here; repeated identical lines are logged once
+        if text not in self._warned:
+            self._warned.add(text)
+            self.get_logger().warning(text)
+
+    def _started(self) -> None:
+        v = self.params.values
+        extra = ''
+        if v['source'] == 'synthetic':
+            extra = f" scenario {v['scenario']}, {v['num_users']} user(s): " + \
+                self.source.status().get('clips', '')
+        elif v['source'] == 'replay':
+            extra = f" {v['replay_file']} ({self.source.count} frames, rate {v['rate']:g}" + \
+                (', loop)' if v['loop'] else ')')
+        self.get_logger().info(f"source {v['source']} started at "
+                               f'{1.0 / self.source.period_s:.1f} Hz on {SKELETONS_TOPIC};{extra}')
+
+    def _retry_open(self) -> None:
+        try:
+            self.source.open()
+        except SourceError as e:
+            self._warn_once(str(e))
+            return
+        self._retry_timer.cancel()
+        self.destroy_timer(self._retry_timer)
+        self._retry_timer = None
+        self._started()
+
+    def _tick(self) -> None:
+        now = self._now_ns()
+        try:
+            outputs = self.source.poll(now)
+        except Exception as e:  # noqa: BLE001 - a source bug must not kill the node silently
+            if self.health.on_drop(f'source error: {type(e).__name__}'):
+                self.get_logger().error(f'source failed: {e}')
+            return
+        for out in outputs:
+            self._publish(out, now)
+        if self.source.finished and not self._finished_logged:
+            self._finished_logged = True
+            self.get_logger().info('replay finished (set loop:=true to repeat)')
+
+    def _publish(self, out: SourceOutput, now: int) -> None:
+        v = self.params.values
+        self.health.on_receive()
+        live_stamp = v['source'] != 'replay' or v['restamp']
+        msg = None
+        if out.raw is not None:
+            if v['restamp'] or (v['publish_tf'] and self.tf_pub is not None):
+                from rclpy.serialization import deserialize_message
+                msg = deserialize_message(out.raw, self._msg_type)
+            if v['restamp']:
+                ns_to_stamp(now, msg.header.stamp)
+                for sk in msg.skeletons:
+                    ns_to_stamp(now, sk.header.stamp)
+                self.pub.publish(msg)
+            else:
+                self.pub.publish(out.raw)
+            stamp = now if v['restamp'] else out.stamp_ns
+        else:
+            stamp = now if (v['source'] == 'replay' and v['restamp']) else out.stamp_ns
+            frames = [f.copy(stamp_ns=stamp) for f in out.frames] if stamp != out.stamp_ns \
+                else out.frames
+            try:
+                msg = frames_to_array_msg(frames, stamp, out.frame_id or v['frame_id'])
+            except ValueError as e:
+                if self.health.on_drop(getattr(e, 'cause', 'invalid skeleton')):
+                    self.get_logger().warning(f'dropped a frame: {e}')
+                return
+            self.pub.publish(msg)
+        self.health.on_publish(latency_s=(now - stamp) / 1e9 if live_stamp else None)
+        if out.truth is not None and v['publish_ground_truth'] and self.truth_pub is not None:
+            self.truth_pub.publish(frames_to_array_msg(out.truth, stamp,
+                                                       out.frame_id or v['frame_id']))
+        if v['publish_tf'] and self.tf_pub is not None and msg is not None:
+            self._publish_tf(msg)
+
+    def _publish_tf(self, msg) -> None:
+        from geometry_msgs.msg import TransformStamped
+        from tf2_msgs.msg import TFMessage
+        prefix = self.params['tf_prefix']
+        tfs: List[TransformStamped] = []
+        for f in frames_from_array_msg(msg):
+            parent = f.frame_id or msg.header.frame_id or self.params['frame_id']
+            for child, j in tf_frames(f, prefix):
+                t = TransformStamped()
+                t.header.frame_id = parent
+                ns_to_stamp(f.stamp_ns, t.header.stamp)
+                t.child_frame_id = child
+                x, y, z = f.positions[j]
+                t.transform.translation.x, t.transform.translation.y = float(x), float(y)
+                t.transform.translation.z = float(z)
+                if f.orientations is not None:
+                    qx, qy, qz, qw = f.orientations[j]
+                    t.transform.rotation.x, t.transform.rotation.y = float(qx), float(qy)
+                    t.transform.rotation.z, t.transform.rotation.w = float(qz), float(qw)
+                else:
+                    t.transform.rotation.w = 1.0
+                tfs.append(t)
+        if tfs:
+            self.tf_pub.publish(TFMessage(transforms=tfs))
+
+    def destroy_node(self):
+        self.source.close()
+        return super().destroy_node()
+
+
+def main(args=None) -> int:
+    return run_node(DriverNode, args=args)
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())

@@ -1,0 +1,48 @@
+"""What every skeleton source provides (no rclpy): frames of users to publish, and one-line errors."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import List, Optional
+
+from skeleton_core.conversions import SkeletonFrame
+
+
+class SourceError(RuntimeError):
+    """A problem a user can fix, in one line (no traceback). ``retryable``: the condition may clear
+    by itself (sensor not plugged in yet, unplugged), so the node may wait and try again."""
+
+    def __init__(self, message: str, retryable: bool = False):
+        super().__init__(message)
+        self.retryable = retryable
+
+
+@dataclass
+class SourceOutput:
+    """One sensor frame: all users seen at capture time ``stamp_ns``."""
+
+    stamp_ns: int
+    frames: List[SkeletonFrame] = field(default_factory=list)
+    truth: Optional[List[SkeletonFrame]] = None   # ground truth (synthetic source only)
+    raw: Optional[bytes] = None                   # recorded CDR bytes of the SkeletonArray (replay)
+    frame_id: str = ''
+
+
+class Source:
+    """Base class. ``open()`` raises :class:`SourceError`; ``poll(now_ns)`` returns the outputs due
+    by ``now_ns`` (called every ``period_s`` by the node); ``close()`` releases everything."""
+
+    name = 'source'
+    period_s = 1.0 / 30.0
+    finished = False  # a non-looping replay that played everything
+
+    def open(self) -> None:
+        pass
+
+    def poll(self, now_ns: int) -> List[SourceOutput]:
+        raise NotImplementedError
+
+    def close(self) -> None:
+        pass
+
+    def status(self) -> dict:
+        return {}

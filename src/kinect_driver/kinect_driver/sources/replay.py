@@ -1,0 +1,143 @@
+"""Replay source: a recorded bag or a CSV skeleton file, at recorded or scaled speed.
+
+* **Bag** (``.mcap`` file, or a rosbag2 directory holding one): the ``skeleton_msgs/msg/SkeletonArray``
+  messages of ``topic`` (default ``/kinect/skeletons``; if the bag has exactly one SkeletonArray
+  topic and ``topic`` is empty, that one). Messages are replayed as their recorded CDR bytes, so
+  subscribers receive exactly what was recorded (the node re-stamps them only with ``restamp``).
+  Timing follows the bag's receive (log) times. sqlite3 (``.db3``) bags are not read: convert them
+  with ``ros2 bag convert`` to MCAP.
+* **CSV** (``.csv``): the format of :mod:`kinect_driver.csv_format`; timing follows ``stamp_ns``.
+
+``rate`` scales the speed (2.0 = twice as fast); ``loop`` starts again after the last message (one
+median message interval after it). Outputs are due when ``(t_recorded - t_first) / rate`` has
+elapsed since the first poll; a poll releases everything due up to half a period ahead, so a
+30 Hz recording polled at 30 Hz gives one message per poll.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import List, Optional, Tuple
+
+import numpy as np
+
+from skeleton_core.bagio import BagError, bag_topics, read_messages
+from skeleton_core.conversions import stamp_to_ns
+
+from ..csv_format import CsvFormatError, read_csv
+from .base import Source, SourceError, SourceOutput
+
+SKELETON_ARRAY = 'skeleton_msgs/msg/SkeletonArray'
+
+
+class ReplaySource(Source):
+    name = 'replay'
+
+    def __init__(self, path: str, topic: str = '/kinect/skeletons', rate: float = 1.0,
+                 loop: bool = False, frame_id: str = 'kinect_link'):
+        self.path = str(path)
+        self.topic = topic
+        self.rate = float(rate)
+        self.loop = bool(loop)
+        self.frame_id = frame_id
+        self._items: List[Tuple[int, SourceOutput]] = []   # (recorded time ns, output)
+        self._next = 0
+        self._start_ns: Optional[int] = None
+        self._lap = 0
+        self._lap_ns = 0
+        self.kind = ''
+
+    # ------------------------------------------------------------------------------------
+    def open(self) -> None:
+        if self.rate <= 0:
+            raise SourceError(f'rate must be > 0, got {self.rate}')
+        if not self.path:
+            raise SourceError('source:=replay needs replay_file:=<bag.mcap | skeletons.csv>')
+        p = Path(self.path).expanduser()
+        if not p.exists():
+            raise SourceError(f'cannot read replay file {p}: no such file')
+        if p.suffix.lower() == '.csv':
+            self._open_csv(p)
+        elif p.suffix.lower() == '.db3' or (p.is_dir() and list(p.glob('*.db3'))):
+            raise SourceError(f'cannot read replay file {p}: sqlite3 bags are not supported '
+                              f'(convert it to MCAP with ros2 bag convert)')
+        else:
+            self._open_bag(p)
+        if not self._items:
+            raise SourceError(f'replay file {p} holds no skeleton frames'
+                              + (f' on {self.topic}' if self.kind == 'bag' else ''))
+        t = np.array([t for t, _ in self._items], dtype=np.int64)
+        dt = np.diff(t)
+        dt = dt[dt > 0]
+        median = float(np.median(dt)) if dt.size else 1e9 / 30.0
+        self.period_s = median / 1e9 / self.rate
+        self._lap_ns = int(t[-1] - t[0] + median)
+        self._next = 0
+        self._start_ns = None
+
+    def _open_bag(self, p: Path) -> None:
+        self.kind = 'bag'
+        try:
+            topics = bag_topics(p)
+        except BagError as e:
+            raise SourceError(str(e)) from None
+        arrays = sorted(t for t, (ty, _) in topics.items() if ty == SKELETON_ARRAY)
+        topic = self.topic
+        if not topic and len(arrays) == 1:
+            topic = arrays[0]
+        if topic not in topics:
+            raise SourceError(f'replay bag {p} has no topic {topic!r} (SkeletonArray topics: '
+                              f'{", ".join(arrays) or "none"})')
+        if topics[topic][0] != SKELETON_ARRAY:
+            raise SourceError(f'replay bag {p}: {topic} holds {topics[topic][0]}, not '
+                              f'{SKELETON_ARRAY}')
+        self.topic = topic
+        items = []
+        try:
+            for m in read_messages(p, topics=[topic]):
+                items.append((m.stamp_ns, SourceOutput(
+                    stamp_ns=stamp_to_ns(m.msg.header.stamp), raw=m.data,
+                    frame_id=m.msg.header.frame_id)))
+        except BagError as e:
+            raise SourceError(str(e)) from None
+        self._items = items
+
+    def _open_csv(self, p: Path) -> None:
+        self.kind = 'csv'
+        try:
+            rows = read_csv(p, frame_id=self.frame_id)
+        except CsvFormatError as e:
+            raise SourceError(str(e)) from None
+        self._items = [(stamp, SourceOutput(stamp_ns=stamp, frames=frames, frame_id=self.frame_id))
+                       for stamp, frames in rows]
+
+    # ------------------------------------------------------------------------------------
+    def poll(self, now_ns: int) -> List[SourceOutput]:
+        if self.finished or not self._items:
+            return []
+        if self._start_ns is None:
+            self._start_ns = now_ns
+        t0 = self._items[0][0]
+        elapsed = (now_ns - self._start_ns) * self.rate + 0.5 * self.period_s * 1e9 * self.rate
+        out = []
+        while True:
+            if self._next >= len(self._items):
+                if not self.loop:
+                    self.finished = True
+                    break
+                self._next = 0
+                self._lap += 1
+            t_rec, item = self._items[self._next]
+            due = (t_rec - t0) + self._lap * self._lap_ns
+            if due > elapsed:
+                break
+            out.append(item)
+            self._next += 1
+        return out
+
+    @property
+    def count(self) -> int:
+        return len(self._items)
+
+    def status(self) -> dict:
+        return {'replay_file': self.path, 'messages': len(self._items), 'lap': self._lap,
+                'position': self._next}

@@ -1,0 +1,123 @@
+"""Synthetic source (the default): ground-truth motion through the Kinect sensor model.
+
+Motion (``clip``): ``''`` = the built-in motions (``skeleton_core.motions.builtin_clips``; user k
+gets motion k), the name of a built-in clip (e.g. ``builtin_wave``), or a path to a CMU BVH file
+(``skeleton_core.mocap.load_cmu_clip``, e.g. one under ``/work/shared/mocap/cmu``). When every user
+plays the same clip, user k starts k/num_users of the way into it.
+
+Each of ``num_users`` (1-6) users gets its own sensor-model stream (``SensorModel.stream``,
+scenario a|b|c, seed ``seed + user``), placed side by side ``user_spacing`` metres apart across the
+field of view (the model's ``placement.lateral_offset_m``). User ids are 1..num_users. Frames are
+stamped with the time ``poll`` is called (the capture time of a simulated sensor).
+"""
+from __future__ import annotations
+
+import copy
+from dataclasses import replace
+from pathlib import Path
+from typing import List
+
+import numpy as np
+
+from skeleton_core.conversions import SkeletonFrame
+from skeleton_core.model import NUM_JOINTS, TRACKED
+
+from .base import Source, SourceError, SourceOutput
+
+MAX_USERS = 6
+
+
+def _load_motion(clip: str, seed: int):
+    """The list of clips users cycle through."""
+    from skeleton_core.motions import builtin_clips
+    if not clip:
+        return builtin_clips(seed)
+    builtins = {c.name: c for c in builtin_clips(seed)}
+    for name in (clip, f'builtin_{clip}'):
+        if name in builtins:
+            return [builtins[name]]
+    p = Path(clip).expanduser()
+    if not p.is_file():
+        raise SourceError(f'clip {clip!r} is neither a file nor a built-in motion '
+                          f'({", ".join(sorted(builtins))})')
+    from skeleton_core.mocap import load_cmu_clip
+    try:
+        return [load_cmu_clip(p)]
+    except Exception as e:  # BvhError / MocapError / OSError: one line naming the file
+        raise SourceError(f'cannot load motion clip {p}: {e}') from None
+
+
+class SyntheticSource(Source):
+    name = 'synthetic'
+
+    def __init__(self, scenario: str = 'b', seed: int = 0, num_users: int = 1, clip: str = '',
+                 rate_hz: float = 30.0, frame_id: str = 'kinect_link', user_spacing: float = 0.8,
+                 sensor_params: str = '', with_truth: bool = True):
+        if not 1 <= int(num_users) <= MAX_USERS:
+            raise SourceError(f'num_users must be 1-{MAX_USERS}, got {num_users}')
+        if scenario not in ('clean', 'a', 'b', 'c'):
+            raise SourceError(f"scenario must be one of a, b, c (or 'clean'), got {scenario!r}")
+        self.scenario = scenario
+        self.seed = int(seed)
+        self.num_users = int(num_users)
+        self.clip = clip
+        self.period_s = 1.0 / float(rate_hz)
+        self.frame_id = frame_id
+        self.user_spacing = float(user_spacing)
+        self.sensor_params = sensor_params
+        self.with_truth = with_truth
+        self._streams: List = []
+        self.frames_out = 0
+        self.clip_names: List[str] = []
+
+    def open(self) -> None:
+        from skeleton_core import sensor_model
+        if self.sensor_params and not Path(self.sensor_params).is_file():
+            raise SourceError(f'sensor model parameter file {self.sensor_params} not found')
+        try:
+            base = sensor_model.load_params(self.sensor_params or None)
+        except Exception as e:
+            raise SourceError(f'cannot load sensor model parameters '
+                              f'{self.sensor_params or "(default)"}: {e}') from None
+        clips = _load_motion(self.clip, self.seed)
+        self._streams = []
+        self.clip_names = []
+        n = self.num_users
+        for k in range(n):
+            clip = clips[k % len(clips)]
+            if len(clips) == 1 and n > 1:  # same motion for everybody: stagger the start
+                shift = (k * len(clip)) // n
+                clip = replace(clip, name=f'{clip.name}+{shift}',
+                               positions=np.roll(clip.positions, -shift, axis=0),
+                               orientations=np.roll(clip.orientations, -shift, axis=0))
+            params = copy.deepcopy(base)
+            params['placement']['lateral_offset_m'] = (
+                float(base['placement'].get('lateral_offset_m', 0.0))
+                + (k - (n - 1) / 2.0) * self.user_spacing)
+            model = sensor_model.SensorModel(params=params, seed=self.seed + k)
+            self._streams.append(model.stream(clip, self.scenario, loop=True))
+            self.clip_names.append(clip.name)
+
+    def poll(self, now_ns: int) -> List[SourceOutput]:
+        frames, truth = [], []
+        for k, stream in enumerate(self._streams):
+            pos, state, true_pos = next(stream)
+            uid = k + 1
+            frames.append(SkeletonFrame(positions=np.asarray(pos, float),
+                                        tracking_state=np.asarray(state, np.uint8), user_id=uid,
+                                        stamp_ns=now_ns, frame_id=self.frame_id))
+            if self.with_truth:
+                truth.append(SkeletonFrame(positions=np.asarray(true_pos, float),
+                                           tracking_state=np.full(NUM_JOINTS, TRACKED, np.uint8),
+                                           user_id=uid, stamp_ns=now_ns, frame_id=self.frame_id))
+        self.frames_out += 1
+        return [SourceOutput(stamp_ns=now_ns, frames=frames,
+                             truth=truth if self.with_truth else None, frame_id=self.frame_id)]
+
+    def close(self) -> None:
+        self._streams = []
+
+    def status(self) -> dict:
+        return {'scenario': self.scenario, 'users': self.num_users,
+                'clips': ','.join(self.clip_names)}
+

@@ -1,0 +1,226 @@
+"""kinect_driver sources without ROS: NiTE mapping, CSV format, replay timing, synthetic users,
+and the live source's errors against the real OpenNI2 library."""
+import os
+import subprocess
+import sys
+import textwrap
+
+import numpy as np
+import pytest
+
+from kinect_driver.csv_format import CsvFormatError, read_csv, write_csv
+from kinect_driver.sources.base import SourceError
+from kinect_driver.sources.openni_live import (camera_mm_to_rep103, confidence_to_state,
+                                               find_openni2_library, nite_to_frame)
+from kinect_driver.sources.replay import ReplaySource
+from kinect_driver.sources.synthetic import SyntheticSource
+from kinect_driver.tf_names import tf_frames
+from skeleton_core.conversions import SkeletonFrame, validate_arrays
+from skeleton_core import model
+from skeleton_core.model import (FOOT_LEFT, HAND_RIGHT, HEAD, HIP_CENTER, INFERRED,
+                                 NITE_TO_KINECT, NOT_TRACKED, TRACKED, standard_body)
+
+
+# ---------------------------------------------------------------------------------- NiTE mapping
+def _nite_points_from_body(rest):
+    """A standing user 2 m in front of the camera, as NiTE would report it (camera mm)."""
+    # body in REP-103 sensor frame: rest pose facing the sensor (rotate 180 deg about z), 2 m away
+    body = rest * np.array([-1.0, -1.0, 1.0]) + np.array([2.0, 0.0, -0.9])
+    nite = body[list(NITE_TO_KINECT)]
+    # REP-103 (x fwd, y left, z up) -> camera (x right, y up, z fwd), mm
+    return np.stack([-nite[:, 1], nite[:, 2], nite[:, 0]], axis=1) * 1000.0, body
+
+
+def test_camera_axes_to_rep103():
+    # 1 m to the camera's right, 0.5 m up, 3 m ahead
+    assert np.allclose(camera_mm_to_rep103([1000.0, 500.0, 3000.0]), [3.0, -1.0, 0.5])
+
+
+def test_confidence_thresholds():
+    st = confidence_to_state([0.0, 0.2, 0.5, 1.0])
+    assert st.tolist() == [NOT_TRACKED, INFERRED, TRACKED, TRACKED]
+    assert confidence_to_state([0.5, 0.8], tracked=0.9, inferred=0.5).tolist() == [NOT_TRACKED,
+                                                                                   INFERRED]
+
+
+def test_nite_to_frame_maps_joints_and_fills_missing_plausibly():
+    rest = standard_body().rest_positions()
+    pts, body = _nite_points_from_body(rest)
+    conf = np.ones(15)
+    conf[0] = 0.0   # head lost
+    conf[6] = 0.5   # left "hand" (wrist) at 0.5 -> TRACKED
+    f = nite_to_frame(pts, conf, user_id=4, stamp_ns=99, frame_id='kinect_link')
+    validate_arrays(f.positions, f.tracking_state)
+    assert f.user_id == 4 and f.stamp_ns == 99 and f.frame_id == 'kinect_link'
+    for k, j in enumerate(NITE_TO_KINECT):
+        assert np.allclose(f.positions[j], body[j]), model.JOINT_NAMES[j]
+    assert f.tracking_state[HEAD] == NOT_TRACKED
+    assert f.tracking_state[NITE_TO_KINECT[6]] == TRACKED
+    # missing joints: HipCenter between the hips, INFERRED; hands/feet NOT_TRACKED at the
+    # standard-body offsets (the test body IS the standard body, so they land on its joints)
+    assert f.tracking_state[HIP_CENTER] == INFERRED
+    assert np.allclose(f.positions[HIP_CENTER], body[HIP_CENTER], atol=1e-9)
+    for j in model.NITE_MISSING:
+        if j != HIP_CENTER:
+            assert f.tracking_state[j] == NOT_TRACKED
+            assert np.allclose(f.positions[j], body[j], atol=1e-6), model.JOINT_NAMES[j]
+    names = [n for n, _ in tf_frames(f)]
+    assert 'neck_4' in names and 'torso_4' in names and 'head_4' not in names
+    assert len(names) == 14
+
+
+def test_nite_to_frame_degenerate_input_stays_valid():
+    f = nite_to_frame(np.zeros((15, 3)), np.zeros(15), 1, 0, 'k')
+    validate_arrays(f.positions, f.tracking_state)
+    assert (f.tracking_state == NOT_TRACKED).all()
+    assert np.allclose(f.positions[[HAND_RIGHT, FOOT_LEFT]], 0.0)
+
+
+# ---------------------------------------------------------------------------------- live errors
+_LIVE = textwrap.dedent('''
+    import sys
+    from kinect_driver.sources.openni_live import LiveSource
+    from kinect_driver.sources.base import SourceError
+    kw = eval(sys.argv[1])
+    try:
+        LiveSource(**kw).open()
+    except SourceError as e:
+        print(e)
+        sys.exit(3)
+    print('opened')
+''')
+
+
+def _live(**kw):
+    # a fresh process each time: the OpenNI2 library is initialized once per process
+    r = subprocess.run([sys.executable, '-c', _LIVE, repr(kw)], capture_output=True, text=True,
+                       timeout=60)
+    return r.returncode, r.stdout.strip(), r.stderr
+
+
+needs_openni = pytest.mark.skipif(
+    find_openni2_library() is None,
+    reason='libopenni2-0 not installed (scripts/setup.sh installs it when run as root)')
+
+
+@needs_openni
+def test_live_without_sensor_reports_no_device():
+    pytest.importorskip('openni', reason='openni bindings not installed (requirements-py.txt)')
+    rc, out, err = _live(nite2_path='/opt/NiTE2/Redist')
+    assert rc == 3, (out, err)
+    assert out.startswith('no device:') and '\n' not in out
+
+
+@needs_openni
+def test_live_names_missing_nite2_path():
+    pytest.importorskip('openni')
+    # OpenNI2's built-in dummy device stands in for a sensor, so the NiTE2 step is reached
+    rc, out, err = _live(device_uri='Dummy', nite2_path='/nowhere/NiTE-2.2/Redist')
+    assert rc == 3, (out, err)
+    assert '/nowhere/NiTE-2.2/Redist' in out and 'NiTE2 not found' in out
+    rc, out, _ = _live(device_uri='Dummy', nite2_path='')
+    assert rc == 3 and 'nite2_path' in out
+
+
+def test_live_missing_openni2_library_and_recording():
+    pytest.importorskip('openni')
+    rc, out, _ = _live(openni2_path='/nowhere/openni2', nite2_path='/x')
+    assert rc == 3 and out == ('OpenNI2 library not found in /nowhere/openni2 '
+                               '(install it: sudo apt-get install libopenni2-0)')
+    if find_openni2_library() is not None:
+        rc, out, _ = _live(device_uri='/nowhere/take1.oni', nite2_path='/x')
+        assert rc == 3 and 'cannot read OpenNI recording /nowhere/take1.oni' in out
+
+
+# ---------------------------------------------------------------------------------- CSV
+def _frames(stamp, users=(1, 2)):
+    rng = np.random.default_rng(stamp)
+    return [SkeletonFrame(positions=standard_body().rest_positions() + rng.normal(0, .1, (20, 3)),
+                          tracking_state=rng.integers(0, 3, 20).astype(np.uint8), user_id=u,
+                          stamp_ns=stamp) for u in users]
+
+
+def test_csv_round_trip(tmp_path):
+    data = [(1000 + k * 33_333_333, _frames(k)) for k in range(4)]
+    assert write_csv(tmp_path / 's.csv', data) == 8
+    back = read_csv(tmp_path / 's.csv', frame_id='kinect_link')
+    assert [s for s, _ in back] == [s for s, _ in data]
+    for (_, a), (_, b) in zip(data, back):
+        for fa, fb in zip(a, b):
+            assert fa.user_id == fb.user_id and fb.frame_id == 'kinect_link'
+            assert np.allclose(fa.positions, fb.positions, atol=1e-6)
+            assert np.array_equal(fa.tracking_state, fb.tracking_state)
+
+
+def test_csv_minimal_columns_and_errors(tmp_path):
+    rows = ['# a comment', 'stamp_ns,user_id,joint,x,y,z']
+    rows += [f'5,1,{j},{j * 0.1},0,1' for j in range(20)]
+    (tmp_path / 'ok.csv').write_text('\n'.join(rows) + '\n')
+    (stamp, [f]), = read_csv(tmp_path / 'ok.csv')
+    assert stamp == 5 and (f.tracking_state == TRACKED).all() and f.positions[3, 0] == 3 * 0.1
+    (tmp_path / 'short.csv').write_text('\n'.join(rows[:-1]) + '\n')
+    with pytest.raises(CsvFormatError, match=r'short.csv:3: stamp 5 user 1 lacks joints \[.FootRight.\]'):
+        read_csv(tmp_path / 'short.csv')
+    (tmp_path / 'bad.csv').write_text('\n'.join(rows[:5] + ['5,1,Nose,0,0,0']) + '\n')
+    with pytest.raises(CsvFormatError, match="bad.csv:6: unknown joint 'Nose'"):
+        read_csv(tmp_path / 'bad.csv')
+    (tmp_path / 'hdr.csv').write_text('t,u,j\n')
+    with pytest.raises(CsvFormatError, match='hdr.csv:1: header lacks'):
+        read_csv(tmp_path / 'hdr.csv')
+
+
+# ---------------------------------------------------------------------------------- replay
+def test_replay_csv_timing_rate_and_loop(tmp_path):
+    period = 33_333_333
+    write_csv(tmp_path / 'r.csv', [(k * period, _frames(k, (3,))) for k in range(10)])
+    src = ReplaySource(str(tmp_path / 'r.csv'), rate=2.0, loop=True)
+    src.open()
+    assert src.period_s == pytest.approx(period / 2e9)
+    t0 = 10 ** 12
+    got = []
+    for tick in range(25):  # 25 ticks at the source period = 2.5 laps at rate 2
+        got += [o.stamp_ns for o in src.poll(t0 + int(tick * period / 2))]
+    assert got[:10] == [k * period for k in range(10)]
+    assert got[10:20] == got[:10] and len(got) == 25  # one per tick, looping
+    once = ReplaySource(str(tmp_path / 'r.csv'))
+    once.open()
+    n = sum(len(once.poll(t0 + tick * period)) for tick in range(30))
+    assert n == 10 and once.finished
+
+
+def test_replay_errors_are_one_line(tmp_path):
+    (tmp_path / 'junk.mcap').write_bytes(b'not a bag at all')
+    for path, text in ((tmp_path / 'junk.mcap', 'junk.mcap: not an MCAP file'),
+                       (tmp_path / 'none.mcap', 'none.mcap: no such file'),
+                       (tmp_path / 'x.db3', 'x.db3')):
+        if path.suffix == '.db3':
+            path.write_bytes(b'SQLite format 3\x00')
+        with pytest.raises(SourceError, match=text) as e:
+            ReplaySource(str(path)).open()
+        assert '\n' not in str(e.value)
+    with pytest.raises(SourceError, match='replay_file'):
+        ReplaySource('').open()
+
+
+# ---------------------------------------------------------------------------------- synthetic
+def test_synthetic_users_side_by_side_with_truth():
+    src = SyntheticSource(scenario='a', seed=3, num_users=4)
+    src.open()
+    outs = [src.poll(1000 + k)[0] for k in range(30)]
+    o = outs[-1]
+    assert [f.user_id for f in o.frames] == [1, 2, 3, 4] == [f.user_id for f in o.truth]
+    for f in o.frames + o.truth:
+        validate_arrays(f.positions, f.tracking_state)
+        assert f.frame_id == 'kinect_link' and f.stamp_ns == 1029
+    lateral = [np.mean([out.truth[k].positions[HIP_CENTER, 1] for out in outs]) for k in range(4)]
+    assert np.all(np.diff(lateral) > 0.5)   # users spread along y, ~0.8 m apart
+    with pytest.raises(SourceError, match='num_users'):
+        SyntheticSource(num_users=7)
+
+
+def test_synthetic_is_reproducible_per_seed():
+    a, b, c = (SyntheticSource(seed=s, num_users=2) for s in (5, 5, 6))
+    for s in (a, b, c):
+        s.open()
+    pa, pb, pc = ([s.poll(0)[0].frames[1].positions for _ in range(5)][-1] for s in (a, b, c))
+    assert np.array_equal(pa, pb) and not np.array_equal(pa, pc)
