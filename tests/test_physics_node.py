@@ -1,0 +1,153 @@
+"""physics node over real DDS: a short clip in on the input topic, simulated skeletons out on
+/character/skeletons (stamps and frame preserved), object markers, pushes, parameter validation."""
+import threading
+import time
+
+import numpy as np
+import pytest
+
+rclpy = pytest.importorskip('rclpy')
+pytest.importorskip('skeleton_msgs.msg', reason='skeleton_msgs not built (run scripts/setup.sh)')
+
+from geometry_msgs.msg import Vector3  # noqa: E402
+from rclpy.executors import MultiThreadedExecutor  # noqa: E402
+from rclpy.parameter import Parameter  # noqa: E402
+from skeleton_msgs.msg import SkeletonArray  # noqa: E402
+from skeleton_msgs.srv import ApplyPush  # noqa: E402
+from visualization_msgs.msg import MarkerArray  # noqa: E402
+
+from skeleton_core.conversions import SkeletonFrame, frames_from_array_msg, frames_to_array_msg  # noqa: E402
+from skeleton_core.model import NUM_JOINTS, segment_lengths, standard_body  # noqa: E402
+from physics_sim.physics_node import PhysicsNode  # noqa: E402
+
+BODY = standard_body()
+
+
+def clip(n=45):
+    """A short clip in the sensor frame: T-pose 2.5 m ahead, arms waving slowly."""
+    base = BODY.rest_positions() + np.array([2.5, 0.0, -0.8])
+    out = []
+    for i in range(n):
+        p = base.copy()
+        p[[6, 7]] += (0.0, 0.0, 0.15 * np.sin(i / 10.0))
+        out.append(p)
+    return out
+
+
+def _msg(p, stamp_ns, uid=4):
+    f = SkeletonFrame(positions=p, tracking_state=np.full(NUM_JOINTS, 2, np.uint8), user_id=uid,
+                      stamp_ns=stamp_ns, frame_id='kinect_link')
+    return frames_to_array_msg([f], stamp_ns, 'kinect_link')
+
+
+@pytest.fixture
+def graph(rclpy_context):
+    node = PhysicsNode(context=rclpy_context, parameter_overrides=[
+        Parameter('input_topic', value='/test_physics/in'), Parameter('body_height', value=1.75),
+        Parameter('balls', value=[1.0, 1.0, 0.1, 0.1, 0.5])])
+    peer = rclpy.create_node('physics_test_peer', context=rclpy_context)
+    ex = MultiThreadedExecutor(num_threads=2, context=rclpy_context)
+    ex.add_node(node)
+    ex.add_node(peer)
+    th = threading.Thread(target=ex.spin, daemon=True)
+    th.start()
+    yield node, peer
+    ex.shutdown()
+    th.join(timeout=5)
+    node.destroy_node()
+    peer.destroy_node()
+
+
+def test_node_tracks_a_clip_over_dds(graph):
+    node, peer = graph
+    got, objs = [], []
+    peer.create_subscription(SkeletonArray, '/character/skeletons', got.append, 50)
+    peer.create_subscription(MarkerArray, '/physics/objects', objs.append, 50)
+    pub = peer.create_publisher(SkeletonArray, '/test_physics/in', 10)
+    deadline = time.time() + 10
+    while pub.get_subscription_count() == 0 and time.time() < deadline:
+        time.sleep(0.05)
+    stamps = []
+    for i, p in enumerate(clip()):
+        stamp = 7_000_000_000 + i * 33_333_333
+        stamps.append(stamp)
+        pub.publish(_msg(p, stamp))
+        time.sleep(1 / 30)
+    deadline = time.time() + 10
+    while (not got or frames_from_array_msg(got[-1])[0].stamp_ns != stamps[-1]) \
+            and time.time() < deadline:
+        time.sleep(0.05)
+    assert got, 'no /character/skeletons received'
+    last = got[-1]
+    assert last.header.frame_id == 'kinect_link'
+    frames = frames_from_array_msg(last)
+    assert [f.user_id for f in frames] == [4]
+    f = frames[0]
+    assert f.stamp_ns == stamps[-1]              # the stamp of the target being tracked
+    np.testing.assert_allclose(segment_lengths(f.positions), BODY.segment_lengths, atol=1e-3)
+    err = np.linalg.norm(f.positions - clip()[-1], axis=1)
+    assert err.mean() < 0.05
+    assert f.orientations is not None
+    # objects: one DELETEALL then the ball, in the input's frame
+    assert objs and objs[-1].markers[-1].header.frame_id == 'kinect_link'
+    assert len(objs[-1].markers) == 2
+
+    # the node keeps simulating (and publishing) when input stops
+    n = len(got)
+    time.sleep(0.4)
+    assert len(got) > n
+
+    # push service: accepted for a real segment, refused for an unknown one
+    cli = peer.create_client(ApplyPush, '/physics/apply_push')
+    assert cli.wait_for_service(timeout_sec=5)
+    req = ApplyPush.Request(user_id=4, segment='Spine', force=Vector3(x=300.0), duration=0.1)
+    fut = cli.call_async(req)
+    deadline = time.time() + 5
+    while not fut.done() and time.time() < deadline:
+        time.sleep(0.02)
+    assert fut.result().success, fut.result().message
+    fut = cli.call_async(ApplyPush.Request(user_id=4, segment='Tail', force=Vector3(x=1.0),
+                                           duration=0.1))
+    deadline = time.time() + 5
+    while not fut.done() and time.time() < deadline:
+        time.sleep(0.02)
+    assert not fut.result().success
+
+
+def test_parameters_validated_on_set(graph):
+    node, _ = graph
+    assert not node.set_parameters([Parameter('kp', value=-5.0)])[0].successful
+    assert not node.set_parameters([Parameter('controller', value='mocap_constraints')])[0].successful
+    assert node.set_parameters([Parameter('kp', value=3000.0)])[0].successful
+    assert node.sim.config.gains.ke == 3000.0
+    assert not node.set_parameters([Parameter('pin_release_height', value=0.01)])[0].successful
+
+
+def test_user_leaving_removes_the_character_and_bad_input_is_dropped(graph):
+    node, peer = graph
+    got = []
+    peer.create_subscription(SkeletonArray, '/character/skeletons', got.append, 50)
+    pub = peer.create_publisher(SkeletonArray, '/test_physics/in', 10)
+    assert node.set_parameters([Parameter('user_timeout', value=0.2)])[0].successful
+    deadline = time.time() + 10
+    while pub.get_subscription_count() == 0 and time.time() < deadline:
+        time.sleep(0.05)
+    for i, p in enumerate(clip(10)):
+        pub.publish(_msg(p, 9_000_000_000 + i * 33_333_333, uid=2))
+        time.sleep(1 / 30)
+    bad = _msg(clip(1)[0], 9_500_000_000, uid=5)
+    bad.skeletons[0].positions[3].x = float('nan')
+    pub.publish(bad)
+    deadline = time.time() + 5
+    while 2 not in node.sim.characters and time.time() < deadline:
+        time.sleep(0.05)
+    assert 2 in node.sim.characters and 5 not in node.sim.characters
+    empty = frames_to_array_msg([], 9_600_000_000, 'kinect_link')
+    deadline = time.time() + 5
+    while node.sim.characters and time.time() < deadline:
+        pub.publish(empty)
+        time.sleep(0.05)
+    assert not node.sim.characters
+    time.sleep(0.2)
+    assert len(got[-1].skeletons) == 0          # an empty array tells viewers it is gone
+    assert sum(node.health.dropped.values()) >= 1
