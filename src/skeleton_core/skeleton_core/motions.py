@@ -121,15 +121,14 @@ def pose_from_rotations(body: Body, local: Dict[int, np.ndarray], t: int,
 
 
 def _no_skate(body, local, t, aims=None):
-    """Positions with the root moved so that the current stance foot does not slide."""
+    """Positions with the root moved so that the lowest sole point (the stance foot's contact
+    point: toe or heel) does not slide."""
     p, q, soles = pose_from_rotations(body, local, t, aims)
-    foot_z = np.minimum(soles[:, [0, 1], 2], soles[:, [2, 3], 2])  # (t, 2) per side
-    stance = np.argmin(foot_z, 1)
-    foot_xy = 0.5 * (soles[:, [0, 1], :2] + soles[:, [2, 3], :2])  # (t, 2, 2) per side
+    contact = np.argmin(soles[..., 2], 1)  # (t,) index into the 4 sole points
     root = np.zeros((t, 2))
     for k in range(1, t):
-        s = stance[k]
-        root[k] = root[k - 1] - (foot_xy[k, s] - foot_xy[k - 1, s])
+        s = contact[k]
+        root[k] = root[k - 1] - (soles[k, s, :2] - soles[k - 1, s, :2])
     p[..., :2] += root[:, None, :]
     return p, q
 
@@ -177,12 +176,15 @@ def _arm_dir(flex, abd, side):
     return d
 
 
-def _forearm_dir(upper, bend, side, plane_up=None):
+def _forearm_dir(upper, bend, side, plane_up=None, flex=None):
     """Forearm direction: the upper-arm direction bent by ``bend`` towards ``plane_up``
-    (thorax frame; default: forward/up, the natural elbow flexion direction)."""
+    (thorax frame). Default: the natural elbow-flexion direction ``(cos f, 0, sin f)`` for
+    shoulder flexion f, which is perpendicular to the upper arm for any abduction (forward for a
+    hanging arm, up for an arm held forward), so there is no singular pose."""
     u = _unit(upper)
     if plane_up is None:
-        plane_up = np.broadcast_to([1.0, 0.0, 0.3], u.shape)
+        f = np.broadcast_to(np.asarray(flex, float), u.shape[:-1])
+        plane_up = np.stack([np.cos(f), np.zeros_like(f), np.sin(f)], -1)
     w = plane_up - np.sum(plane_up * u, -1, keepdims=True) * u
     w = _unit(w + 1e-9)
     b = np.asarray(bend, float)[..., None]
@@ -190,16 +192,35 @@ def _forearm_dir(upper, bend, side, plane_up=None):
 
 
 def _arms(aims, t, flex_l, abd_l, elbow_l, flex_r, abd_r, elbow_r, up_l=None, up_r=None):
-    ul = _arm_dir(np.broadcast_to(flex_l, (t,)), np.broadcast_to(abd_l, (t,)), 'left')
-    ur = _arm_dir(np.broadcast_to(flex_r, (t,)), np.broadcast_to(abd_r, (t,)), 'right')
+    flex_l, flex_r = np.broadcast_to(flex_l, (t,)), np.broadcast_to(flex_r, (t,))
+    ul = _arm_dir(flex_l, np.broadcast_to(abd_l, (t,)), 'left')
+    ur = _arm_dir(flex_r, np.broadcast_to(abd_r, (t,)), 'right')
     aims[ELBOW_LEFT] = ul
     aims[ELBOW_RIGHT] = ur
-    fl = _forearm_dir(ul, np.broadcast_to(elbow_l, (t,)), 'left', up_l)
-    fr = _forearm_dir(ur, np.broadcast_to(elbow_r, (t,)), 'right', up_r)
+    fl = _forearm_dir(ul, np.broadcast_to(elbow_l, (t,)), 'left', up_l, flex_l)
+    fr = _forearm_dir(ur, np.broadcast_to(elbow_r, (t,)), 'right', up_r, flex_r)
     aims[WRIST_LEFT] = fl
     aims[WRIST_RIGHT] = fr
     aims[HAND_LEFT] = fl
     aims[HAND_RIGHT] = fr
+
+
+def _keys(rng, t, period, lo, hi):
+    """A smooth random curve: values drawn in [lo, hi] every ``period`` seconds, joined by
+    cosine ease-in/out (zero velocity at the keys)."""
+    n = int(np.ceil(t / (period * FPS))) + 2
+    vals = rng.uniform(lo, hi, n)
+    x = np.arange(t) / (period * FPS)
+    k = np.floor(x).astype(int)
+    u = 0.5 - 0.5 * np.cos(np.pi * (x - k))
+    return vals[k] * (1 - u) + vals[k + 1] * u
+
+
+def _sway(rng, local, t, amount=1.0):
+    """Secondary motion added to standing clips: slow random trunk lean, twist and side bend."""
+    a = np.radians(amount)
+    _trunk(local, _keys(rng, t, 2.3, -4 * a, 12 * a), _keys(rng, t, 1.9, -15 * a, 15 * a), t,
+           side=_keys(rng, t, 2.7, -6 * a, 6 * a))
 
 
 def _smooth_pulse(x):
@@ -220,14 +241,15 @@ def _walk(rng, t, time):
     hip_l = hip_a * np.sin(ph)
     hip_r = hip_a * np.sin(ph + np.pi)
     # knee flexes while the thigh swings forward (early swing), a little during stance
-    knee_l = np.radians(5) + knee_a * np.maximum(0, np.sin(ph + 1.1)) ** 2
-    knee_r = np.radians(5) + knee_a * np.maximum(0, np.sin(ph + np.pi + 1.1)) ** 2
+    # swing = hip flexing (cos(ph) > 0); the knee bends from late stance to late swing
+    knee_l = np.radians(5) + knee_a * np.maximum(0, np.cos(ph + 0.3)) ** 2
+    knee_r = np.radians(5) + knee_a * np.maximum(0, np.cos(ph + np.pi + 0.3)) ** 2
     ankle_l = np.radians(8) * np.sin(ph + 0.5)
     ankle_r = np.radians(8) * np.sin(ph + np.pi + 0.5)
     _legs(local, hip_l, knee_l, ankle_l, hip_r, knee_r, ankle_r)
     local[0] = rz(np.radians(4) * np.sin(ph))  # pelvis rotation
     _trunk(local, np.radians(4), -np.radians(6) * np.sin(ph), t)
-    _arms(aims, t, -arm_a * np.sin(ph) * 0 + arm_a * np.sin(ph + np.pi), np.radians(8),
+    _arms(aims, t, arm_a * np.sin(ph + np.pi), np.radians(8),
           np.radians(20) + 0.5 * arm_a * (1 + np.sin(ph + np.pi)),
           arm_a * np.sin(ph), np.radians(8), np.radians(20) + 0.5 * arm_a * (1 + np.sin(ph)))
     return 'walk', 'locomotion', local, aims, True
@@ -240,8 +262,8 @@ def _arm_raise(rng, t, time):
     u = _smooth_pulse(f * time)
     u2 = _smooth_pulse(f * time + 0.5 * rng.uniform(0, 1))
     local, aims = {}, {}
-    _crouch(local, np.radians(2), t)
-    _trunk(local, 0.0, 0.0, t)
+    _crouch(local, _keys(rng, t, 2.1, 0.0, np.radians(12)), t)
+    _sway(rng, local, t)
     if lateral:  # abduction in the frontal plane
         _arms(aims, t, np.radians(5), np.radians(6) + top * u, np.radians(10),
               np.radians(5), np.radians(6) + top * u2, np.radians(10))
@@ -257,8 +279,8 @@ def _wave(rng, t, time):
     env = np.clip(time / 1.0, 0, 1) * np.clip((time[-1] - time) / 1.0, 0, 1)
     env = 0.5 - 0.5 * np.cos(np.pi * env)
     local, aims = {}, {}
-    _crouch(local, np.radians(2), t)
-    _trunk(local, 0.0, 0.0, t, side=np.radians(3) * env)
+    _crouch(local, _keys(rng, t, 2.1, 0.0, np.radians(10)), t)
+    _sway(rng, local, t, 0.6)
     # right upper arm raised sideways, forearm up, oscillating in the frontal plane
     ur = _arm_dir(np.radians(20) * env + np.radians(5), np.radians(6) + np.radians(80) * env, 'right')
     aims[ELBOW_RIGHT] = ur
@@ -269,7 +291,8 @@ def _wave(rng, t, time):
     aims[HAND_RIGHT] = fr
     ul = _arm_dir(np.radians(5), np.radians(6), 'left')
     aims[ELBOW_LEFT] = np.broadcast_to(ul, (t, 3))
-    fl = _forearm_dir(aims[ELBOW_LEFT], np.broadcast_to(np.radians(12), (t,)), 'left')
+    fl = _forearm_dir(aims[ELBOW_LEFT], np.broadcast_to(np.radians(12), (t,)), 'left',
+                      flex=np.radians(5))
     aims[WRIST_LEFT] = fl
     aims[HAND_LEFT] = fl
     return 'wave', 'upper_body', local, aims, False
@@ -288,7 +311,9 @@ def _punch(rng, t, time):
         w = np.exp(-0.5 * ((time - c) / 0.09) ** 2)
         (left if k % 2 == 0 else right)[:] += w
     left, right = np.clip(left, 0, 1), np.clip(right, 0, 1)
-    _trunk(local, np.radians(8), np.radians(25) * (right - left), t)
+    _trunk(local, np.radians(8) + _keys(rng, t, 1.7, -np.radians(4), np.radians(10)),
+           np.radians(25) * (right - left) + _keys(rng, t, 1.3, -np.radians(10), np.radians(10)),
+           t, side=_keys(rng, t, 1.5, -np.radians(6), np.radians(6)))
     guard_flex, guard_abd, guard_elbow = np.radians(35), np.radians(12), np.radians(125)
     _arms(aims, t,
           guard_flex + (reach - guard_flex) * left, guard_abd * (1 - left) - np.radians(8) * left,
@@ -354,15 +379,34 @@ def _sword(rng, t, time):
     # diagonal swing: raised over the right shoulder, cut down to the left, return
     s = np.where(x < 0.35, _smooth_pulse(x / 0.7), _smooth_pulse(0.5 + (x - 0.35) / 1.3))
     _crouch(local, np.radians(12), t)
-    _trunk(local, np.radians(20) * s, np.radians(30) * (s - 0.5), t)
+    _trunk(local, np.radians(20) * s + _keys(rng, t, 1.9, -np.radians(5), np.radians(8)),
+           np.radians(30) * (s - 0.5) + _keys(rng, t, 2.3, -np.radians(12), np.radians(12)), t)
     flex = np.radians(150) - np.radians(110) * s
     _arms(aims, t, flex, -np.radians(10) - np.radians(15) * (1 - s), np.radians(25),
           flex, np.radians(15) * (1 - s) - np.radians(10), np.radians(25))
     return 'sword_swing', 'sword_fighting', local, aims, False
 
 
+def _reach(rng, t, time):
+    """Reaching to random targets around the body, one or both hands, leaning towards them."""
+    local, aims = {}, {}
+    period = rng.uniform(1.0, 1.6)
+    flex_l = _keys(rng, t, period, np.radians(10), np.radians(150))
+    flex_r = _keys(rng, t, period * 1.13, np.radians(10), np.radians(150))
+    abd_l = _keys(rng, t, period * 0.91, -np.radians(25), np.radians(80))
+    abd_r = _keys(rng, t, period * 1.07, -np.radians(25), np.radians(80))
+    el_l = _keys(rng, t, period * 0.87, np.radians(0), np.radians(110))
+    el_r = _keys(rng, t, period * 1.21, np.radians(0), np.radians(110))
+    _arms(aims, t, flex_l, abd_l, el_l, flex_r, abd_r, el_r)
+    reach_fwd = 0.5 * (np.sin(flex_l) + np.sin(flex_r))
+    _crouch(local, _keys(rng, t, 1.7, 0.0, np.radians(25)), t)
+    _trunk(local, np.radians(25) * reach_fwd * rng.uniform(0.3, 1.0),
+           0.6 * (abd_r - abd_l) * 0.3, t, side=_keys(rng, t, 2.0, -np.radians(8), np.radians(8)))
+    return 'reach', 'object_handling', local, aims, False
+
+
 BUILTIN_MOTIONS: Tuple[Callable, ...] = (_walk, _arm_raise, _wave, _punch, _kick, _pick_up,
-                                         _squat_lift, _sword)
+                                         _squat_lift, _sword, _reach)
 
 
 def builtin_clips(seed: int = 0, body: Optional[Body] = None, duration: float = 6.0,

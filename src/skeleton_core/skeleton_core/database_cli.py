@@ -1,0 +1,143 @@
+"""``ros2 run skeleton_core build_db`` / ``make build-db``: build (or fetch from the cache) the
+motion database and print what went into it.
+
+Examples::
+
+    build_db                                   # default: CMU five-class database clips, cached
+    build_db --source builtin                  # the built-in motions (no ../shared needed)
+    build_db --all-clips --mirror --no-filter --out out/big_db.npz   # 53k postures, scale tests
+"""
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+import time
+from pathlib import Path
+
+from . import database, mocap, motions
+
+
+def _parser():
+    p = argparse.ArgumentParser(
+        prog='build_db', description='Build the motion database (Shum et al. 2013 Sec. V-A): '
+        'normalise, retarget to the standard body, filter near-duplicate postures.')
+    p.add_argument('--source', choices=('auto', 'cmu', 'builtin'), default='auto',
+                   help='auto: CMU when the shared data folder exists, else built-in motions')
+    p.add_argument('--cmu-dir', type=Path, default=None,
+                   help='folder of CMU cgspeed BVH files with index.csv '
+                        '(default: <shared>/mocap/cmu; implies --source cmu)')
+    p.add_argument('--classes', default=','.join(mocap.FIVE_CLASSES),
+                   help='comma-separated CMU classes to use (default: the five paper classes)')
+    p.add_argument('--all-clips', action='store_true',
+                   help="use every clip: all classes including 'other', database and dev parts")
+    p.add_argument('--mirror', action='store_true',
+                   help='add left-right mirrored copies of every clip (doubles the frames)')
+    p.add_argument('--threshold', type=float, default=None,
+                   help=f'filter threshold, m^2 summed over joints (default '
+                        f'{database.DEFAULT_THRESHOLD})')
+    p.add_argument('--no-filter', action='store_true', help='keep every posture')
+    p.add_argument('--out', type=Path, default=None,
+                   help='write the database here (default: the cache, keyed by the inputs)')
+    p.add_argument('--cache-dir', type=Path, default=None,
+                   help='cache folder (default $KINECT_POSTURE_CACHE or <repo>/cache)')
+    p.add_argument('--rebuild', action='store_true', help='ignore a cached database')
+    p.add_argument('--no-progress', action='store_true', help='no progress bars')
+    return p
+
+
+def _bar(total, desc, enabled):
+    if not enabled:
+        return None
+    try:
+        from tqdm import tqdm
+        return tqdm(total=total, desc=desc, unit='clip', leave=False)
+    except ImportError:  # pragma: no cover
+        return None
+
+
+def main(argv=None) -> int:
+    args = _parser().parse_args(argv)
+    logging.basicConfig(level=logging.INFO, format='%(message)s')
+    log = logging.getLogger('build_db')
+    progress = not args.no_progress and sys.stderr.isatty()
+    threshold = 0.0 if args.no_filter else (
+        database.DEFAULT_THRESHOLD if args.threshold is None else args.threshold)
+    if threshold < 0:
+        print('build_db: --threshold must be >= 0', file=sys.stderr)
+        return 2
+    classes = None if args.all_clips else tuple(
+        c.strip() for c in args.classes.split(',') if c.strip())
+    if classes is not None:
+        bad = [c for c in classes if c not in mocap.MOTION_CLASSES]
+        if bad:
+            print(f'build_db: unknown class(es) {", ".join(bad)}; known: '
+                  f'{", ".join(mocap.MOTION_CLASSES)}', file=sys.stderr)
+            return 2
+    split = 'all' if args.all_clips else 'database'
+    try:
+        if args.cmu_dir is not None or args.out is not None:
+            # explicit build (not the cached default)
+            source = args.source
+            cmu_dir = args.cmu_dir
+            if cmu_dir is None and source != 'builtin':
+                shared = database.default_shared_dir()
+                cmu_dir = shared / 'mocap' / 'cmu' if shared is not None else None
+                if source == 'auto':
+                    source = 'cmu' if cmu_dir is not None and cmu_dir.is_dir() else 'builtin'
+            elif cmu_dir is not None:
+                source = 'cmu'
+            skipped = []
+            t0 = time.perf_counter()
+            if source == 'cmu':
+                if cmu_dir is None or not cmu_dir.is_dir():
+                    print(f'build_db: CMU folder {cmu_dir} not found', file=sys.stderr)
+                    return 1
+                n_files = len(list(cmu_dir.glob('*.bvh')))
+                bar = _bar(n_files, 'loading BVH', progress)
+                cb = (lambda name: bar.update(1)) if bar is not None else None
+                clips = mocap.load_cmu_clips(cmu_dir, classes, skipped=skipped, progress=cb)
+                if bar is not None:
+                    bar.close()
+                db_clips, dev_clips = mocap.split_clips(clips)
+            else:
+                db_clips, dev_clips = motions.builtin_split()
+            sel = list(db_clips) + (list(dev_clips) if split == 'all' else [])
+            if args.mirror:
+                sel += [mocap.mirror_clip(c) for c in sel]
+            t_load = time.perf_counter() - t0
+            db, st = database.build_database(sel, threshold=threshold, progress=progress,
+                                             meta={'source': source, 'skipped': skipped})
+            out = args.out or (database.default_cache_dir() / f'motion_db_{source}_custom.npz')
+            db.save(out)
+            st.update(cache_hit=False, path=str(out), skipped=skipped, load_seconds=t_load)
+        else:
+            st = {}
+            db = database.load_or_build_default(
+                args.source, cache_dir=args.cache_dir, threshold=threshold, classes=classes,
+                split=split, mirror=args.mirror, progress=progress, rebuild=args.rebuild,
+                stats=st)
+    except (database.DatabaseError, FileNotFoundError, ValueError) as e:
+        print(f'build_db: {e}', file=sys.stderr)
+        return 1
+    for name, reason in st.get('skipped') or []:
+        print(f'skipped {name}: {reason}')
+    counts = {}
+    for c in db.posture_classes:
+        counts[c] = counts.get(c, 0) + 1
+    print(f"source: {db.meta.get('source', '?')}; clips: {len(db.class_names)}; "
+          f"threshold: {db.meta.get('threshold')} m^2")
+    print(f"postures: {st.get('frames_before', db.meta.get('frames_before'))} before filtering -> "
+          f"{len(db)} after")
+    print('per class: ' + ', '.join(f'{k} {v}' for k, v in sorted(counts.items())))
+    if st.get('cache_hit'):
+        print(f"cache hit: {st['path']}")
+    else:
+        print(f"built in {st.get('seconds', float('nan')):.2f} s"
+              + (f" (+{st['load_seconds']:.2f} s loading)" if 'load_seconds' in st else ''))
+        print(f"written: {st['path']}")
+    return 0
+
+
+if __name__ == '__main__':  # pragma: no cover
+    sys.exit(main())
