@@ -259,7 +259,9 @@ class DriverNode(Node):
             self.tf_pub.publish(TFMessage(transforms=tfs))
 
     def destroy_node(self):
-        self.source.close()
+        source = getattr(self, 'source', None)  # absent when __init__ failed early
+        if source is not None:
+            source.close()
         return super().destroy_node()
 
 
