@@ -65,6 +65,14 @@ def _limits(series: Optional[SkeletonSeries], span: float):
     return out
 
 
+def _floor(series: Optional[SkeletonSeries]) -> Optional[float]:
+    """Floor height estimated from the lowest joint of every frame (sensor frames have the floor
+    below z = 0, a physics world has it at 0)."""
+    if series is None or len(series) == 0:
+        return None
+    return float(np.nanpercentile(series.positions[..., 2].min(axis=1), 5)) - 0.02
+
+
 def _span(panels: Sequence[Panel]) -> float:
     span = 1.0
     for pn in panels:
@@ -103,6 +111,7 @@ class _PanelArtists:
         self.axes = {'front': ax_front, 'side': ax_side}
         self.bones, self.joints, self.squares, self.ghosts = {}, {}, {}, {}
         style = panel.style
+        floor = _floor(panel.series if panel.series is not None else panel.ghost)
         self.height = None
         if panel.series is not None and len(panel.series) and style == 'character':
             h = estimate_height(panel.series.positions[len(panel.series) // 2])
@@ -116,7 +125,8 @@ class _PanelArtists:
             ax.set_yticks([])
             for s in ax.spines.values():
                 s.set_color('0.8')
-            ax.axhline(0.0, color='0.75', lw=0.8, zorder=0)  # floor (z = 0)
+            if floor is not None:
+                ax.axhline(floor, color='0.75', lw=0.8, zorder=0)
             self.ghosts[view] = LineCollection([], colors=[GROUND_TRUTH + (0.6,)], linewidths=1.5,
                                                zorder=1)
             ax.add_collection(self.ghosts[view])
@@ -140,6 +150,9 @@ class _PanelArtists:
                      color='0.5')
         self._fig = fig
         self._pts_per_m = None
+        self.animated = [a for view in self.axes for a in (
+            self.ghosts[view], self.bones[view], self.joints[view], self.squares[view])]
+        self.animated.append(self.nodata)
 
     def _points_per_metre(self, ax) -> float:
         bbox = ax.get_window_extent()
@@ -197,7 +210,7 @@ class _PanelArtists:
 
 
 def render_frames(panels, out_gif=None, out_png=None, fps: float = 12.0, max_frames: int = 300,
-                  tolerance_s: float = 0.1, title: str = '', dpi: int = 64, png_dpi: int = 110,
+                  tolerance_s: float = 0.1, title: str = '', dpi: int = 72, png_dpi: int = 110,
                   still_stamp_ns: Optional[int] = None, colors: int = 64) -> Dict[str, object]:
     """Render panels side by side. ``panels``: list of :class:`Panel`, or a dict title ->
     SkeletonSeries / (N, 20, 3) array / None (style from the title: 'raw', 'character', else
@@ -241,18 +254,33 @@ def render_frames(panels, out_gif=None, out_png=None, fps: float = 12.0, max_fra
                        + (f'   (playback x{speed:.1f})' if speed > 1.01 else ''))
         return n
 
+    animated = [a for pa in arts for a in pa.animated] + [clock]
+
+    def set_animated(flag):
+        for a in animated:
+            a.set_animated(flag)
+
     out = {'frames': 0, 'speed': speed, 'gif': None, 'png': None, 'still_stamp_ns': None}
     best = (-1, int(stamps[len(stamps) // 2]))
     if out_gif is not None:
+        # blitting: the static part (axes, titles, legend) is drawn once, then only the moving
+        # artists are drawn over a copy of it for every frame
+        set_animated(True)
+        canvas = fig.canvas
+        canvas.draw()
+        background = canvas.copy_from_bbox(fig.bbox)
         images = []
         for st in stamps:
             n = draw(st)
             if n > best[0]:
                 best = (n, int(st))
-            fig.canvas.draw()
-            rgb = np.asarray(fig.canvas.buffer_rgba())[..., :3]
+            canvas.restore_region(background)
+            for a in animated:
+                fig.draw_artist(a)
+            rgb = np.asarray(canvas.buffer_rgba())[..., :3]
             images.append(Image.fromarray(rgb).quantize(colors=colors, method=Image.Quantize.MEDIANCUT,
                                                         dither=Image.Dither.NONE))
+        set_animated(False)
         Path(out_gif).parent.mkdir(parents=True, exist_ok=True)
         images[0].save(out_gif, save_all=True, append_images=images[1:], loop=0,
                        duration=int(round(1000.0 / fps)), optimize=True, disposal=1)
@@ -261,8 +289,9 @@ def render_frames(panels, out_gif=None, out_png=None, fps: float = 12.0, max_fra
     if out_png is not None:
         if still_stamp_ns is None:
             if out_gif is None:
+                fig.canvas.draw()  # lays the axes out (capsule widths need it)
                 for st in stamps:
-                    n = sum(a.panel.series is not None and a.update(int(st)) for a in arts)
+                    n = sum(a.update(int(st)) for a in arts)
                     if n > best[0]:
                         best = (n, int(st))
             still_stamp_ns = best[1] if best[0] > 0 else int(stamps[len(stamps) // 2])
