@@ -74,10 +74,14 @@ class _Acc:
             return np.where(self.n > 0, np.sqrt(self.s / np.maximum(self.n, 1)), np.nan)
 
 
-def measure(streams: Sequence[np.ndarray], references: Optional[Sequence[np.ndarray]] = None
-            ) -> Dict[str, np.ndarray]:
+def measure(streams: Sequence[np.ndarray], references: Optional[Sequence[np.ndarray]] = None,
+            groups: Optional[Sequence[str]] = None) -> Dict[str, np.ndarray]:
     """Noise measurements of a set of (T, 20, 3) streams (m), optionally against references
-    (same shape, NaN where missing). Returns arrays in mm (see module docstring)."""
+    (same shape, NaN where missing). Returns arrays in mm (see module docstring). ``groups`` (a
+    session key per stream) adds ``offset_clip_mm``: RMS per axis of the per-clip mean error about
+    its session's mean (the part of the systematic offset that changes from clip to clip, as the
+    model draws it per stream)."""
+    means: Dict[str, List[np.ndarray]] = {}
     hf = _Acc(NUM_JOINTS)
     hfx = _Acc(NUM_JOINTS)
     hfyz = _Acc(NUM_JOINTS)
@@ -102,12 +106,19 @@ def measure(streams: Sequence[np.ndarray], references: Optional[Sequence[np.ndar
                 mu = e[okr].mean(0)
                 rnd.add(((e[okr] - mu) ** 2).sum(axis=(0, 2)) / 3, okr.sum() - 1)
                 off.add((mu ** 2).sum(-1) / 3, 1)
+                means.setdefault(groups[i] if groups else '', []).append(mu)
     out = {'hf_jitter_mm': hf.rms() * 1e3, 'hf_jitter_depth_mm': hfx.rms() * 1e3,
            'hf_jitter_lateral_mm': hfyz.rms() * 1e3, 'bone_length_std_mm': bl.rms() * 1e3,
            'bone_length_f2f_mm': f2f.rms() * 1e3}
     if references is not None:
         out['random_error_mm'] = rnd.rms() * 1e3
         out['offset_mm'] = off.rms() * 1e3
+        oc = _Acc(NUM_JOINTS)
+        for lst in means.values():
+            if len(lst) >= 2:
+                a = np.array(lst)
+                oc.add(((a - a.mean(0)) ** 2).sum(axis=(0, 2)) / 3, len(a) - 1)
+        out['offset_clip_mm'] = oc.rms() * 1e3
     return out
 
 
@@ -158,8 +169,97 @@ def _synthetic_streams(ref_clips, seed: int = 0, params=None):
     return model, streams
 
 
+def _reference_clips(with_ref, src, max_clips):
+    """(name, rigid reference motion, fps) for the model side: the clip's marker reference with
+    constant segment lengths (Shum & Ho Eq. 3-4 retargeting to its median lengths), so the model
+    output's bone-length variation is the model's alone. Clips whose reference has gaps inside
+    are left out; gaps at the ends are trimmed."""
+    from .geometry import retarget
+    from .model import standard_body
+    pick = with_ref[:: max(1, len(with_ref) // max_clips)] if with_ref else []
+    out = []
+    for rc in pick:
+        r, fps = None, 100.0
+        if src is not None:
+            from .vicon import load_reference, vicon_path_for
+            try:
+                r = load_reference(vicon_path_for(src, rc.clip.name))
+            except Exception:
+                r = None
+        if r is None:
+            r, fps = rc.reference, 30.0
+        good = np.flatnonzero(np.isfinite(r).all(axis=(1, 2)))
+        if len(good) < 30 or len(good) != good[-1] - good[0] + 1:
+            continue
+        r = r[good[0]:good[-1] + 1]
+        r = retarget(r, standard_body(), np.median(segment_lengths(r), axis=0))
+        out.append((rc.clip.name, r, fps))
+    return out
+
+
+def model_measure(ref_clips, params=None, seed: int = 0):
+    """Run the sensor model ('clean') on the reference motions and measure its output."""
+    from .sensor_model import SensorModel
+    model = SensorModel(params, seed=seed)
+    streams = [model.corrupt(SimpleNamespace(name=n, positions=p, fps=fps), 'clean')
+               for n, p, fps in ref_clips]
+    if not streams:
+        return None, None, model, []
+    return (measure([s.positions for s in streams], [s.truth for s in streams]),
+            measure([s.truth for s in streams]), model, streams)
+
+
+def _group_ratio(real, model, idx):
+    with np.errstate(invalid='ignore', divide='ignore'):
+        r = np.asarray(real, float)[idx] / np.asarray(model, float)[idx]
+    r = r[np.isfinite(r)]
+    return float(np.mean(r)) if len(r) else 1.0
+
+
+def fit_params(result, ref_clips, params, iterations: int = 3) -> Dict:
+    """Multiplicative fit of the model's noise numbers to the real measurements.
+
+    Per joint group g: ``jitter.base_mm[g]`` scales with real/model lateral (y, z) hf jitter,
+    ``jitter.depth_coeff_mm`` with real/model depth-axis hf jitter (mean over joints), and
+    ``slow_drift.sigma_mm[g]`` with real/model within-clip bone-length std of the segments
+    ending in group g; the model is re-run after every step. Returns the fitted values and the
+    model's measurements with them."""
+    import copy
+    from .sensor_model import JOINT_GROUP
+    real = result['real']
+    p = copy.deepcopy(params)
+    cj = list(COMPARE_JOINTS)
+    groups = sorted({JOINT_GROUP[j] for j in cj})
+    m = result['model']
+    history = []
+    for it in range(iterations):
+        qd = _group_ratio(real['hf_jitter_depth_mm'], m['hf_jitter_depth_mm'], cj)
+        p['jitter']['depth_coeff_mm'] = round(float(p['jitter']['depth_coeff_mm'])
+                                              * float(np.clip(qd, 0.2, 5.0)), 3)
+        for g in groups:
+            js = [j for j in cj if JOINT_GROUP[j] == g]
+            q = _group_ratio(real['hf_jitter_lateral_mm'], m['hf_jitter_lateral_mm'], js)
+            p['jitter']['base_mm'][g] = round(float(p['jitter']['base_mm'][g])
+                                              * float(np.clip(q, 0.2, 5.0)), 2)
+            segs = [k for k in COMPARE_SEGMENTS if JOINT_GROUP[SEGMENT_CHILDREN[k]] == g]
+            if segs:
+                qb = _group_ratio(real['bone_length_std_mm'], m['bone_length_std_mm'], segs)
+                p['slow_drift']['sigma_mm'][g] = round(
+                    float(p['slow_drift']['sigma_mm'][g]) * float(np.clip(qb, 0.2, 5.0)), 2)
+        mm, _, _, _ = model_measure(ref_clips, p)
+        m = {k: v.tolist() for k, v in mm.items()}
+        history.append({'iteration': it + 1,
+                        'hf_ratio_model_over_real': _group_ratio(m['hf_jitter_mm'],
+                                                                 real['hf_jitter_mm'], cj),
+                        'bone_std_ratio_model_over_real': _group_ratio(
+                            m['bone_length_std_mm'], real['bone_length_std_mm'],
+                            list(COMPARE_SEGMENTS))})
+    return {'params': {'jitter': p['jitter'], 'slow_drift': p['slow_drift']},
+            'model': m, 'history': history}
+
+
 def calibrate(clips, registrations=None, src=None, max_model_clips: int = 60,
-              params=None) -> Dict:
+              params=None, fit_iterations: int = 3) -> Dict:
     """Real-vs-model statistics. ``clips``: :func:`skeleton_core.uiprmd.load_dataset` output.
 
     The model side needs the raw 100 Hz reference of clips with Vicon; ``src`` (the UI-PRMD folder)
@@ -168,7 +268,8 @@ def calibrate(clips, registrations=None, src=None, max_model_clips: int = 60,
     with_ref = [rc for rc in ok if rc.reference is not None]
     real_all = measure([rc.kinect.positions for rc in ok])
     real_ref = measure([rc.kinect.positions for rc in with_ref],
-                       [rc.reference for rc in with_ref]) if with_ref else None
+                       [rc.reference for rc in with_ref],
+                       [rc.clip.session for rc in with_ref]) if with_ref else None
     result = {'real': {k: v.tolist() for k, v in real_all.items()},
               'real_with_reference': None if real_ref is None
               else {k: v.tolist() for k, v in real_ref.items()},
@@ -179,34 +280,13 @@ def calibrate(clips, registrations=None, src=None, max_model_clips: int = 60,
             s: (r.mean_offset * 1e3).round(1).tolist() for s, r in registrations.items()}
     # model side
     try:
-        from .sensor_model import statistics as model_statistics
-        pick = with_ref[:: max(1, len(with_ref) // max_model_clips)] if with_ref else []
-        ref_clips = []
-        for rc in pick:
-            r100 = None
-            if src is not None:
-                from .vicon import load_reference, vicon_path_for
-                try:
-                    r100 = load_reference(vicon_path_for(src, rc.clip.name))
-                except Exception:
-                    r100 = None
-            if r100 is None:
-                good = np.isfinite(rc.reference).all(axis=(1, 2))
-                r = rc.reference[good]
-                # undo the sensor placement roughly: any rigid frame will do, the model re-places
-                r100 = r
-                ref_clips.append((rc.clip.name, r100, 30.0))
-            else:
-                ref_clips.append((rc.clip.name, r100, 100.0))
-        from .sensor_model import SensorModel
-        model = SensorModel(params, seed=0)
-        streams = [model.corrupt(SimpleNamespace(name=n, positions=p, fps=fps), 'clean')
-                   for n, p, fps in ref_clips]
+        ref_clips = _reference_clips(with_ref, src, max_model_clips)
+        model_m, truth_m, model, streams = model_measure(ref_clips, params)
         if streams:
-            result['model'] = {k: v.tolist() for k, v in measure(
-                [s.positions for s in streams], [s.truth for s in streams]).items()}
-            result['model_truth_hf_jitter_mm'] = measure([s.truth for s in streams])[
-                'hf_jitter_mm'].tolist()
+            from .sensor_model import statistics as model_statistics
+            result['model'] = {k: v.tolist() for k, v in model_m.items()}
+            result['model_truth_hf_jitter_mm'] = truth_m['hf_jitter_mm'].tolist()
+            result['model_truth_bone_length_std_mm'] = truth_m['bone_length_std_mm'].tolist()
             st = model_statistics(streams)
             result['model_statistics'] = {k: st[k] for k in ('jitter_mm', 'offset_mm',
                                                               'bone_length_std_mm',
@@ -215,6 +295,8 @@ def calibrate(clips, registrations=None, src=None, max_model_clips: int = 60,
             result['model_params'] = {'jitter': model.params['jitter'],
                                       'slow_drift': model.params['slow_drift'],
                                       'systematic': model.params['systematic']}
+            if fit_iterations:
+                result['fit'] = fit_params(result, ref_clips, model.params, fit_iterations)
     except ImportError as e:
         result['model_error'] = f'sensor model not available ({e})'
     result['proposal'] = propose(result)
@@ -227,32 +309,20 @@ def _ratio(model, real):
 
 
 def propose(result) -> Dict:
-    """YAML changes that would bring the model within tolerance (per joint group)."""
-    if 'model' not in result:
+    """YAML changes: the fitted values (:func:`fit_params`) that differ from the current ones."""
+    fit = result.get('fit')
+    cur = result.get('model_params')
+    if not fit or not cur:
         return {}
-    from .sensor_model import JOINT_GROUP
-    real_hf = np.asarray(result['real']['hf_jitter_mm'])
-    model_hf = np.asarray(result['model']['hf_jitter_mm'])
-    real_bl = np.asarray(result['real']['bone_length_std_mm'])
-    model_bl = np.asarray(result['model']['bone_length_std_mm'])
-    params = result.get('model_params', {})
-    out = {'jitter.base_mm': {}, 'slow_drift.sigma_mm': {}}
-    groups = sorted({JOINT_GROUP[j] for j in COMPARE_JOINTS})
-    for g in groups:
-        js = [j for j in COMPARE_JOINTS if JOINT_GROUP[j] == g]
-        ratio = float(np.nanmean(real_hf[js] / model_hf[js]))
-        cur = float(params.get('jitter', {}).get('base_mm', {}).get(g, np.nan))
-        if abs(ratio - 1) > TOLERANCE and np.isfinite(cur):
-            out['jitter.base_mm'][g] = {'current': cur, 'proposed': round(cur * ratio, 1),
-                                        'real_over_model_hf': round(ratio, 2)}
-        segs = [k for k in COMPARE_SEGMENTS if JOINT_GROUP[SEGMENT_CHILDREN[k]] == g]
-        if segs:
-            rb = float(np.nanmean(real_bl[segs] / model_bl[segs]))
-            cur = float(params.get('slow_drift', {}).get('sigma_mm', {}).get(g, np.nan))
-            if abs(rb - 1) > TOLERANCE and np.isfinite(cur):
-                out['slow_drift.sigma_mm'][g] = {
-                    'current': cur, 'proposed': round(cur * rb, 1),
-                    'real_over_model_bone_std': round(rb, 2)}
+    out = {}
+    old, new = cur['jitter']['depth_coeff_mm'], fit['params']['jitter']['depth_coeff_mm']
+    if abs(new / old - 1) > 0.05:
+        out['jitter.depth_coeff_mm'] = {'current': old, 'proposed': new}
+    for sec, key in (('jitter', 'base_mm'), ('slow_drift', 'sigma_mm')):
+        for g, old in cur[sec][key].items():
+            new = fit['params'][sec][key].get(g, old)
+            if old and abs(new / old - 1) > 0.05:
+                out[f'{sec}.{key}.{g}'] = {'current': old, 'proposed': new}
     return out
 
 
@@ -274,8 +344,12 @@ def format_report(result) -> str:
              'Savitzky-Golay); random = std of the error against the reference about its '
              'per-clip mean; offset = RMS of per-clip mean error. "!" = model outside +-30 % '
              'of real.', '',
-             '| joint | hf real | hf model | ratio | random real | random model | offset real '
-             '| offset model |', '|---|---:|---:|---:|---:|---:|---:|---:|']
+             'offset clip = the part of it that changes between clips of one session (what the '
+             'model draws per stream). "fit" = the model with the proposed numbers.', '',
+             '| joint | hf real | hf model | ratio | hf fit | random real | random model | '
+             'offset real | offset clip real | offset model |',
+             '|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|']
+    fit = (result.get('fit') or {}).get('model')
     for j in COMPARE_JOINTS:
         hr = real['hf_jitter_mm'][j]
         hm = model['hf_jitter_mm'][j] if model else np.nan
@@ -283,9 +357,11 @@ def format_report(result) -> str:
         flag = ' !' if model and abs(ratio - 1) > TOLERANCE else ''
         lines.append(
             f'| {JOINT_NAMES[j]} | {_f(hr)} | {_f(hm)} | {_f(ratio) if not model else f"{ratio:.2f}"}'
-            f'{flag} | {_f(rr.get("random_error_mm", [np.nan] * 20)[j])} | '
+            f'{flag} | {_f(fit["hf_jitter_mm"][j]) if fit else "n/a"} | '
+            f'{_f(rr.get("random_error_mm", [np.nan] * 20)[j])} | '
             f'{_f(model["random_error_mm"][j]) if model else "n/a"} | '
             f'{_f(rr.get("offset_mm", [np.nan] * 20)[j])} | '
+            f'{_f(rr.get("offset_clip_mm", [np.nan] * 20)[j])} | '
             f'{_f(model["offset_mm"][j]) if model else "n/a"} |')
     cj = list(COMPARE_JOINTS)
     lines += ['', 'High-frequency jitter by axis, mean over joints (mm): depth (x, along the '
@@ -298,8 +374,8 @@ def format_report(result) -> str:
                   _f(float(np.nanmean(np.asarray(model['hf_jitter_lateral_mm'])[cj])))
                   if model else 'n/a')]
     lines += ['', 'Per segment (mm): within-clip std of the length, and RMS frame-to-frame change.',
-              '', '| segment | std real | std model | ratio | f2f real | f2f model |',
-              '|---|---:|---:|---:|---:|---:|']
+              '', '| segment | std real | std model | ratio | std fit | f2f real | f2f model |',
+              '|---|---:|---:|---:|---:|---:|---:|']
     for k in COMPARE_SEGMENTS:
         br = real['bone_length_std_mm'][k]
         bm = model['bone_length_std_mm'][k] if model else np.nan
@@ -307,6 +383,7 @@ def format_report(result) -> str:
         flag = ' !' if model and abs(ratio - 1) > TOLERANCE else ''
         lines.append(f'| {SEGMENT_NAMES[k]} | {_f(br)} | {_f(bm)} | '
                      f'{"n/a" if not model else f"{ratio:.2f}"}{flag} | '
+                     f'{_f(fit["bone_length_std_mm"][k]) if fit else "n/a"} | '
                      f'{_f(real["bone_length_f2f_mm"][k])} | '
                      f'{_f(model["bone_length_f2f_mm"][k]) if model else "n/a"} |')
     lines += ['', f'Tracking failures: frames with a core segment (no hands/feet) > {FAIL_REL:.0%} and '
@@ -319,14 +396,17 @@ def format_report(result) -> str:
                      f'{100 * d["median_rel_dev"]:.1f} % | {100 * d["max_rel_dev"]:.0f} % | '
                      f'{d["max_joint_speed_m_s"]:.1f} |')
     prop = result.get('proposal') or {}
-    if any(prop.values()):
-        lines += ['', 'Proposed config/sensor_model.yaml changes (scale by real/model):', '']
-        for key, groups in prop.items():
-            for g, d in groups.items():
-                lines.append(f'- `{key}.{g}`: {d["current"]} -> {d["proposed"]} '
-                             f'(real/model {list(d.values())[-1]})')
+    if prop:
+        lines += ['', 'Proposed config/sensor_model.yaml changes (fitted by re-running the model, '
+                  f'{len(result["fit"]["history"])} iterations):', '']
+        for key, d in prop.items():
+            lines.append(f'- `{key}`: {d["current"]} -> {d["proposed"]}')
+        h = result['fit']['history'][-1]
+        lines.append(f'- after the fit, model/real mean ratio: hf jitter '
+                     f'{h["hf_ratio_model_over_real"]:.2f}, bone-length std '
+                     f'{h["bone_std_ratio_model_over_real"]:.2f}')
     elif model:
-        lines += ['', 'Model within +-30 % of real for every joint group: no change proposed.']
+        lines += ['', 'No change proposed.']
     return '\n'.join(lines)
 
 

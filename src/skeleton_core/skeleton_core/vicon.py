@@ -89,9 +89,16 @@ class SubjectParams:
 
 
 def read_vicon(path) -> np.ndarray:
-    """(N, 39, 3) marker positions in metres (lab frame), validated (see uiprmd.read_table)."""
+    """(N, 39, 3) marker positions in metres (lab frame), validated (see uiprmd.read_table).
+
+    A few files are not gap-filled at their ends: the missing marker is written as exactly
+    (0, 0, 0) (e.g. CLAV in m10_s02_e01 frames 0-47, LASI in m07_s04_e01). Those samples are
+    returned as NaN, so every joint centre built from them is NaN on those frames (and takes no
+    part in the registration, the ground-truth topic or any score)."""
     from .uiprmd import read_table
-    return read_table(Path(path), NUM_COLUMNS).reshape(-1, NUM_MARKERS, 3) / 1000.0
+    m = read_table(Path(path), NUM_COLUMNS).reshape(-1, NUM_MARKERS, 3) / 1000.0
+    m[np.all(np.abs(m) < 1e-6, axis=-1)] = np.nan
+    return m
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
