@@ -23,6 +23,17 @@ if [ ${#need_apt[@]} -gt 0 ]; then
   fi
 fi
 
+# Optional: the OpenNI2 runtime for the driver's live Kinect source (Debian libopenni2-0). Installed
+# only when root with apt-get and not yet present; skipped silently otherwise (nothing else needs it).
+if ! ls /usr/lib/*/libOpenNI2.so.0 /usr/lib/libOpenNI2.so.0 >/dev/null 2>&1 &&
+   [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
+  log "installing libopenni2-0 (OpenNI2 runtime for source:=live) with apt-get"
+  { DEBIAN_FRONTEND=noninteractive apt-get install -y -qq libopenni2-0 >/dev/null 2>&1 ||
+    { apt-get update -qq >/dev/null 2>&1 &&
+      DEBIAN_FRONTEND=noninteractive apt-get install -y -qq libopenni2-0 >/dev/null 2>&1; }; } ||
+    log "libopenni2-0 could not be installed: the live source will say so; everything else works"
+fi
+
 underlay=""
 for d in ${ROS_DISTRO_PATH:-} /opt/ros/kilted /opt/ros/jazzy /opt/ros/humble /opt/ros/rolling; do
   [ -f "$d/setup.bash" ] && { underlay="$d"; break; }
