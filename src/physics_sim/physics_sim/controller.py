@@ -115,7 +115,7 @@ def quat_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Shortest-arc rotation (x, y, z, w) taking unit vector ``a`` to unit vector ``b`` (rows)."""
     a = np.asarray(a, float)
     b = np.asarray(b, float)
-    c = np.cross(a, b)
+    c = _rows_cross(a, b) if a.ndim == 2 and b.ndim == 2 else np.cross(a, b)
     d = np.sum(a * b, axis=-1, keepdims=True)
     q = np.concatenate([c, 1.0 + d], axis=-1)
     # opposite vectors: rotate pi about any axis orthogonal to a
@@ -138,25 +138,52 @@ def pelvis_quat(positions: np.ndarray) -> np.ndarray:
     return quat_from_matrix(np.stack([x, y, z], axis=1))
 
 
+def _levels():
+    """Segments grouped by depth in the body tree (parents before children)."""
+    depth = {}
+    for k in body_order():
+        pb = segment_parent_body(k)
+        depth[k] = 0 if pb < 0 else depth[pb] + 1
+    return [np.array([k for k in depth if depth[k] == lv]) for lv in range(max(depth.values()) + 1)]
+
+
+_LEVELS = None
+
+
+def _rotate_rows(q, v):
+    u, w = q[:, :3], q[:, 3:4]
+    t = 2.0 * _rows_cross(u, v)
+    return v + w * t + _rows_cross(u, t)
+
+
+def _rows_cross(a, b):
+    return np.stack([a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1], a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2],
+                     a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]], axis=1)
+
+
 def segment_quats_from_positions(positions: np.ndarray, rest_offsets: np.ndarray) -> np.ndarray:
     """World orientation (x, y, z, w) of every segment (19, SEGMENTS order) from joint positions:
     the root segment follows the pelvis frame; every other segment is its parent body's
     orientation followed by the shortest arc turning the parent-carried rest direction onto the
-    segment's direction (no twist added)."""
+    segment's direction (no twist added). Batched by tree depth."""
+    global _LEVELS
+    if _LEVELS is None:
+        _LEVELS = _levels()
     p = np.asarray(positions, float)
-    q = np.zeros((len(SEGMENTS), 4))
-    root_q = pelvis_quat(p)
     rest = np.asarray(rest_offsets, float)
-    for k in body_order():
-        pb = segment_parent_body(k)
-        if pb < 0:
-            q[k] = root_q
-            continue
-        base = q[pb]
-        c, par = SEGMENT_CHILDREN[k], SEGMENT_PARENTS[k]
-        rd = _unit(quat_rotate(base, rest[c]), np.array([0.0, 0.0, 1.0]))
-        td = _unit(p[c] - p[par], rd)
-        q[k] = quat_multiply(quat_between(rd, td), base)
+    q = np.zeros((len(SEGMENTS), 4))
+    q[_LEVELS[0]] = pelvis_quat(p)
+    child = np.array(SEGMENT_CHILDREN)
+    parent = np.array(SEGMENT_PARENTS)
+    pbody = np.array([segment_parent_body(k) for k in range(len(SEGMENTS))])
+    for ks in _LEVELS[1:]:
+        base = q[pbody[ks]]
+        rd = _rotate_rows(base, rest[child[ks]])
+        rd /= np.maximum(np.linalg.norm(rd, axis=1, keepdims=True), 1e-12)
+        td = p[child[ks]] - p[parent[ks]]
+        n = np.linalg.norm(td, axis=1, keepdims=True)
+        td = np.where(n > 1e-9, td / np.maximum(n, 1e-12), rd)
+        q[ks] = quat_multiply(quat_between(rd, td), base)
     return q
 
 

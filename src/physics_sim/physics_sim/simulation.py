@@ -45,6 +45,17 @@ from .mjcf_body import CharacterParams, joint_anchor
 from .mjcf_world import ALL_BITS, CharacterEntry, ObjectSpec, WorldParams, character_bits, world_xml
 
 CONTROLLERS = ('explicit_pd', 'mocap_constraints')
+SEGMENT_CHILDREN_A = tuple(c for _, c in SEGMENTS)
+SEGMENT_PARENTS_A = tuple(p for p, _ in SEGMENTS)
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Row-wise cross product of (N, 3) arrays (np.cross is slow for small arrays)."""
+    out = np.empty_like(a)
+    out[:, 0] = a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1]
+    out[:, 1] = a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2]
+    out[:, 2] = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
+    return out
 
 
 # ---------------------------------------------------------------------------------------------
@@ -211,6 +222,8 @@ class Simulation:
                 if pin.active:
                     self._set_pin(ch, j, True, pin.point)
         mujoco.mj_forward(m, d)
+        self._pack_indices()
+        self._pack_targets()
         self.counters['rebuilds'] += 1
 
     @staticmethod
@@ -465,6 +478,7 @@ class Simulation:
         n = max(1, int(round(duration / m.opt.timestep)))
         if self.config.dodge:
             self._update_dodge()
+        self._pack_targets()
         for _ in range(n):
             mujoco.mj_step1(m, d)   # kinematics + velocities of the current state
             self._control()         # forces from the current state (not one step old)
@@ -472,42 +486,121 @@ class Simulation:
             self.time = float(d.time)
         self._check_health()
 
+    def _pack_indices(self) -> None:
+        """Index arrays over all characters (after every rebuild): the control law runs once,
+        vectorised, for the whole world."""
+        chars = list(self.characters.values())
+        self._chars = chars
+        n = len(chars)
+        cat = (lambda xs, shape: np.concatenate(xs) if xs else np.zeros(shape))  # noqa: E731
+        self._jb = cat([c.joint_body for c in chars], (0,)).astype(int)
+        self._jl = cat([c.joint_local for c in chars], (0, 3))
+        self._sb = cat([c.seg_body for c in chars], (0,)).astype(int)
+        child = np.array(SEGMENT_CHILDREN_A)
+        parent = np.array(SEGMENT_PARENTS_A)
+        self._sc = cat([child + NUM_JOINTS * i for i in range(n)], (0,)).astype(int)
+        self._sp = cat([parent + NUM_JOINTS * i for i in range(n)], (0,)).astype(int)
+        self._tw_i = cat([c.twist_inertia for c in chars], (0,))
+        self._jroot = self.model.body_rootid[self._jb] if n else np.zeros(0, int)
+        self._mocap = (cat([c.mocap_ids for c in chars], (0,)).astype(int)
+                       if n and chars[0].mocap_ids is not None else None)
+
+    def _pack_targets(self) -> None:
+        """Stacked target frames (previous, newest, velocities) of all characters for this
+        advance; dodging characters get their arm targets replaced."""
+        chars = self._chars
+        nj, ns = NUM_JOINTS, len(SEGMENTS)
+        P0, P1, Q0, Q1, W, T0, PER = [], [], [], [], [], [], []
+        for ch in chars:
+            p0, p1 = ch.prev.positions, ch.cur.positions
+            if ch.dodge_until > self.time:
+                p0, p1 = self._dodge_targets(ch, p0), self._dodge_targets(ch, p1)
+            P0.append(p0)
+            P1.append(p1)
+            q0, q1 = ch.prev.seg_quats, ch.cur.seg_quats
+            q1 = q1 * np.where(np.sum(q0 * q1, axis=1, keepdims=True) < 0, -1.0, 1.0)
+            Q0.append(q0)
+            Q1.append(q1)
+            from .character import _rotvec
+            W.append(_rotvec(quat_multiply(q1, quat_conjugate(q0))) / ch.period)
+            T0.append(ch.cur.sim_time)
+            PER.append(ch.period)
+        if not chars:
+            self._tg = None
+            return
+        T0, PER = np.array(T0), np.array(PER)
+        P0, P1 = np.concatenate(P0), np.concatenate(P1)
+        self._tg = dict(P0=P0, dP=P1 - P0, V=(P1 - P0) / np.repeat(PER, nj)[:, None],
+                        Q0=np.concatenate(Q0), Q1=np.concatenate(Q1), W=np.concatenate(W),
+                        T0j=np.repeat(T0, nj), PERj=np.repeat(PER, nj),
+                        T0s=np.repeat(T0, ns), PERs=np.repeat(PER, ns))
+        feet = []
+        for i, ch in enumerate(chars):
+            for j in ch.pins:
+                feet.append((i, j, ch.pins[j]))
+        self._feet = feet
+        self._feet_idx = np.array([i * nj + j for i, j, _ in feet], int)
+        self._feet_active = np.array([pin.active for _, _, pin in feet], bool)
+        self._feet_manual = np.array([pin.manual for _, _, pin in feet], bool)
+        self._pin_pts = None
+
     def _control(self) -> None:
         m, d = self.model, self.data
         c = self.config
         g = c.gains
-        d.xfrc_applied[:] = 0.0
+        xfrc = d.xfrc_applied
+        xfrc[:] = 0.0
         t = self.time
-        for ch in self.characters.values():
-            p_t, q_t, v_t, w_t = ch.target_at(t)
-            if ch.dodge_until > t:
-                p_t = self._dodge_targets(ch, p_t)
-            pts = ch.joint_points(d)
+        tg = self._tg
+        if tg is not None:
+            # interpolated targets: linear over one frame period, then held
+            sj = np.clip((t - tg['T0j']) / tg['PERj'], 0.0, 1.0)[:, None]
+            p_t = tg['P0'] + sj * tg['dP']
+            v_t = tg['V'] * (sj < 1.0)
+            ss = np.clip((t - tg['T0s']) / tg['PERs'], 0.0, 1.0)[:, None]
+            q_t = (1.0 - ss) * tg['Q0'] + ss * tg['Q1']
+            q_t /= np.sqrt(np.sum(q_t * q_t, axis=1, keepdims=True))
+            w_t = tg['W'] * (ss < 1.0)
+            jb = self._jb
+            xm = d.xmat[jb].reshape(-1, 3, 3)
+            pts = d.xpos[jb] + (xm @ self._jl[:, :, None])[:, :, 0]
             if c.controller == 'explicit_pd':
-                bodies = ch.joint_body
-                cvel = d.cvel[bodies]
-                com = d.subtree_com[m.body_rootid[bodies]]
-                vel = cvel[:, 3:] + np.cross(cvel[:, :3], pts - com)
-                f = pd_force(p_t, pts, v_t, vel, g.ke, g.kd, g.max_force)
-                wr = apply_at_points(f, pts, d.xipos[bodies])
-                np.add.at(d.xfrc_applied, bodies, wr)
+                cvel = d.cvel[jb]
+                vel = cvel[:, 3:] + _cross(cvel[:, :3], pts - d.subtree_com[self._jroot])
+                f = g.ke * (p_t - pts) + g.kd * (v_t - vel)
+                nrm = np.sqrt(np.sum(f * f, axis=1, keepdims=True))
+                f *= np.minimum(1.0, g.max_force / np.maximum(nrm, 1e-300))
+                wr = np.concatenate([f, _cross(pts - d.xipos[jb], f)], axis=1)
+                np.add.at(xfrc, jb, wr)
             else:
-                d.mocap_pos[ch.mocap_ids] = p_t
+                d.mocap_pos[self._mocap] = p_t
             # Eq. 2: torque about each segment's own axis
-            axes = ch.segment_axes(pts)
-            err = twist_error(q_t, ch.segment_quats(d), axes)
-            omega = d.cvel[ch.seg_body, :3]
+            axes = pts[self._sc] - pts[self._sp]
+            axes /= np.maximum(np.sqrt(np.sum(axes * axes, axis=1, keepdims=True)), 1e-9)
+            qc = d.xquat[self._sb]  # w x y z
+            # rel = q_t * conj(q_cur), only its vector part along the axis and its w matter
+            x1, y1, z1, w1 = q_t[:, 0], q_t[:, 1], q_t[:, 2], q_t[:, 3]
+            w2, x2, y2, z2 = qc[:, 0], -qc[:, 1], -qc[:, 2], -qc[:, 3]
+            rw = w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2
+            rx = w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2
+            ry = w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2
+            rz = w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2
+            sign = np.where(rw < 0, -1.0, 1.0)
+            proj = (rx * axes[:, 0] + ry * axes[:, 1] + rz * axes[:, 2]) * sign
+            err = 2.0 * np.arctan2(proj, rw * sign)
+            err = (err + np.pi) % (2 * np.pi) - np.pi
+            omega = d.cvel[self._sb, :3]
             rate = np.sum(omega * axes, axis=1)
             rate_t = np.sum(w_t * axes, axis=1)
-            tau = pd_twist_torque(err, rate_t, rate, g.twist_ke * ch.twist_inertia,
-                                  g.twist_kd * ch.twist_inertia, g.max_torque)
-            d.xfrc_applied[ch.seg_body, 3:] += tau[:, None] * axes
-            if c.pin_feet:
-                self._update_pins(ch, p_t, v_t, pts)
-        for uid, k, f, t_end in self.pushes:
-            if t < t_end and uid in self.characters:
-                d.xfrc_applied[self.characters[uid].seg_body[k], :3] += f
-        self.pushes = [p for p in self.pushes if p[3] > t]
+            tau = np.clip(g.twist_ke * self._tw_i * err + g.twist_kd * self._tw_i * (rate_t - rate),
+                          -g.max_torque, g.max_torque)
+            xfrc[self._sb, 3:] += tau[:, None] * axes
+            self._update_pins(p_t, v_t, pts)
+        if self.pushes:
+            for uid, k, f, t_end in self.pushes:
+                if t < t_end and uid in self.characters:
+                    xfrc[self.characters[uid].seg_body[k], :3] += f
+            self.pushes = [p for p in self.pushes if p[3] > t]
 
     # ------------------------------------------------------------------ virtual joints
     def _set_pin(self, ch: Character, j: int, on: bool, point=None) -> None:
@@ -529,6 +622,7 @@ class Simulation:
         pin = ch.pins[j]
         pin.active, pin.manual, pin.point = True, True, p.copy()
         self._set_pin(ch, j, True, p)
+        self._pack_targets()
 
     def unpin(self, user_id: int, joint: str) -> None:
         ch = self.characters[int(user_id)]
@@ -536,25 +630,40 @@ class Simulation:
         if j in ch.pins:
             ch.pins[j].active = ch.pins[j].manual = False
             self._set_pin(ch, j, False)
+            self._pack_targets()
 
-    def _update_pins(self, ch: Character, p_t, v_t, pts) -> None:
+    def _update_pins(self, p_t, v_t, pts) -> None:
+        """Pin a foot whose target is on the floor and slow; release it when the target lifts or
+        slides away (Shum & Ho 2012, Sec. 6.1)."""
         c = self.config
+        fi = self._feet_idx
+        if fi.size == 0:
+            return
         floor = self.sensor.lift if self.sensor else 0.0
-        for j, pin in ch.pins.items():
-            if pin.manual:
-                continue
-            h = p_t[j, 2] - floor
+        h = p_t[fi, 2] - floor
+        speed = np.sqrt(np.sum(v_t[fi] ** 2, axis=1))
+        down = (h < c.pin_height) & (speed < c.pin_speed) & c.pin_feet
+        act = self._feet_active
+        slide = np.sqrt(np.sum((p_t[fi, :2] - self._pin_points()[:, :2]) ** 2, axis=1))
+        up = (h > c.pin_release_height) | (slide > c.pin_release_distance) | (not c.pin_feet)
+        change = np.flatnonzero(np.where(act, up, down) & ~self._feet_manual)
+        for n in change:
+            i, j, pin = self._feet[n]
             if not pin.active:
-                if h < c.pin_height and np.linalg.norm(v_t[j]) < c.pin_speed:
-                    pin.active = True
-                    pin.point = pts[j].copy()
-                    self._set_pin(ch, j, True, pin.point)
-                    self.counters['pins'] += 1
+                pin.active = True
+                pin.point = pts[fi[n]].copy()
+                self._set_pin(self._chars[i], j, True, pin.point)
+                self.counters['pins'] += 1
             else:
-                slide = np.linalg.norm(p_t[j, :2] - pin.point[:2])
-                if h > c.pin_release_height or slide > c.pin_release_distance:
-                    pin.active = False
-                    self._set_pin(ch, j, False)
+                pin.active = False
+                self._set_pin(self._chars[i], j, False)
+            act[n] = pin.active
+            self._pin_pts = None
+
+    def _pin_points(self) -> np.ndarray:
+        if getattr(self, '_pin_pts', None) is None or len(self._pin_pts) != len(self._feet):
+            self._pin_pts = np.array([pin.point for _, _, pin in self._feet]).reshape(-1, 3)
+        return self._pin_pts
 
     def _check_health(self) -> None:
         """Stretched virtual joints are conflicts (counted; released if badly stretched); a
