@@ -160,13 +160,15 @@ class _PanelArtists:
         return bbox.width * 72.0 / self._fig.dpi / (x1 - x0)
 
     def update(self, stamp_ns: int) -> int:
-        """Draw the frame nearest ``stamp_ns``; returns the number of red squares drawn."""
+        """Draw the latest frame at or before ``stamp_ns`` (held for at most the tolerance);
+        returns 1000 when the panel has data plus the number of red squares drawn."""
         s = self.panel.series
         n_squares = 0
-        i = -1 if s is None else int(s.index_at(np.array([stamp_ns]), self.tol)[0])
+        i = -1 if s is None else int(s.index_held(np.array([stamp_ns]), self.tol)[0])
         g = self.panel.ghost
-        gi = -1 if g is None else int(g.index_at(np.array([stamp_ns]), self.tol)[0])
+        gi = -1 if g is None else int(g.index_held(np.array([stamp_ns]), self.tol)[0])
         self.nodata.set_visible(i < 0)
+        has_data = 0 if i < 0 else 1000
         if self.panel.style == 'character' and self._pts_per_m is None:
             self._pts_per_m = self._points_per_metre(self.axes['front'])
         for view in self.axes:
@@ -206,16 +208,18 @@ class _PanelArtists:
                 n_squares = int(bad.sum())
             else:
                 self.squares[view].set_offsets(np.zeros((0, 2)))
-        return n_squares
+        return has_data + n_squares
 
 
 def render_frames(panels, out_gif=None, out_png=None, fps: float = 12.0, max_frames: int = 300,
-                  tolerance_s: float = 0.1, title: str = '', dpi: int = 72, png_dpi: int = 110,
+                  hold_s: float = 0.5, title: str = '', dpi: int = 72, png_dpi: int = 110,
                   still_stamp_ns: Optional[int] = None, colors: int = 64) -> Dict[str, object]:
     """Render panels side by side. ``panels``: list of :class:`Panel`, or a dict title ->
     SkeletonSeries / (N, 20, 3) array / None (style from the title: 'raw', 'character', else
     reconstructed). Writes an animated GIF (``out_gif``) and/or a still PNG (``out_png``, the frame
-    at ``still_stamp_ns``, else the one with the most red squares, else the middle one).
+    at ``still_stamp_ns``, else one where the most panels have data and, among those, the raw
+    panel shows the most red squares). A panel shows its latest frame at or before the sample
+    time for at most ``hold_s``, then "no data".
     Returns {'frames', 'speed', 'gif', 'png', 'still_stamp_ns'}."""
     import matplotlib
     matplotlib.use('Agg', force=False)
@@ -235,7 +239,7 @@ def render_frames(panels, out_gif=None, out_png=None, fps: float = 12.0, max_fra
     FigureCanvasAgg(fig)
     gs = fig.add_gridspec(2, len(panels), height_ratios=[1, 1], left=0.02, right=0.98,
                           bottom=0.08, top=0.9, wspace=0.06, hspace=0.08)
-    tol = int(tolerance_s * 1e9)
+    tol = int(hold_s * 1e9)
     arts = []
     for k, pn in enumerate(panels):
         lim = _limits(pn.series if pn.series is not None and len(pn.series) else pn.ghost, span)

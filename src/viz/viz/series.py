@@ -85,6 +85,17 @@ class SkeletonSeries:
         return np.where(ok, pick, -1)
 
 
+    def index_held(self, stamps_ns: np.ndarray, hold_ns: int) -> np.ndarray:
+        """Index of the latest frame at or before every stamp (what a display shows), -1 when
+        there is none or it is older than ``hold_ns``."""
+        q = np.asarray(stamps_ns, dtype=np.int64)
+        if len(self) == 0:
+            return np.full(q.shape, -1)
+        i = np.searchsorted(self.stamps_ns, q, side='right') - 1
+        ok = (i >= 0) & (q - self.stamps_ns[np.clip(i, 0, None)] <= hold_ns)
+        return np.where(ok, i, -1)
+
+
 @dataclass
 class BagData:
     """What the report reads from a bag."""
