@@ -137,6 +137,6 @@ def test_report_cli_on_a_small_bag(tmp_path, capsys):
 
 def test_series_frame_lookup_nearest_and_held():
     s = SkeletonSeries.from_arrays(np.zeros((3, NUM_JOINTS, 3)), np.array([0, 100, 300]))
-    assert s.index_at(np.array([-5, 40, 60, 210, 400]), 50).tolist() == [0, 0, 1, -1, 2]
+    assert s.index_at(np.array([-5, 40, 60, 210, 330, 400]), 50).tolist() == [0, 0, 1, -1, 2, -1]
     assert s.index_held(np.array([-5, 40, 99, 100, 250, 301, 500]), 150).tolist() == \
         [-1, 0, 0, 1, 1, 2, -1]
