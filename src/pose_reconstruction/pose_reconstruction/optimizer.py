@@ -43,6 +43,28 @@ SOLVERS = ('stochastic', 'gauss_newton')
 KNN_MODES = ('brute', 'kdtree')
 
 
+def local_pca(Yc: np.ndarray, dims: int):
+    """Principal axes of centred rows ``Yc`` (K, 60): ``(V (d, 60) orthonormal rows, singular
+    values (d,))``, d <= dims, dropping numerically empty directions. For K < 60 the K x K Gram
+    matrix is diagonalised (cheaper than an SVD of Yc)."""
+    K, D = Yc.shape
+    if K < D:
+        lam, U = np.linalg.eigh(Yc @ Yc.T)
+        lam, U = lam[::-1], U[:, ::-1]
+        keep = lam > max(lam[0], 1e-300) * 1e-10
+        d = int(min(dims, keep.sum()))
+        s = np.sqrt(lam[:d])
+        V = (U[:, :d].T @ Yc) / s[:, None]
+    else:
+        _, s, vt = np.linalg.svd(Yc, full_matrices=False)
+        keep = s > max(s[0], 1e-300) * 1e-5
+        d = int(min(dims, keep.sum()))
+        V, s = vt[:d], s[:d]
+    if d == 0:  # every neighbour identical: a zero-dimensional space (the mean only)
+        return np.zeros((1, D)), np.zeros(1)
+    return V, s
+
+
 @dataclass
 class OptimizerResult:
     positions: np.ndarray                 # (20, 3) normalised standard-body posture
@@ -144,17 +166,34 @@ class NaturalPostureOptimizer:
     # -- energy -------------------------------------------------------------------------------
     def _setup(self, Y: np.ndarray, query: np.ndarray, weights: np.ndarray,
                continuity_target: Optional[np.ndarray]):
-        """Local PCA of the neighbours ``Y`` (K, 60) and the constants of the energy."""
+        """Local PCA of the neighbours ``Y`` (K, 60) and the constants of the energy.
+
+        Every term is evaluated in the latent space: with ``x = mu + V^T z`` (V orthonormal rows)
+        E_c is a quadratic form in z, |x - a|^2 = |z - z_a|^2 + |residual_a|^2 for E_s and E_m,
+        and the segment vectors of E_k are affine in z (``seg0 + z dV``).
+        """
         mu = Y.mean(axis=0)
-        _, s, vt = np.linalg.svd(Y - mu, full_matrices=False)
-        d = int(min(self.pca_dims, vt.shape[0]))
-        V = vt[:d]                                            # (d, 60)
+        V, s = local_pca(Y - mu, self.pca_dims)
+        d = V.shape[0]
         zn = (Y - mu) @ V.T                                   # (K, d)
         res_n = np.maximum(np.sum((Y - mu) ** 2, axis=1) - np.sum(zn ** 2, axis=1), 0.0)
-        sd = s[:d] / np.sqrt(max(len(Y) - 1, 1))
-        return dict(mu=mu, V=V, zn=zn, res_n=res_n, sd=sd, q=query.ravel(),
-                    w60=np.repeat(weights, 3), c=None if continuity_target is None
-                    else continuity_target.ravel())
+        sd = s / np.sqrt(max(len(Y) - 1, 1))
+        q = query.ravel()
+        w60 = np.repeat(weights, 3)
+        A_c = (V * w60) @ V.T                                 # E_c = z A z + b z + c
+        b_c = 2.0 * (V @ (w60 * (mu - q)))
+        c_c = float(np.sum(w60 * (mu - q) ** 2))
+        m = mu.reshape(NUM_JOINTS, 3)
+        seg0 = (m[_SEG_C] - m[_SEG_P]).ravel()                # (57,)
+        Vr = V.reshape(d, NUM_JOINTS, 3)
+        dV = (Vr[:, _SEG_C] - Vr[:, _SEG_P]).reshape(d, -1)   # (d, 57)
+        S = dict(mu=mu, V=V, zn=zn, zn_sq=np.sum(zn ** 2, axis=1) + res_n, res_n=res_n, sd=sd,
+                 q=q, w60=w60, A_c=A_c, b_c=b_c, c_c=c_c, seg0=seg0, dV=dV, c=None)
+        if continuity_target is not None:
+            c = continuity_target.ravel()
+            zc = (c - mu) @ V.T
+            S.update(c=c, zc=zc, res_c=max(float(np.sum((c - mu) ** 2) - zc @ zc), 0.0))
+        return S
 
     def energy(self, Z: np.ndarray, S: dict) -> np.ndarray:
         """Eq. 15 for a batch of latent samples ``Z`` (M, d) -> (M,)."""
@@ -163,19 +202,17 @@ class NaturalPostureOptimizer:
                 + self.w_kinematics * terms['kinematics'] + self.w_continuity * terms['continuity'])
 
     def energy_terms(self, Z: np.ndarray, S: dict) -> Dict[str, np.ndarray]:
-        X = S['mu'] + Z @ S['V']                                          # (M, 60)
-        ec = ((X - S['q']) ** 2) @ S['w60']                               # Eq. 9-10
-        # Eq. 11 in latent coordinates: |x - y_n|^2 = |z - z_n|^2 + |residual_n|^2
-        dz = (np.sum(Z * Z, axis=1)[:, None] - 2.0 * Z @ S['zn'].T
-              + np.sum(S['zn'] ** 2, axis=1)[None, :] + S['res_n'][None, :])
-        es = np.maximum(dz.min(axis=1), 0.0) / NUM_JOINTS
-        P = X.reshape(len(X), NUM_JOINTS, 3)
-        seg = np.linalg.norm(P[:, _SEG_C] - P[:, _SEG_P], axis=2)         # (M, 19)
-        ek = np.sum((seg - self.L) ** 2, axis=1) / NUM_SEGMENTS           # Eq. 12
+        zz = np.sum(Z * Z, axis=1)
+        ec = np.sum((Z @ S['A_c']) * Z, axis=1) + Z @ S['b_c'] + S['c_c']          # Eq. 9-10
+        dz = zz[:, None] - 2.0 * (Z @ S['zn'].T) + S['zn_sq'][None, :]
+        es = np.maximum(dz.min(axis=1), 0.0) / NUM_JOINTS                          # Eq. 11
+        seg = (S['seg0'] + Z @ S['dV']).reshape(len(Z), NUM_SEGMENTS, 3)
+        ln = np.sqrt(np.einsum('msk,msk->ms', seg, seg))
+        ek = np.sum((ln - self.L) ** 2, axis=1) / NUM_SEGMENTS                     # Eq. 12
         if S['c'] is None:
-            em = np.zeros(len(X))
-        else:
-            em = np.sum((X - S['c']) ** 2, axis=1) / NUM_JOINTS           # Eq. 13-14
+            em = np.zeros(len(Z))
+        else:                                                                      # Eq. 13-14
+            em = (zz - 2.0 * (Z @ S['zc']) + S['zc'] @ S['zc'] + S['res_c']) / NUM_JOINTS
         return {'control': ec, 'style': es, 'kinematics': ek, 'continuity': em}
 
     # -- solvers ------------------------------------------------------------------------------

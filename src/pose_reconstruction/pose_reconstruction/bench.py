@@ -1,0 +1,148 @@
+"""``ros2 run pose_reconstruction bench_reconstruction``: timing and accuracy figures of the
+posture reconstruction (no ROS needed).
+
+Prints
+1. accuracy (Shum et al. 2013 Eq. 18, cm) of raw / A / B / C (stochastic and Gauss-Newton) on a
+   corrupted synthetic clip whose motion the database contains;
+2. the per-stage time split of method C per frame per user (Fig. 9 style: reliability,
+   normalise+retarget, KNN, local PCA, optimisation, orientations, output), median ms and ratio to
+   the 33 ms frame budget, for both solvers, on the default database;
+3. method A time per query;
+4. how time grows with database size (1k -> 50k postures, jittered copies) for brute-force BLAS
+   KNN vs cKDTree in PCA space (with its recall of the exact Eq. 9 neighbours), and with K.
+
+The machine may be shared: figures are medians over the frames of a clip.
+"""
+from __future__ import annotations
+
+import argparse
+import time
+from typing import Dict, List
+
+import numpy as np
+
+from skeleton_core.conversions import SkeletonFrame
+
+from .optimizer import NaturalPostureOptimizer
+from .posture_space import as_database_arrays, parent_relative_error
+from .reconstructor import Reconstructor
+from .synthetic import SyntheticDatabase, scenario
+
+BUDGET_MS = 1000.0 / 30.0
+
+
+def run_clip(db, obs, ts, method: str, **params):
+    r = Reconstructor(db, method=method, **params)
+    out, total, stages = [], [], []
+    for t in range(len(obs)):
+        f = SkeletonFrame(positions=obs[t], tracking_state=ts[t], stamp_ns=t)
+        t0 = time.perf_counter()
+        out.append(r.process(f).positions)
+        total.append(1e3 * (time.perf_counter() - t0))
+        stages.append(dict(r.timings_ms))
+    return np.array(out), np.array(total), stages, r
+
+
+def stage_medians(stages: List[Dict[str, float]]) -> Dict[str, float]:
+    keys = stages[0].keys()
+    return {k: float(np.median([s[k] for s in stages])) for k in keys}
+
+
+def jittered(db, size: int, seed: int = 0) -> SyntheticDatabase:
+    """A database of ``size`` postures: copies of ``db`` with 2 cm Gaussian joint jitter."""
+    d = as_database_arrays(db)
+    rng = np.random.default_rng(seed)
+    idx = rng.integers(0, d.size, size)
+    pos = d.positions[idx] + rng.normal(0.0, 0.02, (size,) + d.positions.shape[1:])
+    ori = d.orientations[idx] if d.orientations is not None else np.tile([0, 0, 0, 1.0], (size, 20, 1))
+    return SyntheticDatabase(positions=pos.astype(np.float32), orientations=ori,
+                             twists=np.zeros((size, 19), np.float32))
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split('\n')[0])
+    ap.add_argument('--source', default='auto', choices=('auto', 'builtin', 'cmu', 'synthetic'),
+                    help='database for the timing sections (default: auto = CMU if present)')
+    ap.add_argument('--frames', type=int, default=150, help='frames of the test clip')
+    ap.add_argument('--quick', action='store_true', help='fewer sizes / K values')
+    a = ap.parse_args(argv)
+
+    print('# posture reconstruction benchmark (medians; the machine may be loaded by other jobs)')
+    # 1. accuracy on a synthetic scenario
+    sdb, truth, obs, ts = scenario(frames=a.frames)
+    print(f'\n## accuracy: corrupted synthetic clip, {a.frames} frames, database '
+          f'{len(sdb.positions)} synthetic postures (Eq. 18 error, cm)')
+    print(f'{"method":<24}{"error cm":>10}{"median ms":>11}')
+    print(f'{"raw Kinect":<24}{100 * parent_relative_error(obs, truth):>10.2f}{"":>11}')
+    for label, m, kw in (('A (Shum & Ho 2012)', 'A', {}), ('B (no reliability)', 'B', {}),
+                         ('C stochastic (paper)', 'C', {}),
+                         ('C gauss_newton', 'C', {'solver': 'gauss_newton'})):
+        out, tot, _, _ = run_clip(sdb, obs, ts, m, **kw)
+        print(f'{label:<24}{100 * parent_relative_error(out, truth):>10.2f}{np.median(tot):>11.2f}')
+
+    # 2. per-stage split on the default database
+    if a.source == 'synthetic':
+        db, src = sdb, 'synthetic'
+    else:
+        from skeleton_core.database import load_or_build_default
+        db = load_or_build_default(source=a.source)
+        src = db.meta.get('source', a.source)
+    n = len(db.positions)
+    print(f'\n## method C per frame per user, database {src} ({n} postures), K=30, 20 dims')
+    for solver in ('stochastic', 'gauss_newton'):
+        _, tot, stages, r = run_clip(db, obs, ts, 'C', solver=solver)
+        med = stage_medians(stages)
+        s = sum(med.values())
+        print(f'solver={solver}: total median {np.median(tot):.2f} ms, p95 '
+              f'{np.percentile(tot, 95):.2f} ms = {np.median(tot) / BUDGET_MS:.1%} of the 33 ms '
+              f'budget')
+        for k, v in med.items():
+            print(f'    {k:<14}{v:7.3f} ms  {v / max(s, 1e-9):6.1%}')
+    _, tot_a, stages_a, _ = run_clip(db, obs, ts, 'A')
+    med_a = stage_medians(stages_a)
+    print(f'\n## method A: completion {med_a["completion"]:.3f} ms per query '
+          f'(+ reliability {med_a["reliability"]:.3f} ms; total {np.median(tot_a):.2f} ms per frame)')
+
+    # 3. scaling with database size and K (KNN only, and the whole frame)
+    sizes = (1000, 3000, 10000) if a.quick else (1000, 3000, 10000, 50000)
+    print('\n## KNN (Eq. 9) vs database size: median ms per query; kdtree recall of the exact '
+          'neighbours')
+    print(f'{"postures":>9}{"brute ms":>10}{"kdtree ms":>11}{"recall":>8}{"frame C ms":>12}')
+    Rs = []
+    est = Reconstructor(sdb, method='C')
+    queries = []
+    for t in range(0, len(obs), 3):
+        f = SkeletonFrame(positions=obs[t], tracking_state=ts[t])
+        R = est._reliability_for(f)
+        queries.append(est.preparer.prepare(obs[t], R, est.reliability.height).query)
+        Rs.append(R)
+    for size in sizes:
+        big = jittered(db, size)
+        brute = NaturalPostureOptimizer(big, knn='brute')
+        tree = NaturalPostureOptimizer(big, knn='kdtree')
+        tb, tk, rec = [], [], []
+        for q, R in zip(queries, Rs):
+            t0 = time.perf_counter()
+            ib, _ = brute.knn_search(q, R)
+            t1 = time.perf_counter()
+            ik, _ = tree.knn_search(q, R)
+            t2 = time.perf_counter()
+            tb.append(1e3 * (t1 - t0))
+            tk.append(1e3 * (t2 - t1))
+            rec.append(len(set(ib) & set(ik)) / len(ib))
+        sub = slice(0, min(len(obs), 45))
+        _, tot, _, _ = run_clip(big, obs[sub], ts[sub], 'C')
+        print(f'{size:>9}{np.median(tb):>10.3f}{np.median(tk):>11.3f}{np.mean(rec):>8.2f}'
+              f'{np.median(tot):>12.2f}')
+    print(f'\n## method C vs K (database {src}, {n} postures): median ms per frame')
+    ks = (10, 30, 60) if a.quick else (10, 30, 60, 120)
+    for k in ks:
+        _, tot, stages, _ = run_clip(db, obs[:60], ts[:60], 'C', k=k)
+        med = stage_medians(stages)
+        print(f'    K={k:<4} total {np.median(tot):6.2f} ms  (knn {med["knn"]:.3f}, local PCA '
+              f'{med["local_pca"]:.3f}, optimise {med["optimise"]:.3f})')
+    return 0
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())
