@@ -85,7 +85,10 @@ def main(argv=None) -> int:
     directory = Path(args.config_dir) if args.config_dir else config_dir()
     names = graph_nodes(args.method, physics=not args.no_physics, viz=not args.no_viz,
                         record=bool(args.record))
-    rclpy.init(args=None)
+    from rclpy.signals import SignalHandlerOptions
+    # Ctrl-C raises KeyboardInterrupt here; the executor is stopped and waited for before the
+    # nodes are destroyed (rclpy's own handler would shut the context down under running callbacks).
+    rclpy.init(args=None, signal_handler_options=SignalHandlerOptions.NO)
     nodes = []
     try:
         nodes = create_nodes(names, node_overrides(args), directory)
@@ -109,10 +112,11 @@ def main(argv=None) -> int:
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
-        executor.shutdown(timeout_sec=2.0)
-        for n in reversed(nodes):  # recorder last in the list: closes its file first
+        executor.shutdown(timeout_sec=5.0)
+        for n in reversed(nodes):  # recorder is last in the list: closes its file first
             n.destroy_node()
         rclpy.try_shutdown()
+    print('[pipeline] stopped', flush=True)
     return 0
 
 
