@@ -12,8 +12,11 @@ harness is available (it is called on import, guarded).
 from __future__ import annotations
 
 import functools
-from typing import Callable, Dict
+from typing import Callable, Dict, Optional
 
+import numpy as np
+
+from .posture_space import DatabaseArrays, as_database_arrays
 from .reconstructor import Reconstructor
 
 _DEFAULT_DB = None
@@ -28,8 +31,33 @@ def default_database():
     return _DEFAULT_DB
 
 
-def make_method(method: str, db=None, **overrides) -> Reconstructor:
-    r = Reconstructor(default_database() if db is None else db, method=method, **overrides)
+def subset(db, size: int):
+    """``size`` postures of ``db`` evenly spread over it (Fig. 8a database-size sweeps)."""
+    arr = as_database_arrays(db)
+    size = int(size)
+    if size < 2:
+        raise ValueError('db_size must be >= 2')
+    if size >= arr.size:
+        return arr
+    idx = np.linspace(0, arr.size - 1, size).round().astype(int)
+    return DatabaseArrays(positions=arr.positions[idx], flat=arr.flat[idx],
+                          orientations=None if arr.orientations is None else arr.orientations[idx],
+                          twists=None if arr.twists is None else arr.twists[idx], body=arr.body)
+
+
+def make_method(method: str, db=None, database: str = '', db_size: Optional[int] = None,
+                **overrides) -> Reconstructor:
+    """A method-``method`` reconstructor. ``db``: a database object; ``database``: a database file
+    ('' = default); ``db_size``: use only that many postures of it."""
+    if db is None:
+        if database:
+            from .node_common import load_database
+            db = load_database(database)
+        else:
+            db = default_database()
+    if db_size is not None:
+        db = subset(db, db_size)
+    r = Reconstructor(db, method=method, **overrides)
     r.name = method
     return r
 
@@ -37,6 +65,17 @@ def make_method(method: str, db=None, **overrides) -> Reconstructor:
 make_method_a: Callable[..., Reconstructor] = functools.partial(make_method, 'A')
 make_method_b: Callable[..., Reconstructor] = functools.partial(make_method, 'B')
 make_method_c: Callable[..., Reconstructor] = functools.partial(make_method, 'C')
+
+DESCRIPTIONS = {
+    'A': 'Shum & Ho 2012: PCA database completion of unreliable joints',
+    'B': 'Shum et al. 2013 natural-posture-space optimizer without reliability',
+    'C': 'Shum et al. 2013 reliability-weighted natural-posture-space optimizer',
+}
+_OPT_DEFAULTS = {'k': 30, 'pca_dims': 20, 'steps': 20, 'samples': 100, 'w_control': 1.0,
+                 'w_style': 0.5, 'w_kinematics': 1.5, 'w_continuity': 0.25,
+                 'solver': 'stochastic'}
+DEFAULTS = {'A': {'pca_dims': 7, 'reliable_threshold': 0.5}, 'B': dict(_OPT_DEFAULTS),
+            'C': dict(_OPT_DEFAULTS)}
 
 FACTORIES: Dict[str, Callable[..., Reconstructor]] = {
     'A': make_method_a, 'B': make_method_b, 'C': make_method_c}
@@ -49,7 +88,7 @@ def register() -> bool:
     except ImportError:
         return False
     for name, factory in FACTORIES.items():
-        register_method(name, factory)
+        register_method(name, factory, description=DESCRIPTIONS[name], defaults=DEFAULTS[name])
     return True
 
 

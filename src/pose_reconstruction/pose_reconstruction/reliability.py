@@ -165,35 +165,48 @@ class ReliabilityEstimator:
         self._heights: Deque[float] = collections.deque(maxlen=30)
         self._captured: Deque[np.ndarray] = collections.deque(maxlen=self.reference_frames)
         self.reference_source = 'standard'
+        self._height = standard_body().height
+        self._frames_since_height = 0
+        self._reference: Optional[np.ndarray] = None
         self.last_terms: Optional[Tuple[np.ndarray, np.ndarray, np.ndarray]] = None
         self.reliability = np.ones(NUM_JOINTS)
 
     # -- reference lengths ---------------------------------------------------------------------
     @property
     def height(self) -> float:
+        """The user's estimated standing height (m)."""
         if self._fixed_height is not None:
             return float(self._fixed_height)
-        if not self._heights:
-            return standard_body().height
-        return float(np.clip(np.median(self._heights), 1.0, 2.3))
+        return self._height
 
     @property
     def reference_lengths(self) -> np.ndarray:
         """(19,) the user's reference segment lengths (captured, or standard body at height)."""
         if self._fixed_reference is not None:
             return self._fixed_reference
-        if self._captured:
-            return np.median(np.asarray(self._captured), axis=0)
-        return standard_body(self.height).segment_lengths
+        if self._reference is None:
+            if self._captured:
+                self._reference = np.median(np.asarray(self._captured), axis=0)
+            else:
+                self._reference = standard_body(self.height).segment_lengths
+        return self._reference
 
     def _observe_reference(self, positions: np.ndarray, tracking_state: np.ndarray) -> None:
         if np.any(tracking_state != TRACKED):
             return
         self._heights.append(estimate_height(positions))
+        self._frames_since_height += 1
+        if len(self._heights) < 30 or self._frames_since_height >= 10:
+            self._frames_since_height = 0
+            h = float(np.clip(np.median(self._heights), 1.0, 2.3))
+            if abs(h - self._height) > 1e-4:
+                self._height = h
+                self._reference = None
         pose = reference_pose_match(positions, self.reference_pose_tolerance_deg)
         if pose is not None:
             self._captured.append(segment_lengths(positions))
             self.reference_source = pose
+            self._reference = None
 
     # -- streaming -------------------------------------------------------------------------------
     def update(self, positions: np.ndarray, tracking_state: np.ndarray) -> np.ndarray:
