@@ -89,7 +89,8 @@ def make_streams(clips, fps: float = 30.0) -> Dict[str, list]:
 
 def _select_methods(methods):
     from . import evaluation as E
-    E.load_plugins()
+    if not methods or any(m not in E.available_methods() for m in methods):
+        E.load_plugins()
     avail = E.available_methods()
     wanted = list(methods) if methods else [m for m in DEFAULT_METHODS if m in avail]
     missing = [m for m in wanted if m not in avail]
