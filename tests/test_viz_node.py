@@ -1,6 +1,8 @@
 """viz node over real DDS: SkeletonArray in, MarkerArray out; run-time parameter changes."""
+import os
 import threading
 import time
+import uuid
 
 import numpy as np
 import pytest
@@ -30,10 +32,21 @@ def _array(uids, reliability=None):
     return frames_to_array_msg(frames, 5_000_000_123, 'kinect_link')
 
 
+# Private topic names: other test runs on this machine may share the DDS domain.
+P = f'/viztest_{os.getpid()}_{uuid.uuid4().hex[:6]}'
+TOPICS = {'raw_topic': P + '/kinect/skeletons',
+          'reliability_topic': P + '/kinect/skeletons_reliability',
+          'reconstructed_topic': P + '/posture/reconstructed',
+          'completed_topic': P + '/posture/completed',
+          'character_topic': P + '/character/skeletons',
+          'objects_topic': P + '/physics/objects', 'markers_topic': P + '/viz/markers'}
+
+
 @pytest.fixture
 def graph(rclpy_context):
     viz = VizNode(context=rclpy_context, parameter_overrides=[
-        Parameter('max_rate_hz', value=20.0), Parameter('stale_timeout_s', value=30.0)])
+        Parameter('max_rate_hz', value=20.0), Parameter('stale_timeout_s', value=30.0)] + [
+        Parameter(k, value=v) for k, v in TOPICS.items()])
     peer = rclpy.create_node('viz_test_peer', context=rclpy_context)
     ex = MultiThreadedExecutor(num_threads=2, context=rclpy_context)
     ex.add_node(viz)
@@ -62,16 +75,23 @@ def _wait_for(got, cond, pubs, timeout=10.0):
 def test_markers_cross_dds_and_hiding_a_layer_takes_effect(graph):
     viz, peer = graph
     got = []
-    peer.create_subscription(MarkerArray, '/viz/markers', got.append, 10)
-    raw = peer.create_publisher(SkeletonArray, '/kinect/skeletons', qos_profile_sensor_data)
-    rel = peer.create_publisher(SkeletonArray, '/kinect/skeletons_reliability',
+    peer.create_subscription(MarkerArray, TOPICS['markers_topic'], got.append, 10)
+    raw = peer.create_publisher(SkeletonArray, TOPICS['raw_topic'], qos_profile_sensor_data)
+    rel = peer.create_publisher(SkeletonArray, TOPICS['reliability_topic'],
                                 qos_profile_sensor_data)
-    char = peer.create_publisher(SkeletonArray, '/character/skeletons', qos_profile_sensor_data)
+    char = peer.create_publisher(SkeletonArray, TOPICS['character_topic'], qos_profile_sensor_data)
     r = np.ones(NUM_JOINTS, np.float32)
     r[ELBOW_LEFT] = 0.0
-    pubs = [(raw, _array([1, 4])), (rel, _array([1], r)), (char, _array([1]))]
+    objects = peer.create_publisher(MarkerArray, TOPICS['objects_topic'], 10)
+    box = Marker(ns='box', id=3, type=Marker.CUBE, action=Marker.ADD)
+    box.header.frame_id = 'kinect_link'
+    box.scale.x = box.scale.y = box.scale.z = 0.3
+    box.color.a = 1.0
+    pubs = [(raw, _array([1, 4])), (rel, _array([1], r)), (char, _array([1])),
+            (objects, MarkerArray(markers=[box]))]
 
-    want = {'raw/user_1', 'raw/user_4', 'reliability/user_1', 'character/user_1'}
+    want = {'raw/user_1', 'raw/user_4', 'reliability/user_1', 'character/user_1',
+            'environment/box'}
     msg = _wait_for(got, lambda m: {x.ns for x in m.markers if x.action == Marker.ADD} == want,
                     pubs)
     assert msg is not None, f'no MarkerArray with {want}; got {[{x.ns for x in m.markers} for m in got[-3:]]}'
@@ -85,7 +105,10 @@ def test_markers_cross_dds_and_hiding_a_layer_takes_effect(graph):
     assert np.isclose(by_ns['reliability/user_1'][0].scale.y, 0.15, atol=1e-6)  # 0.15 * (1 - 0)
     assert len(by_ns['character/user_1']) == 3 * NUM_SEGMENTS
     assert all(m.header.frame_id == 'kinect_link' for m in msg.markers)
-    assert (msg.markers[0].header.stamp.sec, msg.markers[0].header.stamp.nanosec) == (5, 123)
+    assert all((m.header.stamp.sec, m.header.stamp.nanosec) == (5, 123) for m in msg.markers
+               if not m.ns.startswith('environment'))
+    fwd = next(x for x in msg.markers if x.ns == 'environment/box')  # forwarded object
+    assert fwd.id == 3 and fwd.type == Marker.CUBE and fwd.lifetime.nanosec == 500_000_000
 
     # refused: out of range / bad colour
     res = viz.set_parameters([Parameter('max_rate_hz', value=1000.0)])[0]
