@@ -147,3 +147,52 @@ def test_missing_database_is_one_clear_error(tmp_path):
         lines = [ln for ln in p.stderr.strip().splitlines() if ln.strip()]
         assert lines[-1].startswith('[ERROR]') and path in lines[-1], p.stderr
         assert 'Traceback' not in p.stderr
+
+
+def test_state_per_user_dropped_after_timeout(rclpy_context, case):
+    from rclpy.parameter import Parameter
+
+    from pose_reconstruction.reliability_node import ReliabilityNode
+    from skeleton_core.conversions import SkeletonFrame, frames_to_array_msg
+
+    _, _, obs, ts = case
+    node = ReliabilityNode(context=rclpy_context, parameter_overrides=[
+        Parameter('user_timeout_s', value=0.2),
+        Parameter('input_topic', value=f'/t{os.getpid()}/unused_in'),
+        Parameter('output_topic', value=f'/t{os.getpid()}/unused_out')])
+    try:
+        def send(uids, stamp):
+            frames = [SkeletonFrame(positions=obs[0], tracking_state=ts[0], user_id=u,
+                                    stamp_ns=stamp) for u in uids]
+            node._on_msg(frames_to_array_msg(frames, stamp, 'k'))
+        send([1, 2], 1_000)
+        assert set(node._users) == {1, 2}
+        time.sleep(0.3)
+        send([2], 2_000)
+        assert set(node._users) == {2}  # user 1 unseen for longer than user_timeout_s
+        # a valid run-time change rebuilds every user's state; an invalid one is refused
+        assert node.set_parameters([Parameter('f_total', value=4)])[0].successful
+        assert node._users == {}
+        assert not node.set_parameters([Parameter('f_total', value=0)])[0].successful
+        assert not node.set_parameters([Parameter('input_topic', value='/x')])[0].successful
+        # duplicate stamps are dropped and counted once per cause
+        send([2], 3_000)
+        send([2], 3_000)
+        assert node.health.dropped['duplicate stamp'] == 1
+        assert node.health.published == 3
+    finally:
+        node.destroy_node()
+
+
+def test_methods_register_with_the_evaluation_harness(case):
+    evaluation = pytest.importorskip('skeleton_core.evaluation')
+    import pose_reconstruction.methods as methods
+
+    db = case[0]
+    assert methods.register()
+    for name in ('A', 'B', 'C'):
+        assert name in evaluation.available_methods()
+    m = methods.make_method_c(db=db, db_size=300, k=12, steps=5)
+    assert m.name == 'C' and m.db.size == 300 and m.core.k == 12 and m.core.steps == 5
+    with pytest.raises(ValueError):
+        methods.make_method_b(db=db, no_such_parameter=1)
