@@ -162,18 +162,27 @@ def segment_twists(orientations: np.ndarray, body: Optional[Body] = None) -> np.
     return angle
 
 
-def filter_postures(flat: np.ndarray, threshold: float, chunk: int = 256) -> np.ndarray:
+def filter_postures(flat: np.ndarray, threshold: float, chunk: int = 256,
+                    dims: int = 12) -> np.ndarray:
     """Greedy near-duplicate removal: indices (ascending) of the kept rows of ``flat`` (N, D).
 
     Row i is kept unless ``sum((flat[i] - flat[k])**2) < threshold`` for an earlier kept row k
-    (same result as the sequential loop). Kept rows live in a KD-tree, rebuilt when the rows
-    kept since the last build (searched by brute force) reach half its size.
+    (exactly the result of the sequential loop). Speed-up: rows are projected on their first
+    ``dims`` principal axes (an orthonormal projection never increases distances), a KD-tree over
+    the projected kept rows yields candidates within ``sqrt(threshold)``, and only those are checked
+    in full dimension. Rows kept since the last tree build (< 256) are checked by brute force.
     """
     x = np.ascontiguousarray(flat, dtype=np.float64)
     n = x.shape[0]
     if threshold <= 0 or n == 0:
         return np.arange(n)
     r = float(np.sqrt(threshold))
+    d = min(dims, x.shape[1])
+    mean = x.mean(0)
+    # principal axes from a subsample (any orthonormal basis is valid; PCA makes it tight)
+    sub = x[:: max(1, n // 20000)] - mean
+    _, vecs = np.linalg.eigh(sub.T @ sub)
+    y = (x - mean) @ vecs[:, ::-1][:, :d]
     kept: List[int] = []
     tree = None
     tree_n = 0
@@ -181,8 +190,15 @@ def filter_postures(flat: np.ndarray, threshold: float, chunk: int = 256) -> np.
         c = x[s:s + chunk]
         covered = np.zeros(len(c), bool)
         if tree is not None:
-            d, _ = tree.query(c, k=1, distance_upper_bound=r)
-            covered |= d < r
+            lists = tree.query_ball_point(y[s:s + chunk], r, return_sorted=False)
+            lens = np.fromiter((len(l) for l in lists), int, len(lists))
+            if lens.sum():
+                rows = np.repeat(np.arange(len(c)), lens)
+                cols = np.asarray(kept[:tree_n])[np.concatenate(
+                    [np.asarray(l, dtype=np.int64) for l in lists if len(l)])]
+                d2 = np.sum((c[rows] - x[cols]) ** 2, 1)
+                hit = rows[d2 < threshold]
+                covered[hit] = True
         recent = kept[tree_n:]
         if recent:
             buf = x[recent]
@@ -191,15 +207,15 @@ def filter_postures(flat: np.ndarray, threshold: float, chunk: int = 256) -> np.
         cand = np.flatnonzero(~covered)
         if len(cand):
             cc = c[cand]
-            d2 = np.sum((cc[:, None, :] - cc[None, :, :]) ** 2, -1)
-            close = d2 < threshold
+            sq = np.sum(cc * cc, 1)
+            close = (sq[:, None] + sq[None, :] - 2.0 * (cc @ cc.T)) < threshold
             alive = np.ones(len(cand), bool)
             for a in range(len(cand)):
                 if alive[a]:
                     kept.append(s + int(cand[a]))
                     alive[a + 1:] &= ~close[a, a + 1:]
-        if len(kept) - tree_n >= max(512, tree_n // 2):
-            tree = cKDTree(x[kept])
+        if len(kept) - tree_n >= 256:
+            tree = cKDTree(y[kept])
             tree_n = len(kept)
     return np.asarray(kept, dtype=np.int64)
 
@@ -303,6 +319,18 @@ def default_shared_dir() -> Optional[Path]:
     return p if p.is_dir() else None
 
 
+def _code_digest() -> str:
+    """Hash of the modules whose code decides the database content (so edits invalidate it)."""
+    h = hashlib.sha256()
+    here = Path(__file__).resolve().parent
+    for name in ('database.py', 'mocap.py', 'motions.py', 'bvh.py', 'geometry.py', 'model.py'):
+        try:
+            h.update((here / name).read_bytes())
+        except OSError:  # pragma: no cover
+            h.update(name.encode())
+    return h.hexdigest()[:16]
+
+
 def _files_digest(files: Sequence[Path]) -> str:
     h = hashlib.sha256()
     for f in files:
@@ -323,7 +351,7 @@ def load_or_build_default(source: str = 'auto', cache_dir=None, shared_dir=None,
     of the repository). ``split``: ``'database'`` (the database part of the split, default) or
     ``'all'`` (database and dev clips). ``classes`` None: all CMU clips including 'other'.
     ``mirror`` adds left-right mirrored copies. The cache file name is a hash of the inputs
-    (file names, sizes, mtimes) and every parameter. ``stats`` (dict) receives build statistics
+    (file names, sizes, mtimes), every parameter and the code of the modules that build it. ``stats`` (dict) receives build statistics
     plus ``cache_hit`` and ``path``.
     """
     from . import mocap, motions  # local: keeps import of this module light
@@ -340,7 +368,8 @@ def load_or_build_default(source: str = 'auto', cache_dir=None, shared_dir=None,
     if source == 'cmu' and (cmu_dir is None or not cmu_dir.is_dir()):
         raise DatabaseError(f'CMU mocap folder not found ({cmu_dir or "no shared folder"}); '
                             f'use source="builtin" or set KP_SHARED')
-    key = {'algo': _ALGO_VERSION, 'format': FORMAT_VERSION, 'source': source, 'threshold': thr,
+    key = {'algo': _ALGO_VERSION, 'code': _code_digest(), 'format': FORMAT_VERSION,
+           'source': source, 'threshold': thr,
            'split': split, 'mirror': bool(mirror), 'height': standard_body().height}
     if source == 'cmu':
         key['classes'] = sorted(classes) if classes is not None else None
