@@ -18,7 +18,7 @@ def test_hf_jitter_of_white_noise_matches_the_filter_theory():
     from scipy.signal import savgol_coeffs
     rng = np.random.default_rng(0)
     sigma = 0.004
-    p = _moving(3000) + rng.normal(0, sigma, size=(3000, NUM_JOINTS, 3))
+    p = _moving(1500) + rng.normal(0, sigma, size=(1500, NUM_JOINTS, 3))
     m = C.measure([p])
     h0 = savgol_coeffs(C.SG_WINDOW, C.SG_ORDER)[C.SG_WINDOW // 2]
     want = sigma * np.sqrt(1 - h0) * 1e3  # the smoother is a projection: residual var = (1-h0) s^2
