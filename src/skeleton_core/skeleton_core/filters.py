@@ -1,0 +1,164 @@
+"""Per-joint smoothing filters used as baselines: the Kinect SDK v1 joint filter and One Euro.
+
+Both are streaming, vectorised over the 20 joints, and treat a NOT_TRACKED joint as invalid: its raw
+position is passed through and that joint's filter restarts when it is seen again.
+
+Holt double exponential (Kinect SDK v1)
+---------------------------------------
+The SDK's ``NuiTransformSmooth`` with ``NUI_TRANSFORM_SMOOTH_PARAMETERS`` is Holt's double
+exponential smoothing with a jitter-reduction stage, a forward prediction and a clamp to the raw
+data (Microsoft, "Skeletal Joint Smoothing White Paper", Kinect for Windows SDK 1.x; the same
+algorithm as the SDK sample ``FilterDoubleExponential``). Per joint, with raw position ``x``:
+
+1. jitter filter: ``d = |x - f_prev|``; if ``d <= jitter_radius`` the input is pulled towards the
+   previous filtered value, ``x' = x d/r + f_prev (1 - d/r)``, else ``x' = x``;
+2. Holt: ``f = x' (1 - smoothing) + (f_prev + b_prev) smoothing``,
+   ``b = (f - f_prev) correction + b_prev (1 - correction)``;
+3. prediction: ``y = f + b prediction``;
+4. clamp: if ``|y - x| > max_deviation_radius``, pull ``y`` onto the sphere of that radius round ``x``.
+
+The first frame outputs the raw value (trend 0); the second averages the two raw values. INFERRED
+joints use twice the jitter and deviation radii, as in the SDK sample. SDK defaults: smoothing 0.5,
+correction 0.5, prediction 0.5, jitter radius 0.05 m, max deviation radius 0.04 m.
+
+One Euro filter (Casiez, Roussel & Vogel, CHI 2012)
+---------------------------------------------------
+A first-order low-pass whose cutoff rises with speed: ``fc = min_cutoff + beta |dx/dt|_filtered``,
+``alpha = 1 / (1 + tau / Te)`` with ``tau = 1 / (2 pi fc)``. The speed is the 3-D speed of the joint
+(so the filter is rotation invariant; the paper filters scalars), smoothed with ``d_cutoff``.
+Defaults (our tuning for joint positions in metres at 30 Hz, following the paper's procedure: set
+``beta = 0`` and lower ``min_cutoff`` until jitter at rest is acceptable, then raise ``beta`` until
+lag on fast movements is acceptable): ``min_cutoff = 1.0 Hz``, ``beta = 1.0 s/m``, ``d_cutoff = 1.0 Hz``.
+"""
+from __future__ import annotations
+
+from typing import Optional
+
+import numpy as np
+
+from .model import INFERRED, NOT_TRACKED, NUM_JOINTS
+
+HOLT_DEFAULTS = dict(smoothing=0.5, correction=0.5, prediction=0.5, jitter_radius=0.05,
+                     max_deviation_radius=0.04)
+ONE_EURO_DEFAULTS = dict(min_cutoff=1.0, beta=1.0, d_cutoff=1.0)
+
+
+def _states(tracking_state, n):
+    if tracking_state is None:
+        return np.full(n, 2, np.uint8)
+    return np.asarray(tracking_state)
+
+
+class HoltFilter:
+    """Kinect SDK v1 double exponential joint filter (see module docstring)."""
+
+    def __init__(self, smoothing: float = 0.5, correction: float = 0.5, prediction: float = 0.5,
+                 jitter_radius: float = 0.05, max_deviation_radius: float = 0.04,
+                 num_joints: int = NUM_JOINTS):
+        if not 0.0 <= smoothing < 1.0:
+            raise ValueError('smoothing must be in [0, 1)')
+        if not 0.0 <= correction <= 1.0:
+            raise ValueError('correction must be in [0, 1]')
+        if prediction < 0.0 or jitter_radius <= 0.0 or max_deviation_radius <= 0.0:
+            raise ValueError('prediction must be >= 0 and the radii > 0')
+        self.smoothing, self.correction, self.prediction = smoothing, correction, prediction
+        self.jitter_radius, self.max_deviation_radius = jitter_radius, max_deviation_radius
+        self.n = num_joints
+        self.reset()
+
+    def reset(self):
+        self.count = np.zeros(self.n, int)
+        self.raw = np.zeros((self.n, 3))
+        self.filtered = np.zeros((self.n, 3))
+        self.trend = np.zeros((self.n, 3))
+
+    def update(self, positions: np.ndarray, tracking_state: Optional[np.ndarray] = None
+               ) -> np.ndarray:
+        x = np.asarray(positions, float)
+        st = _states(tracking_state, self.n)
+        valid = st != NOT_TRACKED
+        scale = np.where(st == INFERRED, 2.0, 1.0)[:, None]
+        jr = self.jitter_radius * scale
+        md = self.max_deviation_radius * scale
+        a, c = self.smoothing, self.correction
+
+        f = x.copy()
+        b = np.zeros_like(x)
+        second = valid & (self.count == 1)
+        later = valid & (self.count >= 2)
+        # second frame: average of the two raw values
+        if second.any():
+            f[second] = 0.5 * (x[second] + self.raw[second])
+            b[second] = (f[second] - self.filtered[second]) * c + self.trend[second] * (1 - c)
+        if later.any():
+            fp, bp = self.filtered[later], self.trend[later]
+            d = np.linalg.norm(x[later] - fp, axis=1, keepdims=True)
+            w = np.where(d <= jr[later], d / jr[later], 1.0)
+            xj = x[later] * w + fp * (1 - w)
+            fl = xj * (1 - a) + (fp + bp) * a
+            f[later] = fl
+            b[later] = (fl - fp) * c + bp * (1 - c)
+        y = f + b * self.prediction
+        dev = np.linalg.norm(y - x, axis=1, keepdims=True)
+        over = (dev > md)[:, 0]
+        if over.any():
+            k = md[over] / dev[over]
+            y[over] = y[over] * k + x[over] * (1 - k)
+        # history
+        self.raw[valid] = x[valid]
+        self.filtered[valid] = f[valid]
+        self.trend[valid] = b[valid]
+        self.count[valid] += 1
+        self.count[~valid] = 0
+        y[~valid] = x[~valid]
+        return y
+
+
+class OneEuroFilter:
+    """One Euro filter on joint positions (see module docstring)."""
+
+    def __init__(self, min_cutoff: float = 1.0, beta: float = 1.0, d_cutoff: float = 1.0,
+                 num_joints: int = NUM_JOINTS, default_rate: float = 30.0):
+        if min_cutoff <= 0 or d_cutoff <= 0 or beta < 0:
+            raise ValueError('cutoffs must be > 0 and beta >= 0')
+        self.min_cutoff, self.beta, self.d_cutoff = min_cutoff, beta, d_cutoff
+        self.n = num_joints
+        self.default_dt = 1.0 / default_rate
+        self.reset()
+
+    def reset(self):
+        self.has = np.zeros(self.n, bool)
+        self.x = np.zeros((self.n, 3))
+        self.dx = np.zeros((self.n, 3))
+        self.t_ns: Optional[int] = None
+
+    @staticmethod
+    def _alpha(cutoff, dt):
+        tau = 1.0 / (2 * np.pi * cutoff)
+        return 1.0 / (1.0 + tau / dt)
+
+    def update(self, positions: np.ndarray, tracking_state: Optional[np.ndarray] = None,
+               stamp_ns: Optional[int] = None) -> np.ndarray:
+        x = np.asarray(positions, float)
+        st = _states(tracking_state, self.n)
+        valid = st != NOT_TRACKED
+        dt = self.default_dt
+        if stamp_ns is not None and self.t_ns is not None and stamp_ns > self.t_ns:
+            dt = (stamp_ns - self.t_ns) * 1e-9
+        if stamp_ns is not None:
+            self.t_ns = int(stamp_ns)
+        out = x.copy()
+        cont = valid & self.has
+        if cont.any():
+            dx = (x[cont] - self.x[cont]) / dt
+            ad = self._alpha(self.d_cutoff, dt)
+            edx = ad * dx + (1 - ad) * self.dx[cont]
+            cutoff = self.min_cutoff + self.beta * np.linalg.norm(edx, axis=1, keepdims=True)
+            a = self._alpha(cutoff, dt)
+            out[cont] = a * x[cont] + (1 - a) * self.x[cont]
+            self.dx[cont] = edx
+        start = valid & ~self.has
+        self.dx[start] = 0.0
+        self.x[valid] = out[valid]
+        self.has = valid.copy()
+        return out

@@ -1,0 +1,134 @@
+"""Accuracy metrics between an estimated and a true joint sequence (vectorised, NaN-safe).
+
+All functions take ``pred`` and ``truth`` of shape (T, 20, 3) in metres, in the same frame, and
+return ``(per_joint, overall)``: ``per_joint`` a (20,) or (19,) array, ``overall`` a float. Frames
+where either input is NaN are skipped (per joint); a quantity with no valid frame is NaN.
+
+* :func:`eq18_error` — Shum et al. 2013, Eq. 18: the mean over frames f and parts i of
+  ``|(p1_i(f) - p1_i'(f)) - (p2_i(f) - p2_i'(f))|`` with i' the parent of i, in cm. The root has
+  no parent, so the sum runs over the 19 non-root parts (``i_total = 19``); the root's row is NaN.
+  Being parent-relative, it ignores the global position (the paper compared Kinect with a magnetic
+  mocap in different frames) and does not accumulate errors down the chains.
+* :func:`mpjpe` — mean per-joint position error, cm (all 20 joints).
+* :func:`jitter` — mean magnitude of the joint acceleration by second differences, m/s^2.
+* :func:`bone_length_std` — std over time of each segment length, cm (19 segments);
+  :func:`bone_length_error` — mean |length - true length|, cm.
+* :func:`bone_direction_error` — mean angle between estimated and true segment directions, deg
+  (length-free).
+"""
+from __future__ import annotations
+
+from typing import Dict, Tuple
+
+import numpy as np
+
+from .model import NUM_JOINTS, PARENTS, SEGMENT_CHILDREN, SEGMENT_PARENTS
+
+_PAR = np.array(PARENTS[1:])
+_SC = np.array(SEGMENT_CHILDREN)
+_SP = np.array(SEGMENT_PARENTS)
+
+
+def _check(pred, truth=None):
+    p = np.asarray(pred, float)
+    if p.ndim != 3 or p.shape[1:] != (NUM_JOINTS, 3):
+        raise ValueError(f'expected (T, {NUM_JOINTS}, 3), got {p.shape}')
+    if truth is None:
+        return p
+    t = np.asarray(truth, float)
+    if t.shape != p.shape:
+        raise ValueError(f'shape mismatch {p.shape} vs {t.shape}')
+    return p, t
+
+
+def _nanmean0(x):
+    """nanmean over axis 0 without warnings; NaN where no value."""
+    ok = np.isfinite(x)
+    n = ok.sum(axis=0)
+    s = np.where(ok, x, 0.0).sum(axis=0)
+    with np.errstate(invalid='ignore', divide='ignore'):
+        return np.where(n > 0, s / np.maximum(n, 1), np.nan)
+
+
+def _overall(x):
+    ok = np.isfinite(x)
+    return float(x[ok].mean()) if ok.any() else float('nan')
+
+
+def eq18_error(pred, truth) -> Tuple[np.ndarray, float]:
+    """Shum 2013 Eq. 18 in cm: per joint (20,), root NaN; overall = mean over frames and 19 parts."""
+    p, t = _check(pred, truth)
+    rp = p[:, 1:] - p[:, _PAR]
+    rt = t[:, 1:] - t[:, _PAR]
+    e = np.linalg.norm(rp - rt, axis=-1) * 100.0  # (T, 19)
+    per = np.full(NUM_JOINTS, np.nan)
+    per[1:] = _nanmean0(e)
+    return per, _overall(e)
+
+
+def mpjpe(pred, truth) -> Tuple[np.ndarray, float]:
+    """Mean per-joint position error in cm."""
+    p, t = _check(pred, truth)
+    e = np.linalg.norm(p - t, axis=-1) * 100.0
+    return _nanmean0(e), _overall(e)
+
+
+def jitter(pred, fps: float = 30.0) -> Tuple[np.ndarray, float]:
+    """Mean joint acceleration magnitude (m/s^2) by second differences; needs T >= 3."""
+    p = _check(pred)
+    if len(p) < 3:
+        return np.full(NUM_JOINTS, np.nan), float('nan')
+    a = np.linalg.norm(p[2:] - 2 * p[1:-1] + p[:-2], axis=-1) * fps ** 2
+    return _nanmean0(a), _overall(a)
+
+
+def _lengths(p):
+    return np.linalg.norm(p[:, _SC] - p[:, _SP], axis=-1)
+
+
+def bone_length_std(pred) -> Tuple[np.ndarray, float]:
+    """Std over time of every segment length (cm), (19,) and their mean."""
+    p = _check(pred)
+    L = _lengths(p) * 100.0
+    mu = _nanmean0(L)
+    dev = (L - mu) ** 2
+    with np.errstate(invalid='ignore'):
+        sd = np.sqrt(_nanmean0(dev))
+    return sd, _overall(sd)
+
+
+def bone_length_error(pred, truth) -> Tuple[np.ndarray, float]:
+    """Mean |segment length - true segment length| in cm, (19,) and overall."""
+    p, t = _check(pred, truth)
+    d = np.abs(_lengths(p) - _lengths(t)) * 100.0
+    return _nanmean0(d), _overall(d)
+
+
+def bone_direction_error(pred, truth) -> Tuple[np.ndarray, float]:
+    """Mean angle (deg) between estimated and true segment directions, (19,) and overall."""
+    p, t = _check(pred, truth)
+    a = p[:, _SC] - p[:, _SP]
+    b = t[:, _SC] - t[:, _SP]
+    na = np.linalg.norm(a, axis=-1)
+    nb = np.linalg.norm(b, axis=-1)
+    with np.errstate(invalid='ignore', divide='ignore'):
+        cos = (a * b).sum(-1) / (na * nb)
+    cos = np.where((na > 1e-9) & (nb > 1e-9), cos, np.nan)
+    ang = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+    return _nanmean0(ang), _overall(ang)
+
+
+METRICS = ('eq18_cm', 'mpjpe_cm', 'jitter_ms2', 'bone_std_cm', 'bone_err_cm', 'bone_dir_deg')
+
+
+def compute_all(pred, truth, fps: float = 30.0) -> Dict[str, Dict]:
+    """Every metric: ``{name: {'per_joint': list, 'overall': float}}`` (bone metrics per segment)."""
+    out = {}
+    for name, (per, tot) in (('eq18_cm', eq18_error(pred, truth)),
+                             ('mpjpe_cm', mpjpe(pred, truth)),
+                             ('jitter_ms2', jitter(pred, fps)),
+                             ('bone_std_cm', bone_length_std(pred)),
+                             ('bone_err_cm', bone_length_error(pred, truth)),
+                             ('bone_dir_deg', bone_direction_error(pred, truth))):
+        out[name] = {'per_joint': [float(v) for v in per], 'overall': tot}
+    return out

@@ -1,0 +1,696 @@
+"""A Kinect v1 skeleton sensor model: turns clean mocap into Kinect-like skeleton streams.
+
+The model (parameters and the published values behind them: ``config/sensor_model.yaml``; the same
+numbers are embedded here as :data:`DEFAULT_PARAMS` so it runs without the file):
+
+1. *Placement* — the clip is resampled to 30 Hz, centred ``distance_m`` in front of the sensor and
+   turned to face it; output is in the sensor frame (REP-103: x forward out of the sensor, y left,
+   z up; the floor at ``z = -sensor_height_m``).
+2. *Noise* — per joint: a fast AR(1) jitter (lateral ``base_mm`` + depth term ``k Z^2`` after
+   Khoshelham & Elberink 2012), a slow AR(1) drift (frame-to-frame bone-length changes) and a
+   per-session systematic joint-centre offset carried in the body frame.
+3. *Occlusion* — geometric: a joint whose line of sight is blocked by a body capsule or the
+   scenario's object is INFERRED at its last reported position; random episodes: the distal joints
+   of a limb are INFERRED (frozen or collapsed onto the body) or NOT_TRACKED.
+4. *False positives* — a joint latches onto a nearby external point and vibrates there while the
+   SDK still reports it TRACKED (random onsets; in class c also when a hand comes near the object).
+5. *Turning away* — smooth yaw excursions of the user; past ``degrade_deg`` the far limbs are
+   INFERRED and jitter grows, past ``confusion_deg`` left and right are swapped.
+
+Offline: :meth:`SensorModel.corrupt` -> :class:`KinectStream`; live:
+:meth:`SensorModel.stream` yields ``(positions, tracking_state, truth)`` frame by frame. Both run the
+same per-frame state machine, so they have the same statistics. A clip is any object with ``name``,
+``fps`` and ``positions`` (T, 20, 3) in a world frame (REP-103, floor at z = 0), e.g.
+``skeleton_core.mocap.MotionClip``.
+"""
+from __future__ import annotations
+
+import copy
+import os
+import zlib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Dict, Iterator, List, Optional, Sequence, Tuple, Union
+
+import numpy as np
+
+from .geometry import facing_yaw
+from .model import (CHILDREN, HIP_CENTER, HIP_LEFT, HIP_RIGHT, JOINT_INDEX, JOINT_NAMES, LIMB_JOINTS,
+                    MIRROR, NOT_TRACKED, INFERRED, NUM_JOINTS, PARENTS, SEGMENT_CHILDREN,
+                    SEGMENT_PARENTS, SHOULDER_LEFT, SHOULDER_RIGHT, SPINE, TRACKED, estimate_height,
+                    standard_body, segment_lengths)
+
+SCENARIOS = ('clean', 'a', 'b', 'c')
+
+# Joint -> group used by the per-group noise tables
+JOINT_GROUP: Tuple[str, ...] = tuple(
+    'torso' if n in ('HipCenter', 'Spine', 'ShoulderCenter') else
+    'head' if n == 'Head' else
+    n.replace('Left', '').replace('Right', '').lower()
+    for n in JOINT_NAMES)
+GROUPS = ('torso', 'head', 'shoulder', 'elbow', 'wrist', 'hand', 'hip', 'knee', 'ankle', 'foot')
+LIMBS = ('left_arm', 'right_arm', 'left_leg', 'right_leg')
+
+_GROUP_TABLE = dict(torso=3.0, head=3.0, shoulder=4.0, elbow=6.0, wrist=8.0, hand=10.0, hip=4.0,
+                    knee=6.0, ankle=8.0, foot=10.0)
+DEFAULT_PARAMS: Dict = {
+    'fps': 30.0,
+    'placement': {'distance_m': 2.5, 'sensor_height_m': 0.8, 'lateral_offset_m': 0.0,
+                  'face_sensor': True, 'min_range_m': 0.8, 'max_range_m': 4.0,
+                  'horizontal_fov_deg': 57.0, 'vertical_fov_deg': 43.0, 'max_travel_m': 1.5,
+                  'travel_window_s': 2.0},
+    'jitter': {'depth_coeff_mm': 1.6, 'rho': 0.3, 'base_mm': dict(_GROUP_TABLE)},
+    'slow_drift': {'rho': 0.95, 'sigma_mm': dict(torso=5.0, head=5.0, shoulder=8.0, elbow=10.0,
+                                                 wrist=12.0, hand=14.0, hip=8.0, knee=10.0,
+                                                 ankle=12.0, foot=14.0)},
+    'systematic': {'sigma_mm': dict(torso=10.0, head=10.0, shoulder=15.0, elbow=15.0, wrist=15.0,
+                                    hand=20.0, hip=20.0, knee=15.0, ankle=20.0, foot=25.0)},
+    'occlusion_geometry': {'radius_scale': 0.8, 'hold_noise_mm': 15.0},
+    'episodes': {'duration_s': [0.3, 2.0], 'collapse_frames': 4, 'elbow_knee_probability': 0.5},
+    'false_positive': {'duration_s': [0.3, 1.5], 'offset_m': [0.1, 0.35], 'vibration_mm': 30.0,
+                       'parent_probability': 0.5, 'proximity_m': 0.15, 'proximity_per_s': 1.0},
+    'turn': {'duration_s': [2.0, 5.0], 'peak_deg': [40.0, 160.0], 'degrade_deg': 65.0,
+             'confusion_deg': 120.0, 'hysteresis_deg': 10.0, 'jitter_gain': 2.0},
+    'scenarios': {
+        'clean': {'description': 'sensor noise only (no occlusion, false positives or turning)',
+                  'self_occlusion': False, 'occlusion_per_min': 0.0,
+                  'false_positive_per_min': 0.0, 'turn_per_min': 0.0,
+                  'limb_weights': [1, 1, 1, 1], 'not_tracked_fraction': 0.0,
+                  'collapse_fraction': 0.0, 'fp_joints': ['HandLeft', 'HandRight'],
+                  'object': None},
+        'a': {'description': 'self-occluded and unoccluded movement, open space',
+              'self_occlusion': True, 'occlusion_per_min': 2.0, 'false_positive_per_min': 0.5,
+              'turn_per_min': 0.5, 'limb_weights': [1, 1, 0.5, 0.5],
+              'not_tracked_fraction': 0.2, 'collapse_fraction': 0.5,
+              'fp_joints': ['HandLeft', 'HandRight', 'FootLeft', 'FootRight'], 'object': None},
+        'b': {'description': 'occluded by environment objects (desk/box between the user and the '
+                             'sensor)',
+              'self_occlusion': True, 'occlusion_per_min': 3.0, 'false_positive_per_min': 1.5,
+              'turn_per_min': 0.5, 'limb_weights': [0.5, 0.5, 1, 1],
+              'not_tracked_fraction': 0.3, 'collapse_fraction': 0.5,
+              'fp_joints': ['HandLeft', 'HandRight', 'FootLeft', 'FootRight', 'KneeLeft',
+                            'KneeRight'],
+              'object': {'gap_m': [0.6, 1.2], 'depth_m': 0.4, 'width_m': [0.5, 1.0],
+                         'top_m': [0.5, 0.9], 'lateral_m': [-0.3, 0.3], 'proximity_fp': False}},
+        'c': {'description': 'interacting with and occluded by objects (box/table within reach)',
+              'self_occlusion': True, 'occlusion_per_min': 4.0, 'false_positive_per_min': 3.0,
+              'turn_per_min': 0.5, 'limb_weights': [1, 1, 0.5, 0.5],
+              'not_tracked_fraction': 0.3, 'collapse_fraction': 0.5,
+              'fp_joints': ['HandLeft', 'HandRight', 'WristLeft', 'WristRight'],
+              'object': {'gap_m': [0.35, 0.55], 'depth_m': 0.4, 'width_m': [0.5, 0.8],
+                         'top_m': [0.8, 1.05], 'lateral_m': [-0.3, 0.3], 'proximity_fp': True}},
+    },
+}
+
+
+def default_yaml_path() -> Optional[Path]:
+    """``config/sensor_model.yaml`` of the source tree, if it can be found (else None)."""
+    env = os.environ.get('KP_SENSOR_MODEL')
+    if env and Path(env).is_file():
+        return Path(env)
+    here = Path(__file__).resolve()
+    for parent in here.parents:
+        cand = parent / 'config' / 'sensor_model.yaml'
+        if cand.is_file():
+            return cand
+    return None
+
+
+def _merge(base: Dict, over: Dict) -> Dict:
+    out = copy.deepcopy(base)
+    for k, v in (over or {}).items():
+        if isinstance(v, dict) and isinstance(out.get(k), dict):
+            out[k] = _merge(out[k], v)
+        else:
+            out[k] = copy.deepcopy(v)
+    return out
+
+
+def load_params(params: Union[None, str, Path, Dict] = None) -> Dict:
+    """Parameters: None = the YAML in config/ when present, else :data:`DEFAULT_PARAMS`;
+    a path = that YAML file (merged over the defaults); a dict = overrides of the defaults."""
+    if params is None:
+        path = default_yaml_path()
+        if path is None:
+            return copy.deepcopy(DEFAULT_PARAMS)
+        params = path
+    if isinstance(params, (str, Path)):
+        import yaml
+        with open(params) as f:
+            data = yaml.safe_load(f) or {}
+        if '/**' in data:  # tolerate a ROS-style wrapper
+            data = data['/**'].get('ros__parameters', {})
+        return _merge(DEFAULT_PARAMS, data)
+    if isinstance(params, dict):
+        return _merge(DEFAULT_PARAMS, params)
+    raise TypeError(f'params must be None, a YAML path or a dict, got {type(params).__name__}')
+
+
+@dataclass
+class KinectStream:
+    """A corrupted clip in the sensor frame."""
+
+    positions: np.ndarray       # (T, 20, 3) what the Kinect reports
+    tracking_state: np.ndarray  # (T, 20) uint8
+    truth: np.ndarray           # (T, 20, 3) the true joints, same frame
+    stamps_ns: np.ndarray       # (T,) int64
+    events: List[Dict]          # onset records: type, cause, frame, joints, duration
+    scenario: str
+    seed: int
+    clean: np.ndarray = field(default=None)  # (T, 20) bool: joint unaffected by any event
+    clip_name: str = ''
+    fps: float = 30.0
+
+    def __len__(self) -> int:
+        return len(self.positions)
+
+
+def _wrap(a):
+    return (np.asarray(a) + np.pi) % (2 * np.pi) - np.pi
+
+
+def _rotz(yaw: float) -> np.ndarray:
+    c, s = np.cos(yaw), np.sin(yaw)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def resample(positions: np.ndarray, fps_in: float, fps_out: float) -> np.ndarray:
+    """Linear resampling of (T, 20, 3) positions from ``fps_in`` to ``fps_out``."""
+    p = np.asarray(positions, float)
+    if abs(fps_in - fps_out) < 1e-9 or len(p) < 2:
+        return p.copy()
+    t_in = np.arange(len(p)) / fps_in
+    t_out = np.arange(0.0, t_in[-1] + 1e-9, 1.0 / fps_out)
+    flat = p.reshape(len(p), -1)
+    out = np.empty((len(t_out), flat.shape[1]))
+    for k in range(flat.shape[1]):
+        out[:, k] = np.interp(t_out, t_in, flat[:, k])
+    return out.reshape(len(t_out), NUM_JOINTS, 3)
+
+
+def _group_array(table: Dict[str, float]) -> np.ndarray:
+    return np.array([float(table[g]) for g in JOINT_GROUP])
+
+
+def _point_segment_2d(p, a, b):
+    """Distance and parameter of 2-D points p (J,2) to segments a-b (S,2) -> (J,S)."""
+    ab = b - a                                     # (S,2)
+    ap = p[:, None, :] - a[None, :, :]             # (J,S,2)
+    den = np.maximum((ab * ab).sum(-1), 1e-12)     # (S,)
+    t = np.clip((ap * ab[None]).sum(-1) / den[None], 0.0, 1.0)
+    d = np.linalg.norm(ap - t[..., None] * ab[None], axis=-1)
+    return d, t
+
+
+def _ray_box(points: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """Does the segment from the sensor origin to each point (J,3) pass through the box?"""
+    p = np.asarray(points, float)
+    with np.errstate(divide='ignore', invalid='ignore'):
+        inv = 1.0 / p
+        t1 = lo[None] * inv
+        t2 = hi[None] * inv
+    tmin = np.nanmax(np.where(np.isfinite(np.minimum(t1, t2)), np.minimum(t1, t2), -np.inf), axis=1)
+    tmax = np.nanmin(np.where(np.isfinite(np.maximum(t1, t2)), np.maximum(t1, t2), np.inf), axis=1)
+    return (tmax >= np.maximum(tmin, 0.0)) & (tmin < 1.0)
+
+
+def _box_distance(points: np.ndarray, lo: np.ndarray, hi: np.ndarray):
+    closest = np.clip(points, lo[None], hi[None])
+    return np.linalg.norm(points - closest, axis=1), closest
+
+
+def _occludable() -> np.ndarray:
+    """(20, 19) mask: a joint is never hidden by a segment touching it or its tree neighbours."""
+    m = np.ones((NUM_JOINTS, len(SEGMENT_CHILDREN)), bool)
+    for j in range(NUM_JOINTS):
+        near = {j, PARENTS[j], *CHILDREN[j]}
+        for s in range(len(SEGMENT_CHILDREN)):
+            if SEGMENT_CHILDREN[s] in near or SEGMENT_PARENTS[s] in near:
+                m[j, s] = False
+    return m
+
+
+_OCCLUDABLE = _occludable()
+
+
+class _Corrupter:
+    """Per-frame state machine shared by :meth:`SensorModel.corrupt` and :meth:`SensorModel.stream`."""
+
+    def __init__(self, model: 'SensorModel', clip, scenario: str, seed: int):
+        if scenario not in model.params['scenarios']:
+            raise ValueError(f'unknown scenario {scenario!r}; '
+                             f'known: {sorted(model.params["scenarios"])}')
+        self.p = model.params
+        self.sc = self.p['scenarios'][scenario]
+        self.scenario = scenario
+        self.seed = seed
+        self.rng = np.random.default_rng(seed)
+        self.fps = float(self.p['fps'])
+        self.truth_all = model.place(clip)
+        self.T = len(self.truth_all)
+        rng = self.rng
+        # body size for the capsules
+        self.body = standard_body(float(np.clip(estimate_height(self.truth_all[0]), 1.0, 2.4)))
+        self.radii = self.body.segment_radii * float(self.p['occlusion_geometry']['radius_scale'])
+        # noise tables
+        self.base = _group_array(self.p['jitter']['base_mm']) * 1e-3
+        self.slow_sigma = _group_array(self.p['slow_drift']['sigma_mm']) * 1e-3
+        self.sys_sigma = _group_array(self.p['systematic']['sigma_mm']) * 1e-3
+        self.sys_offset = rng.standard_normal((NUM_JOINTS, 3)) * self.sys_sigma[:, None]
+        self.e_fast = np.zeros((NUM_JOINTS, 3))
+        self.e_slow = rng.standard_normal((NUM_JOINTS, 3)) * self.slow_sigma[:, None]
+        self.first = True
+        # object for classes b/c
+        self.box = None
+        obj = self.sc.get('object')
+        if obj:
+            root = self.truth_all[:, HIP_CENTER]
+            near_x = float(np.min(self.truth_all[..., 0]))
+            gap = rng.uniform(*obj['gap_m'])
+            width = rng.uniform(*obj['width_m'])
+            top = rng.uniform(*obj['top_m']) - float(self.p['placement']['sensor_height_m'])
+            yc = float(np.median(root[:, 1])) + rng.uniform(*obj['lateral_m'])
+            floor = -float(self.p['placement']['sensor_height_m'])
+            x1 = near_x - 0.02 if gap < 0.5 else near_x - gap + float(obj['depth_m'])
+            x1 = min(x1, near_x - 0.02)
+            x0 = x1 - float(obj['depth_m'])
+            self.box = (np.array([x0, yc - width / 2, floor]), np.array([x1, yc + width / 2, top]))
+            self.proximity_fp = bool(obj.get('proximity_fp', False))
+        else:
+            self.proximity_fp = False
+        # dynamic state
+        self.last = None               # last reported positions
+        self.hold = None               # last position reported while TRACKED
+        self.occ = None                # active random occlusion episode
+        self.fps_eps: List[Dict] = []  # active false positives
+        self.turn = None               # active turn episode
+        self.mirrored = False
+        self.events: List[Dict] = []
+        self.frame_index = 0
+        self.fp_joints = [JOINT_INDEX[n] for n in self.sc.get('fp_joints', [])]
+        w = np.asarray(self.sc.get('limb_weights', [1, 1, 1, 1]), float)
+        self.limb_p = w / w.sum() if w.sum() > 0 else np.full(4, 0.25)
+
+    # -------------------------------------------------------------------------------------
+    def _per_frame(self, rate_per_min: float) -> float:
+        return float(rate_per_min) / 60.0 / self.fps
+
+    def _duration(self, rng_pair) -> int:
+        return max(1, int(round(self.rng.uniform(*rng_pair) * self.fps)))
+
+    def step(self, i: int):
+        """Process truth frame ``i`` (of the placed clip); returns (positions, state, truth, clean)."""
+        rng, p, sc = self.rng, self.p, self.sc
+        fi = self.frame_index
+        truth = self.truth_all[i].copy()
+        clean = np.ones(NUM_JOINTS, bool)
+
+        # --- the user turning away (changes the truth) ------------------------------------
+        if self.turn is None and rng.random() < self._per_frame(sc.get('turn_per_min', 0.0)):
+            n = self._duration(p['turn']['duration_s'])
+            peak = np.deg2rad(rng.uniform(*p['turn']['peak_deg'])) * rng.choice([-1.0, 1.0])
+            prof = peak * 0.5 * (1 - np.cos(2 * np.pi * (np.arange(n) + 1) / (n + 1)))
+            self.turn = {'profile': prof, 'k': 0}
+            self.events.append({'type': 'turn', 'cause': 'random', 'frame': fi, 'joints': [],
+                                'duration': n, 'peak_deg': float(np.rad2deg(peak))})
+        if self.turn is not None:
+            yaw = self.turn['profile'][self.turn['k']]
+            self.turn['k'] += 1
+            if self.turn['k'] >= len(self.turn['profile']):
+                self.turn = None
+            root = truth[HIP_CENTER].copy()
+            truth = (truth - root) @ _rotz(yaw).T + root
+        body_yaw = float(facing_yaw(truth))
+        to_sensor = float(np.arctan2(-truth[HIP_CENTER, 1], -truth[HIP_CENTER, 0]))
+        rel = abs(float(_wrap(body_yaw - to_sensor)))
+        rel_deg = np.rad2deg(rel)
+        tp = p['turn']
+        gain = 1.0
+        if rel_deg > tp['degrade_deg']:
+            ramp = min(1.0, (rel_deg - tp['degrade_deg']) / max(90.0 - tp['degrade_deg'], 1e-6))
+            gain = 1.0 + (float(tp['jitter_gain']) - 1.0) * ramp
+            clean[:] = False
+
+        # --- noise ------------------------------------------------------------------------
+        depth = np.maximum(truth[:, 0], 0.1)
+        sig = np.repeat((self.base * gain)[:, None], 3, axis=1)
+        sig[:, 0] = np.hypot(sig[:, 0], float(p['jitter']['depth_coeff_mm']) * 1e-3 * depth ** 2)
+        rho = float(p['jitter']['rho'])
+        rs = float(p['slow_drift']['rho'])
+        if self.first:
+            self.e_fast = rng.standard_normal((NUM_JOINTS, 3)) * sig
+            self.first = False
+        else:
+            self.e_fast = rho * self.e_fast + np.sqrt(1 - rho ** 2) * sig * \
+                rng.standard_normal((NUM_JOINTS, 3))
+        self.e_slow = rs * self.e_slow + np.sqrt(1 - rs ** 2) * self.slow_sigma[:, None] * \
+            rng.standard_normal((NUM_JOINTS, 3))
+        pos = truth + self.sys_offset @ _rotz(body_yaw).T + self.e_fast + self.e_slow
+        state = np.full(NUM_JOINTS, TRACKED, np.uint8)
+        if self.hold is None:
+            self.hold = pos.copy()
+            self.last = pos.copy()
+        hold_noise = float(p['occlusion_geometry']['hold_noise_mm']) * 1e-3
+
+        def make_inferred(mask, st=INFERRED):
+            idx = np.flatnonzero(mask)
+            if len(idx):
+                pos[idx] = self.hold[idx] + rng.standard_normal((len(idx), 3)) * hold_noise / 3
+                state[idx] = np.minimum(state[idx], st)
+                clean[idx] = False
+
+        # --- field of view and range -------------------------------------------------------
+        pl = p['placement']
+        hang = np.abs(np.arctan2(truth[:, 1], truth[:, 0]))
+        vang = np.abs(np.arctan2(truth[:, 2], truth[:, 0]))
+        out = ((truth[:, 0] < pl['min_range_m']) | (truth[:, 0] > pl['max_range_m']) |
+               (hang > np.deg2rad(pl['horizontal_fov_deg']) / 2) |
+               (vang > np.deg2rad(pl['vertical_fov_deg']) / 2))
+        make_inferred(out, NOT_TRACKED)
+
+        # --- geometric occlusion ------------------------------------------------------------
+        occluded = np.zeros(NUM_JOINTS, bool)
+        if sc.get('self_occlusion'):
+            occluded |= self._self_occluded(truth)
+        if self.box is not None:
+            occluded |= _ray_box(truth, *self.box)
+        # turned away: the far-side limbs are inferred
+        if rel_deg > tp['degrade_deg']:
+            left_far = (np.linalg.norm(truth[SHOULDER_LEFT]) > np.linalg.norm(truth[SHOULDER_RIGHT]))
+            side = ('left' if left_far else 'right')
+            for limb in (side + '_arm', side + '_leg'):
+                occluded[list(LIMB_JOINTS[limb][1:])] = True
+        make_inferred(occluded & ~out)
+
+        # --- random occlusion episodes ------------------------------------------------------
+        if self.occ is None and rng.random() < self._per_frame(sc.get('occlusion_per_min', 0.0)):
+            limb = LIMBS[rng.choice(4, p=self.limb_p)]
+            chain = LIMB_JOINTS[limb]  # shoulder/hip, elbow/knee, wrist/ankle, hand/foot
+            joints = list(chain[2:])
+            if rng.random() < float(p['episodes']['elbow_knee_probability']):
+                joints = [chain[1]] + joints
+            u = rng.random()
+            ntf = float(sc.get('not_tracked_fraction', 0.0))
+            mode = 'not_tracked' if u < ntf else (
+                'collapse' if rng.random() < float(sc.get('collapse_fraction', 0.5)) else 'freeze')
+            n = self._duration(p['episodes']['duration_s'])
+            self.occ = {'joints': joints, 'mode': mode, 'left': n, 'k': 0, 'limb': limb,
+                        'start': self.last[joints].copy()}
+            self.events.append({'type': 'occlusion', 'cause': 'random', 'frame': fi,
+                                'joints': joints, 'duration': n, 'mode': mode, 'limb': limb})
+        if self.occ is not None:
+            o = self.occ
+            j = o['joints']
+            if o['mode'] == 'not_tracked':
+                pos[j] = self.hold[j]
+                state[j] = NOT_TRACKED
+            elif o['mode'] == 'freeze':
+                pos[j] = o['start'] + rng.standard_normal((len(j), 3)) * hold_noise / 3
+                state[j] = INFERRED
+            else:  # collapse: arms fall onto the hip/spine side, legs straight under the hip
+                target = self._collapse_targets(truth, o['limb'], j)
+                a = min(1.0, (o['k'] + 1) / max(1, int(p['episodes']['collapse_frames'])))
+                pos[j] = (1 - a) * o['start'] + a * target + \
+                    rng.standard_normal((len(j), 3)) * hold_noise / 3
+                state[j] = INFERRED
+            clean[j] = False
+            o['k'] += 1
+            o['left'] -= 1
+            if o['left'] <= 0:
+                self.occ = None
+
+        # --- false positives ----------------------------------------------------------------
+        fpp = p['false_positive']
+        active = {j for e in self.fps_eps for j in e['joints']}
+        cands = [j for j in self.fp_joints if j not in active]
+        onset = None
+        if cands and rng.random() < self._per_frame(sc.get('false_positive_per_min', 0.0)):
+            onset = ('random', int(rng.choice(cands)), None)
+        elif cands and self.proximity_fp and self.box is not None:
+            d, closest = _box_distance(truth[cands], *self.box)
+            near = np.flatnonzero(d < float(fpp['proximity_m']))
+            if len(near) and rng.random() < float(fpp['proximity_per_s']) / self.fps * len(near):
+                k = int(rng.choice(near))
+                onset = ('proximity', cands[k], closest[k])
+        if onset is not None:
+            cause, j, point = onset
+            joints = [j]
+            par = PARENTS[j]
+            if (JOINT_GROUP[j] in ('hand', 'foot') and par not in active and
+                    rng.random() < float(fpp['parent_probability'])):
+                joints.append(par)
+            if point is None:
+                d = rng.standard_normal(3)
+                d[2] *= 0.5
+                d /= np.linalg.norm(d)
+                point = truth[j] + d * rng.uniform(*fpp['offset_m'])
+            n = self._duration(fpp['duration_s'])
+            pts = np.array([point + (truth[k] - truth[j]) * 0.3 for k in joints])
+            self.fps_eps.append({'joints': joints, 'points': pts, 'left': n})
+            self.events.append({'type': 'false_positive', 'cause': cause, 'frame': fi,
+                                'joints': joints, 'duration': n})
+        vib = float(fpp['vibration_mm']) * 1e-3
+        for e in self.fps_eps:
+            j = e['joints']
+            pos[j] = e['points'] + rng.standard_normal((len(j), 3)) * vib
+            state[j] = TRACKED
+            clean[j] = False
+            e['left'] -= 1
+        self.fps_eps = [e for e in self.fps_eps if e['left'] > 0]
+
+        # --- left/right confusion when facing away ----------------------------------------
+        h = tp['hysteresis_deg']
+        if not self.mirrored and rel_deg > tp['confusion_deg']:
+            self.mirrored = True
+            self.events.append({'type': 'mirror', 'cause': 'turn', 'frame': fi, 'joints': [],
+                                'duration': 0})
+        elif self.mirrored and rel_deg < tp['confusion_deg'] - h:
+            self.mirrored = False
+        if self.mirrored:
+            pos = pos[list(MIRROR)]
+            state = state[list(MIRROR)]
+            clean[:] = False
+
+        tracked = state == TRACKED
+        self.hold[tracked] = pos[tracked]
+        self.last = pos.copy()
+        self.frame_index += 1
+        return pos, state, truth, clean
+
+    def _collapse_targets(self, truth, limb, joints):
+        if limb.endswith('arm'):
+            side = 1.0 if limb.startswith('left') else -1.0
+            # onto the side of the trunk, hand at hip level
+            hip = truth[HIP_LEFT if side > 0 else HIP_RIGHT]
+            spine = truth[SPINE]
+            out = []
+            for k, j in enumerate(joints):
+                a = (k + 1) / len(joints)
+                out.append((1 - a) * spine + a * hip)
+            return np.array(out)
+        hip = truth[HIP_LEFT if limb.startswith('left') else HIP_RIGHT]
+        leg = self.body.segment_lengths
+        out = []
+        for j in joints:
+            g = JOINT_GROUP[j]
+            drop = {'knee': 0.28, 'ankle': 0.53, 'foot': 0.55}[g] * self.body.height / 1.0
+            drop = min(drop, hip[2] - truth[:, 2].min() + 0.05) if g != 'knee' else drop
+            out.append(hip - np.array([0.0, 0.0, drop]))
+        del leg
+        return np.array(out)
+
+    def _self_occluded(self, truth: np.ndarray) -> np.ndarray:
+        x = np.maximum(truth[:, 0], 1e-3)
+        uv = truth[:, 1:] / x[:, None]
+        a = uv[list(SEGMENT_PARENTS)]
+        b = uv[list(SEGMENT_CHILDREN)]
+        d, t = _point_segment_2d(uv, a, b)                     # (20, 19)
+        xa = truth[list(SEGMENT_PARENTS), 0]
+        xb = truth[list(SEGMENT_CHILDREN), 0]
+        xs = xa[None] + t * (xb - xa)[None]                     # depth of the closest point
+        rad = self.radii[None] / np.maximum(xs, 1e-3)           # angular radius
+        occ = (d < rad) & (xs + self.radii[None] * 0.5 < x[:, None]) & _OCCLUDABLE
+        return occ.any(axis=1)
+
+
+class SensorModel:
+    """Kinect v1 skeleton sensor model. ``params``: None (config/sensor_model.yaml or built-in
+    defaults), a YAML path, or a dict of overrides. ``seed``: base seed of every stream."""
+
+    def __init__(self, params: Union[None, str, Path, Dict] = None, seed: int = 0):
+        self.params = load_params(params)
+        self.seed = int(seed)
+        self.fps = float(self.params['fps'])
+
+    # ------------------------------------------------------------------------------------
+    def place(self, clip) -> np.ndarray:
+        """The clip's joints resampled to the sensor rate and put in front of the sensor (T,20,3)."""
+        pos = np.asarray(clip.positions, float)
+        pos = resample(pos, float(getattr(clip, 'fps', self.fps)), self.fps)
+        pl = self.params['placement']
+        ok = np.isfinite(pos).all(axis=(1, 2))
+        if not ok.all():  # fill gaps in the input by holding the previous valid frame
+            idx = np.maximum.accumulate(np.where(ok, np.arange(len(pos)), 0))
+            pos = pos[idx]
+        root = pos[:, HIP_CENTER, :2]
+        travel = float(np.max(np.ptp(root, axis=0))) if len(root) else 0.0
+        if travel > float(pl.get('max_travel_m', np.inf)):
+            # treadmill: remove the slow part of the horizontal root path (moving average over
+            # travel_window_s) so locomotion stays inside the play space
+            w = max(1, int(round(float(pl.get('travel_window_s', 2.0)) * self.fps)))
+            kernel = np.ones(w) / w
+            padded = np.pad(root, ((w // 2, w - 1 - w // 2), (0, 0)), mode='edge')
+            slow = np.stack([np.convolve(padded[:, k], kernel, mode='valid') for k in range(2)], 1)
+            pos = pos.copy()
+            pos[..., :2] -= (slow - slow.mean(axis=0))[:, None, :]
+        centre = np.array([*np.mean(pos[:, HIP_CENTER, :2], axis=0), 0.0])
+        pos = pos - centre
+        if pl.get('face_sensor', True):
+            yaws = facing_yaw(pos)
+            mean_yaw = float(np.arctan2(np.mean(np.sin(yaws)), np.mean(np.cos(yaws))))
+            # face -x (towards the sensor)
+            pos = pos @ _rotz(np.pi - mean_yaw).T
+        pos = pos + np.array([float(pl['distance_m']), float(pl['lateral_offset_m']),
+                              -float(pl['sensor_height_m'])])
+        return pos
+
+    def stream_seed(self, clip, scenario: str, seed: Optional[int] = None) -> int:
+        base = self.seed if seed is None else int(seed)
+        tag = f'{getattr(clip, "name", "")}/{scenario}'.encode()
+        return (base * 1_000_003 + zlib.crc32(tag)) % (2 ** 31)
+
+    def corrupt(self, clip, scenario: str = 'a', seed: Optional[int] = None,
+                max_frames: Optional[int] = None, start_ns: int = 0) -> KinectStream:
+        """The whole clip through the sensor model (offline)."""
+        s = self.stream_seed(clip, scenario, seed)
+        c = _Corrupter(self, clip, scenario, s)
+        n = c.T if max_frames is None else min(c.T, int(max_frames))
+        pos = np.empty((n, NUM_JOINTS, 3))
+        st = np.empty((n, NUM_JOINTS), np.uint8)
+        tr = np.empty((n, NUM_JOINTS, 3))
+        cl = np.empty((n, NUM_JOINTS), bool)
+        for i in range(n):
+            pos[i], st[i], tr[i], cl[i] = c.step(i)
+        stamps = start_ns + np.round(np.arange(n) * 1e9 / self.fps).astype(np.int64)
+        return KinectStream(positions=pos, tracking_state=st, truth=tr, stamps_ns=stamps,
+                            events=c.events, scenario=scenario, seed=s, clean=cl,
+                            clip_name=str(getattr(clip, 'name', '')), fps=self.fps)
+
+    def stream(self, clip, scenario: str = 'a', loop: bool = True,
+               seed: Optional[int] = None) -> Iterator[Tuple[np.ndarray, np.ndarray, np.ndarray]]:
+        """Live: yields ``(positions, tracking_state, truth)`` per frame (forever if ``loop``)."""
+        c = _Corrupter(self, clip, scenario, self.stream_seed(clip, scenario, seed))
+        while True:
+            for i in range(c.T):
+                pos, st, tr, _ = c.step(i)
+                yield pos, st, tr
+            if not loop:
+                return
+
+    # ------------------------------------------------------------------------------------
+    def expected_jitter_mm(self, depth_m: Union[float, np.ndarray]) -> np.ndarray:
+        """Model std (mm, RMS over the 3 axes) of the random error (fast + slow) per joint at a depth."""
+        base = _group_array(self.params['jitter']['base_mm'])
+        slow = _group_array(self.params['slow_drift']['sigma_mm'])
+        dz = float(self.params['jitter']['depth_coeff_mm']) * np.asarray(depth_m, float) ** 2
+        var = (3 * base ** 2 + dz ** 2) / 3 + slow ** 2
+        return np.sqrt(var)
+
+
+def statistics(streams: Sequence[KinectStream]) -> Dict:
+    """Noise statistics of corrupted streams, for the report and the calibration test.
+
+    * ``jitter_mm`` (20,): std of the random error (reported - truth, less its per-stream mean, i.e.
+      less the systematic offset), RMS over axes, on clean frames only;
+    * ``offset_mm`` (20,): RMS of the per-stream mean error (the systematic joint-centre offsets);
+    * ``bone_length_std_mm`` (19,): std over time of each segment length on clean frames;
+    * ``occluded_fraction``: per scenario, the fraction of joint-frames not TRACKED, and per joint
+      group; ``false_positive_fraction``: per scenario, joint-frames latched but TRACKED;
+    * ``events_per_min``: per scenario and event type/cause.
+    """
+    streams = list(streams)
+    res_sq = np.zeros(NUM_JOINTS)
+    res_n = np.zeros(NUM_JOINTS)
+    off_sq = np.zeros(NUM_JOINTS)
+    off_n = np.zeros(NUM_JOINTS)
+    bl_var = np.zeros(len(SEGMENT_CHILDREN))
+    bl_n = np.zeros(len(SEGMENT_CHILDREN))
+    per_sc: Dict[str, Dict] = {}
+    depth = []
+    for s in streams:
+        err = s.positions - s.truth
+        cl = s.clean if s.clean is not None else np.ones(s.tracking_state.shape, bool)
+        for j in range(NUM_JOINTS):
+            e = err[cl[:, j], j]
+            if len(e) >= 3:
+                mu = e.mean(axis=0)
+                res_sq[j] += ((e - mu) ** 2).sum() / 3
+                res_n[j] += len(e) - 1
+                off_sq[j] += (mu ** 2).sum() / 3
+                off_n[j] += 1
+        depth.append(s.truth[..., 0][cl])
+        lengths = segment_lengths(s.positions)
+        for k, (a, b) in enumerate(zip(SEGMENT_PARENTS, SEGMENT_CHILDREN)):
+            m = cl[:, a] & cl[:, b]
+            if m.sum() >= 3:
+                bl_var[k] += lengths[m, k].var() * (m.sum() - 1)
+                bl_n[k] += m.sum() - 1
+        d = per_sc.setdefault(s.scenario, {'frames': 0, 'not_tracked': 0, 'inferred': 0,
+                                           'joint_frames': 0, 'events': {}, 'group_nt': {},
+                                           'fp_frames': 0})
+        T = len(s)
+        d['frames'] += T
+        d['joint_frames'] += T * NUM_JOINTS
+        d['not_tracked'] += int((s.tracking_state == NOT_TRACKED).sum())
+        d['inferred'] += int((s.tracking_state == INFERRED).sum())
+        for g in GROUPS:
+            idx = [j for j in range(NUM_JOINTS) if JOINT_GROUP[j] == g]
+            gd = d['group_nt'].setdefault(g, [0, 0])
+            gd[0] += int((s.tracking_state[:, idx] != TRACKED).sum())
+            gd[1] += T * len(idx)
+        for e in s.events:
+            key = f'{e["type"]}:{e["cause"]}'
+            d['events'][key] = d['events'].get(key, 0) + 1
+            if e['type'] == 'false_positive':
+                d['fp_frames'] += e['duration'] * len(e['joints'])
+    out = {
+        'jitter_mm': (np.sqrt(res_sq / np.maximum(res_n, 1)) * 1e3).tolist(),
+        'offset_mm': (np.sqrt(off_sq / np.maximum(off_n, 1)) * 1e3).tolist(),
+        'bone_length_std_mm': (np.sqrt(bl_var / np.maximum(bl_n, 1)) * 1e3).tolist(),
+        'mean_depth_m': float(np.concatenate(depth).mean()) if depth else float('nan'),
+        'scenarios': {},
+    }
+    for sc, d in per_sc.items():
+        minutes = d['frames'] / (streams[0].fps * 60.0)
+        out['scenarios'][sc] = {
+            'frames': d['frames'],
+            'minutes': minutes,
+            'not_tracked_fraction': d['not_tracked'] / d['joint_frames'],
+            'inferred_fraction': d['inferred'] / d['joint_frames'],
+            'occluded_fraction': (d['not_tracked'] + d['inferred']) / d['joint_frames'],
+            'occluded_fraction_by_group': {g: v[0] / max(v[1], 1) for g, v in d['group_nt'].items()},
+            'false_positive_fraction': d['fp_frames'] / d['joint_frames'],
+            'events_per_min': {k: v / max(minutes, 1e-9) for k, v in sorted(d['events'].items())},
+        }
+    return out
+
+
+def format_statistics(stats: Dict) -> str:
+    """Markdown summary of :func:`statistics`."""
+    lines = ['### Sensor model noise statistics', '',
+             f'mean depth of clean joints: {stats["mean_depth_m"]:.2f} m', '',
+             '| joint | jitter (mm) | systematic offset (mm) |', '|---|---:|---:|']
+    for j, n in enumerate(JOINT_NAMES):
+        lines.append(f'| {n} | {stats["jitter_mm"][j]:.1f} | {stats["offset_mm"][j]:.1f} |')
+    lines += ['', '| segment | length std (mm) |', '|---|---:|']
+    from .model import SEGMENT_NAMES
+    for k, n in enumerate(SEGMENT_NAMES):
+        lines.append(f'| {n} | {stats["bone_length_std_mm"][k]:.1f} |')
+    lines += ['', '| scenario | minutes | not tracked | inferred | false positive | events/min |',
+              '|---|---:|---:|---:|---:|---|']
+    for sc, d in stats['scenarios'].items():
+        ev = ', '.join(f'{k} {v:.2f}' for k, v in d['events_per_min'].items())
+        lines.append(f'| {sc} | {d["minutes"]:.2f} | {100 * d["not_tracked_fraction"]:.1f}% | '
+                     f'{100 * d["inferred_fraction"]:.1f}% | '
+                     f'{100 * d["false_positive_fraction"]:.1f}% | {ev} |')
+    return '\n'.join(lines)
