@@ -157,7 +157,8 @@ def test_cli_skips_bad_files_and_writes_the_rest(tmp_path, capsys):
     bad = _make_src(src, 'm01_s09_e03')
     bad.write_bytes(bad.read_bytes()[:20])                  # truncated gzip
     out = tmp_path / 'out'
-    rc = uiprmd_cli.main(['--src', str(src), '--out', str(out), '--quiet'])
+    rc = uiprmd_cli.main(['--src', str(src), '--out', str(out), '--quiet',
+                          '--sensor-height', '0'])
     assert rc == 0
     text = capsys.readouterr().out
     assert '1 bags written' in text and '2 skipped' in text
@@ -188,5 +189,7 @@ def test_real_clip_import(shared_dir, tmp_path):
     f = frames_from_array_msg(msgs[0].msg)[0]
     assert f.frame_id == 'kinect_link'
     assert 2.0 < f.positions[0, 0] < 3.0 and abs(f.positions[0, 1]) < 0.5  # ~2.5 m in front
-    assert 0.7 < f.positions[0, 2] < 1.2                                     # hips above floor
+    # default nominal sensor height 0.8 m: floor at z = -0.8, hips ~0.9-1.0 m above it
+    assert 0.7 < f.positions[0, 2] + 0.8 < 1.2
+    assert -0.9 < f.positions[[15, 19], 2].min() < -0.7                      # feet on the floor
     assert f.positions[3, 2] > f.positions[0, 2] + 0.4                       # head above hips

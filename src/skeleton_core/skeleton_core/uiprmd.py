@@ -22,7 +22,9 @@ The vertical shift cannot be undone (the sensor height is not in the files), so 
 is the sensor's REP-103 frame **with its origin dropped to the floor**: the origin is on the floor
 directly below the sensor, z = 0 is the floor, and the subject stands ~2.2-2.8 m in front
 (x > 0). The camera tilt, if any, was already removed by the data set's export (the floor is level
-in the files). We publish it as ``frame_id = 'kinect_link'`` and document the floor origin.
+in the files). :func:`load_dataset` (and the importer, ``--sensor-height``, default 0.8 m) can put the
+origin at a nominal sensor height instead (floor at z = -height), the synthetic driver's convention;
+the frame_id is ``'kinect_link'``.
 
 Joint mapping (one table: :data:`KINECT_FROM_UIPRMD`)
 ----------------------------------------------------

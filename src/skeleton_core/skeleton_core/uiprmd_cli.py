@@ -5,7 +5,7 @@
 
 One bag per repetition, ``<out>/mMM_sSS_eEE.mcap``: ``skeleton_msgs/msg/SkeletonArray`` at 30 Hz on
 ``/kinect/skeletons`` (one skeleton, user_id 1, frame ``kinect_link``: REP-103 axes of the sensor,
-origin on the floor below it, see :mod:`skeleton_core.uiprmd`) with monotonic stamps starting at
+origin ``--sensor-height`` (default 0.8 m, nominal) above the floor, see :mod:`skeleton_core.uiprmd`) with monotonic stamps starting at
 ``--start-sec``; where a Vicon file exists, the marker-derived joint centres registered into the
 same frame on ``/kinect/ground_truth`` with the same stamps (frames the Vicon recording does not
 cover have no ground-truth message). ``<out>/import_report.json`` lists the clips written, the
@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 SKELETON_TOPIC = '/kinect/skeletons'
+DEFAULT_SENSOR_HEIGHT = 0.8  # m: config/sensor_model.yaml placement.sensor_height_m, physics node
 GROUND_TRUTH_TOPIC = '/kinect/ground_truth'
 
 
@@ -76,9 +77,11 @@ def build_parser():
                     help='header stamp of the first frame of every bag, s [%(default)s]')
     ap.add_argument('--user-id', type=int, default=1)
     ap.add_argument('--frame-id', default='kinect_link')
-    ap.add_argument('--sensor-height', type=float, default=0.0,
-                    help='put the origin this far above the floor (m); 0 = origin on the floor '
-                         'below the sensor [%(default)s]')
+    ap.add_argument('--sensor-height', type=float, default=DEFAULT_SENSOR_HEIGHT,
+                    help='nominal sensor height (m): the origin is put this far above the floor '
+                         '(floor at z = -height); the true height was not recorded. Default: '
+                         'the sensor model / physics node default; 0 = origin on the floor '
+                         '[%(default)s]')
     ap.add_argument('--calibrate', action='store_true',
                     help='measure the real sensor error and print it next to the sensor model '
                          '(writes <out>/calibration.{md,json}); no bags unless --bags is given')
