@@ -30,7 +30,28 @@ def launch_available() -> bool:
     return True
 
 
-def run_graph(bag: Path, duration: float, args, use_launch: bool) -> int:
+def wait_for_output(proc, timeout: float, topic: str = '/character/skeletons'):
+    """Seconds until the first message on ``topic`` (the last stage of the graph), or None."""
+    import rclpy
+    from rclpy.node import Node
+    from skeleton_msgs.msg import SkeletonArray
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx)
+    node = Node('demo_watch', context=ctx)
+    got = []
+    node.create_subscription(SkeletonArray, topic, got.append, 10)
+    t0 = time.monotonic()
+    try:
+        while not got and time.monotonic() - t0 < timeout and proc.poll() is None:
+            rclpy.spin_once(node, timeout_sec=0.2)
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown(context=ctx)
+    return (time.monotonic() - t0) if got else None
+
+
+def run_graph(bag: Path, duration: float, args, use_launch: bool,
+              startup_timeout: float = 180.0) -> int:
     """Start the graph, let it run ``duration`` s, stop it with SIGINT (as Ctrl-C does)."""
     opts = {'scenario': args.scenario, 'num_users': str(args.num_users), 'method': args.method,
             'seed': str(args.seed)}
@@ -46,9 +67,15 @@ def run_graph(bag: Path, duration: float, args, use_launch: bool) -> int:
     with open(log_path, 'w') as log:
         proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
         try:
-            deadline = time.monotonic() + duration
-            while time.monotonic() < deadline and proc.poll() is None:
-                time.sleep(0.2)
+            started = wait_for_output(proc, startup_timeout)
+            if started is None:
+                print(f'[demo] the graph produced no /character/skeletons within '
+                      f'{startup_timeout:.0f} s; stopping it', file=sys.stderr)
+            else:
+                print(f'[demo] graph up after {started:.1f} s; recording {duration:.0f} s', flush=True)
+                deadline = time.monotonic() + duration
+                while time.monotonic() < deadline and proc.poll() is None:
+                    time.sleep(0.2)
             if proc.poll() is None:
                 os.killpg(proc.pid, signal.SIGINT)
                 try:

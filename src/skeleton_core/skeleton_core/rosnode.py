@@ -156,6 +156,9 @@ def run_node(node_factory: Callable[..., Node], args=None, executor=None) -> int
     node = None
     try:
         node = node_factory()
+    except KeyboardInterrupt:  # Ctrl-C while still starting up
+        rclpy.try_shutdown()
+        return 0
     except (ValueError, FileNotFoundError, RuntimeError, OSError) as e:
         print(f'[ERROR] {e}', file=sys.stderr)
         if rclpy.ok():
