@@ -165,3 +165,16 @@ def test_default_builtin_is_cached(tmp_path):
         load_or_build_default('cmu', cache_dir=tmp_path, shared_dir=tmp_path)
     auto = load_or_build_default('auto', cache_dir=tmp_path, shared_dir=tmp_path / 'no')
     assert auto.meta['source'] == 'builtin'
+
+
+def test_build_db_cli(tmp_path, capsys):
+    from skeleton_core import database_cli
+    out = tmp_path / 'db.npz'
+    assert database_cli.main(['--source', 'builtin', '--out', str(out), '--no-progress',
+                              '--threshold', '0.05']) == 0
+    text = capsys.readouterr().out
+    db = MotionDatabase.load(out)
+    assert f'-> {len(db)} after' in text and f'written: {out}' in text
+    assert db.meta['threshold'] == 0.05 and db.meta['frames_before'] == 8100
+    assert database_cli.main(['--source', 'builtin', '--classes', 'dancing']) == 2
+    assert 'unknown class' in capsys.readouterr().err

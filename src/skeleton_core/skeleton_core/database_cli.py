@@ -122,14 +122,13 @@ def main(argv=None) -> int:
         return 1
     for name, reason in st.get('skipped') or []:
         print(f'skipped {name}: {reason}')
-    counts = {}
-    for c in db.posture_classes:
-        counts[c] = counts.get(c, 0) + 1
     print(f"source: {db.meta.get('source', '?')}; clips: {len(db.class_names)}; "
           f"threshold: {db.meta.get('threshold')} m^2")
     print(f"postures: {st.get('frames_before', db.meta.get('frames_before'))} before filtering -> "
           f"{len(db)} after")
-    print('per class: ' + ', '.join(f'{k} {v}' for k, v in sorted(counts.items())))
+    print('per class (postures, SD of upper / lower body positions in cm, cf. Shum 2013 Table I):')
+    for cls, v in database.class_statistics(db).items():
+        print(f"  {cls:16s} {v['postures']:6d}   {v['upper_sd_cm']:5.1f} / {v['lower_sd_cm']:5.1f}")
     if st.get('cache_hit'):
         print(f"cache hit: {st['path']}")
     else:
