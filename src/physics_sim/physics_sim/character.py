@@ -86,6 +86,13 @@ class Character:
                           else None)
         eid = lambda n: mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_EQUALITY, n)  # noqa: E731
         self.pin_eq = {j: eid(f'{p}pin_{JOINT_NAMES[j]}') for j in PIN_JOINTS}
+        # MuJoCo derives body2's anchor from the compile-time pose; the tracking connects must
+        # pull the joint point onto the mocap body's origin, so set both anchors explicitly.
+        for j in range(NUM_JOINTS):
+            e = eid(f'{p}track_{JOINT_NAMES[j]}')
+            if e >= 0:
+                model.eq_data[e, 0:3] = self.joint_local[j]
+                model.eq_data[e, 3:6] = 0.0
         jid = lambda n: mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, n)  # noqa: E731
         self.root_qadr = model.jnt_qposadr[jid(f'{p}root')]
         self.root_dadr = model.jnt_dofadr[jid(f'{p}root')]

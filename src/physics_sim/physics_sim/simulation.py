@@ -107,6 +107,7 @@ class SimConfig:
     # constraint controller (mocap_constraints): soft connect spring = (time constant, damping ratio)
     track_timeconst: float = 0.02
     track_dampratio: float = 1.0
+    track_impedance: float = 0.9    # solimp d (dmin = dmax): share of the constraint force kept
     # character model
     body_height: float = 0.0        # m; 0 = estimate from the user's first target
     body_mass: float = 75.0         # kg at 1.75 m (scaled with height^3)
@@ -139,6 +140,8 @@ class SimConfig:
             raise ValueError(f'controller must be one of {CONTROLLERS}, got {self.controller!r}')
         if not (1e-4 <= self.timestep <= 0.02):
             raise ValueError(f'timestep must be in [0.0001, 0.02] s, got {self.timestep}')
+        if not (0.01 <= self.track_impedance <= 0.99):
+            raise ValueError('track_impedance must be in [0.01, 0.99]')
         if self.track_timeconst < 2 * self.timestep:
             raise ValueError('track_timeconst must be at least 2 x timestep')
         self.gains.validate()
@@ -187,7 +190,8 @@ class Simulation:
         cp = CharacterParams(joint_damping=c.joint_damping, joint_armature=c.joint_armature,
                              friction=c.friction,
                              mocap_targets=(c.controller == 'mocap_constraints'),
-                             track_solref=(c.track_timeconst, c.track_dampratio))
+                             track_solref=(c.track_timeconst, c.track_dampratio),
+                             track_solimp=(c.track_impedance, c.track_impedance, 0.001))
         return WorldParams(timestep=c.timestep, character=cp)
 
     def _rebuild(self) -> None:
@@ -573,7 +577,11 @@ class Simulation:
                 wr = np.concatenate([f, _cross(pts - d.xipos[jb], f)], axis=1)
                 np.add.at(xfrc, jb, wr)
             else:
-                d.mocap_pos[self._mocap] = p_t
+                # the connect's damping acts on the velocity relative to the (static) mocap body;
+                # leading the target by (b/k) v_t = 2 d tc zeta^2 v_t cancels the lag that causes,
+                # like Eq. 1's Kd p'_target term
+                lead = 2.0 * c.track_impedance * c.track_timeconst * c.track_dampratio ** 2
+                d.mocap_pos[self._mocap] = p_t + lead * v_t
             # Eq. 2: torque about each segment's own axis
             axes = pts[self._sc] - pts[self._sp]
             axes /= np.maximum(np.sqrt(np.sum(axes * axes, axis=1, keepdims=True)), 1e-9)

@@ -1,0 +1,289 @@
+"""``bench_physics``: figures of the physics character (no ROS).
+
+    ros2 run physics_sim bench_physics [--quick] [--long] [--out out/bench_physics.json]
+
+Prints, for both controllers (``explicit_pd`` = the papers' external PD forces,
+``mocap_constraints`` = soft connect constraints to mocap targets):
+
+* real-time factor with 1 and 6 characters at the 2 ms step (machine load matters: quote it),
+* steady-state tracking error on a static T-pose and on the built-in motion clips
+  (``skeleton_core.motions.builtin_clips``, 30 fps), segment length preservation, pinned foot drift,
+* output jitter against the raw input with Kinect-like noise (mean |second difference|),
+* the explicit-PD stability limit (largest stable Ke at 2 ms, damping ratio kept) and the
+  constraint option's stiffest setting,
+* a push (300 N for 0.1 s on the chest): peak joint displacement and recovery time,
+* a long noisy run with outliers and pushes (60 s; ``--long``: 10 min) counting NaN resets.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+from dataclasses import replace
+from pathlib import Path
+from typing import Dict
+
+import numpy as np
+from skeleton_core.model import NUM_JOINTS, segment_lengths, standard_body
+
+from .controller import Gains
+from .simulation import SimConfig, Simulation
+
+SENSOR_SHIFT = np.array([2.5, 0.0, -0.8])  # world -> sensor frame: person 2.5 m ahead, sensor 0.8 m up
+CONTROLLERS = ('explicit_pd', 'mocap_constraints')
+
+
+def clips(quick: bool):
+    try:
+        from skeleton_core.motions import builtin_clips
+        cs = builtin_clips(0)
+        names = ('builtin_walk', 'builtin_punch', 'builtin_squat_lift', 'builtin_wave',
+                 'builtin_kick', 'builtin_sword_swing')
+        cs = [c for c in cs if c.name in names] or cs
+        out = [(c.name, c.positions + SENSOR_SHIFT, c.orientations) for c in cs]
+    except ImportError:
+        out = [('synthetic_wave', synthetic(180), None)]
+    return out[:2] if quick else out
+
+
+def synthetic(n: int) -> np.ndarray:
+    """Fallback clip: the standard T-pose with waving forearms, sensor frame."""
+    base = standard_body().rest_positions() + SENSOR_SHIFT
+    seq = np.repeat(base[None], n, axis=0)
+    t = np.arange(n) / 30.0
+    seq[:, [6, 7, 10, 11], 2] += 0.15 * np.sin(2 * np.pi * 0.5 * t)[:, None]
+    return seq
+
+
+def config(controller: str, **kw) -> SimConfig:
+    return SimConfig(controller=controller, body_height=1.75, **kw)
+
+
+def run_clip(controller: str, seq: np.ndarray, ori=None, noise: float = 0.0, seed: int = 0,
+             cfg: SimConfig = None) -> Dict:
+    rng = np.random.default_rng(seed)
+    sim = Simulation(cfg or config(controller))
+    out_s, out_w, tgt, raw, drift = [], [], [], [], []
+    for i in range(len(seq)):
+        p = seq[i] + (rng.normal(0.0, noise, seq[i].shape) if noise > 0 else 0.0)
+        raw.append(p)
+        st = sim.step({0: (p, None if ori is None else ori[i])})[0]
+        out_s.append(st.positions_sensor)
+        out_w.append(st.positions)
+        tgt.append(st.target_world)
+        for j, pin in sim.characters[0].pins.items():
+            if pin.active:  # distance of the pinned foot from its pin point
+                drift.append(float(np.linalg.norm(st.positions[j] - pin.point)))
+    return dict(sensor=np.array(out_s), world=np.array(out_w), target=np.array(tgt),
+                raw=np.array(raw), drift=np.array(drift) if drift else np.zeros(1),
+                counters=dict(sim.counters))
+
+
+def jitter(seq: np.ndarray) -> float:
+    """Mean norm of the second difference of joint positions (m/frame^2)."""
+    a = seq[2:] - 2 * seq[1:-1] + seq[:-2]
+    return float(np.mean(np.linalg.norm(a, axis=-1)))
+
+
+def tracking(quick: bool) -> Dict:
+    res = {}
+    body = standard_body()
+    for ctrl in CONTROLLERS:
+        r = {}
+        static = run_clip(ctrl, np.repeat((body.rest_positions() + SENSOR_SHIFT)[None], 45, 0))
+        e = np.linalg.norm(static['world'] - static['target'], axis=-1)[30:]
+        r['static_tpose_err_mean_cm'] = 100 * float(e.mean())
+        r['static_tpose_err_max_cm'] = 100 * float(e.max())
+        errs, lens, drift = [], [], []
+        per_clip = {}
+        for name, seq, ori in clips(quick):
+            rr = run_clip(ctrl, seq, ori)
+            e = np.linalg.norm(rr['world'] - rr['target'], axis=-1)[30:]
+            errs.append(e)
+            per_clip[name] = round(100 * float(e.mean()), 2)
+            lens.append(np.abs(segment_lengths(rr['world']) - body.segment_lengths).max())
+            drift.append(rr['drift'].max())
+        e = np.concatenate([x.ravel() for x in errs])
+        r['clip_err_mean_cm'] = 100 * float(e.mean())
+        r['clip_err_p95_cm'] = 100 * float(np.percentile(e, 95))
+        r['clip_err_by_clip_cm'] = per_clip
+        r['segment_length_err_max_mm'] = 1000 * float(max(lens))
+        r['pinned_foot_drift_max_cm'] = 100 * float(max(drift))
+        # jitter on a noisy version of the first clip (Kinect-like 1.5 cm i.i.d. noise)
+        name, seq, ori = clips(quick)[0]
+        rr = run_clip(ctrl, seq, ori, noise=0.015, seed=1)
+        jr, jo = jitter(rr['raw'][30:]), jitter(rr['sensor'][30:])
+        r['jitter_raw_mm'] = 1000 * jr
+        r['jitter_out_mm'] = 1000 * jo
+        r['jitter_reduction_pct'] = 100 * (1 - jo / jr)
+        res[ctrl] = r
+    return res
+
+
+def stable_run(cfg: SimConfig, seconds: float = 1.5) -> bool:
+    body = standard_body()
+    tp = body.rest_positions() + SENSOR_SHIFT
+    sim = Simulation(cfg)
+    try:
+        for i in range(int(seconds * 30)):
+            if i == 6:
+                sim.apply_push(0, 'ShoulderCenter', (300.0, 0.0, 0.0), 0.1)
+            st = sim.step({0: tp})[0]
+            v = sim.data.qvel[sim.characters[0].dofs[:3]]
+            if sim.counters['nan_reset'] or not np.all(np.isfinite(st.positions)) \
+                    or np.linalg.norm(v) > 20.0:
+                return False
+    except Exception:  # noqa: BLE001 -- a blown-up simulation is the measurement
+        return False
+    e = np.linalg.norm(st.positions - st.target_world, axis=-1)
+    return bool(e.mean() < 0.1)
+
+
+def stability(quick: bool) -> Dict:
+    g0 = Gains()
+    kes = [4e3, 2e4, 1e5, 3e5, 1e6, 3e6] if not quick else [4e3, 1e5, 1e6]
+    rows = []
+    limit = None
+    for ke in kes:
+        kd = g0.kd * np.sqrt(ke / g0.ke)
+        g = replace(g0, ke=ke, kd=kd, max_force=1e9)
+        ok = stable_run(config('explicit_pd', gains=g))
+        rows.append(dict(ke=ke, kd=round(kd, 1), stable=ok))
+        if ok:
+            limit = ke
+        else:
+            break
+    kd_rows = []
+    kd_limit = None
+    for kd in ([80, 300, 600, 1200, 2400] if not quick else [80, 600, 2400]):
+        ok = stable_run(config('explicit_pd', gains=replace(g0, kd=float(kd), max_force=1e9)))
+        kd_rows.append(dict(ke=g0.ke, kd=kd, stable=ok))
+        if ok:
+            kd_limit = kd
+        else:
+            break
+    mc = []
+    for tc in ([0.1, 0.03, 0.01, 0.004] if not quick else [0.03, 0.004]):
+        ok = stable_run(config('mocap_constraints', track_timeconst=tc))
+        mc.append(dict(timeconst=tc, spring_per_kg=round(1.0 / tc ** 2, 1), stable=ok))
+    return dict(explicit_ke_sweep=rows, explicit_max_stable_ke=limit, explicit_kd_sweep=kd_rows,
+                explicit_max_stable_kd=kd_limit, mocap_timeconst_sweep=mc)
+
+
+def push_test() -> Dict:
+    body = standard_body()
+    tp = body.rest_positions() + SENSOR_SHIFT
+    out = {}
+    for ctrl in CONTROLLERS:
+        sim = Simulation(config(ctrl))
+        for _ in range(30):
+            st = sim.step({0: tp})[0]
+        before = st.positions.copy()
+        base_err = np.linalg.norm(st.positions - st.target_world, axis=-1).max()
+        sim.apply_push(0, 'ShoulderCenter', (300.0, 0.0, 0.0), 0.1)
+        peak, rec = 0.0, None
+        for i in range(90):
+            st = sim.step({0: tp})[0]
+            disp = np.linalg.norm(st.positions - before, axis=-1).max()
+            peak = max(peak, disp)
+            if rec is None and i > 3 and disp < 0.02:
+                rec = (i + 1) / 30.0
+            elif disp >= 0.02:
+                rec = None
+        out[ctrl] = dict(impulse_Ns=30.0, peak_displacement_cm=100 * peak,
+                         recovery_time_s=rec, pre_push_err_cm=100 * float(base_err))
+    return out
+
+
+def rtf(quick: bool) -> Dict:
+    seq = clips(True)[0][1]
+    n_frames = 60 if quick else 90
+    out = {}
+    for ctrl in CONTROLLERS:
+        for n in (1, 6):
+            sim = Simulation(config(ctrl, max_characters=n))
+            offs = [np.array([0.0, 1.6 * (k - (n - 1) / 2), 0.0]) for k in range(n)]
+            sim.step({k: seq[0] + offs[k] for k in range(n)})
+            t0 = time.perf_counter()
+            for i in range(1, n_frames):
+                sim.step({k: seq[i] + offs[k] for k in range(n)})
+            wall = time.perf_counter() - t0
+            out[f'{ctrl}_{n}char'] = (n_frames - 1) / 30.0 / wall
+    return out
+
+
+def long_run(seconds: float) -> Dict:
+    cs = clips(False)
+    rng = np.random.default_rng(7)
+    sim = Simulation(config('explicit_pd'))
+    n = int(seconds * 30)
+    nan_out = 0
+    t0 = time.perf_counter()
+    for i in range(n):
+        name, seq, ori = cs[(i // 180) % len(cs)]
+        p = seq[i % len(seq)] + rng.normal(0.0, 0.03, (NUM_JOINTS, 3))
+        if rng.random() < 0.02:
+            p[rng.integers(NUM_JOINTS)] += rng.normal(0.0, 0.5, 3)  # tracking glitch
+        if i % 60 == 30:
+            sim.apply_push(0, ['Spine', 'Head', 'ElbowLeft', 'KneeRight'][(i // 60) % 4],
+                           rng.normal(0.0, 250.0, 3), 0.1)
+        st = sim.step({0: p})[0]
+        nan_out += int(not np.all(np.isfinite(st.positions)))
+    return dict(seconds=seconds, wall_s=time.perf_counter() - t0, nan_outputs=nan_out,
+                nan_resets=sim.counters['nan_reset'], conflicts=sim.counters['constraint_conflict'],
+                released=sim.counters['virtual_joint_released'])
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(prog='bench_physics', description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument('--quick', action='store_true', help='fewer clips and sweep points')
+    ap.add_argument('--long', action='store_true', help='10 min noisy run instead of 60 s')
+    ap.add_argument('--out', default='out/bench_physics.json')
+    args = ap.parse_args(argv if argv is not None else sys.argv[1:])
+    load = os.getloadavg()[0] if hasattr(os, 'getloadavg') else float('nan')
+    res = {'cpu_count': os.cpu_count(), 'load_avg_1min': load}
+    t0 = time.perf_counter()
+    print(f'bench_physics (2 ms step; load average {load:.1f} on {os.cpu_count()} cores)', flush=True)
+    res['real_time_factor'] = rtf(args.quick)
+    for k, v in res['real_time_factor'].items():
+        print(f'  RTF {k:28s} {v:6.2f}', flush=True)
+    res['tracking'] = tracking(args.quick)
+    for ctrl, r in res['tracking'].items():
+        print(f'  [{ctrl}] static T-pose error mean {r["static_tpose_err_mean_cm"]:.2f} cm '
+              f'(max {r["static_tpose_err_max_cm"]:.2f}); clips mean {r["clip_err_mean_cm"]:.2f} cm '
+              f'p95 {r["clip_err_p95_cm"]:.2f} cm {r["clip_err_by_clip_cm"]}', flush=True)
+        print(f'  [{ctrl}] segment length error max {r["segment_length_err_max_mm"]:.4f} mm; '
+              f'pinned foot drift max {r["pinned_foot_drift_max_cm"]:.2f} cm; jitter raw '
+              f'{r["jitter_raw_mm"]:.2f} mm -> out {r["jitter_out_mm"]:.2f} mm '
+              f'({r["jitter_reduction_pct"]:.0f} % lower)', flush=True)
+    res['stability'] = stability(args.quick)
+    s = res['stability']
+    print(f'  stability explicit_pd: Ke sweep {[(r["ke"], r["stable"]) for r in s["explicit_ke_sweep"]]}'
+          f' -> max stable Ke {s["explicit_max_stable_ke"]}', flush=True)
+    print(f'  stability explicit_pd: Kd sweep {[(r["kd"], r["stable"]) for r in s["explicit_kd_sweep"]]}'
+          f' -> max stable Kd {s["explicit_max_stable_kd"]}', flush=True)
+    print(f'  stability mocap_constraints: {[(r["timeconst"], r["stable"]) for r in s["mocap_timeconst_sweep"]]}',
+          flush=True)
+    res['push'] = push_test()
+    for ctrl, r in res['push'].items():
+        print(f'  push [{ctrl}] 300 N x 0.1 s on ShoulderCenter: peak displacement '
+              f'{r["peak_displacement_cm"]:.1f} cm, recovery (< 2 cm) {r["recovery_time_s"]} s',
+              flush=True)
+    res['long_run'] = long_run(600.0 if args.long else 60.0)
+    r = res['long_run']
+    print(f'  long noisy run {r["seconds"]:.0f} s (3 cm noise, glitches, pushes): NaN outputs '
+          f'{r["nan_outputs"]}, NaN resets {r["nan_resets"]}, conflicts {r["conflicts"]}, '
+          f'released {r["released"]} (wall {r["wall_s"]:.0f} s)', flush=True)
+    res['bench_wall_s'] = time.perf_counter() - t0
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps(res, indent=1, default=float))
+    print(f'wrote {out} ({res["bench_wall_s"]:.0f} s)')
+    return 0
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())
