@@ -14,7 +14,8 @@ real Kinect streams:
 * **bone-length variation** per segment: std of the length within a clip (pooled, as
   ``bone_length_std_mm``) and RMS of the frame-to-frame length change;
 * **tracking failures**: the fraction of frames whose core segments (no hands/feet) deviate more
-  than ``FAIL_REL`` (and more than ``FAIL_ABS``) from the subject's median lengths (the median over the subject's other clips),
+  than ``FAIL_REL`` (and more than ``FAIL_ABS``) from the subject's median lengths (the median
+  over the subject's other clips),
   per movement, with m03_s01 (the known failure) separately.
 
 and puts the same quantities computed on synthetic streams next to them: the marker reference of
@@ -356,7 +357,8 @@ def format_report(result) -> str:
         ratio = hm / hr if model else np.nan
         flag = ' !' if model and abs(ratio - 1) > TOLERANCE else ''
         lines.append(
-            f'| {JOINT_NAMES[j]} | {_f(hr)} | {_f(hm)} | {_f(ratio) if not model else f"{ratio:.2f}"}'
+            f'| {JOINT_NAMES[j]} | {_f(hr)} | {_f(hm)} | '
+            f'{_f(ratio) if not model else f"{ratio:.2f}"}'
             f'{flag} | {_f(fit["hf_jitter_mm"][j]) if fit else "n/a"} | '
             f'{_f(rr.get("random_error_mm", [np.nan] * 20)[j])} | '
             f'{_f(model["random_error_mm"][j]) if model else "n/a"} | '
@@ -386,7 +388,8 @@ def format_report(result) -> str:
                      f'{_f(fit["bone_length_std_mm"][k]) if fit else "n/a"} | '
                      f'{_f(real["bone_length_f2f_mm"][k])} | '
                      f'{_f(model["bone_length_f2f_mm"][k]) if model else "n/a"} |')
-    lines += ['', f'Tracking failures: frames with a core segment (no hands/feet) > {FAIL_REL:.0%} and '
+    lines += ['', 'Tracking failures: frames with a core segment (no hands/feet) > '
+              f'{FAIL_REL:.0%} and '
               f'> {FAIL_ABS * 100:.0f} cm off the subject\'s median length; dev = relative '
               'length deviation.', '',
               '| movement | clips | frames | failed frames | median dev | max dev | '

@@ -22,9 +22,9 @@ The vertical shift cannot be undone (the sensor height is not in the files), so 
 is the sensor's REP-103 frame **with its origin dropped to the floor**: the origin is on the floor
 directly below the sensor, z = 0 is the floor, and the subject stands ~2.2-2.8 m in front
 (x > 0). The camera tilt, if any, was already removed by the data set's export (the floor is level
-in the files). :func:`load_dataset` (and the importer, ``--sensor-height``, default 0.8 m) can put the
-origin at a nominal sensor height instead (floor at z = -height), the synthetic driver's convention;
-the frame_id is ``'kinect_link'``.
+in the files). :func:`load_dataset` (and the importer, ``--sensor-height``, default 0.8 m) can
+put the origin at a nominal sensor height instead (floor at z = -height), the synthetic
+driver's convention; the frame_id is ``'kinect_link'``.
 
 Joint mapping (one table: :data:`KINECT_FROM_UIPRMD`)
 ----------------------------------------------------
@@ -48,7 +48,7 @@ from typing import Dict, List, Optional, Tuple
 
 import numpy as np
 
-from .model import (JOINT_INDEX, JOINT_NAMES, NOT_TRACKED, NUM_JOINTS, PARENTS, TRACKED,
+from .model import (JOINT_NAMES, NOT_TRACKED, NUM_JOINTS, TRACKED,
                     ELBOW_LEFT, ELBOW_RIGHT, HAND_LEFT, HAND_RIGHT, WRIST_LEFT, WRIST_RIGHT,
                     standard_body)
 

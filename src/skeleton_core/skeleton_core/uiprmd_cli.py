@@ -5,7 +5,8 @@
 
 One bag per repetition, ``<out>/mMM_sSS_eEE.mcap``: ``skeleton_msgs/msg/SkeletonArray`` at 30 Hz on
 ``/kinect/skeletons`` (one skeleton, user_id 1, frame ``kinect_link``: REP-103 axes of the sensor,
-origin ``--sensor-height`` (default 0.8 m, nominal) above the floor, see :mod:`skeleton_core.uiprmd`) with monotonic stamps starting at
+origin ``--sensor-height`` (default 0.8 m, nominal) above the floor, see
+:mod:`skeleton_core.uiprmd`) with monotonic stamps starting at
 ``--start-sec``; where a Vicon file exists, the marker-derived joint centres registered into the
 same frame on ``/kinect/ground_truth`` with the same stamps (frames the Vicon recording does not
 cover have no ground-truth message). ``<out>/import_report.json`` lists the clips written, the
@@ -155,7 +156,8 @@ def main(argv=None):
     print(f'import_uiprmd: {len(clips)} clips read, {len(written)} bags written to {out} '
           f'({n_gt} with {GROUND_TRUTH_TOPIC}), {len(skipped)} skipped')
     for s, r in regs.items():
-        print(f'  session {s}: registration residual {np.nanmean(r.residual_per_joint) * 1000:.0f} mm '
+        res_mm = np.nanmean(r.residual_per_joint) * 1000
+        print(f'  session {s}: registration residual {res_mm:.0f} mm '
               f'mean over joints, t = {np.round(r.translation, 3).tolist()} m')
     for p, why in skipped:
         print(f'  skipped {p}: {why}')
