@@ -40,11 +40,15 @@ def wait_for_output(proc, timeout: float, topic: str = '/character/skeletons'):
     node = Node('demo_watch', context=ctx)
     got = []
     node.create_subscription(SkeletonArray, topic, got.append, 10)
+    from rclpy.executors import SingleThreadedExecutor
+    ex = SingleThreadedExecutor(context=ctx)
+    ex.add_node(node)
     t0 = time.monotonic()
     try:
         while not got and time.monotonic() - t0 < timeout and proc.poll() is None:
-            rclpy.spin_once(node, timeout_sec=0.2)
+            ex.spin_once(timeout_sec=0.2)
     finally:
+        ex.shutdown()
         node.destroy_node()
         rclpy.try_shutdown(context=ctx)
     return (time.monotonic() - t0) if got else None
