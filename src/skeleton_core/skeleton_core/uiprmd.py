@@ -380,7 +380,13 @@ def load_dataset(src, subjects=None, movements=None, repetitions=None, with_refe
     for session, items in sorted(refs.items()):
         # the tracking-failure clips take no part in the fit
         fit = [(rc, r) for rc, r in items if not rc.clip.is_tracking_failure] or items
-        sr = reg.register_session([rc.kinect.positions for rc, _ in fit], [r for _, r in fit])
+        try:
+            sr = reg.register_session([rc.kinect.positions for rc, _ in fit],
+                                      [r for _, r in fit])
+        except (ValueError, np.linalg.LinAlgError) as e:
+            for rc, _ in items:
+                skipped.append((rc.clip.name, f'reference not registered ({e}); Kinect clip kept'))
+            continue
         for rc, r in items:
             k = rc.kinect.positions
             if any(rc is f for f, _ in fit):
