@@ -113,6 +113,10 @@ def test_scene_namespaces_hidden_layers_and_deletes():
     assert [s.id for s in specs if s.ns == 'reliability/user_1'] == [ELBOW_LEFT]
     assert sum(s.ns == 'character/user_1' for s in specs) == 3 * NUM_SEGMENTS
     assert all(s.action == mk.ADD for s in specs)
+    # nothing changed: nothing to send; a style change rebuilds every layer
+    assert scene.build(0.15) == []
+    scene.invalidate()
+    assert {s.ns for s in scene.build(0.15)} == nss
 
     # user 2 disappears, the raw layer is hidden: their markers come back once as DELETE
     scene.update('raw', [_frame(1)], 0.2)
@@ -121,8 +125,10 @@ def test_scene_namespaces_hidden_layers_and_deletes():
     deletes = {(s.ns, s.id) for s in specs if s.action == mk.DELETE}
     assert deletes == {('raw/user_1', 0), ('raw/user_1', 1), ('raw/user_2', 0), ('raw/user_2', 1)}
     assert not any(s.ns.startswith('raw/') and s.action == mk.ADD for s in specs)
+    scene.update('raw', [_frame(1)], 0.35)
     specs = scene.build(0.4)
     assert not any(s.ns.startswith('raw/') for s in specs)
+    assert not scene.has_stale(0.4)
 
     # a layer that stops updating goes stale and is deleted
     scene.update('reconstructed', [_frame(1)], 0.4)

@@ -34,6 +34,10 @@ LAYERS: Tuple[str, ...] = ('raw', 'reliability', 'reconstructed', 'completed', '
 SPHERE, CYLINDER, CUBE, SPHERE_LIST, LINE_LIST = 'SPHERE', 'CYLINDER', 'CUBE', 'SPHERE_LIST', 'LINE_LIST'
 ADD, DELETE = 'ADD', 'DELETE'
 
+# Capsule radius per metre of body height (standard_body radii are proportional to the height)
+_RADIUS_PER_HEIGHT = standard_body().segment_radii / standard_body().height
+_SEG_P, _SEG_C = list(SEGMENT_PARENTS), list(SEGMENT_CHILDREN)
+
 # Marker ids inside one skeleton namespace
 JOINTS_ID, BONES_ID = 0, 1
 
@@ -85,25 +89,29 @@ def namespace(layer: str, user_id: int) -> str:
 # --------------------------------------------------------------------------------------------
 # Geometry helpers
 # --------------------------------------------------------------------------------------------
+def quats_z_to(directions: np.ndarray) -> np.ndarray:
+    """Unit quaternions (K, 4) (x, y, z, w) rotating the +z axis onto each of ``directions``
+    (K, 3) (the axis of an RViz CYLINDER is its local z). A zero direction gives the identity,
+    the -z direction a half turn about x."""
+    d = np.asarray(directions, dtype=float).reshape(-1, 3)
+    n = np.linalg.norm(d, axis=1)
+    out = np.tile(np.array([0.0, 0.0, 0.0, 1.0]), (len(d), 1))
+    ok = n > 1e-12
+    u = d[ok] / n[ok, None]
+    c = u[:, 2]  # cos of the angle between z and u
+    flip = c < -1.0 + 1e-9
+    # q = (sin(a/2) axis, cos(a/2)) without trig: w = sqrt((1+c)/2), xyz = (z x u) / (2w)
+    w = np.sqrt(np.maximum(0.5 * (1.0 + c), 1e-300))
+    q = np.stack([-u[:, 1] / (2 * w), u[:, 0] / (2 * w), np.zeros_like(w), w], axis=1)
+    q[flip] = (1.0, 0.0, 0.0, 0.0)
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    out[ok] = q
+    return out
+
+
 def quat_z_to(direction: np.ndarray) -> Tuple[float, float, float, float]:
-    """Unit quaternion (x, y, z, w) rotating the +z axis onto ``direction`` (the axis of an RViz
-    CYLINDER is its local z). A zero direction gives the identity."""
-    d = np.asarray(direction, dtype=float)
-    n = np.linalg.norm(d)
-    if n < 1e-12:
-        return (0.0, 0.0, 0.0, 1.0)
-    d = d / n
-    z = np.array([0.0, 0.0, 1.0])
-    c = float(np.dot(z, d))
-    if c < -1.0 + 1e-9:  # opposite: half turn about x
-        return (1.0, 0.0, 0.0, 0.0)
-    axis = np.cross(z, d)
-    # q = (sin(a/2) axis, cos(a/2)) written without trig: w = sqrt((1+c)/2), xyz = axis/(2w)
-    w = np.sqrt(0.5 * (1.0 + c))
-    xyz = axis / (2.0 * w)
-    q = np.array([xyz[0], xyz[1], xyz[2], w])
-    q /= np.linalg.norm(q)
-    return tuple(float(v) for v in q)
+    """Unit quaternion (x, y, z, w) rotating the +z axis onto ``direction``."""
+    return tuple(float(v) for v in quats_z_to(np.asarray(direction, dtype=float)[None])[0])
 
 
 def reliability_square_side(reliability: np.ndarray, max_side: float) -> np.ndarray:
@@ -211,22 +219,24 @@ def capsule_markers(frame: SkeletonFrame, style: Style, layer: str = 'character'
     radius at the character's height (the MuJoCo model's capsule sizes)."""
     ns = namespace(layer, frame.user_id)
     p = _shift(style, layer, np.asarray(frame.positions, dtype=float))
-    radii = standard_body(character_height(frame, style)).segment_radii
+    radii = (_RADIUS_PER_HEIGHT * character_height(frame, style)).tolist()
     color = _rgba(style.character_color)
+    pa, pb = p[_SEG_P], p[_SEG_C]
+    d = pb - pa
+    lengths = np.maximum(np.linalg.norm(d, axis=1), 1e-4).tolist()
+    mids = (0.5 * (pa + pb)).tolist()
+    quats = quats_z_to(d).tolist()
+    pa, pb = pa.tolist(), pb.tolist()
     out = []
     common = dict(ns=ns, frame_id=frame.frame_id, stamp_ns=frame.stamp_ns, color=color)
-    for k, (a, b) in enumerate(zip(SEGMENT_PARENTS, SEGMENT_CHILDREN)):
-        r = float(radii[k])
-        d = p[b] - p[a]
-        length = float(np.linalg.norm(d))
-        mid = 0.5 * (p[a] + p[b])
-        out.append(MarkerSpec(id=3 * k, type=CYLINDER, position=tuple(float(v) for v in mid),
-                              orientation=quat_z_to(d), scale=(2 * r, 2 * r, max(length, 1e-4)),
-                              **common))
-        for i, j in ((1, a), (2, b)):
-            out.append(MarkerSpec(id=3 * k + i, type=SPHERE,
-                                  position=tuple(float(v) for v in p[j]), scale=(2 * r,) * 3,
-                                  **common))
+    for k in range(len(radii)):
+        dia = 2.0 * radii[k]
+        out.append(MarkerSpec(id=3 * k, type=CYLINDER, position=tuple(mids[k]),
+                              orientation=tuple(quats[k]), scale=(dia, dia, lengths[k]), **common))
+        out.append(MarkerSpec(id=3 * k + 1, type=SPHERE, position=tuple(pa[k]),
+                              scale=(dia, dia, dia), **common))
+        out.append(MarkerSpec(id=3 * k + 2, type=SPHERE, position=tuple(pb[k]),
+                              scale=(dia, dia, dia), **common))
     return out
 
 
@@ -254,6 +264,8 @@ def layer_markers(layer: str, frame: SkeletonFrame, style: Style
 class SceneState:
     """Latest skeletons of every layer; :meth:`build` returns the markers to publish now.
 
+    Only layers whose input changed since the last build are rebuilt (RViz keeps the others until
+    their lifetime ends; :meth:`invalidate` forces a full rebuild, e.g. after a style change).
     Markers that were shown before and are not shown now (user gone, layer hidden or stale, joint
     square vanished) come back once as DELETE specs, so RViz never keeps a stale marker.
     """
@@ -261,14 +273,15 @@ class SceneState:
     def __init__(self, style: Optional[Style] = None, layers: Iterable[str] = LAYERS,
                  stale_timeout_s: float = 1.0, default_frame_id: str = 'kinect_link'):
         self.style = style or Style()
-        self.enabled: Dict[str, bool] = {name: True for name in LAYERS}
-        for name in LAYERS:
-            self.enabled[name] = name in set(layers)
+        self.enabled: Dict[str, bool] = {name: name in set(layers) for name in LAYERS}
         self.stale_timeout_s = stale_timeout_s
         self.default_frame_id = default_frame_id
         self._frames: Dict[str, List[SkeletonFrame]] = {}
         self._received_at: Dict[str, float] = {}
-        self._shown: Dict[str, Tuple[str, set]] = {}  # ns -> (frame_id, ids)
+        self._version: Dict[str, int] = {name: 0 for name in LAYERS}
+        self._built: Dict[str, int] = {name: -1 for name in LAYERS}
+        # layer -> ns -> (frame_id, ids shown)
+        self._shown: Dict[str, Dict[str, Tuple[str, set]]] = {name: {} for name in LAYERS}
 
     def update(self, layer: str, frames: Sequence[SkeletonFrame], now_s: float) -> None:
         """Replace the layer's skeletons by ``frames`` (all users seen in one message)."""
@@ -276,38 +289,48 @@ class SceneState:
             raise ValueError(f'unknown layer {layer!r}')
         self._frames[layer] = list(frames)
         self._received_at[layer] = now_s
+        self._version[layer] += 1
+
+    def invalidate(self) -> None:
+        """Rebuild every layer at the next :meth:`build` (style or frame changed)."""
+        self._built = {name: -1 for name in LAYERS}
+
+    def _active(self, layer: str, now_s: float) -> bool:
+        t = self._received_at.get(layer)
+        return bool(self.enabled.get(layer)) and t is not None and now_s - t <= self.stale_timeout_s
 
     def build(self, now_s: float) -> List[MarkerSpec]:
         out: List[MarkerSpec] = []
-        shown: Dict[str, Tuple[str, set]] = {}
         for layer in LAYERS:
-            if not self.enabled.get(layer, False):
-                continue
-            t = self._received_at.get(layer)
-            if t is None or now_s - t > self.stale_timeout_s:
-                continue
-            for f in self._frames.get(layer, []):
-                if not f.frame_id:
-                    f = f.copy(frame_id=self.default_frame_id)
-                specs, _ = layer_markers(layer, f, self.style)
-                if not specs:
-                    continue
-                ns = specs[0].ns
-                shown[ns] = (f.frame_id, {s.id for s in specs})
-                out.extend(specs)
-        # deletes: whatever was shown last time and is not shown now
-        for ns, (frame_id, ids) in self._shown.items():
-            now_ids = shown.get(ns, (frame_id, set()))[1]
-            for i in sorted(ids - now_ids):
-                out.append(MarkerSpec(ns=ns, id=i, action=DELETE, frame_id=frame_id))
-        self._shown = shown
+            active = self._active(layer, now_s)
+            if active and self._built[layer] == self._version[layer]:
+                continue  # unchanged since the last build
+            shown: Dict[str, Tuple[str, set]] = {}
+            if active:
+                for f in self._frames.get(layer, []):
+                    if not f.frame_id:
+                        f = f.copy(frame_id=self.default_frame_id)
+                    specs, _ = layer_markers(layer, f, self.style)
+                    if not specs:
+                        continue
+                    shown[specs[0].ns] = (f.frame_id, {s.id for s in specs})
+                    out.extend(specs)
+                self._built[layer] = self._version[layer]
+            else:
+                self._built[layer] = -1
+            # deletes: whatever this layer showed before and does not show now
+            for ns, (frame_id, ids) in self._shown[layer].items():
+                now_ids = shown.get(ns, (frame_id, set()))[1]
+                for i in sorted(ids - now_ids):
+                    out.append(MarkerSpec(ns=ns, id=i, action=DELETE, frame_id=frame_id))
+            self._shown[layer] = shown
         return out
 
     def has_stale(self, now_s: float) -> bool:
-        """True when a layer with markers shown has not been updated for ``stale_timeout_s``."""
-        layers = {ns.split('/', 1)[0] for ns in self._shown}
-        return any(now_s - self._received_at.get(layer, -np.inf) > self.stale_timeout_s
-                   for layer in layers)
+        """True when a layer with markers shown is hidden or has not been updated for
+        ``stale_timeout_s`` (the next :meth:`build` deletes its markers)."""
+        return any(shown and not self._active(layer, now_s)
+                   for layer, shown in self._shown.items())
 
     def shown_namespaces(self) -> List[str]:
-        return sorted(self._shown)
+        return sorted(ns for shown in self._shown.values() for ns in shown)

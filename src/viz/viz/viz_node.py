@@ -138,33 +138,68 @@ def style_from_params(v: Dict[str, Any]) -> mk.Style:
         offsets={'reconstructed': off_r, 'completed': off_r, 'character': off_c})
 
 
-def spec_to_msg(spec: mk.MarkerSpec, lifetime_s: float) -> Marker:
-    m = Marker()
-    m.header.frame_id = spec.frame_id
-    ns_to_stamp(spec.stamp_ns, m.header.stamp)
-    m.ns, m.id = spec.ns, int(spec.id)
-    if spec.action == mk.DELETE:
-        m.action = Marker.DELETE
+class MarkerCache:
+    """Turns :class:`viz.markers.MarkerSpec` s into Marker messages, reusing the message objects
+    of every (ns, id) across publishes: constructing rclpy messages costs ~15x more than setting
+    their fields (a 2-user scene with every layer has ~170 markers at up to 30 Hz)."""
+
+    def __init__(self):
+        self._markers: Dict[tuple, Marker] = {}
+        self._points: Dict[tuple, list] = {}
+        self._colors: Dict[tuple, list] = {}
+
+    def __len__(self) -> int:
+        return len(self._markers)
+
+    def to_msg(self, spec: mk.MarkerSpec, lifetime_s: float) -> Marker:
+        key = (spec.ns, spec.id)
+        if spec.action == mk.DELETE:
+            self._markers.pop(key, None)
+            self._points.pop(key, None)
+            self._colors.pop(key, None)
+            m = Marker(ns=spec.ns, id=int(spec.id), action=Marker.DELETE)
+            m.header.frame_id = spec.frame_id
+            ns_to_stamp(spec.stamp_ns, m.header.stamp)
+            return m
+        m = self._markers.get(key)
+        if m is None:
+            m = self._markers[key] = Marker(ns=spec.ns, id=int(spec.id), action=Marker.ADD)
+        m.header.frame_id = spec.frame_id
+        ns_to_stamp(spec.stamp_ns, m.header.stamp)
+        m.type = _TYPES[spec.type]
+        p = m.pose.position
+        p.x, p.y, p.z = (float(v) for v in spec.position)
+        o = m.pose.orientation
+        o.x, o.y, o.z, o.w = (float(v) for v in spec.orientation)
+        m.scale.x, m.scale.y, m.scale.z = (float(v) for v in spec.scale)
+        m.color.r, m.color.g, m.color.b, m.color.a = (float(v) for v in spec.color)
+        secs = int(lifetime_s)
+        m.lifetime.sec, m.lifetime.nanosec = secs, int(round((lifetime_s - secs) * 1e9))
+        if spec.points is not None:
+            from geometry_msgs.msg import Point
+            from std_msgs.msg import ColorRGBA
+            pts = self._points.setdefault(key, [])
+            n = len(spec.points)
+            while len(pts) < n:
+                pts.append(Point())
+            for q, (a, b, c) in zip(pts, spec.points.tolist()):
+                q.x, q.y, q.z = a, b, c
+            m.points = pts[:n]
+            if spec.colors is not None and len(spec.colors) == n:
+                cols = self._colors.setdefault(key, [])
+                while len(cols) < n:
+                    cols.append(ColorRGBA())
+                for q, (r, g, b, a) in zip(cols, spec.colors.tolist()):
+                    q.r, q.g, q.b, q.a = r, g, b, a
+                m.colors = cols[:n]
+            else:
+                m.colors = []
         return m
-    m.action = Marker.ADD
-    m.type = _TYPES[spec.type]
-    p = m.pose.position
-    p.x, p.y, p.z = (float(v) for v in spec.position)
-    o = m.pose.orientation
-    o.x, o.y, o.z, o.w = (float(v) for v in spec.orientation)
-    m.scale.x, m.scale.y, m.scale.z = (float(v) for v in spec.scale)
-    m.color.r, m.color.g, m.color.b, m.color.a = (float(v) for v in spec.color)
-    secs = int(lifetime_s)
-    m.lifetime.sec, m.lifetime.nanosec = secs, int(round((lifetime_s - secs) * 1e9))
-    m.frame_locked = False
-    if spec.points is not None:
-        from geometry_msgs.msg import Point
-        from std_msgs.msg import ColorRGBA
-        m.points = [Point(x=float(a), y=float(b), z=float(c)) for a, b, c in spec.points]
-        if spec.colors is not None and len(spec.colors) == len(spec.points):
-            m.colors = [ColorRGBA(r=float(r), g=float(g), b=float(b), a=float(a))
-                        for r, g, b, a in spec.colors]
-    return m
+
+
+def spec_to_msg(spec: mk.MarkerSpec, lifetime_s: float) -> Marker:
+    """One spec -> a new Marker message."""
+    return MarkerCache().to_msg(spec, lifetime_s)
 
 
 class VizNode(Node):
@@ -182,6 +217,7 @@ class VizNode(Node):
                                    default_frame_id=v['default_frame_id'])
         self._apply_enabled(v)
         self._dirty = False
+        self._cache = MarkerCache()
         self._objects: Optional[MarkerArray] = None
         self._objects_at = 0.0
         self._objects_shown: Dict[tuple, str] = {}
@@ -212,6 +248,7 @@ class VizNode(Node):
         except (TypeError, ValueError) as e:
             return str(e)
         self.scene.style = style
+        self.scene.invalidate()
         self.scene.stale_timeout_s = v['stale_timeout_s']
         self.scene.default_frame_id = v['default_frame_id']
         self._apply_enabled(v)
@@ -292,7 +329,7 @@ class VizNode(Node):
             return
         lifetime = self.params.values['marker_lifetime_s']
         out = MarkerArray()
-        out.markers = [spec_to_msg(s, lifetime) for s in specs] + objects
+        out.markers = [self._cache.to_msg(s, lifetime) for s in specs] + objects
         self._pub.publish(out)
         self.health.on_publish(latency_s=time.perf_counter() - t0)
 
