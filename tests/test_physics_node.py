@@ -139,7 +139,7 @@ def test_user_leaving_removes_the_character_and_bad_input_is_dropped(graph):
     bad.skeletons[0].positions[3].x = float('nan')
     pub.publish(bad)
     deadline = time.time() + 5
-    while 2 not in node.sim.characters and time.time() < deadline:
+    while (2 not in node.sim.characters or not node.health.dropped) and time.time() < deadline:
         time.sleep(0.05)
     assert 2 in node.sim.characters and 5 not in node.sim.characters
     empty = frames_to_array_msg([], 9_600_000_000, 'kinect_link')

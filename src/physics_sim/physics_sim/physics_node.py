@@ -87,6 +87,9 @@ PARAMS: List[ParamSpec] = [
               range=(0.001, 1.0), read_only=True),
     ParamSpec('track_dampratio', 1.0, 'mocap_constraints: damping ratio', range=(0.1, 10.0),
               read_only=True),
+    ParamSpec('track_impedance', 0.9, 'mocap_constraints: solimp impedance d (share of the '
+              'constraint force kept; lower = softer, more push response)', range=(0.01, 0.99),
+              read_only=True),
     ParamSpec('body_height', 0.0, 'character height (m); 0 = estimated from the first target',
               validator=_height, read_only=True),
     ParamSpec('body_mass', 75.0, 'character mass at 1.75 m (kg), scaled with height^3',
@@ -144,6 +147,7 @@ def config_from_params(v: Dict) -> SimConfig:
                   twist_kd=v['twist_kd'], max_torque=v['max_torque'])
     return SimConfig(timestep=v['timestep'], controller=v['controller'], gains=gains,
                      track_timeconst=v['track_timeconst'], track_dampratio=v['track_dampratio'],
+                     track_impedance=v['track_impedance'],
                      body_height=v['body_height'], body_mass=v['body_mass'],
                      retarget=v['retarget'], joint_damping=v['joint_damping'],
                      joint_armature=v['joint_armature'], sensor_height=v['sensor_height'],
