@@ -52,6 +52,7 @@ def test_retargeting_keeps_standard_bone_lengths(shared_dir):
     np.testing.assert_allclose(segment_lengths(db2.positions.astype(float))[0],
                                tall.segment_lengths, atol=1e-5)
     assert db2.meta['body_height'] == 1.95
+    np.testing.assert_allclose(db2.body.segment_lengths, tall.segment_lengths)
 
 
 def test_twists_are_axial_rotations():

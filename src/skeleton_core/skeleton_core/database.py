@@ -99,6 +99,15 @@ class MotionDatabase:
         return self.positions.reshape(len(self), NUM_JOINTS * 3)
 
     @property
+    def body(self) -> Body:
+        """The body the postures were retargeted to (from ``meta``; default standard body)."""
+        h = self.meta.get('body_height')
+        m = self.meta.get('body_mass')
+        if h is None:
+            return standard_body()
+        return standard_body(float(h), float(m) if m is not None else 75.0)
+
+    @property
     def posture_classes(self) -> np.ndarray:
         """(N,) class name of every posture."""
         names = np.array(self.class_names + [''], dtype=object)
