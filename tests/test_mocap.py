@@ -51,10 +51,11 @@ def test_orientations_follow_segments(walk):
     d = walk.positions[:, 1:] - walk.positions[:, list(PARENTS[1:])]
     d /= np.linalg.norm(d, axis=-1, keepdims=True)
     pred = quat_rotate(walk.orientations[:, 1:], rest_directions()[1:])
-    ang = np.degrees(np.arccos(np.clip(np.sum(d * pred, -1), -1, 1)))
-    limbs = [j - 1 for j in range(4, 20)]  # arms and legs: rigid with one mocap bone
-    assert ang[:, limbs].max() < 1.0
-    assert ang.max() < 30.0  # trunk segments span several bones
+    np.testing.assert_allclose(pred, d, atol=1e-9)
+    # the head segment's twist follows the CMU Head bone: its facing (x axis) stays forward-ish
+    head_fwd = quat_rotate(walk.orientations[:, 3], np.array([1.0, 0, 0]))
+    pelvis_fwd = quat_rotate(walk.orientations[:, 0], np.array([1.0, 0, 0]))
+    assert np.all(np.sum(head_fwd[:, :2] * pelvis_fwd[:, :2], -1) > 0.7)
     np.testing.assert_allclose(np.linalg.norm(walk.orientations, axis=-1), 1.0, atol=1e-9)
 
 

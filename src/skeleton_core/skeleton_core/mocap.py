@@ -8,14 +8,16 @@ Orientation convention (shared with :mod:`skeleton_core.motions` and the databas
 ``orientations[t, j]`` (xyzw) is the global orientation of the segment that *ends* at joint j
 (joint 0: the pelvis). Identity means "as in the standard body's T-pose facing +x", i.e.
 ``quat_rotate(orientations[t, j], unit(standard_body().rest_offsets[j]))`` is the direction of the
-segment from ``PARENTS[j]`` to j (exactly for built-in motions, approximately for mocap, where a
-Kinect segment can span several mocap bones).
+segment from ``PARENTS[j]`` to j (exactly, for built-in motions and mocap alike).
 
 CMU -> Kinect mapping (the one table: :data:`CMU_TO_KINECT`)
 -----------------------------------------------------------
 Kinect joints are points on the mocap skeleton; segment orientations are the global rotation of one
 mocap bone (:data:`CMU_ORIENTATION_SOURCE`), composed with a constant per-subject correction that
-turns the standard body's rest direction into the mocap bone's rest direction. Choices:
+turns the standard body's rest direction into the mocap bone's rest direction; for segments that
+span several bones (Spine-ShoulderCenter, ShoulderCenter-Head: up to ~25 deg off) a final minimal
+swing aligns the orientation with the actual segment, so the twist comes from the source bone and
+the direction from the positions. Choices:
 
 * HipCenter = ``Hips`` (pelvis centre); HipLeft/Right = ``LeftUpLeg``/``RightUpLeg`` (hip joint
   centres), Knee = ``Leg``, Ankle = ``Foot``, Foot = ``ToeBase`` (ball of the foot; the toe end
@@ -50,7 +52,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from .bvh import Bvh, BvhError, load_bvh
-from .geometry import quat_multiply
+from .geometry import quat_multiply, quat_rotate
 from .model import JOINT_NAMES, MIRROR, NUM_JOINTS, PARENTS, standard_body
 
 __all__ = [
@@ -169,6 +171,18 @@ def _min_rotation(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return q / np.linalg.norm(q)
 
 
+def _min_rotation_batch(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Batched smallest rotations taking unit vectors a to b (..., 3) -> (..., 4); for (near)
+    opposite vectors, which cannot occur for the small residuals this is used on, identity."""
+    c = np.cross(a, b)
+    w = 1.0 + np.sum(a * b, -1, keepdims=True)
+    q = np.concatenate([c, w], -1)
+    n = np.linalg.norm(q, axis=-1, keepdims=True)
+    ident = np.zeros_like(q)
+    ident[..., 3] = 1.0
+    return np.where(n > 1e-9, q / np.maximum(n, 1e-12), ident)
+
+
 def _kinect_points(bvh: Bvh, pos: np.ndarray, ends: np.ndarray) -> np.ndarray:
     """Kinect joint positions (F, 20, 3) in BVH axes from mocap joint / End Site positions."""
     out = np.zeros(pos.shape[:1] + (NUM_JOINTS, 3))
@@ -250,6 +264,14 @@ def load_cmu_clip(path, motion_class: Optional[str] = None, drop_first: bool = T
         d = kin0[j] - kin0[PARENTS[j]]
         corr[j] = _min_rotation(a_std[j], d / np.linalg.norm(d))
     q = quat_multiply(q, corr)
+    # Segments spanning several mocap bones (trunk, neck) are not rigid with their source bone:
+    # swing the orientation by the small residual so it points exactly along the segment (the
+    # twist still comes from the source bone).
+    seg = kin[:, 1:] - kin[:, list(PARENTS[1:])]
+    seg /= np.maximum(np.linalg.norm(seg, axis=-1, keepdims=True), 1e-12)
+    pred = quat_rotate(q[:, 1:], np.broadcast_to(a_std[1:], seg.shape))
+    q[:, 1:] = quat_multiply(_min_rotation_batch(pred, seg), q[:, 1:])
+    q /= np.linalg.norm(q, axis=-1, keepdims=True)
     q *= np.where(q[..., 3:4] < 0, -1.0, 1.0)
     if not (np.all(np.isfinite(kin)) and np.all(np.isfinite(q))):
         raise MocapError(f'{path}: non-finite values after forward kinematics')
