@@ -140,3 +140,12 @@ def test_series_frame_lookup_nearest_and_held():
     assert s.index_at(np.array([-5, 40, 60, 210, 330, 400]), 50).tolist() == [0, 0, 1, -1, 2, -1]
     assert s.index_held(np.array([-5, 40, 99, 100, 250, 301, 500]), 150).tolist() == \
         [-1, 0, 0, 1, 1, 2, -1]
+
+
+def test_report_on_input_without_any_skeleton_topic(tmp_path):
+    files = report.write_report(report.data_from_series({}), tmp_path, name='empty', max_frames=2)
+    summary = json.loads((tmp_path / 'empty_summary.json').read_text())
+    assert summary['user_id'] is None and summary['reliability'] is None
+    assert all(m['frames'] == 0 for m in summary['methods'].values())
+    assert 'no data' in (tmp_path / 'empty_summary.md').read_text()
+    assert files['frame'] and files['animation']
