@@ -78,3 +78,19 @@ def test_reconstructor_method_a_streams_and_preserves_header(db):
     # everything tracked and steady -> nothing substituted
     assert not r.last_result.substituted.any()
     assert np.allclose(out.positions, clip[-1])
+
+
+def test_fast_helpers_match_geometry_and_model():
+    from pose_reconstruction.posture_space import (fast_denormalize, fast_normalize,
+                                                   fast_retarget, rest_directions)
+    from skeleton_core.geometry import normalize, retarget
+    rng = np.random.default_rng(2)
+    body = standard_body()
+    p = place(body.rest_positions() + rng.normal(0, 0.05, (NUM_JOINTS, 3)), yaw=2.5)
+    w = rng.random(NUM_JOINTS)
+    a, ta = normalize(p, w)
+    b, tb = fast_normalize(p, w)
+    assert np.allclose(a, b) and np.isclose(float(ta.yaw), float(tb.yaw))
+    assert np.allclose(fast_denormalize(b, tb), p)
+    assert np.allclose(fast_retarget(a, body.bone_lengths_by_joint(), rest_directions(body)),
+                       retarget(a, body))

@@ -22,11 +22,10 @@ from typing import Optional
 
 import numpy as np
 
-from skeleton_core.geometry import denormalize
 from skeleton_core.model import NUM_JOINTS, PARENTS
 
-from .posture_space import (QueryPreparer, as_database_arrays, orientations_to_sensor,
-                            rest_directions)
+from .posture_space import (QueryPreparer, as_database_arrays, fast_denormalize,
+                            orientations_to_sensor, rest_directions)
 
 
 def pca_basis(flat: np.ndarray, dims: int):
@@ -90,7 +89,7 @@ class PCACompletion:
         out = p.copy()
         if missing.any():
             if self.substitution == 'absolute':
-                full = denormalize(match / prep.scale, prep.transform)
+                full = fast_denormalize(match / prep.scale, prep.transform)
                 out[missing] = full[missing]
             else:
                 if user_bone_lengths is None:
@@ -106,7 +105,7 @@ class PCACompletion:
                 world_off = (unit * bone[:, None]) @ rot.T
                 if missing[0]:
                     # root missing: place it from the match relative to the observed hips' centre
-                    full = denormalize(match / prep.scale, prep.transform)
+                    full = fast_denormalize(match / prep.scale, prep.transform)
                     out[0] = full[0]
                 for j in range(1, NUM_JOINTS):  # parents first; only a few joints are missing
                     if missing[j]:

@@ -12,8 +12,7 @@ from typing import Optional
 
 import numpy as np
 
-from skeleton_core.geometry import NormalizeTransform, denormalize, normalize, quat_from_yaw, \
-    quat_multiply
+from skeleton_core.geometry import NormalizeTransform, facing_yaw, quat_from_yaw, quat_multiply
 from skeleton_core.model import (NUM_JOINTS, PARENTS, ROOT, SEGMENT_CHILDREN, SEGMENT_PARENTS,
                                  Body, standard_body)
 
@@ -100,6 +99,32 @@ def rest_directions(body: Body) -> np.ndarray:
     return np.where(n > 1e-12, o / np.maximum(n, 1e-12), 0.0)
 
 
+def fast_normalize(positions: np.ndarray, weights: Optional[np.ndarray] = None):
+    """geometry.normalize for one posture (20, 3), without the batch machinery (same result)."""
+    p = np.asarray(positions, float)
+    yaw = facing_yaw(p, weights)
+    t = p[ROOT].copy()
+    c, s = np.cos(yaw), np.sin(yaw)
+    d = p - t
+    out = np.empty_like(d)
+    out[:, 0] = c * d[:, 0] + s * d[:, 1]
+    out[:, 1] = -s * d[:, 0] + c * d[:, 1]
+    out[:, 2] = d[:, 2]
+    return out, NormalizeTransform(yaw=np.asarray(yaw), translation=t)
+
+
+def fast_denormalize(normalized: np.ndarray, transform: NormalizeTransform) -> np.ndarray:
+    """geometry.denormalize for one posture (20, 3)."""
+    q = np.asarray(normalized, float)
+    yaw = float(transform.yaw)
+    c, s = np.cos(yaw), np.sin(yaw)
+    out = np.empty_like(q)
+    out[:, 0] = c * q[:, 0] - s * q[:, 1]
+    out[:, 1] = s * q[:, 0] + c * q[:, 1]
+    out[:, 2] = q[:, 2]
+    return out + transform.translation
+
+
 @dataclass
 class PreparedQuery:
     """A sensor posture brought into the database space."""
@@ -126,7 +151,7 @@ class QueryPreparer:
     def prepare(self, positions: np.ndarray, reliability: np.ndarray,
                 user_height: float) -> PreparedQuery:
         w = np.asarray(reliability, float)
-        norm, tf = normalize(positions, np.maximum(w, 1e-3))
+        norm, tf = fast_normalize(positions, np.maximum(w, 1e-3))
         scale = self.body.height / max(user_height, 0.5)
         ret = fast_retarget(norm, self.lengths, self.rest_dirs)
         bad = w < self.reliable_threshold
@@ -142,7 +167,7 @@ def to_sensor_frame(normalized: np.ndarray, transform: NormalizeTransform,
     restore yaw and translation (geometry.denormalize)."""
     p = normalized if user_bone_lengths is None else fast_retarget(normalized, user_bone_lengths,
                                                                     rest_dirs)
-    return denormalize(p, transform)
+    return fast_denormalize(p, transform)
 
 
 def orientations_to_sensor(quats: np.ndarray, yaw: float) -> np.ndarray:
