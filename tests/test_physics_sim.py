@@ -172,3 +172,29 @@ def test_sensor_pose_round_trip_and_pitch():
     np.testing.assert_allclose(s.to_sensor(s.to_world(p)), p, atol=1e-12)
     fwd = s.to_world(np.array([[1.0, 0.0, 0.0]]))[0]
     assert fwd[2] < 0.8 + 0.03  # tilted down: a point straight ahead is below the sensor
+
+
+def test_physics_method_processes_frames_and_registers():
+    from skeleton_core.conversions import SkeletonFrame
+    from physics_sim.methods import PhysicsMethod, register
+    m = PhysicsMethod(config=SimConfig(body_height=1.75))
+    out = None
+    for i in range(20):
+        f = SkeletonFrame(positions=tpose_sensor(), tracking_state=np.full(20, 2, np.uint8),
+                          user_id=3, stamp_ns=1_000_000_000 + i * 33_333_333, frame_id='kinect_depth')
+        out = m.process(f)
+    assert out.user_id == 3 and out.frame_id == 'kinect_depth' and out.stamp_ns == f.stamp_ns
+    assert np.abs(out.positions - tpose_sensor()).max() < 0.05
+    bad = f.copy(positions=np.full((20, 3), np.nan))
+    assert m.process(bad) is None                       # refused, no crash
+    lost = f.copy(tracking_state=np.where(np.arange(20) == 7, 0, 2).astype(np.uint8))
+    lost.positions[7] = 0.0                             # an untracked joint's garbage
+    out = m.process(lost)
+    assert np.linalg.norm(out.positions[7] - tpose_sensor()[7]) < 0.1
+    m.reset()
+    assert not m.sim.characters
+    evaluation = pytest.importorskip('skeleton_core.evaluation')
+    assert register()
+    assert {'physics', 'physics_raw'} <= set(evaluation.available_methods())
+    raw = evaluation.make_method('physics_raw')
+    assert raw.name == 'physics_raw' and raw.process(f) is not None

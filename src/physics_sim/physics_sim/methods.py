@@ -7,21 +7,19 @@ frame (1/30 s when unknown) and the simulated joint positions/orientations are r
 input's frame, with the input's stamp, user id and frame id.
 
 :func:`register` adds it to ``skeleton_core.evaluation`` (import guarded: this module works
-without the harness). The evaluation harness's clips are in a world frame with the floor at z = 0
-or in a sensor frame; ``auto_floor`` puts the floor under the first frame's lowest foot in both.
+without the harness). The evaluation harness's
+frames arrive in the sensor frame (sensor 0.8 m above the floor, ``sensor_model.yaml``);
+``auto_floor`` instead puts the floor under the first frame's lowest foot.
 """
 from __future__ import annotations
 
-from typing import Callable, Optional
+from typing import Optional
 
 import numpy as np
 from skeleton_core.conversions import SkeletonFrame
-from skeleton_core.model import NUM_JOINTS, TRACKED
+from skeleton_core.model import NOT_TRACKED, NUM_JOINTS, TRACKED
 
 from .simulation import SimConfig, Simulation
-
-UPSTREAM_CANDIDATES = ('reconstruction', 'optimizer', 'completion')
-
 
 class PhysicsMethod:
     """Physics tracking of the frames given by ``upstream`` (a Method; None = the raw input)."""
@@ -40,10 +38,22 @@ class PhysicsMethod:
         self.sim = Simulation(self._config)
         self._last_stamp = {}
 
-    def process(self, frame: SkeletonFrame) -> SkeletonFrame:
+    def process(self, frame: SkeletonFrame) -> Optional[SkeletonFrame]:
         target = self.upstream.process(frame) if self.upstream is not None else frame
+        if target is None:
+            return None
         uid = int(target.user_id)
-        self.sim.set_target(uid, target.positions, target.orientations, target.stamp_ns)
+        pos = np.array(target.positions, dtype=float)
+        missing = np.asarray(target.tracking_state) == NOT_TRACKED
+        if missing.any():
+            if uid not in self.sim.characters:
+                return None  # spawn only from a complete skeleton
+            # no target for a joint the sensor lost: hold it where the character has it
+            pos[missing] = self.sim.state(uid).positions_sensor[missing]
+        try:
+            self.sim.set_target(uid, pos, target.orientations, target.stamp_ns)
+        except ValueError:
+            return None  # refused (NaN, too many users): no output for this frame
         last = self._last_stamp.get(uid)
         dt = 1.0 / 30.0
         if last is not None and target.stamp_ns > last:
@@ -58,49 +68,50 @@ class PhysicsMethod:
                              stamp_ns=target.stamp_ns, frame_id=target.frame_id)
 
 
-def _upstream_factory(evaluation) -> Optional[Callable[[], object]]:
-    """A factory of the reconstruction method from the harness's registry, if it has one."""
-    for getter in ('make_method', 'create_method', 'get_method'):
-        fn = getattr(evaluation, getter, None)
-        if fn is None:
-            continue
-        for name in UPSTREAM_CANDIDATES:
-            try:
-                m = fn(name)
-            except Exception:  # noqa: BLE001 -- unknown name or signature: try the next
-                continue
-            if m is not None:
-                return (lambda fn=fn, name=name: fn(name)) if not callable(m) or hasattr(m, 'process') \
-                    else m
-    return None
+def make_physics(upstream: Optional[str] = 'C', controller: str = 'explicit_pd',
+                 sensor_height: float = 0.8, sensor_pitch: float = 0.0, auto_floor: bool = False,
+                 kp: Optional[float] = None, kd: Optional[float] = None, **upstream_params
+                 ) -> PhysicsMethod:
+    """Factory for the harness: ``upstream`` is a registered method name ('C' = the full
+    reconstruction; None = physics on the raw stream), its parameters pass through."""
+    from .controller import Gains
+    g = Gains()
+    if kp is not None:
+        g.ke = float(kp)
+    if kd is not None:
+        g.kd = float(kd)
+    cfg = SimConfig(controller=controller, gains=g, sensor_height=sensor_height,
+                    sensor_pitch=sensor_pitch, auto_floor=auto_floor)
+    up = None
+    if upstream:
+        from skeleton_core import evaluation
+        if upstream not in evaluation.available_methods():
+            evaluation.load_plugins(('pose_reconstruction.methods',))
+        up = evaluation.make_method(upstream, **upstream_params)
+    name = 'physics' if upstream == 'C' else (f'physics_{upstream}' if upstream else 'physics_raw')
+    return PhysicsMethod(upstream=up, config=cfg, name=name)
 
 
 def register() -> bool:
-    """Register ``physics`` (reconstruction -> physics) and ``physics_raw`` with the evaluation
-    harness. Returns False when the harness is not installed."""
+    """Register ``physics`` (method C -> physics), ``physics_A`` (A -> physics) and
+    ``physics_raw`` (raw stream -> physics) with the evaluation harness; False without it."""
     try:
-        from skeleton_core import evaluation
+        from skeleton_core.evaluation import register_method
     except ImportError:
         return False
-    reg = getattr(evaluation, 'register_method', None)
-    if reg is None:
-        return False
-    up = _upstream_factory(evaluation)
-
-    def physics():
-        return PhysicsMethod(upstream=up() if up is not None else None)
-
-    def physics_raw():
-        return PhysicsMethod(upstream=None, name='physics_raw')
-
-    for name, factory in (('physics', physics), ('physics_raw', physics_raw)):
-        try:
-            reg(name, factory)
-        except Exception:  # noqa: BLE001 -- already registered / different signature
-            pass
+    import functools
+    defaults = {'controller': 'explicit_pd', 'sensor_height': 0.8, 'auto_floor': False}
+    register_method('physics', functools.partial(make_physics, 'C'),
+                    'Shum et al. 2013 Sec. VII: method C, then the PD-tracked MuJoCo character',
+                    defaults)
+    register_method('physics_A', functools.partial(make_physics, 'A'),
+                    'Shum & Ho 2012: method A (PCA completion), then the PD-tracked character',
+                    defaults)
+    register_method('physics_raw', functools.partial(make_physics, None),
+                    'the PD-tracked MuJoCo character on the raw Kinect stream', defaults)
     return True
 
 
 register()
 
-__all__ = ['PhysicsMethod', 'register']
+__all__ = ['PhysicsMethod', 'make_physics', 'register']
