@@ -127,6 +127,12 @@ def test_markers_cross_dds_and_hiding_a_layer_takes_effect(graph):
     assert later is not None
     assert not any(x.ns.startswith('raw/') for x in later.markers)
 
+    # hiding the environment deletes the forwarded object
+    assert viz.set_parameters([Parameter('show_objects', value=False)])[0].successful
+    gone = _wait_for(got, lambda m: any(x.action == Marker.DELETE and x.ns == 'environment/box'
+                                        and x.id == 3 for x in m.markers), pubs)
+    assert gone is not None, 'hidden environment objects were not deleted'
+
 
 def test_config_file_lists_every_parameter_and_loads(rclpy_context):
     from pathlib import Path

@@ -218,7 +218,7 @@ class VizNode(Node):
         self._apply_enabled(v)
         self._dirty = False
         self._cache = MarkerCache()
-        self._objects: Optional[MarkerArray] = None
+        self._objects: Optional[list] = None
         self._objects_at = 0.0
         self._objects_shown: Dict[tuple, str] = {}
         self._objects_new = False
@@ -272,14 +272,28 @@ class VizNode(Node):
         self._dirty = True
 
     def _on_objects(self, msg: MarkerArray) -> None:
+        """Keep the ADD markers of the newest environment array, renamed ``environment/<ns>``
+        (DELETE / DELETEALL entries are dropped: this node deletes what it forwarded itself)."""
         self.health.on_receive()
-        self._objects = msg
+        v = self.params.values
+        lt = v['marker_lifetime_s']
+        kept = []
+        for m in msg.markers:
+            if m.action != Marker.ADD:
+                continue
+            m.ns = f'environment/{m.ns}' if m.ns else 'environment'
+            if not m.header.frame_id:
+                m.header.frame_id = v['default_frame_id']
+            if m.lifetime.sec == 0 and m.lifetime.nanosec == 0:
+                m.lifetime.sec, m.lifetime.nanosec = int(lt), int(round((lt - int(lt)) * 1e9))
+            kept.append(m)
+        self._objects = kept
         self._objects_at = time.monotonic()
         self._objects_new = True
 
     def _object_markers(self, now: float):
-        """Forward a new environment MarkerArray (namespaced ``environment/...``), or DELETE the
-        forwarded objects once they are hidden or stale."""
+        """The newest environment markers once, plus DELETEs for forwarded objects that are gone,
+        hidden or stale."""
         v = self.params.values
         fresh = self._objects is not None and now - self._objects_at <= v['stale_timeout_s']
         out = []
@@ -287,18 +301,8 @@ class VizNode(Node):
             if not self._objects_new:
                 return out
             self._objects_new = False
-            shown = {}
-            for m in self._objects.markers:
-                if m.action != Marker.ADD:
-                    continue
-                m.ns = f'environment/{m.ns}' if m.ns else 'environment'
-                if not m.header.frame_id:
-                    m.header.frame_id = v['default_frame_id']
-                if m.lifetime.sec == 0 and m.lifetime.nanosec == 0:
-                    lt = v['marker_lifetime_s']
-                    m.lifetime.sec, m.lifetime.nanosec = int(lt), int(round((lt - int(lt)) * 1e9))
-                shown[(m.ns, m.id)] = m.header.frame_id
-                out.append(m)
+            shown = {(m.ns, m.id): m.header.frame_id for m in self._objects}
+            out = list(self._objects)
             for (ns, i), frame in self._objects_shown.items():
                 if (ns, i) not in shown:
                     out.append(self._delete(ns, i, frame))
@@ -306,7 +310,7 @@ class VizNode(Node):
         elif self._objects_shown:
             out = [self._delete(ns, i, frame) for (ns, i), frame in self._objects_shown.items()]
             self._objects_shown = {}
-            self._objects_new = True  # re-forward if shown again
+            self._objects_new = True  # forward again when shown again
         return out
 
     @staticmethod
