@@ -274,7 +274,10 @@ def _method_list(methods) -> List[tuple]:
             out.append((label, (lambda n=name, p=params: make_method(n, **p)),
                         {**method_info(name)['defaults'], **params}))
         elif callable(m):
-            out.append((getattr(m, 'name', getattr(m, '__name__', 'method')), m, {}))
+            label = getattr(m, 'name', None)
+            if not isinstance(label, str) or not label:
+                label = getattr(m(), 'name', None) or getattr(m, '__name__', 'method')
+            out.append((label, m, dict(getattr(m, 'params', {}) or {})))
         else:
             raise TypeError(f'cannot use {m!r} as a method')
     return out
@@ -400,7 +403,7 @@ def table3(methods, clips, seed: int = 0, max_frames: Optional[int] = None, sens
                              progress=progress)
         params.update(r['method_params'])
         for m, v in r['results'].items():
-            results.setdefault(m, {})[key] = v
+            results.setdefault(m, {})[key] = v[key]
     return {'experiment': 'table3', 'results': results, 'method_params': params,
             'subsets': {k: {'parts': TABLE3_SUBSETS[k][0],
                             'joints': [JOINT_NAMES[j] for j in TABLE3_SUBSETS[k][1]]}

@@ -25,7 +25,8 @@ One Euro filter (Casiez, Roussel & Vogel, CHI 2012)
 ---------------------------------------------------
 A first-order low-pass whose cutoff rises with speed: ``fc = min_cutoff + beta |dx/dt|_filtered``,
 ``alpha = 1 / (1 + tau / Te)`` with ``tau = 1 / (2 pi fc)``. The speed is the 3-D speed of the joint
-(so the filter is rotation invariant; the paper filters scalars), smoothed with ``d_cutoff``.
+(so the filter is rotation invariant; the paper filters scalars) from successive *raw* positions (as in
+the authors' reference implementation), smoothed with ``d_cutoff``.
 Defaults (our tuning for joint positions in metres at 30 Hz, following the paper's procedure: set
 ``beta = 0`` and lower ``min_cutoff`` until jitter at rest is acceptable, then raise ``beta`` until
 lag on fast movements is acceptable): ``min_cutoff = 1.0 Hz``, ``beta = 1.0 s/m``, ``d_cutoff = 1.0 Hz``.
@@ -129,6 +130,7 @@ class OneEuroFilter:
     def reset(self):
         self.has = np.zeros(self.n, bool)
         self.x = np.zeros((self.n, 3))
+        self.raw = np.zeros((self.n, 3))
         self.dx = np.zeros((self.n, 3))
         self.t_ns: Optional[int] = None
 
@@ -150,7 +152,7 @@ class OneEuroFilter:
         out = x.copy()
         cont = valid & self.has
         if cont.any():
-            dx = (x[cont] - self.x[cont]) / dt
+            dx = (x[cont] - self.raw[cont]) / dt
             ad = self._alpha(self.d_cutoff, dt)
             edx = ad * dx + (1 - ad) * self.dx[cont]
             cutoff = self.min_cutoff + self.beta * np.linalg.norm(edx, axis=1, keepdims=True)
@@ -160,5 +162,6 @@ class OneEuroFilter:
         start = valid & ~self.has
         self.dx[start] = 0.0
         self.x[valid] = out[valid]
+        self.raw[valid] = x[valid]
         self.has = valid.copy()
         return out

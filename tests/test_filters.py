@@ -1,0 +1,98 @@
+"""Baseline joint filters: Kinect SDK v1 Holt double exponential and One Euro, on hand cases."""
+import numpy as np
+import pytest
+
+from skeleton_core.filters import HOLT_DEFAULTS, HoltFilter, OneEuroFilter
+from skeleton_core.model import INFERRED, NOT_TRACKED, NUM_JOINTS, TRACKED
+
+
+def _frame(x):
+    p = np.zeros((NUM_JOINTS, 3))
+    p[:, 0] = x
+    return p
+
+
+def test_holt_defaults_are_the_sdk_defaults():
+    assert HOLT_DEFAULTS == dict(smoothing=0.5, correction=0.5, prediction=0.5,
+                                 jitter_radius=0.05, max_deviation_radius=0.04)
+
+
+def test_holt_second_frame_hand_computed_and_clamped():
+    f = HoltFilter()
+    assert np.allclose(f.update(_frame(0.0)), 0.0)  # first frame: raw, trend 0
+    # second frame: filtered = mean(0, 1) = 0.5, trend = 0.5 * 0.5 = 0.25,
+    # predicted = 0.5 + 0.25 * 0.5 = 0.625; |0.625 - 1| = 0.375 > 0.04 -> pulled to 1 - 0.04
+    y = f.update(_frame(1.0))
+    assert np.allclose(y[:, 0], 0.96)
+
+
+def test_holt_third_frame_jitter_stage_hand_computed():
+    f = HoltFilter(max_deviation_radius=10.0)  # no clamp: check the Holt recursion itself
+    f.update(_frame(0.0))
+    f.update(_frame(0.02))   # filtered 0.01, trend 0.005
+    y = f.update(_frame(0.03))
+    # jitter: d = 0.02 <= 0.05 -> x' = 0.03*0.4 + 0.01*0.6 = 0.018
+    # holt: f = 0.018*0.5 + (0.01 + 0.005)*0.5 = 0.0165; b = 0.0065*0.5 + 0.005*0.5 = 0.00575
+    # predicted = 0.0165 + 0.5*0.00575 = 0.019375
+    assert np.allclose(y[:, 0], 0.019375)
+
+
+def test_holt_converges_to_a_step():
+    f = HoltFilter()
+    for _ in range(5):
+        f.update(_frame(0.0))
+    ys = [f.update(_frame(1.0))[0, 0] for _ in range(60)]
+    assert abs(ys[-1] - 1.0) < 1e-3
+    assert max(ys) < 1.2  # bounded overshoot
+    assert all(abs(y - 1.0) <= 0.04 + 1e-12 for y in ys)  # never farther than the deviation radius
+
+
+def test_holt_not_tracked_passes_raw_and_restarts():
+    f = HoltFilter()
+    for _ in range(10):
+        f.update(_frame(0.0))
+    st = np.full(NUM_JOINTS, TRACKED, np.uint8)
+    st[3] = NOT_TRACKED
+    y = f.update(_frame(2.0), st)
+    assert y[3, 0] == 2.0
+    # after the gap joint 3 restarts from the raw value, the others are still filtered
+    y = f.update(_frame(2.0))
+    assert y[3, 0] == 2.0 and abs(y[0, 0] - 2.0) > 1e-3
+
+
+def test_holt_inferred_uses_larger_radii():
+    a, b = HoltFilter(), HoltFilter()
+    for f in (a, b):
+        f.update(_frame(0.0))
+    st = np.full(NUM_JOINTS, INFERRED, np.uint8)
+    ya = a.update(_frame(1.0))
+    yb = b.update(_frame(1.0), st)
+    assert np.allclose(ya[:, 0], 0.96) and np.allclose(yb[:, 0], 0.92)
+
+
+def test_one_euro_passes_a_slow_ramp():
+    f = OneEuroFilter()
+    fps, v = 30.0, 0.1  # 10 cm/s
+    xs = np.arange(150) / fps * v
+    ys = np.array([f.update(_frame(x), stamp_ns=int(i * 1e9 / fps))[0, 0]
+                   for i, x in enumerate(xs)])
+    # steady-state lag of a first-order low-pass = v * tau, tau = 1/(2 pi (1 + beta v))
+    tau = 1.0 / (2 * np.pi * (1.0 + 1.0 * v))
+    assert abs((xs[-1] - ys[-1]) - v * tau) < 2e-3
+    assert np.allclose(np.diff(ys[-30:]) * fps, v, rtol=0.02)
+
+
+def test_one_euro_smooths_noise_at_rest():
+    rng = np.random.default_rng(0)
+    f = OneEuroFilter()
+    noise = rng.normal(0.0, 0.01, 600)
+    ys = np.array([f.update(_frame(n), stamp_ns=int(i * 1e9 / 30))[0, 0]
+                   for i, n in enumerate(noise)])
+    assert ys[60:].std() < 0.5 * noise[60:].std()
+
+
+def test_one_euro_rejects_bad_parameters():
+    with pytest.raises(ValueError):
+        OneEuroFilter(min_cutoff=0.0)
+    with pytest.raises(ValueError):
+        HoltFilter(smoothing=1.0)

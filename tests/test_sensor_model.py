@@ -1,0 +1,154 @@
+"""Kinect v1 sensor model: placement, calibrated noise statistics, event rates, live == offline."""
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from skeleton_core.evaluation import toy_clip
+from skeleton_core.model import (FOOT_LEFT, FOOT_RIGHT, HAND_LEFT, HAND_RIGHT, HIP_CENTER, INFERRED,
+                                 NOT_TRACKED, TRACKED)
+from skeleton_core.sensor_model import (DEFAULT_PARAMS, SCENARIOS, SensorModel, load_params,
+                                        statistics)
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_yaml_matches_builtin_defaults():
+    with open(ROOT / 'config' / 'sensor_model.yaml') as f:
+        data = yaml.safe_load(f)
+    assert data == DEFAULT_PARAMS
+    assert load_params(ROOT / 'config' / 'sensor_model.yaml') == DEFAULT_PARAMS
+    assert set(SCENARIOS) <= set(DEFAULT_PARAMS['scenarios'])
+
+
+def test_placement_in_sensor_frame():
+    m = SensorModel(seed=0)
+    s = m.corrupt(toy_clip(3.0), 'clean')
+    assert s.positions.shape == s.truth.shape == (90, 20, 3)
+    assert s.tracking_state.dtype == np.uint8 and s.stamps_ns.dtype == np.int64
+    assert np.allclose(np.diff(s.stamps_ns), 1e9 / 30, atol=1)
+    root = s.truth[:, HIP_CENTER]
+    assert np.allclose(root[:, 0], 2.5, atol=0.05) and np.allclose(root[:, 1], 0.0, atol=0.05)
+    feet = s.truth[:, [FOOT_LEFT, FOOT_RIGHT], 2]
+    assert abs(feet.min() + 0.8) < 0.03  # floor at -sensor height
+    # facing the sensor: the body's left hand is on the sensor's right (-y)
+    assert np.all(s.truth[:, HAND_LEFT, 1] < s.truth[:, HAND_RIGHT, 1])
+    # resampled from 120 Hz
+    clip = toy_clip(3.0, fps=120.0)
+    assert len(m.corrupt(clip, 'clean')) == 90
+
+
+def test_noise_statistics_match_the_yaml():
+    m = SensorModel(seed=3)
+    streams = [m.corrupt(toy_clip(20.0, name=f'toy{i}'), 'clean') for i in range(3)]
+    st = statistics(streams)
+    expected = m.expected_jitter_mm(st['mean_depth_m'])
+    got = np.array(st['jitter_mm'])
+    assert np.all(np.abs(got / expected - 1) < 0.2), (got, expected)
+    # every segment length varies frame to frame, by about the joint errors combined
+    bl = np.array(st['bone_length_std_mm'])
+    assert np.all(bl > 5.0) and np.all(bl < 60.0)
+    # no event in the clean scenario
+    assert all(s.events == [] for s in streams)
+    assert np.all(np.concatenate([s.tracking_state for s in streams]) == TRACKED)
+
+
+def _rate_check(events, kind, cause, rate_per_min, frames, fps=30.0):
+    onsets = [e for e in events if e['type'] == kind and e['cause'] == cause]
+    busy = sum(e['duration'] for e in events if e['type'] == kind)
+    free_min = max(frames - busy, 1) / fps / 60.0
+    expected = rate_per_min * free_min
+    assert abs(len(onsets) - expected) < 3.5 * np.sqrt(expected) + 1, (len(onsets), expected)
+    return len(onsets)
+
+
+@pytest.mark.parametrize('scenario', ['a', 'b', 'c'])
+def test_events_happen_at_the_configured_rates(scenario):
+    # rates scaled up 10x so a short stream has enough events; the ratio between classes is kept
+    p = DEFAULT_PARAMS['scenarios'][scenario]
+    over = {'scenarios': {scenario: {'occlusion_per_min': 10 * p['occlusion_per_min'],
+                                     'false_positive_per_min': 10 * p['false_positive_per_min'],
+                                     'turn_per_min': 0.0}}}
+    m = SensorModel(over, seed=1)
+    s = m.corrupt(toy_clip(60.0), scenario)
+    n_occ = _rate_check(s.events, 'occlusion', 'random', 10 * p['occlusion_per_min'], len(s))
+    assert n_occ > 10
+    # false positives (random onsets; one episode per candidate joint at a time)
+    fp = [e for e in s.events if e['type'] == 'false_positive' and e['cause'] == 'random']
+    expected = 10 * p['false_positive_per_min'] * len(s) / 30.0 / 60.0
+    assert abs(len(fp) - expected) < 3.5 * np.sqrt(expected) + 1, (len(fp), expected)
+    # during a random occlusion episode the limb is INFERRED or NOT_TRACKED (unless a false
+    # positive latched one of its joints, which the SDK reports TRACKED)
+    latched = np.zeros(s.tracking_state.shape, bool)
+    for e in s.events:
+        if e['type'] == 'false_positive':
+            latched[e['frame']:e['frame'] + e['duration'], e['joints']] = True
+    for e in [e for e in s.events if e['type'] == 'occlusion']:
+        f = e['frame'] + 1
+        if f < len(s):
+            j = [k for k in e['joints'] if not latched[f, k]]
+            assert np.all(s.tracking_state[f, j] != TRACKED)
+
+
+def test_more_occlusion_with_objects():
+    m = SensorModel(seed=2)
+    clip = toy_clip(30.0)
+    st = statistics([m.corrupt(clip, sc) for sc in ('a', 'b', 'c')])['scenarios']
+    assert st['a']['occluded_fraction'] < st['b']['occluded_fraction']
+    assert st['a']['occluded_fraction'] < st['c']['occluded_fraction']
+
+
+def test_false_positive_latches_and_vibrates():
+    over = {'scenarios': {'a': {'false_positive_per_min': 30.0, 'occlusion_per_min': 0.0,
+                                'turn_per_min': 0.0, 'self_occlusion': False}}}
+    s = SensorModel(over, seed=4).corrupt(toy_clip(20.0), 'a')
+    fps = [e for e in s.events if e['type'] == 'false_positive' and e['duration'] >= 6]
+    assert fps
+    angles = []
+    for e in fps:
+        j = e['joints'][0]
+        seg = slice(e['frame'], e['frame'] + e['duration'])
+        assert np.all(s.tracking_state[seg, j] == TRACKED)  # the SDK still says TRACKED
+        err = np.linalg.norm(s.positions[seg, j] - s.truth[seg, j], axis=1)
+        assert err.mean() > 0.05
+        d = np.diff(s.positions[seg, j], axis=0)
+        cos = (d[1:] * d[:-1]).sum(1) / np.linalg.norm(d[1:], axis=1) / np.linalg.norm(d[:-1], axis=1)
+        angles += np.degrees(np.arccos(np.clip(cos, -1, 1))).tolist()
+    assert np.mean(angles) > 90.0  # vibration (Shum 2013 Eq. 3-4)
+
+
+def test_turning_away_swaps_left_and_right():
+    over = {'turn': {'peak_deg': [175.0, 175.0], 'duration_s': [4.0, 4.0]},
+            'scenarios': {'a': {'turn_per_min': 6.0, 'occlusion_per_min': 0.0,
+                                'false_positive_per_min': 0.0}}}
+    s = SensorModel(over, seed=5).corrupt(toy_clip(30.0), 'a')
+    mirrors = [e for e in s.events if e['type'] == 'mirror']
+    turns = [e for e in s.events if e['type'] == 'turn']
+    assert turns and mirrors
+    t = turns[0]
+    mid = t['frame'] + t['duration'] // 2
+    # the reported left hand is where the true right hand is
+    assert np.linalg.norm(s.positions[mid, HAND_LEFT] - s.truth[mid, HAND_RIGHT]) < 0.15
+    assert np.any(s.tracking_state[mid] == INFERRED)  # the far side is inferred
+
+
+def test_live_stream_equals_offline():
+    m = SensorModel(seed=7)
+    clip = toy_clip(4.0)
+    s = m.corrupt(clip, 'c')
+    gen = m.stream(clip, 'c', loop=True)
+    for i in range(len(s)):
+        p, st, tr = next(gen)
+        assert np.array_equal(p, s.positions[i]) and np.array_equal(st, s.tracking_state[i])
+        assert np.array_equal(tr, s.truth[i])
+    p, st, tr = next(gen)  # loops
+    assert p.shape == (20, 3) and st.dtype == np.uint8
+    assert np.array_equal(m.corrupt(clip, 'c').positions, s.positions)  # seeded
+    assert not np.array_equal(SensorModel(seed=8).corrupt(clip, 'c').positions, s.positions)
+    assert set(np.unique(s.tracking_state)) <= {NOT_TRACKED, INFERRED, TRACKED}
+
+
+def test_unknown_scenario_is_rejected():
+    with pytest.raises(ValueError):
+        SensorModel().corrupt(toy_clip(1.0), 'z')
