@@ -50,7 +50,7 @@ def test_structure_and_fk():
     # frame 1: root turned 90 deg about z: chest offset (0,2,0) -> (-2,0,0), leg (1,0,0) -> (0,1,0)
     np.testing.assert_allclose(pos[1, 1], 2 * np.array([-2, 0, 0]), atol=1e-9)
     np.testing.assert_allclose(pos[1, 2], 2 * np.array([0, 1, 0]), atol=1e-9)
-    # chest End Site: root Rz(90) then chest Zrot 0 Yrot 0 Xrot 90: (0,1,0) -> Rx(90) (0,0,1) -> Rz (0,0,1)
+    # chest End Site: root Rz(90), chest Xrot 90: (0,1,0) -> Rx (0,0,1) -> Rz (0,0,1)
     np.testing.assert_allclose(ends[1, 0], 2 * np.array([-2, 0, 1]), atol=1e-9)
     np.testing.assert_allclose(rot[1, 0] @ [1, 0, 0], [0, 1, 0], atol=1e-9)
 

@@ -183,7 +183,8 @@ def parse_bvh(text: str, path: str = '<string>') -> Bvh:
             motion_line = ln
             break
         if pending is not None and key != '{':
-            raise BvhError(path, ln, f"expected '{{' after {pending[0]} declared on line {pending[2]}")
+            raise BvhError(path, ln, f"expected '{{' after {pending[0]} declared on line "
+                                     f"{pending[2]}")
         if key in ('ROOT', 'JOINT'):
             if key == 'ROOT':
                 if seen_root:
@@ -244,7 +245,8 @@ def parse_bvh(text: str, path: str = '<string>') -> Bvh:
                 raise BvhError(path, ln, 'CHANNELS needs a count') from None
             chans = tuple(toks[2:])
             if len(chans) != count:
-                raise BvhError(path, ln, f'CHANNELS declares {count} channels but lists {len(chans)}')
+                raise BvhError(path, ln, f'CHANNELS declares {count} channels but lists '
+                                         f'{len(chans)}')
             for c in chans:
                 if c not in CHANNEL_NAMES:
                     raise BvhError(path, ln, f'unknown channel {c!r} (expected one of '
@@ -301,7 +303,8 @@ def parse_bvh(text: str, path: str = '<string>') -> Bvh:
                                     f'{len(data_lines)} motion lines')
     if len(data_lines) > num_frames:
         raise BvhError(path, data_lines[num_frames][0],
-                       f'{len(data_lines) - num_frames} motion lines more than Frames: {num_frames}')
+                       f'{len(data_lines) - num_frames} motion lines more than '
+                       f'Frames: {num_frames}')
     motion = None
     if num_frames:
         try:

@@ -8,7 +8,8 @@ Every posture of the input clips is
    segment lengths are exactly the standard body's;
 3. given its **twists** (:func:`segment_twists`): for each of the 19 segments, the angle of the
    twist component of the segment's orientation (normalised frame) about the segment's rest axis,
-   from the swing-twist decomposition ``q = swing * twist(rest_axis)`` (:func:`geometry.swing_twist`).
+   from the swing-twist decomposition ``q = swing * twist(rest_axis)``
+   (:func:`geometry.swing_twist`).
    Zero in the T-pose. These are the "rotations along the joint axes" Theta_d of Shum & Ho 2012
    Sec. 6.2 / Shum 2013 Eq. 17, the target the physics character's axial PD torque tracks; apply the
    same function to the simulated body's segment orientations to get the current value;
@@ -20,7 +21,8 @@ Default threshold: :data:`DEFAULT_THRESHOLD` = 0.02 m^2 (an RMS joint distance o
 
 * CMU five-class database clips (27 clips after the dev split): 5,150 -> 2,199 postures
   (0.01 m^2: 3,304; 0.05 m^2: 1,192);
-* all 73 CMU clips incl. 'other' (``--all-clips``): 26,537 -> 12,438; mirrored too: 53,074 -> 24,840;
+* all 73 CMU clips incl. 'other' (``--all-clips``): 26,537 -> 12,438;
+  with mirrored copies (``--all-clips --mirror``): 53,074 -> 24,840;
 * built-in motions (45 clips): 8,100 -> 783.
 
 Shum 2013 went 21,590 -> 2,574 and found ~2,000 postures enough (Sec. VIII-D, Fig. 8a).
@@ -384,7 +386,8 @@ def load_or_build_default(source: str = 'auto', cache_dir=None, shared_dir=None,
     of the repository). ``split``: ``'database'`` (the database part of the split, default) or
     ``'all'`` (database and dev clips). ``classes`` None: all CMU clips including 'other'.
     ``mirror`` adds left-right mirrored copies. The cache file name is a hash of the inputs
-    (file names, sizes, mtimes), every parameter and the code of the modules that build it. ``stats`` (dict) receives build statistics
+    (file names, sizes, mtimes), every parameter and the code of the modules that build it.
+    ``stats`` (dict) receives build statistics
     plus ``cache_hit`` and ``path``.
     """
     from . import mocap, motions  # local: keeps import of this module light

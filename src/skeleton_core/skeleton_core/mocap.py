@@ -132,7 +132,8 @@ class MotionClip:
         self.orientations = np.asarray(self.orientations, dtype=float)
         t = self.positions.shape[0]
         if self.positions.shape != (t, NUM_JOINTS, 3):
-            raise ValueError(f'{self.name}: positions must be (T, 20, 3), got {self.positions.shape}')
+            raise ValueError(f'{self.name}: positions must be (T, 20, 3), '
+                             f'got {self.positions.shape}')
         if self.orientations.shape != (t, NUM_JOINTS, 4):
             raise ValueError(f'{self.name}: orientations must be (T, 20, 4), '
                              f'got {self.orientations.shape}')
@@ -234,7 +235,8 @@ def load_cmu_clip(path, motion_class: Optional[str] = None, drop_first: bool = T
     needed |= set(CMU_ORIENTATION_SOURCE.values())
     missing = sorted(needed - set(bvh.names))
     if missing:
-        raise MocapError(f'{path}: not a CMU cgspeed skeleton (missing joints {", ".join(missing)})')
+        raise MocapError(f'{path}: not a CMU cgspeed skeleton '
+                         f'(missing joints {", ".join(missing)})')
     motion = bvh.motion[1:] if drop_first else bvh.motion
     if motion.shape[0] < 2:
         raise MocapError(f'{path}: fewer than 2 frames of motion')

@@ -3,14 +3,14 @@
 Every clip is driven by joint rotations on the standard body (``model.standard_body``), so segment
 lengths are exact and orientations follow the :mod:`skeleton_core.mocap` convention (identity = the
 T-pose facing +x; ``quat_rotate(q[j], rest_dir[j])`` is the segment direction, exactly). Motions are
-sums of smooth periodic curves (30 fps, 6-8 s each). Feet: the root height is set every frame so that
-the lowest sole point (toe joint or heel = ankle minus the ankle height along the foot) is on the
-floor, so the standing body never floats or sinks; during walking the stance foot's horizontal
-position is kept fixed (no foot skating) by moving the root.
+sums of smooth periodic or smoothly interpolated random curves (30 fps, 6 s each). Feet: the root
+height is set every frame so that the lowest sole point (toe joint, or heel = ankle minus the ankle
+height along the foot) is on the floor, so the standing body never floats or sinks; during walking
+the contact point's horizontal position is kept fixed (no foot skating) by moving the root.
 
 Motions and their Shum 2013 class: walk (locomotion), arm raises and waving (upper_body), punches
-and a front kick (boxing), reach-and-pick-up and squat-lift (object_handling), two-handed sword
-swings (sword_fighting). ``builtin_clips(seed)`` draws amplitudes, speeds and phases from a seeded
+and a front kick (boxing), pick-up, squat-lift and reaching to random targets (object_handling),
+two-handed sword swings (sword_fighting). ``builtin_clips(seed)`` draws amplitudes, speeds and phases from a seeded
 generator; :func:`builtin_split` uses different seeds for database and dev clips.
 """
 from __future__ import annotations
@@ -282,7 +282,8 @@ def _wave(rng, t, time):
     _crouch(local, _keys(rng, t, 2.1, 0.0, np.radians(10)), t)
     _sway(rng, local, t, 0.6)
     # right upper arm raised sideways, forearm up, oscillating in the frontal plane
-    ur = _arm_dir(np.radians(20) * env + np.radians(5), np.radians(6) + np.radians(80) * env, 'right')
+    ur = _arm_dir(np.radians(20) * env + np.radians(5), np.radians(6) + np.radians(80) * env,
+                  'right')
     aims[ELBOW_RIGHT] = ur
     up = np.broadcast_to([0.0, 0.0, 1.0], (t, 3)) + np.stack(
         [0 * time, -np.sin(amp * np.sin(2 * np.pi * f * time)) * env, 0 * time], -1)
@@ -318,7 +319,8 @@ def _punch(rng, t, time):
     _arms(aims, t,
           guard_flex + (reach - guard_flex) * left, guard_abd * (1 - left) - np.radians(8) * left,
           guard_elbow * (1 - left) + np.radians(5) * left,
-          guard_flex + (reach - guard_flex) * right, guard_abd * (1 - right) - np.radians(8) * right,
+          guard_flex + (reach - guard_flex) * right,
+          guard_abd * (1 - right) - np.radians(8) * right,
           guard_elbow * (1 - right) + np.radians(5) * right)
     return 'punch', 'boxing', local, aims, False
 
