@@ -94,7 +94,8 @@ def test_markers_cross_dds_and_hiding_a_layer_takes_effect(graph):
             'environment/box'}
     msg = _wait_for(got, lambda m: {x.ns for x in m.markers if x.action == Marker.ADD} == want,
                     pubs)
-    assert msg is not None, f'no MarkerArray with {want}; got {[{x.ns for x in m.markers} for m in got[-3:]]}'
+    assert msg is not None, \
+        f'no MarkerArray with {want}; got {[{x.ns for x in m.markers} for m in got[-3:]]}'
     by_ns = {}
     for m in msg.markers:
         by_ns.setdefault(m.ns, []).append(m)

@@ -31,7 +31,8 @@ from skeleton_core.model import (INFERRED, NOT_TRACKED, NUM_JOINTS, SEGMENT_CHIL
 LAYERS: Tuple[str, ...] = ('raw', 'reliability', 'reconstructed', 'completed', 'character')
 
 # Marker types (names; the node maps them to visualization_msgs/Marker constants)
-SPHERE, CYLINDER, CUBE, SPHERE_LIST, LINE_LIST = 'SPHERE', 'CYLINDER', 'CUBE', 'SPHERE_LIST', 'LINE_LIST'
+SPHERE, CYLINDER, CUBE = 'SPHERE', 'CYLINDER', 'CUBE'
+SPHERE_LIST, LINE_LIST = 'SPHERE_LIST', 'LINE_LIST'
 ADD, DELETE = 'ADD', 'DELETE'
 
 # Capsule radius per metre of body height (standard_body radii are proportional to the height)
@@ -244,7 +245,8 @@ def layer_markers(layer: str, frame: SkeletonFrame, style: Style
                   ) -> Tuple[List[MarkerSpec], List[int]]:
     """Markers of one layer for one user, and ids of that namespace to delete now."""
     if layer == 'raw':
-        return skeleton_markers(frame, layer, style.raw_joint_color, style.raw_bone_color, style), []
+        return skeleton_markers(frame, layer, style.raw_joint_color, style.raw_bone_color,
+                                style), []
     if layer == 'reliability':
         return reliability_markers(frame, style, layer)
     if layer == 'reconstructed':

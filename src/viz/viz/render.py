@@ -282,8 +282,8 @@ def render_frames(panels, out_gif=None, out_png=None, fps: float = 12.0, max_fra
             for a in animated:
                 fig.draw_artist(a)
             rgb = np.asarray(canvas.buffer_rgba())[..., :3]
-            images.append(Image.fromarray(rgb).quantize(colors=colors, method=Image.Quantize.MEDIANCUT,
-                                                        dither=Image.Dither.NONE))
+            images.append(Image.fromarray(rgb).quantize(
+                colors=colors, method=Image.Quantize.MEDIANCUT, dither=Image.Dither.NONE))
         set_animated(False)
         Path(out_gif).parent.mkdir(parents=True, exist_ok=True)
         images[0].save(out_gif, save_all=True, append_images=images[1:], loop=0,

@@ -85,7 +85,8 @@ def summarize(data: BagData, user: Optional[int], tolerance_s: float = DEFAULT_T
     out: Dict = {
         'user_id': user,
         'users': sorted({u for by in data.series.values() for u in by}),
-        'topics': {t: {'type': ty, 'messages': n} for t, (ty, n) in sorted(data.topic_counts.items())},
+        'topics': {t: {'type': ty, 'messages': n}
+                   for t, (ty, n) in sorted(data.topic_counts.items())},
         'roles': {role: {'topic': data.topics.get(role),
                          'frames': len(s) if s is not None else 0}
                   for role, s in series.items()},

@@ -1,12 +1,12 @@
 """``viz`` node: skeleton topics -> ``visualization_msgs/MarkerArray`` for RViz.
 
 Subscribes (names are read-only parameters ``*_topic``):
-  /kinect/skeletons              raw Kinect skeletons            -> layer ``raw``
-  /kinect/skeletons_reliability  raw + per-joint reliability     -> layer ``reliability`` (red squares)
-  /posture/reconstructed         reconstructed postures          -> layer ``reconstructed``
-  /posture/completed             completion-only postures        -> layer ``completed`` (off by default)
-  /character/skeletons           simulated character             -> layer ``character`` (capsules)
-  /physics/objects               environment objects (MarkerArray) -> namespaces ``environment/<ns>``
+  /kinect/skeletons              raw Kinect skeletons         -> layer ``raw``
+  /kinect/skeletons_reliability  with per-joint reliability   -> layer ``reliability`` (red squares)
+  /posture/reconstructed         reconstructed postures       -> layer ``reconstructed``
+  /posture/completed             completion-only postures     -> layer ``completed`` (off by default)
+  /character/skeletons           simulated character          -> layer ``character`` (capsules)
+  /physics/objects               environment objects (MarkerArray) -> ``environment/<ns>``
 Publishes ``/viz/markers`` (MarkerArray) at most ``max_rate_hz``, only when something changed, and
 ``/diagnostics``. The geometry is in :mod:`viz.markers`; this node adapts messages and parameters.
 """
@@ -15,7 +15,6 @@ from __future__ import annotations
 import time
 from typing import Any, Dict, Optional
 
-import numpy as np
 from rclpy.exceptions import InvalidParameterValueException
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
