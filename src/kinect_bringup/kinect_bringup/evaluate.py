@@ -28,8 +28,8 @@ def _parser():
                    help='clips: CMU dev split from ../shared (auto falls back to built-ins)')
     p.add_argument('--scenarios', default='a,b,c', help='sensor-model scenario classes')
     p.add_argument('--seed', type=int, default=0)
-    p.add_argument('--max-frames', type=int, default=600,
-                   help='frames (30 Hz) per clip; 0 = whole clips (default 600 = 20 s)')
+    p.add_argument('--max-frames', type=int, default=300,
+                   help='frames (30 Hz) per clip; 0 = whole clips (default 300 = 10 s)')
     p.add_argument('--out', default='out/eval', help='output directory')
     p.add_argument('--experiment', default='table4',
                    choices=('table3', 'table4', 'fig5', 'fig8'))
