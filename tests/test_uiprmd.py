@@ -122,7 +122,8 @@ def test_good_tiny_file_loads(tmp_path):
     np.testing.assert_allclose(k.positions[0, 0], (2.5, 0.0, 1.0))
 
 
-@pytest.mark.parametrize('case', ['columns', 'nan', 'empty', 'truncated', 'frames', 'missing'])
+@pytest.mark.parametrize('case', ['columns', 'nan', 'text', 'empty', 'truncated', 'frames',
+                                  'missing', 'not_gzip'])
 def test_malformed_file_raises_naming_file(tmp_path, case):
     gp, ga = _good_rows()
     if case == 'columns':
@@ -131,8 +132,14 @@ def test_malformed_file_raises_naming_file(tmp_path, case):
         bad = gp.copy()
         bad[2, 5] = np.nan
         p = _make_src(tmp_path, pos=bad)
+    elif case == 'text':
+        rows = '\n'.join(','.join(f'{v:.5f}' for v in r) for r in gp)
+        p = _make_src(tmp_path, pos_raw=rows.replace('0.00000', 'abc', 1))
     elif case == 'empty':
         p = _make_src(tmp_path, pos_raw='')
+    elif case == 'not_gzip':
+        p = _make_src(tmp_path)
+        p.write_bytes(b'this is not gzip data at all')
     elif case == 'frames':
         p = _make_src(tmp_path, pos=gp[:3])
     elif case == 'truncated':
