@@ -143,7 +143,7 @@ def stable_run(cfg: SimConfig, seconds: float = 1.5) -> bool:
 
 def stability(quick: bool) -> Dict:
     g0 = Gains()
-    kes = [4e3, 2e4, 1e5, 3e5, 1e6, 3e6] if not quick else [4e3, 1e5, 1e6]
+    kes = [4e3, 1e4, 2e4, 4e4, 7e4, 1e5, 3e5] if not quick else [4e3, 2e4, 1e5]
     rows = []
     limit = None
     for ke in kes:
@@ -157,7 +157,7 @@ def stability(quick: bool) -> Dict:
             break
     kd_rows = []
     kd_limit = None
-    for kd in ([80, 300, 600, 1200, 2400] if not quick else [80, 600, 2400]):
+    for kd in ([100, 200, 300, 400, 500, 600, 1200] if not quick else [100, 300, 600]):
         ok = stable_run(config('explicit_pd', gains=replace(g0, kd=float(kd), max_force=1e9)))
         kd_rows.append(dict(ke=g0.ke, kd=kd, stable=ok))
         if ok:

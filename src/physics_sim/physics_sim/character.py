@@ -65,6 +65,7 @@ class Character:
         self.pins: Dict[int, PinState] = {j: PinState() for j in PIN_JOINTS}
         self.dodge_until = -1.0
         self.spawned = False   # qpos not yet set from the first target
+        self.velocity = np.zeros((NUM_JOINTS, 3))  # p'_target (frame differences, smoothed)
         # joint anchors (segment, local point)
         anchors = [joint_anchor(body, j) for j in range(NUM_JOINTS)]
         self.joint_seg = np.array([a[0] for a in anchors])
@@ -122,8 +123,10 @@ class Character:
         data.qvel[self.dofs] = 0.0
 
     # ------------------------------------------------------------------ targets
-    def push_target(self, target: Target) -> None:
-        """A new target frame: interpolate from where the target is now to it over one frame."""
+    def push_target(self, target: Target, smoothing: float = 0.0) -> None:
+        """A new target frame: interpolate from where the target is now to it over one frame;
+        the target velocity (Eq. 1 p'_target) is the frame difference, exponentially smoothed
+        with factor ``smoothing`` (0 = raw difference)."""
         now = target.sim_time
         p_now, q_now, _, _ = self.target_at(now)
         dt_stamp = (target.stamp_ns - self.cur.stamp_ns) * 1e-9
@@ -133,6 +136,8 @@ class Character:
             self.period = 1.0 / 30.0
         self.prev = Target(p_now, q_now, now, self.cur.stamp_ns)
         self.cur = target
+        raw = (target.positions - p_now) / self.period
+        self.velocity = smoothing * self.velocity + (1.0 - smoothing) * raw
 
     def target_at(self, t: float):
         """(positions, seg quats, velocities, segment angular velocities) of the target at sim time

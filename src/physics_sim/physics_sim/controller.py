@@ -31,7 +31,7 @@ class Gains:
     """Controller gains and limits (the paper hand-tunes one Ke/Kd pair for all joints)."""
 
     ke: float = 4000.0          # N/m, Eq. 1 elasticity
-    kd: float = 80.0            # N s/m, Eq. 1 damping
+    kd: float = 100.0           # N s/m, Eq. 1 damping
     max_force: float = 800.0    # N, |F| bound
     twist_ke: float = 400.0     # 1/s^2: Ke_i = twist_ke * I_i (I_i = axial inertia + armature)
     twist_kd: float = 40.0      # 1/s:   Kd_i = twist_kd * I_i

@@ -75,7 +75,9 @@ PARAMS: List[ParamSpec] = [
               'constraints to mocap targets (implicit, more stable)', choices=CONTROLLERS,
               read_only=True),
     ParamSpec('kp', 4000.0, 'Ke of Eq. 1 (N/m), shared by all joints', range=(0.0, 1e6)),
-    ParamSpec('kd', 80.0, 'Kd of Eq. 1 (N s/m), shared by all joints', range=(0.0, 1e4)),
+    ParamSpec('kd', 100.0, 'Kd of Eq. 1 (N s/m), shared by all joints', range=(0.0, 1e4)),
+    ParamSpec('velocity_smoothing', 0.7, "exponential smoothing of the target velocity p'_target "
+              '(frame differences) of Eq. 1; 0 = raw differences (more jitter)', range=(0.0, 0.95)),
     ParamSpec('max_force', 800.0, 'bound on |F| of Eq. 1 (N)', range=(0.0, 1e5)),
     ParamSpec('twist_kp', 400.0,
               'Eq. 2 elasticity per unit axial inertia (1/s^2): Ke_i = twist_kp * I_i',
@@ -138,7 +140,7 @@ PARAMS: List[ParamSpec] = [
 
 LIVE_GAINS = {'kp': 'ke', 'kd': 'kd', 'max_force': 'max_force', 'twist_kp': 'twist_ke',
               'twist_kd': 'twist_kd', 'max_torque': 'max_torque'}
-LIVE_CONFIG = ('retarget', 'pin_feet', 'pin_height', 'pin_release_height', 'pin_speed',
+LIVE_CONFIG = ('velocity_smoothing', 'retarget', 'pin_feet', 'pin_height', 'pin_release_height', 'pin_speed',
                'pin_release_distance', 'dodge', 'dodge_distance')
 
 
@@ -148,6 +150,7 @@ def config_from_params(v: Dict) -> SimConfig:
     return SimConfig(timestep=v['timestep'], controller=v['controller'], gains=gains,
                      track_timeconst=v['track_timeconst'], track_dampratio=v['track_dampratio'],
                      track_impedance=v['track_impedance'],
+                     velocity_smoothing=v['velocity_smoothing'],
                      body_height=v['body_height'], body_mass=v['body_mass'],
                      retarget=v['retarget'], joint_damping=v['joint_damping'],
                      joint_armature=v['joint_armature'], sensor_height=v['sensor_height'],

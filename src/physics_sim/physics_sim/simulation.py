@@ -109,6 +109,7 @@ class SimConfig:
     track_dampratio: float = 1.0
     track_impedance: float = 0.9    # solimp d (dmin = dmax): share of the constraint force kept
     # character model
+    velocity_smoothing: float = 0.7  # p'_target: exponential smoothing of frame differences (0 = raw)
     body_height: float = 0.0        # m; 0 = estimate from the user's first target
     body_mass: float = 75.0         # kg at 1.75 m (scaled with height^3)
     retarget: bool = True           # Eq. 3-4: targets to the character's segment lengths
@@ -140,6 +141,8 @@ class SimConfig:
             raise ValueError(f'controller must be one of {CONTROLLERS}, got {self.controller!r}')
         if not (1e-4 <= self.timestep <= 0.02):
             raise ValueError(f'timestep must be in [0.0001, 0.02] s, got {self.timestep}')
+        if not (0.0 <= self.velocity_smoothing < 1.0):
+            raise ValueError('velocity_smoothing must be in [0, 1)')
         if not (0.01 <= self.track_impedance <= 0.99):
             raise ValueError('track_impedance must be in [0.01, 0.99]')
         if self.track_timeconst < 2 * self.timestep:
@@ -310,7 +313,7 @@ class Simulation:
             self.characters[uid] = ch
             self._rebuild()
         else:
-            ch.push_target(target)
+            ch.push_target(target, self.config.velocity_smoothing)
 
     def remove_character(self, user_id: int) -> bool:
         if int(user_id) not in self.characters:
@@ -534,7 +537,9 @@ class Simulation:
             return
         T0, PER = np.array(T0), np.array(PER)
         P0, P1 = np.concatenate(P0), np.concatenate(P1)
-        self._tg = dict(P0=P0, dP=P1 - P0, V=(P1 - P0) / np.repeat(PER, nj)[:, None],
+        V = np.concatenate([ch.velocity * (0.0 if ch.dodge_until > self.time else 1.0)
+                            for ch in chars])
+        self._tg = dict(P0=P0, dP=P1 - P0, V=V,
                         Q0=np.concatenate(Q0), Q1=np.concatenate(Q1), W=np.concatenate(W),
                         T0j=np.repeat(T0, nj), PERj=np.repeat(PER, nj),
                         T0s=np.repeat(T0, ns), PERs=np.repeat(PER, ns))
@@ -573,7 +578,8 @@ class Simulation:
                 vel = cvel[:, 3:] + _cross(cvel[:, :3], pts - d.subtree_com[self._jroot])
                 f = g.ke * (p_t - pts) + g.kd * (v_t - vel)
                 nrm = np.sqrt(np.sum(f * f, axis=1, keepdims=True))
-                f *= np.minimum(1.0, g.max_force / np.maximum(nrm, 1e-300))
+                with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+                    f *= np.minimum(1.0, g.max_force / np.maximum(nrm, 1e-300))
                 wr = np.concatenate([f, _cross(pts - d.xipos[jb], f)], axis=1)
                 np.add.at(xfrc, jb, wr)
             else:
