@@ -43,7 +43,7 @@ def process(bag: Path, out: Path, method: str = 'C', database: str = '', physics
     """Process ``bag`` into ``out``; returns a summary (frames, wall time, accuracy)."""
     from skeleton_core.bagio import BagWriter, bag_topics, read_messages
     from skeleton_core.conversions import frames_from_array_msg, frames_to_array_msg
-    from .database_loader import load_database
+    from .node_common import load_database
     from .reconstructor import Reconstructor
 
     topics = bag_topics(str(bag))
@@ -56,8 +56,8 @@ def process(bag: Path, out: Path, method: str = 'C', database: str = '', physics
     last_seen: Dict[int, int] = {}
     sim = None
     if physics:
-        from physics_sim.methods import PhysicsTracker
-        sim = PhysicsTracker()
+        from physics_sim.methods import PhysicsMethod
+        sim = PhysicsMethod(upstream=None)
     truth: Dict[tuple, np.ndarray] = {}
     raw: Dict[tuple, np.ndarray] = {}
     rec: Dict[tuple, np.ndarray] = {}
@@ -68,7 +68,7 @@ def process(bag: Path, out: Path, method: str = 'C', database: str = '', physics
     frame_no = 0
     out.parent.mkdir(parents=True, exist_ok=True)
     with BagWriter(str(out)) as writer:
-        for m in read_messages(str(bag)):
+        for m in read_messages(str(bag), decode={input_topic, '/kinect/ground_truth'}):
             writer.write_raw(m.topic, m.data, m.stamp_ns, m.msgtype)
             if m.topic == '/kinect/ground_truth' and m.msgtype == SKELETONS:
                 for f in frames_from_array_msg(m.msg):
@@ -96,7 +96,7 @@ def process(bag: Path, out: Path, method: str = 'C', database: str = '', physics
             frame_id = m.msg.header.frame_id
             writer.write(out_topic, frames_to_array_msg(outs, stamp, frame_id), m.stamp_ns, SKELETONS)
             if sim is not None:
-                sims = sim.step(outs, stamp)
+                sims = [s for s in (sim.process(o) for o in outs) if s is not None]
                 for s in sims:
                     char[(s.user_id, s.stamp_ns)] = s.positions
                 writer.write('/character/skeletons', frames_to_array_msg(sims, stamp, frame_id),
@@ -122,8 +122,8 @@ def accuracy(truth: Dict, streams: Dict[str, Dict]) -> Dict:
             continue
         est = np.stack([data[k] for k in keys])
         ref = np.stack([truth[k] for k in keys])
-        out[name] = {'frames': len(keys), 'mpjpe_cm': float(np.nanmean(mpjpe(est, ref))),
-                     'eq18_cm': float(np.nanmean(eq18_error(est, ref)))}
+        out[name] = {'frames': len(keys), 'mpjpe_cm': mpjpe(est, ref)[1],
+                     'eq18_cm': eq18_error(est, ref)[1]}
     return out
 
 

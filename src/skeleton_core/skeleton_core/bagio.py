@@ -316,15 +316,17 @@ def bag_topics(path) -> Dict[str, Tuple[str, int]]:
 
 
 def read_messages(path, topics: Optional[Iterable[str]] = None,
-                  decode: bool = True) -> Iterator[BagMessage]:
+                  decode=True) -> Iterator[BagMessage]:
     """Messages of a bag in log-time order (optionally only some topics). ``decode=False`` leaves
-    ``msg`` as None (faster when only the raw bytes are needed)."""
+    ``msg`` as None (faster when only the raw bytes are needed); a collection of topic names
+    decodes only those topics."""
     from mcap.reader import make_reader
     from mcap_ros2.decoder import DecoderFactory
     p, f = _open(path)
     topic_list = None if topics is None else list(topics)
     factory = DecoderFactory()
     decoders: Dict[int, Any] = {}
+    decode_only = None if isinstance(decode, bool) else set(decode)
     with f:
         try:
             reader = make_reader(f)
@@ -332,7 +334,7 @@ def read_messages(path, topics: Optional[Iterable[str]] = None,
             for schema, channel, message in it:
                 msg = None
                 msgtype = schema.name if schema is not None else ''
-                if decode:
+                if decode if decode_only is None else channel.topic in decode_only:
                     dec = decoders.get(channel.id)
                     if dec is None:
                         if schema is None:
