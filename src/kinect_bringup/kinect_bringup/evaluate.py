@@ -79,7 +79,8 @@ def run(argv=None) -> int:
                        sensor_params=args.sensor_params, data_source=source, progress=progress)
     elif exp == 'fig5':
         import numpy as np
-        from skeleton_core.geometry import normalize
+        from skeleton_core.geometry import normalize, retarget
+        from skeleton_core.model import standard_body
         db = None
         try:
             from skeleton_core.database import load_or_build_default
@@ -91,7 +92,8 @@ def run(argv=None) -> int:
         streams = E.make_streams(dev_clips, scenarios[:1], args.seed, max_frames,
                                  E.SensorModel(args.sensor_params, seed=args.seed))
         q = np.concatenate([s.positions for lst in streams.values() for s in lst])
-        res = E.fig5(postures, normalize(q)[0])
+        # queries as the database holds postures: normalised, retargeted to the standard body
+        res = E.fig5(postures, retarget(normalize(q)[0], standard_body()))
         res['meta'] = E._meta(dev_clips, args.seed, E.SensorModel(args.sensor_params),
                               max_frames, source, {'query_scenario': scenarios[0]})
     else:  # fig8

@@ -416,8 +416,8 @@ def table3(methods, clips, seed: int = 0, max_frames: Optional[int] = None, sens
 # ------------------------------------------------------------------------------------------
 def _database_postures(database=None, clips=None) -> np.ndarray:
     """(N, 20, 3) normalised postures of a MotionDatabase (several attribute names tried) or of
-    clips (normalised here)."""
-    from .geometry import normalize
+    clips (normalised and retargeted to the standard body here, as the database does)."""
+    from .geometry import normalize, retarget
     if database is not None:
         for attr in ('positions', 'postures', 'normalized_positions', 'poses'):
             arr = getattr(database, attr, None)
@@ -430,7 +430,7 @@ def _database_postures(database=None, clips=None) -> np.ndarray:
     if clips is None:
         raise ValueError('fig5 needs a database with a positions array or clips')
     pos = np.concatenate([np.asarray(c.positions, float) for c in clips])
-    return normalize(pos)[0]
+    return retarget(normalize(pos)[0], standard_body())
 
 
 def fig5(database_postures: np.ndarray, query_postures: np.ndarray,

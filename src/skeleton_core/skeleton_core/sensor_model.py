@@ -58,7 +58,7 @@ DEFAULT_PARAMS: Dict = {
     'placement': {'distance_m': 2.5, 'sensor_height_m': 0.8, 'lateral_offset_m': 0.0,
                   'face_sensor': True, 'min_range_m': 0.8, 'max_range_m': 4.0,
                   'horizontal_fov_deg': 57.0, 'vertical_fov_deg': 43.0, 'max_travel_m': 1.5,
-                  'travel_window_s': 2.0},
+                  'travel_window_s': 2.0, 'keep_facing': True},
     'jitter': {'depth_coeff_mm': 1.6, 'rho': 0.3, 'base_mm': dict(_GROUP_TABLE)},
     'slow_drift': {'rho': 0.95, 'sigma_mm': dict(torso=3.5, head=5.0, shoulder=8.0, elbow=10.0,
                                                  wrist=12.0, hand=14.0, hip=3.0, knee=10.0,
@@ -532,6 +532,21 @@ class SensorModel:
         if not ok.all():  # fill gaps in the input by holding the previous valid frame
             idx = np.maximum.accumulate(np.where(ok, np.arange(len(pos)), 0))
             pos = pos[idx]
+        if pl.get('keep_facing', True) and len(pos) > 1:
+            # the user keeps facing the screen: remove the slow part of the heading (moving average
+            # of the unwrapped yaw over travel_window_s), turning each frame about its own root;
+            # turning away is then modelled by the turn episodes at their configured rate
+            w = max(1, int(round(float(pl.get('travel_window_s', 2.0)) * self.fps)))
+            yaw = np.unwrap(facing_yaw(pos))
+            padded = np.pad(yaw, (w // 2, w - 1 - w // 2), mode='edge')
+            slow = np.convolve(padded, np.ones(w) / w, mode='valid')
+            corr = -(slow - slow[0])
+            c, sn = np.cos(corr), np.sin(corr)
+            rot = np.zeros((len(pos), 3, 3))
+            rot[:, 0, 0], rot[:, 0, 1], rot[:, 1, 0], rot[:, 1, 1] = c, -sn, sn, c
+            rot[:, 2, 2] = 1.0
+            r0 = pos[:, HIP_CENTER:HIP_CENTER + 1, :]
+            pos = np.einsum('tij,tkj->tki', rot, pos - r0) + r0
         root = pos[:, HIP_CENTER, :2]
         travel = float(np.max(np.ptp(root, axis=0))) if len(root) else 0.0
         if travel > float(pl.get('max_travel_m', np.inf)):
