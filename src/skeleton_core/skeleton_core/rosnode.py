@@ -13,6 +13,7 @@ from typing import Any, Callable, Dict, Iterable, Optional, Sequence
 import rclpy
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
                                 SetParametersResult)
+from rclpy.exceptions import ParameterException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
@@ -159,7 +160,7 @@ def run_node(node_factory: Callable[..., Node], args=None, executor=None) -> int
     except KeyboardInterrupt:  # Ctrl-C while still starting up
         rclpy.try_shutdown()
         return 0
-    except (ValueError, FileNotFoundError, RuntimeError, OSError) as e:
+    except (ValueError, FileNotFoundError, RuntimeError, OSError, ParameterException) as e:
         print(f'[ERROR] {e}', file=sys.stderr)
         if rclpy.ok():
             rclpy.try_shutdown()
