@@ -129,8 +129,10 @@ def test_pipeline_over_dds(rclpy_context, case):
         assert opt.set_parameters([Parameter('method', value='B')])[0].successful
         assert not opt.set_parameters([Parameter('database', value='/nonexistent/db.npz')])[0].successful
     finally:
-        ex.shutdown()
+        ex.shutdown(timeout_sec=5.0)
+        th.join(timeout=5.0)
         for n in nodes + [client]:
+            ex.remove_node(n)
             n.destroy_node()
 
 

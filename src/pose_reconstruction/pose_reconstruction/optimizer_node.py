@@ -38,8 +38,8 @@ SPECS = [
     ParamSpec('reliable_threshold', 0.5, 'a joint at or above this reliability counts as reliable',
               (0.0, 1.0)),
     ParamSpec('trust_sensor_distance', 0.25,
-              'if the nearest database posture is farther than this (RMS m per reliable joint), '
-              'reliable joints keep their observed positions', (0.0, 100.0)),
+              'nearest database posture farther than this (RMS m per reliable joint): reliable '
+              'joints blend towards their observed positions (fully at twice it)', (0.0, 100.0)),
     ParamSpec('output_scale', 'user', "user: result retargeted to the user's bone lengths; "
               'standard: the database body', choices=('user', 'standard')),
     ParamSpec('use_input_reliability', True,

@@ -12,7 +12,9 @@ Methods (Shum et al. 2013, Sec. VIII-B):
 
 Graceful degradation (B/C): when even the nearest database posture is farther than
 ``trust_sensor_distance`` (RMS per reliable joint, metres) from the query, the database cannot
-describe the posture, so joints at or above ``reliable_threshold`` keep their observed positions.
+describe the posture, so joints at or above ``reliable_threshold`` are blended towards their
+observed positions, linearly from 0 % at that distance to 100 % (kept as observed) at twice it
+(``trust_sensor`` holds the last blend factor).
 """
 from __future__ import annotations
 
@@ -91,6 +93,7 @@ class Reconstructor:
         else:
             self.core = NaturalPostureOptimizer(self.db, **core)
         self.timings_ms: Dict[str, float] = {}
+        self.trust_sensor = 0.0
         self.last_result = None
         self.reset()
 
@@ -134,9 +137,12 @@ class Reconstructor:
             positions = to_sensor_frame(res.positions, prep.transform, bones, self._rest_dirs)
             wsum = float(np.sum(w))
             rms = np.sqrt(res.distances[0] / max(wsum, 1e-6))
-            if rms > self.trust_sensor_distance:  # standard-body metres
+            d0 = self.trust_sensor_distance  # standard-body metres
+            alpha = float(np.clip((rms - d0) / max(d0, 1e-6), 0.0, 1.0))
+            self.trust_sensor = alpha
+            if alpha > 0.0:
                 keep = w >= self.reliable_threshold
-                positions[keep] = frame.positions[keep]
+                positions[keep] = (1.0 - alpha) * positions[keep] + alpha * frame.positions[keep]
             ori = None
             if res.orientations is not None:
                 ori = orientations_to_sensor(res.orientations, yaw)
