@@ -135,12 +135,15 @@ class SimConfig:
     dodge_time: float = 0.6         # s: look-ahead
     dodge_hold: float = 0.5         # s: arms stay up this long after the last threat
     max_characters: int = 6
+    slow_control_every: int = 4     # steps between updates of the Eq. 2 torques and foot pins
 
     def validate(self) -> None:
         if self.controller not in CONTROLLERS:
             raise ValueError(f'controller must be one of {CONTROLLERS}, got {self.controller!r}')
         if not (1e-4 <= self.timestep <= 0.02):
             raise ValueError(f'timestep must be in [0.0001, 0.02] s, got {self.timestep}')
+        if not (1 <= int(self.slow_control_every) <= 50):
+            raise ValueError('slow_control_every must be in [1, 50]')
         if not (0.0 <= self.velocity_smoothing < 1.0):
             raise ValueError('velocity_smoothing must be in [0, 1)')
         if not (0.01 <= self.track_impedance <= 0.99):
@@ -552,6 +555,8 @@ class Simulation:
         self._feet_active = np.array([pin.active for _, _, pin in feet], bool)
         self._feet_manual = np.array([pin.manual for _, _, pin in feet], bool)
         self._pin_pts = None
+        self._twist = None      # recomputed on the next step
+        self._step_count = 0
 
     def _control(self) -> None:
         m, d = self.model, self.data
@@ -566,10 +571,6 @@ class Simulation:
             sj = np.clip((t - tg['T0j']) / tg['PERj'], 0.0, 1.0)[:, None]
             p_t = tg['P0'] + sj * tg['dP']
             v_t = tg['V'] * (sj < 1.0)
-            ss = np.clip((t - tg['T0s']) / tg['PERs'], 0.0, 1.0)[:, None]
-            q_t = (1.0 - ss) * tg['Q0'] + ss * tg['Q1']
-            q_t /= np.sqrt(np.sum(q_t * q_t, axis=1, keepdims=True))
-            w_t = tg['W'] * (ss < 1.0)
             jb = self._jb
             xm = d.xmat[jb].reshape(-1, 3, 3)
             pts = d.xpos[jb] + (xm @ self._jl[:, :, None])[:, :, 0]
@@ -588,33 +589,45 @@ class Simulation:
                 # like Eq. 1's Kd p'_target term
                 lead = 2.0 * c.track_impedance * c.track_timeconst * c.track_dampratio ** 2
                 d.mocap_pos[self._mocap] = p_t + lead * v_t
-            # Eq. 2: torque about each segment's own axis
-            axes = pts[self._sc] - pts[self._sp]
-            axes /= np.maximum(np.sqrt(np.sum(axes * axes, axis=1, keepdims=True)), 1e-9)
-            qc = d.xquat[self._sb]  # w x y z
-            # rel = q_t * conj(q_cur), only its vector part along the axis and its w matter
-            x1, y1, z1, w1 = q_t[:, 0], q_t[:, 1], q_t[:, 2], q_t[:, 3]
-            w2, x2, y2, z2 = qc[:, 0], -qc[:, 1], -qc[:, 2], -qc[:, 3]
-            rw = w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2
-            rx = w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2
-            ry = w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2
-            rz = w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2
-            sign = np.where(rw < 0, -1.0, 1.0)
-            proj = (rx * axes[:, 0] + ry * axes[:, 1] + rz * axes[:, 2]) * sign
-            err = 2.0 * np.arctan2(proj, rw * sign)
-            err = (err + np.pi) % (2 * np.pi) - np.pi
-            omega = d.cvel[self._sb, :3]
-            rate = np.sum(omega * axes, axis=1)
-            rate_t = np.sum(w_t * axes, axis=1)
-            tau = np.clip(g.twist_ke * self._tw_i * err + g.twist_kd * self._tw_i * (rate_t - rate),
-                          -g.max_torque, g.max_torque)
-            xfrc[self._sb, 3:] += tau[:, None] * axes
-            self._update_pins(p_t, v_t, pts)
+            self._step_count += 1
+            if self._twist is None or self._step_count >= c.slow_control_every:
+                self._step_count = 0
+                self._twist = self._twist_torques(t, tg, pts)
+                self._update_pins(p_t, v_t, pts)
+            xfrc[self._sb, 3:] += self._twist
         if self.pushes:
             for uid, k, f, t_end in self.pushes:
                 if t < t_end and uid in self.characters:
                     xfrc[self.characters[uid].seg_body[k], :3] += f
             self.pushes = [p for p in self.pushes if p[3] > t]
+
+    def _twist_torques(self, t: float, tg: Dict, pts: np.ndarray) -> np.ndarray:
+        """Eq. 2 torques (N*19, 3) about each segment's own axis, bounded by max_torque."""
+        d, g = self.data, self.config.gains
+        ss = np.clip((t - tg['T0s']) / tg['PERs'], 0.0, 1.0)[:, None]
+        q_t = (1.0 - ss) * tg['Q0'] + ss * tg['Q1']
+        q_t /= np.sqrt(np.sum(q_t * q_t, axis=1, keepdims=True))
+        w_t = tg['W'] * (ss < 1.0)
+        axes = pts[self._sc] - pts[self._sp]
+        axes /= np.maximum(np.sqrt(np.sum(axes * axes, axis=1, keepdims=True)), 1e-9)
+        qc = d.xquat[self._sb]  # w x y z
+        # rel = q_t * conj(q_cur): only its w and its vector part along the axis matter
+        x1, y1, z1, w1 = q_t[:, 0], q_t[:, 1], q_t[:, 2], q_t[:, 3]
+        w2, x2, y2, z2 = qc[:, 0], -qc[:, 1], -qc[:, 2], -qc[:, 3]
+        rw = w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2
+        rx = w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2
+        ry = w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2
+        rz = w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2
+        sign = np.where(rw < 0, -1.0, 1.0)
+        proj = (rx * axes[:, 0] + ry * axes[:, 1] + rz * axes[:, 2]) * sign
+        err = 2.0 * np.arctan2(proj, rw * sign)
+        err = (err + np.pi) % (2 * np.pi) - np.pi
+        omega = d.cvel[self._sb, :3]
+        rate = np.sum(omega * axes, axis=1)
+        rate_t = np.sum(w_t * axes, axis=1)
+        tau = np.clip(g.twist_ke * self._tw_i * err + g.twist_kd * self._tw_i * (rate_t - rate),
+                      -g.max_torque, g.max_torque)
+        return tau[:, None] * axes
 
     # ------------------------------------------------------------------ virtual joints
     def _set_pin(self, ch: Character, j: int, on: bool, point=None) -> None:
