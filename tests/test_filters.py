@@ -76,8 +76,8 @@ def test_one_euro_passes_a_slow_ramp():
     xs = np.arange(150) / fps * v
     ys = np.array([f.update(_frame(x), stamp_ns=int(i * 1e9 / fps))[0, 0]
                    for i, x in enumerate(xs)])
-    # steady-state lag of a first-order low-pass = v * tau, tau = 1/(2 pi (1 + beta v))
-    tau = 1.0 / (2 * np.pi * (1.0 + 1.0 * v))
+    # steady-state lag of a first-order low-pass = v * tau, tau = 1/(2 pi (1 + beta v)), beta = 3
+    tau = 1.0 / (2 * np.pi * (1.0 + 3.0 * v))
     assert abs((xs[-1] - ys[-1]) - v * tau) < 2e-3
     assert np.allclose(np.diff(ys[-30:]) * fps, v, rtol=0.02)
 

@@ -30,6 +30,8 @@ def _parser():
     p.add_argument('--seed', type=int, default=0)
     p.add_argument('--max-frames', type=int, default=300,
                    help='frames (30 Hz) per clip; 0 = whole clips (default 300 = 10 s)')
+    p.add_argument('--repeats', type=int, default=1,
+                   help='run every clip N times with independent sensor noise/events (seed, seed+1..)')
     p.add_argument('--out', default='out/eval', help='output directory')
     p.add_argument('--experiment', default='table4',
                    choices=('table3', 'table4', 'fig5', 'fig8'))
@@ -73,10 +75,12 @@ def run(argv=None) -> int:
     exp = args.experiment
     if exp == 'table4':
         res = E.evaluate(methods, dev_clips, scenarios, seed=args.seed, max_frames=max_frames,
-                         sensor_params=args.sensor_params, data_source=source, progress=progress)
+                         sensor_params=args.sensor_params, data_source=source, progress=progress,
+                         repeats=args.repeats)
     elif exp == 'table3':
         res = E.table3(methods, dev_clips, seed=args.seed, max_frames=max_frames,
-                       sensor_params=args.sensor_params, data_source=source, progress=progress)
+                       sensor_params=args.sensor_params, data_source=source, progress=progress,
+                       repeats=args.repeats)
     elif exp == 'fig5':
         import numpy as np
         from skeleton_core.geometry import normalize, retarget
