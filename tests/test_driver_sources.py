@@ -206,12 +206,13 @@ def test_replay_errors_are_one_line(tmp_path):
 def test_synthetic_users_side_by_side_with_truth():
     src = SyntheticSource(scenario='a', seed=3, num_users=4)
     src.open()
-    outs = [src.poll(1000 + k)[0] for k in range(30)]
+    period = 33_333_333
+    outs = [src.poll(10 ** 12 + k * period)[0] for k in range(30)]
     o = outs[-1]
     assert [f.user_id for f in o.frames] == [1, 2, 3, 4] == [f.user_id for f in o.truth]
     for f in o.frames + o.truth:
         validate_arrays(f.positions, f.tracking_state)
-        assert f.frame_id == 'kinect_link' and f.stamp_ns == 1029
+        assert f.frame_id == 'kinect_link' and f.stamp_ns == o.stamp_ns
     lateral = [np.mean([out.truth[k].positions[HIP_CENTER, 1] for out in outs]) for k in range(4)]
     assert np.all(np.diff(lateral) > 0.5)   # users spread along y, ~0.8 m apart
     with pytest.raises(SourceError, match='num_users'):
@@ -222,5 +223,26 @@ def test_synthetic_is_reproducible_per_seed():
     a, b, c = (SyntheticSource(seed=s, num_users=2) for s in (5, 5, 6))
     for s in (a, b, c):
         s.open()
-    pa, pb, pc = ([s.poll(0)[0].frames[1].positions for _ in range(5)][-1] for s in (a, b, c))
+    pa, pb, pc = ([s.poll(k * 10 ** 8)[0].frames[1].positions for k in range(5)][-1]
+                  for s in (a, b, c))
     assert np.array_equal(pa, pb) and not np.array_equal(pa, pc)
+
+
+def test_synthetic_schedule_is_drift_free_and_catches_up():
+    src = SyntheticSource(num_users=1, rate_hz=30.0)
+    src.open()
+    p = 33_333_333
+    t0 = 5 * 10 ** 12
+    stamps = []
+    # jittery polls: one frame each, stamps on the fixed grid, never after the poll time
+    for k, jitter in enumerate([0, 9e6, 2e6, 15e6, 0, 11e6]):
+        now = t0 + k * p + int(jitter)
+        out = src.poll(now)
+        assert len(out) == 1 and out[0].stamp_ns <= now
+        stamps.append(out[0].stamp_ns)
+    assert np.all(np.diff(stamps) == p)
+    # a poll 5 periods late returns the 5 overdue frames, still on the grid
+    late = src.poll(t0 + 10 * p)
+    assert [o.stamp_ns for o in late] == [stamps[-1] + i * p for i in range(1, 6)]
+    # far behind: the backlog is skipped, not replayed
+    assert len(src.poll(t0 + 1000 * p)) == 1 and src.skipped > 900

@@ -30,6 +30,7 @@ from .tf_names import tf_frames
 
 SKELETONS_TOPIC = '/kinect/skeletons'
 GROUND_TRUTH_TOPIC = '/kinect/ground_truth'
+STALL_S = 2.0  # live: warn when the device sends nothing for this long
 
 
 def _non_empty(name):
@@ -138,6 +139,7 @@ class DriverNode(Node):
         self._warned = set()
         self.source = make_source(v, log=self._warn_once, clock_ns=self._now_ns)
         self._finished_logged = False
+        self._stalled = False
         self._retry_timer = None
         try:
             self.source.open()
@@ -192,8 +194,22 @@ class DriverNode(Node):
             if self.health.on_drop(f'source error: {type(e).__name__}'):
                 self.get_logger().error(f'source failed: {e}')
             return
-        for out in outputs:
-            self._publish(out, now)
+        try:
+            for out in outputs:
+                self._publish(out, now)
+        except Exception:  # noqa: BLE001
+            if not self.context.ok():  # shutting down (Ctrl-C / SIGTERM) mid-callback
+                return
+            raise
+        last = getattr(self.source, 'last_frame_ns', 0)
+        if last and now - last > STALL_S * 1e9:
+            if not self._stalled:
+                self._stalled = True
+                self.get_logger().warning(f'no frames from the device for {STALL_S:g} s '
+                                          f'(unplugged or covered?)')
+        elif self._stalled and last:
+            self._stalled = False
+            self.get_logger().info('frames from the device again')
         if self.source.finished and not self._finished_logged:
             self._finished_logged = True
             self.get_logger().info('replay finished (set loop:=true to repeat)')

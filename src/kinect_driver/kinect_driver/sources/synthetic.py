@@ -7,8 +7,13 @@ plays the same clip, user k starts k/num_users of the way into it.
 
 Each of ``num_users`` (1-6) users gets its own sensor-model stream (``SensorModel.stream``,
 scenario a|b|c, seed ``seed + user``), placed side by side ``user_spacing`` metres apart across the
-field of view (the model's ``placement.lateral_offset_m``). User ids are 1..num_users. Frames are
-stamped with the time ``poll`` is called (the capture time of a simulated sensor).
+field of view (the model's ``placement.lateral_offset_m``). User ids are 1..num_users.
+
+Timing: a simulated sensor captures frames on a fixed, drift-free schedule ``A + k / rate_hz``
+(anchored half a period before the first poll, so timer jitter below half a period gives exactly
+one frame per poll). Each frame is stamped with its scheduled capture time; a poll returns every
+frame due by then, so a late poll (a loaded machine) catches up instead of losing frames. When
+more than ``MAX_CATCHUP`` frames are overdue the backlog is skipped (counted in ``skipped``).
 """
 from __future__ import annotations
 
@@ -25,6 +30,7 @@ from skeleton_core.model import NUM_JOINTS, TRACKED
 from .base import Source, SourceError, SourceOutput
 
 MAX_USERS = 6
+MAX_CATCHUP = 15  # frames (0.5 s at 30 Hz)
 
 
 def _load_motion(clip: str, seed: int):
@@ -68,7 +74,10 @@ class SyntheticSource(Source):
         self.with_truth = with_truth
         self._streams: List = []
         self.frames_out = 0
+        self.skipped = 0
         self.clip_names: List[str] = []
+        self._period_ns = int(round(1e9 / float(rate_hz)))
+        self._next_ns = None
 
     def open(self) -> None:
         from skeleton_core import sensor_model
@@ -99,25 +108,40 @@ class SyntheticSource(Source):
             self.clip_names.append(clip.name)
 
     def poll(self, now_ns: int) -> List[SourceOutput]:
+        period = self._period_ns
+        if self._next_ns is None:
+            self._next_ns = now_ns - period // 2
+        due = (now_ns - self._next_ns) // period + 1
+        if due > MAX_CATCHUP:
+            skip = due - 1
+            self._next_ns += skip * period
+            self.skipped += skip
+        outs = []
+        while self._next_ns <= now_ns:
+            outs.append(self._capture(self._next_ns))
+            self._next_ns += period
+        return outs
+
+    def _capture(self, stamp_ns: int) -> SourceOutput:
         frames, truth = [], []
         for k, stream in enumerate(self._streams):
             pos, state, true_pos = next(stream)
             uid = k + 1
             frames.append(SkeletonFrame(positions=np.asarray(pos, float),
                                         tracking_state=np.asarray(state, np.uint8), user_id=uid,
-                                        stamp_ns=now_ns, frame_id=self.frame_id))
+                                        stamp_ns=stamp_ns, frame_id=self.frame_id))
             if self.with_truth:
                 truth.append(SkeletonFrame(positions=np.asarray(true_pos, float),
                                            tracking_state=np.full(NUM_JOINTS, TRACKED, np.uint8),
-                                           user_id=uid, stamp_ns=now_ns, frame_id=self.frame_id))
+                                           user_id=uid, stamp_ns=stamp_ns, frame_id=self.frame_id))
         self.frames_out += 1
-        return [SourceOutput(stamp_ns=now_ns, frames=frames,
-                             truth=truth if self.with_truth else None, frame_id=self.frame_id)]
+        return SourceOutput(stamp_ns=stamp_ns, frames=frames,
+                            truth=truth if self.with_truth else None, frame_id=self.frame_id)
 
     def close(self) -> None:
         self._streams = []
 
     def status(self) -> dict:
         return {'scenario': self.scenario, 'users': self.num_users,
-                'clips': ','.join(self.clip_names)}
+                'clips': ','.join(self.clip_names), 'frames_skipped': self.skipped}
 
