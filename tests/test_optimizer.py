@@ -7,7 +7,7 @@ from pose_reconstruction.posture_space import parent_relative_error
 from pose_reconstruction.reconstructor import Reconstructor
 from pose_reconstruction.synthetic import random_database, scenario
 from skeleton_core.conversions import SkeletonFrame
-from skeleton_core.model import (ELBOW_RIGHT, HAND_LEFT, HAND_RIGHT, NUM_JOINTS, TRACKED,
+from skeleton_core.model import (ELBOW_RIGHT, HAND_LEFT, NUM_JOINTS, TRACKED, WRIST_LEFT,
                                  WRIST_RIGHT, segment_lengths, standard_body)
 
 
@@ -69,16 +69,17 @@ def test_keeps_reliable_joint_and_replaces_unreliable_one(case):
     db, truth, _, _ = case
     obs = truth.copy()
     ts = np.full((len(obs), NUM_JOINTS), TRACKED, np.uint8)
-    obs[:, HAND_LEFT] += (0.0, 0.0, 0.6)  # hand reported 60 cm too high ...
-    ts[:, HAND_LEFT] = 1                  # ... and only inferred
+    bad = [WRIST_LEFT, HAND_LEFT]
+    obs[:, bad] += (0.0, 0.0, 0.5)  # forearm end reported 50 cm too high ...
+    ts[:, bad] = 1                   # ... and only inferred
     out, r = run(db, obs, ts, method='C')
     err = np.linalg.norm(out - truth, axis=2)[10:]
-    assert np.median(err[:, HAND_LEFT]) < 0.15        # replaced (raw error 0.6 m)
+    assert np.median(err[:, WRIST_LEFT]) < 0.15       # replaced (raw error 0.5 m)
     assert np.median(err[:, ELBOW_RIGHT]) < 0.06      # reliable joints stay where observed
-    # method B trusts the wrong hand and is pulled towards it
+    # method B trusts the wrong wrist and is pulled towards it
     out_b, _ = run(db, obs, ts, method='B')
     err_b = np.linalg.norm(out_b - truth, axis=2)[10:]
-    assert np.median(err[:, HAND_LEFT]) < np.median(err_b[:, HAND_LEFT])
+    assert np.median(err[:, WRIST_LEFT]) < np.median(err_b[:, WRIST_LEFT])
 
 
 @pytest.mark.parametrize('solver', ['stochastic', 'gauss_newton'])
@@ -137,3 +138,17 @@ def test_invalid_parameters_refused(small_db):
         Reconstructor(small_db, method='C', bogus=1)
     with pytest.raises(ValueError):
         NaturalPostureOptimizer(small_db, k=1)
+
+
+def test_output_takes_the_users_observed_segment_lengths(small_db):
+    # a user whose trunk is 30 % shorter than the standard proportions: after a few reliable
+    # frames the output keeps the observed lengths, not the database's
+    p = standard_body(1.7).rest_positions()
+    from skeleton_core.model import SHOULDER_CENTER, SPINE, subtree
+    above = subtree(SHOULDER_CENTER)
+    p[above] -= (0.0, 0.0, 0.3 * (p[SHOULDER_CENTER, 2] - p[SPINE, 2]))
+    ts = np.full(NUM_JOINTS, TRACKED, np.uint8)
+    r = Reconstructor(small_db, method='C')
+    for _ in range(12):
+        out = r.process(SkeletonFrame(positions=p, tracking_state=ts))
+    assert np.allclose(segment_lengths(out.positions), segment_lengths(p), atol=1e-6)

@@ -25,7 +25,7 @@ from typing import Dict, Optional
 import numpy as np
 
 from skeleton_core.conversions import SkeletonFrame
-from skeleton_core.model import NUM_JOINTS
+from skeleton_core.model import NUM_JOINTS, NUM_SEGMENTS, SEGMENT_CHILDREN, SEGMENT_PARENTS
 
 from .completion import PCACompletion
 from .optimizer import NaturalPostureOptimizer
@@ -34,6 +34,8 @@ from .posture_space import (QueryPreparer, as_database_arrays, orientations_to_s
 from .reliability import ReliabilityEstimator
 
 METHODS = ('A', 'B', 'C')
+_SEG_P = np.array(SEGMENT_PARENTS)
+_SEG_C = np.array(SEGMENT_CHILDREN)
 RELIABILITY_PARAMS = ('d_min', 'f_b', 'theta_floor_deg', 'theta_roof_deg', 'f_total',
                       'sigma_frames', 'tracked_value', 'inferred_value', 'not_tracked_value',
                       'reference_pose_tolerance_deg', 'reference_frames')
@@ -42,7 +44,7 @@ OPTIMIZER_PARAMS = ('k', 'pca_dims', 'steps', 'samples', 'w_control', 'w_style',
                     'kdtree_dims', 'kdtree_candidates')
 COMPLETION_PARAMS = ('pca_dims', 'reliability_threshold', 'substitution')
 OWN_PARAMS = ('use_reliability', 'use_input_reliability', 'reliable_threshold',
-              'trust_sensor_distance', 'output_scale')
+              'trust_sensor_distance', 'output_scale', 'length_window')
 
 
 def split_params(method: str, params: Dict) -> tuple:
@@ -69,7 +71,8 @@ class Reconstructor:
 
     def __init__(self, db, method: str = 'C', use_reliability: Optional[bool] = None,
                  use_input_reliability: bool = True, reliable_threshold: float = 0.5,
-                 trust_sensor_distance: float = 0.25, output_scale: str = 'user', **params):
+                 trust_sensor_distance: float = 0.25, output_scale: str = 'user',
+                 length_window: int = 90, **params):
         method = str(method).upper()
         if method not in METHODS:
             raise ValueError(f'method must be one of {METHODS}, got {method!r}')
@@ -92,6 +95,9 @@ class Reconstructor:
             self.core = PCACompletion(self.db, **core)
         else:
             self.core = NaturalPostureOptimizer(self.db, **core)
+        self.length_window = int(length_window)
+        if self.length_window < 1:
+            raise ValueError('length_window must be >= 1')
         self.timings_ms: Dict[str, float] = {}
         self.trust_sensor = 0.0
         self.last_result = None
@@ -100,6 +106,9 @@ class Reconstructor:
     def reset(self) -> None:
         self.reliability.reset()
         self._prev = deque(maxlen=2)  # (normalised solution (20, 3), yaw)
+        self._lengths = np.full((self.length_window, NUM_SEGMENTS), np.nan)
+        self._lengths_n = 0
+        self._user_lengths: Optional[np.ndarray] = None
         if isinstance(self.core, NaturalPostureOptimizer):
             self.core.reset_rng()
 
@@ -110,12 +119,37 @@ class Reconstructor:
             return given
         return est
 
+    def user_segment_lengths(self) -> np.ndarray:
+        """(19,) the user's segment lengths for the output: the median of the observed lengths of
+        segments whose two joints were reliable over the last ``length_window`` frames, where
+        there are at least 5 such frames; else the reliability reference (captured T-pose /
+        standing lengths, or the standard body at the user's height)."""
+        ref = self.reliability.reference_lengths
+        if self.reliability.reference_source != 'standard':
+            return ref  # lengths captured in a reference posture (Sec. IV-B)
+        if self._user_lengths is None or self._lengths_n % 10 == 0:
+            obs = self._lengths[:min(self._lengths_n, self.length_window)]
+            count = np.sum(np.isfinite(obs), axis=0)
+            med = np.full(NUM_SEGMENTS, np.nan)
+            ok = count >= 5
+            if ok.any():
+                med[ok] = np.nanmedian(obs[:, ok], axis=0)
+            self._user_lengths = np.where(ok, med, ref)
+        return self._user_lengths
+
+    def _observe_lengths(self, positions: np.ndarray, R: np.ndarray) -> None:
+        good = (R[_SEG_P] >= self.reliable_threshold) & (R[_SEG_C] >= self.reliable_threshold)
+        ln = np.linalg.norm(positions[_SEG_C] - positions[_SEG_P], axis=1)
+        self._lengths[self._lengths_n % self.length_window] = np.where(good, ln, np.nan)
+        self._lengths_n += 1
+
     def process(self, frame: SkeletonFrame) -> SkeletonFrame:
         t0 = time.perf_counter()
         R = self._reliability_for(frame)
+        self._observe_lengths(frame.positions, np.asarray(R, float))
         t1 = time.perf_counter()
         height = self.reliability.height
-        user_bones = user_bone_lengths(self.reliability.reference_lengths)
+        user_bones = user_bone_lengths(self.user_segment_lengths())
         if self.method == 'A':
             res = self.core.complete(frame.positions, R, height, frame.orientations, user_bones)
             positions, ori = res.positions, res.orientations
