@@ -89,8 +89,10 @@ class Character:
         self.pin_eq = {j: eid(f'{p}pin_{JOINT_NAMES[j]}') for j in PIN_JOINTS}
         # MuJoCo derives body2's anchor from the compile-time pose; the tracking connects must
         # pull the joint point onto the mocap body's origin, so set both anchors explicitly.
+        self.track_eq = {}
         for j in range(NUM_JOINTS):
             e = eid(f'{p}track_{JOINT_NAMES[j]}')
+            self.track_eq[j] = e
             if e >= 0:
                 model.eq_data[e, 0:3] = self.joint_local[j]
                 model.eq_data[e, 3:6] = 0.0

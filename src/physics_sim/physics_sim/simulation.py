@@ -512,6 +512,9 @@ class Simulation:
         self._sp = cat([parent + NUM_JOINTS * i for i in range(n)], (0,)).astype(int)
         self._tw_i = cat([c.twist_inertia for c in chars], (0,))
         self._jroot = self.model.body_rootid[self._jb] if n else np.zeros(0, int)
+        self._ub, inv = np.unique(self._jb, return_inverse=True)
+        self._sum_rows = np.zeros((len(self._ub), len(self._jb)))
+        self._sum_rows[inv, np.arange(len(self._jb))] = 1.0
         self._mocap = (cat([c.mocap_ids for c in chars], (0,)).astype(int)
                        if n and chars[0].mocap_ids is not None else None)
 
@@ -582,7 +585,7 @@ class Simulation:
                 with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
                     f *= np.minimum(1.0, g.max_force / np.maximum(nrm, 1e-300))
                 wr = np.concatenate([f, _cross(pts - d.xipos[jb], f)], axis=1)
-                np.add.at(xfrc, jb, wr)
+                xfrc[self._ub] += self._sum_rows @ wr  # several joints share a body
             else:
                 # the connect's damping acts on the velocity relative to the (static) mocap body;
                 # leading the target by (b/k) v_t = 2 d tc zeta^2 v_t cancels the lag that causes,
@@ -635,6 +638,9 @@ class Simulation:
         if on:
             self.model.eq_data[e, 3:6] = point
         self.data.eq_active[e] = 1 if on else 0
+        te = ch.track_eq.get(j, -1)
+        if te >= 0:  # constraint controller: the pin replaces the foot's tracking spring
+            self.data.eq_active[te] = 0 if on else 1
 
     def pin(self, user_id: int, joint: str, point=None) -> None:
         """Pin a foot joint ('FootLeft'/'FootRight') to a world point (default: where it is) with
