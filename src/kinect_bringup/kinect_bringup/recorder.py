@@ -11,7 +11,7 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 
 from skeleton_core.health import Health
-from skeleton_core.rosnode import ParamSpec, Parameters, run_node
+from skeleton_core.rosnode import DiagnosticsPublisher, ParamSpec, Parameters, run_node
 
 from .graph import TOPICS
 
@@ -48,9 +48,11 @@ class RecorderNode(Node):
             self.counts[topic] = 0
             self.create_subscription(_msg_class(msgtype), topic,
                                      lambda msg, t=topic, mt=msgtype: self._on_msg(t, mt, msg), qos)
+        self.diagnostics = DiagnosticsPublisher(self, self.health)
         self.get_logger().info(f'recording {len(self.counts)} topics to {self.path}')
 
     def _on_msg(self, topic, msgtype, msg):
+        self.health.on_receive()
         now = self.get_clock().now().nanoseconds
         with self._lock:
             if self._writer is None:
