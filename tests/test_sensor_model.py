@@ -152,3 +152,15 @@ def test_live_stream_equals_offline():
 def test_unknown_scenario_is_rejected():
     with pytest.raises(ValueError):
         SensorModel().corrupt(toy_clip(1.0), 'z')
+
+
+def test_turn_episodes_at_the_configured_rate():
+    m = SensorModel({'scenarios': {'a': {'turn_per_min': 6.0, 'occlusion_per_min': 0.0,
+                                         'false_positive_per_min': 0.0}}}, seed=6)
+    s = m.corrupt(toy_clip(90.0), 'a')
+    n = _rate_check(s.events, 'turn', 'random', 6.0, len(s))
+    assert n >= 2
+    # turning changes the truth itself (the user turns), about the root
+    t = [e for e in s.events if e['type'] == 'turn'][0]
+    mid = t['frame'] + t['duration'] // 2
+    assert np.allclose(s.truth[mid, HIP_CENTER], m.place(toy_clip(90.0))[mid, HIP_CENTER])
