@@ -246,3 +246,52 @@ def test_synthetic_schedule_is_drift_free_and_catches_up():
     assert [o.stamp_ns for o in late] == [stamps[-1] + i * p for i in range(1, 6)]
     # far behind: the backlog is skipped, not replayed
     assert len(src.poll(t0 + 1000 * p)) == 1 and src.skipped > 900
+
+
+def test_live_reader_survives_unplug_and_reconnects():
+    """The reader thread's recovery logic, with the device I/O replaced by a fake."""
+    import threading
+    import time
+    from kinect_driver.sources.base import SourceOutput
+    from kinect_driver.sources.openni_live import LiveSource
+
+    class FakeLive(LiveSource):
+        def __init__(self):
+            super().__init__(retry_s=0.05, log=self.logs.append)
+            self.connects = 0
+            self.reads = 0
+            self.done = threading.Event()
+
+        logs = []
+
+        def connect(self):
+            self.connects += 1
+            if self.connects == 2:   # first reconnection attempt: still unplugged
+                from kinect_driver.sources.base import SourceError
+                raise SourceError('no device: no OpenNI2 depth sensor connected', retryable=True)
+            self.connected = True
+
+        def disconnect(self):
+            self.connected = False
+
+        def read_once(self):
+            self.reads += 1
+            if self.reads == 3:
+                raise RuntimeError('USB transfer failed')
+            if self.reads >= 8:   # enough: idle until closed (the queue keeps the last 10)
+                self.done.set()
+                self._stop.wait(1.0)
+                return []
+            time.sleep(0.005)
+            self._queue.append(SourceOutput(stamp_ns=self.reads))
+            return []
+
+    src = FakeLive()
+    src.open()
+    assert src.done.wait(5.0)
+    src.close()
+    assert src.connects == 3 and src.reconnects == 1
+    assert any('device disconnected' in m and 'USB transfer failed' in m for m in src.logs)
+    assert any(m.startswith('no device') and 'retrying' in m for m in src.logs)
+    assert 'device reconnected' in src.logs
+    assert [o.stamp_ns for o in src.poll(0)][:2] == [1, 2]
