@@ -70,7 +70,12 @@ class Graph:
     def _start(self, name: str, cmd: List[str]):
         if self.log_dir:
             self.log_dir.mkdir(parents=True, exist_ok=True)
-            out = open(self.log_dir / f'{name}.log', 'w')
+            # a restarted node appends to its log: what the killed process wrote is kept
+            restart = name in self.procs
+            out = open(self.log_dir / f'{name}.log', 'a' if restart else 'w')
+            if restart:
+                out.write(f'---- {name} restarted ----\n')
+                out.flush()
             self._logs.append(out)
         else:
             out = subprocess.DEVNULL
