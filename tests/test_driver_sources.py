@@ -1,6 +1,5 @@
 """kinect_driver sources without ROS: NiTE mapping, CSV format, replay timing, synthetic users,
 and the live source's errors against the real OpenNI2 library."""
-import os
 import subprocess
 import sys
 import textwrap
