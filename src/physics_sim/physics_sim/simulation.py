@@ -197,7 +197,8 @@ class Simulation:
                              friction=c.friction,
                              mocap_targets=(c.controller == 'mocap_constraints'),
                              track_solref=(c.track_timeconst, c.track_dampratio),
-                             track_solimp=(c.track_impedance, c.track_impedance, 0.001))
+                             track_solimp=(c.track_impedance, c.track_impedance, 0.001),
+                             pin_solref=(2.0 * c.timestep, 1.0))  # stiffest MuJoCo allows
         return WorldParams(timestep=c.timestep, character=cp)
 
     def _rebuild(self) -> None:
