@@ -294,3 +294,58 @@ def test_live_reader_survives_unplug_and_reconnects():
     assert any(m.startswith('no device') and 'retrying' in m for m in src.logs)
     assert 'device reconnected' in src.logs
     assert [o.stamp_ns for o in src.poll(0)][:2] == [1, 2]
+
+
+def test_live_read_once_with_nite_structures():
+    """read_once on real NiTE2 binding structures (the tracker itself is faked: no NiTE here)."""
+    nite = pytest.importorskip('openni.nite2', reason='openni bindings not installed')
+    from openni import _nite2 as c_api
+    from kinect_driver.sources.openni_live import LiveSource
+
+    pts, body = _nite_points_from_body(standard_body().rest_positions())
+
+    def user(uid, state, skeleton_state):
+        ud = c_api.NiteUserData()
+        ud.id = uid
+        ud.state = state
+        ud.skeleton.state = skeleton_state
+        for k in range(15):
+            j = ud.skeleton.joints[k]
+            j.position.x, j.position.y, j.position.z = pts[k]
+            j.positionConfidence = 1.0 if k else 0.0
+        return nite.UserData(ud)
+
+    class Frame:
+        def __init__(self, users):
+            self.users = users
+
+        def close(self):
+            pass
+
+    class Tracker:
+        started = []
+
+        def read_frame(self):
+            return Frame([
+                user(1, c_api.NiteUserState.NITE_USER_STATE_NEW,
+                     c_api.NiteSkeletonState.NITE_SKELETON_NONE),
+                user(2, c_api.NiteUserState.NITE_USER_STATE_VISIBLE,
+                     c_api.NiteSkeletonState.NITE_SKELETON_TRACKED),
+                user(5, c_api.NiteUserState.NITE_USER_STATE_VISIBLE,
+                     c_api.NiteSkeletonState.NITE_SKELETON_TRACKED)])
+
+        def start_skeleton_tracking(self, uid):
+            self.started.append(int(uid))
+
+    src = LiveSource(max_users=1, frame_id='cam', clock_ns=lambda: 42)
+    src._tracker = Tracker()
+    frames = src.read_once()
+    assert Tracker.started == [1]                     # a new user gets skeleton tracking
+    assert [f.user_id for f in frames] == [2]         # tracked users only, at most max_users
+    f = frames[0]
+    assert f.stamp_ns == 42 and f.frame_id == 'cam'
+    for j in NITE_TO_KINECT[1:]:
+        assert np.allclose(f.positions[j], body[j], atol=1e-6)
+    assert f.tracking_state[HEAD] == NOT_TRACKED and f.tracking_state[NITE_TO_KINECT[1]] == TRACKED
+    out, = src.poll(0)
+    assert out.frames == frames and out.stamp_ns == 42

@@ -301,7 +301,7 @@ class LiveSource(Source):
         for user in frame.users:
             if user.is_new():
                 self._tracker.start_skeleton_tracking(user.id)
-            if user.skeleton.state != nite2.SkeletonState.NITE_SKELETON_TRACKED:
+            if int(user.skeleton.state) != int(nite2.SkeletonState.NITE_SKELETON_TRACKED):
                 continue
             joints = user.skeleton.joints
             pts = [(joints[k].position.x, joints[k].position.y, joints[k].position.z)
