@@ -40,6 +40,8 @@ def _parser():
     p.add_argument('--params', default='',
                    help='fig8: comma-separated parameters to sweep (db_size,k,pca_dims,steps,'
                         'samples)')
+    p.add_argument('--reference', default='input', choices=('input', 'truth'),
+                   help='table3: score against the full input skeleton (paper) or the truth')
     p.add_argument('--quiet', action='store_true', help='no progress lines')
     return p
 
@@ -76,11 +78,11 @@ def run(argv=None) -> int:
     if exp == 'table4':
         res = E.evaluate(methods, dev_clips, scenarios, seed=args.seed, max_frames=max_frames,
                          sensor_params=args.sensor_params, data_source=source, progress=progress,
-                         repeats=args.repeats)
+                         repeats=args.repeats, reference=args.reference)
     elif exp == 'table3':
         res = E.table3(methods, dev_clips, seed=args.seed, max_frames=max_frames,
                        sensor_params=args.sensor_params, data_source=source, progress=progress,
-                       repeats=args.repeats)
+                       repeats=args.repeats, reference=args.reference)
     elif exp == 'fig5':
         import numpy as np
         from skeleton_core.geometry import normalize, retarget
