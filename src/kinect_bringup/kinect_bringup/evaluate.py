@@ -78,7 +78,7 @@ def run(argv=None) -> int:
     if exp == 'table4':
         res = E.evaluate(methods, dev_clips, scenarios, seed=args.seed, max_frames=max_frames,
                          sensor_params=args.sensor_params, data_source=source, progress=progress,
-                         repeats=args.repeats, reference=args.reference)
+                         repeats=args.repeats)
     elif exp == 'table3':
         res = E.table3(methods, dev_clips, seed=args.seed, max_frames=max_frames,
                        sensor_params=args.sensor_params, data_source=source, progress=progress,
