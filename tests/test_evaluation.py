@@ -118,3 +118,16 @@ def test_fig8_sweeps_with_overrides():
     assert [r['value'] for r in rows] == [1, 5] and all('eq18_cm' in r for r in rows)
     res = E.fig8('raw', [E.toy_clip(1.0)], params=('k',), sweeps={'k': (3,)}, max_frames=10)
     assert 'skipped' in res['sweeps']['k'][0]  # RawMethod takes no k
+
+
+def test_evaluate_cli_writes_markdown_and_json(tmp_path, capsys):
+    ev = pytest.importorskip('kinect_bringup.evaluate')
+    rc = ev.run(['--source', 'builtin', '--methods', 'raw,holt', '--max-frames', '15',
+                 '--scenarios', 'a', '--out', str(tmp_path), '--quiet'])
+    assert rc == 0
+    md = (tmp_path / 'table4.md').read_text()
+    assert '| raw |' in md and '| holt |' in md and 'builtin' in md
+    data = json.loads((tmp_path / 'table4.json').read_text())
+    assert data['meta']['seed'] == 0 and data['results']['raw']['a']['frames'] > 0
+    assert 'Sensor model noise statistics' in capsys.readouterr().out
+    assert ev.run(['--methods', 'no_such_method', '--out', str(tmp_path)]) == 2
