@@ -18,7 +18,9 @@ def generate_launch_description():
     args = [('source', 'synthetic', 'synthetic | replay | live'),
             ('replay_file', '', 'bag (.mcap) or CSV for source:=replay'),
             ('scenario', 'b', 'synthetic scenario class a | b | c'),
-            ('num_users', '1', 'synthetic users (1-6)')]
+            ('num_users', '1', 'synthetic users (1-6)'),
+            ('device_uri', '', 'live: OpenNI2 device URI or .oni file ("" = first device)'),
+            ('nite2_path', '', 'live: NiTE2 Redist directory (libNiTE2.so, NiTE.ini, NiTE2/)')]
     types = {'num_users': int}
     overrides = {name: ParameterValue(LaunchConfiguration(name), value_type=types.get(name, str))
                  for name, _, _ in args}

@@ -20,6 +20,8 @@ ARGS = [
     # '' = keep the value from config/<node>.yaml
     ('source', '', 'skeleton source: synthetic | replay | live (default: driver.yaml)'),
     ('replay_file', '', 'bag (.mcap) or CSV file for source:=replay'),
+    ('device_uri', '', 'live: OpenNI2 device URI or .oni recording ("" = first device)'),
+    ('nite2_path', '', 'live: NiTE2 Redist directory (never bundled; see docs/live_kinect.md)'),
     ('scenario', '', 'synthetic source scenario class (Shum 2013 Table IV): a | b | c'),
     ('num_users', '', 'synthetic source: number of users (1-6)'),
     ('seed', '', 'synthetic source: random seed'),
@@ -62,6 +64,7 @@ def _nodes(context):
 
     driver_over = {}
     for name, cast in (('source', str), ('scenario', str), ('replay_file', str),
+                       ('device_uri', str), ('nite2_path', str),
                        ('num_users', int), ('seed', int)):
         if arg(name):
             driver_over[name] = cast(arg(name))

@@ -7,7 +7,8 @@ from pathlib import Path
 os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 if os.environ.get('ROS_DISTRO') in ('humble', 'iron'):
     os.environ['ROS_LOCALHOST_ONLY'] = '1'
-os.environ.setdefault('ROS_DOMAIN_ID', str(1 + os.getpid() % 100))
+# a private DDS domain per test run (scripts/env.sh's default 42 would be shared by every shell)
+os.environ['ROS_DOMAIN_ID'] = os.environ.get('KP_TEST_DOMAIN_ID', str(1 + os.getpid() % 100))
 os.environ.setdefault('MPLBACKEND', 'Agg')
 
 import pytest  # noqa: E402

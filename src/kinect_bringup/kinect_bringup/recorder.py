@@ -46,8 +46,10 @@ class RecorderNode(Node):
             if msgtype is None:
                 raise ValueError(f'recorder: unknown topic {topic!r} (known: {sorted(TOPICS)})')
             self.counts[topic] = 0
+            # raw=True: the serialized bytes go to the bag as received (no decode/encode)
             self.create_subscription(_msg_class(msgtype), topic,
-                                     lambda msg, t=topic, mt=msgtype: self._on_msg(t, mt, msg), qos)
+                                     lambda data, t=topic, mt=msgtype: self._on_msg(t, mt, data),
+                                     qos, raw=True)
         self.diagnostics = DiagnosticsPublisher(self, self.health)
         self.get_logger().info(f'recording {len(self.counts)} topics to {self.path}')
 
