@@ -84,6 +84,11 @@ PARAMS: List[ParamSpec] = [
               range=(0.0, 1e5)),
     ParamSpec('twist_kd', 40.0, 'Eq. 2 damping per unit axial inertia (1/s): Kd_i = twist_kd * I_i',
               range=(0.0, 1e4)),
+    ParamSpec('twist_scale', [1.0] * 19,
+              'per-segment factor on the Eq. 2 gains (19 values, skeleton_core.model.SEGMENTS '
+              'order); the gains are Ke_i = twist_kp * scale_i * I_i', read_only=True,
+              validator=lambda v: None if len(v) == 19 and all(
+                  math.isfinite(x) and x >= 0 for x in v) else 'twist_scale needs 19 values >= 0'),
     ParamSpec('max_torque', 50.0, 'bound on |T| of Eq. 2 (N m)', range=(0.0, 1e4)),
     ParamSpec('track_timeconst', 0.02, 'mocap_constraints: spring time constant (s)',
               range=(0.001, 1.0), read_only=True),
@@ -151,6 +156,7 @@ def config_from_params(v: Dict) -> SimConfig:
                      track_timeconst=v['track_timeconst'], track_dampratio=v['track_dampratio'],
                      track_impedance=v['track_impedance'],
                      velocity_smoothing=v['velocity_smoothing'],
+                     twist_scale=list(v['twist_scale']),
                      body_height=v['body_height'], body_mass=v['body_mass'],
                      retarget=v['retarget'], joint_damping=v['joint_damping'],
                      joint_armature=v['joint_armature'], sensor_height=v['sensor_height'],

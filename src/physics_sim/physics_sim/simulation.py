@@ -136,12 +136,17 @@ class SimConfig:
     dodge_hold: float = 0.5         # s: arms stay up this long after the last threat
     max_characters: int = 6
     slow_control_every: int = 4     # steps between updates of the Eq. 2 torques and foot pins
+    twist_scale: Optional[Sequence[float]] = None  # per-segment factor on Eq. 2 gains (19, SEGMENTS)
 
     def validate(self) -> None:
         if self.controller not in CONTROLLERS:
             raise ValueError(f'controller must be one of {CONTROLLERS}, got {self.controller!r}')
         if not (1e-4 <= self.timestep <= 0.02):
             raise ValueError(f'timestep must be in [0.0001, 0.02] s, got {self.timestep}')
+        if self.twist_scale is not None:
+            ts = np.asarray(self.twist_scale, float)
+            if ts.shape != (len(SEGMENTS),) or not np.all(np.isfinite(ts)) or np.any(ts < 0):
+                raise ValueError(f'twist_scale needs {len(SEGMENTS)} finite values >= 0')
         if not (1 <= int(self.slow_control_every) <= 50):
             raise ValueError('slow_control_every must be in [1, 50]')
         if not (0.0 <= self.velocity_smoothing < 1.0):
@@ -511,7 +516,9 @@ class Simulation:
         parent = np.array(SEGMENT_PARENTS_A)
         self._sc = cat([child + NUM_JOINTS * i for i in range(n)], (0,)).astype(int)
         self._sp = cat([parent + NUM_JOINTS * i for i in range(n)], (0,)).astype(int)
-        self._tw_i = cat([c.twist_inertia for c in chars], (0,))
+        scale = (np.ones(len(SEGMENTS)) if self.config.twist_scale is None
+                 else np.asarray(self.config.twist_scale, float))
+        self._tw_i = cat([c.twist_inertia * scale for c in chars], (0,))
         self._jroot = self.model.body_rootid[self._jb] if n else np.zeros(0, int)
         self._ub, inv = np.unique(self._jb, return_inverse=True)
         self._sum_rows = np.zeros((len(self._ub), len(self._jb)))
