@@ -8,8 +8,9 @@ import yaml
 from skeleton_core.evaluation import toy_clip
 from skeleton_core.model import (FOOT_LEFT, FOOT_RIGHT, HAND_LEFT, HAND_RIGHT, HIP_CENTER, INFERRED,
                                  NOT_TRACKED, TRACKED)
-from skeleton_core.sensor_model import (DEFAULT_PARAMS, SCENARIOS, SensorModel, load_params,
-                                        statistics)
+from skeleton_core.model import SEGMENT_NAMES, SEGMENTS
+from skeleton_core.sensor_model import (DEFAULT_PARAMS, JOINT_GROUP, SCENARIOS, SensorModel,
+                                        load_params, statistics)
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -49,6 +50,16 @@ def test_noise_statistics_match_the_yaml():
     # every segment length varies frame to frame, by about the joint errors combined
     bl = np.array(st['bone_length_std_mm'])
     assert np.all(bl > 5.0) and np.all(bl < 60.0)
+    # vertical segments (trunk, thighs, shanks) are perpendicular to the depth axis: their length
+    # std is the lateral error of both ends combined, sqrt(base^2 + slow^2) per joint (YAML values)
+    p = m.params
+    lat = {g: np.hypot(p['jitter']['base_mm'][g], p['slow_drift']['sigma_mm'][g])
+           for g in p['jitter']['base_mm']}
+    for child in ('Spine', 'ShoulderCenter', 'Head', 'KneeLeft', 'AnkleRight'):
+        k = SEGMENT_NAMES.index(next(n for n in SEGMENT_NAMES if n.endswith('-' + child)))
+        a, b = SEGMENTS[k]
+        want = np.hypot(lat[JOINT_GROUP[a]], lat[JOINT_GROUP[b]])
+        assert abs(bl[k] / want - 1) < 0.2, (child, bl[k], want)
     # no event in the clean scenario
     assert all(s.events == [] for s in streams)
     assert np.all(np.concatenate([s.tracking_state for s in streams]) == TRACKED)
