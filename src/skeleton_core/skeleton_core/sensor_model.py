@@ -478,25 +478,25 @@ class _Corrupter:
         return pos, state, truth, clean
 
     def _collapse_targets(self, truth, limb, joints):
+        """Where the SDK puts a collapsed limb: an arm folded onto the side of the trunk (joints
+        spread from the spine down to the hip), a leg hanging straight under its hip (joints at
+        their bone-length distances below it, not below the floor)."""
         if limb.endswith('arm'):
-            side = 1.0 if limb.startswith('left') else -1.0
-            # onto the side of the trunk, hand at hip level
-            hip = truth[HIP_LEFT if side > 0 else HIP_RIGHT]
+            hip = truth[HIP_LEFT if limb.startswith('left') else HIP_RIGHT]
             spine = truth[SPINE]
-            out = []
-            for k, j in enumerate(joints):
-                a = (k + 1) / len(joints)
-                out.append((1 - a) * spine + a * hip)
-            return np.array(out)
-        hip = truth[HIP_LEFT if limb.startswith('left') else HIP_RIGHT]
-        leg = self.body.segment_lengths
+            a = (np.arange(len(joints)) + 1.0) / len(joints)
+            return (1 - a)[:, None] * spine + a[:, None] * hip
+        hip_j = HIP_LEFT if limb.startswith('left') else HIP_RIGHT
+        hip = truth[hip_j]
+        floor = float(truth[:, 2].min())
+        bone = self.body.bone_lengths_by_joint()
         out = []
         for j in joints:
-            g = JOINT_GROUP[j]
-            drop = {'knee': 0.28, 'ankle': 0.53, 'foot': 0.55}[g] * self.body.height / 1.0
-            drop = min(drop, hip[2] - truth[:, 2].min() + 0.05) if g != 'knee' else drop
-            out.append(hip - np.array([0.0, 0.0, drop]))
-        del leg
+            drop, k = 0.0, j
+            while k != hip_j and k > 0:
+                drop += bone[k] if JOINT_GROUP[k] != 'foot' else 0.0
+                k = PARENTS[k]
+            out.append([hip[0], hip[1], max(hip[2] - drop, floor)])
         return np.array(out)
 
     def _self_occluded(self, truth: np.ndarray) -> np.ndarray:
