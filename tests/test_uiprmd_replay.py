@@ -17,8 +17,11 @@ from skeleton_core.bagio import read_messages  # noqa: E402
 from skeleton_core.conversions import frames_from_array_msg  # noqa: E402
 from skeleton_core.model import HAND_LEFT, NOT_TRACKED, TRACKED  # noqa: E402
 
+# A DDS domain of our own (scripts/env.sh exports ROS_DOMAIN_ID=42 for everybody)
+DOMAIN = 1 + (os.getpid() * 7 + 13) % 100
 
-def test_imported_real_clip_replays_over_dds(shared_dir, rclpy_context, tmp_path):
+
+def test_imported_real_clip_replays_over_dds(shared_dir, tmp_path):
     from skeleton_core import uiprmd_cli
     src = shared_dir / 'kinect' / 'ui-prmd'
     assert uiprmd_cli.main(['--src', str(src), '--out', str(tmp_path), '--subjects', 's02',
@@ -27,12 +30,14 @@ def test_imported_real_clip_replays_over_dds(shared_dir, rclpy_context, tmp_path
     recorded = [m.data for m in read_messages(bag, ['/kinect/skeletons'], decode=False)]
     cmd = [sys.executable, '-m', 'kinect_driver.driver_node', '--ros-args',
            '-p', 'source:=replay', '-p', f'replay_file:={bag}', '-p', 'loop:=true']
-    proc = subprocess.Popen(cmd, env=dict(os.environ), stdout=subprocess.PIPE,
-                            stderr=subprocess.STDOUT, text=True)
-    node = rclpy.create_node('uiprmd_replay_probe', context=rclpy_context)
+    proc = subprocess.Popen(cmd, env=dict(os.environ, ROS_DOMAIN_ID=str(DOMAIN)),
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx, domain_id=DOMAIN)
+    node = rclpy.create_node('uiprmd_replay_probe', context=ctx)
     got = []
     node.create_subscription(SkeletonArray, '/kinect/skeletons', got.append, 100, raw=True)
-    ex = SingleThreadedExecutor(context=rclpy_context)
+    ex = SingleThreadedExecutor(context=ctx)
     ex.add_node(node)
     try:
         deadline = time.monotonic() + 30
@@ -42,6 +47,7 @@ def test_imported_real_clip_replays_over_dds(shared_dir, rclpy_context, tmp_path
                 break
     finally:
         node.destroy_node()
+        rclpy.shutdown(context=ctx)
         proc.terminate()
         try:
             out, _ = proc.communicate(timeout=10)
