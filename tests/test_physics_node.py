@@ -135,9 +135,12 @@ def test_user_leaving_removes_the_character_and_bad_input_is_dropped(graph):
     for i, p in enumerate(clip(10)):
         pub.publish(_msg(p, 9_000_000_000 + i * 33_333_333, uid=2))
         time.sleep(1 / 30)
+    # user 2 present and a malformed user 5 in the same array: 5 is dropped, 2 stays
+    good = _msg(clip(1)[0], 9_500_000_000, uid=2)
     bad = _msg(clip(1)[0], 9_500_000_000, uid=5)
     bad.skeletons[0].positions[3].x = float('nan')
-    pub.publish(bad)
+    good.skeletons.append(bad.skeletons[0])
+    pub.publish(good)
     deadline = time.time() + 15
     while (2 not in node.sim.characters or not node.health.dropped) and time.time() < deadline:
         time.sleep(0.05)
