@@ -36,7 +36,7 @@ import numpy as np
 from . import metrics as M
 from .conversions import SkeletonFrame
 from .filters import HOLT_DEFAULTS, ONE_EURO_DEFAULTS, HoltFilter, OneEuroFilter
-from .model import (ANKLE_LEFT, ELBOW_LEFT, ELBOW_RIGHT, FOOT_LEFT, FOOT_RIGHT, HAND_LEFT,
+from .model import (ELBOW_LEFT, ELBOW_RIGHT, FOOT_LEFT, FOOT_RIGHT, HAND_LEFT,
                     HAND_RIGHT, JOINT_NAMES, KNEE_LEFT, KNEE_RIGHT, NOT_TRACKED, NUM_JOINTS,
                     TRACKED, standard_body)
 from .sensor_model import KinectStream, SensorModel, format_statistics, statistics
