@@ -30,9 +30,12 @@ class Probe:
         self._keep = keep
         self._lock = threading.Lock()
         qos = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE)
-        for topic, msgtype in topics.items():
-            self.node.create_subscription(msg_class(msgtype), topic,
-                                          lambda m, t=topic: self._cb(t, m), qos)
+        self._types = {t: msg_class(ty) for t, ty in topics.items()}
+        for topic, cls in self._types.items():
+            # raw: count arrivals without deserializing (a MarkerArray costs ms in Python);
+            # messages are deserialized only when a test asks for them
+            self.node.create_subscription(cls, topic, lambda m, t=topic: self._cb(t, m), qos,
+                                          raw=True)
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
         self._thread = threading.Thread(target=self._spin, daemon=True)
@@ -81,8 +84,10 @@ class Probe:
             return {t: len(v) for t, v in self.times.items()}
 
     def last(self, topic: str):
+        from rclpy.serialization import deserialize_message
         with self._lock:
-            return self.messages[topic][-1] if self.messages[topic] else None
+            data = self.messages[topic][-1] if self.messages[topic] else None
+        return None if data is None else deserialize_message(data, self._types[topic])
 
     # ---- parameters of other nodes --------------------------------------------------------
     def _call(self, srv_type, name: str, request, timeout: float = 10.0):

@@ -15,6 +15,7 @@ Examples::
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from pathlib import Path
 
@@ -43,11 +44,33 @@ def _parser():
     p.add_argument('--reference', default='input', choices=('input', 'truth'),
                    help='table3: score against the full input skeleton (paper) or the truth')
     p.add_argument('--quiet', action='store_true', help='no progress lines')
+    p.add_argument('--real', nargs='?', const='auto', default=None, metavar='UIPRMD_DIR',
+                   help='real-data mode: score the methods on the UI-PRMD Kinect recordings '
+                        'against the Vicon marker reference (default dir ../shared/kinect/ui-prmd)')
+    p.add_argument('--max-clips', type=int, default=4,
+                   help='--real: clips per movement row, 0 = all')
     return p
+
+
+def run_real(args) -> int:
+    from skeleton_core import real_eval
+    from .graph import repo_root
+    src = args.real
+    if src == 'auto':
+        shared = os.environ.get('KP_SHARED') or str((repo_root() or Path.cwd()).parent / 'shared')
+        src = str(Path(shared) / 'kinect' / 'ui-prmd')
+    argv = ['--src', src, '--out', args.out, '--max-clips', str(args.max_clips)]
+    if args.methods:
+        argv += ['--methods', args.methods]
+    if args.quiet:
+        argv.append('--quiet')
+    return real_eval.main(argv)
 
 
 def run(argv=None) -> int:
     args = _parser().parse_args(argv)
+    if args.real:
+        return run_real(args)
     from skeleton_core import evaluation as E
 
     plugins = E.load_plugins()
