@@ -476,9 +476,8 @@ class Simulation:
                     pos, ori = t
                 else:
                     pos, ori = t, None
-                validate_or_raise = validate_arrays  # raises SkeletonFormatError (a ValueError)
-                try:
-                    validate_or_raise(pos, orientations=ori)
+                try:  # SkeletonFormatError is a ValueError
+                    validate_arrays(pos, orientations=ori)
                 except ValueError:
                     self.counters['refused_target'] += 1
                     raise
