@@ -7,7 +7,7 @@ keeps no MuJoCo pointers except the index arrays refreshed by :meth:`Character.b
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Dict, Optional
+from typing import Dict
 
 import mujoco
 import numpy as np

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 from typing import Optional
 
 import numpy as np
-from skeleton_core.geometry import quat_conjugate, quat_multiply, quat_rotate, swing_twist
+from skeleton_core.geometry import quat_conjugate, quat_multiply, swing_twist
 from skeleton_core.model import (HIP_CENTER, HIP_LEFT, HIP_RIGHT, NUM_JOINTS, SEGMENT_CHILDREN,
                                  SEGMENT_PARENTS, SEGMENTS, SPINE)
 

@@ -10,7 +10,7 @@ every other bit as conaffinity; the floor and objects use all bits.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import List, Optional, Sequence, Tuple
+from typing import Optional, Sequence, Tuple
 
 import numpy as np
 from skeleton_core.model import Body

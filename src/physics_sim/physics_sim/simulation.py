@@ -26,7 +26,7 @@ Controllers (``SimConfig.controller``):
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from typing import Dict, List, Mapping, Optional, Sequence
 
 import mujoco
@@ -39,8 +39,7 @@ from skeleton_core.model import (ELBOW_LEFT, ELBOW_RIGHT, HAND_LEFT, HAND_RIGHT,
                                  WRIST_RIGHT, Body, estimate_height, standard_body)
 
 from .character import Character, Target
-from .controller import (Gains, apply_at_points, is_identity, joint_quats_to_segment, pd_force,
-                         pd_twist_torque, segment_quats_to_joints, twist_error)
+from .controller import Gains, is_identity, joint_quats_to_segment, segment_quats_to_joints
 from .mjcf_body import CharacterParams, joint_anchor
 from .mjcf_world import ALL_BITS, CharacterEntry, ObjectSpec, WorldParams, character_bits, world_xml
 
