@@ -148,7 +148,7 @@ def test_output_takes_the_users_observed_segment_lengths(small_db):
     above = subtree(SHOULDER_CENTER)
     p[above] -= (0.0, 0.0, 0.3 * (p[SHOULDER_CENTER, 2] - p[SPINE, 2]))
     ts = np.full(NUM_JOINTS, TRACKED, np.uint8)
-    r = Reconstructor(small_db, method='C')
+    r = Reconstructor(small_db, method='C', trust_sensor_distance=100.0)  # no sensor fallback
     for _ in range(12):
         out = r.process(SkeletonFrame(positions=p, tracking_state=ts))
     assert np.allclose(segment_lengths(out.positions), segment_lengths(p), atol=1e-6)

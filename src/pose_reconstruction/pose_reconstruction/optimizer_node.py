@@ -37,7 +37,7 @@ SPECS = [
     ParamSpec('kdtree_candidates', 4, 'kdtree: candidates fetched per neighbour', (1, 100)),
     ParamSpec('reliable_threshold', 0.5, 'a joint at or above this reliability counts as reliable',
               (0.0, 1.0)),
-    ParamSpec('trust_sensor_distance', 0.25,
+    ParamSpec('trust_sensor_distance', 0.12,
               'nearest database posture farther than this (RMS m per reliable joint): reliable '
               'joints blend towards their observed positions (fully at twice it)', (0.0, 100.0)),
     ParamSpec('output_scale', 'user', "user: result retargeted to the user's bone lengths; "

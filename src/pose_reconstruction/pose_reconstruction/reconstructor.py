@@ -71,7 +71,7 @@ class Reconstructor:
 
     def __init__(self, db, method: str = 'C', use_reliability: Optional[bool] = None,
                  use_input_reliability: bool = True, reliable_threshold: float = 0.5,
-                 trust_sensor_distance: float = 0.25, output_scale: str = 'user',
+                 trust_sensor_distance: float = 0.12, output_scale: str = 'user',
                  length_window: int = 90, **params):
         method = str(method).upper()
         if method not in METHODS:
