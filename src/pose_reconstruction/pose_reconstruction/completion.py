@@ -65,15 +65,16 @@ class PCACompletion:
             raise ValueError('pca_dims must be >= 1')
         self.pca_dims = int(pca_dims)
         self.mean, self.components, _ = pca_basis(self.db.flat, self.pca_dims)
-        self.projected = (self.db.flat - self.mean) @ self.components.T  # (N, d)
+        self.projected = np.ascontiguousarray((self.db.flat - self.mean) @ self.components.T)
+        self._projected_sq = np.einsum('nd,nd->n', self.projected, self.projected)
         self._mean_pose = self.mean.reshape(NUM_JOINTS, 3)
 
     def search(self, query_flat: np.ndarray) -> tuple:
         """Nearest database posture to a 60-D (already mean-filled) query in the reduced space."""
         z = self.components @ (query_flat - self.mean)
-        d = np.einsum('nd,nd->n', self.projected - z, self.projected - z)
+        d = self._projected_sq - 2.0 * (self.projected @ z)  # + |z|^2, constant
         i = int(np.argmin(d))
-        return i, float(d[i])
+        return i, max(float(d[i] + z @ z), 0.0)
 
     def complete(self, positions: np.ndarray, reliability: np.ndarray, user_height: float,
                  orientations: Optional[np.ndarray] = None,
