@@ -198,3 +198,22 @@ def test_methods_register_with_the_evaluation_harness(case):
     assert m.name == 'C' and m.db.size == 300 and m.core.k == 12 and m.core.steps == 5
     with pytest.raises(ValueError):
         methods.make_method_b(db=db, no_such_parameter=1)
+
+
+def test_config_files_hold_every_parameter_with_its_default():
+    import yaml
+
+    from pose_reconstruction import completion_node, node_common, optimizer_node
+    from conftest import ROOT
+    common = node_common.common_specs('', '')
+    for name, specs in (('reliability', common + node_common.RELIABILITY_SPECS),
+                        ('completion', common + completion_node.SPECS
+                         + node_common.RELIABILITY_SPECS),
+                        ('optimizer', common + optimizer_node.SPECS
+                         + node_common.RELIABILITY_SPECS)):
+        values = yaml.safe_load((ROOT / 'config' / f'{name}.yaml').read_text())
+        values = values['/**']['ros__parameters']
+        assert set(values) == {s.name for s in specs}, name
+        for s in specs:
+            if s.name not in ('input_topic', 'output_topic'):
+                assert values[s.name] == s.default, (name, s.name)
