@@ -19,6 +19,9 @@ from .controller import ball_qpos, segment_quats_from_positions
 from .mjcf_body import PIN_JOINTS, ROOT_SEGMENT, joint_anchor
 
 
+MAX_TARGET_SPEED = 10.0  # m/s: bound on the target velocity p'_target of Eq. 1
+
+
 def _nlerp(q0: np.ndarray, q1: np.ndarray, s: float) -> np.ndarray:
     sign = np.where(np.sum(q0 * q1, axis=-1, keepdims=True) < 0, -1.0, 1.0)
     q = (1.0 - s) * q0 + s * sign * q1
@@ -139,6 +142,8 @@ class Character:
         self.prev = Target(p_now, q_now, now, self.cur.stamp_ns)
         self.cur = target
         raw = (target.positions - p_now) / self.period
+        n = np.linalg.norm(raw, axis=1, keepdims=True)  # a tracking glitch is not a velocity
+        raw *= np.minimum(1.0, MAX_TARGET_SPEED / np.maximum(n, 1e-12))
         self.velocity = smoothing * self.velocity + (1.0 - smoothing) * raw
 
     def target_at(self, t: float):

@@ -126,6 +126,7 @@ class SimConfig:
     pin_release_height: float = 0.07
     pin_speed: float = 0.3          # m/s: pin only if the foot target is slower
     pin_release_distance: float = 0.15  # m: release when the target slides this far from the pin
+    pin_max_force: float = 3000.0   # N: a virtual joint pulling harder conflicts with the targets
     conflict_tolerance: float = 0.05    # m: a virtual joint stretched more than this = conflict
     conflict_release: float = 0.3       # m: ... and released if stretched more than this
     # interaction
@@ -681,11 +682,25 @@ class Simulation:
         floor = self.sensor.lift if self.sensor else 0.0
         h = p_t[fi, 2] - floor
         speed = np.sqrt(np.sum(v_t[fi] ** 2, axis=1))
-        down = (h < c.pin_height) & (speed < c.pin_speed) & c.pin_feet
+        # the simulated foot must be on the floor and slow too: pinning a flailing foot would
+        # stop it dead in one step (an impulse the solver cannot absorb)
+        d = self.data
+        jb = self._jb[fi]
+        cv = d.cvel[jb]
+        v_sim = cv[:, 3:] + _cross(cv[:, :3], pts[fi] - d.subtree_com[self._jroot[fi]])
+        sim_ok = ((pts[fi, 2] - floor < c.pin_height + 0.03)
+                  & (np.sqrt(np.sum(v_sim ** 2, axis=1)) < 2.0 * c.pin_speed))
+        down = (h < c.pin_height) & (speed < c.pin_speed) & sim_ok & c.pin_feet
         act = self._feet_active
         slide = np.sqrt(np.sum((p_t[fi, :2] - self._pin_points()[:, :2]) ** 2, axis=1))
         up = (h > c.pin_release_height) | (slide > c.pin_release_distance) | (not c.pin_feet)
-        change = np.flatnonzero(np.where(act, up, down) & ~self._feet_manual)
+        strained = np.zeros(len(fi), bool)
+        if act.any():
+            strained = (self._pin_forces() > c.pin_max_force) & act
+            if strained.any():  # conflicting constraints: let go before the solver blows up
+                self.counters['constraint_conflict'] += int(strained.sum())
+                self.counters['virtual_joint_released'] += int(strained.sum())
+        change = np.flatnonzero((np.where(act, up, down) & ~self._feet_manual) | strained)
         for n in change:
             i, j, pin = self._feet[n]
             if not pin.active:
@@ -694,10 +709,26 @@ class Simulation:
                 self._set_pin(self._chars[i], j, True, pin.point)
                 self.counters['pins'] += 1
             else:
-                pin.active = False
+                pin.active = pin.manual = False
                 self._set_pin(self._chars[i], j, False)
+                self._feet_manual[n] = False
             act[n] = pin.active
             self._pin_pts = None
+
+    def _pin_forces(self) -> np.ndarray:
+        """Magnitude (N) of each foot pin's constraint force in the last step (0 if inactive)."""
+        d = self.data
+        out = np.zeros(len(self._feet))
+        rows = np.flatnonzero(d.efc_type[:d.nefc] == mujoco.mjtConstraint.mjCNSTR_EQUALITY)
+        if rows.size:
+            ids = d.efc_id[rows]
+            f = d.efc_force[rows]
+            for n, (i, j, pin) in enumerate(self._feet):
+                if pin.active:
+                    sel = ids == self._chars[i].pin_eq[j]
+                    out[n] = float(np.sqrt(np.sum(f[sel] ** 2)))
+        self._pin_forces_cache = out
+        return out
 
     def _pin_points(self) -> np.ndarray:
         if getattr(self, '_pin_pts', None) is None or len(self._pin_pts) != len(self._feet):
