@@ -121,6 +121,8 @@ PARAMS: List[ParamSpec] = [
               range=(0.0, 10.0)),
     ParamSpec('pin_release_distance', 0.15, 'release when the target slides this far (m)',
               range=(0.01, 2.0)),
+    ParamSpec('pin_max_force', 3000.0, 'a foot pin pulling harder than this (N) conflicts with '
+              'the targets and is released (counted)', range=(100.0, 1e5)),
     ParamSpec('dodge', False, 'raise the forearms when a ball approaches the head'),
     ParamSpec('dodge_distance', 0.45, 'predicted miss distance that triggers a dodge (m)',
               range=(0.05, 3.0)),
@@ -146,7 +148,7 @@ PARAMS: List[ParamSpec] = [
 LIVE_GAINS = {'kp': 'ke', 'kd': 'kd', 'max_force': 'max_force', 'twist_kp': 'twist_ke',
               'twist_kd': 'twist_kd', 'max_torque': 'max_torque'}
 LIVE_CONFIG = ('velocity_smoothing', 'retarget', 'pin_feet', 'pin_height', 'pin_release_height', 'pin_speed',
-               'pin_release_distance', 'dodge', 'dodge_distance')
+               'pin_release_distance', 'pin_max_force', 'dodge', 'dodge_distance')
 
 
 def config_from_params(v: Dict) -> SimConfig:
@@ -163,7 +165,8 @@ def config_from_params(v: Dict) -> SimConfig:
                      sensor_pitch=math.radians(v['sensor_pitch_deg']), auto_floor=v['auto_floor'],
                      pin_feet=v['pin_feet'], pin_height=v['pin_height'],
                      pin_release_height=v['pin_release_height'], pin_speed=v['pin_speed'],
-                     pin_release_distance=v['pin_release_distance'], dodge=v['dodge'],
+                     pin_release_distance=v['pin_release_distance'],
+                     pin_max_force=v['pin_max_force'], dodge=v['dodge'],
                      dodge_distance=v['dodge_distance'], max_characters=v['max_characters'])
 
 
