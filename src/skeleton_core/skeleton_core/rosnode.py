@@ -173,6 +173,12 @@ def run_node(node_factory: Callable[..., Node], args=None, executor=None) -> int
             executor.spin()
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except RuntimeError:
+        # Ctrl-C / SIGINT shuts the context down under the executor: when that happens while it
+        # is taking a message, rclpy raises RuntimeError ("Unable to convert call argument '0'")
+        # from take_message instead of ExternalShutdownException. A clean stop, not a crash.
+        if rclpy.ok():
+            raise
     finally:
         node.destroy_node()
         rclpy.try_shutdown()
