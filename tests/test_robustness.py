@@ -65,6 +65,7 @@ EXPECTED_CAUSE = {
 FUZZ_USER = 7         # the malformed skeletons' user (the driver streams its own users)
 STARTUP_TIMEOUT = 120.0  # s: seven Python processes importing rclpy/mujoco/scipy on a loaded machine
 QUIET_S = 5.0
+IN_FLIGHT_S = 0.3  # a killed process's last messages arrive within this; a new one needs longer
 BAD_LOG = re.compile(r'\[(WARN|ERROR|FATAL)\]|Traceback')
 
 
@@ -79,14 +80,21 @@ class GraphProbe(Probe):
         self.nan = {t: 0 for t in topics}
         self.users = {t: [] for t in topics}   # (time, user ids) per message
         self.diag = {}                         # node name -> {key: value}
+        self.diag_times = {}                   # node name -> arrival times of its diagnostics
         self._extra_lock = threading.Lock()
         super().__init__(topics, name='robustness_probe', keep=20)
 
-    def _cb(self, topic, msg):
+    def _cb(self, topic, raw):
+        msg = raw
+        if isinstance(raw, (bytes, bytearray)) and topic != '/viz/markers':
+            # the probe subscribes raw (counting is cheap); these topics are checked here
+            from rclpy.serialization import deserialize_message
+            msg = deserialize_message(raw, self._types[topic])
         if topic == '/diagnostics':
             with self._extra_lock:
                 for st in msg.status:
                     self.diag[st.name.lstrip('/')] = {kv.key: kv.value for kv in st.values}
+                    self.diag_times.setdefault(st.name.lstrip('/'), []).append(time.monotonic())
         elif topic != '/viz/markers':
             # the test's own malformed messages (FUZZ_USER only) arrive here too on the topics it
             # injects into: only the nodes' skeletons count there (/posture/completed and
@@ -100,11 +108,15 @@ class GraphProbe(Probe):
                     self.nan[topic] += 1
                 self.users[topic].append((time.monotonic(), {sk.user_id for sk in msg.skeletons}))
                 del self.users[topic][:-2000]
-        super()._cb(topic, msg)
+        super()._cb(topic, raw)
 
     def diagnostics(self, node):
         with self._extra_lock:
             return dict(self.diag.get(node, {}))
+
+    def diagnostics_since(self, node, t0) -> int:
+        with self._extra_lock:
+            return sum(1 for t in self.diag_times.get(node, []) if t > t0)
 
     def user_seen_since(self, topic, t0, user) -> int:
         with self._extra_lock:
@@ -178,7 +190,7 @@ def test_nodes_wait_quietly_for_their_inputs(running):
         bad = [ln for ln in text.splitlines() if BAD_LOG.search(ln)]
         assert not bad, f'{node} complained while waiting for its input:\n' + '\n'.join(bad)
     silent = {t: n for t, n in running['quiet_counts'].items()
-              if t not in ('/diagnostics', '/viz/markers') and n}
+              if t != '/diagnostics' and n}
     assert not silent, f'output without any input: {silent}'
     # ... and work as soon as the driver starts
     probe, user = running['probe'], running['user']
@@ -279,7 +291,7 @@ def test_a_big_jump_back_in_time_restarts_the_users_not_the_node(running):
 
 
 @pytest.mark.parametrize('node', ['reliability', 'completion', 'optimizer', 'physics', 'viz',
-                                  'driver'])
+                                  'recorder', 'driver'])
 def test_killing_one_node_recovers_without_restarting_the_others(running, node):
     probe, user = running['probe'], running['user']
     others = {n: p.pid for g in running['graphs'].values() for n, p in g.procs.items() if n != node}
@@ -288,13 +300,21 @@ def test_killing_one_node_recovers_without_restarting_the_others(running, node):
     graph.restart(node)  # SIGKILL, then the same command again
     t0 = time.monotonic()
     assert graph.procs[node].pid != old
-    topic = OUTPUT[node]
-    if node == 'viz':
-        ok = _wait(lambda: probe.rate('/viz/markers', 1.0) > 0 and
-                   any(t > t0 for t in probe.times['/viz/markers']), STARTUP_TIMEOUT)
+    topic = OUTPUT.get(node, '/diagnostics')
+    if node == 'recorder':
+        # no output topic: its diagnostics come back (later than any in-flight message of the
+        # killed process) and it records again
+        ok = _wait(lambda: probe.diagnostics_since(node, t0 + IN_FLIGHT_S) >= 1 and
+                   int(probe.diagnostics(node).get('received', 0)) > 0, STARTUP_TIMEOUT)
+    elif node == 'viz':
+        ok = _wait(lambda: sum(t > t0 + IN_FLIGHT_S for t in list(probe.times[topic])) >= 5,
+                   STARTUP_TIMEOUT)
     else:
-        # its own output and everything downstream of it (all SkeletonArray topics) resume
-        ok = probe.wait_user(list(SKELETON_TOPICS.values()), t0, user, count=5)
+        # its own output (later than any in-flight message of the killed process), then every
+        # SkeletonArray topic downstream of it (their queues of old input are drained by then)
+        ok = probe.wait_user([topic], t0 + IN_FLIGHT_S, user, count=5)
+        ok = ok and probe.wait_user(list(SKELETON_TOPICS.values()), time.monotonic(), user,
+                                    count=3, timeout=60)
     assert ok, f'no output on {topic} after restarting {node}:\n' + \
         _logs(running['log_dir'], node)[-2000:]
     now = {n: p.pid for g in running['graphs'].values() for n, p in g.procs.items() if n != node}
@@ -302,3 +322,5 @@ def test_killing_one_node_recovers_without_restarting_the_others(running, node):
     alive = {n: a for g in running['graphs'].values() for n, a in g.alive().items()}
     assert all(alive.values()), alive
     assert all(v == 0 for v in probe.nan.values()), probe.nan
+    text = _logs(running['log_dir'], node)  # the killed process's log, then the new one's
+    assert 'restarted' in text and 'Traceback' not in text, text[-3000:]
