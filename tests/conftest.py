@@ -19,7 +19,7 @@ SHARED = Path(os.environ.get('KP_SHARED', ROOT.parent / 'shared'))
 
 def pytest_configure(config):
     config.addinivalue_line('markers', 'ros: needs rclpy and the built skeleton_msgs')
-    config.addinivalue_line('markers', 'launch: needs ros2 launch / launch_pytest')
+    config.addinivalue_line('markers', 'launch_tooling: needs ros2 launch / launch_pytest')
     config.addinivalue_line('markers', 'shared: needs ../shared data')
     config.addinivalue_line('markers', 'slow: takes more than ~20 s')
 

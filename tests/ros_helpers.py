@@ -83,6 +83,16 @@ class Probe:
         with self._lock:
             return {t: len(v) for t, v in self.times.items()}
 
+    def indices(self, topic: str):
+        with self._lock:
+            return [(topic, i) for i in range(len(self.messages[topic]))]
+
+    def message(self, topic: str, index: int):
+        from rclpy.serialization import deserialize_message
+        with self._lock:
+            data = self.messages[topic][index]
+        return deserialize_message(data, self._types[topic])
+
     def last(self, topic: str):
         from rclpy.serialization import deserialize_message
         with self._lock:
