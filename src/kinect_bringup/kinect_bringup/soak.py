@@ -223,7 +223,9 @@ def main(argv=None) -> int:
         life = seg[-1][0] - seg[0][0]
         warm = [mb for t, mb in seg if t >= seg[0][0] + 0.25 * life]
         entry = {'process_life_s': round(life, 1), 'restarted': n in restarted,
-                 'last': samples[-1][1], 'judged': False}
+                 'last': samples[-1][1], 'judged': False,
+                 # (s, MB) about every 30 s, to see the trend (samples are every 2 s)
+                 'series': [(round(t), round(mb, 1)) for t, mb, _ in samples[::15]]}
         if len(warm) >= 2:
             base, last = warm[0], max(warm[-3:])
             g = (last - base) / base * 100.0
