@@ -25,7 +25,7 @@ fi
 
 # Optional: the OpenNI2 runtime for the driver's live Kinect source (Debian libopenni2-0). Installed
 # only when root with apt-get and not yet present; skipped silently otherwise (nothing else needs it).
-if ! ls /usr/lib/*/libOpenNI2.so.0 /usr/lib/libOpenNI2.so.0 >/dev/null 2>&1 &&
+if ! { ls /usr/lib/*/libOpenNI2.so.0 || ls /usr/lib/libOpenNI2.so.0; } >/dev/null 2>&1 &&
    [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
   log "installing libopenni2-0 (OpenNI2 runtime for source:=live) with apt-get"
   { DEBIAN_FRONTEND=noninteractive apt-get install -y -qq libopenni2-0 >/dev/null 2>&1 ||

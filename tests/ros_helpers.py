@@ -21,9 +21,12 @@ class Probe:
     """A node in its own context and spin thread that records arrival times (and the last few
     messages) on a set of topics, and can query/set parameters of other nodes."""
 
-    def __init__(self, topics: Dict[str, str], name: str = 'test_probe', keep: int = 50):
+    def __init__(self, topics: Dict[str, str], name: str = 'test_probe', keep: int = 50,
+                 domain_id: Optional[int] = None):
         self.context = rclpy.Context()
-        rclpy.init(context=self.context)
+        # domain_id: listen on another DDS domain than this process's ROS_DOMAIN_ID (a graph
+        # started with its own domain cannot be confused with another graph still running)
+        rclpy.init(context=self.context, domain_id=domain_id)
         self.node = Node(name, context=self.context)
         self.times: Dict[str, List[float]] = {t: [] for t in topics}
         self.messages: Dict[str, List] = {t: [] for t in topics}

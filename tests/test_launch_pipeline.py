@@ -4,10 +4,6 @@ They need the launch tooling (a system ROS 2, or the tooling built from ../share
 scripts/setup.sh); without it they skip with that reason.
 """
 import os
-import shutil
-import signal
-import subprocess
-import sys
 import time
 
 import pytest
@@ -110,37 +106,3 @@ def test_parameter_changed_at_run_time_takes_effect(probe):
     bad = probe.set_parameter('/optimizer', 'k', 100000)
     assert not bad.successful and bad.reason  # out-of-range sets are refused with a reason
     assert probe.set_parameter('/viz', 'show_raw', True).successful
-
-
-# ---- `ros2 launch` and the one-process `pipeline`: same parameters, clean SIGINT exit ----------
-def _params_of_running_graph(cmd, probe_name):
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                            start_new_session=True, env=dict(os.environ))
-    probe = Probe({'/viz/markers': TOPICS['/viz/markers']}, name=probe_name)
-    try:
-        ok = probe.wait_for(['/viz/markers'], count=3, timeout=150)
-        params = {n: probe.get_parameters(f'/{n}') for n in NODES} if ok else None
-    finally:
-        probe.close()
-        os.killpg(proc.pid, signal.SIGINT)
-        try:
-            out, _ = proc.communicate(timeout=40)
-        except subprocess.TimeoutExpired:
-            os.killpg(proc.pid, signal.SIGKILL)
-            out, _ = proc.communicate()
-    assert ok, f'no /viz/markers from {cmd}:\n' + out.decode(errors='replace')[-3000:]
-    return params, proc.returncode, out.decode(errors='replace')
-
-
-@pytest.mark.skipif(shutil.which('ros2') is None, reason='ros2 CLI not installed')
-def test_ros2_launch_and_pipeline_run_the_same_configuration():
-    p_launch, rc_launch, out_launch = _params_of_running_graph(
-        ['ros2', 'launch', 'kinect_bringup', 'pipeline.launch.py'], 'probe_launch')
-    assert rc_launch == 0, out_launch[-3000:]  # clean exit on SIGINT
-    assert 'Traceback' not in out_launch, out_launch[-3000:]
-    p_pipe, rc_pipe, out_pipe = _params_of_running_graph(
-        [sys.executable, '-m', 'kinect_bringup.pipeline'], 'probe_pipeline')
-    assert rc_pipe == 0, out_pipe[-3000:]
-    assert 'Traceback' not in out_pipe, out_pipe[-3000:]
-    for node in NODES:
-        assert p_launch[node] == p_pipe[node], node

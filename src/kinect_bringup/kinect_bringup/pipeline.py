@@ -82,6 +82,8 @@ def main(argv=None) -> int:
     import rclpy
     from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 
+    from skeleton_core.rosnode import ignore_further_interrupts
+
     directory = Path(args.config_dir) if args.config_dir else config_dir()
     names = graph_nodes(args.method, physics=not args.no_physics, viz=not args.no_viz,
                         record=bool(args.record))
@@ -112,6 +114,7 @@ def main(argv=None) -> int:
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
+        ignore_further_interrupts()
         executor.shutdown(timeout_sec=5.0)
         for n in reversed(nodes):  # recorder is last in the list: closes its file first
             n.destroy_node()

@@ -6,6 +6,7 @@ This is the only module of ``skeleton_core`` that imports rclpy; library modules
 from __future__ import annotations
 
 import math
+import signal
 import sys
 from dataclasses import dataclass
 from typing import Any, Callable, Dict, Iterable, Optional, Sequence
@@ -149,6 +150,16 @@ class DiagnosticsPublisher:
         self._pub.publish(msg)
 
 
+def ignore_further_interrupts() -> None:
+    """Call when shutdown has begun: a second SIGINT must not interrupt the cleanup with a
+    KeyboardInterrupt traceback. It comes routinely: Ctrl-C in a terminal reaches ``ros2 launch``
+    and its nodes (one process group), and launch then forwards its own SIGINT to each node."""
+    try:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+    except ValueError:  # not the main thread: signals are not ours to handle
+        pass
+
+
 def run_node(node_factory: Callable[..., Node], args=None, executor=None) -> int:
     """Standard ``main()``: init, build the node (a start-up error is one clear line and exit 1),
     spin until Ctrl-C / SIGTERM, shut down cleanly."""
@@ -180,6 +191,7 @@ def run_node(node_factory: Callable[..., Node], args=None, executor=None) -> int
         if rclpy.ok():
             raise
     finally:
+        ignore_further_interrupts()
         node.destroy_node()
         rclpy.try_shutdown()
     return 0

@@ -1,0 +1,64 @@
+"""`ros2 launch` and the one-process `pipeline`, started as a user starts them: both give every
+node the same parameters, and both exit cleanly (code 0, no traceback) on SIGINT.
+
+Its own module, and each graph on a DDS domain of its own: a graph still running or shutting down
+elsewhere in the suite (the launch_pytest fixtures) must not answer for the one under test — that
+made the probe see markers at once and interrupt `ros2 launch` while its nodes were still importing.
+"""
+import os
+import shutil
+import signal
+import subprocess
+import sys
+
+import pytest
+
+from kinect_bringup.graph import TOPICS
+from ros_helpers import Probe
+
+pytestmark = [pytest.mark.launch_tooling, pytest.mark.slow]
+
+NODES = ['driver', 'reliability', 'completion', 'optimizer', 'physics', 'viz']
+# every node has produced output once these flow: the graph is fully up
+READY = ['/posture/completed', '/posture/reconstructed', '/character/skeletons', '/viz/markers']
+
+
+def _private_domain(offset: int) -> int:
+    return (int(os.environ.get('ROS_DOMAIN_ID', '0')) + offset) % 100 + 1
+
+
+def _params_of_running_graph(cmd, probe_name, domain):
+    env = dict(os.environ, ROS_DOMAIN_ID=str(domain))
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                            start_new_session=True, env=env)
+    probe = Probe({t: TOPICS[t] for t in READY}, name=probe_name, domain_id=domain)
+    try:
+        ok = probe.wait_for(READY, count=3, timeout=150)
+        params = {n: probe.get_parameters(f'/{n}') for n in NODES} if ok else None
+        counts = probe.counts()
+    finally:
+        probe.close()
+        os.killpg(proc.pid, signal.SIGINT)
+        try:
+            out, _ = proc.communicate(timeout=40)
+        except subprocess.TimeoutExpired:
+            os.killpg(proc.pid, signal.SIGKILL)
+            out, _ = proc.communicate()
+    text = out.decode(errors='replace')
+    assert ok, f'not every output flowed from {cmd} ({counts}):\n' + text[-3000:]
+    return params, proc.returncode, text
+
+
+@pytest.mark.skipif(shutil.which('ros2') is None, reason='ros2 CLI not installed')
+def test_ros2_launch_and_pipeline_run_the_same_configuration():
+    p_launch, rc_launch, out_launch = _params_of_running_graph(
+        ['ros2', 'launch', 'kinect_bringup', 'pipeline.launch.py'], 'probe_launch',
+        _private_domain(37))
+    assert rc_launch == 0, out_launch[-3000:]  # clean exit on SIGINT
+    assert 'Traceback' not in out_launch, out_launch[-3000:]
+    p_pipe, rc_pipe, out_pipe = _params_of_running_graph(
+        [sys.executable, '-m', 'kinect_bringup.pipeline'], 'probe_pipeline', _private_domain(61))
+    assert rc_pipe == 0, out_pipe[-3000:]
+    assert 'Traceback' not in out_pipe, out_pipe[-3000:]
+    for node in NODES:
+        assert p_launch[node] == p_pipe[node], node
