@@ -1,4 +1,4 @@
-"""``pipeline``: the whole node graph in one process (multi-threaded executor), configured from the
+"""``pipeline``: the whole node graph in one process (one executor), configured from the
 same ``config/<node>.yaml`` files as ``pipeline.launch.py`` — for machines without ``ros2 launch``.
 
     ros2 run kinect_bringup pipeline                       # synthetic source, method C, physics, viz
@@ -33,8 +33,31 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--record', default='', help='record the pipeline topics to this MCAP file')
     p.add_argument('--duration', type=float, default=0.0, help='stop after this many seconds (0 = run)')
     p.add_argument('--config-dir', default=None, help='directory of <node>.yaml files')
-    p.add_argument('--threads', type=int, default=None, help='executor threads (default: cores)')
+    p.add_argument('--executor', choices=EXECUTORS, default='single',
+                   help='rclpy executor: single (default; the nodes share one interpreter lock, so '
+                        'threads add overhead, not parallelism), multi, events (rclpy.experimental)')
+    p.add_argument('--threads', type=int, default=None,
+                   help='--executor multi: executor threads (default: cores)')
     return p
+
+
+EXECUTORS = ('single', 'multi', 'events')
+
+
+def make_executor(kind: str, threads: Optional[int] = None):
+    """The executor that spins every node of the one-process graph."""
+    if kind == 'multi':
+        from rclpy.executors import MultiThreadedExecutor
+        return MultiThreadedExecutor(num_threads=threads)
+    if kind == 'events':
+        try:
+            from rclpy.experimental import EventsExecutor
+        except ImportError as e:  # Humble has none
+            raise RuntimeError('--executor events needs rclpy.experimental.EventsExecutor '
+                               '(Jazzy or newer)') from e
+        return EventsExecutor()
+    from rclpy.executors import SingleThreadedExecutor
+    return SingleThreadedExecutor()
 
 
 def node_overrides(args) -> Dict[str, Dict]:
@@ -80,7 +103,7 @@ def create_nodes(names: List[str], overrides: Dict[str, Dict], directory: Option
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv if argv is not None else sys.argv[1:])
     import rclpy
-    from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+    from rclpy.executors import ExternalShutdownException
 
     from skeleton_core.rosnode import ignore_further_interrupts
 
@@ -100,7 +123,14 @@ def main(argv=None) -> int:
             n.destroy_node()
         rclpy.try_shutdown()
         return 1
-    executor = MultiThreadedExecutor(num_threads=args.threads)
+    try:
+        executor = make_executor(args.executor, args.threads)
+    except RuntimeError as e:
+        print(f'[pipeline] ERROR: {e}', file=sys.stderr)
+        for n in nodes:
+            n.destroy_node()
+        rclpy.try_shutdown()
+        return 1
     for n in nodes:
         executor.add_node(n)
     nodes[0].get_logger().info(
