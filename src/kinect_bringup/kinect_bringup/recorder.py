@@ -59,7 +59,7 @@ class RecorderNode(Node):
         with self._lock:
             if self._writer is None:
                 return
-            self._writer.write(topic, msg, now, msgtype=msgtype)
+            self._writer.write_raw(topic, msg, now, msgtype=msgtype)  # CDR bytes as received
             self.counts[topic] += 1
         self.health.on_publish()
 

@@ -239,7 +239,11 @@ class BagWriter:
 
     def write(self, topic: str, msg: Any, stamp_ns: int, msgtype: Optional[str] = None) -> None:
         """Record ``msg`` on ``topic`` at log time ``stamp_ns``. ``msgtype`` defaults to the rclpy
-        message's own type, else to ``skeleton_msgs/msg/SkeletonArray``."""
+        message's own type, else to ``skeleton_msgs/msg/SkeletonArray``. Serialized bytes (a raw
+        subscription's message) are written as they are."""
+        if isinstance(msg, (bytes, bytearray, memoryview)):
+            self.write_raw(topic, msg, stamp_ns, msgtype or DEFAULT_MSGTYPE)
+            return
         if msgtype is None:
             msgtype = _rclpy_type_name(msg) if _is_rclpy_message(msg) else DEFAULT_MSGTYPE
         msgtype = _normalize_type(msgtype)
