@@ -188,6 +188,11 @@ def run_node(node_factory: Callable[..., Node], args=None, executor=None) -> int
         # Ctrl-C / SIGINT shuts the context down under the executor: when that happens while it
         # is taking a message, rclpy raises RuntimeError ("Unable to convert call argument '0'")
         # from take_message instead of ExternalShutdownException. A clean stop, not a crash.
+        # rclpy's signal handler shuts the context down from its own thread: give it a moment
+        import time
+        deadline = time.monotonic() + 1.0
+        while rclpy.ok() and time.monotonic() < deadline:
+            time.sleep(0.01)
         if rclpy.ok():
             raise
     finally:
