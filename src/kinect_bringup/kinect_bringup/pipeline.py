@@ -117,15 +117,8 @@ def main(argv=None) -> int:
     nodes = []
     try:
         nodes = create_nodes(names, node_overrides(args), directory)
-    except (ValueError, FileNotFoundError, RuntimeError, OSError, ImportError) as e:
-        print(f'[pipeline] ERROR: {e}', file=sys.stderr)
-        for n in nodes:
-            n.destroy_node()
-        rclpy.try_shutdown()
-        return 1
-    try:
         executor = make_executor(args.executor, args.threads)
-    except RuntimeError as e:
+    except (ValueError, FileNotFoundError, RuntimeError, OSError, ImportError) as e:
         print(f'[pipeline] ERROR: {e}', file=sys.stderr)
         for n in nodes:
             n.destroy_node()

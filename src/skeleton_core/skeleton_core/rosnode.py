@@ -8,6 +8,7 @@ from __future__ import annotations
 import math
 import signal
 import sys
+import time
 from dataclasses import dataclass
 from typing import Any, Callable, Dict, Iterable, Optional, Sequence
 
@@ -189,7 +190,6 @@ def run_node(node_factory: Callable[..., Node], args=None, executor=None) -> int
         # is taking a message, rclpy raises RuntimeError ("Unable to convert call argument '0'")
         # from take_message instead of ExternalShutdownException. A clean stop, not a crash.
         # rclpy's signal handler shuts the context down from its own thread: give it a moment
-        import time
         deadline = time.monotonic() + 1.0
         while rclpy.ok() and time.monotonic() < deadline:
             time.sleep(0.01)
