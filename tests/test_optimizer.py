@@ -121,12 +121,68 @@ def test_trust_sensor_when_database_is_far(small_db):
     p[[5, 6, 7], 1] += 0.6
     p[[9, 10, 11], 1] -= 0.6
     ts = np.full(NUM_JOINTS, TRACKED, np.uint8)
-    r = Reconstructor(small_db, method='C', trust_sensor_distance=0.05)
+    old = dict(output_mode='blend', trust_mode='distance')  # the earlier rule
+    r = Reconstructor(small_db, method='C', trust_sensor_distance=0.05, **old)
     out = r.process(SkeletonFrame(positions=p, tracking_state=ts))
     assert np.allclose(out.positions, p)
-    r2 = Reconstructor(small_db, method='C', trust_sensor_distance=100.0)
+    r2 = Reconstructor(small_db, method='C', trust_sensor_distance=100.0, **old)
     out2 = r2.process(SkeletonFrame(positions=p, tracking_state=ts))
     assert not np.allclose(out2.positions, p)
+
+
+def _noisy_frames(p, frames, noise_m, seed=0):
+    rng = np.random.default_rng(seed)
+    return [p + rng.normal(0.0, noise_m, p.shape) for _ in range(frames)]
+
+
+def test_noise_ratio_trusts_a_precise_sensor_far_from_the_database(small_db):
+    # the same odd posture: observed with 2 mm noise, the database distance is ~100x the noise
+    # -> the output follows the sensor (segments mode: constant lengths, smoothed)
+    p = standard_body().rest_positions()
+    p[[5, 6, 7], 1] += 0.6
+    p[[9, 10, 11], 1] -= 0.6
+    ts = np.full(NUM_JOINTS, TRACKED, np.uint8)
+    r = Reconstructor(small_db, method='C')
+    outs = [r.process(SkeletonFrame(positions=f, tracking_state=ts, stamp_ns=i * 33_333_333))
+            for i, f in enumerate(_noisy_frames(p, 40, 0.002))]
+    assert r.trust_sensor == 1.0 and r.noise < 0.01
+    err = np.linalg.norm(outs[-1].positions - p, axis=1)
+    assert np.median(err) < 0.03
+    L = np.array([segment_lengths(o.positions) for o in outs[20:]])
+    assert np.max(np.std(L, axis=0)) < 1e-9  # constant bone lengths once frozen
+    # the database posture itself, observed with 3 cm noise: the distance is a few times the
+    # noise -> the database is trusted (trust 0)
+    q = np.asarray(small_db.positions[100], float)
+    r2 = Reconstructor(small_db, method='C')
+    for i, f in enumerate(_noisy_frames(q, 30, 0.03, seed=1)):
+        r2.process(SkeletonFrame(positions=f, tracking_state=ts, stamp_ns=i * 33_333_333))
+    assert r2.trust_sensor == 0.0
+
+
+def test_segments_output_smoothing_and_lengths_parameters(small_db):
+    p = standard_body(1.7).rest_positions()
+    ts = np.full(NUM_JOINTS, TRACKED, np.uint8)
+    frames = _noisy_frames(p, 40, 0.01, seed=2)
+
+    def jitter(**kw):
+        r = Reconstructor(small_db, method='C', **kw)
+        out = np.array([r.process(SkeletonFrame(positions=f, tracking_state=ts,
+                                                stamp_ns=i * 33_333_333)).positions
+                        for i, f in enumerate(frames)])
+        return np.mean(np.linalg.norm(out[2:] - 2 * out[1:-1] + out[:-2], axis=2)), out
+    j_on, out = jitter()
+    j_off, _ = jitter(smooth_min_cutoff=0.0)
+    assert j_on < 0.6 * j_off
+    # symmetric lengths: left and right forearms equal
+    from skeleton_core.model import ELBOW_LEFT
+    L = segment_lengths(out[-1])
+    seg = {c: k for k, c in enumerate(__import__('skeleton_core.model', fromlist=['x']).SEGMENT_CHILDREN)}
+    assert L[seg[WRIST_LEFT]] == pytest.approx(L[seg[WRIST_RIGHT]])
+    assert L[seg[ELBOW_LEFT]] == pytest.approx(L[seg[ELBOW_RIGHT]])
+    for bad in (dict(output_mode='x'), dict(trust_mode='x'), dict(observation_weight=2.0),
+                dict(length_frames=0), dict(smooth_d_cutoff=0.0)):
+        with pytest.raises(ValueError):
+            Reconstructor(small_db, method='C', **bad)
 
 
 def test_invalid_parameters_refused(small_db):
@@ -148,7 +204,8 @@ def test_output_takes_the_users_observed_segment_lengths(small_db):
     above = subtree(SHOULDER_CENTER)
     p[above] -= (0.0, 0.0, 0.3 * (p[SHOULDER_CENTER, 2] - p[SPINE, 2]))
     ts = np.full(NUM_JOINTS, TRACKED, np.uint8)
-    r = Reconstructor(small_db, method='C', trust_sensor_distance=100.0)  # no sensor fallback
+    r = Reconstructor(small_db, method='C', trust_sensor_distance=100.0,  # no sensor fallback
+                      output_mode='blend', trust_mode='distance')
     for _ in range(12):
         out = r.process(SkeletonFrame(positions=p, tracking_state=ts))
     assert np.allclose(segment_lengths(out.positions), segment_lengths(p), atol=1e-6)

@@ -102,7 +102,7 @@ def test_gaussian_weighted_minimum():
 
 
 def test_reference_lengths_captured_from_tpose_and_scaled_default():
-    est = ReliabilityEstimator()
+    est = ReliabilityEstimator(reference_mode='standard')  # the paper's default lengths
     short = standard_body(1.5)
     # before any reference pose: the standard body scaled to the estimated height
     p = short.rest_positions()
@@ -127,6 +127,37 @@ def test_reference_lengths_captured_from_tpose_and_scaled_default():
     t2[HAND_RIGHT] = INFERRED
     est3.update(p, t2)
     assert est3.reference_source == 'standard'
+
+
+def test_observed_reference_lengths_follow_a_different_skeleton_layout():
+    # a sensor whose spine segment is 14 cm longer than the standard body's (real Kinect vs the
+    # CMU-derived body): with the standard reference the hip centre's R_k stays low, with the
+    # observed reference (default) it is 1, and a sudden 50 % stretch still lowers R_k
+    from skeleton_core.model import HIP_CENTER, SHOULDER_CENTER, SPINE, subtree
+    p = standard_body(1.7).rest_positions()
+    p[HIP_CENTER, 2] -= 0.14
+    for leg in (12, 16):  # the hips hang from the hip centre
+        p[subtree(leg)] -= (0.0, 0.0, 0.14)
+    lowered = p.copy()
+    lowered[ELBOW_LEFT] = p[SHOULDER_LEFT] + (0.15, 0.0, 0.1)
+    lowered[WRIST_LEFT] = p[SHOULDER_LEFT] + (0.3, 0.0, 0.2)
+    ts = np.full(NUM_JOINTS, TRACKED, np.uint8)
+    std = ReliabilityEstimator(reference_mode='standard')
+    obs = ReliabilityEstimator()
+    for _ in range(12):
+        rs = std.update(lowered, ts)
+        ro = obs.update(lowered, ts)
+    assert std.last_terms[1][HIP_CENTER] < 0.75
+    assert obs.last_terms[1][HIP_CENTER] == pytest.approx(1.0)
+    assert rs[HIP_CENTER] < ro[HIP_CENTER]
+    assert obs.reference_source == 'standard'  # no reference posture captured
+    assert np.allclose(obs.reference_lengths, segment_lengths(lowered))
+    q = lowered.copy()
+    q[subtree(SHOULDER_CENTER)] += (0.0, 0.0, 0.5 * (p[SHOULDER_CENTER, 2] - p[SPINE, 2]))
+    obs.update(q, ts)
+    assert obs.last_terms[1][SHOULDER_CENTER] < 0.9
+    with pytest.raises(ValueError):
+        ReliabilityEstimator(reference_mode='bogus')
 
 
 def test_invalid_parameters_refused():

@@ -37,6 +37,12 @@ RELIABILITY_SPECS = [
               (1.0, 90.0)),
     ParamSpec('reference_frames', 15, 'reference segment lengths: median of this many captures',
               (1, 300)),
+    ParamSpec('reference_mode', 'observed',
+              'reference lengths before a reference posture is captured: observed (running median '
+              'of tracked segments) or standard (the standard body at the user height, paper)',
+              choices=('observed', 'standard')),
+    ParamSpec('observed_window', 90, "reference_mode observed: frames in the running median",
+              (1, 10000)),
 ]
 RELIABILITY_NAMES = [s.name for s in RELIABILITY_SPECS]
 

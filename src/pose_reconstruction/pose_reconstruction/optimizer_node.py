@@ -44,6 +44,31 @@ SPECS = [
               'standard: the database body', choices=('user', 'standard')),
     ParamSpec('use_input_reliability', True,
               'use the reliability field of the input when it is filled (else estimate it)'),
+    ParamSpec('output_mode', 'segments',
+              'segments: blended segment directions, constant user lengths, chained from the root, '
+              'smoothed; blend: solution blended towards the observed joints (paper)',
+              choices=('segments', 'blend')),
+    ParamSpec('trust_mode', 'noise_ratio',
+              "trust in the sensor from noise_ratio (database distance / the sensor's measured "
+              'noise) or distance (trust_sensor_distance, earlier rule)',
+              choices=('noise_ratio', 'distance')),
+    ParamSpec('trust_sensor_ratio', 8.0,
+              'noise_ratio: database distance / sensor noise at which the trust starts to rise '
+              '(full at twice it)', (1e-3, 1e6)),
+    ParamSpec('noise_alpha', 0.05, 'noise_ratio: exponential-average rate of the noise estimate',
+              (1e-4, 1.0)),
+    ParamSpec('observation_weight', 0.3,
+              'segments: weight of the observed direction of a segment with two reliable ends',
+              (0.0, 1.0)),
+    ParamSpec('length_frames', 15,
+              'segments: reliable observations averaged per segment length, then frozen',
+              (1, 100000)),
+    ParamSpec('symmetric_lengths', True, 'segments: left and right limbs share their mean lengths'),
+    ParamSpec('smooth_min_cutoff', 2.0,
+              'segments: One Euro minimum cutoff (Hz) of segment and root smoothing, 0 = off',
+              (0.0, 1000.0)),
+    ParamSpec('smooth_beta', 10.0, 'segments: One Euro speed coefficient (s/m)', (0.0, 1e6)),
+    ParamSpec('smooth_d_cutoff', 1.0, 'segments: One Euro speed cutoff (Hz)', (1e-3, 1000.0)),
 ]
 CORE_NAMES = [s.name for s in SPECS if s.name not in ('database', 'method')]
 

@@ -10,11 +10,38 @@ Methods (Shum et al. 2013, Sec. VIII-B):
 * ``'B'`` — the natural-posture-space optimizer with every reliability 1;
 * ``'C'`` — the optimizer with the reliability of Eq. 8 (the paper's method).
 
-Graceful degradation (B/C): when even the nearest database posture is farther than
-``trust_sensor_distance`` (RMS per reliable joint, metres) from the query, the database cannot
-describe the posture, so joints at or above ``reliable_threshold`` are blended towards their
-observed positions, linearly from 0 % at that distance to 100 % (kept as observed) at twice it
-(``trust_sensor`` holds the last blend factor).
+Output stage of B/C, ``output_mode``:
+
+* ``'segments'`` (default) — every segment's direction is a blend of the database solution's and
+  the observed one; the weight of the observation is the larger of ``observation_weight`` (for a
+  segment whose two ends are reliable, at or above ``reliable_threshold``; 0 otherwise) and the
+  *trust in the sensor* times min(1, reliability of the less reliable end / ``reliable_threshold``);
+  the segments get constant user lengths (the mean observed length over the first
+  ``length_frames`` reliable observations of each segment, then frozen; with
+  ``symmetric_lengths`` the left and right limbs share the mean of their two lengths) and are
+  chained from the observed root; the segment
+  vectors and the root are smoothed by a One Euro filter (``smooth_min_cutoff`` Hz,
+  ``smooth_beta`` s/m, ``smooth_d_cutoff`` Hz; ``smooth_min_cutoff`` 0 = off). Bone lengths stay
+  constant, and errors of the observation do not leak into the segments the database fills in.
+* ``'blend'`` — the paper's output: the solution retargeted to the user's lengths (median observed
+  lengths over ``length_window`` frames), reliable joints blended towards their observed positions
+  when the trust is above 0 (this breaks constant bone lengths).
+
+Trust in the sensor (graceful degradation), ``trust_mode``:
+
+* ``'noise_ratio'`` (default) — the RMS distance (per reliable joint) of the nearest database
+  posture, smoothed over time, divided by the sensor's measured frame-to-frame noise (an
+  exponential average, rate ``noise_alpha``, of the median second difference of the reliable
+  joints): a database posture that differs from a precise sensor by many times its noise cannot
+  describe the posture. The trust rises linearly from 0 at ``trust_sensor_ratio`` to 1 at twice
+  it (1 until the noise is known, i.e. the first two frames). On the sensor-model streams the
+  ratio is 3-10, on the real UI-PRMD Kinect recordings (rehabilitation exercises the CMU database
+  lacks, another joint layout) 20-130.
+* ``'distance'`` — the earlier rule: linear from 0 at ``trust_sensor_distance`` (RMS m per
+  reliable joint, standard body) to 1 at twice it.
+
+``trust_sensor`` holds the last trust factor. The paper's behaviour: ``output_mode='blend'``,
+``trust_mode='distance'``, ``reference_mode='standard'``.
 """
 from __future__ import annotations
 
@@ -25,26 +52,36 @@ from typing import Dict, Optional
 import numpy as np
 
 from skeleton_core.conversions import SkeletonFrame
-from skeleton_core.model import NUM_JOINTS, NUM_SEGMENTS, SEGMENT_CHILDREN, SEGMENT_PARENTS
+from skeleton_core.filters import OneEuroFilter
+from skeleton_core.model import (MIRROR, NUM_JOINTS, NUM_SEGMENTS, ROOT, SEGMENT_CHILDREN,
+                                 SEGMENT_PARENTS)
 
 from .completion import PCACompletion
 from .optimizer import NaturalPostureOptimizer
-from .posture_space import (QueryPreparer, as_database_arrays, orientations_to_sensor,
-                            rest_directions, to_sensor_frame, user_bone_lengths)
+from .posture_space import (ANCESTORS, QueryPreparer, as_database_arrays, fast_denormalize,
+                            orientations_to_sensor, rest_directions, to_sensor_frame,
+                            user_bone_lengths)
 from .reliability import ReliabilityEstimator
 
 METHODS = ('A', 'B', 'C')
+OUTPUT_MODES = ('segments', 'blend')
+TRUST_MODES = ('noise_ratio', 'distance')
 _SEG_P = np.array(SEGMENT_PARENTS)
 _SEG_C = np.array(SEGMENT_CHILDREN)
+_MIRROR_SEG = np.array([SEGMENT_CHILDREN.index(MIRROR[c]) for c in SEGMENT_CHILDREN])
 RELIABILITY_PARAMS = ('d_min', 'f_b', 'theta_floor_deg', 'theta_roof_deg', 'f_total',
                       'sigma_frames', 'tracked_value', 'inferred_value', 'not_tracked_value',
-                      'reference_pose_tolerance_deg', 'reference_frames')
+                      'reference_pose_tolerance_deg', 'reference_frames', 'reference_mode',
+                      'observed_window')
 OPTIMIZER_PARAMS = ('k', 'pca_dims', 'steps', 'samples', 'w_control', 'w_style', 'w_kinematics',
                     'w_continuity', 'step_scale', 'solver', 'gn_iterations', 'seed', 'knn',
                     'kdtree_dims', 'kdtree_candidates')
 COMPLETION_PARAMS = ('pca_dims', 'reliability_threshold', 'substitution')
 OWN_PARAMS = ('use_reliability', 'use_input_reliability', 'reliable_threshold',
-              'trust_sensor_distance', 'output_scale', 'length_window')
+              'trust_sensor_distance', 'output_scale', 'length_window', 'output_mode',
+              'trust_mode', 'trust_sensor_ratio', 'noise_alpha', 'length_frames',
+              'smooth_min_cutoff', 'smooth_beta', 'smooth_d_cutoff', 'observation_weight',
+              'symmetric_lengths')
 
 
 def split_params(method: str, params: Dict) -> tuple:
@@ -72,12 +109,37 @@ class Reconstructor:
     def __init__(self, db, method: str = 'C', use_reliability: Optional[bool] = None,
                  use_input_reliability: bool = True, reliable_threshold: float = 0.5,
                  trust_sensor_distance: float = 0.12, output_scale: str = 'user',
-                 length_window: int = 90, **params):
+                 length_window: int = 90, output_mode: str = 'segments',
+                 trust_mode: str = 'noise_ratio', trust_sensor_ratio: float = 8.0,
+                 noise_alpha: float = 0.05, length_frames: int = 15,
+                 symmetric_lengths: bool = True, observation_weight: float = 0.3,
+                 smooth_min_cutoff: float = 2.0, smooth_beta: float = 10.0,
+                 smooth_d_cutoff: float = 1.0, **params):
         method = str(method).upper()
         if method not in METHODS:
             raise ValueError(f'method must be one of {METHODS}, got {method!r}')
         if output_scale not in ('user', 'standard'):
             raise ValueError("output_scale must be 'user' or 'standard'")
+        if output_mode not in OUTPUT_MODES:
+            raise ValueError(f'output_mode must be one of {OUTPUT_MODES}')
+        if trust_mode not in TRUST_MODES:
+            raise ValueError(f'trust_mode must be one of {TRUST_MODES}')
+        if not trust_sensor_ratio > 0 or not 0 < noise_alpha <= 1:
+            raise ValueError('trust_sensor_ratio must be > 0 and noise_alpha in (0, 1]')
+        if int(length_frames) < 1:
+            raise ValueError('length_frames must be >= 1')
+        if smooth_min_cutoff < 0 or smooth_beta < 0 or smooth_d_cutoff <= 0:
+            raise ValueError('smooth_min_cutoff, smooth_beta must be >= 0, smooth_d_cutoff > 0')
+        self.output_mode = output_mode
+        self.trust_mode = trust_mode
+        self.trust_sensor_ratio = float(trust_sensor_ratio)
+        self.noise_alpha = float(noise_alpha)
+        self.length_frames = int(length_frames)
+        self.symmetric_lengths = bool(symmetric_lengths)
+        if not 0.0 <= observation_weight <= 1.0:
+            raise ValueError('observation_weight must be in [0, 1]')
+        self.observation_weight = float(observation_weight)
+        self.smooth = (float(smooth_min_cutoff), float(smooth_beta), float(smooth_d_cutoff))
         self.method = method
         self.name = method
         self.db = as_database_arrays(db)
@@ -90,6 +152,7 @@ class Reconstructor:
         self.output_scale = output_scale
         self.preparer = QueryPreparer(self.db.body, self.reliable_threshold)
         self._rest_dirs = rest_directions(self.db.body)
+        self._standard_lengths = np.asarray(self.db.body.segment_lengths, float)
         if method == 'A':
             core.setdefault('reliability_threshold', self.reliable_threshold)
             self.core = PCACompletion(self.db, **core)
@@ -109,6 +172,20 @@ class Reconstructor:
         self._lengths = np.full((self.length_window, NUM_SEGMENTS), np.nan)
         self._lengths_n = 0
         self._user_lengths: Optional[np.ndarray] = None
+        # output_mode 'segments': frozen-after-length_frames mean lengths, noise, filters
+        self._seg_sum = np.zeros(NUM_SEGMENTS)
+        self._seg_count = np.zeros(NUM_SEGMENTS, int)
+        self._seg_fallback = np.full(NUM_SEGMENTS, np.nan)
+        self._hist = deque(maxlen=2)  # previous observed positions (noise estimate)
+        self._noise: Optional[float] = None
+        self._noise_n = 0
+        self._rms_avg: Optional[float] = None
+        self.noise = float('nan')
+        mc, b, dc = self.smooth
+        self._last_stamp: Optional[int] = None
+        self._filter_clock_ns = 0
+        self._seg_filter = OneEuroFilter(mc, b, dc, num_joints=NUM_SEGMENTS) if mc > 0 else None
+        self._root_filter = OneEuroFilter(mc, b, dc, num_joints=1) if mc > 0 else None
         if isinstance(self.core, NaturalPostureOptimizer):
             self.core.reset_rng()
 
@@ -143,6 +220,83 @@ class Reconstructor:
         self._lengths[self._lengths_n % self.length_window] = np.where(good, ln, np.nan)
         self._lengths_n += 1
 
+    def output_segment_lengths(self, positions: np.ndarray, R: np.ndarray) -> np.ndarray:
+        """(19,) constant user lengths of output_mode 'segments': the mean observed length of each
+        segment over its first ``length_frames`` reliable observations (both ends at or above
+        ``reliable_threshold``), frozen afterwards; a segment not yet observed reliably keeps the
+        reliability reference length it had when first needed."""
+        good = (R[_SEG_P] >= self.reliable_threshold) & (R[_SEG_C] >= self.reliable_threshold)
+        good &= self._seg_count < self.length_frames
+        if good.any():
+            ln = np.linalg.norm(positions[_SEG_C] - positions[_SEG_P], axis=1)
+            self._seg_sum[good] += ln[good]
+            self._seg_count[good] += 1
+        none = self._seg_count == 0
+        if none.any():
+            unset = none & ~np.isfinite(self._seg_fallback)
+            if unset.any():
+                self._seg_fallback[unset] = self.reliability.reference_lengths[unset]
+        L = np.where(none, self._seg_fallback, self._seg_sum / np.maximum(self._seg_count, 1))
+        if self.output_scale == 'standard':
+            L = self._standard_lengths
+        elif self.symmetric_lengths:
+            L = 0.5 * (L + L[_MIRROR_SEG])
+        return L
+
+    def _update_trust(self, positions: np.ndarray, w: np.ndarray, rms: float) -> float:
+        """The trust in the sensor (module docstring) for this frame, in [0, 1]."""
+        if self.trust_mode == 'distance':
+            d0 = self.trust_sensor_distance  # standard-body metres
+            return float(np.clip((rms - d0) / max(d0, 1e-6), 0.0, 1.0))
+        rel = w >= self.reliable_threshold
+        if len(self._hist) == 2 and rel.any():
+            a = positions - 2.0 * self._hist[-1] + self._hist[-2]
+            n = float(np.median(np.linalg.norm(a[rel], axis=1)))
+            self._noise_n += 1  # running mean first, then exponential
+            rate = max(self.noise_alpha, 1.0 / self._noise_n)
+            self._noise = n if self._noise is None else (1 - rate) * self._noise + rate * n
+        self._hist.append(positions)
+        rate = max(2.0 * self.noise_alpha, 1.0 / (self._noise_n + 1))
+        self._rms_avg = rms if self._rms_avg is None else (1 - rate) * self._rms_avg + rate * rms
+        if self._noise is None:
+            return 1.0
+        self.noise = self._noise
+        r0 = self.trust_sensor_ratio
+        return float(np.clip((self._rms_avg / max(self._noise, 1e-4) - r0) / r0, 0.0, 1.0))
+
+    def _segments_output(self, frame: SkeletonFrame, solution: np.ndarray, w: np.ndarray,
+                         trust: float) -> np.ndarray:
+        obs = np.asarray(frame.positions, float)
+        L = self.output_segment_lengths(obs, w)
+        vs = solution[_SEG_C] - solution[_SEG_P]
+        us = vs / np.maximum(np.linalg.norm(vs, axis=1, keepdims=True), 1e-9)
+        vo = obs[_SEG_C] - obs[_SEG_P]
+        no = np.linalg.norm(vo, axis=1, keepdims=True)
+        uo = np.where(no > 1e-9, vo / np.maximum(no, 1e-9), us)
+        wmin = np.minimum(w[_SEG_P], w[_SEG_C])
+        beta = np.maximum(self.observation_weight * (wmin >= self.reliable_threshold),
+                          trust * np.clip(wmin / max(self.reliable_threshold, 1e-6), 0.0, 1.0))
+        u = (1.0 - beta)[:, None] * us + beta[:, None] * uo
+        nu = np.linalg.norm(u, axis=1, keepdims=True)
+        u = np.where(nu > 1e-9, u / np.maximum(nu, 1e-9), us)
+        v = u * L[:, None]
+        root = obs[ROOT:ROOT + 1]
+        if self._seg_filter is not None:
+            # filter clock: the stamps' steps where plausible (1 ms - 0.5 s), else 30 Hz
+            stamp = int(frame.stamp_ns or 0)
+            dt = 1.0 / 30.0
+            if self._last_stamp is not None and 1e6 <= stamp - self._last_stamp <= 5e8:
+                dt = (stamp - self._last_stamp) * 1e-9
+            self._last_stamp = stamp
+            self._filter_clock_ns += int(round(dt * 1e9))
+            v = self._seg_filter.update(v, None, self._filter_clock_ns)
+            nv = np.linalg.norm(v, axis=1, keepdims=True)
+            v = np.where(nv > 1e-9, v / np.maximum(nv, 1e-9), u) * L[:, None]
+            root = self._root_filter.update(root, None, self._filter_clock_ns)
+        off = np.zeros((NUM_JOINTS, 3))
+        off[_SEG_C] = v
+        return root[0] + ANCESTORS @ off
+
     def process(self, frame: SkeletonFrame) -> SkeletonFrame:
         t0 = time.perf_counter()
         R = self._reliability_for(frame)
@@ -167,16 +321,21 @@ class Reconstructor:
             res = self.core.solve(prep.query, w, prev[::-1])
             self._prev.append((res.positions, yaw))
             t2 = time.perf_counter()
-            bones = user_bones if self.output_scale == 'user' else None
-            positions = to_sensor_frame(res.positions, prep.transform, bones, self._rest_dirs)
             wsum = float(np.sum(w))
-            rms = np.sqrt(res.distances[0] / max(wsum, 1e-6))
-            d0 = self.trust_sensor_distance  # standard-body metres
-            alpha = float(np.clip((rms - d0) / max(d0, 1e-6), 0.0, 1.0))
+            rms = float(np.sqrt(res.distances[0] / max(wsum, 1e-6)))
+            alpha = self._update_trust(np.asarray(frame.positions, float), w, rms)
             self.trust_sensor = alpha
-            if alpha > 0.0:
-                keep = w >= self.reliable_threshold
-                positions[keep] = (1.0 - alpha) * positions[keep] + alpha * frame.positions[keep]
+            if self.output_mode == 'segments':
+                positions = self._segments_output(
+                    frame, fast_denormalize(res.positions, prep.transform), w, alpha)
+            else:
+                bones = user_bones if self.output_scale == 'user' else None
+                positions = to_sensor_frame(res.positions, prep.transform, bones,
+                                            self._rest_dirs)
+                if alpha > 0.0:
+                    keep = w >= self.reliable_threshold
+                    positions[keep] = ((1.0 - alpha) * positions[keep]
+                                       + alpha * frame.positions[keep])
             ori = None
             if res.orientations is not None:
                 ori = orientations_to_sensor(res.orientations, yaw)

@@ -14,8 +14,13 @@ per-frame minimum of the three (Eq. 8), the most recent frame weighted most.
 
 Reference segment lengths (Sec. IV-B) are captured automatically whenever every joint is tracked
 and the posture is close to one of the two reference postures (T-pose, standing with arms down),
-and refreshed the same way later; until the first capture the standard body scaled to the user's
-estimated height is used.
+and refreshed the same way later. Until the first capture, ``reference_mode='observed'`` (default)
+uses the median length of every segment over the recent frames in which both its joints were
+tracked (``observed_window`` frames; a segment with fewer than 5 such frames falls back to the
+standard body), so a sensor whose skeleton layout differs from the database body (real Kinect: a
+spine about 14 cm longer than the CMU-derived standard body) does not make whole joints unreliable;
+``reference_mode='standard'`` is the paper's behaviour: the standard body scaled to the user's
+estimated height.
 """
 from __future__ import annotations
 
@@ -30,6 +35,7 @@ from skeleton_core.model import (ELBOW_LEFT, ELBOW_RIGHT, FOOT_LEFT, FOOT_RIGHT,
                                  SEGMENT_PARENTS, TRACKED, WRIST_LEFT, WRIST_RIGHT,
                                  estimate_height, segment_lengths, standard_body)
 
+REFERENCE_MODES = ('observed', 'standard')
 _SEG_P = np.array(SEGMENT_PARENTS)
 _SEG_C = np.array(SEGMENT_CHILDREN)
 
@@ -132,13 +138,16 @@ class ReliabilityEstimator:
     All parameters are the paper's defaults: ``d_min`` 3 cm, ``f_b`` 3 frames, ``theta_floor``
     90 deg, ``theta_roof`` 135 deg, tracked/inferred/not tracked 1/0/0, ``f_total`` 6 frames.
     ``sigma_frames`` is the width of the Gaussian weight of Eq. 8 (the paper does not give it).
+    ``reference_mode``: 'observed' or 'standard' lengths before a reference posture is captured
+    (module docstring).
     """
 
     def __init__(self, d_min: float = 0.03, f_b: int = 3, theta_floor_deg: float = 90.0,
                  theta_roof_deg: float = 135.0, f_total: int = 6, sigma_frames: float = 2.0,
                  tracked_value: float = 1.0, inferred_value: float = 0.0,
                  not_tracked_value: float = 0.0, reference_pose_tolerance_deg: float = 25.0,
-                 reference_frames: int = 15, height: Optional[float] = None,
+                 reference_frames: int = 15, reference_mode: str = 'observed',
+                 observed_window: int = 90, height: Optional[float] = None,
                  reference_lengths: Optional[np.ndarray] = None):
         if not 0 <= theta_floor_deg < theta_roof_deg <= 180:
             raise ValueError('need 0 <= theta_floor < theta_roof <= 180 degrees')
@@ -155,6 +164,12 @@ class ReliabilityEstimator:
         self.not_tracked_value = float(not_tracked_value)
         self.reference_pose_tolerance_deg = float(reference_pose_tolerance_deg)
         self.reference_frames = int(reference_frames)
+        if reference_mode not in REFERENCE_MODES:
+            raise ValueError(f'reference_mode must be one of {REFERENCE_MODES}')
+        self.reference_mode = reference_mode
+        self.observed_window = int(observed_window)
+        if self.observed_window < 1:
+            raise ValueError('observed_window must be >= 1')
         self._fixed_height = height
         self._fixed_reference = None if reference_lengths is None else np.asarray(reference_lengths, float)
         self.reset()
@@ -168,6 +183,9 @@ class ReliabilityEstimator:
         self._height = standard_body().height
         self._frames_since_height = 0
         self._reference: Optional[np.ndarray] = None
+        self._observed = np.full((self.observed_window, NUM_SEGMENTS), np.nan)
+        self._observed_n = 0
+        self._observed_median: Optional[np.ndarray] = None
         self.last_terms: Optional[Tuple[np.ndarray, np.ndarray, np.ndarray]] = None
         self.reliability = np.ones(NUM_JOINTS)
 
@@ -188,8 +206,30 @@ class ReliabilityEstimator:
             if self._captured:
                 self._reference = np.median(np.asarray(self._captured), axis=0)
             else:
-                self._reference = standard_body(self.height).segment_lengths
+                std = standard_body(self.height).segment_lengths
+                med = self._observed_median
+                self._reference = std if med is None else np.where(np.isfinite(med), med, std)
         return self._reference
+
+    def _observe_lengths(self, positions: np.ndarray, tracking_state: np.ndarray) -> None:
+        """Running median of the tracked segments' lengths (reference_mode 'observed')."""
+        if self.reference_mode != 'observed':
+            return
+        good = (tracking_state[_SEG_P] == TRACKED) & (tracking_state[_SEG_C] == TRACKED)
+        self._observed[self._observed_n % self.observed_window] = np.where(
+            good, segment_lengths(positions), np.nan)
+        self._observed_n += 1
+        n = self._observed_n
+        if n <= 10 or n % 10 == 0:  # often at first, then every 10 frames
+            obs = self._observed[:min(n, self.observed_window)]
+            count = np.sum(np.isfinite(obs), axis=0)
+            med = np.full(NUM_SEGMENTS, np.nan)
+            ok = count >= min(5, n)
+            if ok.any():
+                med[ok] = np.nanmedian(obs[:, ok], axis=0)
+            self._observed_median = med
+            if not self._captured:
+                self._reference = None
 
     def _observe_reference(self, positions: np.ndarray, tracking_state: np.ndarray) -> None:
         if np.any(tracking_state != TRACKED):
@@ -214,6 +254,7 @@ class ReliabilityEstimator:
         p = np.asarray(positions, float)
         ts = np.asarray(tracking_state)
         self._observe_reference(p, ts)
+        self._observe_lengths(p, ts)
         self._positions.append(p)
         rb, _ = behaviour_term(np.asarray(self._positions), self.d_min, self.f_b,
                                self.theta_floor, self.theta_roof)
