@@ -4,7 +4,7 @@ import mujoco
 import numpy as np
 import pytest
 
-from skeleton_core.model import NUM_SEGMENTS, SEGMENT_CHILDREN, JOINT_NAMES, standard_body
+from skeleton_core.model import NUM_SEGMENTS, SEGMENT_CHILDREN, SEGMENTS, JOINT_NAMES, standard_body
 
 from physics_sim.mjcf_body import CharacterParams, standalone_character_xml, joint_anchor
 from physics_sim.mjcf_world import CharacterEntry, ObjectSpec, WorldParams, world_xml
@@ -84,3 +84,31 @@ def test_bad_objects_refused(kw):
     args.update(kw)
     with pytest.raises(ValueError):
         ObjectSpec(**args)
+
+
+def test_pd_actuators_sit_on_the_joint_points_and_segment_axes():
+    body = standard_body()
+    m, d = _model(standalone_character_xml(body, CharacterParams(pd_actuators=True, pd_kp=1234.0,
+                                                                 pd_kv=56.0,
+                                                                 pd_force_limit=789.0)))
+    assert m.nu == 20 * 3 + NUM_SEGMENTS
+    rest = body.rest_positions()
+    for j in range(20):
+        s = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, f'u0_site_{JOINT_NAMES[j]}')
+        np.testing.assert_allclose(d.site_xpos[s], rest[j], atol=1e-6)
+        for a, axis in enumerate('xyz'):
+            u = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_ACTUATOR, f'u0_pd_{JOINT_NAMES[j]}_{axis}')
+            # length = the joint point's coordinate along the world axis; gains Ke, Kd; bound
+            assert d.actuator_length[u] == pytest.approx(rest[j, a], abs=1e-6)
+            assert m.actuator_dyntype[u] == mujoco.mjtDyn.mjDYN_INTEGRATOR
+            np.testing.assert_allclose(m.actuator_biasprm[u, :3], [0.0, -1234.0, -56.0])
+            np.testing.assert_allclose(m.actuator_forcerange[u], [-789.0, 789.0])
+    for k, c in enumerate(SEGMENT_CHILDREN):
+        s = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, f'u0_axis_{JOINT_NAMES[c]}')
+        parent = rest[SEGMENTS[k][0]]
+        axis = rest[c] - parent
+        np.testing.assert_allclose(d.site_xmat[s].reshape(3, 3)[:, 2], axis / np.linalg.norm(axis),
+                                   atol=1e-6)
+    # without the option: no actuators, no sites
+    m0, _ = _model(standalone_character_xml(body))
+    assert m0.nu == 0 and m0.nsite == 1  # the world origin site only

@@ -2,16 +2,19 @@
 
     ros2 run physics_sim bench_physics [--quick] [--long] [--out out/bench_physics.json]
 
-Prints, for both controllers (``explicit_pd`` = the papers' external PD forces,
+Prints, for every controller (``actuator_pd`` = Eq. 1-2 as MuJoCo actuators, the default, with
+explicit Euler integration as the paper and with implicitfast (``actuator_pd_implicit``);
+``explicit_pd`` = the papers' external PD forces computed in Python at every step;
 ``mocap_constraints`` = soft connect constraints to mocap targets):
 
-* real-time factor with 1 and 6 characters at the 2 ms step, by wall clock (depends on the machine's
+* real-time factor with 1, 2 and 6 characters at the 2 ms step, by wall clock (depends on the machine's
   load: quote it) and by this process's CPU time (what an idle core would give),
 * steady-state tracking error on a static T-pose and on the built-in motion clips
   (``skeleton_core.motions.builtin_clips``, 30 fps), segment length preservation, pinned foot drift,
 * output jitter against the raw input with Kinect-like noise (mean |second difference|),
-* the explicit-PD stability limit (largest stable Ke at 2 ms, damping ratio kept) and the
-  constraint option's stiffest setting,
+* the stability limits (largest stable Ke at 2 ms with the damping ratio kept, largest stable Kd)
+  of explicit_pd and of actuator_pd with either integrator, and the constraint option's stiffest
+  setting,
 * a push (300 N for 0.1 s on the chest): peak joint displacement and recovery time,
 * a long noisy run with outliers and pushes (60 s; ``--long``: 10 min) counting NaN resets.
 """
@@ -33,7 +36,12 @@ from .controller import Gains
 from .simulation import SimConfig, Simulation
 
 SENSOR_SHIFT = np.array([2.5, 0.0, -0.8])  # world -> sensor frame: person 2.5 m ahead, sensor 0.8 m up
-CONTROLLERS = ('explicit_pd', 'mocap_constraints')
+# (name, controller, integrator): every controller, actuator_pd (the default: Euler, explicit as the
+# paper) also with the implicit integration of its damping
+VARIANTS = (('actuator_pd', 'actuator_pd', 'euler'),
+            ('actuator_pd_implicit', 'actuator_pd', 'implicitfast'),
+            ('explicit_pd', 'explicit_pd', 'implicitfast'),
+            ('mocap_constraints', 'mocap_constraints', 'implicitfast'))
 
 
 def clips(quick: bool):
@@ -58,8 +66,11 @@ def synthetic(n: int) -> np.ndarray:
     return seq
 
 
-def config(controller: str, **kw) -> SimConfig:
-    return SimConfig(controller=controller, body_height=1.75, **kw)
+def config(variant: str, **kw) -> SimConfig:
+    """The SimConfig of a VARIANTS name (or a plain controller name)."""
+    ctrl, integ = next(((c, i) for n, c, i in VARIANTS if n == variant), (variant, 'implicitfast'))
+    kw.setdefault('integrator', integ)
+    return SimConfig(controller=ctrl, body_height=1.75, **kw)
 
 
 def run_clip(controller: str, seq: np.ndarray, ori=None, noise: float = 0.0, seed: int = 0,
@@ -91,7 +102,7 @@ def jitter(seq: np.ndarray) -> float:
 def tracking(quick: bool) -> Dict:
     res = {}
     body = standard_body()
-    for ctrl in CONTROLLERS:
+    for ctrl, _, _ in VARIANTS:
         r = {}
         static = run_clip(ctrl, np.repeat((body.rest_positions() + SENSOR_SHIFT)[None], 45, 0))
         e = np.linalg.norm(static['world'] - static['target'], axis=-1)[30:]
@@ -142,15 +153,16 @@ def stable_run(cfg: SimConfig, seconds: float = 1.5) -> bool:
     return bool(e.mean() < 0.1)
 
 
-def stability(quick: bool) -> Dict:
+def gain_sweeps(variant: str, quick: bool) -> Dict:
+    """Largest stable Ke (damping ratio kept) and Kd (Ke default) of a PD variant at 2 ms."""
     g0 = Gains()
-    kes = [4e3, 1e4, 2e4, 4e4, 7e4, 1e5, 3e5] if not quick else [4e3, 2e4, 1e5]
+    kes = [4e3, 1e4, 2e4, 4e4, 7e4, 1e5, 3e5, 1e6] if not quick else [4e3, 2e4, 1e5, 1e6]
     rows = []
     limit = None
     for ke in kes:
         kd = g0.kd * np.sqrt(ke / g0.ke)
         g = replace(g0, ke=ke, kd=kd, max_force=1e9)
-        ok = stable_run(config('explicit_pd', gains=g))
+        ok = stable_run(config(variant, gains=g))
         rows.append(dict(ke=ke, kd=round(kd, 1), stable=ok))
         if ok:
             limit = ke
@@ -158,26 +170,31 @@ def stability(quick: bool) -> Dict:
             break
     kd_rows = []
     kd_limit = None
-    for kd in ([100, 200, 300, 400, 500, 600, 1200] if not quick else [100, 300, 600]):
-        ok = stable_run(config('explicit_pd', gains=replace(g0, kd=float(kd), max_force=1e9)))
+    for kd in ([100, 200, 300, 400, 600, 1200, 5000] if not quick else [100, 300, 600, 5000]):
+        ok = stable_run(config(variant, gains=replace(g0, kd=float(kd), max_force=1e9)))
         kd_rows.append(dict(ke=g0.ke, kd=kd, stable=ok))
         if ok:
             kd_limit = kd
         else:
             break
+    return dict(ke_sweep=rows, max_stable_ke=limit, kd_sweep=kd_rows, max_stable_kd=kd_limit)
+
+
+def stability(quick: bool) -> Dict:
+    out = {v: gain_sweeps(v, quick) for v in ('explicit_pd', 'actuator_pd', 'actuator_pd_implicit')}
     mc = []
     for tc in ([0.1, 0.03, 0.01, 0.004] if not quick else [0.03, 0.004]):
         ok = stable_run(config('mocap_constraints', track_timeconst=tc))
         mc.append(dict(timeconst=tc, spring_per_kg=round(1.0 / tc ** 2, 1), stable=ok))
-    return dict(explicit_ke_sweep=rows, explicit_max_stable_ke=limit, explicit_kd_sweep=kd_rows,
-                explicit_max_stable_kd=kd_limit, mocap_timeconst_sweep=mc)
+    out['mocap_timeconst_sweep'] = mc
+    return out
 
 
 def push_test() -> Dict:
     body = standard_body()
     tp = body.rest_positions() + SENSOR_SHIFT
     out = {}
-    for ctrl in CONTROLLERS:
+    for ctrl, _, _ in VARIANTS:
         sim = Simulation(config(ctrl))
         for _ in range(30):
             st = sim.step({0: tp})[0]
@@ -204,8 +221,8 @@ def rtf(quick: bool) -> Dict:
     seq = clips(True)[0][1]
     n_frames = 60 if quick else 90
     out = {}
-    for ctrl in CONTROLLERS:
-        for n in (1, 6):
+    for ctrl, _, _ in VARIANTS:
+        for n in (1, 2, 6):
             sim = Simulation(config(ctrl, max_characters=n))
             offs = [np.array([0.0, 1.6 * (k - (n - 1) / 2), 0.0]) for k in range(n)]
             sim.step({k: seq[0] + offs[k] for k in range(n)})
@@ -221,7 +238,7 @@ def rtf(quick: bool) -> Dict:
 def long_run(seconds: float) -> Dict:
     cs = clips(False)
     rng = np.random.default_rng(7)
-    sim = Simulation(config('explicit_pd'))
+    sim = Simulation(config('actuator_pd'))   # the default
     n = int(seconds * 30)
     nan_out = 0
     t0 = time.perf_counter()
@@ -267,10 +284,12 @@ def main(argv=None) -> int:
               f'({r["jitter_reduction_pct"]:.0f} % lower)', flush=True)
     res['stability'] = stability(args.quick)
     s = res['stability']
-    print(f'  stability explicit_pd: Ke sweep {[(r["ke"], r["stable"]) for r in s["explicit_ke_sweep"]]}'
-          f' -> max stable Ke {s["explicit_max_stable_ke"]}', flush=True)
-    print(f'  stability explicit_pd: Kd sweep {[(r["kd"], r["stable"]) for r in s["explicit_kd_sweep"]]}'
-          f' -> max stable Kd {s["explicit_max_stable_kd"]}', flush=True)
+    for v in ('explicit_pd', 'actuator_pd', 'actuator_pd_implicit'):
+        r = s[v]
+        print(f'  stability {v}: Ke sweep {[(x["ke"], x["stable"]) for x in r["ke_sweep"]]} -> max '
+              f'stable Ke {r["max_stable_ke"]}; Kd sweep '
+              f'{[(x["kd"], x["stable"]) for x in r["kd_sweep"]]} -> max stable Kd '
+              f'{r["max_stable_kd"]}', flush=True)
     print(f'  stability mocap_constraints: {[(r["timeconst"], r["stable"]) for r in s["mocap_timeconst_sweep"]]}',
           flush=True)
     res['push'] = push_test()

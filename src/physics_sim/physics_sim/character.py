@@ -11,12 +11,11 @@ from typing import Dict
 
 import mujoco
 import numpy as np
-from skeleton_core.geometry import quat_conjugate, quat_multiply
 from skeleton_core.model import (FOOT_LEFT, FOOT_RIGHT, JOINT_NAMES, NUM_JOINTS, SEGMENT_CHILDREN,
                                  SEGMENT_PARENTS, SEGMENTS, Body)
 
 from .controller import ball_qpos, segment_quats_from_positions
-from .mjcf_body import PIN_JOINTS, ROOT_SEGMENT, joint_anchor
+from .mjcf_body import AXES, PIN_JOINTS, ROOT_SEGMENT, joint_anchor
 
 
 MAX_TARGET_SPEED = 10.0  # m/s: bound on the target velocity p'_target of Eq. 1
@@ -26,14 +25,6 @@ def _nlerp(q0: np.ndarray, q1: np.ndarray, s: float) -> np.ndarray:
     sign = np.where(np.sum(q0 * q1, axis=-1, keepdims=True) < 0, -1.0, 1.0)
     q = (1.0 - s) * q0 + s * sign * q1
     return q / np.linalg.norm(q, axis=-1, keepdims=True)
-
-
-def _rotvec(q: np.ndarray) -> np.ndarray:
-    """Rotation vectors (N, 3) of unit quaternions (N, 4) x, y, z, w."""
-    q = q * np.where(q[..., 3:4] < 0, -1.0, 1.0)
-    s = np.linalg.norm(q[..., :3], axis=-1, keepdims=True)
-    ang = 2.0 * np.arctan2(s, q[..., 3:4])
-    return np.where(s > 1e-12, q[..., :3] / np.maximum(s, 1e-12) * ang, 2.0 * q[..., :3])
 
 
 @dataclass
@@ -88,6 +79,12 @@ class Character:
         mids = [bid(f'{p}target_{JOINT_NAMES[j]}') for j in range(NUM_JOINTS)]
         self.mocap_ids = (np.array([model.body_mocapid[m] for m in mids]) if min(mids) >= 0
                           else None)
+        aid = lambda n: mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_ACTUATOR, n)  # noqa: E731
+        acts = np.array([[aid(f'{p}pd_{JOINT_NAMES[j]}_{a}') for a in AXES]
+                         for j in range(NUM_JOINTS)])
+        self.actuator_ids = acts if acts.min() >= 0 else None   # (20, 3): actuator_pd only
+        tw = np.array([aid(f'{p}twist_{JOINT_NAMES[c]}') for c in SEGMENT_CHILDREN])
+        self.twist_actuator_ids = tw if tw.min() >= 0 else None  # (19,): actuator_pd only
         eid = lambda n: mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_EQUALITY, n)  # noqa: E731
         self.pin_eq = {j: eid(f'{p}pin_{JOINT_NAMES[j]}') for j in PIN_JOINTS}
         # MuJoCo derives body2's anchor from the compile-time pose; the tracking connects must
@@ -133,7 +130,7 @@ class Character:
         the target velocity (Eq. 1 p'_target) is the frame difference, exponentially smoothed
         with factor ``smoothing`` (0 = raw difference)."""
         now = target.sim_time
-        p_now, q_now, _, _ = self.target_at(now)
+        p_now, q_now = self.pose_at(now)
         dt_stamp = (target.stamp_ns - self.cur.stamp_ns) * 1e-9
         if self.cur.stamp_ns and target.stamp_ns and 1.0 / 240 <= dt_stamp <= 0.25:
             self.period = dt_stamp
@@ -146,26 +143,21 @@ class Character:
         raw *= np.minimum(1.0, MAX_TARGET_SPEED / np.maximum(n, 1e-12))
         self.velocity = smoothing * self.velocity + (1.0 - smoothing) * raw
 
-    def target_at(self, t: float):
-        """(positions, seg quats, velocities, segment angular velocities) of the target at sim time
-        ``t``: linear interpolation from the previous to the newest frame over one frame period,
-        then held (velocity 0)."""
+    def pose_at(self, t: float):
+        """(positions, seg quats) of the target at sim time ``t``: linear from the previous to the
+        newest frame over one frame period, then held."""
         s = (t - self.cur.sim_time) / self.period
         if s >= 1.0 or self.prev is self.cur:
-            z = np.zeros((NUM_JOINTS, 3))
-            return self.cur.positions, self.cur.seg_quats, z, np.zeros((len(SEGMENTS), 3))
+            return self.cur.positions, self.cur.seg_quats
         s = max(s, 0.0)
-        p = (1.0 - s) * self.prev.positions + s * self.cur.positions
-        v = (self.cur.positions - self.prev.positions) / self.period
-        q = _nlerp(self.prev.seg_quats, self.cur.seg_quats, s)
-        w = _rotvec(quat_multiply(self.cur.seg_quats, quat_conjugate(self.prev.seg_quats))) / self.period
-        return p, q, v, w
+        return ((1.0 - s) * self.prev.positions + s * self.cur.positions,
+                _nlerp(self.prev.seg_quats, self.cur.seg_quats, s))
 
     # ------------------------------------------------------------------ state
     def joint_points(self, data) -> np.ndarray:
         """World positions (20, 3) of the joint points of the simulated bodies."""
         xm = data.xmat[self.joint_body].reshape(-1, 3, 3)
-        return data.xpos[self.joint_body] + np.einsum('nij,nj->ni', xm, self.joint_local)
+        return data.xpos[self.joint_body] + (xm @ self.joint_local[:, :, None])[:, :, 0]
 
     def segment_quats(self, data) -> np.ndarray:
         """World orientations (19, 4) x, y, z, w of the segment bodies (rest-relative)."""

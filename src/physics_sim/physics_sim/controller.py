@@ -15,6 +15,7 @@ joint quaternions of the character.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Optional
 
@@ -115,7 +116,7 @@ def quat_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Shortest-arc rotation (x, y, z, w) taking unit vector ``a`` to unit vector ``b`` (rows)."""
     a = np.asarray(a, float)
     b = np.asarray(b, float)
-    c = _rows_cross(a, b) if a.ndim == 2 and b.ndim == 2 else np.cross(a, b)
+    c = np.cross(a, b)
     d = np.sum(a * b, axis=-1, keepdims=True)
     q = np.concatenate([c, 1.0 + d], axis=-1)
     # opposite vectors: rotate pi about any axis orthogonal to a
@@ -130,61 +131,94 @@ def quat_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 def pelvis_quat(positions: np.ndarray) -> np.ndarray:
     """Pelvis frame (x forward, y left, z up the spine) of a posture, as a rest-relative quaternion."""
-    p = np.asarray(positions, float)
-    y = _unit(p[HIP_LEFT] - p[HIP_RIGHT], np.array([0.0, 1.0, 0.0]))
-    z = p[SPINE] - p[HIP_CENTER]
-    z = _unit(z - np.dot(z, y) * y, np.array([0.0, 0.0, 1.0]))
-    x = np.cross(y, z)
-    return quat_from_matrix(np.stack([x, y, z], axis=1))
+    return np.array(_pelvis_quat(np.asarray(positions, float).tolist()))
 
 
-def _levels():
-    """Segments grouped by depth in the body tree (parents before children)."""
-    depth = {}
-    for k in body_order():
-        pb = segment_parent_body(k)
-        depth[k] = 0 if pb < 0 else depth[pb] + 1
-    return [np.array([k for k in depth if depth[k] == lv]) for lv in range(max(depth.values()) + 1)]
+def _pelvis_quat(p) -> tuple:
+    """:func:`pelvis_quat` on nested lists of floats (x, y, z, w tuple)."""
+    hl, hr, sp, hc = p[HIP_LEFT], p[HIP_RIGHT], p[SPINE], p[HIP_CENTER]
+    y = _unit3((hl[0] - hr[0], hl[1] - hr[1], hl[2] - hr[2]), (0.0, 1.0, 0.0))
+    z = (sp[0] - hc[0], sp[1] - hc[1], sp[2] - hc[2])
+    dz = z[0] * y[0] + z[1] * y[1] + z[2] * y[2]
+    z = _unit3((z[0] - dz * y[0], z[1] - dz * y[1], z[2] - dz * y[2]), (0.0, 0.0, 1.0))
+    x = (y[1] * z[2] - y[2] * z[1], y[2] * z[0] - y[0] * z[2], y[0] * z[1] - y[1] * z[0])
+    # rotation matrix with columns x, y, z -> quaternion (the larger-diagonal branch is stable)
+    r00, r11, r22 = x[0], y[1], z[2]
+    tr = r00 + r11 + r22
+    if tr > 0.0:
+        s = 2.0 * math.sqrt(tr + 1.0)
+        q = ((y[2] - z[1]) / s, (z[0] - x[2]) / s, (x[1] - y[0]) / s, 0.25 * s)
+    elif r00 >= r11 and r00 >= r22:
+        s = 2.0 * math.sqrt(max(1.0 + r00 - r11 - r22, 1e-300))
+        q = (0.25 * s, (y[0] + x[1]) / s, (z[0] + x[2]) / s, (y[2] - z[1]) / s)
+    elif r11 >= r22:
+        s = 2.0 * math.sqrt(max(1.0 + r11 - r00 - r22, 1e-300))
+        q = ((y[0] + x[1]) / s, 0.25 * s, (z[1] + y[2]) / s, (z[0] - x[2]) / s)
+    else:
+        s = 2.0 * math.sqrt(max(1.0 + r22 - r00 - r11, 1e-300))
+        q = ((z[0] + x[2]) / s, (z[1] + y[2]) / s, 0.25 * s, (x[1] - y[0]) / s)
+    n = math.sqrt(sum(c * c for c in q)) * (-1.0 if q[3] < 0 else 1.0)
+    return (q[0] / n, q[1] / n, q[2] / n, q[3] / n)
 
 
-_LEVELS = None
+def _qmul(a, b):
+    """Product of two quaternions given as (x, y, z, w) tuples of floats."""
+    ax, ay, az, aw = a
+    bx, by, bz, bw = b
+    return (aw * bx + ax * bw + ay * bz - az * by, aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw, aw * bw - ax * bx - ay * by - az * bz)
 
 
-def _rotate_rows(q, v):
-    u, w = q[:, :3], q[:, 3:4]
-    t = 2.0 * _rows_cross(u, v)
-    return v + w * t + _rows_cross(u, t)
+def _qrot(q, v):
+    """Vector ``v`` (3 floats) rotated by the unit quaternion ``q`` (x, y, z, w)."""
+    x, y, z, w = q
+    vx, vy, vz = v
+    tx, ty, tz = 2.0 * (y * vz - z * vy), 2.0 * (z * vx - x * vz), 2.0 * (x * vy - y * vx)
+    return (vx + w * tx + y * tz - z * ty, vy + w * ty + z * tx - x * tz,
+            vz + w * tz + x * ty - y * tx)
 
 
-def _rows_cross(a, b):
-    return np.stack([a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1], a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2],
-                     a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]], axis=1)
+def _arc(a, b):
+    """Shortest-arc quaternion turning unit vector ``a`` onto unit vector ``b`` (floats)."""
+    d = a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+    if 1.0 + d < 1e-9:  # opposite: half a turn about any axis orthogonal to a
+        return tuple(float(c) for c in quat_between(np.array(a), np.array(b)))
+    q = (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0], 1.0 + d)
+    n = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+    return (q[0] / n, q[1] / n, q[2] / n, q[3] / n)
+
+
+def _unit3(v, fallback):
+    n = math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+    return (v[0] / n, v[1] / n, v[2] / n) if n > 1e-9 else fallback
+
+
+_TREE = None   # (segment, parent body, parent joint, child joint) in body order, root first
 
 
 def segment_quats_from_positions(positions: np.ndarray, rest_offsets: np.ndarray) -> np.ndarray:
-    """World orientation (x, y, z, w) of every segment (19, SEGMENTS order) from joint positions:
-    the root segment follows the pelvis frame; every other segment is its parent body's
+    """World orientation (x, y, z, w) of every segment (19, SEGMENTS order) from joint positions
+    (20, 3): the root segment follows the pelvis frame; every other segment is its parent body's
     orientation followed by the shortest arc turning the parent-carried rest direction onto the
-    segment's direction (no twist added). Batched by tree depth."""
-    global _LEVELS
-    if _LEVELS is None:
-        _LEVELS = _levels()
-    p = np.asarray(positions, float)
-    rest = np.asarray(rest_offsets, float)
-    q = np.zeros((len(SEGMENTS), 4))
-    q[_LEVELS[0]] = pelvis_quat(p)
-    child = np.array(SEGMENT_CHILDREN)
-    parent = np.array(SEGMENT_PARENTS)
-    pbody = np.array([segment_parent_body(k) for k in range(len(SEGMENTS))])
-    for ks in _LEVELS[1:]:
-        base = q[pbody[ks]]
-        rd = _rotate_rows(base, rest[child[ks]])
-        rd /= np.maximum(np.linalg.norm(rd, axis=1, keepdims=True), 1e-12)
-        td = p[child[ks]] - p[parent[ks]]
-        n = np.linalg.norm(td, axis=1, keepdims=True)
-        td = np.where(n > 1e-9, td / np.maximum(n, 1e-12), rd)
-        q[ks] = quat_multiply(quat_between(rd, td), base)
-    return q
+    segment's direction (no twist added). Scalar code: one posture per target frame, where numpy's
+    per-call cost on 3-vectors would dominate."""
+    global _TREE
+    if _TREE is None:
+        _TREE = [(k, segment_parent_body(k), SEGMENT_PARENTS[k], SEGMENT_CHILDREN[k])
+                 for k in body_order()]
+    p = np.asarray(positions, float).tolist()
+    rest = np.asarray(rest_offsets, float).tolist()
+    q = [None] * len(SEGMENTS)
+    for k, pb, pj, cj in _TREE:
+        if pb < 0:
+            q[k] = _pelvis_quat(p)
+            continue
+        base = q[pb]
+        rd = _unit3(_qrot(base, rest[cj]), (1.0, 0.0, 0.0))
+        a, b = p[cj], p[pj]
+        td = _unit3((a[0] - b[0], a[1] - b[1], a[2] - b[2]), rd)
+        q[k] = _qmul(_arc(rd, td), base)
+    return np.array(q)
 
 
 def joint_quats_to_segment(q_by_joint: np.ndarray) -> np.ndarray:

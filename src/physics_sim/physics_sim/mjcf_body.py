@@ -70,6 +70,12 @@ class CharacterParams:
     track_solref: Tuple[float, float] = (0.03, 1.0)   # timeconst (s), damping ratio
     track_solimp: Tuple[float, float, float] = (0.9, 0.95, 0.001)
     pin_solref: Tuple[float, float] = (0.01, 1.0)
+    # actuator_pd controller: a site at every joint point and three actuators per joint (world
+    # x, y, z) realising Eq. 1 in MuJoCo (kp = Ke, kv = Kd, force bounded per axis)
+    pd_actuators: bool = False
+    pd_kp: float = 4000.0
+    pd_kv: float = 100.0
+    pd_force_limit: float = 800.0
 
 
 def segment_local_end(body: Body, k: int) -> np.ndarray:
@@ -118,6 +124,15 @@ def character_bodies_xml(prefix: str, body: Body, root_pos, params: CharacterPar
                 f'contype="{params.contype}" conaffinity="{params.conaffinity}" '
                 f'friction="{params.friction:.6g} 0.005 0.0001" rgba="{rgba}"/>')
         lines = [head, joint, geom]
+        if params.pd_actuators:
+            axis = end / max(float(np.linalg.norm(end)), 1e-9)
+            lines.append(f'{ind}  <site name="{prefix}axis_{name}" pos="0 0 0" '
+                         f'zaxis="{fmt(axis)}" size="0.01"/>')
+            for j in range(NUM_JOINTS):
+                seg, local = joint_anchor(body, j)
+                if seg == k:
+                    lines.append(f'{ind}  <site name="{prefix}site_{JOINT_NAMES[j]}" '
+                                 f'pos="{fmt(local)}" size="0.01"/>')
         for c in children[k]:
             lines += emit(c, depth + 1)
         lines.append(f'{ind}</body>')
@@ -150,6 +165,44 @@ def character_equality_xml(prefix: str, body: Body, params: CharacterParams) -> 
     return '\n'.join(lines)
 
 
+AXES = ('x', 'y', 'z')
+ORIGIN_SITE = 'origin'   # world site the PD actuators measure their length from
+
+
+def character_actuator_xml(prefix: str, params: CharacterParams) -> str:
+    """Eq. 1 and 2 as MuJoCo actuators (``actuator_pd``): for joint j and world axis a, actuator
+    ``<p>pd_<Joint>_<a>`` pulls the joint's site along a with ``kp (act - x_a) - kv x'_a``, x_a the
+    site's coordinate relative to the world origin site. ``act`` is an integrator state: the
+    simulation sets it to the target ``p_t + (Kd/Ke) p'_t`` and its rate ``ctrl`` to the target's
+    slope, so MuJoCo interpolates the target at every step itself; that is exactly ``Ke (p_t - p)
+    + Kd (p'_t - p')`` per axis, bounded by ``forcerange``. Per segment, ``<p>twist_<Joint>``
+    applies Eq. 2's torque about the segment axis with its damping evaluated at every step.
+    Empty unless ``params.pd_actuators``."""
+    if not params.pd_actuators:
+        return ''
+    lim = float(params.pd_force_limit)
+    kp, kv = float(params.pd_kp), float(params.pd_kv)
+    lines = []
+    for k in range(len(SEGMENTS)):
+        # Eq. 2 about the segment's own axis (the site's z): torque = ctrl - Kd_i * twist rate,
+        # ctrl = Ke_i * twist error + Kd_i * target twist rate (set by the simulation); the gains
+        # and the torque bound are set at run time (per segment inertia, see Simulation)
+        name = JOINT_NAMES[SEGMENT_CHILDREN[k]]
+        lines.append(f'    <general name="{prefix}twist_{name}" site="{prefix}axis_{name}" '
+                     f'gear="0 0 0 0 0 1" gainprm="1" biastype="affine" biasprm="0 0 0" '
+                     f'forcelimited="true" forcerange="-1 1"/>')
+    for j in range(NUM_JOINTS):
+        for a, axis in enumerate(AXES):
+            gear = ['0'] * 6
+            gear[a] = '1'
+            lines.append(f'    <general name="{prefix}pd_{JOINT_NAMES[j]}_{axis}" '
+                         f'site="{prefix}site_{JOINT_NAMES[j]}" refsite="{ORIGIN_SITE}" '
+                         f'gear="{" ".join(gear)}" dyntype="integrator" gainprm="{kp:.6g}" '
+                         f'biastype="affine" biasprm="0 {-kp:.6g} {-kv:.6g}" '
+                         f'forcelimited="true" forcerange="{-lim:.6g} {lim:.6g}"/>')
+    return '\n'.join(lines)
+
+
 def character_xml_parts(prefix: str, body: Body, root_pos, params: Optional[CharacterParams] = None,
                         target_positions: Optional[np.ndarray] = None):
     """(bodies, mocap bodies, equalities) MJCF fragments for one character."""
@@ -169,10 +222,13 @@ def standalone_character_xml(body: Body, params: Optional[CharacterParams] = Non
     b, m, e = character_xml_parts(prefix, body, (0.0, 0.0, body.root_height), params)
     return (f'<mujoco model="character">\n  <option timestep="0.002" integrator="implicitfast"/>\n'
             f'  <worldbody>\n    <geom name="floor" type="plane" size="0 0 0.05"/>\n{b}\n{m}\n'
-            f'  </worldbody>\n  <equality>\n{e}\n  </equality>\n</mujoco>')
+            f'    <site name="{ORIGIN_SITE}"/>\n'
+            f'  </worldbody>\n  <equality>\n{e}\n  </equality>\n'
+            f'  <actuator>\n{character_actuator_xml(prefix, params)}\n  </actuator>\n</mujoco>')
 
 
 __all__ = ['CharacterParams', 'ROOT_SEGMENT', 'PIN_JOINTS', 'body_order', 'segment_parent_body',
            'joint_anchor', 'segment_local_end', 'character_bodies_xml', 'character_mocap_xml',
-           'character_equality_xml', 'character_xml_parts', 'standalone_character_xml', 'fmt',
+           'character_equality_xml', 'character_xml_parts', 'character_actuator_xml',
+           'ORIGIN_SITE', 'AXES', 'standalone_character_xml', 'fmt',
            'PARENTS']

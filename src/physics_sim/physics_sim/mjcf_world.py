@@ -15,7 +15,8 @@ from typing import Optional, Sequence, Tuple
 import numpy as np
 from skeleton_core.model import Body
 
-from .mjcf_body import CharacterParams, character_xml_parts, fmt
+from .mjcf_body import (ORIGIN_SITE, CharacterParams, character_actuator_xml, character_xml_parts,
+                        fmt)
 
 ALL_BITS = 0x7FFFFFFF
 OBJECT_KINDS = ('box', 'ball', 'mace')
@@ -120,7 +121,7 @@ def world_xml(characters: Sequence[CharacterEntry], objects: Sequence[ObjectSpec
     params = params or WorldParams()
     integ = {'euler': 'Euler', 'implicitfast': 'implicitfast', 'implicit': 'implicit',
              'rk4': 'RK4'}[params.integrator]
-    bodies, mocaps, eqs = [], [], []
+    bodies, mocaps, eqs, acts = [], [], [], []
     names = set()
     for c in characters:
         if c.prefix in names:
@@ -133,6 +134,7 @@ def world_xml(characters: Sequence[CharacterEntry], objects: Sequence[ObjectSpec
         if m:
             mocaps.append(m)
         eqs.append(e)
+        acts.append(character_actuator_xml(c.prefix, cp))
         for o in objects:
             if o.holdable:
                 for hand in (HAND_LEFT, HAND_RIGHT):
@@ -144,6 +146,7 @@ def world_xml(characters: Sequence[CharacterEntry], objects: Sequence[ObjectSpec
         raise ValueError('duplicate object names')
     objs = [object_xml(o) for o in objects]
     eq_block = '\n'.join(x for x in eqs if x)
+    act_block = '\n'.join(x for x in acts if x)
     return '\n'.join([
         '<mujoco model="kinect_physics">',
         f'  <option timestep="{params.timestep:.6g}" integrator="{integ}" '
@@ -153,9 +156,11 @@ def world_xml(characters: Sequence[CharacterEntry], objects: Sequence[ObjectSpec
         '  <worldbody>',
         f'    <geom name="floor" type="plane" size="0 0 0.05" friction="{params.floor_friction:.6g} '
         f'0.005 0.0001" rgba="0.8 0.8 0.8 1"/>',
+        f'    <site name="{ORIGIN_SITE}" size="0.01"/>',
         *bodies, *mocaps, *objs,
         '  </worldbody>',
         *(['  <equality>', eq_block, '  </equality>'] if eq_block else []),
+        *(['  <actuator>', act_block, '  </actuator>'] if act_block else []),
         '</mujoco>'])
 
 

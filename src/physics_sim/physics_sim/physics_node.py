@@ -41,7 +41,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 from .controller import Gains
 from .mjcf_world import ObjectSpec
-from .simulation import CONTROLLERS, SimConfig, Simulation
+from .simulation import CONTROLLERS, INTEGRATORS, SimConfig, Simulation
 
 
 def _tuples(n: int):
@@ -70,10 +70,20 @@ PARAMS: List[ParamSpec] = [
     ParamSpec('output_rate', 30.0, 'simulation tick and output rate (Hz)', range=(1.0, 240.0),
               read_only=True),
     ParamSpec('timestep', 0.002, 'physics time step (s)', range=(0.0005, 0.01), read_only=True),
-    ParamSpec('controller', 'explicit_pd',
-              'explicit_pd = the papers\' external PD forces; mocap_constraints = soft connect '
-              'constraints to mocap targets (implicit, more stable)', choices=CONTROLLERS,
-              read_only=True),
+    ParamSpec('controller', 'actuator_pd',
+              'actuator_pd = Eq. 1-2 evaluated by MuJoCo actuators at every step (fast); '
+              'explicit_pd = the papers\' external PD forces computed in Python at every step '
+              '(reference); mocap_constraints = soft connect constraints to mocap targets',
+              choices=CONTROLLERS, read_only=True),
+    ParamSpec('integrator', 'euler',
+              'MuJoCo integrator: euler = explicit like the paper (fastest; stable up to Kd ~300 '
+              'N s/m, Ke ~40000 N/m at 2 ms); implicitfast treats actuator_pd\'s Kd implicitly '
+              '(stable at any gain, ~35 % slower)',
+              choices=INTEGRATORS, read_only=True),
+    ParamSpec('slow_control_every', 0,
+              'physics steps between Python control updates (Eq. 2 twist targets, foot pins; '
+              'actuator_pd and mocap_constraints targets); 0 = auto (4 for explicit_pd, one per '
+              'tick otherwise)', range=(0, 50), read_only=True),
     ParamSpec('kp', 4000.0, 'Ke of Eq. 1 (N/m), shared by all joints', range=(0.0, 1e6)),
     ParamSpec('kd', 100.0, 'Kd of Eq. 1 (N s/m), shared by all joints', range=(0.0, 1e4)),
     ParamSpec('velocity_smoothing', 0.7, "exponential smoothing of the target velocity p'_target "
@@ -155,6 +165,7 @@ def config_from_params(v: Dict) -> SimConfig:
     gains = Gains(ke=v['kp'], kd=v['kd'], max_force=v['max_force'], twist_ke=v['twist_kp'],
                   twist_kd=v['twist_kd'], max_torque=v['max_torque'])
     return SimConfig(timestep=v['timestep'], controller=v['controller'], gains=gains,
+                     integrator=v['integrator'], slow_control_every=v['slow_control_every'],
                      track_timeconst=v['track_timeconst'], track_dampratio=v['track_dampratio'],
                      track_impedance=v['track_impedance'],
                      velocity_smoothing=v['velocity_smoothing'],

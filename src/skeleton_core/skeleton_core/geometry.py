@@ -16,7 +16,9 @@ from typing import Optional
 import numpy as np
 
 from .model import (HIP_LEFT, HIP_RIGHT, NUM_JOINTS, PARENTS, ROOT, SEGMENT_CHILDREN,
-                    SHOULDER_LEFT, SHOULDER_RIGHT, Body)
+                    SHOULDER_LEFT, SHOULDER_RIGHT, Body, forward_kinematics)
+
+_PARENT_OR_SELF = [p if p >= 0 else j for j, p in enumerate(PARENTS)]  # the root's own row: d = 0
 
 
 @dataclass
@@ -87,15 +89,10 @@ def retarget(positions: np.ndarray, body: Body,
     bone = np.zeros(NUM_JOINTS)
     bone[list(SEGMENT_CHILDREN)] = seg_len
     rest_dir = body.rest_offsets / np.maximum(np.linalg.norm(body.rest_offsets, axis=1), 1e-12)[:, None]
-    out = np.empty_like(p)
-    out[..., ROOT, :] = p[..., ROOT, :]
-    for j in range(1, NUM_JOINTS):
-        par = PARENTS[j]
-        d = p[..., j, :] - p[..., par, :]
-        n = np.linalg.norm(d, axis=-1, keepdims=True)
-        unit = np.where(n > 1e-9, d / np.maximum(n, 1e-12), rest_dir[j])
-        out[..., j, :] = out[..., par, :] + bone[j] * unit
-    return out
+    d = p - p[..., _PARENT_OR_SELF, :]
+    n = np.sqrt(np.sum(d * d, axis=-1, keepdims=True))
+    unit = np.where(n > 1e-9, d / np.maximum(n, 1e-12), rest_dir)
+    return forward_kinematics(bone[:, None] * unit, p[..., ROOT, :])
 
 
 # ---------------------------------------------------------------------------------------------

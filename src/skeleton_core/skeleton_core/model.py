@@ -247,14 +247,26 @@ def standard_body(height: float = STANDARD_HEIGHT, mass: float = STANDARD_MASS) 
 # --------------------------------------------------------------------------------------------
 # Tree helpers
 # --------------------------------------------------------------------------------------------
+def _ancestor_matrix() -> np.ndarray:
+    a = np.zeros((NUM_JOINTS, NUM_JOINTS))
+    for j in range(NUM_JOINTS):
+        k = j
+        while k >= 0 and k != ROOT:
+            a[j, k] = 1.0
+            k = PARENTS[k]
+    return a
+
+
+# PATH_TO_ROOT[j, k] = 1 when k is j or one of its ancestors, the root excluded: positions relative
+# to the root are PATH_TO_ROOT @ parent-relative offsets (one matrix product instead of a loop).
+PATH_TO_ROOT = _ancestor_matrix()
+
+
 def forward_kinematics(offsets: np.ndarray, root: np.ndarray) -> np.ndarray:
-    """Positions from parent-relative offsets. ``offsets``: (..., 20, 3), ``root``: (..., 3)."""
+    """Positions from parent-relative offsets. ``offsets``: (..., 20, 3) (the root row is ignored),
+    ``root``: (..., 3)."""
     offsets = np.asarray(offsets, dtype=float)
-    pos = np.empty_like(offsets)
-    pos[..., ROOT, :] = root
-    for j in range(1, NUM_JOINTS):
-        pos[..., j, :] = pos[..., PARENTS[j], :] + offsets[..., j, :]
-    return pos
+    return np.asarray(root, float)[..., None, :] + PATH_TO_ROOT @ offsets
 
 
 def parent_relative(positions: np.ndarray) -> np.ndarray:
