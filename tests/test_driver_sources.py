@@ -247,6 +247,23 @@ def test_synthetic_schedule_is_drift_free_and_catches_up():
     assert len(src.poll(t0 + 1000 * p)) == 1 and src.skipped > 900
 
 
+def test_synthetic_schedule_follows_the_timer_when_the_first_poll_was_late():
+    """A late first poll must not make every later frame wait a period (or be stamped before it
+    leaves): the schedule moves back onto the timer's grid, one frame per poll."""
+    src = SyntheticSource(num_users=1, rate_hz=30.0)
+    src.open()
+    p = 33_333_333
+    t0 = 7 * 10 ** 12
+    polls = [t0 + 12_000_000] + [t0 + k * p + 300_000 for k in range(1, 8)]
+    outs = [src.poll(now) for now in polls]
+    assert [len(o) for o in outs] == [1] * len(polls)
+    stamps = [o[0].stamp_ns for o in outs]
+    assert all(s <= now for s, now in zip(stamps, polls))
+    # after the re-anchoring the frames are stamped when they leave, on a drift-free grid
+    assert [now - s for s, now in zip(stamps[1:], polls[1:])] == [0] * (len(polls) - 1)
+    assert np.all(np.diff(stamps[1:]) == p)
+
+
 def test_live_reader_survives_unplug_and_reconnects():
     """The reader thread's recovery logic, with the device I/O replaced by a fake."""
     import threading

@@ -9,11 +9,13 @@ Each of ``num_users`` (1-6) users gets its own sensor-model stream (``SensorMode
 scenario a|b|c, seed ``seed + user``), placed side by side ``user_spacing`` metres apart across the
 field of view (the model's ``placement.lateral_offset_m``). User ids are 1..num_users.
 
-Timing: a simulated sensor captures frames on a fixed, drift-free schedule ``A + k / rate_hz``
-(anchored half a period before the first poll, so timer jitter below half a period gives exactly
-one frame per poll). Each frame is stamped with its scheduled capture time; a poll returns every
-frame due by then, so a late poll (a loaded machine) catches up instead of losing frames. When
-more than ``MAX_CATCHUP`` frames are overdue the backlog is skipped (counted in ``skipped``).
+Timing: a simulated sensor captures frames on a fixed, drift-free schedule ``A + k / rate_hz``,
+anchored at the first poll. Each frame is stamped with its scheduled capture time; a poll returns
+every frame due by then, so a late poll (a loaded machine) catches up instead of losing frames.
+A poll that comes less than half a period before the next capture (the first poll was late, the
+timer is back on its grid) moves the schedule back to it, so frames leave at the moment they
+are stamped and the latency measured downstream is the graph's own. When more than
+``MAX_CATCHUP`` frames are overdue the backlog is skipped (counted in ``skipped``).
 """
 from __future__ import annotations
 
@@ -109,8 +111,8 @@ class SyntheticSource(Source):
 
     def poll(self, now_ns: int) -> List[SourceOutput]:
         period = self._period_ns
-        if self._next_ns is None:
-            self._next_ns = now_ns - period // 2
+        if self._next_ns is None or 0 < self._next_ns - now_ns < period // 2:
+            self._next_ns = now_ns   # first poll, or the timer ticks earlier than the schedule
         due = (now_ns - self._next_ns) // period + 1
         if due > MAX_CATCHUP:
             skip = due - 1
