@@ -69,7 +69,22 @@ def test_skeleton_array_round_trip_matches_rclpy_serialization(tmp_path):
     assert bag_topics(path) == {'/kinect/skeletons': ('skeleton_msgs/msg/SkeletonArray', 5)}
 
 
-def test_decoded_message_rewrites_to_identical_bytes(tmp_path):
+def test_rclpy_decodes_when_available_and_matches_the_pure_decoder(tmp_path, monkeypatch):
+    with BagWriter(tmp_path / 'a.mcap') as bag:
+        bag.write('/x', _array_msg(42), 7)
+    fast = next(read_messages(tmp_path / 'a.mcap')).msg
+    assert isinstance(fast, SkeletonArray)               # rclpy's C deserializer
+    assert fast == deserialize_message(next(read_messages(tmp_path / 'a.mcap')).data, SkeletonArray)
+    monkeypatch.setenv('KP_BAGIO_PURE', '1')
+    pure = next(read_messages(tmp_path / 'a.mcap')).msg
+    assert not isinstance(pure, SkeletonArray)
+    for a, b in zip(frames_from_array_msg(fast), frames_from_array_msg(pure)):
+        assert np.array_equal(a.positions, b.positions) and a.user_id == b.user_id
+        assert np.array_equal(a.orientations, b.orientations) and a.stamp_ns == b.stamp_ns
+
+
+def test_decoded_message_rewrites_to_identical_bytes(tmp_path, monkeypatch):
+    monkeypatch.setenv('KP_BAGIO_PURE', '1')   # the pure-Python decoder's look-alike messages
     with BagWriter(tmp_path / 'a.mcap') as bag:
         bag.write('/x', _array_msg(42), 7)
     first = next(read_messages(tmp_path / 'a.mcap'))

@@ -156,3 +156,39 @@ def test_user_leaving_removes_the_character_and_bad_input_is_dropped(graph):
         time.sleep(0.05)
     assert len(got[-1].skeletons) == 0          # an empty array tells viewers it is gone
     assert sum(node.health.dropped.values()) >= 1
+
+
+def _wait_subscribed(pub):
+    deadline = time.time() + 10
+    while pub.get_subscription_count() == 0 and time.time() < deadline:
+        time.sleep(0.05)
+
+
+def test_ticks_follow_the_input_but_keep_the_output_rate(graph):
+    """sync_to_input: every target leaves the node carrying its own stamp (one tick right after
+    each input, not whenever the free-running timer happens to fire); input at twice the output
+    rate does not make the simulation tick twice as often."""
+    node, peer = graph
+    got = []
+    peer.create_subscription(SkeletonArray, '/character/skeletons', got.append, 200)
+    pub = peer.create_publisher(SkeletonArray, '/test_physics/in', 10)
+    _wait_subscribed(pub)
+    stamps = []
+    for i, p in enumerate(clip(30)):
+        stamps.append(9_000_000_000 + i * 33_333_333)
+        pub.publish(_msg(p, stamps[-1]))
+        time.sleep(1 / 30)
+    time.sleep(0.3)
+    out_stamps = {m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec for m in got}
+    missing = [s for s in stamps[1:] if s not in out_stamps]
+    assert len(missing) <= 1, f'{len(missing)} of {len(stamps) - 1} inputs had no output of their own'
+    # 60 Hz input for 1.5 s: the character still ticks at about the 30 Hz output rate
+    got.clear()
+    t0 = time.time()
+    i = 0
+    while time.time() - t0 < 1.5:
+        pub.publish(_msg(clip(1)[0], 11_000_000_000 + i * 16_666_667))
+        i += 1
+        time.sleep(1 / 60)
+    rate = len(got) / (time.time() - t0)
+    assert 20.0 <= rate <= 40.0, rate

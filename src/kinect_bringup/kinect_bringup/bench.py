@@ -166,17 +166,24 @@ def process_bag_speed(log_dir: Path) -> Dict:
         if not bag.exists():
             return {'error': 'recording failed'}
         out = log_dir / 'bench_output.mcap'
+        report = log_dir / 'bench_output.json'
         t0 = time.monotonic()
         proc = subprocess.run([sys.executable, '-m', 'pose_reconstruction.process_bag', str(bag),
-                               '--out', str(out), '--method', 'C', '--no-progress'],
+                               '--out', str(out), '--method', 'C', '--no-progress',
+                               '--report', str(report)],
                               capture_output=True, text=True)
         wall = time.monotonic() - t0
         if proc.returncode != 0:
             return {'error': proc.stderr.strip().splitlines()[-1:] or 'process_bag failed'}
         from skeleton_core.bagio import bag_topics
         n = bag_topics(str(bag)).get('/kinect/skeletons', (None, 0))[1]
+        loop = json.loads(report.read_text())
+        # the processing loop (read, reconstruct, write) is what grows with the recording; the
+        # start-up (imports, database) is paid once per command
         return {'frames': n, 'wall_s': wall, 'recorded_s': n / 30.0,
-                'x_real_time': (n / 30.0) / wall if wall > 0 else float('nan')}
+                'x_real_time': (n / 30.0) / wall if wall > 0 else float('nan'),
+                'loop_s': loop['wall_s'], 'x_real_time_loop': loop['x_real_time'],
+                'startup_s': wall - loop['wall_s']}
     except Exception as e:  # noqa: BLE001 - report, don't crash the whole benchmark
         return {'error': str(e)}
 
@@ -201,8 +208,12 @@ def to_markdown(results: List[Dict], bag_speed: Dict, commit: str) -> str:
             lines.append(f"| {r['mode']} | {r['users']} | {name} | {s['cpu_percent']:.0f} | {s['rss_mb']:.0f} |")
     lines += ['', f"NaN outputs: {sum(r['nan_outputs'] for r in results)}", '']
     if 'x_real_time' in bag_speed:
-        lines.append(f"process_bag (method C, no physics): {bag_speed['frames']} frames in "
-                     f"{bag_speed['wall_s']:.2f} s = **{bag_speed['x_real_time']:.1f}x real time**")
+        lines.append(f"process_bag (method C, no physics): {bag_speed['frames']} frames "
+                     f"({bag_speed['recorded_s']:.1f} s recorded): processing loop "
+                     f"{bag_speed['loop_s']:.2f} s = **{bag_speed['x_real_time_loop']:.1f}x real "
+                     f"time**; whole command {bag_speed['wall_s']:.2f} s = "
+                     f"{bag_speed['x_real_time']:.1f}x (start-up {bag_speed['startup_s']:.1f} s "
+                     f"once per command: imports, database)")
     elif bag_speed:
         lines.append(f"process_bag: {bag_speed}")
     return '\n'.join(lines) + '\n'

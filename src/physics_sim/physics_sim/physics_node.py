@@ -70,6 +70,11 @@ PARAMS: List[ParamSpec] = [
     ParamSpec('output_rate', 30.0, 'simulation tick and output rate (Hz)', range=(1.0, 240.0),
               read_only=True),
     ParamSpec('timestep', 0.002, 'physics time step (s)', range=(0.0005, 0.01), read_only=True),
+    ParamSpec('sync_to_input', True,
+              'tick as soon as a target arrives (phase-locked to the sensor: the output leaves '
+              'right after its input instead of up to one period later); the timer keeps the '
+              'output rate when input is slower or stops. Each tick simulates the wall time since '
+              'the previous one (at most two periods)'),
     ParamSpec('controller', 'actuator_pd',
               'actuator_pd = Eq. 1-2 evaluated by MuJoCo actuators at every step (fast); '
               'explicit_pd = the papers\' external PD forces computed in Python at every step '
@@ -218,12 +223,17 @@ class PhysicsNode(Node):
         self._next_throw = None
         self._wall_in_step = 0.0
         self._sim_in_step = 0.0
+        self._last_tick: Optional[float] = None
+        self._last_input_tick: Optional[float] = None
+        self._time_debt = 0.0
+        self._last_arrival: Optional[float] = None   # sync_to_input: input arrivals (monotonic s)
+        self._input_interval: Optional[float] = None
         self.pub = self.create_publisher(SkeletonArray, v['output_topic'], 10)
         self.obj_pub = self.create_publisher(MarkerArray, v['objects_topic'], 10)
         self.create_subscription(SkeletonArray, v['input_topic'], self._on_input, 10)
         self.create_subscription(WrenchStamped, '~/push', self._on_push_topic, 10)
         self.create_service(ApplyPush, '~/apply_push', self._on_push_srv)
-        self.timer = self.create_timer(1.0 / v['output_rate'], self._tick)
+        self.timer = self.create_timer(1.0 / v['output_rate'], self._on_timer)
         self.diag = DiagnosticsPublisher(self, self.health, extra=self._diag_extra)
         self.get_logger().info(
             f'physics: {v["controller"]} at {v["timestep"] * 1000:.1f} ms, input {v["input_topic"]}'
@@ -278,6 +288,19 @@ class PhysicsNode(Node):
             uid = next(iter(self.sim.characters))
             self.sim.hold(uid, 'mace', self.params['mace_hand'])
             self._mace_given = True
+        if self.params['sync_to_input'] and frames:
+            # phase-lock to the sensor: tick now unless the last tick was recent (input faster
+            # than the output rate), and restart the timer's period from here
+            period = 1.0 / self.params['output_rate']
+            if self._last_arrival is not None and 0.2 * period < now - self._last_arrival < 3 * period:
+                iv = now - self._last_arrival
+                self._input_interval = iv if self._input_interval is None \
+                    else 0.8 * self._input_interval + 0.2 * iv
+            self._last_arrival = now
+            if self._last_input_tick is None or now - self._last_input_tick >= 0.75 * period:
+                self._last_input_tick = now
+                self._tick()
+                self.timer.reset()
 
     def _push(self, user_id: int, segment: str, force, duration: float) -> str:
         try:
@@ -307,8 +330,23 @@ class PhysicsNode(Node):
         return resp
 
     # ------------------------------------------------------------------ simulation tick
+    def _on_timer(self) -> None:
+        if self.params['sync_to_input'] and self._input_interval is not None:
+            # the next input is due about now: let it trigger the tick (a tick just before it
+            # would make it wait a whole period); when input stops, ticks resume a period later
+            due = self._last_arrival + self._input_interval - time.monotonic()
+            if abs(due) <= 0.25 / self.params['output_rate']:
+                return
+        self._tick()
+
     def _tick(self) -> None:
         now = time.monotonic()
+        period = 1.0 / self.params['output_rate']
+        if self.params['sync_to_input'] and self._last_tick is not None:
+            dt = min(max(now - self._last_tick, 0.0), 2.0 * period)   # wall time since the last
+        else:
+            dt = period
+        self._last_tick = now
         timeout = self.params['user_timeout']
         if self._last_msg is not None:
             for uid in list(self.sim.characters):
@@ -316,18 +354,23 @@ class PhysicsNode(Node):
                     self.sim.remove_character(uid)
                     self._last_seen.pop(uid, None)
                     self.get_logger().info(f'user {uid} left: character removed')
-        period = self.params['auto_throw_period']
-        if period > 0 and self.sim.characters:
+        throw = self.params['auto_throw_period']
+        if throw > 0 and self.sim.characters:
             if self._next_throw is None or now >= self._next_throw:
                 if self._next_throw is not None:
                     self.sim.throw_at(next(iter(self.sim.characters)))
                     self._prune_thrown()
-                self._next_throw = now + period
-        dt = 1.0 / self.params['output_rate']
-        t0 = time.perf_counter()
-        self.sim.advance(dt)
-        self._wall_in_step = 0.9 * self._wall_in_step + 0.1 * (time.perf_counter() - t0)
-        self._sim_in_step = 0.9 * self._sim_in_step + 0.1 * dt
+                self._next_throw = now + throw
+        # whole physics steps; the remainder is carried to the next tick (sim time = wall time)
+        ts = self.params['timestep']
+        self._time_debt += dt
+        steps = int(self._time_debt / ts + 1e-9)
+        if steps:
+            self._time_debt -= steps * ts
+            t0 = time.perf_counter()
+            self.sim.advance(steps * ts)
+            self._wall_in_step = 0.9 * self._wall_in_step + 0.1 * (time.perf_counter() - t0)
+            self._sim_in_step = 0.9 * self._sim_in_step + 0.1 * steps * ts
         self._publish()
 
     def _prune_thrown(self, keep: int = 8) -> None:

@@ -322,11 +322,28 @@ def bag_topics(path) -> Dict[str, Tuple[str, int]]:
     return {k: (v[0], v[1]) for k, v in out.items()}
 
 
+def _rclpy_decoder(msgtype: str):
+    """rclpy's C deserializer for ``msgtype`` when rclpy and the message package are importable
+    (a built workspace): ~20x faster than the pure-Python CDR decoder, and the messages are the
+    real ROS types. None otherwise (or with ``KP_BAGIO_PURE=1``)."""
+    if os.environ.get('KP_BAGIO_PURE') or msgtype.count('/') != 2:
+        return None
+    try:
+        import importlib
+        from rclpy.serialization import deserialize_message
+        pkg, kind, name = msgtype.split('/')
+        cls = getattr(importlib.import_module(f'{pkg}.{kind}'), name)
+    except (ImportError, AttributeError, ValueError):
+        return None
+    return lambda data: deserialize_message(bytes(data), cls)
+
+
 def read_messages(path, topics: Optional[Iterable[str]] = None,
                   decode=True) -> Iterator[BagMessage]:
     """Messages of a bag in log-time order (optionally only some topics). ``decode=False`` leaves
     ``msg`` as None (faster when only the raw bytes are needed); a collection of topic names
-    decodes only those topics."""
+    decodes only those topics. Messages are decoded by rclpy where it is importable, else by the
+    pure-Python decoder of ``mcap_ros2`` (attribute access either way)."""
     from mcap.reader import make_reader
     from mcap_ros2.decoder import DecoderFactory
     p, f = _open(path)
@@ -346,7 +363,8 @@ def read_messages(path, topics: Optional[Iterable[str]] = None,
                     if dec is None:
                         if schema is None:
                             raise BagError(f'cannot decode {channel.topic} in {p}: no schema')
-                        dec = factory.decoder_for(channel.message_encoding, schema)
+                        dec = (_rclpy_decoder(schema.name) if channel.message_encoding == 'cdr'
+                               else None) or factory.decoder_for(channel.message_encoding, schema)
                         if dec is None:
                             raise BagError(f'cannot decode {channel.topic} in {p}: encoding '
                                            f'{channel.message_encoding}/{schema.encoding}')
