@@ -66,7 +66,8 @@ def validate_arrays(positions, tracking_state=None, reliability=None, orientatio
         if t.shape != (NUM_JOINTS,):
             raise SkeletonFormatError('wrong length',
                                       f'tracking_state must have {NUM_JOINTS} entries, got {t.shape}')
-        if not np.all(np.isin(t, TRACKING_STATES)):
+        if t.size and (t.min() < min(TRACKING_STATES) or t.max() > max(TRACKING_STATES)
+                       or (t.dtype.kind not in 'iub' and np.any(t != np.round(t)))):
             raise SkeletonFormatError('unknown tracking state',
                                       f'values {sorted(set(t.tolist()) - set(TRACKING_STATES))}')
         t = t.astype(np.uint8)
