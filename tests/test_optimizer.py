@@ -209,3 +209,37 @@ def test_output_takes_the_users_observed_segment_lengths(small_db):
     for _ in range(12):
         out = r.process(SkeletonFrame(positions=p, tracking_state=ts))
     assert np.allclose(segment_lengths(out.positions), segment_lengths(p), atol=1e-6)
+
+
+def test_fast_paths_equal_the_reference_functions():
+    # query preparation, the quaternion yaw and the fused One Euro filter of the output stage
+    # are rewritten as a few matrix products: same numbers as the straightforward functions
+    from pose_reconstruction.posture_space import (STRICT_ANCESTORS, QueryPreparer,
+                                                   fast_normalize, fast_retarget,
+                                                   orientations_to_sensor)
+    from pose_reconstruction.reconstructor import _yaw_quat_matrix
+    from skeleton_core.filters import OneEuroFilter
+    body = standard_body()
+    prep = QueryPreparer(body, 0.5)
+    rng = np.random.default_rng(7)
+    for i in range(20):
+        p = standard_body(1.6).rest_positions() + rng.normal(0, 0.05, (NUM_JOINTS, 3)) + [2, 1, 0]
+        w = rng.uniform(0, 1, NUM_JOINTS)
+        got = prep.prepare(p, w, 1.6)
+        norm, tf = fast_normalize(p, np.maximum(w, 1e-3))
+        ref = fast_retarget(norm, prep.lengths, prep.rest_dirs)
+        bad = w < 0.5
+        chain = (STRICT_ANCESTORS & bad[None, :]).any(axis=1)
+        ref[chain] = norm[chain] * body.height / 1.6
+        assert np.allclose(got.query, ref, atol=1e-12)
+        assert float(got.transform.yaw) == pytest.approx(float(tf.yaw), abs=1e-12)
+        q = rng.normal(size=(NUM_JOINTS, 4))
+        q /= np.linalg.norm(q, axis=1, keepdims=True)
+        yaw = rng.uniform(-np.pi, np.pi)
+        assert np.allclose(q @ _yaw_quat_matrix(yaw).T, orientations_to_sensor(q, yaw), atol=1e-12)
+    a, b = OneEuroFilter(2.0, 10.0, 1.0, num_joints=20), OneEuroFilter(2.0, 10.0, 1.0, num_joints=20)
+    ts = np.full(NUM_JOINTS, TRACKED, np.uint8)
+    for t in range(30):
+        x = rng.normal(0, 0.1, (NUM_JOINTS, 3))
+        stamp = t * 33_333_333
+        assert np.allclose(a.update(x, None, stamp), b.update(x, ts, stamp), atol=1e-12)

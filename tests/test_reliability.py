@@ -6,7 +6,8 @@ from pose_reconstruction.reliability import (INCIDENCE, ReliabilityEstimator, be
                                              gaussian_weights, kinematics_term,
                                              reference_pose_match, tracking_term)
 from skeleton_core.model import (ELBOW_LEFT, HAND_RIGHT, HIP_CENTER, INFERRED, NOT_TRACKED,
-                                 NUM_JOINTS, SEGMENT_OF_JOINT, SHOULDER_LEFT, TRACKED, WRIST_LEFT,
+                                 NUM_JOINTS, SEGMENT_CHILDREN, SEGMENT_OF_JOINT, SEGMENT_PARENTS,
+                                 SHOULDER_LEFT, TRACKED, WRIST_LEFT,
                                  segment_lengths, standard_body)
 
 FLOOR, ROOF = np.radians(90.0), np.radians(135.0)
@@ -165,3 +166,47 @@ def test_invalid_parameters_refused():
         ReliabilityEstimator(theta_floor_deg=140.0, theta_roof_deg=135.0)
     with pytest.raises(ValueError):
         ReliabilityEstimator(f_total=0)
+
+
+def test_streamed_update_equals_the_equations_on_a_random_stream():
+    # the estimator keeps one new angle per frame and precomputed segment lengths; it must give
+    # exactly Eq. 1-8 as the reference functions compute them on the whole history
+    rng = np.random.default_rng(3)
+    T = 40
+    base = rest() + np.array([2.5, 0.0, -0.8])
+    pos = base + np.cumsum(rng.normal(0, 0.02, (T, NUM_JOINTS, 3)), axis=0)
+    pos[::3, WRIST_LEFT] += 0.06  # vibration
+    states = rng.choice([TRACKED, TRACKED, TRACKED, INFERRED, NOT_TRACKED], (T, NUM_JOINTS))
+    states[:10] = TRACKED
+    est = ReliabilityEstimator(reference_mode='standard')
+    minima = []
+    for t in range(T):
+        ts = states[t].astype(np.uint8)
+        got = est.update(pos[t], ts)
+        hist = pos[max(0, t - est.f_b - 1):t + 1]
+        rb, _ = behaviour_term(hist, est.d_min, est.f_b, est.theta_floor, est.theta_roof)
+        rk = kinematics_term(pos[t], est.reference_lengths)
+        rt = tracking_term(ts)
+        minima.append(np.minimum(np.minimum(rb, rk), rt))
+        win = np.array(minima[-est.f_total:])
+        ref = np.clip(gaussian_weights(len(win), est.sigma_frames) @ win, 0, 1)
+        assert np.allclose(got, ref, atol=1e-12), t
+        assert np.allclose(est.last_terms[0], rb, atol=1e-12)
+
+
+def test_reference_capture_decision_matches_reference_pose_match():
+    from pose_reconstruction.reliability import _pose_match_segments
+    rng = np.random.default_rng(4)
+    p0 = rest()
+    tol = 25.0
+    seen = set()
+    for i in range(60):
+        p = p0 + rng.normal(0, 0.04 * (i % 6), p0.shape)
+        a = np.radians(rng.uniform(-180, 180))
+        c, s = np.cos(a), np.sin(a)
+        p = p @ np.array([[c, -s, 0], [s, c, 0], [0, 0, 1.0]]).T
+        seg = p[list(SEGMENT_CHILDREN)] - p[list(SEGMENT_PARENTS)]
+        got = _pose_match_segments(p, seg, np.linalg.norm(seg, axis=1), np.cos(np.radians(tol)))
+        assert got == reference_pose_match(p, tol), i
+        seen.add(got)
+    assert 'tpose' in seen and None in seen

@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
-from typing import Dict, Optional, Sequence
+from typing import Callable, Dict, Optional, Sequence
 
 import numpy as np
 
@@ -41,28 +41,46 @@ _SEG_C = np.array(SEGMENT_CHILDREN)
 
 SOLVERS = ('stochastic', 'gauss_newton')
 KNN_MODES = ('brute', 'kdtree')
+# (60, 57): flat posture -> flat segment vectors (child - parent); (57, 19): squared components ->
+# squared segment lengths
+_DSEG = np.zeros((NUM_JOINTS * 3, NUM_SEGMENTS * 3))
+for _s, (_p, _c) in enumerate(zip(SEGMENT_PARENTS, SEGMENT_CHILDREN)):
+    for _k in range(3):
+        _DSEG[3 * _c + _k, 3 * _s + _k] += 1.0
+        _DSEG[3 * _p + _k, 3 * _s + _k] -= 1.0
+_SUM3 = np.kron(np.eye(NUM_SEGMENTS), np.ones((3, 1)))
 
 
 def local_pca(Yc: np.ndarray, dims: int):
     """Principal axes of centred rows ``Yc`` (K, 60): ``(V (d, 60) orthonormal rows, singular
     values (d,))``, d <= dims, dropping numerically empty directions. For K < 60 the K x K Gram
     matrix is diagonalised (cheaper than an SVD of Yc)."""
+    V, s, _ = _local_pca(Yc, dims)
+    return V, s
+
+
+def _local_pca(Yc: np.ndarray, dims: int, G: Optional[np.ndarray] = None):
+    """:func:`local_pca` plus the latent coordinates of the rows, ``Yc V^T`` (K, d) (from the
+    Gram matrix ``G = Yc Yc^T`` when K < 60: ``U_d s``, no further product)."""
     K, D = Yc.shape
     if K < D:
-        lam, U = np.linalg.eigh(Yc @ Yc.T)
+        lam, U = np.linalg.eigh(Yc @ Yc.T if G is None else G)
         lam, U = lam[::-1], U[:, ::-1]
         keep = lam > max(lam[0], 1e-300) * 1e-10
         d = int(min(dims, keep.sum()))
         s = np.sqrt(lam[:d])
-        V = (U[:, :d].T @ Yc) / s[:, None]
+        Ud = U[:, :d]
+        V = (Ud.T @ Yc) / s[:, None]
+        zn = Ud * s
     else:
         _, s, vt = np.linalg.svd(Yc, full_matrices=False)
         keep = s > max(s[0], 1e-300) * 1e-5
         d = int(min(dims, keep.sum()))
         V, s = vt[:d], s[:d]
+        zn = Yc @ V.T
     if d == 0:  # every neighbour identical: a zero-dimensional space (the mean only)
-        return np.zeros((1, D)), np.zeros(1)
-    return V, s
+        return np.zeros((1, D)), np.zeros(1), np.zeros((K, 1))
+    return V, s, zn
 
 
 @dataclass
@@ -72,9 +90,17 @@ class OptimizerResult:
     neighbours: np.ndarray                # (K,) database indices
     distances: np.ndarray                 # (K,) Eq. 9 distances
     energy: float
-    terms: Dict[str, float]
     steps: int                            # optimisation iterations run
     timings_ms: Dict[str, float] = field(default_factory=dict)
+    terms_fn: Optional[Callable[[], Dict[str, float]]] = field(default=None, repr=False)
+    _terms: Optional[Dict[str, float]] = field(default=None, repr=False)
+
+    @property
+    def terms(self) -> Dict[str, float]:
+        """The four energy terms of the solution (computed when first asked for)."""
+        if self._terms is None:
+            self._terms = self.terms_fn() if self.terms_fn is not None else {}
+        return self._terms
 
 
 class NaturalPostureOptimizer:
@@ -88,9 +114,12 @@ class NaturalPostureOptimizer:
         self.db = as_database_arrays(db)
         self.body = self.db.body
         self.L = self.body.segment_lengths.copy()  # (19,)
+        self._Lcol = self.L[:, None]
         X = self.db.flat
         self._X = X
         self._Xsq_joint = np.einsum('njd,njd->nj', self.db.positions, self.db.positions)  # (N, 20)
+        # Eq. 9 for every posture as one matrix-vector product: [|x_j|^2 (20) | x (60)] . [w | -2 w q]
+        self._XA = np.ascontiguousarray(np.hstack((self._Xsq_joint, X)))
         self.seed = seed
         self.rng = np.random.default_rng(seed)
         self._kdtree = None
@@ -155,13 +184,17 @@ class NaturalPostureOptimizer:
             d = np.einsum('njd,j->n', (P - q) ** 2, w)
             order = np.argsort(d)[:self.k]
             return cand[order], d[order]
-        wq = (w[:, None] * q).ravel()
-        d = self._Xsq_joint @ w - 2.0 * (self._X @ wq) + float(np.sum(w * np.sum(q * q, axis=1)))
+        wq = w[:, None] * q
+        v = np.concatenate((w, -2.0 * wq.ravel()))
+        d = self._XA @ v
+        d += float(np.einsum('jd,jd->', wq, q))
         k = self.k
         idx = np.argpartition(d, k - 1)[:k] if k < len(d) else np.arange(len(d))
-        order = np.argsort(d[idx])
-        idx = idx[order]
-        return idx, np.maximum(d[idx], 0.0)
+        dk = d[idx]
+        order = np.argsort(dk)
+        dk = dk[order]
+        np.maximum(dk, 0.0, out=dk)
+        return idx[order], dk
 
     # -- energy -------------------------------------------------------------------------------
     def _setup(self, Y: np.ndarray, query: np.ndarray, weights: np.ndarray,
@@ -170,36 +203,88 @@ class NaturalPostureOptimizer:
 
         Every term is evaluated in the latent space: with ``x = mu + V^T z`` (V orthonormal rows)
         E_c is a quadratic form in z, |x - a|^2 = |z - z_a|^2 + |residual_a|^2 for E_s and E_m,
-        and the segment vectors of E_k are affine in z (``seg0 + z dV``).
+        and the segment vectors of E_k are affine in z (``seg0 + z dV``). The weighted sum of the
+        quadratic and linear parts and every product with z are gathered into one matrix ``W``
+        so that :meth:`energy` needs one matrix product per batch.
         """
-        mu = Y.mean(axis=0)
-        V, s = local_pca(Y - mu, self.pca_dims)
+        K = len(Y)
+        mu = Y.sum(axis=0) * (1.0 / K)
+        Yc = Y - mu
+        G = Yc @ Yc.T
+        V, s, zn = _local_pca(Yc, self.pca_dims, G)
         d = V.shape[0]
-        zn = (Y - mu) @ V.T                                   # (K, d)
-        res_n = np.maximum(np.sum((Y - mu) ** 2, axis=1) - np.sum(zn ** 2, axis=1), 0.0)
-        sd = s / np.sqrt(max(len(Y) - 1, 1))
+        znsq = np.einsum('kd,kd->k', zn, zn)
+        res_n = np.maximum(np.diagonal(G) - znsq, 0.0)
+        sd = s * (1.0 / np.sqrt(max(K - 1, 1)))
         q = query.ravel()
         w60 = np.repeat(weights, 3)
-        A_c = (V * w60) @ V.T                                 # E_c = z A z + b z + c
-        b_c = 2.0 * (V @ (w60 * (mu - q)))
-        c_c = float(np.sum(w60 * (mu - q) ** 2))
-        m = mu.reshape(NUM_JOINTS, 3)
-        seg0 = (m[_SEG_C] - m[_SEG_P]).ravel()                # (57,)
-        Vr = V.reshape(d, NUM_JOINTS, 3)
-        dV = (Vr[:, _SEG_C] - Vr[:, _SEG_P]).reshape(d, -1)   # (d, 57)
-        S = dict(mu=mu, V=V, zn=zn, zn_sq=np.sum(zn ** 2, axis=1) + res_n, res_n=res_n, sd=sd,
+        mq = mu - q
+        Vw = V * w60
+        A_c = Vw @ V.T                                        # E_c = z A z + b z + c
+        b_c = 2.0 * (Vw @ mq)
+        c_c = float(mq @ (w60 * mq))
+        sg = np.vstack((V, mu)) @ _DSEG                        # (d + 1, 57)
+        dV, seg0 = sg[:d], sg[d]
+        S = dict(mu=mu, V=V, zn=zn, zn_sq=znsq + res_n, res_n=res_n, sd=sd,
                  q=q, w60=w60, A_c=A_c, b_c=b_c, c_c=c_c, seg0=seg0, dV=dV, c=None)
+        # fused energy: E = z Q z + [z W](linear) + const + w_s/20 min_n(zn_sq - 2 z zn) + w_k E_k
+        inv_j = 1.0 / NUM_JOINTS
+        Q = self.w_control * A_c
+        lin = self.w_control * b_c
+        const = self.w_control * c_c
         if continuity_target is not None:
             c = continuity_target.ravel()
-            zc = (c - mu) @ V.T
-            S.update(c=c, zc=zc, res_c=max(float(np.sum((c - mu) ** 2) - zc @ zc), 0.0))
+            zc = V @ (c - mu)
+            cm = c - mu
+            res_c = max(float(cm @ cm - zc @ zc), 0.0)
+            S.update(c=c, zc=zc, res_c=res_c)
+            lin = lin - (2.0 * self.w_continuity * inv_j) * zc
+            const += self.w_continuity * inv_j * (float(zc @ zc) + res_c)
+            Q = Q + (self.w_continuity * inv_j) * np.eye(d)
+        Q = Q + (self.w_style * inv_j) * np.eye(d)            # |z|^2 of E_s (min over n aside)
+        # WT (d + 57 + K, d + 1) acting on [z; 1]: rows Q z + lin (so z.(Q z + lin) = quadratic +
+        # linear part), the segment vectors seg0 + dV^T z by coordinate (x block, y, z), and
+        # |z_n|^2 - 2 z_n.z per neighbour (E_s = min_n of it + |z|^2, the latter in Q)
+        dVx = dV.reshape(d, NUM_SEGMENTS, 3).transpose(2, 1, 0).reshape(-1, d)   # (57, d)
+        WT = np.empty((d + 3 * NUM_SEGMENTS + K, d + 1))
+        WT[:d, :d] = Q
+        WT[:d, d] = lin
+        WT[d:d + 57, :d] = dVx
+        WT[d:d + 57, d] = seg0.reshape(NUM_SEGMENTS, 3).T.ravel()
+        WT[d + 57:, :d] = -2.0 * zn
+        WT[d + 57:, d] = znsq + res_n
+        S.update(WT=WT, const=const, d=d)
         return S
 
+    def _energy_t(self, ZT: np.ndarray, S: dict) -> np.ndarray:
+        """Eq. 15 for samples stored as the columns of ``ZT`` (d + 1, M), last row 1 -> (M,)."""
+        d = S['d']
+        P = S['WT'] @ ZT
+        e = np.einsum('dm,dm->m', P[:d], ZT[:d])
+        e += S['const']
+        n = NUM_SEGMENTS
+        sx, sy, sz = P[d:d + n], P[d + n:d + 2 * n], P[d + 2 * n:d + 3 * n]
+        ln = sx * sx
+        ln += sy * sy
+        ln += sz * sz
+        np.sqrt(ln, out=ln)
+        ln -= self._Lcol
+        ek = np.einsum('sm,sm->m', ln, ln)
+        ek *= self.w_kinematics / NUM_SEGMENTS
+        e += ek
+        es = P[d + 3 * n:].min(axis=0)
+        es *= self.w_style / NUM_JOINTS
+        e += es
+        return e
+
     def energy(self, Z: np.ndarray, S: dict) -> np.ndarray:
-        """Eq. 15 for a batch of latent samples ``Z`` (M, d) -> (M,)."""
-        terms = self.energy_terms(Z, S)
-        return (self.w_control * terms['control'] + self.w_style * terms['style']
-                + self.w_kinematics * terms['kinematics'] + self.w_continuity * terms['continuity'])
+        """Eq. 15 for a batch of latent samples ``Z`` (M, d) -> (M,): the weighted sum of
+        :meth:`energy_terms`, from one matrix product."""
+        Z = np.asarray(Z, float)
+        ZT = np.empty((Z.shape[1] + 1, Z.shape[0]))
+        ZT[:-1] = Z.T
+        ZT[-1] = 1.0
+        return self._energy_t(ZT, S)
 
     def energy_terms(self, Z: np.ndarray, S: dict) -> Dict[str, np.ndarray]:
         zz = np.sum(Z * Z, axis=1)
@@ -220,15 +305,27 @@ class NaturalPostureOptimizer:
         z, e = z0, e0
         sigma = self.step_scale * np.maximum(S['sd'], 1e-6)
         steps = 0
+        d = len(z)
+        ZT = np.empty((d + 1, self.samples))
+        ZT[d] = 1.0
+        sig = sigma[:, None]
+        zc = np.asarray(z, float)[:, None]
+        normal = self.rng.standard_normal
+        Zs = ZT[:d]
         for _ in range(self.steps):
             steps += 1
-            Z = z + self.rng.standard_normal((self.samples, len(z))) * sigma
-            E = self.energy(Z, S)
-            j = int(np.argmin(E))
-            if E[j] < e:
-                z, e = Z[j], float(E[j])
+            normal(out=Zs)
+            Zs *= sig
+            Zs += zc
+            E = self._energy_t(ZT, S)
+            j = int(E.argmin())
+            ej = float(E[j])
+            if ej < e:
+                e = ej
+                zc = ZT[:d, j:j + 1].copy()
             else:
                 break  # no sample improves: stop (Sec. VI-E)
+        z = zc[:, 0]
         return z, e, steps
 
     def _gauss_newton(self, z0: np.ndarray, e0: float, S: dict):
@@ -275,7 +372,9 @@ class NaturalPostureOptimizer:
         """``query`` (20, 3) normalised standard-body posture, ``weights`` (20,) reliabilities,
         ``previous`` up to two earlier solutions, most recent first, in the query's frame."""
         t0 = time.perf_counter()
-        w = np.clip(np.asarray(weights, float), 0.0, 1.0)
+        w = np.asarray(weights, float)
+        if w.min() < 0.0 or w.max() > 1.0:
+            w = np.clip(w, 0.0, 1.0)
         w_knn = w if w.sum() > 1e-6 else np.ones_like(w)
         idx, dist = self.knn_search(query, w_knn)
         t1 = time.perf_counter()
@@ -288,18 +387,20 @@ class NaturalPostureOptimizer:
         S = self._setup(self._X[idx], np.asarray(query, float), w, c)
         t2 = time.perf_counter()
         # initial sample: best of the neighbours' mean, the previous solution and the nearest one
-        starts = [np.zeros(S['V'].shape[0]), S['zn'][0]]
-        if previous:
-            starts.append((previous[0].ravel() - S['mu']) @ S['V'].T)
-        starts = np.asarray(starts)
+        V, mu = S['V'], S['mu']
+        starts = np.empty((3 if len(previous) else 2, V.shape[0]))
+        starts[0] = 0.0
+        starts[1] = S['zn'][0]
+        if len(previous):
+            starts[2] = V @ (previous[0].ravel() - mu)
         e_starts = self.energy(starts, S)
-        j = int(np.argmin(e_starts))
+        j = int(e_starts.argmin())
         z0, e0 = starts[j], float(e_starts[j])
         if self.solver == 'gauss_newton':
             z, e, steps = self._gauss_newton(z0, e0, S)
         else:
             z, e, steps = self._stochastic(z0, e0, S)
-        x = (S['mu'] + z @ S['V']).reshape(NUM_JOINTS, 3)
+        x = (mu + z @ V).reshape(NUM_JOINTS, 3)
         t3 = time.perf_counter()
         ori = None
         if self.db.orientations is not None:
@@ -307,8 +408,9 @@ class NaturalPostureOptimizer:
             Q = self.db.orientations[idx]                     # (K, 20, 4)
             ori = quat_average(np.swapaxes(Q, 0, 1), np.broadcast_to(inv, (NUM_JOINTS, len(idx))))
         t4 = time.perf_counter()
-        terms = {k: float(v[0]) for k, v in self.energy_terms(z[None], S).items()}
+        zs = z[None]
         return OptimizerResult(
-            positions=x, orientations=ori, neighbours=idx, distances=dist, energy=e, terms=terms,
+            positions=x, orientations=ori, neighbours=idx, distances=dist, energy=e,
             steps=steps, timings_ms={'knn': 1e3 * (t1 - t0), 'local_pca': 1e3 * (t2 - t1),
-                                     'optimise': 1e3 * (t3 - t2), 'orientations': 1e3 * (t4 - t3)})
+                                     'optimise': 1e3 * (t3 - t2), 'orientations': 1e3 * (t4 - t3)},
+            terms_fn=lambda: {k: float(v[0]) for k, v in self.energy_terms(zs, S).items()})

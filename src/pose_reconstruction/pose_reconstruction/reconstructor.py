@@ -58,8 +58,8 @@ from skeleton_core.model import (MIRROR, NUM_JOINTS, NUM_SEGMENTS, ROOT, SEGMENT
 
 from .completion import PCACompletion
 from .optimizer import NaturalPostureOptimizer
-from .posture_space import (ANCESTORS, QueryPreparer, as_database_arrays, fast_denormalize,
-                            orientations_to_sensor, rest_directions, to_sensor_frame,
+from .posture_space import (ANCESTORS, QueryPreparer, as_database_arrays, rest_directions,
+                            to_sensor_frame,
                             user_bone_lengths)
 from .reliability import ReliabilityEstimator
 
@@ -69,6 +69,25 @@ TRUST_MODES = ('noise_ratio', 'distance')
 _SEG_P = np.array(SEGMENT_PARENTS)
 _SEG_C = np.array(SEGMENT_CHILDREN)
 _MIRROR_SEG = np.array([SEGMENT_CHILDREN.index(MIRROR[c]) for c in SEGMENT_CHILDREN])
+# (19, 20): positions -> segment vectors (child - parent); (20, 19): segment vectors -> positions
+# relative to the root (the segments on the way from the root)
+_SEG_DIFF = np.zeros((NUM_SEGMENTS, NUM_JOINTS))
+_SEG_DIFF[np.arange(NUM_SEGMENTS), _SEG_C] = 1.0
+_SEG_DIFF[np.arange(NUM_SEGMENTS), _SEG_P] -= 1.0
+_SEG_CHAIN = ANCESTORS[:, _SEG_C]
+
+
+def _yaw_matrix(yaw: float) -> np.ndarray:
+    """(3, 3) rotation about +z by ``yaw``; ``x @ M.T`` rotates row vectors."""
+    c, s = np.cos(yaw), np.sin(yaw)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def _yaw_quat_matrix(yaw: float) -> np.ndarray:
+    """(4, 4) left multiplication by the quaternion of a rotation about +z (x, y, z, w order):
+    ``quat_multiply(quat_from_yaw(yaw), q) == q @ M.T``."""
+    s, c = np.sin(0.5 * yaw), np.cos(0.5 * yaw)
+    return np.array([[c, -s, 0.0, 0.0], [s, c, 0.0, 0.0], [0.0, 0.0, c, s], [0.0, 0.0, -s, c]])
 RELIABILITY_PARAMS = ('d_min', 'f_b', 'theta_floor_deg', 'theta_roof_deg', 'f_total',
                       'sigma_frames', 'tracked_value', 'inferred_value', 'not_tracked_value',
                       'reference_pose_tolerance_deg', 'reference_frames', 'reference_mode',
@@ -184,8 +203,10 @@ class Reconstructor:
         mc, b, dc = self.smooth
         self._last_stamp: Optional[int] = None
         self._filter_clock_ns = 0
-        self._seg_filter = OneEuroFilter(mc, b, dc, num_joints=NUM_SEGMENTS) if mc > 0 else None
-        self._root_filter = OneEuroFilter(mc, b, dc, num_joints=1) if mc > 0 else None
+        # one filter for the 19 segment vectors and the root (rows 0-18, 19): the same per-row
+        # One Euro filter as two separate ones, in one call
+        self._seg_filter = OneEuroFilter(mc, b, dc, num_joints=NUM_SEGMENTS + 1) if mc > 0 else None
+        self._frozen_lengths: Optional[np.ndarray] = None
         if isinstance(self.core, NaturalPostureOptimizer):
             self.core.reset_rng()
 
@@ -214,21 +235,30 @@ class Reconstructor:
             self._user_lengths = np.where(ok, med, ref)
         return self._user_lengths
 
-    def _observe_lengths(self, positions: np.ndarray, R: np.ndarray) -> None:
+    def _observe_lengths(self, ln: np.ndarray, R: np.ndarray) -> None:
+        """``ln`` (19,) this frame's observed segment lengths, ``R`` (20,) reliabilities."""
         good = (R[_SEG_P] >= self.reliable_threshold) & (R[_SEG_C] >= self.reliable_threshold)
-        ln = np.linalg.norm(positions[_SEG_C] - positions[_SEG_P], axis=1)
         self._lengths[self._lengths_n % self.length_window] = np.where(good, ln, np.nan)
         self._lengths_n += 1
 
-    def output_segment_lengths(self, positions: np.ndarray, R: np.ndarray) -> np.ndarray:
+    def output_segment_lengths(self, positions: np.ndarray, R: np.ndarray,
+                               lengths: Optional[np.ndarray] = None) -> np.ndarray:
         """(19,) constant user lengths of output_mode 'segments': the mean observed length of each
         segment over its first ``length_frames`` reliable observations (both ends at or above
         ``reliable_threshold``), frozen afterwards; a segment not yet observed reliably keeps the
-        reliability reference length it had when first needed."""
+        reliability reference length it had when first needed. ``lengths`` (19,): the observed
+        segment lengths of ``positions`` when already known."""
+        if self._frozen_lengths is not None:
+            return self._frozen_lengths
+        if self.output_scale == 'standard':
+            self._frozen_lengths = self._standard_lengths
+            return self._frozen_lengths
         good = (R[_SEG_P] >= self.reliable_threshold) & (R[_SEG_C] >= self.reliable_threshold)
         good &= self._seg_count < self.length_frames
         if good.any():
-            ln = np.linalg.norm(positions[_SEG_C] - positions[_SEG_P], axis=1)
+            ln = lengths
+            if ln is None:
+                ln = np.linalg.norm(positions[_SEG_C] - positions[_SEG_P], axis=1)
             self._seg_sum[good] += ln[good]
             self._seg_count[good] += 1
         none = self._seg_count == 0
@@ -237,24 +267,28 @@ class Reconstructor:
             if unset.any():
                 self._seg_fallback[unset] = self.reliability.reference_lengths[unset]
         L = np.where(none, self._seg_fallback, self._seg_sum / np.maximum(self._seg_count, 1))
-        if self.output_scale == 'standard':
-            L = self._standard_lengths
-        elif self.symmetric_lengths:
+        if self.symmetric_lengths:
             L = 0.5 * (L + L[_MIRROR_SEG])
+        if self._seg_count.min() >= self.length_frames:
+            self._frozen_lengths = L  # every segment complete: constant from now on
         return L
 
     def _update_trust(self, positions: np.ndarray, w: np.ndarray, rms: float) -> float:
         """The trust in the sensor (module docstring) for this frame, in [0, 1]."""
         if self.trust_mode == 'distance':
             d0 = self.trust_sensor_distance  # standard-body metres
-            return float(np.clip((rms - d0) / max(d0, 1e-6), 0.0, 1.0))
-        rel = w >= self.reliable_threshold
-        if len(self._hist) == 2 and rel.any():
-            a = positions - 2.0 * self._hist[-1] + self._hist[-2]
-            n = float(np.median(np.linalg.norm(a[rel], axis=1)))
-            self._noise_n += 1  # running mean first, then exponential
-            rate = max(self.noise_alpha, 1.0 / self._noise_n)
-            self._noise = n if self._noise is None else (1 - rate) * self._noise + rate * n
+            return min(max((rms - d0) / max(d0, 1e-6), 0.0), 1.0)
+        if len(self._hist) == 2:
+            rel = w >= self.reliable_threshold
+            if rel.any():
+                a = positions - 2.0 * self._hist[-1] + self._hist[-2]
+                a = a[rel]
+                an = np.sort(np.sqrt(np.einsum('jk,jk->j', a, a)))
+                m = len(an)
+                n = 0.5 * float(an[(m - 1) // 2] + an[m // 2])  # the median
+                self._noise_n += 1  # running mean first, then exponential
+                rate = max(self.noise_alpha, 1.0 / self._noise_n)
+                self._noise = n if self._noise is None else (1 - rate) * self._noise + rate * n
         self._hist.append(positions)
         rate = max(2.0 * self.noise_alpha, 1.0 / (self._noise_n + 1))
         self._rms_avg = rms if self._rms_avg is None else (1 - rate) * self._rms_avg + rate * rms
@@ -262,25 +296,46 @@ class Reconstructor:
             return 1.0
         self.noise = self._noise
         r0 = self.trust_sensor_ratio
-        return float(np.clip((self._rms_avg / max(self._noise, 1e-4) - r0) / r0, 0.0, 1.0))
+        return min(max((self._rms_avg / max(self._noise, 1e-4) - r0) / r0, 0.0), 1.0)
 
     def _segments_output(self, frame: SkeletonFrame, solution: np.ndarray, w: np.ndarray,
-                         trust: float) -> np.ndarray:
+                         trust: float, yaw: Optional[float] = None,
+                         seg_obs: Optional[np.ndarray] = None,
+                         len_obs: Optional[np.ndarray] = None) -> np.ndarray:
+        """Output_mode 'segments' (module docstring). ``solution`` (20, 3): in the sensor frame,
+        or, with ``yaw``, the normalised solution (only its segment directions matter: they are
+        turned by ``yaw``). ``seg_obs`` / ``len_obs``: the observed segment vectors (19, 3) and
+        lengths (19,) when already computed."""
         obs = np.asarray(frame.positions, float)
-        L = self.output_segment_lengths(obs, w)
-        vs = solution[_SEG_C] - solution[_SEG_P]
-        us = vs / np.maximum(np.linalg.norm(vs, axis=1, keepdims=True), 1e-9)
-        vo = obs[_SEG_C] - obs[_SEG_P]
-        no = np.linalg.norm(vo, axis=1, keepdims=True)
-        uo = np.where(no > 1e-9, vo / np.maximum(no, 1e-9), us)
+        if seg_obs is None:
+            seg_obs = _SEG_DIFF @ obs
+            len_obs = np.sqrt(np.einsum('sk,sk->s', seg_obs, seg_obs))
+        L = self.output_segment_lengths(obs, w, len_obs)
+        vs = _SEG_DIFF @ solution
+        if yaw is not None:
+            vs = vs @ _yaw_matrix(yaw).T
+        ns = np.sqrt(np.einsum('sk,sk->s', vs, vs))
+        us = vs / np.maximum(ns, 1e-9)[:, None]
+        uo = seg_obs / np.maximum(len_obs, 1e-9)[:, None]
+        zero = len_obs <= 1e-9
+        if zero.any():
+            uo[zero] = us[zero]
         wmin = np.minimum(w[_SEG_P], w[_SEG_C])
-        beta = np.maximum(self.observation_weight * (wmin >= self.reliable_threshold),
-                          trust * np.clip(wmin / max(self.reliable_threshold, 1e-6), 0.0, 1.0))
-        u = (1.0 - beta)[:, None] * us + beta[:, None] * uo
-        nu = np.linalg.norm(u, axis=1, keepdims=True)
-        u = np.where(nu > 1e-9, u / np.maximum(nu, 1e-9), us)
-        v = u * L[:, None]
-        root = obs[ROOT:ROOT + 1]
+        thr = self.reliable_threshold
+        beta = np.minimum(wmin * (1.0 / max(thr, 1e-6)), 1.0)
+        beta *= trust
+        if self.observation_weight > 0.0:
+            np.maximum(beta, self.observation_weight * (wmin >= thr), out=beta)
+        u = us + beta[:, None] * (uo - us)
+        nu = np.sqrt(np.einsum('sk,sk->s', u, u))
+        small = nu <= 1e-9
+        u /= np.maximum(nu, 1e-9)[:, None]
+        if small.any():
+            u[small] = us[small]
+        vr = np.empty((NUM_SEGMENTS + 1, 3))
+        vr[:NUM_SEGMENTS] = u
+        vr[:NUM_SEGMENTS] *= L[:, None]
+        vr[NUM_SEGMENTS] = obs[ROOT]
         if self._seg_filter is not None:
             # filter clock: the stamps' steps where plausible (1 ms - 0.5 s), else 30 Hz
             stamp = int(frame.stamp_ns or 0)
@@ -289,46 +344,53 @@ class Reconstructor:
                 dt = (stamp - self._last_stamp) * 1e-9
             self._last_stamp = stamp
             self._filter_clock_ns += int(round(dt * 1e9))
-            v = self._seg_filter.update(v, None, self._filter_clock_ns)
-            nv = np.linalg.norm(v, axis=1, keepdims=True)
-            v = np.where(nv > 1e-9, v / np.maximum(nv, 1e-9), u) * L[:, None]
-            root = self._root_filter.update(root, None, self._filter_clock_ns)
-        off = np.zeros((NUM_JOINTS, 3))
-        off[_SEG_C] = v
-        return root[0] + ANCESTORS @ off
+            vr = self._seg_filter.update(vr, None, self._filter_clock_ns)
+            v = vr[:NUM_SEGMENTS]
+            nv = np.sqrt(np.einsum('sk,sk->s', v, v))
+            keep = nv > 1e-9
+            v = (v / np.maximum(nv, 1e-9)[:, None]) if keep.all() else \
+                np.where(keep[:, None], v / np.maximum(nv, 1e-9)[:, None], u)
+            v *= L[:, None]
+        else:
+            v = vr[:NUM_SEGMENTS]
+        return vr[NUM_SEGMENTS] + _SEG_CHAIN @ v
 
     def process(self, frame: SkeletonFrame) -> SkeletonFrame:
         t0 = time.perf_counter()
-        R = self._reliability_for(frame)
-        self._observe_lengths(frame.positions, np.asarray(R, float))
+        obs = np.asarray(frame.positions, float)
+        R = np.asarray(self._reliability_for(frame), float)
+        seg_obs = _SEG_DIFF @ obs
+        len_obs = np.sqrt(np.einsum('sk,sk->s', seg_obs, seg_obs))
+        segments = self.method != 'A' and self.output_mode == 'segments'
+        if not segments:
+            self._observe_lengths(len_obs, R)
         t1 = time.perf_counter()
         height = self.reliability.height
-        user_bones = user_bone_lengths(self.user_segment_lengths())
         if self.method == 'A':
+            user_bones = user_bone_lengths(self.user_segment_lengths())
             res = self.core.complete(frame.positions, R, height, frame.orientations, user_bones)
             positions, ori = res.positions, res.orientations
             self.timings_ms = {'reliability': 1e3 * (t1 - t0),
                                'completion': 1e3 * (time.perf_counter() - t1)}
         else:
             w = R if self.use_reliability else np.ones(NUM_JOINTS)
-            prep = self.preparer.prepare(frame.positions, w, height)
+            prep = self.preparer.prepare(obs, w, height)
             yaw = float(prep.transform.yaw)
             prev = []
             for x, y in self._prev:  # bring earlier solutions into this frame's heading
-                dy = y - yaw
-                c, s = np.cos(dy), np.sin(dy)
-                prev.append(x @ np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]).T)
+                prev.append(x @ _yaw_matrix(y - yaw).T)
             res = self.core.solve(prep.query, w, prev[::-1])
             self._prev.append((res.positions, yaw))
             t2 = time.perf_counter()
-            wsum = float(np.sum(w))
+            wsum = float(w.sum())
             rms = float(np.sqrt(res.distances[0] / max(wsum, 1e-6)))
-            alpha = self._update_trust(np.asarray(frame.positions, float), w, rms)
+            alpha = self._update_trust(obs, w, rms)
             self.trust_sensor = alpha
-            if self.output_mode == 'segments':
-                positions = self._segments_output(
-                    frame, fast_denormalize(res.positions, prep.transform), w, alpha)
+            if segments:
+                positions = self._segments_output(frame, res.positions, w, alpha, yaw=yaw,
+                                                  seg_obs=seg_obs, len_obs=len_obs)
             else:
+                user_bones = user_bone_lengths(self.user_segment_lengths())
                 bones = user_bones if self.output_scale == 'user' else None
                 positions = to_sensor_frame(res.positions, prep.transform, bones,
                                             self._rest_dirs)
@@ -338,7 +400,7 @@ class Reconstructor:
                                        + alpha * frame.positions[keep])
             ori = None
             if res.orientations is not None:
-                ori = orientations_to_sensor(res.orientations, yaw)
+                ori = res.orientations @ _yaw_quat_matrix(yaw).T
             elif frame.orientations is not None:
                 ori = frame.orientations.copy()
             self.timings_ms = {'reliability': 1e3 * (t1 - t0),
@@ -347,5 +409,5 @@ class Reconstructor:
                                'output': 1e3 * (time.perf_counter() - t2)}
         self.last_result = res
         return frame.copy(positions=np.asarray(positions, float),
-                          reliability=np.asarray(R, np.float32),
+                          reliability=R.astype(np.float32),
                           orientations=None if ori is None else np.asarray(ori, float))

@@ -30,9 +30,12 @@ from typing import Deque, Optional, Tuple
 import numpy as np
 
 from skeleton_core.geometry import normalize
-from skeleton_core.model import (ELBOW_LEFT, ELBOW_RIGHT, FOOT_LEFT, FOOT_RIGHT, HAND_LEFT, HAND_RIGHT, INFERRED,
-                                 NOT_TRACKED, NUM_JOINTS, NUM_SEGMENTS, SEGMENT_CHILDREN,
-                                 SEGMENT_PARENTS, TRACKED, WRIST_LEFT, WRIST_RIGHT,
+from skeleton_core.model import (ANKLE_LEFT, ANKLE_RIGHT, ELBOW_LEFT, ELBOW_RIGHT, FOOT_LEFT,
+                                 FOOT_RIGHT, HAND_LEFT, HAND_RIGHT, HEAD, HIP_LEFT, HIP_RIGHT,
+                                 INFERRED, KNEE_LEFT, KNEE_RIGHT, NOT_TRACKED, NUM_JOINTS,
+                                 NUM_SEGMENTS, SEGMENT_CHILDREN, SEGMENT_OF_JOINT,
+                                 SEGMENT_PARENTS, SHOULDER_CENTER, SHOULDER_LEFT, SHOULDER_RIGHT,
+                                 SPINE, STANDARD_HEIGHT, TRACKED, WRIST_LEFT, WRIST_RIGHT,
                                  estimate_height, segment_lengths, standard_body)
 
 REFERENCE_MODES = ('observed', 'standard')
@@ -61,6 +64,14 @@ def reference_directions() -> dict:
 _REF_DIRS = reference_directions()
 _POSE_SEGS = np.array([k for k, c in enumerate(SEGMENT_CHILDREN)
                        if c not in (HAND_LEFT, HAND_RIGHT, FOOT_LEFT, FOOT_RIGHT)])
+_REF_STACK = np.stack([_REF_DIRS['tpose'][_POSE_SEGS], _REF_DIRS['standing'][_POSE_SEGS]])
+_REF_NAMES = ('tpose', 'standing')
+# model.estimate_height from precomputed segment lengths: the leg + trunk + head chain against the
+# standard body's
+_HEIGHT_CHAIN = np.array([SEGMENT_OF_JOINT[j] for j in (SPINE, SHOULDER_CENTER, HEAD, KNEE_LEFT,
+                                                        ANKLE_LEFT, KNEE_RIGHT, ANKLE_RIGHT)])
+_HEIGHT_REF = float(standard_body().segment_lengths[_HEIGHT_CHAIN].sum())
+_INCIDENCE_MEAN = INCIDENCE / INCIDENCE.sum(axis=1, keepdims=True)
 
 
 def behaviour_term(history: np.ndarray, d_min: float, f_b: int, theta_floor: float,
@@ -132,6 +143,26 @@ def reference_pose_match(positions: np.ndarray, tolerance_deg: float) -> Optiona
     return best if best_err <= tolerance_deg else None
 
 
+def _pose_match_segments(p: np.ndarray, seg: np.ndarray, ln: np.ndarray,
+                         cos_tolerance: float) -> Optional[str]:
+    """:func:`reference_pose_match` from precomputed segment vectors ``seg`` (19, 3) and lengths
+    ``ln`` (19,): the same heading (hips + shoulders) and decision, compared as cosines."""
+    if ln.min() < 1e-6:
+        return None
+    lx = (p[HIP_LEFT, 0] - p[HIP_RIGHT, 0]) + (p[SHOULDER_LEFT, 0] - p[SHOULDER_RIGHT, 0])
+    ly = (p[HIP_LEFT, 1] - p[HIP_RIGHT, 1]) + (p[SHOULDER_LEFT, 1] - p[SHOULDER_RIGHT, 1])
+    yaw = np.arctan2(-lx, ly)
+    c, s = np.cos(yaw), np.sin(yaw)
+    u = seg[_POSE_SEGS] / ln[_POSE_SEGS, None]
+    rot = np.empty_like(u)
+    rot[:, 0] = c * u[:, 0] + s * u[:, 1]
+    rot[:, 1] = c * u[:, 1] - s * u[:, 0]
+    rot[:, 2] = u[:, 2]
+    worst = np.einsum('rsk,sk->rs', _REF_STACK, rot).min(axis=1)   # smallest cosine per posture
+    best = 0 if worst[0] >= worst[1] else 1
+    return _REF_NAMES[best] if worst[best] >= cos_tolerance else None
+
+
 class ReliabilityEstimator:
     """Streaming per-user reliability (Eq. 1-8). Call :meth:`update` once per frame.
 
@@ -163,6 +194,9 @@ class ReliabilityEstimator:
         self.inferred_value = float(inferred_value)
         self.not_tracked_value = float(not_tracked_value)
         self.reference_pose_tolerance_deg = float(reference_pose_tolerance_deg)
+        self._cos_tolerance = float(np.cos(np.radians(self.reference_pose_tolerance_deg)))
+        self._rt_lut = np.array([not_tracked_value, inferred_value, tracked_value], float)
+        self._gauss = [None] + [gaussian_weights(n, sigma_frames) for n in range(1, f_total + 1)]
         self.reference_frames = int(reference_frames)
         if reference_mode not in REFERENCE_MODES:
             raise ValueError(f'reference_mode must be one of {REFERENCE_MODES}')
@@ -175,7 +209,10 @@ class ReliabilityEstimator:
         self.reset()
 
     def reset(self) -> None:
-        self._positions: Deque[np.ndarray] = collections.deque(maxlen=self.f_b + 2)
+        self._last_p: Optional[np.ndarray] = None     # behaviour term, streamed (Eq. 1-4)
+        self._last_d: Optional[np.ndarray] = None
+        self._last_n: Optional[np.ndarray] = None
+        self._theta: Deque[np.ndarray] = collections.deque(maxlen=self.f_b)
         self._minima: Deque[np.ndarray] = collections.deque(maxlen=self.f_total)
         self._heights: Deque[float] = collections.deque(maxlen=30)
         self._captured: Deque[np.ndarray] = collections.deque(maxlen=self.reference_frames)
@@ -211,13 +248,15 @@ class ReliabilityEstimator:
                 self._reference = std if med is None else np.where(np.isfinite(med), med, std)
         return self._reference
 
-    def _observe_lengths(self, positions: np.ndarray, tracking_state: np.ndarray) -> None:
-        """Running median of the tracked segments' lengths (reference_mode 'observed')."""
+    def _observe_lengths(self, tracked: np.ndarray, lengths: np.ndarray) -> None:
+        """Running median of the tracked segments' lengths (reference_mode 'observed');
+        ``tracked`` (20,) bool, ``lengths`` (19,) this frame's segment lengths."""
         if self.reference_mode != 'observed':
             return
-        good = (tracking_state[_SEG_P] == TRACKED) & (tracking_state[_SEG_C] == TRACKED)
-        self._observed[self._observed_n % self.observed_window] = np.where(
-            good, segment_lengths(positions), np.nan)
+        good = tracked[_SEG_P] & tracked[_SEG_C]
+        row = self._observed[self._observed_n % self.observed_window]
+        row[:] = lengths
+        row[~good] = np.nan
         self._observed_n += 1
         n = self._observed_n
         if n <= 10 or n % 10 == 0:  # often at first, then every 10 frames
@@ -231,10 +270,11 @@ class ReliabilityEstimator:
             if not self._captured:
                 self._reference = None
 
-    def _observe_reference(self, positions: np.ndarray, tracking_state: np.ndarray) -> None:
-        if np.any(tracking_state != TRACKED):
-            return
-        self._heights.append(estimate_height(positions))
+    def _observe_reference(self, positions: np.ndarray, seg: np.ndarray,
+                           lengths: np.ndarray) -> None:
+        """A frame with every joint tracked: height estimate, reference posture capture."""
+        h = STANDARD_HEIGHT * float(lengths[_HEIGHT_CHAIN].sum()) / _HEIGHT_REF
+        self._heights.append(h if np.isfinite(h) else estimate_height(positions))
         self._frames_since_height += 1
         if len(self._heights) < 30 or self._frames_since_height >= 10:
             self._frames_since_height = 0
@@ -242,9 +282,9 @@ class ReliabilityEstimator:
             if abs(h - self._height) > 1e-4:
                 self._height = h
                 self._reference = None
-        pose = reference_pose_match(positions, self.reference_pose_tolerance_deg)
+        pose = _pose_match_segments(positions, seg, lengths, self._cos_tolerance)
         if pose is not None:
-            self._captured.append(segment_lengths(positions))
+            self._captured.append(lengths.copy())
             self.reference_source = pose
             self._reference = None
 
@@ -253,15 +293,47 @@ class ReliabilityEstimator:
         """Add one frame; return the reliability (20,) in [0, 1] (Eq. 8)."""
         p = np.asarray(positions, float)
         ts = np.asarray(tracking_state)
-        self._observe_reference(p, ts)
-        self._observe_lengths(p, ts)
-        self._positions.append(p)
-        rb, _ = behaviour_term(np.asarray(self._positions), self.d_min, self.f_b,
-                               self.theta_floor, self.theta_roof)
-        rk = kinematics_term(p, self.reference_lengths)
-        rt = tracking_term(ts, self.tracked_value, self.inferred_value, self.not_tracked_value)
+        seg = p[_SEG_C] - p[_SEG_P]
+        ln = np.sqrt(np.einsum('sk,sk->s', seg, seg))
+        tracked = ts == TRACKED
+        if tracked.all():
+            self._observe_reference(p, seg, ln)
+        self._observe_lengths(tracked, ln)
+        # Eq. 1-4, one new angle per frame (as behaviour_term on the last f_b + 2 positions)
+        if self._last_p is not None:
+            d = p - self._last_p
+            n = np.sqrt(np.einsum('jk,jk->j', d, d))
+            if self._last_d is not None:
+                ok = (n > self.d_min) & (self._last_n > self.d_min)
+                dot = np.einsum('jk,jk->j', d, self._last_d)
+                cos = np.where(ok, dot / np.where(ok, n * self._last_n, 1.0), 1.0)
+                np.clip(cos, -1.0, 1.0, out=cos)
+                self._theta.append(np.where(ok, np.arccos(cos), 0.0))
+            self._last_d, self._last_n = d, n
+        self._last_p = p
+        if self._theta:
+            mean = sum(self._theta) / self.f_b
+            rb = 1.0 - (np.maximum(np.minimum(mean, self.theta_roof) - self.theta_floor, 0.0)
+                        / (self.theta_roof - self.theta_floor))
+        else:
+            rb = np.ones(NUM_JOINTS)
+        # Eq. 5-6
+        ref = self.reference_lengths
+        ds = np.abs(ln - ref)
+        ds /= np.maximum(ref, 1e-6)
+        np.minimum(ds, 1.0, out=ds)
+        rk = 1.0 - _INCIDENCE_MEAN @ ds
+        # Eq. 7
+        if ts.dtype.kind in 'ui' and ts.size and 0 <= ts.min() and ts.max() <= 2:
+            rt = self._rt_lut[ts]
+        else:
+            rt = tracking_term(ts, self.tracked_value, self.inferred_value, self.not_tracked_value)
         self.last_terms = (rb, rk, rt)
-        self._minima.append(np.minimum(np.minimum(rb, rk), rt))
-        w = gaussian_weights(len(self._minima), self.sigma_frames)
-        self.reliability = np.clip(w @ np.asarray(self._minima), 0.0, 1.0)
-        return self.reliability
+        m = np.minimum(rb, rk)
+        np.minimum(m, rt, out=m)
+        self._minima.append(m)
+        w = self._gauss[len(self._minima)]
+        r = w @ np.asarray(self._minima)
+        np.clip(r, 0.0, 1.0, out=r)
+        self.reliability = r
+        return r

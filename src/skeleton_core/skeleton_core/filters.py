@@ -132,6 +132,7 @@ class OneEuroFilter:
 
     def reset(self):
         self.has = np.zeros(self.n, bool)
+        self.all_started = False  # every row valid in the previous update
         self.x = np.zeros((self.n, 3))
         self.raw = np.zeros((self.n, 3))
         self.dx = np.zeros((self.n, 3))
@@ -145,13 +146,24 @@ class OneEuroFilter:
     def update(self, positions: np.ndarray, tracking_state: Optional[np.ndarray] = None,
                stamp_ns: Optional[int] = None) -> np.ndarray:
         x = np.asarray(positions, float)
-        st = _states(tracking_state, self.n)
-        valid = st != NOT_TRACKED
         dt = self.default_dt
         if stamp_ns is not None and self.t_ns is not None and stamp_ns > self.t_ns:
             dt = (stamp_ns - self.t_ns) * 1e-9
         if stamp_ns is not None:
             self.t_ns = int(stamp_ns)
+        if tracking_state is None and self.all_started:
+            # every row valid and continuing: the same arithmetic without the masks
+            ad = self._alpha(self.d_cutoff, dt)
+            edx = ad * ((x - self.raw) / dt) + (1 - ad) * self.dx
+            cutoff = self.min_cutoff + self.beta * np.sqrt(np.einsum('jk,jk->j', edx, edx))
+            a = (1.0 / (1.0 + (1.0 / (2 * np.pi * cutoff)) / dt))[:, None]
+            out = a * x + (1 - a) * self.x
+            self.dx = edx
+            self.x = out.copy()
+            self.raw = x.copy()
+            return out
+        st = _states(tracking_state, self.n)
+        valid = st != NOT_TRACKED
         out = x.copy()
         cont = valid & self.has
         if cont.any():
@@ -167,4 +179,5 @@ class OneEuroFilter:
         self.x[valid] = out[valid]
         self.raw[valid] = x[valid]
         self.has = valid.copy()
+        self.all_started = bool(valid.all())
         return out

@@ -133,7 +133,7 @@ def quat_average(quats: np.ndarray, weights: Optional[np.ndarray] = None) -> np.
     eigenvector of sum w q q^T), sign-invariant. ``quats`` (..., K, 4), ``weights`` (..., K)."""
     q = np.asarray(quats, float)
     w = np.ones(q.shape[:-1]) if weights is None else np.asarray(weights, float)
-    m = np.einsum('...k,...ki,...kj->...ij', w, q, q)
+    m = np.swapaxes(q * w[..., None], -1, -2) @ q           # sum_k w_k q_k q_k^T (..., 4, 4)
     _, vecs = np.linalg.eigh(m)
     avg = vecs[..., :, -1]
     # deterministic sign: w >= 0
