@@ -74,7 +74,7 @@ PARAMS: List[ParamSpec] = [
               'tick as soon as a target arrives (phase-locked to the sensor: the output leaves '
               'right after its input instead of up to one period later); the timer keeps the '
               'output rate when input is slower or stops. Each tick simulates the wall time since '
-              'the previous one (at most two periods)'),
+              'the previous one (0.5 to 1.5 periods)'),
     ParamSpec('controller', 'actuator_pd',
               'actuator_pd = Eq. 1-2 evaluated by MuJoCo actuators at every step (fast); '
               'explicit_pd = the papers\' external PD forces computed in Python at every step '
@@ -226,8 +226,6 @@ class PhysicsNode(Node):
         self._last_tick: Optional[float] = None
         self._last_input_tick: Optional[float] = None
         self._time_debt = 0.0
-        self._last_arrival: Optional[float] = None   # sync_to_input: input arrivals (monotonic s)
-        self._input_interval: Optional[float] = None
         self.pub = self.create_publisher(SkeletonArray, v['output_topic'], 10)
         self.obj_pub = self.create_publisher(MarkerArray, v['objects_topic'], 10)
         self.create_subscription(SkeletonArray, v['input_topic'], self._on_input, 10)
@@ -289,17 +287,15 @@ class PhysicsNode(Node):
             self.sim.hold(uid, 'mace', self.params['mace_hand'])
             self._mace_given = True
         if self.params['sync_to_input'] and frames:
-            # phase-lock to the sensor: tick now unless the last tick was recent (input faster
-            # than the output rate), and restart the timer's period from here
+            # phase-lock to the sensor: tick now unless the last input tick was recent (input
+            # faster than the output rate: that frame rides on the next tick). While input flows
+            # the timer waits 1.25 periods, so an input arriving a little late still comes first;
+            # when input stops it fires then and falls back to the output rate.
             period = 1.0 / self.params['output_rate']
-            if self._last_arrival is not None and 0.2 * period < now - self._last_arrival < 3 * period:
-                iv = now - self._last_arrival
-                self._input_interval = iv if self._input_interval is None \
-                    else 0.8 * self._input_interval + 0.2 * iv
-            self._last_arrival = now
             if self._last_input_tick is None or now - self._last_input_tick >= 0.75 * period:
                 self._last_input_tick = now
                 self._tick()
+                self.timer.timer_period_ns = int(1.25 * period * 1e9)
                 self.timer.reset()
 
     def _push(self, user_id: int, segment: str, force, duration: float) -> str:
@@ -331,19 +327,18 @@ class PhysicsNode(Node):
 
     # ------------------------------------------------------------------ simulation tick
     def _on_timer(self) -> None:
-        if self.params['sync_to_input'] and self._input_interval is not None:
-            # the next input is due about now: let it trigger the tick (a tick just before it
-            # would make it wait a whole period); when input stops, ticks resume a period later
-            due = self._last_arrival + self._input_interval - time.monotonic()
-            if abs(due) <= 0.25 / self.params['output_rate']:
-                return
+        nominal = int(1e9 / self.params['output_rate'])
+        if self.timer.timer_period_ns != nominal:   # no input in time: back to the output rate
+            self.timer.timer_period_ns = nominal
         self._tick()
 
     def _tick(self) -> None:
         now = time.monotonic()
         period = 1.0 / self.params['output_rate']
         if self.params['sync_to_input'] and self._last_tick is not None:
-            dt = min(max(now - self._last_tick, 0.0), 2.0 * period)   # wall time since the last
+            # the wall time since the last tick, bounded: an overloaded machine gets a slower
+            # simulation at a kept output rate, not ever longer (costlier) ticks
+            dt = min(max(now - self._last_tick, 0.5 * period), 1.5 * period)
         else:
             dt = period
         self._last_tick = now
