@@ -45,7 +45,7 @@ def test_weighted_knn_matches_eq9_brute_force(small_db):
 
 
 def test_energy_terms_match_equations(small_db):
-    opt = NaturalPostureOptimizer(small_db, k=12, pca_dims=5)
+    opt = NaturalPostureOptimizer(small_db, k=12, pca_dims=5, w_style=0.5)
     q = np.asarray(small_db.positions[3], float)
     w = np.full(NUM_JOINTS, 0.5)
     idx, _ = opt.knn_search(q, w)
@@ -243,3 +243,65 @@ def test_fast_paths_equal_the_reference_functions():
         x = rng.normal(0, 0.1, (NUM_JOINTS, 3))
         stamp = t * 33_333_333
         assert np.allclose(a.update(x, None, stamp), b.update(x, ts, stamp), atol=1e-12)
+
+
+def test_filled_segments_are_smoothed_more(small_db):
+    # the right forearm and hand not tracked: those segments come from the database solution and
+    # get smooth_filled_scale times the cutoff; the tracked segments are filtered as before
+    from skeleton_core.model import HAND_RIGHT, NOT_TRACKED, SEGMENT_CHILDREN
+    p = standard_body(1.7).rest_positions()
+    frames = _noisy_frames(p, 60, 0.02, seed=3)
+    ts = np.full(NUM_JOINTS, TRACKED, np.uint8)
+    ts[[WRIST_RIGHT, HAND_RIGHT]] = NOT_TRACKED
+
+    def run_scale(scale, states, frames=frames):
+        r = Reconstructor(small_db, method='C', smooth_filled_scale=scale)
+        return np.array([r.process(SkeletonFrame(positions=f, tracking_state=states,
+                                                 stamp_ns=i * 33_333_333)).positions
+                         for i, f in enumerate(frames)])
+
+    def seg_jitter(out, joint):
+        k = list(SEGMENT_CHILDREN).index(joint)
+        from skeleton_core.model import SEGMENT_PARENTS
+        v = out[:, joint] - out[:, SEGMENT_PARENTS[k]]
+        return np.mean(np.linalg.norm(v[2:] - 2 * v[1:-1] + v[:-2], axis=1))
+    full, soft = run_scale(1.0, ts), run_scale(0.2, ts)
+    assert seg_jitter(soft[20:], HAND_RIGHT) < 0.7 * seg_jitter(full[20:], HAND_RIGHT)
+    # everything tracked and steady (every reliability 1): scale 1 everywhere, the same output
+    all_ts = np.full(NUM_JOINTS, TRACKED, np.uint8)
+    quiet = _noisy_frames(p, 30, 0.002, seed=4)
+    assert np.allclose(run_scale(1.0, all_ts, quiet), run_scale(0.2, all_ts, quiet), atol=1e-12)
+    with pytest.raises(ValueError):
+        Reconstructor(small_db, method='C', smooth_filled_scale=0.0)
+
+
+def test_translation_invariant_knn_and_floating_root(small_db):
+    opt = NaturalPostureOptimizer(small_db, k=8)
+    rng = np.random.default_rng(9)
+    q = np.asarray(small_db.positions[40], float) + rng.normal(0, 0.01, (NUM_JOINTS, 3))
+    w = rng.uniform(0.2, 1.0, NUM_JOINTS)
+    t = np.array([0.08, -0.05, 0.12])
+    idx, d, shifts = opt.knn_search(q + t, w, translate=True)
+    # the distance is Eq. 9 at the best translation, found exactly by brute force
+    X = np.asarray(small_db.positions, float)
+    best_t = np.einsum('njd,j->nd', X - (q + t), w) / w.sum()
+    full = np.einsum('njd,j->n', (X - (q + t) - best_t[:, None]) ** 2, w)
+    assert np.allclose(d, np.sort(full)[:8], atol=1e-9)
+    assert np.allclose(shifts, best_t[idx], atol=1e-12)
+    assert idx[0] == 40 and np.allclose(shifts[0], -t, atol=0.02)
+    # a reconstructor whose root is not tracked and reported 15 cm off: the root is put back
+    from skeleton_core.model import NOT_TRACKED, ROOT
+    p = np.asarray(small_db.positions[40], float) + [2.5, 0.0, 0.0]
+    ts = np.full(NUM_JOINTS, TRACKED, np.uint8)
+    ts[ROOT] = NOT_TRACKED
+    bad = p.copy()
+    bad[ROOT] += (0.0, 0.0, 0.15)
+    errs = {}
+    for flag in (True, False):
+        r = Reconstructor(small_db, method='C', float_root=flag, output_scale='standard')
+        for i in range(20):
+            out = r.process(SkeletonFrame(positions=bad, tracking_state=ts, stamp_ns=i * 33_333_333))
+        errs[flag] = (np.linalg.norm(out.positions[ROOT] - p[ROOT]),
+                      parent_relative_error(out.positions[None], p[None]))
+    assert errs[True][0] < 0.03 < 0.1 < errs[False][0]
+    assert errs[True][1] < errs[False][1]

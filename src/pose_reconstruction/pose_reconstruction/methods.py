@@ -72,7 +72,7 @@ DESCRIPTIONS = {
     'C': 'Shum et al. 2013 reliability-weighted natural-posture-space optimizer',
 }
 _OPT_DEFAULTS = {'k': 30, 'pca_dims': 20, 'steps': 20, 'samples': 100, 'w_control': 1.0,
-                 'w_style': 0.5, 'w_kinematics': 1.5, 'w_continuity': 0.25,
+                 'w_style': 8.0, 'w_kinematics': 1.5, 'w_continuity': 0.25,
                  'solver': 'stochastic'}
 DEFAULTS = {'A': {'pca_dims': 7, 'reliable_threshold': 0.5}, 'B': dict(_OPT_DEFAULTS),
             'C': dict(_OPT_DEFAULTS)}

@@ -92,6 +92,7 @@ class OptimizerResult:
     energy: float
     steps: int                            # optimisation iterations run
     timings_ms: Dict[str, float] = field(default_factory=dict)
+    shift: Optional[np.ndarray] = None    # (3,) translation added to the query (translate=True)
     terms_fn: Optional[Callable[[], Dict[str, float]]] = field(default=None, repr=False)
     _terms: Optional[Dict[str, float]] = field(default=None, repr=False)
 
@@ -107,7 +108,7 @@ class NaturalPostureOptimizer:
     """Methods B/C core. Stateless apart from the RNG: the caller passes the previous solutions."""
 
     def __init__(self, db, k: int = 30, pca_dims: int = 20, steps: int = 20, samples: int = 100,
-                 w_control: float = 1.0, w_style: float = 0.5, w_kinematics: float = 1.5,
+                 w_control: float = 1.0, w_style: float = 8.0, w_kinematics: float = 1.5,
                  w_continuity: float = 0.25, step_scale: float = 0.5,
                  solver: str = 'stochastic', gn_iterations: int = 6, seed: int = 0,
                  knn: str = 'brute', kdtree_dims: int = 12, kdtree_candidates: int = 4):
@@ -120,6 +121,9 @@ class NaturalPostureOptimizer:
         self._Xsq_joint = np.einsum('njd,njd->nj', self.db.positions, self.db.positions)  # (N, 20)
         # Eq. 9 for every posture as one matrix-vector product: [|x_j|^2 (20) | x (60)] . [w | -2 w q]
         self._XA = np.ascontiguousarray(np.hstack((self._Xsq_joint, X)))
+        # (N * 3, 20): coordinate rows of every posture, for weighted centroids (translate=True)
+        self._Xcoord = np.ascontiguousarray(
+            self.db.positions.transpose(0, 2, 1).reshape(-1, NUM_JOINTS), dtype=float)
         self.seed = seed
         self.rng = np.random.default_rng(seed)
         self._kdtree = None
@@ -165,8 +169,12 @@ class NaturalPostureOptimizer:
         self._kd_axes = vt[:self.kdtree_dims]
         self._kdtree = cKDTree((X - self._kd_mean) @ self._kd_axes.T)
 
-    def knn_search(self, query: np.ndarray, weights: np.ndarray):
+    def knn_search(self, query: np.ndarray, weights: np.ndarray, translate: bool = False):
         """K nearest database postures under Eq. 9 with per-joint ``weights`` (20,).
+
+        ``translate``: the distance is minimised over a translation of the query (for a query
+        whose root, and so its origin, is unreliable): ``sum_i w_i |x_i - q_i - t|^2`` at the best
+        ``t`` = weighted centroid of x - that of q. Returns ``(idx, distances, t (K, 3))`` then.
 
         ``knn='brute'``: exact, two BLAS matrix-vector products over the whole database.
         ``knn='kdtree'``: approximate; a cKDTree in a global PCA space proposes
@@ -188,13 +196,22 @@ class NaturalPostureOptimizer:
         v = np.concatenate((w, -2.0 * wq.ravel()))
         d = self._XA @ v
         d += float(np.einsum('jd,jd->', wq, q))
+        if translate:
+            ws = max(float(w.sum()), 1e-12)
+            shift = (self._Xcoord @ w).reshape(-1, 3)
+            shift -= wq.sum(axis=0)
+            shift *= 1.0 / ws
+            d -= ws * np.einsum('nd,nd->n', shift, shift)
         k = self.k
         idx = np.argpartition(d, k - 1)[:k] if k < len(d) else np.arange(len(d))
         dk = d[idx]
         order = np.argsort(dk)
         dk = dk[order]
         np.maximum(dk, 0.0, out=dk)
-        return idx[order], dk
+        idx = idx[order]
+        if translate:
+            return idx, dk, shift[idx]
+        return idx, dk
 
     # -- energy -------------------------------------------------------------------------------
     def _setup(self, Y: np.ndarray, query: np.ndarray, weights: np.ndarray,
@@ -368,15 +385,26 @@ class NaturalPostureOptimizer:
 
     # -- one frame ----------------------------------------------------------------------------
     def solve(self, query: np.ndarray, weights: np.ndarray,
-              previous: Sequence[np.ndarray] = ()) -> OptimizerResult:
+              previous: Sequence[np.ndarray] = (), translate: bool = False) -> OptimizerResult:
         """``query`` (20, 3) normalised standard-body posture, ``weights`` (20,) reliabilities,
-        ``previous`` up to two earlier solutions, most recent first, in the query's frame."""
+        ``previous`` up to two earlier solutions, most recent first, in the query's frame.
+        ``translate``: the query's origin (its root) is not trusted: the KNN search is translation
+        invariant and the query is moved by the neighbours' inverse-distance-weighted mean
+        translation (``OptimizerResult.shift``) before the optimisation."""
         t0 = time.perf_counter()
         w = np.asarray(weights, float)
         if w.min() < 0.0 or w.max() > 1.0:
             w = np.clip(w, 0.0, 1.0)
         w_knn = w if w.sum() > 1e-6 else np.ones_like(w)
-        idx, dist = self.knn_search(query, w_knn)
+        shift = None
+        query = np.asarray(query, float)
+        if translate:
+            idx, dist, shifts = self.knn_search(query, w_knn, translate=True)
+            inv = 1.0 / (dist + 1e-6)
+            shift = (inv @ shifts) / inv.sum()
+            query = query + shift
+        else:
+            idx, dist = self.knn_search(query, w_knn)
         t1 = time.perf_counter()
         if len(previous) >= 2:
             c = 2.0 * previous[0] - previous[1]
@@ -384,7 +412,7 @@ class NaturalPostureOptimizer:
             c = previous[0]
         else:
             c = None
-        S = self._setup(self._X[idx], np.asarray(query, float), w, c)
+        S = self._setup(self._X[idx], query, w, c)
         t2 = time.perf_counter()
         # initial sample: best of the neighbours' mean, the previous solution and the nearest one
         V, mu = S['V'], S['mu']
@@ -411,6 +439,6 @@ class NaturalPostureOptimizer:
         zs = z[None]
         return OptimizerResult(
             positions=x, orientations=ori, neighbours=idx, distances=dist, energy=e,
-            steps=steps, timings_ms={'knn': 1e3 * (t1 - t0), 'local_pca': 1e3 * (t2 - t1),
+            steps=steps, shift=shift, timings_ms={'knn': 1e3 * (t1 - t0), 'local_pca': 1e3 * (t2 - t1),
                                      'optimise': 1e3 * (t3 - t2), 'orientations': 1e3 * (t4 - t3)},
             terms_fn=lambda: {k: float(v[0]) for k, v in self.energy_terms(zs, S).items()})

@@ -22,7 +22,8 @@ SPECS = [
     ParamSpec('steps', 20, 'Table V: maximum optimisation steps', (0, 1000)),
     ParamSpec('samples', 100, 'Table V: samples per optimisation step', (1, 100000)),
     ParamSpec('w_control', 1.0, 'Eq. 15: weight of the control term E_c', (0.0, 1000.0)),
-    ParamSpec('w_style', 0.5, 'Eq. 15: weight of the style term E_s', (0.0, 1000.0)),
+    ParamSpec('w_style', 8.0, 'Eq. 15: weight of the style term E_s (paper 0.5; 8 measured on '
+              'the sensor-model streams)', (0.0, 1000.0)),
     ParamSpec('w_kinematics', 1.5, 'Eq. 15: weight of the kinematics term E_k', (0.0, 1000.0)),
     ParamSpec('w_continuity', 0.25, 'Eq. 15: weight of the continuity term E_m', (0.0, 1000.0)),
     ParamSpec('step_scale', 0.5, 'stochastic search: sample spread in neighbour standard deviations',
@@ -64,11 +65,18 @@ SPECS = [
               'segments: reliable observations averaged per segment length, then frozen',
               (1, 100000)),
     ParamSpec('symmetric_lengths', True, 'segments: left and right limbs share their mean lengths'),
-    ParamSpec('smooth_min_cutoff', 2.0,
+    ParamSpec('smooth_min_cutoff', 3.0,
               'segments: One Euro minimum cutoff (Hz) of segment and root smoothing, 0 = off',
               (0.0, 1000.0)),
     ParamSpec('smooth_beta', 10.0, 'segments: One Euro speed coefficient (s/m)', (0.0, 1e6)),
     ParamSpec('smooth_d_cutoff', 1.0, 'segments: One Euro speed cutoff (Hz)', (1e-3, 1000.0)),
+    ParamSpec('smooth_filled_scale', 0.2,
+              'segments: cutoff factor of a segment the database fills in (an end with '
+              'reliability 0; 1 at or above reliable_threshold, linear between), 1 = same '
+              'smoothing everywhere', (0.01, 1.0)),
+    ParamSpec('float_root', True,
+              'when the root joint is unreliable, match the database translation-invariantly '
+              'and place the root (and the query) where the neighbours put it'),
 ]
 CORE_NAMES = [s.name for s in SPECS if s.name not in ('database', 'method')]
 

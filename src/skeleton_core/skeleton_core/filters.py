@@ -144,7 +144,10 @@ class OneEuroFilter:
         return 1.0 / (1.0 + tau / dt)
 
     def update(self, positions: np.ndarray, tracking_state: Optional[np.ndarray] = None,
-               stamp_ns: Optional[int] = None) -> np.ndarray:
+               stamp_ns: Optional[int] = None,
+               cutoff_scale: Optional[np.ndarray] = None) -> np.ndarray:
+        """Filter one frame. ``cutoff_scale`` (n,) > 0 optionally multiplies each row's cutoff
+        (lower = smoother for that row)."""
         x = np.asarray(positions, float)
         dt = self.default_dt
         if stamp_ns is not None and self.t_ns is not None and stamp_ns > self.t_ns:
@@ -156,6 +159,8 @@ class OneEuroFilter:
             ad = self._alpha(self.d_cutoff, dt)
             edx = ad * ((x - self.raw) / dt) + (1 - ad) * self.dx
             cutoff = self.min_cutoff + self.beta * np.sqrt(np.einsum('jk,jk->j', edx, edx))
+            if cutoff_scale is not None:
+                cutoff = cutoff * cutoff_scale
             a = (1.0 / (1.0 + (1.0 / (2 * np.pi * cutoff)) / dt))[:, None]
             out = a * x + (1 - a) * self.x
             self.dx = edx
@@ -171,6 +176,8 @@ class OneEuroFilter:
             ad = self._alpha(self.d_cutoff, dt)
             edx = ad * dx + (1 - ad) * self.dx[cont]
             cutoff = self.min_cutoff + self.beta * np.linalg.norm(edx, axis=1, keepdims=True)
+            if cutoff_scale is not None:
+                cutoff = cutoff * np.asarray(cutoff_scale, float)[cont][:, None]
             a = self._alpha(cutoff, dt)
             out[cont] = a * x[cont] + (1 - a) * self.x[cont]
             self.dx[cont] = edx
