@@ -289,7 +289,8 @@ def test_translation_invariant_knn_and_floating_root(small_db):
     assert np.allclose(d, np.sort(full)[:8], atol=1e-9)
     assert np.allclose(shifts, best_t[idx], atol=1e-12)
     assert idx[0] == 40 and np.allclose(shifts[0], -t, atol=0.02)
-    # a reconstructor whose root is not tracked and reported 15 cm off: the root is put back
+    # a reconstructor whose root is not tracked and reported 15 cm off: with the database
+    # trusted (trust 0) the root is put back
     from skeleton_core.model import NOT_TRACKED, ROOT
     p = np.asarray(small_db.positions[40], float) + [2.5, 0.0, 0.0]
     ts = np.full(NUM_JOINTS, TRACKED, np.uint8)
@@ -298,10 +299,17 @@ def test_translation_invariant_knn_and_floating_root(small_db):
     bad[ROOT] += (0.0, 0.0, 0.15)
     errs = {}
     for flag in (True, False):
-        r = Reconstructor(small_db, method='C', float_root=flag, output_scale='standard')
+        r = Reconstructor(small_db, method='C', float_root=flag, output_scale='standard',
+                          trust_mode='distance', trust_sensor_distance=100.0)
         for i in range(20):
             out = r.process(SkeletonFrame(positions=bad, tracking_state=ts, stamp_ns=i * 33_333_333))
         errs[flag] = (np.linalg.norm(out.positions[ROOT] - p[ROOT]),
                       parent_relative_error(out.positions[None], p[None]))
     assert errs[True][0] < 0.03 < 0.1 < errs[False][0]
     assert errs[True][1] < errs[False][1]
+    # a trusted sensor (trust 1) keeps its own root
+    r = Reconstructor(small_db, method='C', output_scale='standard', trust_mode='distance',
+                      trust_sensor_distance=1e-6)
+    for i in range(20):
+        out = r.process(SkeletonFrame(positions=bad, tracking_state=ts, stamp_ns=i * 33_333_333))
+    assert r.trust_sensor == 1.0 and np.allclose(out.positions[ROOT], bad[ROOT], atol=1e-9)

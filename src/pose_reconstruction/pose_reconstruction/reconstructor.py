@@ -34,8 +34,8 @@ Unreliable root (``float_root``, default on): the query is expressed relative to
 so a root that is occluded (Kinect: INFERRED at a stale position) would shift every reliable joint
 of the query. When the root's reliability is below ``reliable_threshold`` the KNN search minimises
 Eq. 9 over a translation of the query, the query is moved by the neighbours' (inverse-distance
-weighted) best translation before the optimisation, and the output root is put where that
-translation places it (then smoothed as usual).
+weighted) best translation before the optimisation, and the output root is moved by that
+translation times (1 - the trust in the sensor, below): a trusted sensor keeps its root.
 
 Trust in the sensor (graceful degradation), ``trust_mode``:
 
@@ -413,8 +413,10 @@ class Reconstructor:
             alpha = self._update_trust(obs, w, rms)
             self.trust_sensor = alpha
             root = None
-            if res.shift is not None:  # the root where the database neighbours place it
-                root = obs[ROOT] - (_yaw_matrix(yaw) @ res.shift) / prep.scale
+            if res.shift is not None and alpha < 1.0:
+                # the root towards where the database neighbours place it, as far as the
+                # database is trusted more than the sensor
+                root = obs[ROOT] - ((1.0 - alpha) / prep.scale) * (_yaw_matrix(yaw) @ res.shift)
             if segments:
                 positions = self._segments_output(frame, res.positions, w, alpha, yaw=yaw,
                                                   seg_obs=seg_obs, len_obs=len_obs, root=root)
