@@ -42,7 +42,7 @@ def process(bag: Path, out: Path, method: str = 'C', database: str = '', physics
             progress: bool = True, params: Optional[Dict] = None) -> Dict:
     """Process ``bag`` into ``out``; returns a summary (frames, wall time, accuracy)."""
     from skeleton_core.bagio import BagWriter, bag_topics, read_messages
-    from skeleton_core.conversions import frames_from_array_msg, frames_to_array_msg
+    from skeleton_core.cdr import SKELETON_ARRAY, CdrError, frames_from_cdr, frames_to_cdr
     from .node_common import load_database
     from .reconstructor import Reconstructor
 
@@ -66,19 +66,31 @@ def process(bag: Path, out: Path, method: str = 'C', database: str = '', physics
     bar = _progress(n_in, progress)
     t0 = time.perf_counter()
     frame_no = 0
+    corrupt = 0
     out.parent.mkdir(parents=True, exist_ok=True)
     with BagWriter(str(out)) as writer:
-        for m in read_messages(str(bag), decode={input_topic, '/kinect/ground_truth'}):
+        # SkeletonArray bytes are decoded and encoded by skeleton_core.cdr (numpy), not through
+        # rclpy message objects: the I/O would otherwise cost as much as the reconstruction
+        for m in read_messages(str(bag), decode=False):
             writer.write_raw(m.topic, m.data, m.stamp_ns, m.msgtype)
             if m.topic == '/kinect/ground_truth' and m.msgtype == SKELETONS:
-                for f in frames_from_array_msg(m.msg):
-                    truth[(f.user_id, f.stamp_ns)] = f.positions
+                try:
+                    for f in frames_from_cdr(m.data)[2]:
+                        truth[(f.user_id, f.stamp_ns)] = f.positions
+                except CdrError:
+                    corrupt += 1
                 continue
             if m.topic != input_topic:
                 continue
+            if m.msgtype != SKELETON_ARRAY:
+                raise ValueError(f'{bag}: {input_topic} holds {m.msgtype}, not {SKELETON_ARRAY}')
             frame_no += 1
             bar.update(1)
-            frames = frames_from_array_msg(m.msg, errors)
+            try:
+                stamp, frame_id, frames = frames_from_cdr(m.data, errors)
+            except CdrError:   # a corrupt message: skipped and counted, the rest goes on
+                corrupt += 1
+                continue
             outs = []
             for f in frames:
                 r = users.get(f.user_id)
@@ -92,21 +104,19 @@ def process(bag: Path, out: Path, method: str = 'C', database: str = '', physics
             for uid in [u for u, k in last_seen.items() if frame_no - k > user_timeout_frames]:
                 users.pop(uid, None)
                 last_seen.pop(uid, None)
-            stamp = m.msg.header.stamp.sec * 1_000_000_000 + m.msg.header.stamp.nanosec
-            frame_id = m.msg.header.frame_id
-            writer.write(out_topic, frames_to_array_msg(outs, stamp, frame_id), m.stamp_ns, SKELETONS)
+            writer.write_raw(out_topic, frames_to_cdr(outs, stamp, frame_id), m.stamp_ns, SKELETONS)
             if sim is not None:
                 sims = [s for s in (sim.process(o) for o in outs) if s is not None]
                 for s in sims:
                     char[(s.user_id, s.stamp_ns)] = s.positions
-                writer.write('/character/skeletons', frames_to_array_msg(sims, stamp, frame_id),
-                             m.stamp_ns, SKELETONS)
+                writer.write_raw('/character/skeletons', frames_to_cdr(sims, stamp, frame_id),
+                                 m.stamp_ns, SKELETONS)
     bar.close()
     wall = time.perf_counter() - t0
     summary = {'input': str(bag), 'output': str(out), 'method': method, 'frames': frame_no,
                'wall_s': wall, 'recorded_s': frame_no / 30.0,
                'x_real_time': (frame_no / 30.0) / wall if wall > 0 else float('nan'),
-               'dropped_skeletons': len(errors), 'physics': physics}
+               'dropped_skeletons': len(errors), 'corrupt_messages': corrupt, 'physics': physics}
     if truth:
         summary['accuracy'] = accuracy(truth, {'raw': raw, method: rec, **({'physics': char} if char else {})})
     return summary

@@ -110,6 +110,21 @@ def ns_to_stamp(ns: int, stamp=None):
     return stamp
 
 
+def frame_from_arrays(positions, tracking_state, reliability, orientations, user_id: int,
+                      stamp_ns: int, frame_id: str) -> SkeletonFrame:
+    """A validated :class:`SkeletonFrame` from the fields of a ``Skeleton`` message as arrays
+    (``orientations`` None or empty = unknown)."""
+    p = np.asarray(positions, float)
+    if p.ndim != 2 or len(p) != NUM_JOINTS:
+        raise SkeletonFormatError('wrong length',
+                                  f'positions must have {NUM_JOINTS} entries, got {len(p)}')
+    q = None if orientations is None or len(orientations) == 0 else np.asarray(orientations, float)
+    p, t, r, q = validate_arrays(p, np.asarray(tracking_state).astype(np.int64),
+                                 np.asarray(reliability, dtype=np.float32), q)
+    return SkeletonFrame(positions=p, tracking_state=t, reliability=r, orientations=q,
+                         user_id=int(user_id), stamp_ns=int(stamp_ns), frame_id=frame_id)
+
+
 def skeleton_from_msg(msg) -> SkeletonFrame:
     """``skeleton_msgs/Skeleton`` -> :class:`SkeletonFrame` (validated)."""
     pos = [(pt.x, pt.y, pt.z) for pt in msg.positions]
@@ -119,12 +134,8 @@ def skeleton_from_msg(msg) -> SkeletonFrame:
     quats = [(q.x, q.y, q.z, q.w) for q in msg.orientations]
     ts = msg.tracking_state
     ts = np.frombuffer(ts, dtype=np.uint8) if isinstance(ts, (bytes, bytearray)) else np.asarray(ts)
-    p, t, r, q = validate_arrays(np.array(pos), ts.astype(np.int64),
-                                 np.asarray(msg.reliability, dtype=np.float32),
-                                 np.array(quats) if quats else None)
-    return SkeletonFrame(positions=p, tracking_state=t, reliability=r, orientations=q,
-                         user_id=int(msg.user_id), stamp_ns=stamp_to_ns(msg.header.stamp),
-                         frame_id=msg.header.frame_id)
+    return frame_from_arrays(pos, ts, msg.reliability, quats, msg.user_id,
+                             stamp_to_ns(msg.header.stamp), msg.header.frame_id)
 
 
 def skeleton_to_msg(frame: SkeletonFrame, msg=None):
@@ -160,15 +171,16 @@ def frames_to_array_msg(frames: Iterable[SkeletonFrame], stamp_ns: int, frame_id
     return out
 
 
-def frames_from_array_msg(msg, errors: Optional[List[SkeletonFormatError]] = None
-                          ) -> List[SkeletonFrame]:
-    """``skeleton_msgs/SkeletonArray`` -> frames. Malformed skeletons are skipped and, when
-    ``errors`` is given, appended to it; duplicate user ids keep the first skeleton."""
+def collect_frames(items, build, header_frame_id: str,
+                   errors: Optional[List[SkeletonFormatError]] = None) -> List[SkeletonFrame]:
+    """``build(item)`` for every skeleton of a SkeletonArray: malformed skeletons are skipped and,
+    when ``errors`` is given, appended to it; duplicate user ids keep the first skeleton; a
+    skeleton without a frame id takes the array's."""
     out: List[SkeletonFrame] = []
     seen = set()
-    for sk in msg.skeletons:
+    for item in items:
         try:
-            f = skeleton_from_msg(sk)
+            f = build(item)
         except SkeletonFormatError as e:
             if errors is not None:
                 errors.append(e)
@@ -179,6 +191,13 @@ def frames_from_array_msg(msg, errors: Optional[List[SkeletonFormatError]] = Non
             continue
         seen.add(f.user_id)
         if not f.frame_id:
-            f.frame_id = msg.header.frame_id
+            f.frame_id = header_frame_id
         out.append(f)
     return out
+
+
+def frames_from_array_msg(msg, errors: Optional[List[SkeletonFormatError]] = None
+                          ) -> List[SkeletonFrame]:
+    """``skeleton_msgs/SkeletonArray`` -> frames. Malformed skeletons are skipped and, when
+    ``errors`` is given, appended to it; duplicate user ids keep the first skeleton."""
+    return collect_frames(msg.skeletons, skeleton_from_msg, msg.header.frame_id, errors)
