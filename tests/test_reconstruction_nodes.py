@@ -154,6 +154,8 @@ def test_missing_database_is_one_clear_error(tmp_path):
 def test_state_per_user_dropped_after_timeout(rclpy_context, case):
     from rclpy.parameter import Parameter
 
+    from rclpy.serialization import serialize_message
+
     from pose_reconstruction.reliability_node import ReliabilityNode
     from skeleton_core.conversions import SkeletonFrame, frames_to_array_msg
 
@@ -166,7 +168,8 @@ def test_state_per_user_dropped_after_timeout(rclpy_context, case):
         def send(uids, stamp):
             frames = [SkeletonFrame(positions=obs[0], tracking_state=ts[0], user_id=u,
                                     stamp_ns=stamp) for u in uids]
-            node._on_msg(frames_to_array_msg(frames, stamp, 'k'))
+            # the node subscribes serialized messages (raw=True): what DDS hands it
+            node._on_msg(serialize_message(frames_to_array_msg(frames, stamp, 'k')))
         send([1, 2], 1_000)
         assert set(node._users) == {1, 2}
         time.sleep(0.3)

@@ -21,6 +21,7 @@ from typing import List
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
 
+from skeleton_core.cdr import frames_to_cdr
 from skeleton_core.conversions import frames_from_array_msg, frames_to_array_msg, ns_to_stamp
 from skeleton_core.health import Health
 from skeleton_core.rosnode import DiagnosticsPublisher, ParamSpec, Parameters, run_node
@@ -235,17 +236,21 @@ class DriverNode(Node):
             stamp = now if (v['source'] == 'replay' and v['restamp']) else out.stamp_ns
             frames = [f.copy(stamp_ns=stamp) for f in out.frames] if stamp != out.stamp_ns \
                 else out.frames
+            fid = out.frame_id or v['frame_id']
             try:
-                msg = frames_to_array_msg(frames, stamp, out.frame_id or v['frame_id'])
+                if v['publish_tf'] and self.tf_pub is not None:
+                    msg = frames_to_array_msg(frames, stamp, fid)   # the TF needs the message
+                    data = msg
+                else:   # serialized directly (skeleton_core.cdr): no message objects per joint
+                    data = frames_to_cdr(frames, stamp, fid)
             except ValueError as e:
                 if self.health.on_drop(getattr(e, 'cause', 'invalid skeleton')):
                     self.get_logger().warning(f'dropped a frame: {e}')
                 return
-            self.pub.publish(msg)
+            self.pub.publish(data)
         self.health.on_publish(latency_s=(now - stamp) / 1e9 if live_stamp else None)
         if out.truth is not None and v['publish_ground_truth'] and self.truth_pub is not None:
-            self.truth_pub.publish(frames_to_array_msg(out.truth, stamp,
-                                                       out.frame_id or v['frame_id']))
+            self.truth_pub.publish(frames_to_cdr(out.truth, stamp, out.frame_id or v['frame_id']))
         if v['publish_tf'] and self.tf_pub is not None and msg is not None:
             self._publish_tf(msg)
 

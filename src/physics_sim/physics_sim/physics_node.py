@@ -30,8 +30,8 @@ import numpy as np
 import rclpy
 from geometry_msgs.msg import WrenchStamped
 from rclpy.node import Node
-from skeleton_core.conversions import (SkeletonFormatError, SkeletonFrame, frames_from_array_msg,
-                                       frames_to_array_msg, ns_to_stamp)
+from skeleton_core.cdr import CdrError, frames_from_cdr, frames_to_cdr
+from skeleton_core.conversions import SkeletonFormatError, SkeletonFrame, ns_to_stamp
 from skeleton_core.health import Health
 from skeleton_core.model import NUM_JOINTS, TRACKED
 from skeleton_core.rosnode import DiagnosticsPublisher, Parameters, ParamSpec, run_node
@@ -228,7 +228,8 @@ class PhysicsNode(Node):
         self._time_debt = 0.0
         self.pub = self.create_publisher(SkeletonArray, v['output_topic'], 10)
         self.obj_pub = self.create_publisher(MarkerArray, v['objects_topic'], 10)
-        self.create_subscription(SkeletonArray, v['input_topic'], self._on_input, 10)
+        # serialized in and out (skeleton_core.cdr): no rclpy message objects per joint
+        self.create_subscription(SkeletonArray, v['input_topic'], self._on_input, 10, raw=True)
         self.create_subscription(WrenchStamped, '~/push', self._on_push_topic, 10)
         self.create_service(ApplyPush, '~/apply_push', self._on_push_srv)
         self.timer = self.create_timer(1.0 / v['output_rate'], self._on_timer)
@@ -264,20 +265,24 @@ class PhysicsNode(Node):
         if self.health.on_drop(cause):
             self.get_logger().warning(f'dropping input ({cause}): {detail} (logged once per cause)')
 
-    def _on_input(self, msg: SkeletonArray) -> None:
+    def _on_input(self, data: bytes) -> None:
         self.health.on_receive()
         errors: list = []
-        frames = frames_from_array_msg(msg, errors=errors)
+        try:
+            header_stamp, header_frame, frames = frames_from_cdr(data, errors)
+        except CdrError as e:
+            self._drop('malformed message', str(e))
+            return
         for e in errors:
             cause = getattr(e, 'cause', 'malformed')
             self._drop(cause, str(e))
         now = time.monotonic()
         self._last_msg = now
-        if msg.header.frame_id:
-            self.frame_id = msg.header.frame_id
+        if header_frame:
+            self.frame_id = header_frame
         for f in frames:
             try:
-                stamp = f.stamp_ns or (msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec)
+                stamp = f.stamp_ns or header_stamp
                 self.sim.set_target(f.user_id, f.positions, f.orientations, stamp)
                 self._last_seen[f.user_id] = now
             except (SkeletonFormatError, ValueError) as e:
@@ -386,8 +391,7 @@ class PhysicsNode(Node):
                 reliability=np.ones(NUM_JOINTS, np.float32), orientations=st.orientations_sensor,
                 user_id=uid, stamp_ns=st.stamp_ns, frame_id=self.frame_id))
             latest = max(latest, st.stamp_ns)
-        msg = frames_to_array_msg(frames, latest, self.frame_id)
-        self.pub.publish(msg)
+        self.pub.publish(frames_to_cdr(frames, latest, self.frame_id))
         self._published_empty = not frames
         lat = None
         if latest:

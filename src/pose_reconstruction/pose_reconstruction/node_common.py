@@ -15,8 +15,8 @@ from typing import Any, Callable, Dict, List, Optional
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
 
-from skeleton_core.conversions import (SkeletonFormatError, frames_from_array_msg,
-                                       skeleton_to_msg, stamp_to_ns)
+from skeleton_core.cdr import CdrError, frames_from_cdr, frames_to_cdr
+from skeleton_core.conversions import SkeletonFormatError, validate_arrays
 from skeleton_core.health import Health
 from skeleton_core.rosnode import DiagnosticsPublisher, ParamSpec, Parameters
 
@@ -86,8 +86,9 @@ class SkeletonArrayNode(Node):
         depth = self.params['qos_depth']
         self._pub = self.create_publisher(SkeletonArray, self.params['output_topic'],
                                           QoSProfile(depth=depth))
+        # serialized in and out (skeleton_core.cdr): no rclpy message objects per joint
         self._sub = self.create_subscription(SkeletonArray, self.params['input_topic'],
-                                             self._on_msg, QoSProfile(depth=depth))
+                                             self._on_msg, QoSProfile(depth=depth), raw=True)
         self._timer = self.create_timer(0.5, self._purge)
         self.diagnostics = DiagnosticsPublisher(self, self.health, extra=self.diagnostics_extra)
         self.get_logger().info(f"{self.params['input_topic']} -> {self.params['output_topic']}")
@@ -142,13 +143,14 @@ class SkeletonArrayNode(Node):
                 self._users.pop(uid, None)
                 self._last_seen.pop(uid, None)
 
-    def _on_msg(self, msg) -> None:
+    def _on_msg(self, data: bytes) -> None:
         t0 = time.monotonic()
         self.health.on_receive()
+        errors: List[SkeletonFormatError] = []
         try:
-            stamp = stamp_to_ns(msg.header.stamp)
-        except Exception:  # noqa: BLE001 - a malformed header is a dropped message, not a crash
-            self._drop('malformed header')
+            stamp, frame_id, frames = frames_from_cdr(data, errors)
+        except CdrError as e:  # undecodable: a dropped message, not a crash
+            self._drop('malformed message', str(e))
             return
         with self._lock:
             if stamp != 0 and self._last_stamp_ns is not None and stamp <= self._last_stamp_ns:
@@ -164,12 +166,9 @@ class SkeletonArrayNode(Node):
                 self._last_seen.clear()
             if stamp != 0:
                 self._last_stamp_ns = stamp
-            errors: List[SkeletonFormatError] = []
-            frames = frames_from_array_msg(msg, errors)
             for e in errors:
                 self._drop(e.cause, e.detail)
-            out = type(msg)()
-            out.header = msg.header
+            results = []
             self._purge()
             for f in frames:
                 proc = self._users.get(f.user_id)
@@ -180,13 +179,15 @@ class SkeletonArrayNode(Node):
                     f.stamp_ns = stamp
                 try:
                     res = proc.process(f)
-                    out.skeletons.append(skeleton_to_msg(res))
+                    validate_arrays(res.positions, res.tracking_state, res.reliability,
+                                    res.orientations)
+                    results.append(res)
                 except SkeletonFormatError as e:
                     self._drop('bad result: ' + e.cause, e.detail)
                 except (ValueError, FloatingPointError, ArithmeticError, IndexError) as e:
                     self._drop('processing error', f'{type(e).__name__}: {e}')
                     proc.reset()
-        self._pub.publish(out)
+        self._pub.publish(frames_to_cdr(results, stamp, frame_id))
         self.health.on_publish(latency_s=time.monotonic() - t0)
 
 

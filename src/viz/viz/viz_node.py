@@ -20,7 +20,8 @@ from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
 from visualization_msgs.msg import Marker, MarkerArray
 
-from skeleton_core.conversions import frames_from_array_msg, ns_to_stamp
+from skeleton_core.cdr import CdrError, frames_from_cdr
+from skeleton_core.conversions import ns_to_stamp
 from skeleton_core.health import Health
 from skeleton_core.rosnode import DiagnosticsPublisher, Parameters, ParamSpec, run_node
 
@@ -224,9 +225,9 @@ class VizNode(Node):
         self._pub = self.create_publisher(MarkerArray, v['markers_topic'], 10)
         from skeleton_msgs.msg import SkeletonArray
         for layer, key in _LAYER_TOPIC.items():
-            self.create_subscription(SkeletonArray, v[key],
-                                     lambda msg, layer=layer: self._on_skeletons(layer, msg),
-                                     qos_profile_sensor_data)
+            self.create_subscription(SkeletonArray, v[key],   # serialized (skeleton_core.cdr)
+                                     lambda data, layer=layer: self._on_skeletons(layer, data),
+                                     qos_profile_sensor_data, raw=True)
         self.create_subscription(MarkerArray, v['objects_topic'], self._on_objects, 10)
         self._timer = self.create_timer(1.0 / v['max_rate_hz'], self._tick)
         self._diag = DiagnosticsPublisher(self, self.health, extra=lambda: {
@@ -259,10 +260,16 @@ class VizNode(Node):
         return None
 
     # ---------------------------------------------------------------- inputs
-    def _on_skeletons(self, layer: str, msg) -> None:
+    def _on_skeletons(self, layer: str, data: bytes) -> None:
         self.health.on_receive()
         errors = []
-        frames = frames_from_array_msg(msg, errors)
+        try:
+            frames = frames_from_cdr(data, errors)[2]
+        except CdrError as e:
+            if self.health.on_drop('malformed message'):
+                self.get_logger().warning(f'{layer}: dropped a malformed message ({e}); '
+                                          'further drops of this cause are only counted')
+            return
         for e in errors:
             if self.health.on_drop(e.cause):
                 self.get_logger().warning(f'{layer}: dropped a skeleton ({e}); '
