@@ -12,6 +12,8 @@ export KINECT_POSTURE_ROOT="$_kp_root"
 export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
 export ROS_DOMAIN_ID="${ROS_DOMAIN_ID:-42}"
 export PYTHONUNBUFFERED=1
+# single-threaded BLAS: the per-frame maths is small matrices; BLAS threads only spin (see skeleton_core)
+export OPENBLAS_NUM_THREADS="${OPENBLAS_NUM_THREADS:-1}" OMP_NUM_THREADS="${OMP_NUM_THREADS:-1}"
 export RCUTILS_COLORIZED_OUTPUT="${RCUTILS_COLORIZED_OUTPUT:-0}"
 export MPLBACKEND="${MPLBACKEND:-Agg}"
 
