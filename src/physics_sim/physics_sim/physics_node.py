@@ -293,15 +293,12 @@ class PhysicsNode(Node):
             self._mace_given = True
         if self.params['sync_to_input'] and frames:
             # phase-lock to the sensor: tick now unless the last input tick was recent (input
-            # faster than the output rate: that frame rides on the next tick). While input flows
-            # the timer waits 1.25 periods, so an input arriving a little late still comes first;
-            # when input stops it fires then and falls back to the output rate.
+            # faster than the output rate: that frame rides on the next tick); the timer only
+            # ticks when no input ticked for a period (see _on_timer)
             period = 1.0 / self.params['output_rate']
             if self._last_input_tick is None or now - self._last_input_tick >= 0.75 * period:
                 self._last_input_tick = now
                 self._tick()
-                self.timer.timer_period_ns = int(1.25 * period * 1e9)
-                self.timer.reset()
 
     def _push(self, user_id: int, segment: str, force, duration: float) -> str:
         try:
@@ -332,9 +329,9 @@ class PhysicsNode(Node):
 
     # ------------------------------------------------------------------ simulation tick
     def _on_timer(self) -> None:
-        nominal = int(1e9 / self.params['output_rate'])
-        if self.timer.timer_period_ns != nominal:   # no input in time: back to the output rate
-            self.timer.timer_period_ns = nominal
+        if (self.params['sync_to_input'] and self._last_input_tick is not None
+                and time.monotonic() - self._last_input_tick < 1.0 / self.params['output_rate']):
+            return   # input is flowing and ticking: the timer is the fallback when it stops
         self._tick()
 
     def _tick(self) -> None:
