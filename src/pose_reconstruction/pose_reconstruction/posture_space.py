@@ -13,21 +13,15 @@ from typing import Optional
 import numpy as np
 
 from skeleton_core.geometry import NormalizeTransform, facing_yaw, quat_from_yaw, quat_multiply
-from skeleton_core.model import (NUM_JOINTS, PARENTS, ROOT, SEGMENT_CHILDREN, SEGMENT_PARENTS,
-                                 Body, standard_body)
+from skeleton_core.model import (NUM_JOINTS, PARENTS, PATH_TO_ROOT, ROOT, SEGMENT_CHILDREN,
+                                 SEGMENT_PARENTS, Body, standard_body)
 
 _PAR = np.array([max(p, 0) for p in PARENTS])
 _SEG_P = np.array(SEGMENT_PARENTS)
 _SEG_C = np.array(SEGMENT_CHILDREN)
 
-# ANCESTORS[j, k] = 1 when k is j or one of its ancestors, excluding the root: positions relative to
-# the root are ANCESTORS @ parent-relative offsets.
-ANCESTORS = np.zeros((NUM_JOINTS, NUM_JOINTS))
-for _j in range(NUM_JOINTS):
-    _k = _j
-    while _k > 0:
-        ANCESTORS[_j, _k] = 1.0
-        _k = PARENTS[_k]
+# ANCESTORS[j, k] = 1 when k is j or one of its ancestors, excluding the root (the model's tree)
+ANCESTORS = PATH_TO_ROOT
 # STRICT_ANCESTORS[j, k] = 1 when k is a proper ancestor of j (root included)
 STRICT_ANCESTORS = np.zeros((NUM_JOINTS, NUM_JOINTS), bool)
 for _j in range(NUM_JOINTS):
