@@ -86,32 +86,6 @@ def apply_at_points(forces, points, com) -> np.ndarray:
 # -------------------------------------------------------------------------------------------
 # Orientations
 # -------------------------------------------------------------------------------------------
-def _unit(v, fallback):
-    v = np.asarray(v, float)
-    n = np.linalg.norm(v, axis=-1, keepdims=True)
-    return np.where(n > 1e-9, v / np.maximum(n, 1e-12), fallback)
-
-
-def quat_from_matrix(r: np.ndarray) -> np.ndarray:
-    """Rotation matrix (3, 3) -> quaternion (x, y, z, w)."""
-    r = np.asarray(r, float)
-    tr = np.trace(r)
-    if tr > 0:
-        s = 2.0 * np.sqrt(tr + 1.0)
-        q = [(r[2, 1] - r[1, 2]) / s, (r[0, 2] - r[2, 0]) / s, (r[1, 0] - r[0, 1]) / s, 0.25 * s]
-    else:
-        i = int(np.argmax(np.diag(r)))
-        j, k = (i + 1) % 3, (i + 2) % 3
-        s = 2.0 * np.sqrt(max(1.0 + r[i, i] - r[j, j] - r[k, k], 1e-300))
-        q = [0.0, 0.0, 0.0, (r[k, j] - r[j, k]) / s]
-        q[i] = 0.25 * s
-        q[j] = (r[j, i] + r[i, j]) / s
-        q[k] = (r[k, i] + r[i, k]) / s
-    q = np.array(q)
-    q /= np.linalg.norm(q)
-    return q * (-1.0 if q[3] < 0 else 1.0)
-
-
 def quat_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Shortest-arc rotation (x, y, z, w) taking unit vector ``a`` to unit vector ``b`` (rows)."""
     a = np.asarray(a, float)
@@ -129,13 +103,9 @@ def quat_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return q / np.linalg.norm(q, axis=-1, keepdims=True)
 
 
-def pelvis_quat(positions: np.ndarray) -> np.ndarray:
-    """Pelvis frame (x forward, y left, z up the spine) of a posture, as a rest-relative quaternion."""
-    return np.array(_pelvis_quat(np.asarray(positions, float).tolist()))
-
-
 def _pelvis_quat(p) -> tuple:
-    """:func:`pelvis_quat` on nested lists of floats (x, y, z, w tuple)."""
+    """Pelvis frame (x forward, y left, z up the spine) of a posture given as nested lists of
+    floats, as a rest-relative quaternion (x, y, z, w tuple)."""
     hl, hr, sp, hc = p[HIP_LEFT], p[HIP_RIGHT], p[SPINE], p[HIP_CENTER]
     y = _unit3((hl[0] - hr[0], hl[1] - hr[1], hl[2] - hr[2]), (0.0, 1.0, 0.0))
     z = (sp[0] - hc[0], sp[1] - hc[1], sp[2] - hc[2])
@@ -254,5 +224,5 @@ def ball_qpos(q_seg: np.ndarray) -> np.ndarray:
 
 
 __all__ = ['Gains', 'clamp_norm', 'pd_force', 'twist_error', 'pd_twist_torque', 'apply_at_points',
-           'quat_between', 'quat_from_matrix', 'pelvis_quat', 'segment_quats_from_positions',
+           'quat_between', 'segment_quats_from_positions',
            'joint_quats_to_segment', 'segment_quats_to_joints', 'is_identity', 'ball_qpos']

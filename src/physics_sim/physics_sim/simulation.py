@@ -541,7 +541,8 @@ class Simulation:
         self._check_health()
 
     def _sync_actuator_gains(self) -> None:
-        """Copy Ke, Kd and max_force (settable at run time) into the implicit PD actuators."""
+        """Copy the run-time settable gains and bounds (Eq. 1 Ke, Kd, max_force; Eq. 2 Kd_i,
+        max_torque) into actuator_pd's actuators."""
         if self._act is None:
             return
         g = self.config.gains
@@ -588,12 +589,10 @@ class Simulation:
                 p1, _ = self._targets_at(self.time + span)
                 d.act[self._act_adr] = p0 + ff * v_t
                 d.ctrl[self._act] = (p1 - p0) / span
-            elif self._mocap is not None:
+                d.ctrl[self._tw_act] = self._twist_torques(t, tg, pts, damped=False)
+            else:  # mocap_constraints
                 lead = 2.0 * c.track_impedance * c.track_timeconst * c.track_dampratio ** 2
                 d.mocap_pos[self._mocap] = p_t + lead * v_t
-            if self._act is not None:
-                d.ctrl[self._tw_act] = self._twist_torques(t, tg, pts, damped=False)
-            else:
                 xfrc[self._sb, 3:] += self._twist_torques(t, tg, pts)
             self._update_pins(p_t, v_t, pts)
         self._apply_pushes(t)

@@ -12,7 +12,8 @@ from typing import Optional
 
 import numpy as np
 
-from skeleton_core.geometry import NormalizeTransform, facing_yaw, quat_from_yaw, quat_multiply
+from skeleton_core.geometry import (NormalizeTransform, facing_yaw, quat_from_yaw, quat_multiply,
+                                    retarget_by_joint)
 from skeleton_core.model import (NUM_JOINTS, PARENTS, PATH_TO_ROOT, ROOT, SEGMENT_CHILDREN,
                                  SEGMENT_PARENTS, Body, standard_body)
 
@@ -73,19 +74,8 @@ def as_database_arrays(db, body: Optional[Body] = None) -> DatabaseArrays:
                           orientations=ori, twists=tw, body=body)
 
 
-def fast_retarget(positions: np.ndarray, lengths: np.ndarray, rest_dirs: np.ndarray) -> np.ndarray:
-    """Shum & Ho 2012 Eq. 3-4 for one posture or a batch (..., 20, 3), root kept, vectorised.
-
-    ``lengths`` (20,) bone length of the segment ending at each joint (0 for the root),
-    ``rest_dirs`` (20, 3) unit direction used for zero-length segments.
-    """
-    p = np.asarray(positions, float)
-    d = p - p[..., _PAR, :]
-    n = np.linalg.norm(d, axis=-1, keepdims=True)
-    unit = np.where(n > 1e-9, d / np.maximum(n, 1e-12), rest_dirs)
-    off = unit * lengths[:, None]
-    off[..., ROOT, :] = 0.0
-    return p[..., ROOT:ROOT + 1, :] + np.einsum('jk,...kd->...jd', ANCESTORS, off)
+# Shum & Ho 2012 Eq. 3-4 with per-joint lengths (``lengths`` (20,), 0 for the root), batched
+fast_retarget = retarget_by_joint
 
 
 def bone_lengths(body: Body) -> np.ndarray:

@@ -84,15 +84,22 @@ def retarget(positions: np.ndarray, body: Body,
     ``lengths`` (19,) overrides the body's segment lengths (e.g. a user's own). A zero-length
     segment takes the direction of the standard T-pose.
     """
-    p = np.asarray(positions, dtype=float)
     seg_len = body.segment_lengths if lengths is None else np.asarray(lengths, float)
     bone = np.zeros(NUM_JOINTS)
     bone[list(SEGMENT_CHILDREN)] = seg_len
     rest_dir = body.rest_offsets / np.maximum(np.linalg.norm(body.rest_offsets, axis=1), 1e-12)[:, None]
+    return retarget_by_joint(positions, bone, rest_dir)
+
+
+def retarget_by_joint(positions: np.ndarray, bone: np.ndarray, rest_dirs: np.ndarray) -> np.ndarray:
+    """:func:`retarget` with the lengths given per joint: ``bone`` (20,) the length of the segment
+    ending at each joint (0 for the root), ``rest_dirs`` (20, 3) the direction a zero-length
+    segment takes. One posture or a batch (..., 20, 3)."""
+    p = np.asarray(positions, dtype=float)
     d = p - p[..., _PARENT_OR_SELF, :]
     n = np.sqrt(np.sum(d * d, axis=-1, keepdims=True))
-    unit = np.where(n > 1e-9, d / np.maximum(n, 1e-12), rest_dir)
-    return forward_kinematics(bone[:, None] * unit, p[..., ROOT, :])
+    unit = np.where(n > 1e-9, d / np.maximum(n, 1e-12), rest_dirs)
+    return forward_kinematics(np.asarray(bone, float)[:, None] * unit, p[..., ROOT, :])
 
 
 # ---------------------------------------------------------------------------------------------
