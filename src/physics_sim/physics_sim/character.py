@@ -64,6 +64,12 @@ class Character:
         anchors = [joint_anchor(body, j) for j in range(NUM_JOINTS)]
         self.joint_seg = np.array([a[0] for a in anchors])
         self.joint_local = np.array([a[1] for a in anchors])
+        # Eq. 3-4 retargeting per joint (skeleton_core.geometry.retarget_by_joint): the length of
+        # the segment ending at each joint and the direction a zero-length segment takes
+        self.retarget_bone = np.zeros(NUM_JOINTS)
+        self.retarget_bone[list(SEGMENT_CHILDREN)] = body.segment_lengths
+        self.retarget_dirs = body.rest_offsets / np.maximum(
+            np.linalg.norm(body.rest_offsets, axis=1), 1e-12)[:, None]
         # twist inertia per segment (capsule axial inertia ~ m r^2 / 2)
         self.axial_inertia = 0.5 * body.segment_masses * body.segment_radii ** 2
 

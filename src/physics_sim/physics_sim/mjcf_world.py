@@ -98,6 +98,7 @@ class CharacterEntry:
 class WorldParams:
     timestep: float = 0.002
     integrator: str = 'implicitfast'
+    solver: str = 'newton'          # MuJoCo constraint solver: pgs, cg or newton
     gravity: Tuple[float, float, float] = (0.0, 0.0, -9.81)
     floor_friction: float = 1.0
     contact_solref: Tuple[float, float] = (0.02, 1.0)
@@ -121,6 +122,7 @@ def world_xml(characters: Sequence[CharacterEntry], objects: Sequence[ObjectSpec
     params = params or WorldParams()
     integ = {'euler': 'Euler', 'implicitfast': 'implicitfast', 'implicit': 'implicit',
              'rk4': 'RK4'}[params.integrator]
+    solver = {'pgs': 'PGS', 'cg': 'CG', 'newton': 'Newton'}[params.solver]
     bodies, mocaps, eqs, acts = [], [], [], []
     names = set()
     for c in characters:
@@ -150,7 +152,7 @@ def world_xml(characters: Sequence[CharacterEntry], objects: Sequence[ObjectSpec
     return '\n'.join([
         '<mujoco model="kinect_physics">',
         f'  <option timestep="{params.timestep:.6g}" integrator="{integ}" '
-        f'gravity="{fmt(params.gravity)}"/>',
+        f'solver="{solver}" gravity="{fmt(params.gravity)}"/>',
         f'  <default><geom solref="{fmt(params.contact_solref)}" condim="3" '
         f'contype="{ALL_BITS}" conaffinity="{ALL_BITS}"/></default>',
         '  <worldbody>',

@@ -41,7 +41,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 from .controller import Gains
 from .mjcf_world import ObjectSpec
-from .simulation import CONTROLLERS, INTEGRATORS, SimConfig, Simulation
+from .simulation import CONTROLLERS, INTEGRATORS, SOLVERS, SimConfig, Simulation
 
 
 def _tuples(n: int):
@@ -85,6 +85,11 @@ PARAMS: List[ParamSpec] = [
               'N s/m, Ke ~40000 N/m at 2 ms); implicitfast treats actuator_pd\'s Kd implicitly '
               '(stable at any gain, ~35 % slower)',
               choices=INTEGRATORS, read_only=True),
+    ParamSpec('solver', 'pgs',
+              'MuJoCo constraint solver (contacts, foot pins, holds, mocap_constraints): pgs = '
+              'projected Gauss-Seidel on the few active constraint rows (fastest here); newton '
+              'factors an nv x nv Hessian every step; all converge to the same forces',
+              choices=SOLVERS, read_only=True),
     ParamSpec('slow_control_every', 0,
               'physics steps between Python control updates (Eq. 2 twist targets, foot pins; '
               'actuator_pd and mocap_constraints targets); 0 = auto (4 for explicit_pd, one per '
@@ -170,7 +175,8 @@ def config_from_params(v: Dict) -> SimConfig:
     gains = Gains(ke=v['kp'], kd=v['kd'], max_force=v['max_force'], twist_ke=v['twist_kp'],
                   twist_kd=v['twist_kd'], max_torque=v['max_torque'])
     return SimConfig(timestep=v['timestep'], controller=v['controller'], gains=gains,
-                     integrator=v['integrator'], slow_control_every=v['slow_control_every'],
+                     integrator=v['integrator'], solver=v['solver'],
+                     slow_control_every=v['slow_control_every'],
                      track_timeconst=v['track_timeconst'], track_dampratio=v['track_dampratio'],
                      track_impedance=v['track_impedance'],
                      velocity_smoothing=v['velocity_smoothing'],

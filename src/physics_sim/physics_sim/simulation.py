@@ -43,7 +43,8 @@ from typing import Dict, List, Mapping, Optional, Sequence
 import mujoco
 import numpy as np
 from skeleton_core.conversions import validate_arrays
-from skeleton_core.geometry import quat_conjugate, quat_multiply, quat_rotate, retarget
+from skeleton_core.geometry import (quat_conjugate, quat_multiply, quat_rotate, retarget,
+                                    retarget_by_joint)
 from skeleton_core.model import (ELBOW_LEFT, ELBOW_RIGHT, HAND_LEFT, HAND_RIGHT, HEAD,
                                  JOINT_INDEX, JOINT_NAMES, NUM_JOINTS, SEGMENT_OF_JOINT,
                                  SEGMENTS, SHOULDER_LEFT, SHOULDER_RIGHT, WRIST_LEFT,
@@ -51,11 +52,12 @@ from skeleton_core.model import (ELBOW_LEFT, ELBOW_RIGHT, HAND_LEFT, HAND_RIGHT,
 
 from .character import Character, Target
 from .controller import Gains, is_identity, joint_quats_to_segment, segment_quats_to_joints
-from .mjcf_body import CharacterParams, joint_anchor
+from .mjcf_body import ROOT_SEGMENT, CharacterParams, joint_anchor
 from .mjcf_world import ALL_BITS, CharacterEntry, ObjectSpec, WorldParams, character_bits, world_xml
 
 CONTROLLERS = ('explicit_pd', 'actuator_pd', 'mocap_constraints')
 INTEGRATORS = ('euler', 'implicitfast')
+SOLVERS = ('pgs', 'cg', 'newton')
 SEGMENT_CHILDREN_A = tuple(c for _, c in SEGMENTS)
 SEGMENT_PARENTS_A = tuple(p for p, _ in SEGMENTS)
 
@@ -125,6 +127,11 @@ class SimConfig:
     # MuJoCo integrator of the world (INTEGRATORS): euler = explicit, as the paper (fastest);
     # implicitfast also integrates actuator_pd's Kd implicitly (stable at any gain, ~35 % slower)
     integrator: str = 'euler'
+    # MuJoCo constraint solver (SOLVERS) for contacts, foot pins, holds and mocap_constraints'
+    # connects: pgs works on the few active constraint rows (a character has 0-10) and costs
+    # ~7 us a step; newton factors an nv x nv Hessian every step (~20 us); all three converge to
+    # the same constraint forces
+    solver: str = 'pgs'
     gains: Gains = field(default_factory=Gains)
     # constraint controller (mocap_constraints): soft connect spring = (time constant, damping ratio)
     track_timeconst: float = 0.02
@@ -168,6 +175,8 @@ class SimConfig:
             raise ValueError(f'controller must be one of {CONTROLLERS}, got {self.controller!r}')
         if self.integrator not in INTEGRATORS:
             raise ValueError(f'integrator must be one of {INTEGRATORS}, got {self.integrator!r}')
+        if self.solver not in SOLVERS:
+            raise ValueError(f'solver must be one of {SOLVERS}, got {self.solver!r}')
         if not (1e-4 <= self.timestep <= 0.02):
             raise ValueError(f'timestep must be in [0.0001, 0.02] s, got {self.timestep}')
         if self.twist_scale is not None:
@@ -234,7 +243,8 @@ class Simulation:
                              pd_actuators=(c.controller == 'actuator_pd'),
                              pd_kp=c.gains.ke, pd_kv=c.gains.kd,
                              pd_force_limit=c.gains.max_force)
-        return WorldParams(timestep=c.timestep, integrator=c.integrator, character=cp)
+        return WorldParams(timestep=c.timestep, integrator=c.integrator, solver=c.solver,
+                           character=cp)
 
     def _rebuild(self) -> None:
         """(Re)compile the world from the current characters and objects, keeping the state of
@@ -320,12 +330,19 @@ class Simulation:
         except ValueError:
             self.counters['refused_target'] += 1
             raise
+        return self._make_target(user_id, p, q, stamp_ns)
+
+    def _make_target(self, user_id: int, p: np.ndarray, q, stamp_ns: int = 0) -> Target:
+        """:meth:`make_target` of arrays that ``validate_arrays`` has already returned."""
         sensor = self._sensor_pose(p)
         pw = sensor.to_world(p)
         ch = self.characters.get(int(user_id))
         body = ch.body if ch is not None else self._new_body(pw)
         if self.config.retarget:
-            pw = retarget(pw, body)
+            if ch is not None:   # the character's Eq. 3-4 lengths and fallback directions, cached
+                pw = retarget_by_joint(pw, ch.retarget_bone, ch.retarget_dirs)
+            else:
+                pw = retarget(pw, body)
         if is_identity(q):
             sq = Character.default_seg_quats(pw, body)
         else:
@@ -339,8 +356,16 @@ class Simulation:
     def set_target(self, user_id: int, positions, orientations=None, stamp_ns: int = 0) -> None:
         """Give user ``user_id`` a new target (sensor frame). A new user spawns a character in
         the target posture."""
-        uid = int(user_id)
-        target = self.make_target(uid, positions, orientations, stamp_ns)
+        try:
+            p, _, _, q = validate_arrays(positions, orientations=orientations)
+        except ValueError:
+            self.counters['refused_target'] += 1
+            raise
+        self._set_target(int(user_id), p, q, stamp_ns)
+
+    def _set_target(self, uid: int, p: np.ndarray, q, stamp_ns: int = 0) -> None:
+        """:meth:`set_target` of validated arrays."""
+        target = self._make_target(uid, p, q, stamp_ns)
         ch = self.characters.get(uid)
         if ch is None:
             if len(self.characters) >= self.config.max_characters:
@@ -507,13 +532,13 @@ class Simulation:
                 else:
                     pos, ori = t, None
                 try:  # SkeletonFormatError is a ValueError
-                    validate_arrays(pos, orientations=ori)
+                    p, _, _, q = validate_arrays(pos, orientations=ori)
                 except ValueError:
                     self.counters['refused_target'] += 1
                     raise
-                prepared.append((uid, pos, ori))
-            for uid, pos, ori in prepared:
-                self.set_target(uid, pos, ori)
+                prepared.append((int(uid), p, q))
+            for uid, p, q in prepared:
+                self._set_target(uid, p, q)
         self.advance(1.0 / 30.0 if duration is None else duration)
         return self.states()
 
@@ -558,11 +583,17 @@ class Simulation:
         m.actuator_forcerange[self._tw_act] = (-g.max_torque, g.max_torque)
         self._act_gains = key
 
+    def _frame_shares(self, times) -> np.ndarray:
+        """Share (0..1) of every character's target interpolation reached at each of ``times``
+        (T,): (T, N) -- linear over one frame period, then held."""
+        tg = self._tg
+        return np.minimum(np.maximum((np.array(times)[:, None] - tg['T0']) / tg['PER'], 0.0), 1.0)
+
     def _targets_at(self, t: float):
         """Interpolated targets (N*20, 3) and their velocities at time ``t``: linear over one
         frame period, then held."""
         tg = self._tg
-        sj = np.clip((t - tg['T0j']) / tg['PERj'], 0.0, 1.0)[:, None]
+        sj = self._frame_shares((t,))[0][self._jchar][:, None]
         return tg['P0'] + sj * tg['dP'], tg['V'] * (sj < 1.0)
 
     def _joint_points(self) -> np.ndarray:
@@ -581,19 +612,23 @@ class Simulation:
         t = self.time + 0.5 * span
         tg = self._tg
         if tg is not None:
-            p_t, v_t = self._targets_at(t)
+            # interpolation shares at the span's start, middle and end: (3, N*20)
+            sh = self._frame_shares((self.time, t, self.time + span))
+            sj = sh[:, self._jchar, None]
+            p_t = tg['P0'] + sj[1] * tg['dP']
+            v_t = tg['V'] * (sj[1] < 1.0)
             pts = self._joint_points()
             if self._act is not None:
                 ff = c.gains.kd / c.gains.ke if c.gains.ke > 0 else 0.0
-                p0, _ = self._targets_at(self.time)
-                p1, _ = self._targets_at(self.time + span)
+                p0 = tg['P0'] + sj[0] * tg['dP']
                 d.act[self._act_adr] = p0 + ff * v_t
-                d.ctrl[self._act] = (p1 - p0) / span
-                d.ctrl[self._tw_act] = self._twist_torques(t, tg, pts, damped=False)
+                d.ctrl[self._act] = ((sj[2] - sj[0]) / span) * tg['dP']
+                d.ctrl[self._tw_act] = self._twist_torques(t, tg, pts, damped=False,
+                                                           share=sh[1])
             else:  # mocap_constraints
                 lead = 2.0 * c.track_impedance * c.track_timeconst * c.track_dampratio ** 2
                 d.mocap_pos[self._mocap] = p_t + lead * v_t
-                xfrc[self._sb, 3:] += self._twist_torques(t, tg, pts)
+                xfrc[self._sb, 3:] += self._twist_torques(t, tg, pts, share=sh[1])
             self._update_pins(p_t, v_t, pts)
         self._apply_pushes(t)
 
@@ -634,48 +669,58 @@ class Simulation:
         self._tw_act = (np.concatenate([c.twist_actuator_ids for c in chars]).astype(int)
                         if self._act is not None else None)
         self._act_gains = None
+        # character of every stacked joint / segment row (per-character frame times)
+        self._jchar = np.repeat(np.arange(n), NUM_JOINTS)
+        self._schar = np.repeat(np.arange(n), len(SEGMENTS))
+        # output orientations by joint: the segment ending at the joint (root: the root body)
+        by_joint = np.full(NUM_JOINTS, ROOT_SEGMENT)
+        by_joint[list(SEGMENT_CHILDREN_A)] = np.arange(len(SEGMENTS))
+        self._jq = cat([by_joint + len(SEGMENTS) * i for i in range(n)], (0,)).astype(int)
+        # foot pins (the PinState objects live as long as their characters)
+        self._feet = [(i, j, ch.pins[j]) for i, ch in enumerate(chars) for j in ch.pins]
+        self._feet_idx = np.array([i * NUM_JOINTS + j for i, j, _ in self._feet], int)
+        self._feet_eq = np.array([chars[i].pin_eq[j] for i, j, _ in self._feet], int)
 
     def _pack_targets(self) -> None:
         """Stacked target frames (previous, newest, velocities) of all characters for this
         advance; dodging characters get their arm targets replaced."""
         chars = self._chars
-        nj, ns = NUM_JOINTS, len(SEGMENTS)
-        P0, P1, Q0, Q1, W, T0, PER = [], [], [], [], [], [], []
-        for ch in chars:
-            p0, p1 = ch.prev.positions, ch.cur.positions
-            if ch.dodge_until > self.time:
-                p0, p1 = self._dodge_targets(ch, p0), self._dodge_targets(ch, p1)
-            P0.append(p0)
-            P1.append(p1)
-            q0, q1 = ch.prev.seg_quats, ch.cur.seg_quats
-            q1 = q1 * np.copysign(1.0, np.einsum('ij,ij->i', q0, q1))[:, None]
-            Q0.append(q0)
-            Q1.append(q1)
-            # segment angular velocity over the frame: 2 vec(q1 q0^-1) / period (the rotation
-            # vector to within 1 % up to 30 degrees per frame; q1 is on q0's side)
-            v0, v1 = q0[:, :3], q1[:, :3]
-            W.append((2.0 / ch.period) * (q0[:, 3:] * v1 - q1[:, 3:] * v0 - _cross(v1, v0)))
-            T0.append(ch.cur.sim_time)
-            PER.append(ch.period)
         if not chars:
             self._tg = None
             return
-        T0, PER = np.array(T0), np.array(PER)
-        P0, P1 = np.concatenate(P0), np.concatenate(P1)
-        V = np.concatenate([ch.velocity * (0.0 if ch.dodge_until > self.time else 1.0)
-                            for ch in chars])
-        self._tg = dict(P0=P0, dP=P1 - P0, V=V,
-                        Q0=np.concatenate(Q0), Q1=np.concatenate(Q1), W=np.concatenate(W),
-                        T0j=np.repeat(T0, nj), PERj=np.repeat(PER, nj),
-                        T0s=np.repeat(T0, ns), PERs=np.repeat(PER, ns))
-        feet = []
-        for i, ch in enumerate(chars):
-            for j in ch.pins:
-                feet.append((i, j, ch.pins[j]))
-        self._feet = feet
-        self._feet_idx = np.array([i * nj + j for i, j, _ in feet], int)
-        self._feet_active = np.array([pin.active for _, _, pin in feet], bool)
-        self._feet_manual = np.array([pin.manual for _, _, pin in feet], bool)
+        if len(chars) == 1:
+            ch = chars[0]
+            dodging = ch.dodge_until > self.time
+            P0, P1 = ch.prev.positions, ch.cur.positions
+            if dodging:
+                P0, P1 = self._dodge_targets(ch, P0), self._dodge_targets(ch, P1)
+            V = ch.velocity * 0.0 if dodging else ch.velocity
+            Q0, Q1 = ch.prev.seg_quats, ch.cur.seg_quats
+            T0, PER = np.array([ch.cur.sim_time]), np.array([ch.period])
+        else:
+            P0, P1, V = [], [], []
+            for ch in chars:
+                p0, p1 = ch.prev.positions, ch.cur.positions
+                if ch.dodge_until > self.time:
+                    p0, p1 = self._dodge_targets(ch, p0), self._dodge_targets(ch, p1)
+                    V.append(ch.velocity * 0.0)
+                else:
+                    V.append(ch.velocity)
+                P0.append(p0)
+                P1.append(p1)
+            P0, P1, V = np.concatenate(P0), np.concatenate(P1), np.concatenate(V)
+            Q0 = np.concatenate([ch.prev.seg_quats for ch in chars])
+            Q1 = np.concatenate([ch.cur.seg_quats for ch in chars])
+            T0 = np.array([ch.cur.sim_time for ch in chars])
+            PER = np.array([ch.period for ch in chars])
+        Q1 = Q1 * np.copysign(1.0, np.einsum('ij,ij->i', Q0, Q1))[:, None]
+        # segment angular velocity over the frame: 2 vec(q1 q0^-1) / period (the rotation
+        # vector to within 1 % up to 30 degrees per frame; q1 is on q0's side)
+        v0, v1 = Q0[:, :3], Q1[:, :3]
+        W = (2.0 / PER)[self._schar, None] * (Q0[:, 3:] * v1 - Q1[:, 3:] * v0 - _cross(v1, v0))
+        self._tg = dict(P0=P0, dP=P1 - P0, V=V, Q0=Q0, Q1=Q1, W=W, T0=T0, PER=PER)
+        self._feet_active = np.array([pin.active for _, _, pin in self._feet], bool)
+        self._feet_manual = np.array([pin.manual for _, _, pin in self._feet], bool)
         self._pin_pts = None
         self._twist = None      # recomputed on the next step
         self._step_count = 0
@@ -710,24 +755,27 @@ class Simulation:
             xfrc[self._sb, 3:] += self._twist
         self._apply_pushes(t)
 
-    def _twist_torques(self, t: float, tg: Dict, pts: np.ndarray, damped: bool = True) -> np.ndarray:
+    def _twist_torques(self, t: float, tg: Dict, pts: np.ndarray, damped: bool = True,
+                       share: Optional[np.ndarray] = None) -> np.ndarray:
         """Eq. 2 torques (N*19, 3) about each segment's own axis, bounded by max_torque; with
         ``damped=False`` only ``Ke_i dtheta + Kd_i theta'_t`` (N*19,) for the twist actuators, which
-        subtract ``Kd_i theta'`` and bound the sum at every step themselves."""
+        subtract ``Kd_i theta'`` and bound the sum at every step themselves. ``share``: the
+        characters' interpolation shares at ``t`` when the caller has them."""
         d, g = self.data, self.config.gains
-        ss = np.minimum(np.maximum((t - tg['T0s']) / tg['PERs'], 0.0), 1.0)[:, None]
+        if share is None:
+            share = self._frame_shares((t,))[0]
+        ss = share[self._schar][:, None]
         q_t = tg['Q0'] + ss * (tg['Q1'] - tg['Q0'])
-        q_t /= np.sqrt(np.einsum('ij,ij->i', q_t, q_t))[:, None]
         axes = pts[self._sc] - pts[self._sp]
         axes /= np.maximum(np.sqrt(np.einsum('ij,ij->i', axes, axes)), 1e-9)[:, None]
         qc = d.xquat[self._sb]  # w x y z
         # rel = q_t * conj(q_cur) = (w1 w2 - v1.v2, w1 v2 + w2 v1 + v1 x v2) with v2 = -v_cur:
-        # only its w and its vector part along the axis matter
-        v1, w1 = q_t[:, :3], q_t[:, 3]
-        v2, w2 = -qc[:, 1:], qc[:, 0]
-        rw = w1 * w2 - np.einsum('ij,ij->i', v1, v2)
-        proj = (w1 * np.einsum('ij,ij->i', axes, v2) + w2 * np.einsum('ij,ij->i', axes, v1)
-                + np.einsum('ij,ij->i', axes, _cross(v1, v2)))
+        # only its w and its vector part along the axis matter (q_t need not be unit: the angle
+        # below depends on the ratio of the two)
+        v1, w1 = q_t[:, :3], q_t[:, 3:]
+        v2, w2 = -qc[:, 1:], qc[:, :1]
+        rw = w1[:, 0] * w2[:, 0] - np.einsum('ij,ij->i', v1, v2)
+        proj = np.einsum('ij,ij->i', axes, w1 * v2 + w2 * v1 + _cross(v1, v2))
         err = 2.0 * np.arctan2(proj * np.copysign(1.0, rw), np.abs(rw))  # shortest way round
         rate_t = np.einsum('ij,ij->i', tg['W'], axes) * (ss[:, 0] < 1.0)
         k_e, k_d = g.twist_ke * self._tw_i, g.twist_kd * self._tw_i
@@ -773,40 +821,55 @@ class Simulation:
 
     def _update_pins(self, p_t, v_t, pts) -> None:
         """Pin a foot whose target is on the floor and slow; release it when the target lifts or
-        slides away (Shum & Ho 2012, Sec. 6.1)."""
+        slides away (Shum & Ho 2012, Sec. 6.1). Scalar code: two feet per character, where
+        numpy's per-call cost would dominate."""
         c = self.config
         fi = self._feet_idx
         if fi.size == 0:
             return
         floor = self.sensor.lift if self.sensor else 0.0
-        h = p_t[fi, 2] - floor
-        speed = np.sqrt(np.einsum('ij,ij->i', v_t[fi], v_t[fi]))
         act = self._feet_active
-        if not act.any() and not (c.pin_feet and np.any((h < c.pin_height) & (speed < c.pin_speed))):
+        any_act = bool(act.any())
+        ht = (p_t[fi, 2] - floor).tolist()
+        vt = v_t[fi].tolist()
+        speed2 = [v[0] * v[0] + v[1] * v[1] + v[2] * v[2] for v in vt]
+        slow2 = c.pin_speed * c.pin_speed
+        if not any_act and not (c.pin_feet and any(h < c.pin_height and s2 < slow2
+                                                   for h, s2 in zip(ht, speed2))):
             return  # nothing pinned and no foot target on the floor: nothing can change
         # the simulated foot must be on the floor and slow too: pinning a flailing foot would
         # stop it dead in one step (an impulse the solver cannot absorb)
         d = self.data
-        jb = self._jb[fi]
-        cv = d.cvel[jb]
-        v_sim = cv[:, 3:] + _cross(cv[:, :3], pts[fi] - d.subtree_com[self._jroot[fi]])
-        sim_ok = ((pts[fi, 2] - floor < c.pin_height + 0.03)
-                  & (np.sqrt(np.sum(v_sim ** 2, axis=1)) < 2.0 * c.pin_speed))
-        down = (h < c.pin_height) & (speed < c.pin_speed) & sim_ok & c.pin_feet
-        slide = np.sqrt(np.sum((p_t[fi, :2] - self._pin_points()[:, :2]) ** 2, axis=1))
-        up = (h > c.pin_release_height) | (slide > c.pin_release_distance) | (not c.pin_feet)
-        strained = np.zeros(len(fi), bool)
-        if act.any():
-            strained = (self._pin_forces() > c.pin_max_force) & act
-            if strained.any():  # conflicting constraints: let go before the solver blows up
-                self.counters['constraint_conflict'] += int(strained.sum())
-                self.counters['virtual_joint_released'] += int(strained.sum())
-        change = np.flatnonzero((np.where(act, up, down) & ~self._feet_manual) | strained)
-        for n in change:
+        xf = pts[fi]
+        cv = d.cvel[self._jb[fi]].tolist()
+        arm = (xf - d.subtree_com[self._jroot[fi]]).tolist()
+        xt = p_t[fi].tolist()
+        forces = self._pin_forces().tolist() if any_act else None
+        pin_pts = self._pin_points().tolist()
+        changes = []
+        for n, (i, j, pin) in enumerate(self._feet):
+            if pin.active:
+                dx, dy = xt[n][0] - pin_pts[n][0], xt[n][1] - pin_pts[n][1]
+                up = (ht[n] > c.pin_release_height or not c.pin_feet
+                      or dx * dx + dy * dy > c.pin_release_distance ** 2)
+                if forces[n] > c.pin_max_force:  # conflicting constraints: let go before the
+                    self.counters['constraint_conflict'] += 1   # solver blows up
+                    self.counters['virtual_joint_released'] += 1
+                    changes.append(n)
+                elif up and not pin.manual:
+                    changes.append(n)
+            elif c.pin_feet and not pin.manual and ht[n] < c.pin_height and speed2[n] < slow2:
+                w, v, r = cv[n][:3], cv[n][3:], arm[n]
+                vs = (v[0] + w[1] * r[2] - w[2] * r[1], v[1] + w[2] * r[0] - w[0] * r[2],
+                      v[2] + w[0] * r[1] - w[1] * r[0])
+                if (float(xf[n, 2]) - floor < c.pin_height + 0.03
+                        and vs[0] * vs[0] + vs[1] * vs[1] + vs[2] * vs[2] < 4.0 * slow2):
+                    changes.append(n)
+        for n in changes:
             i, j, pin = self._feet[n]
             if not pin.active:
                 pin.active = True
-                pin.point = pts[fi[n]].copy()
+                pin.point = xf[n].copy()
                 self._set_pin(self._chars[i], j, True, pin.point)
                 self.counters['pins'] += 1
             else:
@@ -820,14 +883,10 @@ class Simulation:
         """Magnitude (N) of each foot pin's constraint force in the last step (0 if inactive)."""
         d = self.data
         out = np.zeros(len(self._feet))
-        rows = np.flatnonzero(d.efc_type[:d.nefc] == mujoco.mjtConstraint.mjCNSTR_EQUALITY)
-        if rows.size:
-            ids = d.efc_id[rows]
-            f = d.efc_force[rows]
-            for n, (i, j, pin) in enumerate(self._feet):
-                if pin.active:
-                    sel = ids == self._chars[i].pin_eq[j]
-                    out[n] = float(np.sqrt(np.sum(f[sel] ** 2)))
+        ne = int(d.ne)   # equality rows come first in the constraint arrays, by equality id
+        if ne:
+            f2 = np.bincount(d.efc_id[:ne], d.efc_force[:ne] ** 2, minlength=self.model.neq)
+            out = np.sqrt(f2[self._feet_eq]) * self._feet_active
         self._pin_forces_cache = out
         return out
 
@@ -839,19 +898,21 @@ class Simulation:
     def _check_health(self) -> None:
         """Stretched virtual joints are conflicts (counted; released if badly stretched); a
         non-finite state resets every character to its target."""
-        m, d = self.model, self.data
+        d = self.data
         c = self.config
-        for ch in self.characters.values():
-            pts = ch.joint_points(d)
-            for j, pin in ch.pins.items():
-                if pin.active:
-                    gap = float(np.linalg.norm(pts[j] - pin.point))
-                    if gap > c.conflict_tolerance:
-                        self.counters['constraint_conflict'] += 1
-                    if gap > c.conflict_release:
-                        pin.active = pin.manual = False
-                        self._set_pin(ch, j, False)
-                        self.counters['virtual_joint_released'] += 1
+        act = [n for n, (_, _, pin) in enumerate(self._feet) if pin.active]
+        if act:
+            pts = self._joint_points()[self._feet_idx[act]]
+            gaps = np.sqrt(np.sum((pts - np.array([self._feet[n][2].point for n in act])) ** 2,
+                                  axis=1))
+            for n, gap in zip(act, gaps.tolist()):
+                i, j, pin = self._feet[n]
+                if gap > c.conflict_tolerance:
+                    self.counters['constraint_conflict'] += 1
+                if gap > c.conflict_release:
+                    pin.active = pin.manual = False
+                    self._set_pin(self._chars[i], j, False)
+                    self.counters['virtual_joint_released'] += 1
         for name, (uid, hand) in list(self.holds.items()):
             ch = self.characters.get(uid)
             if ch is None:
@@ -865,11 +926,11 @@ class Simulation:
             if gap > c.conflict_release:
                 self.release(name)
                 self.counters['virtual_joint_released'] += 1
-        bad = (not np.all(np.isfinite(d.qpos)) or not np.all(np.isfinite(d.qvel))
-               or d.warning[mujoco.mjtWarning.mjWARN_BADQACC].number > 0)
+        w = d.warning[mujoco.mjtWarning.mjWARN_BADQACC]
+        bad = (not np.isfinite(d.qpos).all() or not np.isfinite(d.qvel).all() or w.number > 0)
         if bad:
             self.counters['nan_reset'] += 1
-            d.warning[mujoco.mjtWarning.mjWARN_BADQACC].number = 0
+            w.number = 0
             self.reset_to_targets()
 
     def reset_to_targets(self) -> None:
@@ -937,8 +998,26 @@ class Simulation:
             target_world=ch.cur.positions.copy())
 
     def states(self) -> Dict[int, CharacterState]:
-        return {uid: self.state(uid) for uid in self.characters}
+        """:meth:`state` of every character, computed for all of them at once."""
+        chars = self._chars
+        if len(chars) != len(self.characters) or not chars:
+            return {uid: self.state(uid) for uid in self.characters}
+        d = self.data
+        pts = self._joint_points()
+        qs = d.xquat[self._sb][:, [1, 2, 3, 0]][self._jq]  # by joint, x y z w
+        sensor = self.sensor or SensorPose(self.config.sensor_height, self.config.sensor_pitch)
+        ps, qss = sensor.to_sensor(pts), sensor.quat_to_sensor(qs)
+        out = {}
+        for i, ch in enumerate(chars):
+            r = slice(i * NUM_JOINTS, (i + 1) * NUM_JOINTS)
+            out[ch.user_id] = CharacterState(
+                user_id=ch.user_id, positions=pts[r], orientations=qs[r],
+                positions_sensor=ps[r], orientations_sensor=qss[r], stamp_ns=ch.cur.stamp_ns,
+                pinned={JOINT_NAMES[j]: p.active for j, p in ch.pins.items()},
+                target_world=ch.cur.positions.copy())
+        return out
 
 
-__all__ = ['Simulation', 'SimConfig', 'SensorPose', 'CharacterState', 'CONTROLLERS', 'Gains',
+__all__ = ['Simulation', 'SimConfig', 'SensorPose', 'CharacterState', 'CONTROLLERS', 'SOLVERS',
+           'Gains',
            'ObjectSpec']
