@@ -109,6 +109,10 @@ def test_pd_actuators_sit_on_the_joint_points_and_segment_axes():
         axis = rest[c] - parent
         np.testing.assert_allclose(d.site_xmat[s].reshape(3, 3)[:, 2], axis / np.linalg.norm(axis),
                                    atol=1e-6)
-    # without the option: no actuators, no sites
-    m0, _ = _model(standalone_character_xml(body))
-    assert m0.nu == 0 and m0.nsite == 1  # the world origin site only
+    # without the option: no actuators and no axis sites; the joint sites (where every controller
+    # reads the joint points) and the world origin site
+    m0, d0 = _model(standalone_character_xml(body))
+    assert m0.nu == 0 and m0.nsite == 1 + 20
+    for j in range(20):
+        s = mujoco.mj_name2id(m0, mujoco.mjtObj.mjOBJ_SITE, f'u0_site_{JOINT_NAMES[j]}')
+        np.testing.assert_allclose(d0.site_xpos[s], rest[j], atol=1e-6)

@@ -70,6 +70,9 @@ class Character:
         self.retarget_bone[list(SEGMENT_CHILDREN)] = body.segment_lengths
         self.retarget_dirs = body.rest_offsets / np.maximum(
             np.linalg.norm(body.rest_offsets, axis=1), 1e-12)[:, None]
+        # each segment's axis in its body frame (the direction of its child joint)
+        ends = body.rest_offsets[list(SEGMENT_CHILDREN)]
+        self.segment_axes_local = ends / np.maximum(np.linalg.norm(ends, axis=1), 1e-9)[:, None]
         # twist inertia per segment (capsule axial inertia ~ m r^2 / 2)
         self.axial_inertia = 0.5 * body.segment_masses * body.segment_radii ** 2
 
@@ -91,6 +94,13 @@ class Character:
         self.actuator_ids = acts if acts.min() >= 0 else None   # (20, 3): actuator_pd only
         tw = np.array([aid(f'{p}twist_{JOINT_NAMES[c]}') for c in SEGMENT_CHILDREN])
         self.twist_actuator_ids = tw if tw.min() >= 0 else None  # (19,): actuator_pd only
+        sid = lambda n: mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, n)  # noqa: E731
+        js = np.array([sid(f'{p}site_{JOINT_NAMES[j]}') for j in range(NUM_JOINTS)])
+        self.joint_site_ids = js if js.min() >= 0 else None   # (20,)
+        if self.joint_site_ids is not None:   # exactly the anchors (the MJCF has 6 digits)
+            model.site_pos[js] = self.joint_local
+        ax = np.array([sid(f'{p}axis_{JOINT_NAMES[c]}') for c in SEGMENT_CHILDREN])
+        self.axis_site_ids = ax if ax.min() >= 0 else None   # (19,): site z = segment axis
         eid = lambda n: mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_EQUALITY, n)  # noqa: E731
         self.pin_eq = {j: eid(f'{p}pin_{JOINT_NAMES[j]}') for j in PIN_JOINTS}
         # MuJoCo derives body2's anchor from the compile-time pose; the tracking connects must
@@ -145,7 +155,7 @@ class Character:
         self.prev = Target(p_now, q_now, now, self.cur.stamp_ns)
         self.cur = target
         raw = (target.positions - p_now) / self.period
-        n = np.linalg.norm(raw, axis=1, keepdims=True)  # a tracking glitch is not a velocity
+        n = np.sqrt(np.einsum('ij,ij->i', raw, raw))[:, None]  # a tracking glitch is not a velocity
         raw *= np.minimum(1.0, MAX_TARGET_SPEED / np.maximum(n, 1e-12))
         self.velocity = smoothing * self.velocity + (1.0 - smoothing) * raw
 

@@ -179,15 +179,41 @@ def segment_quats_from_positions(positions: np.ndarray, rest_offsets: np.ndarray
     p = np.asarray(positions, float).tolist()
     rest = np.asarray(rest_offsets, float).tolist()
     q = [None] * len(SEGMENTS)
+    sqrt = math.sqrt
     for k, pb, pj, cj in _TREE:
         if pb < 0:
             q[k] = _pelvis_quat(p)
             continue
+        # inlined (hot loop): rd = unit(rotate(base, rest[cj])); td = unit(p[cj] - p[pj]) (rd if
+        # degenerate); q[k] = arc(rd, td) * base
         base = q[pb]
-        rd = _unit3(_qrot(base, rest[cj]), (1.0, 0.0, 0.0))
+        x, y, z, w = base
+        vx, vy, vz = rest[cj]
+        tx, ty, tz = 2.0 * (y * vz - z * vy), 2.0 * (z * vx - x * vz), 2.0 * (x * vy - y * vx)
+        rx = vx + w * tx + y * tz - z * ty
+        ry = vy + w * ty + z * tx - x * tz
+        rz = vz + w * tz + x * ty - y * tx
+        n = sqrt(rx * rx + ry * ry + rz * rz)
+        if n > 1e-9:
+            rx, ry, rz = rx / n, ry / n, rz / n
+        else:
+            rx, ry, rz = 1.0, 0.0, 0.0
         a, b = p[cj], p[pj]
-        td = _unit3((a[0] - b[0], a[1] - b[1], a[2] - b[2]), rd)
-        q[k] = _qmul(_arc(rd, td), base)
+        dx, dy, dz = a[0] - b[0], a[1] - b[1], a[2] - b[2]
+        n = sqrt(dx * dx + dy * dy + dz * dz)
+        if n > 1e-9:
+            dx, dy, dz = dx / n, dy / n, dz / n
+        else:
+            dx, dy, dz = rx, ry, rz
+        dot = rx * dx + ry * dy + rz * dz
+        if 1.0 + dot < 1e-9:
+            ax, ay, az, aw = _arc((rx, ry, rz), (dx, dy, dz))
+        else:
+            ax, ay, az, aw = (ry * dz - rz * dy, rz * dx - rx * dz, rx * dy - ry * dx, 1.0 + dot)
+            n = sqrt(ax * ax + ay * ay + az * az + aw * aw)
+            ax, ay, az, aw = ax / n, ay / n, az / n, aw / n
+        q[k] = (aw * x + ax * w + ay * z - az * y, aw * y - ax * z + ay * w + az * x,
+                aw * z + ax * y - ay * x + az * w, aw * w - ax * x - ay * y - az * z)
     return np.array(q)
 
 

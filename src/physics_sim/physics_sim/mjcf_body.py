@@ -128,11 +128,13 @@ def character_bodies_xml(prefix: str, body: Body, root_pos, params: CharacterPar
             axis = end / max(float(np.linalg.norm(end)), 1e-9)
             lines.append(f'{ind}  <site name="{prefix}axis_{name}" pos="0 0 0" '
                          f'zaxis="{fmt(axis)}" size="0.01"/>')
-            for j in range(NUM_JOINTS):
-                seg, local = joint_anchor(body, j)
-                if seg == k:
-                    lines.append(f'{ind}  <site name="{prefix}site_{JOINT_NAMES[j]}" '
-                                 f'pos="{fmt(local)}" size="0.01"/>')
+        # a site at every joint point (the actuators' point, and where MuJoCo computes the joint
+        # positions the simulation reads at every step)
+        for j in range(NUM_JOINTS):
+            seg, local = joint_anchor(body, j)
+            if seg == k:
+                lines.append(f'{ind}  <site name="{prefix}site_{JOINT_NAMES[j]}" '
+                             f'pos="{fmt(local)}" size="0.01"/>')
         for c in children[k]:
             lines += emit(c, depth + 1)
         lines.append(f'{ind}</body>')

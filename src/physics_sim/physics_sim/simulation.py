@@ -563,6 +563,7 @@ class Simulation:
                 self._control_span(nstep)
                 mujoco.mj_step(m, d, nstep=nstep)
                 self.time = float(d.time)
+        self._pts = None
         self._check_health()
 
     def _sync_actuator_gains(self) -> None:
@@ -596,7 +597,21 @@ class Simulation:
         sj = self._frame_shares((t,))[0][self._jchar][:, None]
         return tg['P0'] + sj * tg['dP'], tg['V'] * (sj < 1.0)
 
+    _XYZW = np.array([1, 2, 3, 0])
+    _WXYZ = np.array([3, 0, 1, 2])
+
+    def _points_now(self) -> np.ndarray:
+        """:meth:`_joint_points` of the state after the last advance, computed once (the health
+        check and the states share it); anything else that moves the bodies clears it."""
+        if self._pts is None:
+            self._pts = self._joint_points()
+        return self._pts
+
     def _joint_points(self) -> np.ndarray:
+        """World positions (N*20, 3) of the joint points (the joint sites, which MuJoCo computes
+        in every step's kinematics)."""
+        if self._js is not None:
+            return self.data.site_xpos[self._js]
         d, jb = self.data, self._jb
         xm = d.xmat[jb].reshape(-1, 3, 3)
         return d.xpos[jb] + (xm @ self._jl[:, :, None])[:, :, 0]
@@ -657,6 +672,15 @@ class Simulation:
         scale = (np.ones(len(SEGMENTS)) if self.config.twist_scale is None
                  else np.asarray(self.config.twist_scale, float))
         self._tw_i = cat([c.twist_inertia * scale for c in chars], (0,))
+        # Eq. 2's twist error: u . vec(conj(q) * q_t) = q^T M_u q_t (w x y z) for the segment's
+        # body-frame axis u: M[0, 1:] = u, M[1:, 0] = -u, M[1:, 1:] = [u]x
+        u = np.array([c.segment_axes_local for c in chars]).reshape(-1, 3)
+        m4 = np.zeros((len(u), 4, 4))
+        m4[:, 0, 1:], m4[:, 1:, 0] = u, -u
+        m4[:, 1, 2], m4[:, 1, 3] = -u[:, 2], u[:, 1]
+        m4[:, 2, 1], m4[:, 2, 3] = u[:, 2], -u[:, 0]
+        m4[:, 3, 1], m4[:, 3, 2] = -u[:, 1], u[:, 0]
+        self._tw_m = m4
         self._jroot = self.model.body_rootid[self._jb] if n else np.zeros(0, int)
         self._ub, inv = np.unique(self._jb, return_inverse=True)
         self._sum_rows = np.zeros((len(self._ub), len(self._jb)))
@@ -668,6 +692,11 @@ class Simulation:
         self._act_adr = None if self._act is None else self.model.actuator_actadr[self._act]
         self._tw_act = (np.concatenate([c.twist_actuator_ids for c in chars]).astype(int)
                         if self._act is not None else None)
+        self._axis_site = (np.concatenate([c.axis_site_ids for c in chars]).astype(int)
+                           if n and chars[0].axis_site_ids is not None else None)
+        self._js = (np.concatenate([c.joint_site_ids for c in chars]).astype(int)
+                    if n and chars[0].joint_site_ids is not None else None)
+        self._pts = None
         self._act_gains = None
         # character of every stacked joint / segment row (per-character frame times)
         self._jchar = np.repeat(np.arange(n), NUM_JOINTS)
@@ -718,7 +747,9 @@ class Simulation:
         # vector to within 1 % up to 30 degrees per frame; q1 is on q0's side)
         v0, v1 = Q0[:, :3], Q1[:, :3]
         W = (2.0 / PER)[self._schar, None] * (Q0[:, 3:] * v1 - Q1[:, 3:] * v0 - _cross(v1, v0))
-        self._tg = dict(P0=P0, dP=P1 - P0, V=V, Q0=Q0, Q1=Q1, W=W, T0=T0, PER=PER)
+        Q0w = Q0[:, self._WXYZ]
+        self._tg = dict(P0=P0, dP=P1 - P0, V=V, Q0w=Q0w, dQw=Q1[:, self._WXYZ] - Q0w, W=W, T0=T0,
+                        PER=PER)
         self._feet_active = np.array([pin.active for _, _, pin in self._feet], bool)
         self._feet_manual = np.array([pin.manual for _, _, pin in self._feet], bool)
         self._pin_pts = None
@@ -764,20 +795,26 @@ class Simulation:
         d, g = self.data, self.config.gains
         if share is None:
             share = self._frame_shares((t,))[0]
-        ss = share[self._schar][:, None]
-        q_t = tg['Q0'] + ss * (tg['Q1'] - tg['Q0'])
-        axes = pts[self._sc] - pts[self._sp]
-        axes /= np.maximum(np.sqrt(np.einsum('ij,ij->i', axes, axes)), 1e-9)[:, None]
+        if len(share) == 1:
+            ss = float(share[0])
+            q_t = tg['Q0w'] + ss * tg['dQw']
+        else:
+            ss = share[self._schar]
+            q_t = tg['Q0w'] + ss[:, None] * tg['dQw']
         qc = d.xquat[self._sb]  # w x y z
-        # rel = q_t * conj(q_cur) = (w1 w2 - v1.v2, w1 v2 + w2 v1 + v1 x v2) with v2 = -v_cur:
-        # only its w and its vector part along the axis matter (q_t need not be unit: the angle
-        # below depends on the ratio of the two)
-        v1, w1 = q_t[:, :3], q_t[:, 3:]
-        v2, w2 = -qc[:, 1:], qc[:, :1]
-        rw = w1[:, 0] * w2[:, 0] - np.einsum('ij,ij->i', v1, v2)
-        proj = np.einsum('ij,ij->i', axes, w1 * v2 + w2 * v1 + _cross(v1, v2))
+        # rel = conj(q_cur) * q_t (w x y z; q_t need not be unit: the angle below depends on the
+        # ratio of its parts): its w part is q_cur . q_t and its vector part along the segment's
+        # body-frame axis u is q_cur^T M_u q_t (bilinear, M_u from _pack_indices); the twist of
+        # q_t * conj(q_cur) about the world axis R u is the same angle
+        rw = np.einsum('ij,ij->i', qc, q_t)
+        proj = np.einsum('ni,nij,nj->n', qc, self._tw_m, q_t)
         err = 2.0 * np.arctan2(proj * np.copysign(1.0, rw), np.abs(rw))  # shortest way round
-        rate_t = np.einsum('ij,ij->i', tg['W'], axes) * (ss[:, 0] < 1.0)
+        if self._axis_site is not None:   # the axis sites' z (the twist actuators' axis)
+            axes = d.site_xmat[self._axis_site][:, 2::3]
+        else:
+            axes = pts[self._sc] - pts[self._sp]
+            axes /= np.maximum(np.sqrt(np.einsum('ij,ij->i', axes, axes)), 1e-9)[:, None]
+        rate_t = np.einsum('ij,ij->i', tg['W'], axes) * (ss < 1.0)  # target twist rate
         k_e, k_d = g.twist_ke * self._tw_i, g.twist_kd * self._tw_i
         if not damped:
             return k_e * err + k_d * rate_t
@@ -902,7 +939,7 @@ class Simulation:
         c = self.config
         act = [n for n, (_, _, pin) in enumerate(self._feet) if pin.active]
         if act:
-            pts = self._joint_points()[self._feet_idx[act]]
+            pts = self._points_now()[self._feet_idx[act]]
             gaps = np.sqrt(np.sum((pts - np.array([self._feet[n][2].point for n in act])) ** 2,
                                   axis=1))
             for n, gap in zip(act, gaps.tolist()):
@@ -946,6 +983,7 @@ class Simulation:
             self._activate_hold(name, uid, hand, teleport=True)
         d.time = t
         mujoco.mj_forward(m, d)
+        self._pts = None
 
     # ------------------------------------------------------------------ dodge (Fig. 4)
     def _update_dodge(self) -> None:
@@ -1003,8 +1041,8 @@ class Simulation:
         if len(chars) != len(self.characters) or not chars:
             return {uid: self.state(uid) for uid in self.characters}
         d = self.data
-        pts = self._joint_points()
-        qs = d.xquat[self._sb][:, [1, 2, 3, 0]][self._jq]  # by joint, x y z w
+        pts = self._points_now()
+        qs = d.xquat[self._sb][:, self._XYZW][self._jq]  # by joint, x y z w
         sensor = self.sensor or SensorPose(self.config.sensor_height, self.config.sensor_pitch)
         ps, qss = sensor.to_sensor(pts), sensor.quat_to_sensor(qs)
         out = {}
