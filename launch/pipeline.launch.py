@@ -1,10 +1,12 @@
-"""The whole node graph: driver -> reliability -> completion / optimizer -> physics -> viz.
+"""The whole node graph: driver -> reconstruction -> physics -> viz.
 
     ros2 launch kinect_bringup pipeline.launch.py                      # synthetic source, method C
     ros2 launch kinect_bringup pipeline.launch.py source:=replay replay_file:=out/demo.mcap
     ros2 launch kinect_bringup pipeline.launch.py source:=live method:=A physics:=false rviz:=true
 
-Parameters come from the package's config/<node>.yaml files (the same files the one-process
+The reconstruction is one node (`reconstruction`: reliability, completion and optimizer without DDS
+hops between them) or, with reconstruction:=split, the three nodes `reliability`, `completion` and
+`optimizer`; both publish the same topics. Parameters come from the package's config/<node>.yaml files (the same files the one-process
 `pipeline` executable reads); launch arguments override the few that users change most.
 """
 import os
@@ -28,6 +30,8 @@ ARGS = [
     ('database', '', 'motion database file ("" = built-in / CMU default, built and cached)'),
     ('method', '', 'reconstruction driving the character: A (completion) | B | C (optimizer); '
      'default: optimizer.yaml'),
+    ('reconstruction', 'fused', 'fused: one reconstruction node; split: reliability, completion and '
+     'optimizer nodes (same topics)'),
     ('physics', 'true', 'run the MuJoCo physics character'),
     ('viz', 'true', 'run the RViz marker node'),
     ('rviz', 'false', 'start RViz with the bundled config'),
@@ -71,17 +75,26 @@ def _nodes(context):
     opt_over = dict(db_over)
     if method in ('B', 'C'):
         opt_over['method'] = method
-    nodes = [
-        Node(package='kinect_driver', executable='driver', name='driver',
-             parameters=params('driver', **driver_over), **common),
-        Node(package='pose_reconstruction', executable='reliability', name='reliability',
-             parameters=params('reliability'), **common),
-        Node(package='pose_reconstruction', executable='completion', name='completion',
-             parameters=params('completion', **db_over), **common),
-        Node(package='pose_reconstruction', executable='optimizer', name='optimizer',
-             parameters=params('optimizer', **opt_over),
-             **common),
-    ]
+    nodes = [Node(package='kinect_driver', executable='driver', name='driver',
+                  parameters=params('driver', **driver_over), **common)]
+    mode = arg('reconstruction')
+    if mode == 'fused':
+        from kinect_bringup.graph import load_params
+        fused = load_params('reconstruction', config_dir)
+        fused.update({f'optimizer.{k}' if k == 'method' else k: v for k, v in opt_over.items()})
+        nodes.append(Node(package='pose_reconstruction', executable='reconstruction',
+                          name='reconstruction', parameters=[fused], **common))
+    elif mode == 'split':
+        nodes += [
+            Node(package='pose_reconstruction', executable='reliability', name='reliability',
+                 parameters=params('reliability'), **common),
+            Node(package='pose_reconstruction', executable='completion', name='completion',
+                 parameters=params('completion', **db_over), **common),
+            Node(package='pose_reconstruction', executable='optimizer', name='optimizer',
+                 parameters=params('optimizer', **opt_over), **common),
+        ]
+    else:
+        raise RuntimeError(f'reconstruction:={mode} is not one of fused, split')
     if arg('physics').lower() in ('true', '1', 'yes'):
         phys_over = {}
         if method:

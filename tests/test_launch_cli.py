@@ -18,7 +18,7 @@ from ros_helpers import Probe
 
 pytestmark = [pytest.mark.launch_tooling, pytest.mark.slow]
 
-NODES = ['driver', 'reliability', 'completion', 'optimizer', 'physics', 'viz']
+NODES = ['driver', 'reconstruction', 'physics', 'viz']  # the default graph (fused reconstruction)
 # every node has produced output once these flow: the graph is fully up
 READY = ['/posture/completed', '/posture/reconstructed', '/character/skeletons', '/viz/markers']
 

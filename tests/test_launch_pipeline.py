@@ -27,7 +27,7 @@ SKELETON_TOPICS = {t: ty for t, ty in TOPICS.items() if ty.endswith('SkeletonArr
 PIPELINE_TOPICS = dict(SKELETON_TOPICS)
 PIPELINE_TOPICS['/viz/markers'] = TOPICS['/viz/markers']
 PIPELINE_TOPICS.pop('/kinect/ground_truth')
-NODES = ['driver', 'reliability', 'completion', 'optimizer', 'physics', 'viz']
+NODES = ['driver', 'reconstruction', 'physics', 'viz']  # the default graph (fused reconstruction)
 
 
 def include(name, **args):
@@ -79,7 +79,8 @@ def test_yaml_parameters_are_set_on_the_running_nodes(probe):
         assert expected, f'config/{node}.yaml has no parameters'
         got = probe.get_parameters(f'/{node}', list(expected))
         overridden = {'driver': {'num_users', 'scenario', 'source', 'seed', 'replay_file'},
-                      'optimizer': {'method'}, 'physics': {'input_topic'}}.get(node, set())
+                      'reconstruction': {'optimizer.method'},
+                      'physics': {'input_topic'}}.get(node, set())
         for k, v in expected.items():
             if k in overridden:
                 continue
@@ -103,6 +104,6 @@ def test_parameter_changed_at_run_time_takes_effect(probe):
     assert res.successful, res.reason
     time.sleep(0.5)
     assert not raw_namespaces(), 'raw layer still drawn after show_raw:=false'
-    bad = probe.set_parameter('/optimizer', 'k', 100000)
+    bad = probe.set_parameter('/reconstruction', 'optimizer.k', 100000)
     assert not bad.successful and bad.reason  # out-of-range sets are refused with a reason
     assert probe.set_parameter('/viz', 'show_raw', True).successful

@@ -220,3 +220,118 @@ def test_config_files_hold_every_parameter_with_its_default():
         for s in specs:
             if s.name not in ('input_topic', 'output_topic'):
                 assert values[s.name] == s.default, (name, s.name)
+
+
+def test_fused_parameters_map_the_three_config_files():
+    from kinect_bringup.graph import load_params
+    from pose_reconstruction import reconstruction_node as rn
+
+    fused = rn.fused_parameters(load_params('reliability'), load_params('completion'),
+                                load_params('optimizer'))
+    specs = {s.name: s for s in rn.SPECS}
+    # every prefixed parameter comes from its node's file with that file's value
+    prefixed = {k for k in specs if '.' in k}
+    assert set(fused) == prefixed | {'qos_depth', 'user_timeout_s', 'time_jump_reset_s',
+                                     'database'}
+    assert fused['optimizer.k'] == load_params('optimizer')['k']
+    assert fused['completion.pca_dims'] == load_params('completion')['pca_dims'] != \
+        fused['optimizer.pca_dims']
+    assert fused['reliability.theta_roof_deg'] == load_params('reliability')['theta_roof_deg']
+    for k, v in fused.items():  # and the files hold the specs' defaults
+        assert specs[k].default == v, k
+    assert rn.section(fused, 'optimizer')['method'] == 'C'
+    assert 'optimizer.database' not in specs and 'completion.use_input_reliability' not in specs
+
+
+def test_fused_node_over_dds(rclpy_context, case):
+    """The one-node reconstruction: same outputs as the three nodes from /kinect/skeletons;
+    the completion is computed only while /posture/completed has a subscriber."""
+    from rclpy.executors import MultiThreadedExecutor
+    from rclpy.node import Node
+    from rclpy.parameter import Parameter
+
+    from pose_reconstruction.posture_space import parent_relative_error
+    from pose_reconstruction.reconstruction_node import ReconstructionNode
+    from skeleton_core.conversions import (SkeletonFrame, frames_from_array_msg,
+                                           frames_to_array_msg)
+    from skeleton_msgs.msg import SkeletonArray
+
+    db, truth, obs, ts = case
+    ctx = rclpy_context
+    ns = f'/f{os.getpid()}'
+    t_in, t_rel = ns + '/kinect/skeletons', ns + '/kinect/skeletons_reliability'
+    t_comp, t_rec = ns + '/posture/completed', ns + '/posture/reconstructed'
+    node = ReconstructionNode(database_obj=db, context=ctx, parameter_overrides=[
+        Parameter('input_topic', value=t_in), Parameter('output_topic', value=t_rec),
+        Parameter('reliability_topic', value=t_rel), Parameter('completed_topic', value=t_comp)])
+    client = Node('fused_client', context=ctx)
+    got = {t_rel: {}, t_comp: {}, t_rec: {}}
+    lock = threading.Lock()
+
+    def make_cb(topic):
+        def cb(msg):
+            with lock:
+                for f in frames_from_array_msg(msg):
+                    got[topic][f.stamp_ns] = f
+        return cb
+
+    subs = {t: client.create_subscription(SkeletonArray, t, make_cb(t), 100)
+            for t in (t_rel, t_rec)}
+    pub = client.create_publisher(SkeletonArray, t_in, 100)
+    ex = MultiThreadedExecutor(num_threads=3, context=ctx)
+    for n in (node, client):
+        ex.add_node(n)
+    th = threading.Thread(target=ex.spin, daemon=True)
+    th.start()
+    t0 = 1_700_000_000_000_000_000
+
+    def send(i):
+        stamp = t0 + i * 33_333_333
+        f = SkeletonFrame(positions=obs[i], tracking_state=ts[i], user_id=4, stamp_ns=stamp,
+                          frame_id='kinect_depth')
+        pub.publish(frames_to_array_msg([f], stamp, 'kinect_depth'))
+        return stamp
+
+    try:
+        assert _wait(lambda: pub.get_subscription_count() >= 1 and all(
+            client.count_publishers(t) >= 1 for t in subs), 10.0)
+        time.sleep(0.3)
+        # nobody subscribes to the completion yet: not computed, not published
+        for i in range(10):
+            s = send(i)
+            assert _wait(lambda: s in got[t_rec] and s in got[t_rel], 3.0, step=0.002)
+        assert node._users[4].comp is None and not got[t_comp]
+        subs[t_comp] = client.create_subscription(SkeletonArray, t_comp, make_cb(t_comp), 100)
+        assert _wait(lambda: node._pubs[2].get_subscription_count() >= 1, 10.0)
+        stamps = []
+        for i in range(10, len(obs)):
+            s = send(i)
+            stamps.append(s)
+            _wait(lambda: all(s in v for v in got.values()), 3.0, step=0.002)
+        assert _wait(lambda: all(s in got[t] for s in stamps for t in got), 10.0), \
+            ({k: len(v) for k, v in got.items()}, node.health.snapshot())
+        with lock:
+            rec_frames = [got[t_rec][s] for s in stamps]
+            rel = np.array([got[t_rel][s].reliability for s in stamps])
+            comp = np.array([got[t_comp][s].positions for s in stamps])
+        rec = np.array([f.positions for f in rec_frames])
+        assert all(f.user_id == 4 and f.frame_id == 'kinect_depth' for f in rec_frames)
+        # the reliability output is the one the optimizer used
+        assert np.array_equal(rel, np.array([f.reliability for f in rec_frames]))
+        assert rel[30 - 10:40 - 10, 7].max() < 0.2 and rel[:, 0].min() > 0.5
+        raw = parent_relative_error(obs[10:], truth[10:])
+        assert parent_relative_error(rec, truth[10:]) < 0.8 * raw
+        assert parent_relative_error(comp, truth[10:]) < raw
+        # prefixed parameters: validated, and a change reaches the library objects
+        assert not node.set_parameters([Parameter('optimizer.k', value=0)])[0].successful
+        assert not node.set_parameters(
+            [Parameter('reliability.theta_floor_deg', value=150.0)])[0].successful
+        assert node.set_parameters([Parameter('optimizer.k', value=12)])[0].successful
+        assert node._users == {}
+        assert node.make_processor(dict(node.params.values)).rec.core.k == 12
+    finally:
+        ex.shutdown(timeout_sec=5.0)
+        th.join(timeout=5.0)
+        for n in (node, client):
+            ex.remove_node(n)
+            n.destroy_node()

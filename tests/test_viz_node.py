@@ -118,8 +118,13 @@ def test_markers_cross_dds_and_hiding_a_layer_takes_effect(graph):
     assert not res.successful
 
     # hide the raw layer at run time: its markers are deleted, then no longer sent
+    got.clear()  # before the change: the deletion may go out at once
     assert viz.set_parameters([Parameter('show_raw', value=False)])[0].successful
-    got.clear()
+    # a hidden layer's topic is not subscribed any more (nothing computed for it upstream)
+    deadline = time.time() + 10.0
+    while raw.get_subscription_count() and time.time() < deadline:
+        time.sleep(0.05)
+    assert raw.get_subscription_count() == 0
     deleted = _wait_for(got, lambda m: any(x.action == Marker.DELETE and x.ns == 'raw/user_4'
                                            for x in m.markers), pubs)
     assert deleted is not None, 'hidden raw layer was not deleted'

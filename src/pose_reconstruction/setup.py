@@ -23,6 +23,7 @@ setup(
             'reliability = pose_reconstruction.reliability_node:main',
             'completion = pose_reconstruction.completion_node:main',
             'optimizer = pose_reconstruction.optimizer_node:main',
+            'reconstruction = pose_reconstruction.reconstruction_node:main',
             'process_bag = pose_reconstruction.process_bag:main',
             'bench_reconstruction = pose_reconstruction.bench:main',
         ],

@@ -22,7 +22,7 @@ from typing import Dict, List
 
 import numpy as np
 
-from .graph import repo_root
+from .graph import RECONSTRUCTION, graph_nodes, repo_root
 from .processes import Graph
 
 BUDGET_MS = 1000.0 / 30.0
@@ -116,14 +116,15 @@ def _proc_stats(graph: Graph, seconds: float) -> Dict[str, Dict[str, float]]:
 
 
 def run_case(probe: LatencyProbe, mode: str, users: int, seconds: float, warmup: float,
-             physics: bool, log_dir: Path) -> Dict:
+             physics: bool, log_dir: Path, reconstruction: str = 'fused') -> Dict:
     overrides = {'driver': {'num_users': users, 'scenario': 'b'}}
-    pipeline_args = ['--num-users', str(users), '--scenario', 'b', '--no-viz']
-    nodes = ['driver', 'reliability', 'completion', 'optimizer'] + (['physics'] if physics else [])
+    pipeline_args = ['--num-users', str(users), '--scenario', 'b', '--no-viz',
+                     '--reconstruction', reconstruction]
+    nodes = graph_nodes(physics=physics, viz=False, reconstruction=reconstruction)
     if not physics:
         pipeline_args.append('--no-physics')
     graph = Graph(mode, nodes=nodes, overrides=overrides, pipeline_args=pipeline_args,
-                  log_dir=log_dir / f'{mode}_{users}')
+                  log_dir=log_dir / f'{mode}_{reconstruction}_{users}')
     try:
         deadline = time.monotonic() + 90
         while probe.count['/kinect/skeletons'] == 0 and time.monotonic() < deadline:
@@ -136,7 +137,8 @@ def run_case(probe: LatencyProbe, mode: str, users: int, seconds: float, warmup:
     finally:
         graph.stop()
     with probe.lock:
-        res = {'mode': mode, 'users': users, 'seconds': seconds, 'processes': stats,
+        res = {'mode': mode, 'reconstruction': reconstruction, 'users': users,
+               'seconds': seconds, 'processes': stats,
                'nan_outputs': probe.nan}
         src = probe.stamps['/kinect/skeletons']
         for topic, key in TOPICS.items():
@@ -188,9 +190,16 @@ def process_bag_speed(log_dir: Path) -> Dict:
         return {'error': str(e)}
 
 
+def _label(r: Dict) -> str:
+    return f"{r['mode']} ({r.get('reconstruction', 'split')})"
+
+
 def to_markdown(results: List[Dict], bag_speed: Dict, commit: str) -> str:
     lines = [f'# End-to-end benchmark (commit {commit})', '',
              f'Frame budget {BUDGET_MS:.1f} ms (30 Hz). Latency = receive time - capture stamp, over real DDS.',
+             'Mode: one-process `pipeline` or `processes` (one per node, as `ros2 launch` runs them); '
+             'reconstruction fused (one node) or split (reliability, completion, optimizer nodes). '
+             'No viz node: nothing consumes /posture/completed, which the fused node then skips.',
              '', '| mode | users | output | rate Hz | p50 ms | p95 ms | p99 ms | p95/budget | dropped |',
              '|---|---:|---|---:|---:|---:|---:|---:|---:|']
     for r in results:
@@ -198,14 +207,14 @@ def to_markdown(results: List[Dict], bag_speed: Dict, commit: str) -> str:
             o = r.get(key, {})
             if not o.get('skeletons'):
                 continue
-            lines.append(f"| {r['mode']} | {r['users']} | {key} | {o['rate_hz']:.1f} | "
+            lines.append(f"| {_label(r)} | {r['users']} | {key} | {o['rate_hz']:.1f} | "
                          f"{o['p50_ms']:.1f} | {o['p95_ms']:.1f} | {o['p99_ms']:.1f} | "
                          f"{o['p95_ms'] / BUDGET_MS:.2f} | {o.get('dropped', 0)} "
                          f"({100 * o.get('dropped_fraction', 0):.1f} %) |")
     lines += ['', '| mode | users | process | CPU % | RSS MB |', '|---|---:|---|---:|---:|']
     for r in results:
         for name, s in r['processes'].items():
-            lines.append(f"| {r['mode']} | {r['users']} | {name} | {s['cpu_percent']:.0f} | {s['rss_mb']:.0f} |")
+            lines.append(f"| {_label(r)} | {r['users']} | {name} | {s['cpu_percent']:.0f} | {s['rss_mb']:.0f} |")
     lines += ['', f"NaN outputs: {sum(r['nan_outputs'] for r in results)}", '']
     if 'x_real_time' in bag_speed:
         lines.append(f"process_bag (method C, no physics): {bag_speed['frames']} frames "
@@ -225,6 +234,9 @@ def main(argv=None) -> int:
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument('--users', default='1,2,4,6')
     p.add_argument('--modes', default='pipeline,processes')
+    p.add_argument('--reconstruction', default='fused',
+                   help=f'comma list of {"/".join(RECONSTRUCTION)}: the reconstruction as one node '
+                        'or as three')
     p.add_argument('--seconds', type=float, default=10.0)
     p.add_argument('--warmup', type=float, default=4.0)
     p.add_argument('--no-physics', action='store_true')
@@ -244,10 +256,13 @@ def main(argv=None) -> int:
     results = []
     try:
         for mode in args.modes.split(','):
-            for users in [int(u) for u in args.users.split(',')]:
-                print(f'[bench] {mode}, {users} user(s) ...', flush=True)
-                results.append(run_case(probe, mode, users, args.seconds, args.warmup,
-                                        not args.no_physics, out / 'logs'))
+            for rec in args.reconstruction.split(','):
+                if rec not in RECONSTRUCTION:
+                    p.error(f'--reconstruction {rec!r} is not one of {list(RECONSTRUCTION)}')
+                for users in [int(u) for u in args.users.split(',')]:
+                    print(f'[bench] {mode} ({rec}), {users} user(s) ...', flush=True)
+                    results.append(run_case(probe, mode, users, args.seconds, args.warmup,
+                                            not args.no_physics, out / 'logs', rec))
     finally:
         probe.close()
     bag_speed = {} if args.skip_bag else process_bag_speed(out / 'logs')

@@ -1,6 +1,11 @@
 """The node graph as data, shared by the launch file's users, the one-process ``pipeline``, the demo
 and the benchmark: which nodes exist, where their parameter files are, and the topics between them.
-No rclpy here."""
+No rclpy at import time.
+
+The reconstruction runs either as one ``reconstruction`` node (default: no DDS hops inside it) or
+as the three nodes ``reliability``, ``completion`` and ``optimizer`` (``split``); the fused node has
+no YAML file of its own: its parameters are the three files' values, prefixed (see
+:func:`load_params`)."""
 from __future__ import annotations
 
 import importlib
@@ -25,6 +30,8 @@ NODES: Dict[str, NodeInfo] = {n.name: n for n in (
     NodeInfo('reliability', 'pose_reconstruction', 'reliability', 'pose_reconstruction.reliability_node'),
     NodeInfo('completion', 'pose_reconstruction', 'completion', 'pose_reconstruction.completion_node'),
     NodeInfo('optimizer', 'pose_reconstruction', 'optimizer', 'pose_reconstruction.optimizer_node'),
+    NodeInfo('reconstruction', 'pose_reconstruction', 'reconstruction',
+             'pose_reconstruction.reconstruction_node'),
     NodeInfo('physics', 'physics_sim', 'physics', 'physics_sim.physics_node'),
     NodeInfo('viz', 'viz', 'viz', 'viz.viz_node'),
     NodeInfo('recorder', 'kinect_bringup', 'recorder', 'kinect_bringup.recorder'),
@@ -75,7 +82,12 @@ def params_file(node: str, directory: Optional[Path] = None) -> Optional[Path]:
 
 def load_params(node: str, directory: Optional[Path] = None) -> Dict:
     """The ros__parameters of ``node`` as the launch file would apply them (``/**`` and the node's
-    own key merged, the node's key winning)."""
+    own key merged, the node's key winning). For ``reconstruction`` (no file of its own): the
+    reliability, completion and optimizer files mapped onto its prefixed names."""
+    if node == 'reconstruction' and params_file(node, directory) is None:
+        from pose_reconstruction.reconstruction_node import fused_parameters
+        return fused_parameters(*(load_params(n, directory)
+                                  for n in ('reliability', 'completion', 'optimizer')))
     path = params_file(node, directory)
     if path is None:
         return {}
@@ -100,9 +112,15 @@ def node_class(name: str):
     return found[0]
 
 
+RECONSTRUCTION = {'fused': ['reconstruction'],
+                  'split': ['reliability', 'completion', 'optimizer']}
+
+
 def graph_nodes(method: str = 'C', physics: bool = True, viz: bool = True,
-                record: bool = False) -> List[str]:
-    names = ['driver', 'reliability', 'completion', 'optimizer']
+                record: bool = False, reconstruction: str = 'fused') -> List[str]:
+    if reconstruction not in RECONSTRUCTION:
+        raise ValueError(f'reconstruction must be one of {list(RECONSTRUCTION)}')
+    names = ['driver'] + RECONSTRUCTION[reconstruction]
     if physics:
         names.append('physics')
     if viz:

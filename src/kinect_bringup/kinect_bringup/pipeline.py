@@ -14,7 +14,7 @@ import threading
 from pathlib import Path
 from typing import Dict, List, Optional
 
-from .graph import config_dir, graph_nodes, node_class, params_file
+from .graph import RECONSTRUCTION, config_dir, graph_nodes, load_params, node_class, params_file
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -28,6 +28,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--database', default=None, help='motion database file ("" = default)')
     p.add_argument('--method', choices=['A', 'B', 'C'], default=None,
                    help='A drives the character from completion; B/C set the optimizer (default: YAML)')
+    p.add_argument('--reconstruction', choices=sorted(RECONSTRUCTION), default='fused',
+                   help='fused: one reconstruction node (default); split: reliability, completion '
+                        'and optimizer nodes')
     p.add_argument('--no-physics', action='store_true')
     p.add_argument('--no-viz', action='store_true')
     p.add_argument('--record', default='', help='record the pipeline topics to this MCAP file')
@@ -62,7 +65,8 @@ def make_executor(kind: str, threads: Optional[int] = None):
 
 def node_overrides(args) -> Dict[str, Dict]:
     """Per-node parameter overrides from the command line (same meaning as the launch arguments)."""
-    over: Dict[str, Dict] = {n: {} for n in ('driver', 'completion', 'optimizer', 'physics', 'recorder')}
+    over: Dict[str, Dict] = {n: {} for n in ('driver', 'completion', 'optimizer', 'reconstruction',
+                                             'physics', 'recorder')}
     for key, attr in (('source', 'source'), ('replay_file', 'replay_file'), ('scenario', 'scenario'),
                       ('num_users', 'num_users'), ('seed', 'seed')):
         v = getattr(args, attr)
@@ -71,8 +75,10 @@ def node_overrides(args) -> Dict[str, Dict]:
     if args.database is not None:
         over['completion']['database'] = args.database
         over['optimizer']['database'] = args.database
+        over['reconstruction']['database'] = args.database
     if args.method in ('B', 'C'):
         over['optimizer']['method'] = args.method
+        over['reconstruction']['optimizer.method'] = args.method
     if args.method:
         over['physics']['input_topic'] = ('/posture/completed' if args.method == 'A'
                                           else '/posture/reconstructed')
@@ -89,10 +95,13 @@ def create_nodes(names: List[str], overrides: Dict[str, Dict], directory: Option
     for name in names:
         cls = node_class(name)
         cli = []
+        values = dict(overrides.get(name, {}))
         pf = params_file(name, directory)
         if pf is not None:
             cli = ['--ros-args', '--params-file', str(pf)]
-        po = [Parameter(k, value=v) for k, v in overrides.get(name, {}).items()]
+        else:  # a node without a file of its own (the fused reconstruction)
+            values = {**load_params(name, directory), **values}
+        po = [Parameter(k, value=v) for k, v in values.items()]
         kwargs = dict(cli_args=cli, parameter_overrides=po)
         if context is not None:
             kwargs['context'] = context
@@ -109,7 +118,7 @@ def main(argv=None) -> int:
 
     directory = Path(args.config_dir) if args.config_dir else config_dir()
     names = graph_nodes(args.method, physics=not args.no_physics, viz=not args.no_viz,
-                        record=bool(args.record))
+                        record=bool(args.record), reconstruction=args.reconstruction)
     from rclpy.signals import SignalHandlerOptions
     # Ctrl-C raises KeyboardInterrupt here; the executor is stopped and waited for before the
     # nodes are destroyed (rclpy's own handler would shut the context down under running callbacks).

@@ -10,7 +10,7 @@ import time
 from pathlib import Path
 from typing import Dict, List, Optional
 
-from .graph import NODES, config_dir, graph_nodes
+from .graph import NODES, config_dir, graph_nodes, load_params
 
 
 def executable(node: str) -> List[str]:
@@ -59,9 +59,12 @@ class Graph:
             for name in nodes or graph_nodes():
                 cmd = executable(name) + ['--ros-args', '-r', f'__node:={name}']
                 pf = cdir / f'{name}.yaml'
+                values = dict((overrides or {}).get(name, {}))
                 if pf.is_file():
                     cmd += ['--params-file', str(pf)]
-                for k, v in (overrides or {}).get(name, {}).items():
+                else:  # a node without a file of its own (the fused reconstruction)
+                    values = {**load_params(name, cdir), **values}
+                for k, v in values.items():
                     cmd += ['-p', f'{k}:={_ros_value(v)}']
                 self._start(name, cmd)
         else:

@@ -202,6 +202,11 @@ class DriverNode(Node):
             if not self.context.ok():  # shutting down (Ctrl-C / SIGTERM) mid-callback
                 return
             raise
+        try:
+            self.source.prepare()
+        except Exception as e:  # noqa: BLE001 - as poll(): counted and logged, never fatal
+            if self.health.on_drop(f'source error: {type(e).__name__}'):
+                self.get_logger().error(f'source failed: {e}')
         last = getattr(self.source, 'last_frame_ns', 0)
         if last and now - last > STALL_S * 1e9:
             if not self._stalled:

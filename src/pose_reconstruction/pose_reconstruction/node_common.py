@@ -4,13 +4,16 @@ run-time-changeable, validated parameters.
 
 A node subclass gives its parameter specs and ``make_processor(params) -> object`` with
 ``process(frame) -> frame`` and ``reset()``; one processor is kept per user id and rebuilt (state
-dropped) when a parameter changes.
+dropped) when a parameter changes. A node with several outputs (``outputs``: the parameter names of
+their topics, the first one primary) gets ``process(frame, wanted) -> tuple`` of one frame (or None)
+per output instead: ``wanted[i]`` says whether output i has subscribers (the primary output always
+counts as wanted), so work nobody consumes can be skipped.
 """
 from __future__ import annotations
 
 import threading
 import time
-from typing import Any, Callable, Dict, List, Optional
+from typing import Any, Callable, Dict, List, Optional, Sequence
 
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
@@ -70,7 +73,8 @@ def check_reliability_params(values: Dict[str, Any]) -> Optional[str]:
 class SkeletonArrayNode(Node):
     """Base class (see module docstring)."""
 
-    def __init__(self, name: str, specs: List[ParamSpec], **kwargs):
+    def __init__(self, name: str, specs: List[ParamSpec], outputs: Sequence[str] = ('output_topic',),
+                 **kwargs):
         super().__init__(name, **kwargs)
         self._lock = threading.RLock()
         self.health = Health()
@@ -84,14 +88,16 @@ class SkeletonArrayNode(Node):
         self.setup()
         from skeleton_msgs.msg import SkeletonArray
         depth = self.params['qos_depth']
-        self._pub = self.create_publisher(SkeletonArray, self.params['output_topic'],
-                                          QoSProfile(depth=depth))
+        self._multi = len(outputs) > 1
+        self._pubs = [self.create_publisher(SkeletonArray, self.params[o], QoSProfile(depth=depth))
+                      for o in outputs]
         # serialized in and out (skeleton_core.cdr): no rclpy message objects per joint
         self._sub = self.create_subscription(SkeletonArray, self.params['input_topic'],
                                              self._on_msg, QoSProfile(depth=depth), raw=True)
         self._timer = self.create_timer(0.5, self._purge)
         self.diagnostics = DiagnosticsPublisher(self, self.health, extra=self.diagnostics_extra)
-        self.get_logger().info(f"{self.params['input_topic']} -> {self.params['output_topic']}")
+        self.get_logger().info(f"{self.params['input_topic']} -> "
+                               + ', '.join(p.topic_name for p in self._pubs))
 
     # -- hooks -----------------------------------------------------------------------------------
     def setup(self) -> None:
@@ -168,7 +174,9 @@ class SkeletonArrayNode(Node):
                 self._last_stamp_ns = stamp
             for e in errors:
                 self._drop(e.cause, e.detail)
-            results = []
+            # the primary output always; the others only while someone subscribes
+            wanted = (True,) + tuple(p.get_subscription_count() > 0 for p in self._pubs[1:])
+            results: List[List] = [[] for _ in self._pubs]
             self._purge()
             for f in frames:
                 proc = self._users.get(f.user_id)
@@ -178,16 +186,22 @@ class SkeletonArrayNode(Node):
                 if f.stamp_ns == 0:
                     f.stamp_ns = stamp
                 try:
-                    res = proc.process(f)
-                    validate_arrays(res.positions, res.tracking_state, res.reliability,
-                                    res.orientations)
-                    results.append(res)
+                    outs = proc.process(f, wanted) if self._multi else (proc.process(f),)
+                    for res in outs:
+                        if res is not None:
+                            validate_arrays(res.positions, res.tracking_state, res.reliability,
+                                            res.orientations)
+                    for i, res in enumerate(outs):
+                        if res is not None:
+                            results[i].append(res)
                 except SkeletonFormatError as e:
                     self._drop('bad result: ' + e.cause, e.detail)
                 except (ValueError, FloatingPointError, ArithmeticError, IndexError) as e:
                     self._drop('processing error', f'{type(e).__name__}: {e}')
                     proc.reset()
-        self._pub.publish(frames_to_cdr(results, stamp, frame_id))
+        for pub, want, res in zip(self._pubs, wanted, results):
+            if want:
+                pub.publish(frames_to_cdr(res, stamp, frame_id))
         self.health.on_publish(latency_s=time.monotonic() - t0)
 
 

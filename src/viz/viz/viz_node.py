@@ -1,6 +1,6 @@
 """``viz`` node: skeleton topics -> ``visualization_msgs/MarkerArray`` for RViz.
 
-Subscribes (names are read-only parameters ``*_topic``):
+Subscribes (names are read-only parameters ``*_topic``; a layer's topic only while it is shown):
   /kinect/skeletons              raw Kinect skeletons         -> layer ``raw``
   /kinect/skeletons_reliability  with per-joint reliability   -> layer ``reliability`` (red squares)
   /posture/reconstructed         reconstructed postures       -> layer ``reconstructed``
@@ -223,11 +223,8 @@ class VizNode(Node):
         self._objects_shown: Dict[tuple, str] = {}
         self._objects_new = False
         self._pub = self.create_publisher(MarkerArray, v['markers_topic'], 10)
-        from skeleton_msgs.msg import SkeletonArray
-        for layer, key in _LAYER_TOPIC.items():
-            self.create_subscription(SkeletonArray, v[key],   # serialized (skeleton_core.cdr)
-                                     lambda data, layer=layer: self._on_skeletons(layer, data),
-                                     qos_profile_sensor_data, raw=True)
+        self._layer_subs: Dict[str, Any] = {}
+        self._sync_subscriptions(v)
         self.create_subscription(MarkerArray, v['objects_topic'], self._on_objects, 10)
         self._timer = self.create_timer(1.0 / v['max_rate_hz'], self._tick)
         self._diag = DiagnosticsPublisher(self, self.health, extra=lambda: {
@@ -239,6 +236,21 @@ class VizNode(Node):
     def _apply_enabled(self, v: Dict[str, Any]) -> None:
         for layer in mk.LAYERS:
             self.scene.enabled[layer] = bool(v[f'show_{layer}'])
+
+    def _sync_subscriptions(self, v: Dict[str, Any]) -> None:
+        """Subscribe to a layer's topic only while the layer is shown: a hidden layer costs
+        nothing, here or upstream (the reconstruction node skips outputs nobody subscribes to)."""
+        from skeleton_msgs.msg import SkeletonArray
+        for layer, key in _LAYER_TOPIC.items():
+            sub = self._layer_subs.get(layer)
+            if v[f'show_{layer}'] and sub is None:
+                self._layer_subs[layer] = self.create_subscription(
+                    SkeletonArray, v[key],   # serialized (skeleton_core.cdr)
+                    lambda data, layer=layer: self._on_skeletons(layer, data),
+                    qos_profile_sensor_data, raw=True)
+            elif not v[f'show_{layer}'] and sub is not None:
+                self.destroy_subscription(sub)
+                del self._layer_subs[layer]
 
     def _on_params(self, changed: Dict[str, Any]) -> Optional[str]:
         v = dict(self.params.values)
@@ -252,6 +264,7 @@ class VizNode(Node):
         self.scene.stale_timeout_s = v['stale_timeout_s']
         self.scene.default_frame_id = v['default_frame_id']
         self._apply_enabled(v)
+        self._sync_subscriptions(v)
         if 'max_rate_hz' in changed:
             self._timer.cancel()
             self.destroy_timer(self._timer)

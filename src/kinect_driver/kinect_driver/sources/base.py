@@ -29,7 +29,10 @@ class SourceOutput:
 
 class Source:
     """Base class. ``open()`` raises :class:`SourceError`; ``poll(now_ns)`` returns the outputs due
-    by ``now_ns`` (called every ``period_s`` by the node); ``close()`` releases everything."""
+    by ``now_ns`` (called every ``period_s`` by the node); ``prepare()`` is called after they are
+    published, to get the next output ready (a simulated sensor computes its next frame there, so
+    that the simulation's own cost is not part of the measured capture-to-output latency);
+    ``close()`` releases everything."""
 
     name = 'source'
     period_s = 1.0 / 30.0
@@ -40,6 +43,9 @@ class Source:
 
     def poll(self, now_ns: int) -> List[SourceOutput]:
         raise NotImplementedError
+
+    def prepare(self) -> None:
+        pass
 
     def close(self) -> None:
         pass

@@ -80,6 +80,7 @@ class SyntheticSource(Source):
         self.clip_names: List[str] = []
         self._period_ns = int(round(1e9 / float(rate_hz)))
         self._next_ns = None
+        self._ready = None  # the next frame's simulated data, computed ahead by prepare()
 
     def open(self) -> None:
         from skeleton_core import sensor_model
@@ -92,6 +93,7 @@ class SyntheticSource(Source):
                               f'{self.sensor_params or "(default)"}: {e}') from None
         clips = _load_motion(self.clip, self.seed)
         self._streams = []
+        self._ready = None
         self.clip_names = []
         n = self.num_users
         for k in range(n):
@@ -124,10 +126,18 @@ class SyntheticSource(Source):
             self._next_ns += period
         return outs
 
+    def prepare(self) -> None:
+        """Simulate the next frame now (after the current one went out): a real sensor has its
+        frame ready when it is captured; the simulation's cost must not count as latency."""
+        if self._ready is None and self._streams:
+            self._ready = [next(stream) for stream in self._streams]
+
     def _capture(self, stamp_ns: int) -> SourceOutput:
         frames, truth = [], []
-        for k, stream in enumerate(self._streams):
-            pos, state, true_pos = next(stream)
+        data, self._ready = self._ready, None
+        if data is None:
+            data = [next(stream) for stream in self._streams]
+        for k, (pos, state, true_pos) in enumerate(data):
             uid = k + 1
             frames.append(SkeletonFrame(positions=np.asarray(pos, float),
                                         tracking_state=np.asarray(state, np.uint8), user_id=uid,

@@ -1,0 +1,143 @@
+"""``reconstruction`` node: reliability, completion (method A) and optimizer (B / C) in one node.
+
+``/kinect/skeletons`` -> ``/posture/reconstructed``, and, while something subscribes to them,
+``/kinect/skeletons_reliability`` and ``/posture/completed``: the same three outputs as the
+``reliability``, ``completion`` and ``optimizer`` nodes, without the two DDS hops (serialise,
+wake up another process, deserialise) between them, and without computing the completion when
+nobody consumes it. The reliability is estimated once per user, inside the optimizer's
+:class:`~.reconstructor.Reconstructor`, and handed to the completion.
+
+Parameters are the three nodes' own, prefixed with the node name (``reliability.d_min``,
+``completion.pca_dims``, ``optimizer.k``; :func:`fused_parameters` maps the three nodes' YAML
+files onto them), plus one shared ``database`` and the topics.
+"""
+from __future__ import annotations
+
+from typing import Any, Dict, Optional
+
+from skeleton_core.rosnode import ParamSpec, run_node
+
+from . import completion_node, optimizer_node
+from .node_common import (RELIABILITY_SPECS, SkeletonArrayNode,
+                          check_reliability_params, common_specs, load_database)
+from .posture_space import as_database_arrays
+from .reconstructor import Reconstructor
+
+# the split nodes' settings that have no meaning here: one database, and the reliability always
+# comes from this node's own estimate
+_NOT_FUSED = ('database', 'use_input_reliability')
+_SECTIONS = {
+    'reliability': RELIABILITY_SPECS,
+    'completion': [s for s in completion_node.SPECS if s.name not in _NOT_FUSED],
+    'optimizer': [s for s in optimizer_node.SPECS if s.name not in _NOT_FUSED],
+}
+
+
+def _prefixed(section: str, spec: ParamSpec) -> ParamSpec:
+    return ParamSpec(f'{section}.{spec.name}', spec.default, spec.description, spec.range,
+                     spec.choices, spec.read_only, spec.validator)
+
+
+SPECS = (common_specs('/kinect/skeletons', '/posture/reconstructed') + [
+    ParamSpec('reliability_topic', '/kinect/skeletons_reliability',
+              'SkeletonArray with the reliability filled (published while subscribed)',
+              read_only=True),
+    ParamSpec('completed_topic', '/posture/completed',
+              'method A output (computed and published only while subscribed)', read_only=True),
+    ParamSpec('database', '', "motion database file ('' = built-in / CMU default)"),
+] + [_prefixed(sec, s) for sec, specs in _SECTIONS.items() for s in specs])
+_SHARED = ('qos_depth', 'user_timeout_s', 'time_jump_reset_s', 'database')
+
+
+def section(values: Dict[str, Any], name: str) -> Dict[str, Any]:
+    """The unprefixed parameters of one section (``'optimizer'`` -> ``{'k': 30, ...}``)."""
+    head = name + '.'
+    return {k[len(head):]: v for k, v in values.items() if k.startswith(head)}
+
+
+def fused_parameters(reliability: Dict[str, Any], completion: Dict[str, Any],
+                     optimizer: Dict[str, Any]) -> Dict[str, Any]:
+    """This node's parameters from the three split nodes' (e.g. their YAML files' values)."""
+    out: Dict[str, Any] = {}
+    for name, values in (('reliability', reliability), ('completion', completion),
+                         ('optimizer', optimizer)):
+        names = {s.name for s in _SECTIONS[name]}
+        out.update({f'{name}.{k}': v for k, v in values.items() if k in names})
+    for k in _SHARED:
+        for values in (completion, optimizer):  # the optimizer's value wins
+            if k in values:
+                out[k] = values[k]
+    return out
+
+
+class _Processor:
+    """One user: the optimizer's Reconstructor (which estimates the reliability) and, when the
+    completion is consumed, a method-A Reconstructor fed with that reliability."""
+
+    def __init__(self, db, values: Dict[str, Any]):
+        self._db = db
+        rel = section(values, 'reliability')
+        self.rec = Reconstructor(db, use_input_reliability=False,
+                                 **section(values, 'optimizer'), **rel)
+        comp = section(values, 'completion')
+        self._comp_args = dict(method='A', use_input_reliability=True, **comp, **rel)
+        self.comp: Optional[Reconstructor] = None  # built when first consumed
+
+    def _completion(self) -> Reconstructor:
+        if self.comp is None:
+            self.comp = Reconstructor(self._db, **self._comp_args)
+        return self.comp
+
+    def reset(self) -> None:
+        self.rec.reset()
+        if self.comp is not None:
+            self.comp.reset()
+
+    def process(self, frame, wanted):
+        out = self.rec.process(frame)
+        rel = frame.copy(reliability=out.reliability)
+        comp = self._completion().process(rel) if wanted[2] else None
+        return out, (rel if wanted[1] else None), comp
+
+
+class ReconstructionNode(SkeletonArrayNode):
+    def __init__(self, database_obj=None, **kwargs):
+        self._database_obj = database_obj
+        super().__init__('reconstruction', SPECS,
+                         outputs=('output_topic', 'reliability_topic', 'completed_topic'), **kwargs)
+
+    def setup(self) -> None:
+        self._load(self.params['database'])
+
+    def _load(self, path: str) -> None:
+        db = self._database_obj if (self._database_obj is not None and not path) else \
+            load_database(path)
+        self.db = as_database_arrays(db)
+        self.get_logger().info(f'motion database: {self.db.size} postures')
+
+    def validate(self, values: Dict[str, Any]) -> Optional[str]:
+        return check_reliability_params(section(values, 'reliability'))
+
+    def apply_params(self, values, changed) -> Optional[str]:
+        if 'database' in changed:
+            try:
+                self._load(changed['database'])
+            except (FileNotFoundError, ValueError, RuntimeError) as e:
+                return str(e)
+        return None
+
+    def make_processor(self, values: Dict[str, Any]):
+        return _Processor(self.db, values)
+
+    def diagnostics_extra(self) -> Dict[str, Any]:
+        extra = super().diagnostics_extra()
+        extra['completion_subscribed'] = self._pubs[2].get_subscription_count() > 0
+        return extra
+
+
+def main(args=None) -> int:
+    return run_node(ReconstructionNode, args=args)
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())
