@@ -99,6 +99,8 @@ class WorldParams:
     timestep: float = 0.002
     integrator: str = 'implicitfast'
     solver: str = 'newton'          # MuJoCo constraint solver: pgs, cg or newton
+    # Euler: MuJoCo integrates joint damping implicitly unless this is False (eulerdamp flag)
+    euler_implicit_damping: bool = True
     gravity: Tuple[float, float, float] = (0.0, 0.0, -9.81)
     floor_friction: float = 1.0
     contact_solref: Tuple[float, float] = (0.02, 1.0)
@@ -152,7 +154,8 @@ def world_xml(characters: Sequence[CharacterEntry], objects: Sequence[ObjectSpec
     return '\n'.join([
         '<mujoco model="kinect_physics">',
         f'  <option timestep="{params.timestep:.6g}" integrator="{integ}" '
-        f'solver="{solver}" gravity="{fmt(params.gravity)}"/>',
+        f'solver="{solver}" gravity="{fmt(params.gravity)}">'
+        + ('' if params.euler_implicit_damping else '<flag eulerdamp="disable"/>') + '</option>',
         f'  <default><geom solref="{fmt(params.contact_solref)}" condim="3" '
         f'contype="{ALL_BITS}" conaffinity="{ALL_BITS}"/></default>',
         '  <worldbody>',

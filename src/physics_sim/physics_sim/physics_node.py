@@ -90,6 +90,10 @@ PARAMS: List[ParamSpec] = [
               'projected Gauss-Seidel on the few active constraint rows (fastest here); newton '
               'factors an nv x nv Hessian every step; all converge to the same forces',
               choices=SOLVERS, read_only=True),
+    ParamSpec('implicit_joint_damping', False,
+              'euler: integrate the ball joints\' damping implicitly (MuJoCo\'s default, ~6 us more '
+              'a step); false = explicitly like the other forces, used only while timestep * '
+              'joint_damping <= joint_armature / 4 (implicit otherwise)', read_only=True),
     ParamSpec('slow_control_every', 0,
               'physics steps between Python control updates (Eq. 2 twist targets, foot pins; '
               'actuator_pd and mocap_constraints targets); 0 = auto (4 for explicit_pd, one per '
@@ -176,6 +180,7 @@ def config_from_params(v: Dict) -> SimConfig:
                   twist_kd=v['twist_kd'], max_torque=v['max_torque'])
     return SimConfig(timestep=v['timestep'], controller=v['controller'], gains=gains,
                      integrator=v['integrator'], solver=v['solver'],
+                     implicit_joint_damping=v['implicit_joint_damping'],
                      slow_control_every=v['slow_control_every'],
                      track_timeconst=v['track_timeconst'], track_dampratio=v['track_dampratio'],
                      track_impedance=v['track_impedance'],
