@@ -312,3 +312,89 @@ def test_implicit_damping_keeps_stiff_gains_stable():
         if stable:
             err = np.linalg.norm(st.positions - st.target_world, axis=1)
             assert err.max() < 0.02
+
+
+def _walk_targets(n=45):
+    """The first frames of the built-in walk, sensor frame (a moving target with foot contacts)."""
+    from skeleton_core.motions import builtin_clips
+    clip = next(c for c in builtin_clips(0) if c.name == 'builtin_walk')
+    return clip.positions[:n] + np.array([2.5, 0.0, -0.8])
+
+
+@pytest.mark.parametrize('controller', ['actuator_pd', 'explicit_pd', 'mocap_constraints'])
+def test_joint_points_from_the_joint_sites_are_the_anchors(controller):
+    """The joint sites MuJoCo computes every step sit exactly on the joint anchors (not on the
+    MJCF's 6-digit copy), for every controller."""
+    sim = Simulation(SimConfig(controller=controller, body_height=1.75))
+    for p in _walk_targets(10):
+        sim.step({1: p})
+    ch = sim.characters[1]
+    assert sim._js is not None
+    np.testing.assert_allclose(sim._joint_points(), ch.joint_points(sim.data), rtol=0, atol=1e-12)
+    st = sim.states()[1]
+    np.testing.assert_allclose(st.positions, ch.joint_points(sim.data), rtol=0, atol=1e-12)
+    np.testing.assert_allclose(st.orientations[1:], sim.state(1).orientations[1:], atol=0)
+
+
+@pytest.mark.parametrize('controller', ['actuator_pd', 'mocap_constraints'])
+def test_twist_error_is_the_reference_twist_angle(controller):
+    """Eq. 2's error computed as one bilinear form in the body frame equals the twist (about the
+    current segment axis) of q_target * q_current^-1 from controller.twist_error."""
+    from physics_sim.controller import twist_error
+    g = Gains(twist_kd=0.0)    # ctrl = Ke_i * error only
+    sim = Simulation(SimConfig(controller=controller, body_height=1.75, gains=g))
+    rng = np.random.default_rng(5)
+    q = np.tile([0.0, 0.0, 0.0, 1.0], (20, 1))
+    for p in _walk_targets(12):
+        # orientations given: random twists/swings (up to ~0.6 rad) away from the simulated ones
+        q[1:] = rng.normal(0.0, 0.3, (19, 4)) + [0.0, 0.0, 0.0, 1.0]
+        sim.step({1: (p, q / np.linalg.norm(q, axis=1, keepdims=True))})
+    sim._pack_targets()
+    t = sim.time + 0.01
+    pts = sim._joint_points()
+    tau = sim._twist_torques(t, sim._tg, pts, damped=(controller != 'actuator_pd'))
+    ch = sim.characters[1]
+    q0, q1 = ch.prev.seg_quats, ch.cur.seg_quats
+    q1 = q1 * np.sign(np.sum(q0 * q1, axis=1))[:, None]
+    s = min(max((t - ch.cur.sim_time) / ch.period, 0.0), 1.0)
+    q_t = (1 - s) * q0 + s * q1
+    q_t /= np.linalg.norm(q_t, axis=1, keepdims=True)
+    axes = ch.segment_axes(ch.joint_points(sim.data))
+    ref = g.twist_ke * sim._tw_i * twist_error(q_t, ch.segment_quats(sim.data), axes)
+    if controller == 'actuator_pd':
+        assert np.abs(ref).max() > 0.05 * g.twist_ke * sim._tw_i.max()   # not all ~0
+        np.testing.assert_allclose(tau, ref, rtol=1e-5, atol=1e-9)
+    else:   # the damped torque vector: |tau| = min(|ref - Kd_i rate|, max) along the axis; Kd_i = 0
+        ref = np.clip(ref, -g.max_torque, g.max_torque)
+        np.testing.assert_allclose(tau, ref[:, None] * axes, rtol=1e-5, atol=1e-9)
+
+
+def test_solver_choice_gives_the_same_motion():
+    """pgs (default) and newton solve the same constraints (contacts, foot pins): the walking
+    character agrees to a fraction of a millimetre; an unknown solver is refused."""
+    out = {}
+    for solver in ('pgs', 'newton'):
+        sim = Simulation(SimConfig(body_height=1.75, solver=solver))
+        out[solver] = np.array([sim.step({1: p})[1].positions for p in _walk_targets()])
+        assert sim.counters['pins'] > 0 and sim.counters['nan_reset'] == 0
+    assert np.abs(out['pgs'] - out['newton']).max() < 2e-4
+    with pytest.raises(ValueError):
+        SimConfig(solver='dantzig').validate()
+
+
+def test_explicit_joint_damping_only_where_it_is_stable():
+    """Euler integrates the joint damping explicitly (MuJoCo's eulerdamp off) unless asked not to
+    or unless the armature is too small for it; the motion matches the implicit one closely."""
+    flag = int(mujoco.mjtDisableBit.mjDSBL_EULERDAMP)
+    sims = {}
+    for name, kw, explicit in (('default', {}, True),
+                               ('asked', dict(implicit_joint_damping=True), False),
+                               ('light', dict(joint_armature=0.005), False),
+                               ('implicitfast', dict(integrator='implicitfast'), True)):
+        sim = Simulation(SimConfig(body_height=1.75, **kw))
+        assert bool(sim.model.opt.disableflags & flag) == explicit, name
+        sims[name] = sim
+    a = np.array([sims['default'].step({1: p})[1].positions for p in _walk_targets(30)])
+    b = np.array([sims['asked'].step({1: p})[1].positions for p in _walk_targets(30)])
+    assert np.abs(a - b).max() < 2e-3
+    assert sims['default'].counters['nan_reset'] == 0
