@@ -49,14 +49,17 @@ class SkeletonFrame:
 
 
 def validate_arrays(positions, tracking_state=None, reliability=None, orientations=None):
-    """Check shapes and values; return them as arrays or raise :class:`SkeletonFormatError`."""
+    """Check shapes and values; return them as arrays or raise :class:`SkeletonFormatError`.
+
+    Every node calls this on every skeleton it takes and sends: the common valid case costs one
+    reduction per array; the causes are worked out only when a check fails."""
     p = np.asarray(positions, dtype=float)
     if p.shape != (NUM_JOINTS, 3):
         raise SkeletonFormatError('wrong length', f'positions must be ({NUM_JOINTS}, 3), got {p.shape}')
-    if not np.all(np.isfinite(p)):
-        bad = np.flatnonzero(~np.isfinite(p).all(axis=1)).tolist()
-        raise SkeletonFormatError('non-finite position', f'joints {bad} are NaN or infinite')
-    if np.any(np.abs(p) > MAX_ABS_COORDINATE):
+    if not np.abs(p).max() <= MAX_ABS_COORDINATE:  # also False for NaN
+        if not np.all(np.isfinite(p)):
+            bad = np.flatnonzero(~np.isfinite(p).all(axis=1)).tolist()
+            raise SkeletonFormatError('non-finite position', f'joints {bad} are NaN or infinite')
         raise SkeletonFormatError('coordinate out of range',
                                   f'|coordinate| > {MAX_ABS_COORDINATE} m')
     if tracking_state is None:
@@ -66,11 +69,12 @@ def validate_arrays(positions, tracking_state=None, reliability=None, orientatio
         if t.shape != (NUM_JOINTS,):
             raise SkeletonFormatError('wrong length',
                                       f'tracking_state must have {NUM_JOINTS} entries, got {t.shape}')
-        if t.size and (t.min() < min(TRACKING_STATES) or t.max() > max(TRACKING_STATES)
-                       or (t.dtype.kind not in 'iub' and np.any(t != np.round(t)))):
-            raise SkeletonFormatError('unknown tracking state',
-                                      f'values {sorted(set(t.tolist()) - set(TRACKING_STATES))}')
-        t = t.astype(np.uint8)
+        if t.dtype != np.uint8 or t.max() > max(TRACKING_STATES):
+            if (t.min() < min(TRACKING_STATES) or t.max() > max(TRACKING_STATES)
+                    or (t.dtype.kind not in 'iub' and np.any(t != np.round(t)))):
+                raise SkeletonFormatError('unknown tracking state',
+                                          f'values {sorted(set(t.tolist()) - set(TRACKING_STATES))}')
+            t = t.astype(np.uint8)
     if reliability is None or len(reliability) == 0:
         r = np.full(NUM_JOINTS, np.nan, np.float32)
     else:
@@ -78,21 +82,25 @@ def validate_arrays(positions, tracking_state=None, reliability=None, orientatio
         if r.shape != (NUM_JOINTS,):
             raise SkeletonFormatError('wrong length',
                                       f'reliability must have {NUM_JOINTS} entries, got {r.shape}')
-        finite = np.isfinite(r)
-        if np.any(np.isinf(r)) or np.any((r[finite] < 0.0) | (r[finite] > 1.0)):
-            raise SkeletonFormatError('reliability out of range', 'values must be NaN or in [0, 1]')
+        if not (r.min() >= 0.0 and r.max() <= 1.0):  # NaN (allowed: unknown) takes this branch
+            finite = np.isfinite(r)
+            if np.any(np.isinf(r)) or np.any((r[finite] < 0.0) | (r[finite] > 1.0)):
+                raise SkeletonFormatError('reliability out of range',
+                                          'values must be NaN or in [0, 1]')
     q = None
     if orientations is not None and len(orientations) > 0:
         q = np.asarray(orientations, dtype=float)
         if q.shape != (NUM_JOINTS, 4):
             raise SkeletonFormatError('wrong length',
                                       f'orientations must be ({NUM_JOINTS}, 4), got {q.shape}')
-        if not np.all(np.isfinite(q)):
+        n = np.sqrt(np.einsum('ij,ij->i', q, q))
+        if not np.isfinite(n).all():  # a NaN or infinite component
             raise SkeletonFormatError('non-finite orientation', 'NaN or infinite quaternion')
-        n = np.linalg.norm(q, axis=1)
         zero = n < 1e-9  # a default-constructed message: identity
-        q[zero] = (0.0, 0.0, 0.0, 1.0)
-        n[zero] = 1.0
+        if zero.any():
+            q = q.copy()
+            q[zero] = (0.0, 0.0, 0.0, 1.0)
+            n[zero] = 1.0
         q = q / n[:, None]
     return p, t, r, q
 
