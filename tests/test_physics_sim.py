@@ -370,8 +370,9 @@ def test_twist_error_is_the_reference_twist_angle(controller):
 
 
 def test_solver_choice_gives_the_same_motion():
-    """pgs (default) and newton solve the same constraints (contacts, foot pins): the walking
-    character agrees to a fraction of a millimetre; an unknown solver is refused."""
+    """pgs (actuator_pd's default) and newton solve the same constraints (contacts, foot pins):
+    the walking character agrees to a fraction of a millimetre; an unknown solver is refused;
+    auto picks newton for mocap_constraints."""
     out = {}
     for solver in ('pgs', 'newton'):
         sim = Simulation(SimConfig(body_height=1.75, solver=solver))
@@ -380,6 +381,11 @@ def test_solver_choice_gives_the_same_motion():
     assert np.abs(out['pgs'] - out['newton']).max() < 2e-4
     with pytest.raises(ValueError):
         SimConfig(solver='dantzig').validate()
+    solvers = {c: Simulation(SimConfig(controller=c, body_height=1.75)).model.opt.solver
+               for c in ('actuator_pd', 'explicit_pd', 'mocap_constraints')}
+    assert solvers == {'actuator_pd': mujoco.mjtSolver.mjSOL_PGS,
+                       'explicit_pd': mujoco.mjtSolver.mjSOL_PGS,
+                       'mocap_constraints': mujoco.mjtSolver.mjSOL_NEWTON}
 
 
 def test_explicit_joint_damping_only_where_it_is_stable():

@@ -85,10 +85,10 @@ PARAMS: List[ParamSpec] = [
               'N s/m, Ke ~40000 N/m at 2 ms); implicitfast treats actuator_pd\'s Kd implicitly '
               '(stable at any gain, ~35 % slower)',
               choices=INTEGRATORS, read_only=True),
-    ParamSpec('solver', 'pgs',
-              'MuJoCo constraint solver (contacts, foot pins, holds, mocap_constraints): pgs = '
-              'projected Gauss-Seidel on the few active constraint rows (fastest here); newton '
-              'factors an nv x nv Hessian every step; all converge to the same forces',
+    ParamSpec('solver', 'auto',
+              'MuJoCo constraint solver (contacts, foot pins, holds, mocap_constraints); all '
+              'converge to the same forces. auto = pgs for actuator_pd/explicit_pd (few active '
+              'rows: fastest), newton for mocap_constraints (60 stiff rows a character)',
               choices=SOLVERS, read_only=True),
     ParamSpec('implicit_joint_damping', False,
               'euler: integrate the ball joints\' damping implicitly (MuJoCo\'s default, ~6 us more '

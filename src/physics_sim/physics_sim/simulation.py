@@ -57,7 +57,7 @@ from .mjcf_world import ALL_BITS, CharacterEntry, ObjectSpec, WorldParams, chara
 
 CONTROLLERS = ('explicit_pd', 'actuator_pd', 'mocap_constraints')
 INTEGRATORS = ('euler', 'implicitfast')
-SOLVERS = ('pgs', 'cg', 'newton')
+SOLVERS = ('auto', 'pgs', 'cg', 'newton')
 SEGMENT_CHILDREN_A = tuple(c for _, c in SEGMENTS)
 SEGMENT_PARENTS_A = tuple(p for p, _ in SEGMENTS)
 
@@ -128,10 +128,11 @@ class SimConfig:
     # implicitfast also integrates actuator_pd's Kd implicitly (stable at any gain, ~35 % slower)
     integrator: str = 'euler'
     # MuJoCo constraint solver (SOLVERS) for contacts, foot pins, holds and mocap_constraints'
-    # connects: pgs works on the few active constraint rows (a character has 0-10) and costs
-    # ~7 us a step; newton factors an nv x nv Hessian every step (~20 us); all three converge to
-    # the same constraint forces
-    solver: str = 'pgs'
+    # connects; all converge to the same constraint forces. auto = pgs for actuator_pd and
+    # explicit_pd (a character has 0-10 active rows: ~7 us a step, where newton factors an
+    # nv x nv Hessian, ~20 us) and newton for mocap_constraints (60 stiff rows a character, which
+    # take pgs many sweeps: 3x slower there)
+    solver: str = 'auto'
     # euler: integrate the ball joints' damping implicitly (MuJoCo's Euler default; one more
     # factorisation per step, ~6 us) instead of explicitly like every other force of the paper's
     # scheme. Explicit is used only while it is stable by a wide margin (timestep * joint_damping
@@ -248,7 +249,9 @@ class Simulation:
                              pd_actuators=(c.controller == 'actuator_pd'),
                              pd_kp=c.gains.ke, pd_kv=c.gains.kd,
                              pd_force_limit=c.gains.max_force)
-        return WorldParams(timestep=c.timestep, integrator=c.integrator, solver=c.solver,
+        solver = c.solver if c.solver != 'auto' else (
+            'newton' if c.controller == 'mocap_constraints' else 'pgs')
+        return WorldParams(timestep=c.timestep, integrator=c.integrator, solver=solver,
                            euler_implicit_damping=self.implicit_damping(), character=cp)
 
     def implicit_damping(self) -> bool:
@@ -950,16 +953,16 @@ class Simulation:
         c = self.config
         act = [n for n, (_, _, pin) in enumerate(self._feet) if pin.active]
         if act:
-            pts = self._points_now()[self._feet_idx[act]]
-            gaps = np.sqrt(np.sum((pts - np.array([self._feet[n][2].point for n in act])) ** 2,
-                                  axis=1))
-            for n, gap in zip(act, gaps.tolist()):
+            gap_v = self._points_now()[self._feet_idx] - self._pin_points()
+            gaps = np.sqrt(np.sum(gap_v * gap_v, axis=1)).tolist()
+            for n in act:
                 i, j, pin = self._feet[n]
-                if gap > c.conflict_tolerance:
+                if gaps[n] > c.conflict_tolerance:
                     self.counters['constraint_conflict'] += 1
-                if gap > c.conflict_release:
+                if gaps[n] > c.conflict_release:
                     pin.active = pin.manual = False
                     self._set_pin(self._chars[i], j, False)
+                    self._pin_pts = None
                     self.counters['virtual_joint_released'] += 1
         for name, (uid, hand) in list(self.holds.items()):
             ch = self.characters.get(uid)
@@ -975,7 +978,8 @@ class Simulation:
                 self.release(name)
                 self.counters['virtual_joint_released'] += 1
         w = d.warning[mujoco.mjtWarning.mjWARN_BADQACC]
-        bad = (not np.isfinite(d.qpos).all() or not np.isfinite(d.qvel).all() or w.number > 0)
+        # a sum is finite only when every term is (or overflows: a blown-up state too)
+        bad = not math.isfinite(float(d.qpos.sum()) + float(d.qvel.sum())) or w.number > 0
         if bad:
             self.counters['nan_reset'] += 1
             w.number = 0
