@@ -62,6 +62,15 @@ SEGMENT_CHILDREN_A = tuple(c for _, c in SEGMENTS)
 SEGMENT_PARENTS_A = tuple(p for p, _ in SEGMENTS)
 
 
+# vec(q1 * conj(q0)) = w0 v1 - w1 v0 + v0 x v1 as bilinear forms q0^T N_k q1 (w x y z), k = x, y, z
+_VEC_Q1_Q0INV = np.zeros((3, 4, 4))
+for _k, (_i, _j) in enumerate(((1, 2), (2, 0), (0, 1))):
+    _VEC_Q1_Q0INV[_k, 0, 1 + _k] = 1.0
+    _VEC_Q1_Q0INV[_k, 1 + _k, 0] = -1.0
+    _VEC_Q1_Q0INV[_k, 1 + _i, 1 + _j] = 1.0
+    _VEC_Q1_Q0INV[_k, 1 + _j, 1 + _i] = -1.0
+
+
 def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Row-wise cross product of (N, 3) arrays (np.cross is slow for small arrays)."""
     out = np.empty_like(a)
@@ -641,23 +650,30 @@ class Simulation:
         t = self.time + 0.5 * span
         tg = self._tg
         if tg is not None:
-            # interpolation shares at the span's start, middle and end: (3, N*20)
-            sh = self._frame_shares((self.time, t, self.time + span))
-            sj = sh[:, self._jchar, None]
+            # interpolation shares at the span's start, middle and end: numbers when the
+            # characters share their frame times, else (3, N*20, 1)
+            if tg['uniform'] is not None:
+                t0, per = tg['uniform']
+                sj = [min(max((x - t0) / per, 0.0), 1.0) for x in (self.time, t, self.time + span)]
+                sh_mid = sj[1]
+                v_t = tg['V'] if sj[1] < 1.0 else tg['V'] * 0.0
+            else:
+                sh = self._frame_shares((self.time, t, self.time + span))
+                sj = sh[:, self._jchar, None]
+                sh_mid = sh[1]
+                v_t = tg['V'] * (sj[1] < 1.0)
             p_t = tg['P0'] + sj[1] * tg['dP']
-            v_t = tg['V'] * (sj[1] < 1.0)
             pts = self._joint_points()
             if self._act is not None:
                 ff = c.gains.kd / c.gains.ke if c.gains.ke > 0 else 0.0
-                p0 = tg['P0'] + sj[0] * tg['dP']
-                d.act[self._act_adr] = p0 + ff * v_t
+                d.act[self._act_adr] = tg['P0'] + sj[0] * tg['dP'] + ff * v_t
                 d.ctrl[self._act] = ((sj[2] - sj[0]) / span) * tg['dP']
                 d.ctrl[self._tw_act] = self._twist_torques(t, tg, pts, damped=False,
-                                                           share=sh[1])
+                                                           share=sh_mid)
             else:  # mocap_constraints
                 lead = 2.0 * c.track_impedance * c.track_timeconst * c.track_dampratio ** 2
                 d.mocap_pos[self._mocap] = p_t + lead * v_t
-                xfrc[self._sb, 3:] += self._twist_torques(t, tg, pts, share=sh[1])
+                xfrc[self._sb, 3:] += self._twist_torques(t, tg, pts, share=sh_mid)
             self._update_pins(p_t, v_t, pts)
         self._apply_pushes(t)
 
@@ -756,14 +772,17 @@ class Simulation:
             Q1 = np.concatenate([ch.cur.seg_quats for ch in chars])
             T0 = np.array([ch.cur.sim_time for ch in chars])
             PER = np.array([ch.period for ch in chars])
-        Q1 = Q1 * np.copysign(1.0, np.einsum('ij,ij->i', Q0, Q1))[:, None]
+        Q0w, Q1w = Q0[:, self._WXYZ], Q1[:, self._WXYZ]     # w x y z from here on
+        Q1w *= np.copysign(1.0, np.einsum('ij,ij->i', Q0w, Q1w))[:, None]
         # segment angular velocity over the frame: 2 vec(q1 q0^-1) / period (the rotation
         # vector to within 1 % up to 30 degrees per frame; q1 is on q0's side)
-        v0, v1 = Q0[:, :3], Q1[:, :3]
-        W = (2.0 / PER)[self._schar, None] * (Q0[:, 3:] * v1 - Q1[:, 3:] * v0 - _cross(v1, v0))
-        Q0w = Q0[:, self._WXYZ]
-        self._tg = dict(P0=P0, dP=P1 - P0, V=V, Q0w=Q0w, dQw=Q1[:, self._WXYZ] - Q0w, W=W, T0=T0,
-                        PER=PER)
+        W = np.einsum('ni,kij,nj->nk', Q0w, _VEC_Q1_Q0INV, Q1w)
+        W *= (2.0 / PER)[self._schar, None]
+        # one frame time and period for all characters (targets arriving together): the
+        # interpolation shares are plain numbers
+        uniform = bool(np.all(T0 == T0[0]) and np.all(PER == PER[0]))
+        self._tg = dict(P0=P0, dP=P1 - P0, V=V, Q0w=Q0w, dQw=Q1w - Q0w, W=W, T0=T0, PER=PER,
+                        uniform=(float(T0[0]), float(PER[0])) if uniform else None)
         self._feet_active = np.array([pin.active for _, _, pin in self._feet], bool)
         self._feet_manual = np.array([pin.manual for _, _, pin in self._feet], bool)
         self._pin_pts = None
@@ -809,8 +828,8 @@ class Simulation:
         d, g = self.data, self.config.gains
         if share is None:
             share = self._frame_shares((t,))[0]
-        if len(share) == 1:
-            ss = float(share[0])
+        if np.ndim(share) == 0 or len(share) == 1:
+            ss = float(np.ravel(share)[0])
             q_t = tg['Q0w'] + ss * tg['dQw']
         else:
             ss = share[self._schar]
