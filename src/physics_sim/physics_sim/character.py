@@ -155,8 +155,9 @@ class Character:
         self.prev = Target(p_now, q_now, now, self.cur.stamp_ns)
         self.cur = target
         raw = (target.positions - p_now) / self.period
-        n = np.sqrt(np.einsum('ij,ij->i', raw, raw))[:, None]  # a tracking glitch is not a velocity
-        raw *= np.minimum(1.0, MAX_TARGET_SPEED / np.maximum(n, 1e-12))
+        n2 = np.einsum('ij,ij->i', raw, raw)   # a tracking glitch is not a velocity:
+        if n2.max() > MAX_TARGET_SPEED ** 2:   # bound |p'_target|
+            raw *= np.minimum(1.0, MAX_TARGET_SPEED / np.maximum(np.sqrt(n2), 1e-12))[:, None]
         self.velocity = smoothing * self.velocity + (1.0 - smoothing) * raw
 
     def pose_at(self, t: float):

@@ -71,6 +71,16 @@ for _k, (_i, _j) in enumerate(((1, 2), (2, 0), (0, 1))):
     _VEC_Q1_Q0INV[_k, 1 + _j, 1 + _i] = -1.0
 
 
+def _as_slice(ids):
+    """``ids`` flattened, as a slice when they are consecutive (None stays None)."""
+    if ids is None:
+        return None
+    flat = np.asarray(ids).reshape(-1)
+    if flat.size and np.array_equal(flat, np.arange(flat[0], flat[0] + flat.size)):
+        return slice(int(flat[0]), int(flat[0]) + flat.size)
+    return flat
+
+
 def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Row-wise cross product of (N, 3) arrays (np.cross is slow for small arrays)."""
     out = np.empty_like(a)
@@ -666,10 +676,10 @@ class Simulation:
             pts = self._joint_points()
             if self._act is not None:
                 ff = c.gains.kd / c.gains.ke if c.gains.ke > 0 else 0.0
-                d.act[self._act_adr] = tg['P0'] + sj[0] * tg['dP'] + ff * v_t
-                d.ctrl[self._act] = ((sj[2] - sj[0]) / span) * tg['dP']
-                d.ctrl[self._tw_act] = self._twist_torques(t, tg, pts, damped=False,
-                                                           share=sh_mid)
+                d.act[self._act_adr_s] = (tg['P0'] + sj[0] * tg['dP'] + ff * v_t).reshape(-1)
+                d.ctrl[self._act_s] = (((sj[2] - sj[0]) / span) * tg['dP']).reshape(-1)
+                d.ctrl[self._tw_act_s] = self._twist_torques(t, tg, pts, damped=False,
+                                                             share=sh_mid)
             else:  # mocap_constraints
                 lead = 2.0 * c.track_impedance * c.track_timeconst * c.track_dampratio ** 2
                 d.mocap_pos[self._mocap] = p_t + lead * v_t
@@ -722,6 +732,10 @@ class Simulation:
         self._act_adr = None if self._act is None else self.model.actuator_actadr[self._act]
         self._tw_act = (np.concatenate([c.twist_actuator_ids for c in chars]).astype(int)
                         if self._act is not None else None)
+        # the same as slices where the ids are consecutive (one character): cheaper to assign
+        self._act_adr_s = _as_slice(self._act_adr)
+        self._act_s = _as_slice(self._act)
+        self._tw_act_s = _as_slice(self._tw_act)
         self._axis_site = (np.concatenate([c.axis_site_ids for c in chars]).astype(int)
                            if n and chars[0].axis_site_ids is not None else None)
         self._js = (np.concatenate([c.joint_site_ids for c in chars]).astype(int)
@@ -780,7 +794,8 @@ class Simulation:
         W *= (2.0 / PER)[self._schar, None]
         # one frame time and period for all characters (targets arriving together): the
         # interpolation shares are plain numbers
-        uniform = bool(np.all(T0 == T0[0]) and np.all(PER == PER[0]))
+        t0s, pers = T0.tolist(), PER.tolist()
+        uniform = all(x == t0s[0] for x in t0s) and all(x == pers[0] for x in pers)
         self._tg = dict(P0=P0, dP=P1 - P0, V=V, Q0w=Q0w, dQw=Q1w - Q0w, W=W, T0=T0, PER=PER,
                         uniform=(float(T0[0]), float(PER[0])) if uniform else None)
         self._feet_active = np.array([pin.active for _, _, pin in self._feet], bool)
@@ -828,8 +843,8 @@ class Simulation:
         d, g = self.data, self.config.gains
         if share is None:
             share = self._frame_shares((t,))[0]
-        if np.ndim(share) == 0 or len(share) == 1:
-            ss = float(np.ravel(share)[0])
+        if isinstance(share, float) or len(share) == 1:
+            ss = float(share) if isinstance(share, float) else float(share[0])
             q_t = tg['Q0w'] + ss * tg['dQw']
         else:
             ss = share[self._schar]
@@ -899,7 +914,7 @@ class Simulation:
             return
         floor = self.sensor.lift if self.sensor else 0.0
         act = self._feet_active
-        any_act = bool(act.any())
+        any_act = any(pin.active for _, _, pin in self._feet)
         ht = (p_t[fi, 2] - floor).tolist()
         vt = v_t[fi].tolist()
         speed2 = [v[0] * v[0] + v[1] * v[1] + v[2] * v[2] for v in vt]
