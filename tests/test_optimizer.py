@@ -254,8 +254,9 @@ def test_filled_segments_are_smoothed_more(small_db):
     ts = np.full(NUM_JOINTS, TRACKED, np.uint8)
     ts[[WRIST_RIGHT, HAND_RIGHT]] = NOT_TRACKED
 
-    def run_scale(scale, states, frames=frames):
-        r = Reconstructor(small_db, method='C', smooth_filled_scale=scale)
+    def run_scale(scale, states, frames=frames, speed=False):
+        r = Reconstructor(small_db, method='C', smooth_filled_scale=scale,
+                          smooth_filled_speed=speed)
         return np.array([r.process(SkeletonFrame(positions=f, tracking_state=states,
                                                  stamp_ns=i * 33_333_333)).positions
                          for i, f in enumerate(frames)])
@@ -267,6 +268,11 @@ def test_filled_segments_are_smoothed_more(small_db):
         return np.mean(np.linalg.norm(v[2:] - 2 * v[1:-1] + v[:-2], axis=1))
     full, soft = run_scale(1.0, ts), run_scale(0.2, ts)
     assert seg_jitter(soft[20:], HAND_RIGHT) < 0.7 * seg_jitter(full[20:], HAND_RIGHT)
+    # smooth_filled_speed: the factor lowers only the minimum cutoff, the speed term (large for
+    # 2 cm noise) stays: less extra smoothing, but still some
+    fast = run_scale(0.2, ts, speed=True)
+    assert (seg_jitter(soft[20:], HAND_RIGHT) < seg_jitter(fast[20:], HAND_RIGHT)
+            < 0.85 * seg_jitter(full[20:], HAND_RIGHT))
     # everything tracked and steady (every reliability 1): scale 1 everywhere, the same output
     all_ts = np.full(NUM_JOINTS, TRACKED, np.uint8)
     quiet = _noisy_frames(p, 30, 0.002, seed=4)
@@ -313,3 +319,114 @@ def test_translation_invariant_knn_and_floating_root(small_db):
     for i in range(20):
         out = r.process(SkeletonFrame(positions=bad, tracking_state=ts, stamp_ns=i * 33_333_333))
     assert r.trust_sensor == 1.0 and np.allclose(out.positions[ROOT], bad[ROOT], atol=1e-9)
+
+
+def test_scale_invariant_knn_matches_brute_force(small_db):
+    opt = NaturalPostureOptimizer(small_db, k=8)
+    X = np.asarray(small_db.positions, float)
+    rng = np.random.default_rng(3)
+    w = rng.uniform(0.0, 1.0, NUM_JOINTS)
+    q = X[40] * 0.85 + [0.3, -0.2, 0.1]          # a smaller body, elsewhere
+    for translate in (False, True):
+        idx, d, s = opt.knn_scaled(q, w, translate=translate, scale_range=(0.5, 2.0))
+        # brute force: centre (with translate), best scale, shape distance 1 - cos^2
+        qc, Xc = q, X
+        if translate:
+            qc = q - (w @ q) / w.sum()
+            Xc = X - np.einsum('j,njd->nd', w, X)[:, None] / w.sum()
+        sxq = np.einsum('njd,jd,j->n', Xc, qc, w)
+        sxx = np.einsum('njd,njd,j->n', Xc, Xc, w)
+        sqq = np.einsum('jd,jd,j->', qc, qc, w)
+        ref = 1.0 - np.maximum(sxq, 0) ** 2 / (sxx * sqq)
+        assert np.allclose(d, np.sort(ref)[:8], atol=1e-9)
+        assert np.allclose(s, np.clip(sxq / sqq, 0.5, 2.0)[idx], atol=1e-9)
+    # translated and scaled: the original posture at the inverse scale, a perfect fit
+    assert idx[0] == 40 and d[0] < 1e-9 and abs(s[0] - 1 / 0.85) < 1e-6
+    # the scale range is respected
+    _, _, s = opt.knn_scaled(q, w, translate=True, scale_range=(0.9, 1.1))
+    assert s.max() <= 1.1 and s.min() >= 0.9
+
+
+def _ends_only(p, frozen, ends):
+    """A frame of a static posture ``p`` where only ``ends`` are tracked (reliability 1, as
+    evaluation.subset_frames); the other joints NOT_TRACKED (0) at the positions of ``frozen``."""
+    from skeleton_core.model import NOT_TRACKED
+    ts = np.full(NUM_JOINTS, NOT_TRACKED, np.uint8)
+    ts[list(ends)] = TRACKED
+    obs = np.array(frozen, float)
+    obs[list(ends)] = p[list(ends)]
+    return obs, ts
+
+
+def _frame(obs, ts, i):
+    return SkeletonFrame(positions=obs, tracking_state=ts, stamp_ns=i * 33_333_333,
+                         reliability=(ts == TRACKED).astype(np.float32))
+
+
+_FEW = ('HandLeft', 'HandRight', 'FootLeft', 'FootRight', 'ElbowLeft', 'ElbowRight',
+        'KneeLeft', 'KneeRight')   # Table III (d): no segment has two tracked ends
+
+
+def _yaw_err(out, a):
+    from skeleton_core.geometry import facing_yaw
+    return abs(np.degrees(np.angle(np.exp(1j * (facing_yaw(out) - a)))))
+
+
+def _turned(X, deg, height):
+    a = np.radians(deg)
+    rot = np.array([[np.cos(a), -np.sin(a), 0], [np.sin(a), np.cos(a), 0], [0, 0, 1]])
+    return a, (X @ rot.T) * (height / 1.75) + [2.5, 0.3, 0.0]
+
+
+def test_height_and_heading_from_the_database_when_no_segment_is_observed(small_db):
+    # a 1.50 m user (the standard body is 1.75 m) turned by 25 degrees, with only hands, feet,
+    # elbows and knees tracked and the other joints reported at the origin: no length, no
+    # height and no heading can be measured. The heading search and the scale-invariant
+    # database fit find both; the height then sets the standard-body lengths of the output
+    from skeleton_core.model import JOINT_INDEX, SEGMENT_CHILDREN, SEGMENT_PARENTS
+    ends = [JOINT_INDEX[n] for n in _FEW]
+    X = np.asarray(small_db.positions, float)
+    a, p = _turned(X[40], 25.0, 1.50)
+    obs, ts = _ends_only(p, np.zeros((NUM_JOINTS, 3)), ends)
+
+    def run_few(**kw):
+        r = Reconstructor(small_db, method='C', **kw)
+        for i in range(40):
+            out = r.process(_frame(obs, ts, i)).positions
+        return r, out
+    r, out = run_few()
+    assert abs(r.reliability.height - 1.50) < 0.02 and _yaw_err(out, a) < 2.0
+    assert len(r._height_fits) == 30 and r._height_done        # then kept
+    L = np.linalg.norm(out[list(SEGMENT_CHILDREN)] - out[list(SEGMENT_PARENTS)], axis=1)
+    assert np.allclose(L, standard_body(r.reliability.height).segment_lengths, atol=1e-6)
+    r0, out0 = run_few(height_frames=0, yaw_search=0, yaw_rate=0.0)   # off: standard, no heading
+    assert r0.reliability.height == 1.75 and not r0._height_fits and _yaw_err(out0, a) > 20.0
+    assert parent_relative_error(out[None], p[None]) < 0.5 * parent_relative_error(out0[None],
+                                                                                   p[None])
+    # once a frame has every joint tracked, the sensor's height is used, not the prior
+    tall = _turned(X[40], 25.0, 1.80)[1]
+    r.process(SkeletonFrame(positions=tall,
+                            tracking_state=np.full(NUM_JOINTS, TRACKED, np.uint8),
+                            stamp_ns=10 ** 10))
+    assert r.reliability.height_measured and abs(r.reliability.height - 1.80) < 0.02
+
+
+def test_heading_follows_the_database_while_the_torso_is_unreliable(small_db):
+    # the torso NOT_TRACKED and reported where it was before the user turned by 25 degrees:
+    # its hip and shoulder lines give a wrong heading, which yaw_rate 0 keeps; the neighbour
+    # fit turns it towards the tracked joints' (a local fit: part of the way here, where the
+    # random database offers other postures that fit the 8 joints at the kept heading)
+    from skeleton_core.model import JOINT_INDEX
+    ends = [JOINT_INDEX[n] for n in _FEW]
+    X = np.asarray(small_db.positions, float)
+    a, p = _turned(X[40], 25.0, 1.50)
+    obs, ts = _ends_only(p, _turned(X[40], 0.0, 1.50)[1], ends)
+    errs = {}
+    for rate in (0.5, 0.0):
+        r = Reconstructor(small_db, method='C', yaw_rate=rate, yaw_search=0)
+        for i in range(40):
+            out = r.process(_frame(obs, ts, i)).positions
+        errs[rate] = _yaw_err(out, a)
+    assert errs[0.0] > 20.0 and errs[0.5] < errs[0.0] - 5.0
+    with pytest.raises(ValueError):
+        Reconstructor(small_db, method='C', yaw_rate=1.5)

@@ -210,3 +210,25 @@ def test_reference_capture_decision_matches_reference_pose_match():
         assert got == reference_pose_match(p, tol), i
         seen.add(got)
     assert 'tpose' in seen and None in seen
+
+
+def test_height_prior_until_the_height_is_measured():
+    # no frame with every joint tracked: the prior (e.g. the reconstructor's database fit) is
+    # the height and scales the standard-body reference lengths; a measured height replaces it
+    from skeleton_core.model import NOT_TRACKED, TRACKED, standard_body
+    est = ReliabilityEstimator(reference_mode='standard')
+    ts = np.full(20, TRACKED, np.uint8)
+    ts[0] = NOT_TRACKED
+    est.update(rest(), ts)
+    assert est.height == 1.75 and not est.height_measured
+    est.set_height_prior(1.55)
+    assert est.height == 1.55
+    assert np.allclose(est.reference_lengths, standard_body(1.55).segment_lengths)
+    est.set_height_prior(5.0)                  # clipped to the estimator's range
+    assert est.height == 2.3
+    est.set_height_prior(None)
+    assert est.height == 1.75
+    est.set_height_prior(1.55)
+    tall = standard_body(1.9).rest_positions()
+    est.update(tall, np.full(20, TRACKED, np.uint8))
+    assert est.height_measured and abs(est.height - 1.9) < 0.02

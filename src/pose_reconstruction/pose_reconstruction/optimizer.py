@@ -213,6 +213,37 @@ class NaturalPostureOptimizer:
             return idx, dk, shift[idx]
         return idx, dk
 
+    def knn_scaled(self, query: np.ndarray, weights: np.ndarray, translate: bool = False,
+                   scale_range: tuple = (0.5, 2.0)):
+        """K nearest database postures under Eq. 9 minimised over a uniform scale ``s`` of the
+        query (in ``scale_range``) and, with ``translate``, a translation:
+        ``sum_i w_i |x_i - s q_i - t|^2``. For a query whose size is unknown (the user's height
+        not measured yet). Exact (brute force, a few BLAS products over the database).
+        Returns ``(idx (K,), distances (K,), scales (K,))``."""
+        w = np.asarray(weights, float)
+        q = np.asarray(query, float)
+        wq = w[:, None] * q
+        sxx = self._Xsq_joint @ w                              # sum_i w_i |x_i|^2
+        sxq = self._X @ wq.ravel()                             # sum_i w_i x_i . q_i
+        sqq = float(np.einsum('jd,jd->', wq, q))
+        if translate:
+            ws = max(float(w.sum()), 1e-12)
+            cx = (self._Xcoord @ w).reshape(-1, 3) * (1.0 / ws)    # weighted centroids
+            cq = wq.sum(axis=0) * (1.0 / ws)
+            sxx = sxx - ws * np.einsum('nd,nd->n', cx, cx)
+            sxq = sxq - ws * (cx @ cq)
+            sqq -= ws * float(cq @ cq)
+        sqq = max(sqq, 1e-12)
+        s = np.clip(sxq * (1.0 / sqq), scale_range[0], scale_range[1])
+        # rank by the scale-free shape distance 1 - cos^2 of the two (centred) configurations:
+        # Eq. 9 at the best scale, sxx - sxq^2 / sqq, would favour compact database postures
+        # (shrinking the query towards them costs little)
+        d = 1.0 - np.maximum(sxq, 0.0) ** 2 / (np.maximum(sxx, 1e-12) * sqq)
+        k = self.k
+        idx = np.argpartition(d, k - 1)[:k] if k < len(d) else np.arange(len(d))
+        idx = idx[np.argsort(d[idx])]
+        return idx, np.maximum(d[idx], 0.0), s[idx]
+
     # -- energy -------------------------------------------------------------------------------
     def _setup(self, Y: np.ndarray, query: np.ndarray, weights: np.ndarray,
                continuity_target: Optional[np.ndarray]):

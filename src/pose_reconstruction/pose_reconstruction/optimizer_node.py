@@ -77,6 +77,21 @@ SPECS = [
     ParamSpec('float_root', True,
               'when the root joint is unreliable, match the database translation-invariantly '
               'and place the root (and the query) where the neighbours put it'),
+    ParamSpec('height_frames', 30,
+              'no frame with every joint tracked yet: frames of scale-invariant database fits '
+              "whose median is taken as the user's height (query scale, standard-body lengths), "
+              'then kept; 0 = off (standard height)', (0, 100000)),
+    ParamSpec('yaw_rate', 0.5,
+              'few reliable joints (hips, shoulders and every segment unreliable): fraction per frame of the heading correction that '
+              'best fits the reliable joints to the database neighbours; 0 = keep the last '
+              'heading', (0.0, 1.0)),
+    ParamSpec('yaw_search', 12,
+              'few reliable joints from the first frame: headings tried against '
+              'the database (from the one the unreliable torso gives); 0 = take that one',
+              (0, 360)),
+    ParamSpec('smooth_filled_speed', True,
+              'segments: smooth_filled_scale lowers only the minimum cutoff of a filled segment '
+              '(the One Euro speed term is kept: no extra lag in fast motion)'),
 ]
 CORE_NAMES = [s.name for s in SPECS if s.name not in ('database', 'method')]
 

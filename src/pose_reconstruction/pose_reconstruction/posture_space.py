@@ -138,11 +138,14 @@ class QueryPreparer:
         self.reliable_threshold = reliable_threshold
 
     def prepare(self, positions: np.ndarray, reliability: np.ndarray,
-                user_height: float) -> PreparedQuery:
+                user_height: float, yaw: Optional[float] = None) -> PreparedQuery:
+        """``yaw``: the heading to remove (default: from the reliability-weighted hip and
+        shoulder lines)."""
         w = np.asarray(reliability, float)
         p = np.asarray(positions, float)
         # fast_normalize + fast_retarget in a few matrix products (same results)
-        yaw = facing_yaw(p, np.maximum(w, 1e-3))
+        if yaw is None:
+            yaw = facing_yaw(p, np.maximum(w, 1e-3))
         t = p[ROOT].copy()
         c, s = np.cos(yaw), np.sin(yaw)
         norm = (p - t) @ np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])

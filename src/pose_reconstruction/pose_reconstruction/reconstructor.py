@@ -37,6 +37,23 @@ Eq. 9 over a translation of the query, the query is moved by the neighbours' (in
 weighted) best translation before the optimisation, and the output root is moved by that
 translation times (1 - the trust in the sensor, below): a trusted sensor keeps its root.
 
+Few reliable joints (e.g. hands and feet only, Table III): no segment has two reliable ends, so
+no length, height or (with the hips and shoulders unreliable) heading can be measured, and the
+positions reported for the unreliable joints must not decide them. Then
+
+* height: until a frame has every joint tracked, the user's height is the median, over the first
+  ``height_frames`` such frames, of a scale-invariant database fit (Eq. 9 minimised over a uniform
+  scale, neighbours ranked by shape distance; :meth:`~.optimizer.NaturalPostureOptimizer.knn_scaled`);
+  it scales the query and gives the standard-body lengths of the segments never observed;
+* heading: the last heading of the reliable torso is kept (at the start, the best of
+  ``yaw_search`` headings against the database, from the one the unreliable torso gives) and
+  turned each frame by ``yaw_rate`` times the rotation that best fits the reliable joints to
+  the database neighbours (weighted 2-D Procrustes).
+
+Both need at least three reliable joints. ``smooth_filled_speed``: ``smooth_filled_scale`` lowers
+only the minimum cutoff of a filled segment, not the One Euro speed term (no extra lag in fast
+motion).
+
 Trust in the sensor (graceful degradation), ``trust_mode``:
 
 * ``'noise_ratio'`` (default) — the RMS distance (per reliable joint) of the nearest database
@@ -65,14 +82,14 @@ import numpy as np
 
 from skeleton_core.conversions import SkeletonFrame
 from skeleton_core.filters import OneEuroFilter
-from skeleton_core.model import (MIRROR, NUM_JOINTS, NUM_SEGMENTS, ROOT, SEGMENT_CHILDREN,
-                                 SEGMENT_PARENTS)
+from skeleton_core.geometry import facing_yaw
+from skeleton_core.model import (HIP_LEFT, HIP_RIGHT, MIRROR, NUM_JOINTS, NUM_SEGMENTS, ROOT,
+                                 SEGMENT_CHILDREN, SEGMENT_PARENTS, SHOULDER_LEFT, SHOULDER_RIGHT)
 
 from .completion import PCACompletion
 from .optimizer import NaturalPostureOptimizer
-from .posture_space import (ANCESTORS, QueryPreparer, as_database_arrays, rest_directions,
-                            to_sensor_frame,
-                            user_bone_lengths)
+from .posture_space import (ANCESTORS, QueryPreparer, as_database_arrays,
+                            rest_directions, to_sensor_frame, user_bone_lengths)
 from .reliability import ReliabilityEstimator
 
 METHODS = ('A', 'B', 'C')
@@ -100,6 +117,7 @@ def _yaw_quat_matrix(yaw: float) -> np.ndarray:
     ``quat_multiply(quat_from_yaw(yaw), q) == q @ M.T``."""
     s, c = np.sin(0.5 * yaw), np.cos(0.5 * yaw)
     return np.array([[c, -s, 0.0, 0.0], [s, c, 0.0, 0.0], [0.0, 0.0, c, s], [0.0, 0.0, -s, c]])
+_MIN_FIT_JOINTS = 3  # the fewest points that fix a rotation and a scale
 RELIABILITY_PARAMS = ('d_min', 'f_b', 'theta_floor_deg', 'theta_roof_deg', 'f_total',
                       'sigma_frames', 'tracked_value', 'inferred_value', 'not_tracked_value',
                       'reference_pose_tolerance_deg', 'reference_frames', 'reference_mode',
@@ -112,7 +130,8 @@ OWN_PARAMS = ('use_reliability', 'use_input_reliability', 'reliable_threshold',
               'trust_sensor_distance', 'output_scale', 'length_window', 'output_mode',
               'trust_mode', 'trust_sensor_ratio', 'noise_alpha', 'length_frames',
               'smooth_min_cutoff', 'smooth_beta', 'smooth_d_cutoff', 'observation_weight',
-              'symmetric_lengths', 'smooth_filled_scale', 'float_root')
+              'symmetric_lengths', 'smooth_filled_scale', 'float_root', 'height_frames',
+              'yaw_rate', 'yaw_search', 'smooth_filled_speed')
 
 
 def split_params(method: str, params: Dict) -> tuple:
@@ -146,7 +165,8 @@ class Reconstructor:
                  symmetric_lengths: bool = True, observation_weight: float = 0.3,
                  smooth_min_cutoff: float = 3.0, smooth_beta: float = 10.0,
                  smooth_d_cutoff: float = 1.0, smooth_filled_scale: float = 0.2,
-                 float_root: bool = True, **params):
+                 float_root: bool = True, height_frames: int = 30, yaw_rate: float = 0.5,
+                 yaw_search: int = 12, smooth_filled_speed: bool = True, **params):
         method = str(method).upper()
         if method not in METHODS:
             raise ValueError(f'method must be one of {METHODS}, got {method!r}')
@@ -175,7 +195,13 @@ class Reconstructor:
         if not 0.0 < smooth_filled_scale <= 1.0:
             raise ValueError('smooth_filled_scale must be in (0, 1]')
         self.smooth_filled_scale = float(smooth_filled_scale)
+        self.smooth_filled_speed = bool(smooth_filled_speed)
         self.float_root = bool(float_root)
+        if int(height_frames) < 0 or int(yaw_search) < 0 or not 0.0 <= yaw_rate <= 1.0:
+            raise ValueError('height_frames, yaw_search must be >= 0 and yaw_rate in [0, 1]')
+        self.height_frames = int(height_frames)
+        self.yaw_rate = float(yaw_rate)
+        self.yaw_search = int(yaw_search)
         self.method = method
         self.name = method
         self.db = as_database_arrays(db)
@@ -224,6 +250,10 @@ class Reconstructor:
         # One Euro filter as two separate ones, in one call
         self._seg_filter = OneEuroFilter(mc, b, dc, num_joints=NUM_SEGMENTS + 1) if mc > 0 else None
         self._frozen_lengths: Optional[np.ndarray] = None
+        # few reliable joints: the heading and the user's height from the database neighbours
+        self._yaw_state: Optional[float] = None
+        self._height_fits: list = []
+        self._height_done = self.height_frames == 0
         if isinstance(self.core, NaturalPostureOptimizer):
             self.core.reset_rng()
 
@@ -281,6 +311,8 @@ class Reconstructor:
         none = self._seg_count == 0
         if none.any():
             unset = none & ~np.isfinite(self._seg_fallback)
+            if not self._height_settled():
+                unset = none  # the database height fit is still converging: follow it
             if unset.any():
                 self._seg_fallback[unset] = self.reliability.reference_lengths[unset]
         L = np.where(none, self._seg_fallback, self._seg_sum / np.maximum(self._seg_count, 1))
@@ -289,6 +321,87 @@ class Reconstructor:
         if self._seg_count.min() >= self.length_frames:
             self._frozen_lengths = L  # every segment complete: constant from now on
         return L
+
+    def _height_settled(self) -> bool:
+        return self._height_done or self.reliability.height_measured
+
+    @staticmethod
+    def _torso_weight(w: np.ndarray) -> float:
+        """The weight of the better of the hip and shoulder lines (a line counts with the
+        smaller reliability of its two joints): what the heading is measured from."""
+        return max(min(w[HIP_LEFT], w[HIP_RIGHT]), min(w[SHOULDER_LEFT], w[SHOULDER_RIGHT]))
+
+    def _search_yaw(self, obs: np.ndarray, w: np.ndarray, height: float,
+                    translate: bool) -> float:
+        """The heading, among ``yaw_search`` evenly spaced ones, whose query is nearest to the
+        database: for a user whose torso has not been reliable yet. The unreliable hip and
+        shoulder lines are only a hypothesis: the spacing starts at the heading they give. The
+        distance is that of the nearest neighbour, scale-invariant while the height is not known
+        (:meth:`NaturalPostureOptimizer.knn_scaled`), else Eq. 9."""
+        yaw0 = float(facing_yaw(obs, np.maximum(w, 1e-3)))
+        best, best_d = yaw0, np.inf
+        wr = np.where(w >= self.reliable_threshold, w, 0.0)
+        for yaw in yaw0 + np.arange(self.yaw_search) * (2.0 * np.pi / self.yaw_search):
+            q = self.preparer.prepare(obs, w, height, yaw=float(yaw)).query
+            if self._height_settled():
+                d = float(self.core.knn_search(q, w, translate=translate)[1][0])
+            else:
+                d = float(self.core.knn_scaled(q, wr, translate, (height / 2.3, height))[1][0])
+            if d < best_d:
+                best, best_d = float(yaw), d
+        return best
+
+    def _neighbour_yaw(self, query: np.ndarray, w: np.ndarray, neighbours: np.ndarray,
+                       distances: np.ndarray, centre: bool) -> Optional[float]:
+        """The rotation about the vertical that brings the reliable joints of ``query`` (20, 3)
+        closest to the database neighbours (weighted 2-D Procrustes per neighbour, after
+        removing the weighted centroids when ``centre``, i.e. the root is unreliable; the
+        circular inverse-distance weighted mean over the neighbours): the query's heading is
+        off by it. None with fewer than two reliable joints."""
+        rel = w >= self.reliable_threshold
+        if rel.sum() < 2:
+            return None
+        inv = 1.0 / (np.asarray(distances, float) + 1e-6)
+        Y = self.db.positions[neighbours][:, rel]               # (K, m, 3)
+        q = query[rel]
+        wr = w[rel]
+        if centre:
+            wn = wr / wr.sum()
+            q = q - wn @ q
+            Y = Y - np.einsum('j,kjd->kd', wn, Y)[:, None, :]
+        # sum_j w_j conj(q_j) y_j with the horizontal coordinates as complex numbers: its angle
+        # is the best rotation of q onto y
+        c = (Y[..., 0] + 1j * Y[..., 1]) @ (wr * (q[:, 0] - 1j * q[:, 1]))   # (K,)
+        ac = np.abs(c)
+        if ac.max() < 1e-9:
+            return None
+        return float(np.angle(inv @ (c / np.maximum(ac, 1e-12))))
+
+    def _fit_height(self, query: np.ndarray, w: np.ndarray, height: float,
+                    translate: bool) -> None:
+        """While the sensor has not measured the user's height (no frame with every joint
+        tracked), estimate it from the database: the scale-invariant KNN search (Eq. 9 minimised
+        over a uniform scale of the query's reliable joints) gives the scale at which the
+        query's reliable joints best match a database posture of the standard body; the user
+        is ``height / scale`` tall (the query was scaled by standard / ``height``). The median
+        over the first ``height_frames`` such frames becomes the reliability estimator's height
+        prior (query scale and standard-body lengths), then stays. Only frames where no segment
+        has two reliable ends count: then no length can be measured, and every reliable joint
+        is below an unreliable one, so the query scaled all of them by the height (a joint below
+        reliable ones is retargeted to the standard lengths instead and says nothing about the
+        user's size)."""
+        rel = w >= self.reliable_threshold
+        if rel.sum() < _MIN_FIT_JOINTS or (rel[_SEG_P] & rel[_SEG_C]).any():
+            return
+        lo, hi = 1.0, 2.3   # the reliability estimator's height range
+        _, dist, s = self.core.knn_scaled(query, np.where(rel, w, 0.0), translate,
+                                          (height / hi, height / lo))
+        inv = 1.0 / (dist + 1e-6)
+        scale = float(inv @ s / inv.sum())
+        self._height_fits.append(height / scale)
+        self.reliability.set_height_prior(float(np.median(self._height_fits)))
+        if len(self._height_fits) >= self.height_frames:
+            self._height_done = True
 
     def _update_trust(self, positions: np.ndarray, w: np.ndarray, rms: float) -> float:
         """The trust in the sensor (module docstring) for this frame, in [0, 1]."""
@@ -369,6 +482,15 @@ class Reconstructor:
                 fs = self.smooth_filled_scale
                 scale = np.ones(NUM_SEGMENTS + 1)
                 scale[:NUM_SEGMENTS] = fs + (1.0 - fs) * rel_frac
+                f = self._seg_filter
+                if self.smooth_filled_speed and f.all_started and f.beta > 0.0:
+                    # the factor applies to the minimum cutoff only: the One Euro speed term
+                    # (beta |speed|, the filter's own estimate) is kept, so that a filled
+                    # segment is smoothed at rest but does not lag when the body moves
+                    ad = 1.0 / (1.0 + 1.0 / (2.0 * np.pi * f.d_cutoff * dt))
+                    edx = ad * ((vr - f.raw) * (1.0 / dt)) + (1.0 - ad) * f.dx
+                    bs = f.beta * np.sqrt(np.einsum('jk,jk->j', edx, edx))
+                    scale = (scale * f.min_cutoff + bs) / (f.min_cutoff + bs)
             vr = self._seg_filter.update(vr, None, self._filter_clock_ns, scale)
             v = vr[:NUM_SEGMENTS]
             nv = np.sqrt(np.einsum('sk,sk->s', v, v))
@@ -399,14 +521,35 @@ class Reconstructor:
                                'completion': 1e3 * (time.perf_counter() - t1)}
         else:
             w = R if self.use_reliability else np.ones(NUM_JOINTS)
-            prep = self.preparer.prepare(obs, w, height)
+            translate = self.float_root and w[ROOT] < self.reliable_threshold
+            rel = w >= self.reliable_threshold
+            # few reliable joints: the torso is unreliable and no segment has two reliable ends
+            few = (self._torso_weight(w) < self.reliable_threshold
+                   and not (rel[_SEG_P] & rel[_SEG_C]).any())
+            # a heading / scale fit needs at least three reliable joints (two leave the
+            # rotation about their line and, with the translation free, the scale undetermined)
+            fit_ok = int(rel.sum()) >= _MIN_FIT_JOINTS
+            yaw_in = None
+            if few:
+                # the hips and shoulders are unreliable: keep the heading they last gave (or
+                # search one at the start), corrected below from the database neighbours
+                if self._yaw_state is None and self.yaw_search > 0 and fit_ok:
+                    self._yaw_state = self._search_yaw(obs, w, height, translate)
+                yaw_in = self._yaw_state
+            prep = self.preparer.prepare(obs, w, height, yaw=yaw_in)
             yaw = float(prep.transform.yaw)
             prev = []
             for x, y in self._prev:  # bring earlier solutions into this frame's heading
                 prev.append(x @ _yaw_matrix(y - yaw).T)
-            translate = self.float_root and w[ROOT] < self.reliable_threshold
             res = self.core.solve(prep.query, w, prev[::-1], translate=translate)
             self._prev.append((res.positions, yaw))
+            theta = None
+            if few and fit_ok and self.yaw_rate > 0.0:
+                theta = self._neighbour_yaw(prep.query, w, res.neighbours, res.distances,
+                                            translate)
+            self._yaw_state = yaw if theta is None else yaw - self.yaw_rate * theta
+            if not self._height_settled():
+                self._fit_height(prep.query, w, height, translate)
             t2 = time.perf_counter()
             wsum = float(w.sum())
             rms = float(np.sqrt(res.distances[0] / max(wsum, 1e-6)))

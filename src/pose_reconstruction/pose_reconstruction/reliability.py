@@ -218,6 +218,7 @@ class ReliabilityEstimator:
         self._captured: Deque[np.ndarray] = collections.deque(maxlen=self.reference_frames)
         self.reference_source = 'standard'
         self._height = standard_body().height
+        self._height_prior: Optional[float] = None
         self._frames_since_height = 0
         self._reference: Optional[np.ndarray] = None
         self._observed = np.full((self.observed_window, NUM_SEGMENTS), np.nan)
@@ -229,10 +230,29 @@ class ReliabilityEstimator:
     # -- reference lengths ---------------------------------------------------------------------
     @property
     def height(self) -> float:
-        """The user's estimated standing height (m)."""
+        """The user's estimated standing height (m): fixed, else measured on frames with every
+        joint tracked, else the prior set by :meth:`set_height_prior`, else the standard body's."""
         if self._fixed_height is not None:
             return float(self._fixed_height)
+        if self._height_prior is not None and not self._heights:
+            return self._height_prior
         return self._height
+
+    @property
+    def height_measured(self) -> bool:
+        """True when the height comes from the sensor (fixed, or frames with every joint
+        tracked), not from a prior or the standard body."""
+        return self._fixed_height is not None or bool(self._heights)
+
+    def set_height_prior(self, height: Optional[float]) -> None:
+        """The height to use while no frame had every joint tracked (e.g. fitted to a motion
+        database by the reconstructor); None = the standard body's. The standard-body reference
+        lengths follow it."""
+        h = None if height is None else float(np.clip(height, 1.0, 2.3))
+        if h != self._height_prior:
+            self._height_prior = h
+            if not self._heights:
+                self._reference = None
 
     @property
     def reference_lengths(self) -> np.ndarray:
