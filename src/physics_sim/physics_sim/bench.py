@@ -8,8 +8,9 @@ explicit Euler integration as the paper and with implicitfast (``actuator_pd_imp
 ``mocap_constraints`` = soft connect constraints to mocap targets):
 
 * real-time factor with 1, 2 and 6 characters at the 2 ms step, by wall clock (depends on the machine's
-  load: quote it) and by this process's CPU time (what an idle core would give); all runs are
-  stepped interleaved in chunks of 10 frames and each figure is the median over its chunks,
+  load: quote it) and by this process's CPU time (what an idle core would give), as simulated
+  seconds (whole 2 ms steps: 34 ms per 1/30 s frame) per second; all runs are stepped
+  interleaved in chunks of 10 frames and each figure is the median over its chunks,
 * steady-state tracking error on a static T-pose and on the built-in motion clips
   (``skeleton_core.motions.builtin_clips``, 30 fps), segment length preservation, pinned foot drift,
 * output jitter against the raw input with Kinect-like noise (mean |second difference|),
@@ -230,21 +231,23 @@ def rtf(quick: bool, variants=None, counts=(1, 2, 6), chunk: int = 10) -> Dict:
             sim = Simulation(config(ctrl, max_characters=n))
             offs = [np.array([0.0, 1.6 * (k - (n - 1) / 2), 0.0]) for k in range(n)]
             sim.step({k: seq[0] + offs[k] for k in range(n)})
-            runs[f'{ctrl}_{n}char'] = [sim, offs, 1, [], []]
+            runs[f'{ctrl}_{n}char'] = [sim, offs, 1, [], [], []]
     for _ in range(n_chunks):
         for r in runs.values():
             sim, offs, i = r[0], r[1], r[2]
+            s0 = sim.time
             t0, c0 = time.perf_counter(), time.process_time()
             for _ in range(chunk):
                 sim.step({k: seq[i % len(seq)] + offs[k] for k in range(len(offs))})
                 i += 1
             r[3].append(time.perf_counter() - t0)
             r[4].append(time.process_time() - c0)
+            r[5].append(sim.time - s0)   # simulated: whole 2 ms steps (17 = 34 ms a 1/30 s frame)
             r[2] = i
     out = {}
     for key, r in runs.items():
-        out[key] = chunk / 30.0 / float(np.median(r[3]))
-        out[key + '_cpu'] = chunk / 30.0 / float(np.median(r[4]))
+        out[key] = float(np.median(np.array(r[5]) / np.array(r[3])))
+        out[key + '_cpu'] = float(np.median(np.array(r[5]) / np.array(r[4])))
     return out
 
 
