@@ -103,6 +103,10 @@ class SensorPose:
     pitch: float = 0.0
     lift: float = 0.0
 
+    def __post_init__(self):   # the offset every target and state is moved by, made once
+        object.__setattr__(self, '_off', np.array([0.0, 0.0, self.height + self.lift]))
+        self._off.flags.writeable = False
+
     def rotation(self) -> np.ndarray:
         c, s = math.cos(self.pitch), math.sin(self.pitch)
         return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
@@ -111,17 +115,17 @@ class SensorPose:
         return np.array([0.0, math.sin(self.pitch / 2), 0.0, math.cos(self.pitch / 2)])
 
     def offset(self) -> np.ndarray:
-        return np.array([0.0, 0.0, self.height + self.lift])
+        return self._off.copy()
 
     def to_world(self, p: np.ndarray) -> np.ndarray:
         if self.pitch == 0.0:
-            return np.asarray(p, float) + self.offset()
-        return np.asarray(p, float) @ self.rotation().T + self.offset()
+            return np.asarray(p, float) + self._off
+        return np.asarray(p, float) @ self.rotation().T + self._off
 
     def to_sensor(self, p: np.ndarray) -> np.ndarray:
         if self.pitch == 0.0:
-            return np.asarray(p, float) - self.offset()
-        return (np.asarray(p, float) - self.offset()) @ self.rotation()
+            return np.asarray(p, float) - self._off
+        return (np.asarray(p, float) - self._off) @ self.rotation()
 
     def quat_to_world(self, q: np.ndarray) -> np.ndarray:
         if self.pitch == 0.0:
@@ -791,11 +795,11 @@ class Simulation:
         # segment angular velocity over the frame: 2 vec(q1 q0^-1) / period (the rotation
         # vector to within 1 % up to 30 degrees per frame; q1 is on q0's side)
         W = np.einsum('ni,kij,nj->nk', Q0w, _VEC_Q1_Q0INV, Q1w)
-        W *= (2.0 / PER)[self._schar, None]
         # one frame time and period for all characters (targets arriving together): the
         # interpolation shares are plain numbers
         t0s, pers = T0.tolist(), PER.tolist()
         uniform = all(x == t0s[0] for x in t0s) and all(x == pers[0] for x in pers)
+        W *= 2.0 / pers[0] if uniform else (2.0 / PER)[self._schar, None]
         self._tg = dict(P0=P0, dP=P1 - P0, V=V, Q0w=Q0w, dQw=Q1w - Q0w, W=W, T0=T0, PER=PER,
                         uniform=(float(T0[0]), float(PER[0])) if uniform else None)
         self._feet_active = np.array([pin.active for _, _, pin in self._feet], bool)
@@ -926,11 +930,10 @@ class Simulation:
         # stop it dead in one step (an impulse the solver cannot absorb)
         d = self.data
         xf = pts[fi]
-        cv = d.cvel[self._jb[fi]].tolist()
-        arm = (xf - d.subtree_com[self._jroot[fi]]).tolist()
         xt = p_t[fi].tolist()
         forces = self._pin_forces().tolist() if any_act else None
-        pin_pts = self._pin_points().tolist()
+        pin_pts = self._pin_points().tolist() if any_act else None
+        cv = arm = None
         changes = []
         for n, (i, j, pin) in enumerate(self._feet):
             if pin.active:
@@ -944,6 +947,9 @@ class Simulation:
                 elif up and not pin.manual:
                     changes.append(n)
             elif c.pin_feet and not pin.manual and ht[n] < c.pin_height and speed2[n] < slow2:
+                if cv is None:   # the simulated feet's velocities, only when one may be pinned
+                    cv = d.cvel[self._jb[fi]].tolist()
+                    arm = (xf - d.subtree_com[self._jroot[fi]]).tolist()
                 w, v, r = cv[n][:3], cv[n][3:], arm[n]
                 vs = (v[0] + w[1] * r[2] - w[2] * r[1], v[1] + w[2] * r[0] - w[0] * r[2],
                       v[2] + w[0] * r[1] - w[1] * r[0])
