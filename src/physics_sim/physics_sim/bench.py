@@ -220,35 +220,38 @@ def push_test() -> Dict:
 
 
 def rtf(quick: bool, variants=None, counts=(1, 2, 6), chunk: int = 10) -> Dict:
-    """Real-time factors: every (variant, number of characters) is stepped in chunks of ``chunk``
-    frames, all of them interleaved round-robin, so a change in the machine's load hits them alike;
-    each figure is the median over its chunks (the VM's timing varies +-25 % run to run)."""
+    """Real-time factors. For each number of characters, the variants are stepped in chunks of
+    ``chunk`` frames, interleaved round-robin, so a change in the machine's load hits them alike;
+    each figure is the median over its chunks (the VM's timing varies +-25 % run to run). Worlds
+    with other numbers of characters are not alive meanwhile (a 6-character world between chunks
+    would evict a 1-character one from the caches)."""
     seq = clips(True)[0][1]
     n_chunks = (60 if quick else 90) // chunk
-    runs = {}
-    for ctrl in (variants or [v for v, _, _ in VARIANTS]):
-        for n in counts:
+    out = {}
+    for n in counts:
+        runs = {}
+        for ctrl in (variants or [v for v, _, _ in VARIANTS]):
             sim = Simulation(config(ctrl, max_characters=n))
             offs = [np.array([0.0, 1.6 * (k - (n - 1) / 2), 0.0]) for k in range(n)]
             sim.step({k: seq[0] + offs[k] for k in range(n)})
             runs[f'{ctrl}_{n}char'] = [sim, offs, 1, [], [], []]
-    for _ in range(n_chunks):
-        for r in runs.values():
-            sim, offs, i = r[0], r[1], r[2]
-            s0 = sim.time
-            t0, c0 = time.perf_counter(), time.process_time()
-            for _ in range(chunk):
-                sim.step({k: seq[i % len(seq)] + offs[k] for k in range(len(offs))})
-                i += 1
-            r[3].append(time.perf_counter() - t0)
-            r[4].append(time.process_time() - c0)
-            r[5].append(sim.time - s0)   # simulated: whole 2 ms steps (17 = 34 ms a 1/30 s frame)
-            r[2] = i
-    out = {}
-    for key, r in runs.items():
-        out[key] = float(np.median(np.array(r[5]) / np.array(r[3])))
-        out[key + '_cpu'] = float(np.median(np.array(r[5]) / np.array(r[4])))
-    return out
+        for _ in range(n_chunks):
+            for r in runs.values():
+                sim, offs, i = r[0], r[1], r[2]
+                s0 = sim.time
+                t0, c0 = time.perf_counter(), time.process_time()
+                for _ in range(chunk):
+                    sim.step({k: seq[i % len(seq)] + offs[k] for k in range(len(offs))})
+                    i += 1
+                r[3].append(time.perf_counter() - t0)
+                r[4].append(time.process_time() - c0)
+                r[5].append(sim.time - s0)   # simulated: whole 2 ms steps (34 ms a 1/30 s frame)
+                r[2] = i
+        for key, r in runs.items():
+            out[key] = float(np.median(np.array(r[5]) / np.array(r[3])))
+            out[key + '_cpu'] = float(np.median(np.array(r[5]) / np.array(r[4])))
+    return {f'{v}_{n}char{s}': out[f'{v}_{n}char{s}'] for v in (variants or [v for v, _, _ in VARIANTS])
+            for n in counts for s in ('', '_cpu')}
 
 
 def long_run(seconds: float) -> Dict:
