@@ -919,9 +919,9 @@ class Simulation:
         floor = self.sensor.lift if self.sensor else 0.0
         act = self._feet_active
         any_act = any(pin.active for _, _, pin in self._feet)
-        ht = (p_t[fi, 2] - floor).tolist()
-        vt = v_t[fi].tolist()
-        speed2 = [v[0] * v[0] + v[1] * v[1] + v[2] * v[2] for v in vt]
+        xt = p_t[fi].tolist()
+        ht = [x[2] - floor for x in xt]
+        speed2 = [v[0] * v[0] + v[1] * v[1] + v[2] * v[2] for v in v_t[fi].tolist()]
         slow2 = c.pin_speed * c.pin_speed
         if not any_act and not (c.pin_feet and any(h < c.pin_height and s2 < slow2
                                                    for h, s2 in zip(ht, speed2))):
@@ -930,8 +930,7 @@ class Simulation:
         # stop it dead in one step (an impulse the solver cannot absorb)
         d = self.data
         xf = pts[fi]
-        xt = p_t[fi].tolist()
-        forces = self._pin_forces().tolist() if any_act else None
+        forces = self._pin_forces(c.pin_max_force).tolist() if any_act else None
         pin_pts = self._pin_points().tolist() if any_act else None
         cv = arm = None
         changes = []
@@ -970,11 +969,15 @@ class Simulation:
             act[n] = pin.active
             self._pin_pts = None
 
-    def _pin_forces(self) -> np.ndarray:
-        """Magnitude (N) of each foot pin's constraint force in the last step (0 if inactive)."""
+    def _pin_forces(self, below: float = 0.0) -> np.ndarray:
+        """Magnitude (N) of each foot pin's constraint force in the last step (0 if inactive).
+        With ``below`` > 0, all zeros when no equality row can reach it (|F| <= sqrt(3) max |row|):
+        the caller only asks which pins pull harder than that."""
         d = self.data
         out = np.zeros(len(self._feet))
         ne = int(d.ne)   # equality rows come first in the constraint arrays, by equality id
+        if ne and below > 0.0 and 1.7320508075688772 * np.abs(d.efc_force[:ne]).max() <= below:
+            ne = 0
         if ne:
             f2 = np.bincount(d.efc_id[:ne], d.efc_force[:ne] ** 2, minlength=self.model.neq)
             out = np.sqrt(f2[self._feet_eq]) * self._feet_active
