@@ -177,15 +177,15 @@ def segment_quats_from_positions(positions: np.ndarray, rest_offsets: np.ndarray
         _TREE = [(k, segment_parent_body(k), SEGMENT_PARENTS[k], SEGMENT_CHILDREN[k])
                  for k in body_order()]
     p = np.asarray(positions, float).tolist()
-    rest = np.asarray(rest_offsets, float).tolist()
+    rest = _unit_rest(rest_offsets)
     q = [None] * len(SEGMENTS)
     sqrt = math.sqrt
     for k, pb, pj, cj in _TREE:
         if pb < 0:
             q[k] = _pelvis_quat(p)
             continue
-        # inlined (hot loop): rd = unit(rotate(base, rest[cj])); td = unit(p[cj] - p[pj]) (rd if
-        # degenerate); q[k] = arc(rd, td) * base
+        # inlined (hot loop): rd = rotate(base, unit rest[cj]) (a unit vector); td = unit(p[cj] -
+        # p[pj]) (rd if degenerate); q[k] = arc(rd, td) * base
         base = q[pb]
         x, y, z, w = base
         vx, vy, vz = rest[cj]
@@ -193,11 +193,6 @@ def segment_quats_from_positions(positions: np.ndarray, rest_offsets: np.ndarray
         rx = vx + w * tx + y * tz - z * ty
         ry = vy + w * ty + z * tx - x * tz
         rz = vz + w * tz + x * ty - y * tx
-        n = sqrt(rx * rx + ry * ry + rz * rz)
-        if n > 1e-9:
-            rx, ry, rz = rx / n, ry / n, rz / n
-        else:
-            rx, ry, rz = 1.0, 0.0, 0.0
         a, b = p[cj], p[pj]
         dx, dy, dz = a[0] - b[0], a[1] - b[1], a[2] - b[2]
         n = sqrt(dx * dx + dy * dy + dz * dz)
@@ -210,11 +205,27 @@ def segment_quats_from_positions(positions: np.ndarray, rest_offsets: np.ndarray
             ax, ay, az, aw = _arc((rx, ry, rz), (dx, dy, dz))
         else:
             ax, ay, az, aw = (ry * dz - rz * dy, rz * dx - rx * dz, rx * dy - ry * dx, 1.0 + dot)
-            n = sqrt(ax * ax + ay * ay + az * az + aw * aw)
-            ax, ay, az, aw = ax / n, ay / n, az / n, aw / n
+            n = 1.0 / sqrt(ax * ax + ay * ay + az * az + aw * aw)
+            ax, ay, az, aw = ax * n, ay * n, az * n, aw * n
         q[k] = (aw * x + ax * w + ay * z - az * y, aw * y - ax * z + ay * w + az * x,
                 aw * z + ax * y - ay * x + az * w, aw * w - ax * x - ay * y - az * z)
     return np.array(q)
+
+
+_REST_UNIT = (None, None)   # (rest offsets array, their unit directions as lists)
+
+
+def _unit_rest(rest_offsets) -> list:
+    """Unit rest directions (lists) of a body's rest offsets ((1, 0, 0) for a zero offset),
+    remembered for the last array seen (one body per character, the same every frame)."""
+    global _REST_UNIT
+    if _REST_UNIT[0] is not rest_offsets:
+        out = []
+        for v in np.asarray(rest_offsets, float).tolist():
+            n = math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+            out.append((v[0] / n, v[1] / n, v[2] / n) if n > 1e-9 else (1.0, 0.0, 0.0))
+        _REST_UNIT = (rest_offsets, out)
+    return _REST_UNIT[1]
 
 
 def joint_quats_to_segment(q_by_joint: np.ndarray) -> np.ndarray:

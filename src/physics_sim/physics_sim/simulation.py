@@ -867,9 +867,9 @@ class Simulation:
             axes = pts[self._sc] - pts[self._sp]
             axes /= np.maximum(np.sqrt(np.einsum('ij,ij->i', axes, axes)), 1e-9)[:, None]
         rate_t = np.einsum('ij,ij->i', tg['W'], axes) * (ss < 1.0)  # target twist rate
+        if not damped:   # (Ke_i err + Kd_i rate_t) with Ke_i, Kd_i = gain per unit inertia * I_i
+            return (g.twist_ke * err + g.twist_kd * rate_t) * self._tw_i
         k_e, k_d = g.twist_ke * self._tw_i, g.twist_kd * self._tw_i
-        if not damped:
-            return k_e * err + k_d * rate_t
         rate = np.einsum('ij,ij->i', d.cvel[self._sb, :3], axes)
         tau = np.minimum(np.maximum(k_e * err + k_d * (rate_t - rate), -g.max_torque),
                          g.max_torque)
