@@ -48,8 +48,9 @@ class LatencyProbe:
         self.count: Dict[str, int] = {t: 0 for t in TOPICS}
         self.nan = 0
         qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
-        for t in TOPICS:
-            self.node.create_subscription(SkeletonArray, t, lambda m, t=t: self._cb(t, m), qos)
+        for t in TOPICS:  # serialized: the probe's own decoding must not delay what it measures
+            self.node.create_subscription(SkeletonArray, t, lambda m, t=t: self._cb(t, m), qos,
+                                          raw=True)
         self.ex = SingleThreadedExecutor(context=self.ctx)
         self.ex.add_node(self.node)
         self.running = True
@@ -60,19 +61,20 @@ class LatencyProbe:
         while self.running:
             self.ex.spin_once(timeout_sec=0.05)
 
-    def _cb(self, topic, msg):
+    def _cb(self, topic, data):
         now = time.time_ns()
         if not self.recording:
             return
+        from skeleton_core.cdr import frames_from_cdr
+        errors = []
+        frames = frames_from_cdr(data, errors)[2]   # a NaN skeleton comes back as an error
         with self.lock:
             self.count[topic] += 1
-            for sk in msg.skeletons:
-                st = sk.header.stamp.sec * 1_000_000_000 + sk.header.stamp.nanosec
-                self.stamps[topic].add((sk.user_id, st))
-                self.lat[topic].append((now - st) / 1e6)
-                if topic != '/kinect/skeletons' and any(
-                        not np.isfinite(p.x + p.y + p.z) for p in sk.positions):
-                    self.nan += 1
+            for f in frames:
+                self.stamps[topic].add((f.user_id, f.stamp_ns))
+                self.lat[topic].append((now - f.stamp_ns) / 1e6)
+            if topic != '/kinect/skeletons':
+                self.nan += sum(e.cause.startswith('non-finite') for e in errors)
 
     def start(self):
         with self.lock:

@@ -20,8 +20,8 @@ from skeleton_core.rosnode import ParamSpec, run_node
 from . import completion_node, optimizer_node
 from .node_common import (RELIABILITY_SPECS, SkeletonArrayNode,
                           check_reliability_params, common_specs, load_database)
+from .fused import FusedProcessor, section
 from .posture_space import as_database_arrays
-from .reconstructor import Reconstructor
 
 # the split nodes' settings that have no meaning here: one database, and the reliability always
 # comes from this node's own estimate
@@ -49,12 +49,6 @@ SPECS = (common_specs('/kinect/skeletons', '/posture/reconstructed') + [
 _SHARED = ('qos_depth', 'user_timeout_s', 'time_jump_reset_s', 'database')
 
 
-def section(values: Dict[str, Any], name: str) -> Dict[str, Any]:
-    """The unprefixed parameters of one section (``'optimizer'`` -> ``{'k': 30, ...}``)."""
-    head = name + '.'
-    return {k[len(head):]: v for k, v in values.items() if k.startswith(head)}
-
-
 def fused_parameters(reliability: Dict[str, Any], completion: Dict[str, Any],
                      optimizer: Dict[str, Any]) -> Dict[str, Any]:
     """This node's parameters from the three split nodes' (e.g. their YAML files' values)."""
@@ -68,36 +62,6 @@ def fused_parameters(reliability: Dict[str, Any], completion: Dict[str, Any],
             if k in values:
                 out[k] = values[k]
     return out
-
-
-class _Processor:
-    """One user: the optimizer's Reconstructor (which estimates the reliability) and, when the
-    completion is consumed, a method-A Reconstructor fed with that reliability."""
-
-    def __init__(self, db, values: Dict[str, Any]):
-        self._db = db
-        rel = section(values, 'reliability')
-        self.rec = Reconstructor(db, use_input_reliability=False,
-                                 **section(values, 'optimizer'), **rel)
-        comp = section(values, 'completion')
-        self._comp_args = dict(method='A', use_input_reliability=True, **comp, **rel)
-        self.comp: Optional[Reconstructor] = None  # built when first consumed
-
-    def _completion(self) -> Reconstructor:
-        if self.comp is None:
-            self.comp = Reconstructor(self._db, **self._comp_args)
-        return self.comp
-
-    def reset(self) -> None:
-        self.rec.reset()
-        if self.comp is not None:
-            self.comp.reset()
-
-    def process(self, frame, wanted):
-        out = self.rec.process(frame)
-        rel = frame.copy(reliability=out.reliability)
-        comp = self._completion().process(rel) if wanted[2] else None
-        return out, (rel if wanted[1] else None), comp
 
 
 class ReconstructionNode(SkeletonArrayNode):
@@ -127,7 +91,7 @@ class ReconstructionNode(SkeletonArrayNode):
         return None
 
     def make_processor(self, values: Dict[str, Any]):
-        return _Processor(self.db, values)
+        return FusedProcessor(self.db, values)
 
     def diagnostics_extra(self) -> Dict[str, Any]:
         extra = super().diagnostics_extra()

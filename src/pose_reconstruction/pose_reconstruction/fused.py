@@ -1,0 +1,49 @@
+"""What the ``reconstruction`` node computes per user, without rclpy: reliability (Eq. 1-8),
+method B / C and, when wanted, method A, from one skeleton.
+
+Parameters are the reliability, completion and optimizer nodes' own, prefixed with the node name
+(``reliability.d_min``, ``completion.pca_dims``, ``optimizer.k``).
+"""
+from __future__ import annotations
+
+from typing import Any, Dict, Optional, Sequence
+
+from .reconstructor import Reconstructor
+
+
+def section(values: Dict[str, Any], name: str) -> Dict[str, Any]:
+    """The unprefixed parameters of one section (``'optimizer'`` -> ``{'k': 30, ...}``)."""
+    head = name + '.'
+    return {k[len(head):]: v for k, v in values.items() if k.startswith(head)}
+
+
+class FusedProcessor:
+    """One user: the optimizer's Reconstructor (which estimates the reliability) and, once the
+    completion is wanted, a method-A Reconstructor fed with that reliability.
+
+    ``process(frame, wanted) -> (reconstructed, with reliability or None, completed or None)``;
+    ``wanted`` = (True, reliability wanted, completion wanted)."""
+
+    def __init__(self, db, values: Dict[str, Any]):
+        self._db = db
+        rel = section(values, 'reliability')
+        self.rec = Reconstructor(db, use_input_reliability=False,
+                                 **section(values, 'optimizer'), **rel)
+        self._comp_args = dict(method='A', use_input_reliability=True,
+                               **section(values, 'completion'), **rel)
+        self.comp: Optional[Reconstructor] = None  # built when first wanted
+
+    def reset(self) -> None:
+        self.rec.reset()
+        if self.comp is not None:
+            self.comp.reset()
+
+    def process(self, frame, wanted: Sequence[bool]):
+        out = self.rec.process(frame)
+        rel = frame.copy(reliability=out.reliability)
+        comp = None
+        if wanted[2]:
+            if self.comp is None:
+                self.comp = Reconstructor(self._db, **self._comp_args)
+            comp = self.comp.process(rel)
+        return out, (rel if wanted[1] else None), comp
