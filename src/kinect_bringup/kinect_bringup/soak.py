@@ -32,19 +32,31 @@ import numpy as np
 from .graph import repo_root
 from .processes import Graph
 
-# run-time parameter changes the soak cycles through: (node, parameter, values)
-# (names as declared by the nodes, see config/<node>.yaml)
-PARAM_CHANGES = [
-    ('optimizer', 'k', [20, 30]),
-    ('optimizer', 'steps', [10, 20]),
-    ('reliability', 'theta_roof_deg', [130.0, 135.0]),
-    ('completion', 'reliable_threshold', [0.4, 0.5]),
-    ('physics', 'kp', [None]),  # None: read the current value and set it again
-]
-NODES = ['driver', 'reliability', 'completion', 'optimizer', 'physics']
-KILL_ORDER = ['reliability', 'optimizer', 'physics', 'completion']
+# run-time parameter changes the soak cycles through: (node, parameter, values), per
+# reconstruction layout (names as declared by the nodes, see config/<node>.yaml)
+PARAM_CHANGES = {
+    'fused': [
+        ('reconstruction', 'optimizer.k', [20, 30]),
+        ('reconstruction', 'optimizer.steps', [10, 20]),
+        ('reconstruction', 'reliability.theta_roof_deg', [130.0, 135.0]),
+        ('reconstruction', 'completion.reliable_threshold', [0.4, 0.5]),
+        ('physics', 'kp', [None]),  # None: read the current value and set it again
+    ],
+    'split': [
+        ('optimizer', 'k', [20, 30]),
+        ('optimizer', 'steps', [10, 20]),
+        ('reliability', 'theta_roof_deg', [130.0, 135.0]),
+        ('completion', 'reliable_threshold', [0.4, 0.5]),
+        ('physics', 'kp', [None]),
+    ],
+}
+NODES = {'fused': ['driver', 'reconstruction', 'physics'],
+         'split': ['driver', 'reliability', 'completion', 'optimizer', 'physics']}
+KILL_ORDER = {'fused': ['reconstruction', 'physics'],
+              'split': ['reliability', 'optimizer', 'physics', 'completion']}
 OUTPUT_TOPIC = {'reliability': '/kinect/skeletons_reliability', 'completion': '/posture/completed',
-                'optimizer': '/posture/reconstructed', 'physics': '/character/skeletons'}
+                'optimizer': '/posture/reconstructed', 'reconstruction': '/posture/reconstructed',
+                'physics': '/character/skeletons'}
 # a killed process's last messages are delivered within this; a new process cannot publish
 # sooner (interpreter start + imports take seconds), so output later than this is the new one's
 IN_FLIGHT_S = 0.3
@@ -57,6 +69,8 @@ def main(argv=None) -> int:
     ap.add_argument('--duration', type=float, default=600.0, help='seconds (default 10 min)')
     ap.add_argument('--kills', type=int, default=None, help='node kills (default: 1 per 2.5 min, >= 1)')
     ap.add_argument('--seed', type=int, default=0)
+    ap.add_argument('--reconstruction', choices=sorted(NODES), default='fused',
+                    help='the reconstruction as one node (default, as launched) or as three')
     ap.add_argument('--rss-min-duration', type=float, default=120.0,
                     help='judge RSS growth only on runs at least this long (s)')
     ap.add_argument('--out', default=str(root / 'out' / 'soak'))
@@ -99,11 +113,12 @@ def main(argv=None) -> int:
         while time.monotonic() < end:
             ex.spin_once(timeout_sec=min(0.01, max(0.0, end - time.monotonic())))
 
-    graph = Graph('processes', nodes=NODES, overrides={'driver': {'num_users': 1}},
+    nodes = NODES[args.reconstruction]
+    graph = Graph('processes', nodes=nodes, overrides={'driver': {'num_users': 1}},
                   log_dir=out / 'logs')
     report: Dict = {'duration_s': args.duration, 'malformed_sent': {}, 'param_changes': [],
                     'kills': [], 'crashes': [], 'rss_mb': {}}
-    rss: Dict[str, List] = {n: [] for n in NODES}
+    rss: Dict[str, List] = {n: [] for n in nodes}
     expected_dead = set()
     t_start = time.monotonic()
     try:
@@ -157,14 +172,16 @@ def main(argv=None) -> int:
                 stamp_back += 1
             # parameter changes at run time
             if now > next_param:
-                nname, pname, values = PARAM_CHANGES[i_param % len(PARAM_CHANGES)]
+                changes = PARAM_CHANGES[args.reconstruction]
+                nname, pname, values = changes[i_param % len(changes)]
                 i_param += 1
                 next_param = now + 7.0
                 report['param_changes'].append(_set_param(node, ex, nname, pname, values, rnd))
             # kill one node and restart it
             if kill_times and now > kill_times[0]:
                 kill_times.pop(0)
-                victim = KILL_ORDER[len(report['kills']) % len(KILL_ORDER)]
+                order = KILL_ORDER[args.reconstruction]
+                victim = order[len(report['kills']) % len(order)]
                 expected_dead.add(victim)
                 graph.restart(victim)
                 expected_dead.discard(victim)
