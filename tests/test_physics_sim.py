@@ -404,3 +404,32 @@ def test_explicit_joint_damping_only_where_it_is_stable():
     b = np.array([sims['asked'].step({1: p})[1].positions for p in _walk_targets(30)])
     assert np.abs(a - b).max() < 2e-3
     assert sims['default'].counters['nan_reset'] == 0
+
+
+def test_pin_forces_match_the_constraint_rows():
+    """Each pinned foot's force is the norm of its connect rows in MuJoCo's constraint arrays;
+    asked only for pins above a bound no row can reach, all are 0 (nothing strained)."""
+    sim = Simulation(SimConfig(body_height=1.75))
+    run(sim, tpose_sensor(), 1.0)
+    d = sim.data
+    assert any(p.active for _, _, p in sim._feet)
+    rows = np.flatnonzero(d.efc_type[:d.nefc] == mujoco.mjtConstraint.mjCNSTR_EQUALITY)
+    ref = []
+    for _, j, pin in sim._feet:
+        sel = rows[d.efc_id[rows] == sim._chars[0].pin_eq[j]]
+        ref.append(np.linalg.norm(d.efc_force[sel]) if pin.active else 0.0)
+    f = sim._pin_forces()
+    assert max(ref) > 10.0    # a standing character leans on its pins
+    np.testing.assert_allclose(f, ref, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(sim._pin_forces(below=0.5 * max(ref)), ref, rtol=1e-12, atol=1e-12)
+    assert not sim._pin_forces(below=10.0 * max(ref)).any()
+
+
+def test_bench_rtf_reports_every_run():
+    """bench_physics's interleaved real-time factors: one wall and one CPU figure per variant and
+    number of characters, positive and finite (no timing is asserted)."""
+    from physics_sim import bench
+    r = bench.rtf(True, variants=['actuator_pd', 'explicit_pd'], counts=(1, 2), chunk=6)
+    assert sorted(r) == sorted(f'{v}_{n}char{s}' for v in ('actuator_pd', 'explicit_pd')
+                               for n in (1, 2) for s in ('', '_cpu'))
+    assert all(np.isfinite(x) and x > 0 for x in r.values())
