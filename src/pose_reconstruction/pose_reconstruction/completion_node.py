@@ -9,9 +9,8 @@ from typing import Any, Dict, Optional
 
 from skeleton_core.rosnode import ParamSpec, run_node
 
-from .node_common import (RELIABILITY_NAMES, RELIABILITY_SPECS, SkeletonArrayNode,
-                          check_reliability_params, common_specs, load_database)
-from .posture_space import as_database_arrays
+from .node_common import (RELIABILITY_NAMES, RELIABILITY_SPECS, DatabaseNode,
+                          check_reliability_params, common_specs)
 from .reconstructor import Reconstructor
 
 SPECS = [
@@ -27,32 +26,14 @@ SPECS = [
 ]
 
 
-class CompletionNode(SkeletonArrayNode):
+class CompletionNode(DatabaseNode):
     def __init__(self, database_obj=None, **kwargs):
-        self._database_obj = database_obj
         specs = (common_specs('/kinect/skeletons_reliability', '/posture/completed') + SPECS
                  + RELIABILITY_SPECS)
-        super().__init__('completion', specs, **kwargs)
-
-    def setup(self) -> None:
-        self._load(self.params['database'])
-
-    def _load(self, path: str) -> None:
-        db = self._database_obj if (self._database_obj is not None and not path) else \
-            load_database(path)
-        self.db = as_database_arrays(db)
-        self.get_logger().info(f'motion database: {self.db.size} postures')
+        super().__init__('completion', specs, database_obj=database_obj, **kwargs)
 
     def validate(self, values: Dict[str, Any]) -> Optional[str]:
         return check_reliability_params(values)
-
-    def apply_params(self, values, changed) -> Optional[str]:
-        if 'database' in changed:
-            try:
-                self._load(changed['database'])
-            except (FileNotFoundError, ValueError, RuntimeError) as e:
-                return str(e)
-        return None
 
     def make_processor(self, values: Dict[str, Any]):
         params = {k: values[k] for k in RELIABILITY_NAMES}

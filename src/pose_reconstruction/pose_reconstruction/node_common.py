@@ -205,6 +205,34 @@ class SkeletonArrayNode(Node):
         self.health.on_publish(latency_s=time.monotonic() - t0)
 
 
+class DatabaseNode(SkeletonArrayNode):
+    """A :class:`SkeletonArrayNode` holding the motion database named by its ``database``
+    parameter (``self.db``), reloaded when the parameter changes (a missing or corrupt file is a
+    refused change). ``database_obj`` (tests) stands in for the default database."""
+
+    def __init__(self, name: str, specs: List[ParamSpec], database_obj=None, **kwargs):
+        self._database_obj = database_obj
+        super().__init__(name, specs, **kwargs)
+
+    def setup(self) -> None:
+        self._load(self.params['database'])
+
+    def _load(self, path: str) -> None:
+        from .posture_space import as_database_arrays
+        db = self._database_obj if (self._database_obj is not None and not path) else \
+            load_database(path)
+        self.db = as_database_arrays(db)
+        self.get_logger().info(f'motion database: {self.db.size} postures')
+
+    def apply_params(self, values: Dict[str, Any], changed: Dict[str, Any]) -> Optional[str]:
+        if 'database' in changed:
+            try:
+                self._load(changed['database'])
+            except (FileNotFoundError, ValueError, RuntimeError) as e:
+                return str(e)
+        return None
+
+
 def load_database(path: str, loader: Optional[Callable[[], Any]] = None):
     """The motion database named by the ``database`` parameter ('' = built-in / CMU default).
 

@@ -18,10 +18,9 @@ from typing import Any, Dict, Optional
 from skeleton_core.rosnode import ParamSpec, run_node
 
 from . import completion_node, optimizer_node
-from .node_common import (RELIABILITY_SPECS, SkeletonArrayNode,
-                          check_reliability_params, common_specs, load_database)
+from .node_common import (RELIABILITY_SPECS, DatabaseNode,
+                          check_reliability_params, common_specs)
 from .fused import FusedProcessor, section
-from .posture_space import as_database_arrays
 
 # the split nodes' settings that have no meaning here: one database, and the reliability always
 # comes from this node's own estimate
@@ -64,31 +63,13 @@ def fused_parameters(reliability: Dict[str, Any], completion: Dict[str, Any],
     return out
 
 
-class ReconstructionNode(SkeletonArrayNode):
+class ReconstructionNode(DatabaseNode):
     def __init__(self, database_obj=None, **kwargs):
-        self._database_obj = database_obj
-        super().__init__('reconstruction', SPECS,
+        super().__init__('reconstruction', SPECS, database_obj=database_obj,
                          outputs=('output_topic', 'reliability_topic', 'completed_topic'), **kwargs)
-
-    def setup(self) -> None:
-        self._load(self.params['database'])
-
-    def _load(self, path: str) -> None:
-        db = self._database_obj if (self._database_obj is not None and not path) else \
-            load_database(path)
-        self.db = as_database_arrays(db)
-        self.get_logger().info(f'motion database: {self.db.size} postures')
 
     def validate(self, values: Dict[str, Any]) -> Optional[str]:
         return check_reliability_params(section(values, 'reliability'))
-
-    def apply_params(self, values, changed) -> Optional[str]:
-        if 'database' in changed:
-            try:
-                self._load(changed['database'])
-            except (FileNotFoundError, ValueError, RuntimeError) as e:
-                return str(e)
-        return None
 
     def make_processor(self, values: Dict[str, Any]):
         return FusedProcessor(self.db, values)
