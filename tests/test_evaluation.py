@@ -131,3 +131,181 @@ def test_evaluate_cli_writes_markdown_and_json(tmp_path, capsys):
     assert data['meta']['seed'] == 0 and data['results']['raw']['a']['frames'] > 0
     assert 'Sensor model noise statistics' in capsys.readouterr().out
     assert ev.run(['--methods', 'no_such_method', '--out', str(tmp_path)]) == 2
+
+
+# ------------------------------------------------------------------------------------------
+# Table III calibration protocol
+# ------------------------------------------------------------------------------------------
+class Recorder:
+    """Returns every frame unchanged and keeps a copy of each (class-level, for inspection)."""
+
+    name = 'recorder'
+    seen = []
+
+    def reset(self):
+        pass
+
+    def process(self, frame):
+        Recorder.seen.append(frame.copy())
+        return frame
+
+
+def test_calibration_stream_is_the_same_user_in_a_tpose_all_tracked():
+    from skeleton_core.model import ELBOW_LEFT, SHOULDER_LEFT, SHOULDER_RIGHT, segment_lengths
+    clip = E.toy_clip(2.0)
+    sensor = SensorModel(seed=0)
+    s = sensor.corrupt(clip, 'clean', seed=0)
+    cs = E.calibration_stream(sensor, clip, 'tpose', seed=0, seconds=1.0,
+                              start_ns=int(s.stamps_ns[0]))
+    assert len(cs) == 30 and cs.scenario == 'clean'
+    # stamps: 30 Hz, ending one frame before the subset stream starts
+    assert np.all(np.diff(cs.stamps_ns) > 0) and cs.stamps_ns[-1] == s.stamps_ns[0] - 33333333
+    # the true skeleton is the clip's (standard) body standing still in a T-pose: arms level
+    # with the shoulders, the same segment lengths as the clip, at the stream's distance
+    assert np.ptp(cs.truth, axis=0).max() < 1e-9
+    assert abs(cs.truth[0, HAND_LEFT, 2] - cs.truth[0, SHOULDER_LEFT, 2]) < 1e-6
+    assert abs(cs.truth[0, ELBOW_LEFT, 2] - cs.truth[0, SHOULDER_LEFT, 2]) < 1e-6
+    assert np.allclose(segment_lengths(cs.truth[0]), segment_lengths(s.truth[0]), atol=1e-6)
+    assert abs(cs.truth[0, 0, 0] - np.mean(s.truth[:, 0, 0])) < 0.05
+    # noisy like the stream (cm level), every joint reported
+    err = np.linalg.norm(cs.positions - cs.truth, axis=-1)
+    assert 0.002 < err.mean() < 0.10
+    frames = E.calibration_frames(cs)
+    assert len(frames) == 30
+    for f in frames:
+        assert np.all(f.tracking_state == TRACKED) and np.all(f.reliability == 1.0)
+    # standing: the same skeleton with the arms hanging down
+    st = E.calibration_stream(sensor, clip, 'standing', seed=0, seconds=0.5)
+    assert len(st) == 15
+    assert st.truth[0, HAND_LEFT, 2] < st.truth[0, SHOULDER_LEFT, 2] - 0.4
+    assert np.allclose(segment_lengths(st.truth[0]), segment_lengths(s.truth[0]), atol=1e-6)
+    assert abs(np.linalg.norm(st.truth[0, HAND_LEFT] - st.truth[0, SHOULDER_RIGHT]) -
+               np.linalg.norm(cs.truth[0, HAND_LEFT] - cs.truth[0, SHOULDER_RIGHT])) > 0.3
+
+
+def test_calibration_is_the_same_session_with_independent_noise():
+    clip = E.toy_clip(2.0)
+    quiet = SensorModel({'jitter': {'depth_coeff_mm': 0.0,
+                                    'base_mm': {g: 0.0 for g in ('torso', 'head', 'shoulder',
+                                                                 'elbow', 'wrist', 'hand', 'hip',
+                                                                 'knee', 'ankle', 'foot')}},
+                         'slow_drift': {'sigma_mm': {g: 0.0 for g in (
+                             'torso', 'head', 'shoulder', 'elbow', 'wrist', 'hand', 'hip', 'knee',
+                             'ankle', 'foot')}}}, seed=0)
+    s = quiet.corrupt(clip, 'clean', seed=4)
+    cs = E.calibration_stream(quiet, clip, 'tpose', seed=4)
+    # only the systematic joint-centre offsets are left: the same per joint (rotated with the
+    # body, so compare lengths) as in the clip's stream
+    off_s = np.linalg.norm(s.positions - s.truth, axis=-1)
+    off_c = np.linalg.norm(cs.positions - cs.truth, axis=-1)
+    assert off_s.mean() > 0.01
+    assert np.allclose(off_c, off_s[0][None], atol=1e-9)
+    # another seed is another session
+    other = E.calibration_stream(quiet, clip, 'tpose', seed=5)
+    assert not np.allclose(np.linalg.norm(other.positions - other.truth, axis=-1), off_c, atol=1e-3)
+    # with the default noise, the calibration's random noise is not the stream's first second
+    noisy = SensorModel(seed=0)
+    s = noisy.corrupt(clip, 'clean', seed=0)
+    cs = E.calibration_stream(noisy, clip, 'tpose', seed=0)
+    de = (cs.positions - cs.truth) - (s.positions[:30] - s.truth[:30])
+    assert np.abs(de).max() > 0.005
+
+
+def test_table3_calibration_frames_are_fed_first_and_not_scored():
+    clip = E.toy_clip(2.0)  # 60 frames
+    runs = {}
+    for cal in ('none', 'tpose'):
+        Recorder.seen = []
+        res = E.table3([Recorder, 'raw'], [clip], subsets=('c', 'e'), calibration=cal)
+        runs[cal] = (list(Recorder.seen), res)
+    seen_none, res_none = runs['none']
+    seen_cal, res_cal = runs['tpose']
+    assert len(seen_none) == 2 * 60 and len(seen_cal) == 2 * (30 + 60)
+    for k in range(2):  # subsets c and e
+        cal, sub = seen_cal[k * 90:k * 90 + 30], seen_cal[k * 90 + 30:(k + 1) * 90]
+        old = seen_none[k * 60:(k + 1) * 60]
+        # calibration: every joint tracked with reliability 1, before the subset frames
+        assert all(np.all(f.tracking_state == TRACKED) and np.all(f.reliability == 1) for f in cal)
+        assert max(f.stamp_ns for f in cal) < sub[0].stamp_ns
+        # the subset frames are exactly those of the protocol without calibration
+        for a, b in zip(sub, old):
+            assert np.array_equal(a.positions, b.positions)
+            assert np.array_equal(a.tracking_state, b.tracking_state)
+            assert np.array_equal(a.reliability, b.reliability) and a.stamp_ns == b.stamp_ns
+    for res in (res_none, res_cal):
+        r = res['results']
+        assert r['raw']['c']['frames'] == 60 and r['raw']['c']['missing_frames'] == 0
+        # scored frames are the subset frames only: raw with all parts is the input itself
+        assert r['raw']['e']['metrics']['eq18_cm']['overall'] == pytest.approx(0.0, abs=1e-12)
+    # the same scores for a method that ignores the calibration
+    for k in ('c', 'e'):
+        assert (res_cal['results']['raw'][k]['metrics']['eq18_cm']['overall'] ==
+                res_none['results']['raw'][k]['metrics']['eq18_cm']['overall'])
+    assert res_none['calibration']['pose'] == 'none' and res_none['calibration']['frames'] == 0
+    assert res_cal['calibration'] == {**res_cal['calibration'], 'pose': 'tpose', 'frames': 30,
+                                      'seconds': 1.0, 'scored': False}
+    assert res_cal['meta']['calibration']['pose'] == 'tpose'
+    md_none, md_cal = E.to_markdown(res_none), E.to_markdown(res_cal)
+    assert 'calibration: none' in md_none and 'calibration: tpose' in md_none.replace(
+        'none', 'tpose') and '| method (calibration: none) |' in md_none
+    assert '| method (calibration: tpose) |' in md_cal and '30 frames' in md_cal
+    assert json.loads(E.to_json(res_cal))['calibration']['pose'] == 'tpose'
+    with pytest.raises(ValueError):
+        E.table3(['raw'], [clip], subsets=('e',), calibration='sitting')
+
+
+def test_table3_none_is_the_old_protocol():
+    """calibration='none' runs exactly what table3 ran before the option existed."""
+    clip = E.toy_clip(2.0)
+    res = E.table3(['holt'], [clip], subsets=('b',), calibration='none', seed=2)
+    sensor = SensorModel(None, seed=2)
+    base = E.make_streams([clip], ('clean',), 2, None, sensor)['clean']
+    base = [E.replace(s, truth=s.positions.copy()) for s in base]
+    old = E.evaluate_streams(['holt'], {'b': base},
+                             frame_transform=lambda s: E.subset_frames(s, E.TABLE3_SUBSETS['b'][1]))
+    # bit for bit (NaN -> None: the root has no Eq. 18 term)
+    assert (E._json_safe(res['results']['holt']['b']['metrics']) ==
+            E._json_safe(old['results']['holt']['b']['metrics']))
+    # the calibration changes a stateful method's output (the filter starts from the T-pose)
+    cal = E.table3(['holt'], [clip], subsets=('b',), calibration='tpose', seed=2)
+    a = cal['results']['holt']['b']['metrics']['eq18_cm']['overall']
+    b = res['results']['holt']['b']['metrics']['eq18_cm']['overall']
+    assert a != b and abs(a - b) < 0.5 * b
+
+
+def test_method_c_takes_its_segment_lengths_from_the_calibration():
+    rc = pytest.importorskip('pose_reconstruction.reconstructor')
+    from skeleton_core.model import SEGMENT_CHILDREN, MIRROR, segment_lengths
+    clip = E.toy_clip(2.0)
+    db = E._database_postures(clips=[E.toy_clip(4.0, name='db')])
+    sensor = SensorModel(seed=0)
+    s = sensor.corrupt(clip, 'clean', seed=0, max_frames=20)
+    cs = E.calibration_stream(sensor, clip, 'tpose', seed=0, start_ns=int(s.stamps_ns[0]))
+    m = rc.Reconstructor(db, method='C', k=5, steps=2, samples=10)
+    out, _ = E.run_method(m, s, E.subset_frames(s, E.TABLE3_SUBSETS['c'][1]),
+                          warmup=E.calibration_frames(cs))
+    # frozen after length_frames (15) calibration frames: their mean, left/right averaged
+    cal = segment_lengths(cs.positions[:m.length_frames]).mean(axis=0)
+    mirror = [SEGMENT_CHILDREN.index(MIRROR[c]) for c in SEGMENT_CHILDREN]
+    want = 0.5 * (cal + cal[mirror])
+    got = segment_lengths(out)
+    assert np.allclose(got, want[None], atol=1e-9)
+    # without the calibration the hidden segments cannot have these lengths
+    out0, _ = E.run_method(m, s, E.subset_frames(s, E.TABLE3_SUBSETS['c'][1]))
+    assert np.abs(segment_lengths(out0)[-1] - want).max() > 0.005
+
+
+def test_evaluate_cli_table3_states_the_calibration(tmp_path):
+    ev = pytest.importorskip('kinect_bringup.evaluate')
+    for cal in ('none', 'tpose'):
+        out = tmp_path / cal
+        rc = ev.run(['--experiment', 'table3', '--source', 'builtin', '--methods', 'raw',
+                     '--max-frames', '10', '--calibration', cal, '--out', str(out), '--quiet'])
+        assert rc == 0
+        md = (out / 'table3.md').read_text()
+        assert f'calibration: {cal}' in md and f'| method (calibration: {cal}) |' in md
+        data = json.loads((out / 'table3.json').read_text())
+        assert data['calibration']['pose'] == cal
+        assert data['meta']['calibration']['pose'] == cal
+    assert data['calibration']['frames'] == 30
+    assert data['calibration']['sources'] and 'built-in' in data['calibration']['sources'][0]

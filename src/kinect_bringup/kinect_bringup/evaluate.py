@@ -8,7 +8,8 @@ Examples::
 
     evaluate                                   # table4: all methods, classes a-c, dev clips
     evaluate --methods raw,holt,one_euro --source builtin --max-frames 300
-    evaluate --experiment table3 --methods raw,C
+    evaluate --experiment table3 --methods raw,C                     # calibrated user (T-pose)
+    evaluate --experiment table3 --methods raw,C --calibration none  # no calibration segment
     evaluate --experiment fig5
     evaluate --experiment fig8 --methods C --params k,steps
 """
@@ -43,6 +44,13 @@ def _parser():
                         'samples)')
     p.add_argument('--reference', default='input', choices=('input', 'truth'),
                    help='table3: score against the full input skeleton (paper) or the truth')
+    p.add_argument('--calibration', default='tpose', choices=('tpose', 'standing', 'none'),
+                   help='table3: before each clip the method sees --calibration-seconds of the '
+                        'same user in a T-pose (default, the paper\'s calibrated user) or standing '
+                        'pose with every joint tracked, not scored; none = the other joints are '
+                        'hidden from the first frame')
+    p.add_argument('--calibration-seconds', type=float, default=1.0,
+                   help='table3: length of the calibration segment (s, at 30 Hz; default 1)')
     p.add_argument('--quiet', action='store_true', help='no progress lines')
     p.add_argument('--real', nargs='?', const='auto', default=None, metavar='UIPRMD_DIR',
                    help='real-data mode: score the methods on the UI-PRMD Kinect recordings '
@@ -105,7 +113,10 @@ def run(argv=None) -> int:
     elif exp == 'table3':
         res = E.table3(methods, dev_clips, seed=args.seed, max_frames=max_frames,
                        sensor_params=args.sensor_params, data_source=source, progress=progress,
-                       repeats=args.repeats, reference=args.reference)
+                       repeats=args.repeats, reference=args.reference,
+                       calibration=args.calibration,
+                       calibration_seconds=args.calibration_seconds)
+        print(f'[evaluate] table3 {E.calibration_text(res)}', file=sys.stderr)
     elif exp == 'fig5':
         import numpy as np
         from skeleton_core.geometry import normalize, retarget

@@ -15,6 +15,9 @@ Experiments (Shum et al. 2013 Sec. VIII, Shum & Ho 2012 Sec. 8.4)
 * :func:`evaluate` / Table IV — every method on scenario classes a-c, Eq. 18 error and more.
 * :func:`table3` — reconstruction from joint subsets (a) left hand + foot ... (e) all parts: the
   other joints are NOT_TRACKED (reliability 0, frozen at the first frame) on a noise-only stream.
+  ``calibration='tpose'`` (the paper's protocol: a calibrated user) first shows each method a
+  short, unscored segment of the same user standing in a T-pose (or ``'standing'``, arms down)
+  with every joint tracked; ``'none'`` hides the other joints from the very first frame.
 * :func:`fig5` — PCA dimensions 1..60 vs nearest-posture matching error (Shum & Ho Eq. 5-6) and
   search time, on the motion database.
 * :func:`fig8` — a method's error and frame time vs one parameter (database size, K, PCA
@@ -222,9 +225,14 @@ def stream_frames(stream: KinectStream, user_id: int = 1) -> Iterable[SkeletonFr
                             user_id=user_id, stamp_ns=int(stream.stamps_ns[i]), frame_id=FRAME_ID)
 
 
-def run_method(method: Method, stream: KinectStream, frames: Optional[Iterable[SkeletonFrame]] = None):
-    """Feed a stream through a method: (positions (T,20,3) with NaN for missing, times_ms (T,))."""
+def run_method(method: Method, stream: KinectStream, frames: Optional[Iterable[SkeletonFrame]] = None,
+               warmup: Optional[Iterable[SkeletonFrame]] = None):
+    """Feed a stream through a method: (positions (T,20,3) with NaN for missing, times_ms (T,)).
+    ``warmup``: frames fed after ``reset()`` and before the stream (e.g. a calibration segment);
+    their outputs and times are discarded."""
     method.reset()
+    for f in (warmup or ()):
+        method.process(f)
     frames = stream_frames(stream) if frames is None else frames
     out = np.full((len(stream), NUM_JOINTS, 3), np.nan)
     times = np.empty(len(stream))
@@ -295,8 +303,11 @@ def make_streams(clips, scenarios=('a', 'b', 'c'), seed: int = 0,
 
 
 def evaluate_streams(methods, streams: Dict[str, List[KinectStream]],
-                     frame_transform: Optional[Callable] = None, progress=None) -> Dict:
-    """Run every method on every stream; per method x scenario: metrics and processing time."""
+                     frame_transform: Optional[Callable] = None, progress=None,
+                     warmup: Optional[Callable] = None) -> Dict:
+    """Run every method on every stream; per method x scenario: metrics and processing time.
+    ``frame_transform(stream)``: the frames to feed instead of the stream's own; ``warmup(stream)``:
+    unscored frames fed before them (see :func:`run_method`)."""
     results: Dict[str, Dict] = {}
     params: Dict[str, Dict] = {}
     for label, factory, p in _method_list(methods):
@@ -307,7 +318,8 @@ def evaluate_streams(methods, streams: Dict[str, List[KinectStream]],
             parts, weights, times, missing = [], [], [], 0
             for s in lst:
                 frames = None if frame_transform is None else frame_transform(s)
-                out, t = run_method(method, s, frames)
+                out, t = run_method(method, s, frames,
+                                    None if warmup is None else warmup(s))
                 missing += int(np.isnan(out).any(axis=(1, 2)).sum())
                 parts.append(M.compute_all(out, s.truth, s.fps))
                 weights.append(len(s))
@@ -391,34 +403,160 @@ def subset_frames(stream: KinectStream, joints: Sequence[int]) -> List[SkeletonF
     return frames
 
 
+CALIBRATIONS = ('tpose', 'standing', 'none')
+CALIBRATION_SECONDS = 1.0
+
+
+def calibration_pose(clip, pose: str = 'tpose', cmu_dir=None):
+    """The clip's own user standing in a calibration pose, in the clip's world frame (REP-103,
+    floor at z = 0): ``(positions (20, 3), description)``.
+
+    * CMU clips (``source`` 'cmu:<file>'): frame 0 of the cgspeed BVH file, a synthetic T-pose of
+      that subject (``mocap.load_cmu_clip`` drops it from the motion);
+    * built-in motions (``source`` 'builtin:...'): the T-pose of the standard body they are
+      driven on;
+    * any other clip: the standard body's T-pose at the height of the clip's first frame.
+
+    ``pose='standing'``: the same skeleton with both arms hanging straight down from the
+    shoulders (the reliability estimator's second reference posture)."""
+    from .model import (ELBOW_LEFT as EL, ELBOW_RIGHT as ER, SHOULDER_LEFT as SL,
+                        SHOULDER_RIGHT as SR, WRIST_LEFT as WL, WRIST_RIGHT as WR, estimate_height)
+    if pose not in ('tpose', 'standing'):
+        raise ValueError(f"calibration pose must be 'tpose' or 'standing', got {pose!r}")
+    src = str(getattr(clip, 'source', '') or '')
+    p = None
+    if src.startswith('cmu:'):
+        from .mocap import load_cmu_clip
+        folder = Path(cmu_dir) if cmu_dir is not None else shared_dir() / 'mocap' / 'cmu'
+        path = folder / src[4:]
+        if path.is_file():
+            full = load_cmu_clip(path, getattr(clip, 'motion_class', None), drop_first=False)
+            p, desc = full.positions[0].copy(), f'{path.name} frame 0 (BVH T-pose)'
+    if p is None and src.startswith('builtin:'):
+        p, desc = standard_body().rest_positions(), 'standard body T-pose (built-in motions)'
+    if p is None:
+        h = float(np.clip(estimate_height(np.asarray(clip.positions[0], float)), 1.0, 2.4))
+        p, desc = standard_body(h).rest_positions(), f'standard body T-pose at {h:.2f} m'
+    if pose == 'standing':
+        p = p.copy()
+        for chain in ((SL, EL, WL, HAND_LEFT), (SR, ER, WR, HAND_RIGHT)):
+            lengths = [np.linalg.norm(p[b] - p[a]) for a, b in zip(chain[:-1], chain[1:])]
+            for a, b, length in zip(chain[:-1], chain[1:], lengths):
+                p[b] = p[a] + (0.0, 0.0, -length)
+        desc += ', arms down'
+    return p, desc
+
+
+def calibration_stream(sensor: SensorModel, clip, pose: str = 'tpose', seed: int = 0,
+                       seconds: float = CALIBRATION_SECONDS, cmu_dir=None,
+                       start_ns: int = 0) -> KinectStream:
+    """``seconds`` of the clip's user standing still in :func:`calibration_pose`, through the
+    sensor model's 'clean' path (same placement and noise model as the clip's stream). It is the
+    same session as ``sensor.corrupt(clip, 'clean', seed)``: the same systematic joint-centre
+    offsets, with independent jitter and drift. Stamps end one frame before ``start_ns``."""
+    from .mocap import MotionClip
+    from .sensor_model import _Corrupter
+    pos, desc = calibration_pose(clip, pose, cmu_dir)
+    fps = sensor.fps
+    n = max(1, int(round(float(seconds) * fps)))
+    quats = np.zeros((n, NUM_JOINTS, 4))
+    quats[..., 3] = 1.0
+    cal = MotionClip(name=str(getattr(clip, 'name', '')), motion_class='calibration', fps=fps,
+                     positions=np.repeat(pos[None], n, axis=0), orientations=quats,
+                     source=desc)
+    session = _Corrupter(sensor, clip, 'clean', sensor.stream_seed(clip, 'clean', seed))
+    s = sensor.stream_seed(clip, f'clean/calibration/{pose}', seed)
+    c = _Corrupter(sensor, cal, 'clean', s)
+    c.sys_offset = session.sys_offset.copy()
+    out = np.empty((n, NUM_JOINTS, 3))
+    st = np.empty((n, NUM_JOINTS), np.uint8)
+    tr = np.empty((n, NUM_JOINTS, 3))
+    cl = np.empty((n, NUM_JOINTS), bool)
+    for i in range(n):
+        out[i], st[i], tr[i], cl[i] = c.step(i)
+    stamps = start_ns - np.round(np.arange(n, 0, -1) * 1e9 / fps).astype(np.int64)
+    return KinectStream(positions=out, tracking_state=st, truth=tr, stamps_ns=stamps,
+                        events=c.events, scenario='clean', seed=s, clean=cl,
+                        clip_name=f'{cal.name} ({desc})', fps=fps)
+
+
+def calibration_frames(stream: KinectStream) -> List[SkeletonFrame]:
+    """A calibration stream as frames with every joint TRACKED and reliability 1."""
+    frames = []
+    for f in stream_frames(stream):
+        f.tracking_state[:] = TRACKED
+        f.reliability = np.ones(NUM_JOINTS, np.float32)
+        frames.append(f)
+    return frames
+
+
 def table3(methods, clips, seed: int = 0, max_frames: Optional[int] = None, sensor_params=None,
            data_source: str = '', subsets=tuple(TABLE3_SUBSETS), progress=None,
-           repeats: int = 1, reference: str = 'input') -> Dict:
+           repeats: int = 1, reference: str = 'input', calibration: str = 'tpose',
+           calibration_seconds: float = CALIBRATION_SECONDS, cmu_dir=None) -> Dict:
     """Shum 2013 Table III: each method given only a subset of joints of a noise-only ('clean')
     stream. ``reference='input'`` (the paper's choice) scores against the full input skeleton,
-    ``'truth'`` against the true motion. Results keyed by subset letter instead of scenario."""
+    ``'truth'`` against the true motion. Results keyed by subset letter instead of scenario.
+
+    ``calibration``: 'tpose' / 'standing' — before each clip's subset frames the method sees
+    ``calibration_seconds`` of the same user in that pose with every joint tracked
+    (:func:`calibration_stream`, not scored; the subset frames are the same as without it), as
+    a user calibrated at the start of a session (the paper's protocol); 'none' — no calibration,
+    the other joints are hidden from the first frame."""
     if reference not in ('input', 'truth'):
         raise ValueError("reference must be 'input' or 'truth'")
+    if calibration not in CALIBRATIONS:
+        raise ValueError(f'calibration must be one of {CALIBRATIONS}, got {calibration!r}')
+    if calibration != 'none' and not float(calibration_seconds) > 0:
+        raise ValueError('calibration_seconds must be > 0')
     sensor = SensorModel(sensor_params, seed=seed)
     base = make_streams(clips, ('clean',), seed, max_frames, sensor, repeats)['clean']
     if reference == 'input':
         base = [replace(s, truth=s.positions.copy()) for s in base]
+    warmup = None
+    cal_meta: Dict = {'pose': calibration, 'seconds': 0.0, 'frames': 0, 'scored': False}
+    if calibration != 'none':
+        # the same order as make_streams: repeats outer, clips inner
+        pairs = [(c, seed + r) for r in range(max(1, int(repeats))) for c in clips]
+        cal_streams = [calibration_stream(sensor, c, calibration, sd, calibration_seconds,
+                                          cmu_dir, int(s.stamps_ns[0]))
+                       for s, (c, sd) in zip(base, pairs)]
+        cal = {id(s): calibration_frames(cs) for s, cs in zip(base, cal_streams)}
+        cal_meta.update(seconds=float(calibration_seconds),
+                        frames=len(cal_streams[0]) if cal_streams else 0,
+                        sources=sorted({cs.clip_name for cs in cal_streams}))
+
+        def warmup(s, cal=cal):
+            return [f.copy() for f in cal[id(s)]]
     results: Dict = {}
     params: Dict = {}
     for key in subsets:
         label, joints = TABLE3_SUBSETS[key]
         r = evaluate_streams(methods, {key: base},
                              frame_transform=lambda s, j=joints: subset_frames(s, j),
-                             progress=progress)
+                             progress=progress, warmup=warmup)
         params.update(r['method_params'])
         for m, v in r['results'].items():
             results.setdefault(m, {})[key] = v[key]
     return {'experiment': 'table3', 'results': results, 'method_params': params,
-            'reference': reference,
+            'reference': reference, 'calibration': cal_meta,
             'subsets': {k: {'parts': TABLE3_SUBSETS[k][0],
                             'joints': [JOINT_NAMES[j] for j in TABLE3_SUBSETS[k][1]]}
                         for k in subsets},
-            'meta': _meta(clips, seed, sensor, max_frames, data_source, {'scenarios': ['clean']})}
+            'meta': _meta(clips, seed, sensor, max_frames, data_source,
+                          {'scenarios': ['clean'], 'calibration': cal_meta})}
+
+
+def calibration_text(results: Dict) -> str:
+    """One line naming a Table III result's protocol (results without the key: 'none')."""
+    cal = results.get('calibration') or {'pose': 'none'}
+    if cal.get('pose', 'none') == 'none':
+        return ('calibration: none (no calibration; the other joints are hidden from the first '
+                'frame, so the user\'s segment lengths are never observed)')
+    what = 'a T-pose' if cal['pose'] == 'tpose' else 'a standing pose, arms down'
+    return (f'calibration: {cal["pose"]} (before each clip, {cal["seconds"]:g} s = '
+            f'{cal["frames"]} frames of the same user in {what} with every joint tracked, '
+            f'reliability 1, not scored)')
 
 
 # ------------------------------------------------------------------------------------------
@@ -557,13 +695,19 @@ def to_markdown(results: Dict) -> str:
         else:
             ref = ('the full input skeleton (as in the paper)'
                    if results.get('reference', 'input') == 'input' else 'the true motion')
-            lines += ['## Reconstruction from joint subsets (Shum et al. 2013 Table III style)', '',
+            cal = (results.get('calibration') or {}).get('pose', 'none')
+            lines += ['## Reconstruction from joint subsets (Shum et al. 2013 Table III style), '
+                      f'calibration: {cal}', '',
                       'Only the listed joints are TRACKED (others NOT_TRACKED, frozen); '
-                      f'noise-only stream; Eq. 18 error (cm) against {ref}.', '']
+                      f'noise-only stream; Eq. 18 error (cm) against {ref}.', '',
+                      f'**Protocol — {calibration_text(results)}.**', '']
             for k, v in results.get('subsets', {}).items():
                 lines.append(f'- ({k}) {v["parts"]}')
             lines.append('')
-        head = '| method | ' + ' | '.join(f'{k} Eq.18 cm' for k in keys)
+        first = 'method'
+        if exp == 'table3':
+            first = f'method (calibration: {(results.get("calibration") or {}).get("pose", "none")})'
+        head = f'| {first} | ' + ' | '.join(f'{k} Eq.18 cm' for k in keys)
         if exp == 'table4' and 'raw' in res:
             head += ' | ' + ' | '.join(f'{k} enh.' for k in keys)
         head += ' | MPJPE cm | jitter m/s² | bone std cm | bone dir ° | ms/frame |'
