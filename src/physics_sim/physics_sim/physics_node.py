@@ -69,6 +69,11 @@ PARAMS: List[ParamSpec] = [
               'environment object poses (visualization_msgs/MarkerArray)', read_only=True),
     ParamSpec('output_rate', 30.0, 'simulation tick and output rate (Hz)', range=(1.0, 240.0),
               read_only=True),
+    ParamSpec('input_depth', 1,
+              'input queue depth: 1 = the character always tracks the newest target (when ticks '
+              'fall behind the input, stale targets are skipped, not queued); more = every '
+              'target is applied, at the cost of latency under load', range=(1, 100),
+              read_only=True),
     ParamSpec('timestep', 0.002, 'physics time step (s)', range=(0.0005, 0.01), read_only=True),
     ParamSpec('sync_to_input', True,
               'tick as soon as a target arrives (phase-locked to the sensor: the output leaves '
@@ -240,7 +245,8 @@ class PhysicsNode(Node):
         self.pub = self.create_publisher(SkeletonArray, v['output_topic'], 10)
         self.obj_pub = self.create_publisher(MarkerArray, v['objects_topic'], 10)
         # serialized in and out (skeleton_core.cdr): no rclpy message objects per joint
-        self.create_subscription(SkeletonArray, v['input_topic'], self._on_input, 10, raw=True)
+        self.create_subscription(SkeletonArray, v['input_topic'], self._on_input,
+                                 v['input_depth'], raw=True)
         self.create_subscription(WrenchStamped, '~/push', self._on_push_topic, 10)
         self.create_service(ApplyPush, '~/apply_push', self._on_push_srv)
         self.timer = self.create_timer(1.0 / v['output_rate'], self._on_timer)
