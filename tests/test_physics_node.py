@@ -34,6 +34,15 @@ def clip(n=45):
     return out
 
 
+def _wait(pred, timeout, step=0.02):
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if pred():
+            return True
+        time.sleep(step)
+    return pred()
+
+
 def _msg(p, stamp_ns, uid=4):
     f = SkeletonFrame(positions=p, tracking_state=np.full(NUM_JOINTS, 2, np.uint8), user_id=uid,
                       stamp_ns=stamp_ns, frame_id='kinect_link')
@@ -206,3 +215,39 @@ def test_ticks_follow_the_input_but_keep_the_output_rate(graph, monkeypatch):
     assert len(ticks) == 2
     # each tick simulated the clock time since the previous one
     assert node._sim_in_step > 0
+
+
+def test_a_slow_tick_skips_stale_targets_instead_of_queueing_them(graph, monkeypatch):
+    """input_depth 1 (default): targets that arrive while a tick runs are not queued, only the
+    newest one is taken next — the character never lags behind a backlog."""
+    node, peer = graph
+    assert node.params['input_depth'] == 1
+    pub = peer.create_publisher(SkeletonArray, '/test_physics/in', 10)
+    assert _wait(lambda: pub.get_subscription_count() >= 1, 10.0)
+    taken = []
+    real = node._on_input
+
+    def slow_input(data):
+        taken.append(time.monotonic())
+        real(data)
+        if len(taken) == 1:
+            time.sleep(0.6)   # a tick far slower than the input
+
+    monkeypatch.setattr(node, '_on_input', slow_input)
+    # the subscription holds the bound method: rebuild it so the patched one is called
+    for sub in list(node.subscriptions):
+        if sub.topic_name == '/test_physics/in':
+            node.destroy_subscription(sub)
+    node.create_subscription(SkeletonArray, '/test_physics/in', node._on_input,
+                             node.params['input_depth'], raw=True)
+    assert _wait(lambda: pub.get_subscription_count() >= 1, 10.0)
+    p = clip(1)[0]
+    pub.publish(_msg(p, 7_000_000_000))
+    assert _wait(lambda: len(taken) == 1, 5.0)
+    for i in range(1, 9):                 # 8 targets while the first one is still being handled
+        pub.publish(_msg(p, 7_000_000_000 + i * 33_333_333))
+        time.sleep(0.03)
+    time.sleep(1.0)
+    assert 2 <= len(taken) <= 3, len(taken)   # the newest (and at most one in flight), not 8
+    st = node.sim.states()[4]
+    assert st.stamp_ns == 7_000_000_000 + 8 * 33_333_333
