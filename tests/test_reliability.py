@@ -5,9 +5,11 @@ import pytest
 from pose_reconstruction.reliability import (INCIDENCE, ReliabilityEstimator, behaviour_term,
                                              gaussian_weights, kinematics_term,
                                              reference_pose_match, tracking_term)
-from skeleton_core.model import (ELBOW_LEFT, HAND_RIGHT, HIP_CENTER, INFERRED, NOT_TRACKED,
+from skeleton_core.model import (ANKLE_LEFT, ANKLE_RIGHT, ELBOW_LEFT, ELBOW_RIGHT, FOOT_LEFT,
+                                 FOOT_RIGHT, HAND_LEFT, HAND_RIGHT, HIP_CENTER, HIP_LEFT,
+                                 HIP_RIGHT, INFERRED, KNEE_LEFT, KNEE_RIGHT, NOT_TRACKED,
                                  NUM_JOINTS, SEGMENT_CHILDREN, SEGMENT_OF_JOINT, SEGMENT_PARENTS,
-                                 SHOULDER_LEFT, TRACKED, WRIST_LEFT,
+                                 SHOULDER_LEFT, SHOULDER_RIGHT, TRACKED, WRIST_LEFT, WRIST_RIGHT,
                                  segment_lengths, standard_body)
 
 FLOOR, ROOF = np.radians(90.0), np.radians(135.0)
@@ -232,3 +234,32 @@ def test_height_prior_until_the_height_is_measured():
     tall = standard_body(1.9).rest_positions()
     est.update(tall, np.full(20, TRACKED, np.uint8))
     assert est.height_measured and abs(est.height - 1.9) < 0.02
+
+
+def test_tpose_of_a_skeleton_with_dropped_hip_joints_is_recognised():
+    """Mocap skeletons (e.g. CMU) put the hip joints ~50 deg below the pelvis centre where the
+    standard body has them level: the reference-posture test judges limbs and spine, not the
+    girdles, so such a T-pose still gives the user's own reference lengths."""
+    p = standard_body(1.7).rest_positions()
+    for hip, knee, ankle, foot in ((HIP_LEFT, KNEE_LEFT, ANKLE_LEFT, FOOT_LEFT),
+                                   (HIP_RIGHT, KNEE_RIGHT, ANKLE_RIGHT, FOOT_RIGHT)):
+        v = p[hip] - p[HIP_CENTER]
+        w = np.linalg.norm(v)
+        drop = np.array([v[0], v[1], 0.0]) / np.linalg.norm(v[:2]) * w * np.cos(np.radians(50)) \
+            - np.array([0.0, 0.0, w * np.sin(np.radians(50))])
+        shift = p[HIP_CENTER] + drop - p[hip]
+        p[[hip, knee, ankle, foot]] += shift   # the whole leg hangs from the lowered hip joint
+    assert reference_pose_match(p, 25.0) == 'tpose'
+    est = ReliabilityEstimator(reference_mode='standard')
+    est.update(p, np.full(NUM_JOINTS, TRACKED, np.uint8))
+    assert est.reference_source == 'tpose'
+    seg = p[list(SEGMENT_CHILDREN)] - p[list(SEGMENT_PARENTS)]
+    assert np.allclose(est.reference_lengths, np.linalg.norm(seg, axis=1))
+    # the limbs still decide: the same skeleton with the arms down is 'standing', not 'tpose'
+    arms = p.copy()
+    for sh, chain in ((SHOULDER_LEFT, (ELBOW_LEFT, WRIST_LEFT, HAND_LEFT)),
+                      (SHOULDER_RIGHT, (ELBOW_RIGHT, WRIST_RIGHT, HAND_RIGHT))):
+        for j in chain:
+            d = np.linalg.norm(p[j] - p[sh])
+            arms[j] = p[sh] - np.array([0.0, 0.0, d])
+    assert reference_pose_match(arms, 25.0) == 'standing'

@@ -62,8 +62,13 @@ def reference_directions() -> dict:
 
 
 _REF_DIRS = reference_directions()
+# segments judged by the reference-posture test: not the hands and feet (short, noisy on Kinect)
+# and not the hip and shoulder girdles, whose direction is where each skeleton model puts its hip
+# and shoulder joints, not a posture (CMU's pelvis segments point ~50 deg below the standard
+# body's horizontal ones, so a CMU T-pose never matched)
 _POSE_SEGS = np.array([k for k, c in enumerate(SEGMENT_CHILDREN)
-                       if c not in (HAND_LEFT, HAND_RIGHT, FOOT_LEFT, FOOT_RIGHT)])
+                       if c not in (HAND_LEFT, HAND_RIGHT, FOOT_LEFT, FOOT_RIGHT,
+                                    HIP_LEFT, HIP_RIGHT, SHOULDER_LEFT, SHOULDER_RIGHT)])
 _REF_STACK = np.stack([_REF_DIRS['tpose'][_POSE_SEGS], _REF_DIRS['standing'][_POSE_SEGS]])
 _REF_NAMES = ('tpose', 'standing')
 # model.estimate_height from precomputed segment lengths: the leg + trunk + head chain against the
