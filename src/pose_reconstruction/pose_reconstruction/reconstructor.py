@@ -51,8 +51,8 @@ positions reported for the unreliable joints must not decide them. Then
   the database neighbours (weighted 2-D Procrustes).
 
 Both need at least three reliable joints. ``smooth_filled_speed``: ``smooth_filled_scale`` lowers
-only the minimum cutoff of a filled segment, not the One Euro speed term (no extra lag in fast
-motion).
+only the minimum cutoff of a filled segment, not the One Euro speed term (less lag in fast
+motion, but more jitter: off by default).
 
 Trust in the sensor (graceful degradation), ``trust_mode``:
 
@@ -166,7 +166,7 @@ class Reconstructor:
                  smooth_min_cutoff: float = 3.0, smooth_beta: float = 10.0,
                  smooth_d_cutoff: float = 1.0, smooth_filled_scale: float = 0.2,
                  float_root: bool = True, height_frames: int = 30, yaw_rate: float = 0.5,
-                 yaw_search: int = 12, smooth_filled_speed: bool = True, **params):
+                 yaw_search: int = 12, smooth_filled_speed: bool = False, **params):
         method = str(method).upper()
         if method not in METHODS:
             raise ValueError(f'method must be one of {METHODS}, got {method!r}')
