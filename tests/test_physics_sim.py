@@ -433,3 +433,34 @@ def test_bench_rtf_reports_every_run():
     assert sorted(r) == sorted(f'{v}_{n}char{s}' for v in ('actuator_pd', 'explicit_pd')
                                for n in (1, 2) for s in ('', '_cpu'))
     assert all(np.isfinite(x) and x > 0 for x in r.values())
+
+
+def test_auto_controller_switches_with_the_number_of_characters():
+    """controller 'auto': actuator_pd for few characters, explicit_pd from auto_explicit_from on
+    (decided when the world is recompiled for a character coming or going); the characters keep
+    tracking across the switch."""
+    sim = Simulation(SimConfig(controller='auto', auto_explicit_from=3, body_height=1.75))
+    ys = (-2.4, -0.8, 0.8, 2.4)
+
+    def targets(uids):
+        return {u: tpose_sensor((2.5, ys[u - 1], 0.0)) for u in uids}
+
+    def tracking(states):
+        return max(np.linalg.norm(s.positions - s.target_world, axis=1).mean()
+                   for s in states.values())
+
+    for _ in range(20):
+        states = sim.step(targets((1, 2)))
+    assert sim.controller == 'actuator_pd' and sim._act is not None
+    assert tracking(states) < 0.03
+    for _ in range(20):
+        states = sim.step(targets((1, 2, 3)))
+    assert sim.controller == 'explicit_pd' and sim._act is None and sim.model.nu == 0
+    assert tracking(states) < 0.03
+    sim.remove_character(3)
+    for _ in range(20):
+        states = sim.step(targets((1, 2)))
+    assert sim.controller == 'actuator_pd' and sim.model.nu > 0
+    assert tracking(states) < 0.03 and sim.counters['nan_reset'] == 0
+    with pytest.raises(ValueError):
+        SimConfig(controller='auto', auto_explicit_from=0).validate()

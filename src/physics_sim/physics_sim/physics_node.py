@@ -80,11 +80,17 @@ PARAMS: List[ParamSpec] = [
               'right after its input instead of up to one period later); the timer keeps the '
               'output rate when input is slower or stops. Each tick simulates the wall time since '
               'the previous one (0.5 to 1.5 periods)'),
-    ParamSpec('controller', 'actuator_pd',
-              'actuator_pd = Eq. 1-2 evaluated by MuJoCo actuators at every step (fast); '
-              'explicit_pd = the papers\' external PD forces computed in Python at every step '
-              '(reference); mocap_constraints = soft connect constraints to mocap targets',
+    ParamSpec('controller', 'auto',
+              'actuator_pd = Eq. 1-2 evaluated by MuJoCo actuators at every step (fast for few '
+              'characters); explicit_pd = the papers\' external PD forces computed in Python at '
+              'every step (reference; faster from ~4 characters); auto = actuator_pd below '
+              'auto_explicit_from characters, explicit_pd from there; mocap_constraints = soft '
+              'connect constraints to mocap targets',
               choices=CONTROLLERS, read_only=True),
+    ParamSpec('auto_explicit_from', 4,
+              'controller auto: explicit_pd from this many characters on (the same control law; '
+              'actuator_pd grows with the square of the characters)', range=(1, 100),
+              read_only=True),
     ParamSpec('integrator', 'euler',
               'MuJoCo integrator: euler = explicit like the paper (fastest; stable up to Kd ~300 '
               'N s/m, Ke ~40000 N/m at 2 ms); implicitfast treats actuator_pd\'s Kd implicitly '
@@ -187,6 +193,7 @@ def config_from_params(v: Dict) -> SimConfig:
                      integrator=v['integrator'], solver=v['solver'],
                      implicit_joint_damping=v['implicit_joint_damping'],
                      slow_control_every=v['slow_control_every'],
+                     auto_explicit_from=v['auto_explicit_from'],
                      track_timeconst=v['track_timeconst'], track_dampratio=v['track_dampratio'],
                      track_impedance=v['track_impedance'],
                      velocity_smoothing=v['velocity_smoothing'],

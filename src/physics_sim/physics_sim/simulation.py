@@ -28,6 +28,13 @@ Controllers (``SimConfig.controller``):
   ``|F| <= sqrt(3) max_force``). With ``integrator='euler'`` it is the paper's explicit scheme;
   with ``'implicitfast'`` MuJoCo integrates the Kd term implicitly. Eq. 2 as in the paper.
 
+* ``auto`` (the node's default) -- ``actuator_pd`` for fewer than ``auto_explicit_from`` (4)
+  characters, ``explicit_pd`` from there on: the same control law, whichever is faster. Each
+  site actuator takes a Jacobian over every degree of freedom of the world, so ``actuator_pd``
+  grows with the square of the characters (``bench_physics``, CPU real-time factor, actuator_pd
+  vs explicit_pd: 3 characters 6.6 vs 5.4, 4: 3.2 vs 3.8, 6: 1.8 vs 3.0). The world is
+  recompiled whenever a character comes or goes, and the choice is made then.
+
 ``explicit_pd`` computes the control law in Python at every physics step (the reference). The two
 others update their targets, Eq. 2 twist targets and foot pins once every ``slow_control_every``
 steps (default: once per ``advance``) and let ``mj_step`` run the steps in between in C:
@@ -55,7 +62,7 @@ from .controller import Gains, is_identity, joint_quats_to_segment, segment_quat
 from .mjcf_body import ROOT_SEGMENT, CharacterParams, joint_anchor
 from .mjcf_world import ALL_BITS, CharacterEntry, ObjectSpec, WorldParams, character_bits, world_xml
 
-CONTROLLERS = ('explicit_pd', 'actuator_pd', 'mocap_constraints')
+CONTROLLERS = ('explicit_pd', 'actuator_pd', 'mocap_constraints', 'auto')
 INTEGRATORS = ('euler', 'implicitfast')
 SOLVERS = ('auto', 'pgs', 'cg', 'newton')
 SEGMENT_CHILDREN_A = tuple(c for _, c in SEGMENTS)
@@ -197,6 +204,8 @@ class SimConfig:
     # steps between Python control updates (Eq. 2 twist targets, foot pins; the chunked
     # controllers' targets); 0 = auto: 4 for explicit_pd, the whole advance (<= 50) otherwise
     slow_control_every: int = 0
+    # controller 'auto': explicit_pd from this many characters on, actuator_pd below
+    auto_explicit_from: int = 4
     twist_scale: Optional[Sequence[float]] = None  # per-segment factor on Eq. 2 gains (19, SEGMENTS)
 
     def validate(self) -> None:
@@ -212,6 +221,8 @@ class SimConfig:
             ts = np.asarray(self.twist_scale, float)
             if ts.shape != (len(SEGMENTS),) or not np.all(np.isfinite(ts)) or np.any(ts < 0):
                 raise ValueError(f'twist_scale needs {len(SEGMENTS)} finite values >= 0')
+        if int(self.auto_explicit_from) < 1:
+            raise ValueError('auto_explicit_from must be >= 1')
         if not (0 <= int(self.slow_control_every) <= 50):
             raise ValueError('slow_control_every must be in [0, 50] (0 = auto)')
         if not (0.0 <= self.velocity_smoothing < 1.0):
@@ -261,19 +272,29 @@ class Simulation:
         self._rebuild()
 
     # ------------------------------------------------------------------ model
+    @property
+    def controller(self) -> str:
+        """The controller in use: ``config.controller``, or for ``'auto'`` the faster one for
+        the current number of characters (module docstring)."""
+        c = self.config
+        if c.controller != 'auto':
+            return c.controller
+        return 'explicit_pd' if len(self.characters) >= c.auto_explicit_from else 'actuator_pd'
+
     def _world_params(self) -> WorldParams:
         c = self.config
+        ctrl = self.controller
         cp = CharacterParams(joint_damping=c.joint_damping, joint_armature=c.joint_armature,
                              friction=c.friction,
-                             mocap_targets=(c.controller == 'mocap_constraints'),
+                             mocap_targets=(ctrl == 'mocap_constraints'),
                              track_solref=(c.track_timeconst, c.track_dampratio),
                              track_solimp=(c.track_impedance, c.track_impedance, 0.001),
                              pin_solref=(2.0 * c.timestep, 1.0),  # stiffest MuJoCo allows
-                             pd_actuators=(c.controller == 'actuator_pd'),
+                             pd_actuators=(ctrl == 'actuator_pd'),
                              pd_kp=c.gains.ke, pd_kv=c.gains.kd,
                              pd_force_limit=c.gains.max_force)
         solver = c.solver if c.solver != 'auto' else (
-            'newton' if c.controller == 'mocap_constraints' else 'pgs')
+            'newton' if ctrl == 'mocap_constraints' else 'pgs')
         return WorldParams(timestep=c.timestep, integrator=c.integrator, solver=solver,
                            euler_implicit_damping=self.implicit_damping(), character=cp)
 
@@ -586,7 +607,7 @@ class Simulation:
         if self.config.dodge:
             self._update_dodge()
         self._pack_targets()
-        if self.config.controller == 'explicit_pd':
+        if self.controller == 'explicit_pd':
             for _ in range(n):
                 mujoco.mj_step1(m, d)   # kinematics + velocities of the current state
                 self._control()         # forces from the current state (not one step old)
