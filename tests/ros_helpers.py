@@ -12,6 +12,16 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 
 
+def wait_until(cond, timeout: float, step: float = 0.02) -> bool:
+    """Poll ``cond()`` until it is true or ``timeout`` s passed; its last value."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if cond():
+            return True
+        time.sleep(step)
+    return bool(cond())
+
+
 def msg_class(msgtype: str):
     pkg, _, name = msgtype.split('/')
     return getattr(importlib.import_module(f'{pkg}.msg'), name)

@@ -19,6 +19,7 @@ from visualization_msgs.msg import MarkerArray  # noqa: E402
 from skeleton_core.conversions import SkeletonFrame, frames_from_array_msg, frames_to_array_msg  # noqa: E402
 from skeleton_core.model import NUM_JOINTS, segment_lengths, standard_body  # noqa: E402
 from physics_sim.physics_node import PhysicsNode  # noqa: E402
+from ros_helpers import wait_until as _wait  # noqa: E402
 
 BODY = standard_body()
 
@@ -32,15 +33,6 @@ def clip(n=45):
         p[[6, 7]] += (0.0, 0.0, 0.15 * np.sin(i / 10.0))
         out.append(p)
     return out
-
-
-def _wait(pred, timeout, step=0.02):
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if pred():
-            return True
-        time.sleep(step)
-    return pred()
 
 
 def _msg(p, stamp_ns, uid=4):

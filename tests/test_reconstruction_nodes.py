@@ -12,14 +12,7 @@ pytestmark = pytest.mark.ros
 
 rclpy = pytest.importorskip('rclpy')
 
-
-def _wait(pred, timeout, step=0.02):
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if pred():
-            return True
-        time.sleep(step)
-    return pred()
+from ros_helpers import wait_until as _wait  # noqa: E402
 
 
 @pytest.fixture(scope='module')

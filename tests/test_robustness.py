@@ -28,7 +28,7 @@ pytest.importorskip('diagnostic_msgs.msg')
 
 from kinect_bringup import fuzz  # noqa: E402
 from kinect_bringup.processes import Graph  # noqa: E402
-from ros_helpers import Probe  # noqa: E402
+from ros_helpers import Probe, wait_until as _wait  # noqa: E402
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
@@ -129,15 +129,6 @@ class GraphProbe(Probe):
                 return True
             time.sleep(0.1)
         return False
-
-
-def _wait(cond, timeout, step=0.1):
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if cond():
-            return True
-        time.sleep(step)
-    return bool(cond())
 
 
 def _logs(log_dir: Path, node: str) -> str:
