@@ -12,7 +12,9 @@ every parameter change accepted).
 
 RSS growth is judged per OS process, never across a restart: for each node the longest-lived of
 its processes (the first one, or the one started by a restart), from 25 % of that process's life
-on, and only when that process lived at least --rss-min-duration s (default 120). Over a shorter
+on (the median of the last third of that window against the median of its first third: the RSS
+follows the load, e.g. the number of characters in the physics world), and only when that
+process lived at least --rss-min-duration s (default 120). Over a shorter
 window the figures are reported but allocator and cache warm-up cannot be told from a leak: the
 node's entry says ``judged: false`` and, when no process was judged (e.g. the 45 s soak of the test
 suite), ``rss_verdict`` says ``skipped``.
@@ -244,9 +246,14 @@ def main(argv=None) -> int:
                  # (s, MB) about every 30 s, to see the trend (samples are every 2 s)
                  'series': [(round(t), round(mb, 1)) for t, mb, _ in samples[::15]]}
         if len(warm) >= 2:
-            base, last = warm[0], max(warm[-3:])
+            # the RSS follows the load (a physics world with more visitors is bigger): a leak is
+            # the level rising, so the first and the last third of the window are compared by
+            # their medians, not one sample against another
+            k = max(1, len(warm) // 3)
+            base, last = float(np.median(warm[:k])), float(np.median(warm[-k:]))
             g = (last - base) / base * 100.0
             entry.update(after_warmup=base, last=last, growth_percent=g,
+                         first_to_last_sample_percent=(warm[-1] - warm[0]) / warm[0] * 100.0,
                          judged=life >= args.rss_min_duration)
             if entry['judged']:
                 judged.append(n)
