@@ -40,6 +40,8 @@ class FusedProcessor:
 
     def process(self, frame, wanted: Sequence[bool]):
         out = self.rec.process(frame)
+        if not (wanted[1] or wanted[2]):
+            return out, None, None
         rel = frame.copy(reliability=out.reliability)
         comp = None
         if wanted[2]:

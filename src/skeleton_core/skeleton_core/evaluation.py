@@ -455,7 +455,6 @@ def calibration_stream(sensor: SensorModel, clip, pose: str = 'tpose', seed: int
     same session as ``sensor.corrupt(clip, 'clean', seed)``: the same systematic joint-centre
     offsets, with independent jitter and drift. Stamps end one frame before ``start_ns``."""
     from .mocap import MotionClip
-    from .sensor_model import _Corrupter
     pos, desc = calibration_pose(clip, pose, cmu_dir)
     fps = sensor.fps
     n = max(1, int(round(float(seconds) * fps)))
@@ -464,20 +463,10 @@ def calibration_stream(sensor: SensorModel, clip, pose: str = 'tpose', seed: int
     cal = MotionClip(name=str(getattr(clip, 'name', '')), motion_class='calibration', fps=fps,
                      positions=np.repeat(pos[None], n, axis=0), orientations=quats,
                      source=desc)
-    session = _Corrupter(sensor, clip, 'clean', sensor.stream_seed(clip, 'clean', seed))
-    s = sensor.stream_seed(clip, f'clean/calibration/{pose}', seed)
-    c = _Corrupter(sensor, cal, 'clean', s)
-    c.sys_offset = session.sys_offset.copy()
-    out = np.empty((n, NUM_JOINTS, 3))
-    st = np.empty((n, NUM_JOINTS), np.uint8)
-    tr = np.empty((n, NUM_JOINTS, 3))
-    cl = np.empty((n, NUM_JOINTS), bool)
-    for i in range(n):
-        out[i], st[i], tr[i], cl[i] = c.step(i)
+    cs = sensor.corrupt(cal, 'clean', seed, seed_tag=f'clean/calibration/{pose}',
+                        sys_offset=sensor.session_offsets(clip, 'clean', seed))
     stamps = start_ns - np.round(np.arange(n, 0, -1) * 1e9 / fps).astype(np.int64)
-    return KinectStream(positions=out, tracking_state=st, truth=tr, stamps_ns=stamps,
-                        events=c.events, scenario='clean', seed=s, clean=cl,
-                        clip_name=f'{cal.name} ({desc})', fps=fps)
+    return replace(cs, stamps_ns=stamps, clip_name=f'{cal.name} ({desc})')
 
 
 def calibration_frames(stream: KinectStream) -> List[SkeletonFrame]:

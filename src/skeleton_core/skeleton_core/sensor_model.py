@@ -575,10 +575,17 @@ class SensorModel:
         return (base * 1_000_003 + zlib.crc32(tag)) % (2 ** 31)
 
     def corrupt(self, clip, scenario: str = 'a', seed: Optional[int] = None,
-                max_frames: Optional[int] = None, start_ns: int = 0) -> KinectStream:
-        """The whole clip through the sensor model (offline)."""
-        s = self.stream_seed(clip, scenario, seed)
+                max_frames: Optional[int] = None, start_ns: int = 0,
+                seed_tag: Optional[str] = None,
+                sys_offset: Optional[np.ndarray] = None) -> KinectStream:
+        """The whole clip through the sensor model (offline). ``seed_tag``: the stream's random
+        seed from this tag instead of the scenario's name (another recording of the same user);
+        ``sys_offset`` (20, 3): the systematic joint-centre offsets to use (e.g. those of
+        :meth:`session_offsets`: the same sensor session) instead of drawing new ones."""
+        s = self.stream_seed(clip, scenario if seed_tag is None else seed_tag, seed)
         c = _Corrupter(self, clip, scenario, s)
+        if sys_offset is not None:
+            c.sys_offset = np.array(sys_offset, float).reshape(NUM_JOINTS, 3)
         n = c.T if max_frames is None else min(c.T, int(max_frames))
         pos = np.empty((n, NUM_JOINTS, 3))
         st = np.empty((n, NUM_JOINTS), np.uint8)
@@ -590,6 +597,11 @@ class SensorModel:
         return KinectStream(positions=pos, tracking_state=st, truth=tr, stamps_ns=stamps,
                             events=c.events, scenario=scenario, seed=s, clean=cl,
                             clip_name=str(getattr(clip, 'name', '')), fps=self.fps)
+
+    def session_offsets(self, clip, scenario: str = 'a', seed: Optional[int] = None) -> np.ndarray:
+        """(20, 3) the systematic joint-centre offsets of ``corrupt(clip, scenario, seed)``."""
+        return _Corrupter(self, clip, scenario,
+                          self.stream_seed(clip, scenario, seed)).sys_offset.copy()
 
     def stream(self, clip, scenario: str = 'a', loop: bool = True,
                seed: Optional[int] = None) -> Iterator[Tuple[np.ndarray, np.ndarray, np.ndarray]]:
