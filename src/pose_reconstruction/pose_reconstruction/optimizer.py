@@ -49,6 +49,11 @@ for _s, (_p, _c) in enumerate(zip(SEGMENT_PARENTS, SEGMENT_CHILDREN)):
         _DSEG[3 * _c + _k, 3 * _s + _k] += 1.0
         _DSEG[3 * _p + _k, 3 * _s + _k] -= 1.0
 _SUM3 = np.kron(np.eye(NUM_SEGMENTS), np.ones((3, 1)))
+# flat coordinate indices of the segments' child and parent joints, by coordinate (the x of every
+# segment, then y, then z): ``flat[_SEGX_C] - flat[_SEGX_P]`` is the (57,) segment vector block of
+# the energy matrix (the same values as ``flat @ _DSEG`` reordered: one subtraction each)
+_SEGX_C = np.array([3 * c + k for k in range(3) for c in SEGMENT_CHILDREN])
+_SEGX_P = np.array([3 * p + k for k in range(3) for p in SEGMENT_PARENTS])
 
 
 def local_pca(Yc: np.ndarray, dims: int):
@@ -271,13 +276,18 @@ class NaturalPostureOptimizer:
         A_c = Vw @ V.T                                        # E_c = z A z + b z + c
         b_c = 2.0 * (Vw @ mq)
         c_c = float(mq @ (w60 * mq))
-        sg = np.vstack((V, mu)) @ _DSEG                        # (d + 1, 57)
-        dV, seg0 = sg[:d], sg[d]
-        S = dict(mu=mu, V=V, zn=zn, zn_sq=znsq + res_n, res_n=res_n, sd=sd,
-                 q=q, w60=w60, A_c=A_c, b_c=b_c, c_c=c_c, seg0=seg0, dV=dV, c=None)
+        zn_sq = znsq + res_n
+        S = dict(mu=mu, V=V, zn=zn, zn_sq=zn_sq, res_n=res_n, sd=sd,
+                 q=q, w60=w60, A_c=A_c, b_c=b_c, c_c=c_c, c=None)
         # fused energy: E = z Q z + [z W](linear) + const + w_s/20 min_n(zn_sq - 2 z zn) + w_k E_k
+        # WT (d + 57 + K, d + 1) acting on [z; 1]: rows Q z + lin (so z.(Q z + lin) = quadratic +
+        # linear part), the segment vectors seg0 + dV^T z by coordinate (x block, y, z), and
+        # |z_n|^2 - 2 z_n.z per neighbour (E_s = min_n of it + |z|^2, the latter in Q)
+        n3 = 3 * NUM_SEGMENTS
+        WT = np.empty((d + n3 + K, d + 1))
         inv_j = 1.0 / NUM_JOINTS
-        Q = self.w_control * A_c
+        np.multiply(A_c, self.w_control, out=WT[:d, :d])       # Q
+        Qdiag = WT.reshape(-1)[:d * (d + 2):d + 2]             # a view of Q's diagonal
         lin = self.w_control * b_c
         const = self.w_control * c_c
         if continuity_target is not None:
@@ -288,33 +298,40 @@ class NaturalPostureOptimizer:
             S.update(c=c, zc=zc, res_c=res_c)
             lin = lin - (2.0 * self.w_continuity * inv_j) * zc
             const += self.w_continuity * inv_j * (float(zc @ zc) + res_c)
-            Q = Q + (self.w_continuity * inv_j) * np.eye(d)
-        Q = Q + (self.w_style * inv_j) * np.eye(d)            # |z|^2 of E_s (min over n aside)
-        # WT (d + 57 + K, d + 1) acting on [z; 1]: rows Q z + lin (so z.(Q z + lin) = quadratic +
-        # linear part), the segment vectors seg0 + dV^T z by coordinate (x block, y, z), and
-        # |z_n|^2 - 2 z_n.z per neighbour (E_s = min_n of it + |z|^2, the latter in Q)
-        dVx = dV.reshape(d, NUM_SEGMENTS, 3).transpose(2, 1, 0).reshape(-1, d)   # (57, d)
-        WT = np.empty((d + 3 * NUM_SEGMENTS + K, d + 1))
-        WT[:d, :d] = Q
+            Qdiag += self.w_continuity * inv_j
+        Qdiag += self.w_style * inv_j                          # |z|^2 of E_s (min over n aside)
         WT[:d, d] = lin
-        WT[d:d + 57, :d] = dVx
-        WT[d:d + 57, d] = seg0.reshape(NUM_SEGMENTS, 3).T.ravel()
-        WT[d + 57:, :d] = -2.0 * zn
-        WT[d + 57:, d] = znsq + res_n
+        Vt = V.T
+        np.subtract(Vt.take(_SEGX_C, axis=0), Vt.take(_SEGX_P, axis=0), out=WT[d:d + n3, :d])
+        np.subtract(mu.take(_SEGX_C), mu.take(_SEGX_P), out=WT[d:d + n3, d])
+        np.multiply(zn, -2.0, out=WT[d + n3:, :d])
+        WT[d + n3:, d] = zn_sq
         S.update(WT=WT, const=const, d=d)
         return S
 
-    def _energy_t(self, ZT: np.ndarray, S: dict) -> np.ndarray:
-        """Eq. 15 for samples stored as the columns of ``ZT`` (d + 1, M), last row 1 -> (M,)."""
+    @staticmethod
+    def _segment_basis(S: dict):
+        """``(seg0 (57,), dV (d, 57))``: the segment vectors (segment-major, x y z) of ``mu`` and
+        of the principal axes, read back from the energy matrix."""
+        d, n = S['d'], NUM_SEGMENTS
+        blk = S['WT'][d:d + 3 * n]                             # (57, d + 1), by coordinate
+        seg = blk.reshape(3, n, d + 1).transpose(1, 0, 2).reshape(3 * n, d + 1)
+        return seg[:, d], seg[:, :d].T
+
+    def _energy_t(self, ZT: np.ndarray, S: dict, P: Optional[np.ndarray] = None,
+                  sq: Optional[np.ndarray] = None) -> np.ndarray:
+        """Eq. 15 for samples stored as the columns of ``ZT`` (d + 1, M), last row 1 -> (M,).
+        ``P`` (d + 57 + K, M) and ``sq`` (57, M): optional work arrays (reused across steps)."""
         d = S['d']
-        P = S['WT'] @ ZT
+        P = np.matmul(S['WT'], ZT, out=P)
         e = np.einsum('dm,dm->m', P[:d], ZT[:d])
         e += S['const']
         n = NUM_SEGMENTS
-        sx, sy, sz = P[d:d + n], P[d + n:d + 2 * n], P[d + 2 * n:d + 3 * n]
-        ln = sx * sx
-        ln += sy * sy
-        ln += sz * sz
+        Ps = P[d:d + 3 * n]
+        sq = np.multiply(Ps, Ps, out=sq)                      # x^2, y^2, z^2 blocks
+        ln = sq[:n]
+        ln += sq[n:2 * n]
+        ln += sq[2 * n:]
         np.sqrt(ln, out=ln)
         ln -= self._Lcol
         ek = np.einsum('sm,sm->m', ln, ln)
@@ -339,7 +356,8 @@ class NaturalPostureOptimizer:
         ec = np.sum((Z @ S['A_c']) * Z, axis=1) + Z @ S['b_c'] + S['c_c']          # Eq. 9-10
         dz = zz[:, None] - 2.0 * (Z @ S['zn'].T) + S['zn_sq'][None, :]
         es = np.maximum(dz.min(axis=1), 0.0) / NUM_JOINTS                          # Eq. 11
-        seg = (S['seg0'] + Z @ S['dV']).reshape(len(Z), NUM_SEGMENTS, 3)
+        seg0, dV = self._segment_basis(S)
+        seg = (seg0 + Z @ dV).reshape(len(Z), NUM_SEGMENTS, 3)
         ln = np.sqrt(np.einsum('msk,msk->ms', seg, seg))
         ek = np.sum((ln - self.L) ** 2, axis=1) / NUM_SEGMENTS                     # Eq. 12
         if S['c'] is None:
@@ -360,12 +378,14 @@ class NaturalPostureOptimizer:
         zc = np.asarray(z, float)[:, None]
         normal = self.rng.standard_normal
         Zs = ZT[:d]
+        P = np.empty((S['WT'].shape[0], self.samples))
+        sq = np.empty((3 * NUM_SEGMENTS, self.samples))
         for _ in range(self.steps):
             steps += 1
             normal(out=Zs)
             Zs *= sig
             Zs += zc
-            E = self._energy_t(ZT, S)
+            E = self._energy_t(ZT, S, P, sq)
             j = int(E.argmin())
             ej = float(E[j])
             if ej < e:
@@ -443,7 +463,7 @@ class NaturalPostureOptimizer:
             c = previous[0]
         else:
             c = None
-        S = self._setup(self._X[idx], query, w, c)
+        S = self._setup(self._X.take(idx, axis=0), query, w, c)
         t2 = time.perf_counter()
         # initial sample: best of the neighbours' mean, the previous solution and the nearest one
         V, mu = S['V'], S['mu']
@@ -464,7 +484,7 @@ class NaturalPostureOptimizer:
         ori = None
         if self.db.orientations is not None:
             inv = 1.0 / (dist + 1e-6)
-            Q = self.db.orientations[idx]                     # (K, 20, 4)
+            Q = self.db.orientations.take(idx, axis=0)        # (K, 20, 4)
             ori = quat_average(np.swapaxes(Q, 0, 1), np.broadcast_to(inv, (NUM_JOINTS, len(idx))))
         t4 = time.perf_counter()
         zs = z[None]

@@ -77,6 +77,24 @@ _HEIGHT_CHAIN = np.array([SEGMENT_OF_JOINT[j] for j in (SPINE, SHOULDER_CENTER, 
                                                         ANKLE_LEFT, KNEE_RIGHT, ANKLE_RIGHT)])
 _HEIGHT_REF = float(standard_body().segment_lengths[_HEIGHT_CHAIN].sum())
 _INCIDENCE_MEAN = INCIDENCE / INCIDENCE.sum(axis=1, keepdims=True)
+_SEG_COLS = np.arange(NUM_SEGMENTS)
+
+
+def _column_nanmedian(obs: np.ndarray, count: np.ndarray) -> np.ndarray:
+    """``np.nanmedian(obs, axis=0)`` (same values) for columns with ``count`` >= 1 finite rows:
+    one sort (NaN last) and the mean of the two middle finite values (np.nanmedian's small-array
+    path goes through masked arrays, ~1 ms here)."""
+    s = np.sort(obs, axis=0)
+    h = count // 2
+    lo = np.where(count % 2 == 1, h, np.maximum(h - 1, 0))
+    return (s[lo, _SEG_COLS] + s[h, _SEG_COLS]) / 2.0
+
+
+def _median_of(values) -> float:
+    """``np.median`` of a few floats (same value): sorted in Python, without array overhead."""
+    v = sorted(values)
+    n = len(v)
+    return float(v[n // 2]) if n % 2 else (v[n // 2 - 1] + v[n // 2]) / 2.0
 
 
 def behaviour_term(history: np.ndarray, d_min: float, f_b: int, theta_floor: float,
@@ -201,6 +219,11 @@ class ReliabilityEstimator:
         self.reference_pose_tolerance_deg = float(reference_pose_tolerance_deg)
         self._cos_tolerance = float(np.cos(np.radians(self.reference_pose_tolerance_deg)))
         self._rt_lut = np.array([not_tracked_value, inferred_value, tracked_value], float)
+        # Eq. 7 for uint8 states in one lookup: any value other than 1 or 2 counts as not tracked
+        self._rt_lut8 = np.full(256, float(not_tracked_value))
+        self._rt_lut8[:3] = self._rt_lut
+        self._std_height: Optional[float] = None
+        self._std_lengths: Optional[np.ndarray] = None
         self._gauss = [None] + [gaussian_weights(n, sigma_frames) for n in range(1, f_total + 1)]
         self.reference_frames = int(reference_frames)
         if reference_mode not in REFERENCE_MODES:
@@ -268,10 +291,18 @@ class ReliabilityEstimator:
             if self._captured:
                 self._reference = np.median(np.asarray(self._captured), axis=0)
             else:
-                std = standard_body(self.height).segment_lengths
+                std = self._standard_lengths(self.height)
                 med = self._observed_median
                 self._reference = std if med is None else np.where(np.isfinite(med), med, std)
         return self._reference
+
+    def _standard_lengths(self, height: float) -> np.ndarray:
+        """``standard_body(height).segment_lengths``, kept for the last height asked for (the
+        reference is recomputed whenever the observed median is refreshed)."""
+        if self._std_height != height:
+            self._std_height = height
+            self._std_lengths = standard_body(height).segment_lengths
+        return self._std_lengths
 
     def _observe_lengths(self, tracked: np.ndarray, lengths: np.ndarray) -> None:
         """Running median of the tracked segments' lengths (reference_mode 'observed');
@@ -290,7 +321,7 @@ class ReliabilityEstimator:
             med = np.full(NUM_SEGMENTS, np.nan)
             ok = count >= min(5, n)
             if ok.any():
-                med[ok] = np.nanmedian(obs[:, ok], axis=0)
+                med[ok] = _column_nanmedian(obs, count)[ok]
             self._observed_median = med
             if not self._captured:
                 self._reference = None
@@ -303,7 +334,7 @@ class ReliabilityEstimator:
         self._frames_since_height += 1
         if len(self._heights) < 30 or self._frames_since_height >= 10:
             self._frames_since_height = 0
-            h = float(np.clip(np.median(self._heights), 1.0, 2.3))
+            h = min(max(_median_of(self._heights), 1.0), 2.3)
             if abs(h - self._height) > 1e-4:
                 self._height = h
                 self._reference = None
@@ -318,7 +349,8 @@ class ReliabilityEstimator:
         """Add one frame; return the reliability (20,) in [0, 1] (Eq. 8)."""
         p = np.asarray(positions, float)
         ts = np.asarray(tracking_state)
-        seg = p[_SEG_C] - p[_SEG_P]
+        seg = p.take(_SEG_C, axis=0)
+        seg -= p.take(_SEG_P, axis=0)
         ln = np.sqrt(np.einsum('sk,sk->s', seg, seg))
         tracked = ts == TRACKED
         if tracked.all():
@@ -332,7 +364,8 @@ class ReliabilityEstimator:
                 ok = (n > self.d_min) & (self._last_n > self.d_min)
                 dot = np.einsum('jk,jk->j', d, self._last_d)
                 cos = np.where(ok, dot / np.where(ok, n * self._last_n, 1.0), 1.0)
-                np.clip(cos, -1.0, 1.0, out=cos)
+                np.maximum(cos, -1.0, out=cos)   # np.clip, without its Python wrapper
+                np.minimum(cos, 1.0, out=cos)
                 self._theta.append(np.where(ok, np.arccos(cos), 0.0))
             self._last_d, self._last_n = d, n
         self._last_p = p
@@ -349,7 +382,9 @@ class ReliabilityEstimator:
         np.minimum(ds, 1.0, out=ds)
         rk = 1.0 - _INCIDENCE_MEAN @ ds
         # Eq. 7
-        if ts.dtype.kind in 'ui' and ts.size and 0 <= ts.min() and ts.max() <= 2:
+        if ts.dtype == np.uint8:
+            rt = self._rt_lut8[ts]
+        elif ts.dtype.kind in 'ui' and ts.size and 0 <= ts.min() and ts.max() <= 2:
             rt = self._rt_lut[ts]
         else:
             rt = tracking_term(ts, self.tracked_value, self.inferred_value, self.not_tracked_value)
@@ -359,6 +394,7 @@ class ReliabilityEstimator:
         self._minima.append(m)
         w = self._gauss[len(self._minima)]
         r = w @ np.asarray(self._minima)
-        np.clip(r, 0.0, 1.0, out=r)
+        np.maximum(r, 0.0, out=r)
+        np.minimum(r, 1.0, out=r)
         self.reliability = r
         return r
