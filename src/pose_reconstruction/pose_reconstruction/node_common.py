@@ -19,7 +19,7 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile
 
 from skeleton_core.cdr import CdrError, frames_from_cdr, frames_to_cdr
-from skeleton_core.conversions import SkeletonFormatError, validate_arrays
+from skeleton_core.conversions import SkeletonFormatError, SkeletonFrame, validate_arrays
 from skeleton_core.health import Health
 from skeleton_core.rosnode import DiagnosticsPublisher, ParamSpec, Parameters
 
@@ -187,11 +187,14 @@ class SkeletonArrayNode(Node):
                     f.stamp_ns = stamp
                 try:
                     outs = proc.process(f, wanted) if self._multi else (proc.process(f),)
-                    for res in outs:
-                        if res is not None:
-                            validate_arrays(res.positions, res.tracking_state, res.reliability,
-                                            res.orientations)
-                    for i, res in enumerate(outs):
+                    # every result checked before any is kept; the checked arrays are what
+                    # gets serialized (frames_to_cdr(validated=True) does not check again)
+                    checked = [None if res is None else SkeletonFrame(
+                        *validate_arrays(res.positions, res.tracking_state, res.reliability,
+                                         res.orientations),
+                        user_id=res.user_id, stamp_ns=res.stamp_ns, frame_id=res.frame_id)
+                        for res in outs]
+                    for i, res in enumerate(checked):
                         if res is not None:
                             results[i].append(res)
                 except SkeletonFormatError as e:
@@ -201,7 +204,7 @@ class SkeletonArrayNode(Node):
                     proc.reset()
         for pub, want, res in zip(self._pubs, wanted, results):
             if want:
-                pub.publish(frames_to_cdr(res, stamp, frame_id))
+                pub.publish(frames_to_cdr(res, stamp, frame_id, validated=True))
         self.health.on_publish(latency_s=time.monotonic() - t0)
 
 

@@ -26,6 +26,12 @@ from .model import NUM_JOINTS
 
 SKELETON_ARRAY = 'skeleton_msgs/msg/SkeletonArray'
 _IDENTITY = np.tile(np.array([0.0, 0.0, 0.0, 1.0]), (NUM_JOINTS, 1))
+# per byte order: compiled structs and the wire dtypes (built once, not per field)
+_U32 = {'<': struct.Struct('<I'), '>': struct.Struct('>I')}
+_I32 = {'<': struct.Struct('<i'), '>': struct.Struct('>i')}
+_STAMP_W = struct.Struct('<iI')
+_WIRE = {(e, t): np.dtype(t).newbyteorder(e) for e in '<>' for t in ('f8', 'f4', 'u1')}
+_ITEM = {t: np.dtype(t).itemsize for t in ('f8', 'f4', 'u1')}
 
 
 class CdrError(ValueError):
@@ -37,7 +43,10 @@ class _Reader:
         if len(data) < 4 or data[0] != 0 or data[1] not in (0, 1):
             raise CdrError('not a CDR buffer (bad encapsulation header)')
         self.buf = memoryview(data)
+        self.n = len(self.buf)
         self.end = '<' if data[1] == 1 else '>'
+        self._u32 = _U32[self.end]
+        self._i32 = _I32[self.end]
         self.pos = 4
 
     def _align(self, n: int) -> None:
@@ -50,13 +59,18 @@ class _Reader:
         self.pos += n
         return out
 
+    def _word(self, st: struct.Struct) -> int:
+        pos = self.pos + (-(self.pos - 4)) % 4
+        if pos + 4 > self.n:
+            raise CdrError(f'truncated CDR buffer ({self.n} bytes)')
+        self.pos = pos + 4
+        return st.unpack_from(self.buf, pos)[0]
+
     def u32(self) -> int:
-        self._align(4)
-        return struct.unpack(self.end + 'I', self._take(4))[0]
+        return self._word(self._u32)
 
     def i32(self) -> int:
-        self._align(4)
-        return struct.unpack(self.end + 'i', self._take(4))[0]
+        return self._word(self._i32)
 
     def string(self) -> str:
         n = self.u32()
@@ -64,13 +78,12 @@ class _Reader:
         return raw[:-1].decode('utf-8', 'replace') if n else ''
 
     def array(self, dtype: str, count: int) -> np.ndarray:
-        item = np.dtype(dtype).itemsize
+        item = _ITEM[dtype]
         if count:
             self._align(item)
-        if count > (len(self.buf) - self.pos) // max(item, 1):
+        if count > (self.n - self.pos) // item:
             raise CdrError(f'sequence of {count} does not fit the buffer')
-        return np.frombuffer(self._take(count * item), dtype=np.dtype(dtype).newbyteorder(
-            self.end)).astype(dtype)
+        return np.frombuffer(self._take(count * item), dtype=_WIRE[self.end, dtype]).astype(dtype)
 
     def stamp_ns(self) -> int:
         sec = self.i32()
@@ -117,11 +130,11 @@ class _Writer:
 
     def u32(self, v: int) -> None:
         self._pad(4)
-        self.raw(struct.pack('<I', v))
+        self.raw(_U32['<'].pack(v))
 
     def stamp(self, ns: int) -> None:
         self._pad(4)
-        self.raw(struct.pack('<iI', int(ns // 1_000_000_000), int(ns % 1_000_000_000)))
+        self.raw(_STAMP_W.pack(int(ns // 1_000_000_000), int(ns % 1_000_000_000)))
 
     def string(self, s: str) -> None:
         b = s.encode('utf-8') + b'\x00'
@@ -129,7 +142,7 @@ class _Writer:
         self.raw(b)
 
     def array(self, a: np.ndarray, dtype: str) -> None:
-        a = np.ascontiguousarray(a, dtype=np.dtype(dtype).newbyteorder('<'))
+        a = np.ascontiguousarray(a, dtype=_WIRE['<', dtype])
         self.u32(a.shape[0] if a.ndim else 1)
         if a.size:
             self._pad(a.dtype.itemsize)
@@ -139,16 +152,22 @@ class _Writer:
         return b''.join(self.parts)
 
 
-def frames_to_cdr(frames: Iterable[SkeletonFrame], stamp_ns: int, frame_id: str) -> bytes:
-    """Serialized SkeletonArray of ``frames`` (validated first, like ``frames_to_array_msg``)."""
+def frames_to_cdr(frames: Iterable[SkeletonFrame], stamp_ns: int, frame_id: str,
+                  validated: bool = False) -> bytes:
+    """Serialized SkeletonArray of ``frames`` (validated first, like ``frames_to_array_msg``;
+    ``validated``: the frames' arrays are already what ``validate_arrays`` returns for them,
+    e.g. a node checked every result, so they are written as they are)."""
     w = _Writer()
     w.stamp(stamp_ns)
     w.string(frame_id)
     frames = list(frames)
     w.u32(len(frames))
     for f in frames:
-        p, t, rel, q = validate_arrays(f.positions, f.tracking_state, f.reliability,
-                                       f.orientations)
+        if validated:
+            p, t, rel, q = f.positions, f.tracking_state, f.reliability, f.orientations
+        else:
+            p, t, rel, q = validate_arrays(f.positions, f.tracking_state, f.reliability,
+                                           f.orientations)
         w.stamp(f.stamp_ns)
         w.string(f.frame_id)
         w.u32(int(f.user_id))

@@ -9,7 +9,7 @@ Malformed input raises :class:`SkeletonFormatError` with a short, user-readable 
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields
 from typing import Iterable, List, Optional
 
 import numpy as np
@@ -41,11 +41,25 @@ class SkeletonFrame:
     frame_id: str = ''
 
     def copy(self, **changes) -> 'SkeletonFrame':
-        out = replace(self, positions=self.positions.copy(),
-                      tracking_state=self.tracking_state.copy(),
-                      reliability=self.reliability.copy(),
-                      orientations=None if self.orientations is None else self.orientations.copy())
-        return replace(out, **changes) if changes else out
+        """A copy with its own arrays; ``changes`` replace fields (their values are taken as
+        given, not copied). One constructor call: only the arrays not replaced are copied."""
+        unknown = changes.keys() - _FRAME_FIELDS
+        if unknown:  # what dataclasses.replace says
+            raise TypeError(f'unexpected field(s) {sorted(unknown)}')
+        ch = changes.get
+        ori = self.orientations
+        return type(self)(
+            positions=ch('positions') if 'positions' in changes else self.positions.copy(),
+            tracking_state=(ch('tracking_state') if 'tracking_state' in changes
+                            else self.tracking_state.copy()),
+            reliability=ch('reliability') if 'reliability' in changes else self.reliability.copy(),
+            orientations=(ch('orientations') if 'orientations' in changes
+                          else None if ori is None else ori.copy()),
+            user_id=ch('user_id', self.user_id), stamp_ns=ch('stamp_ns', self.stamp_ns),
+            frame_id=ch('frame_id', self.frame_id))
+
+
+_FRAME_FIELDS = frozenset(f.name for f in fields(SkeletonFrame))
 
 
 def validate_arrays(positions, tracking_state=None, reliability=None, orientations=None):
@@ -83,8 +97,8 @@ def validate_arrays(positions, tracking_state=None, reliability=None, orientatio
             raise SkeletonFormatError('wrong length',
                                       f'reliability must have {NUM_JOINTS} entries, got {r.shape}')
         if not (r.min() >= 0.0 and r.max() <= 1.0):  # NaN (allowed: unknown) takes this branch
-            finite = np.isfinite(r)
-            if np.any(np.isinf(r)) or np.any((r[finite] < 0.0) | (r[finite] > 1.0)):
+            # an infinity or a finite value outside [0, 1] (NaN compares False both ways)
+            if np.logical_or(r < 0.0, r > 1.0).any():
                 raise SkeletonFormatError('reliability out of range',
                                           'values must be NaN or in [0, 1]')
     q = None
@@ -127,8 +141,10 @@ def frame_from_arrays(positions, tracking_state, reliability, orientations, user
         raise SkeletonFormatError('wrong length',
                                   f'positions must have {NUM_JOINTS} entries, got {len(p)}')
     q = None if orientations is None or len(orientations) == 0 else np.asarray(orientations, float)
-    p, t, r, q = validate_arrays(p, np.asarray(tracking_state).astype(np.int64),
-                                 np.asarray(reliability, dtype=np.float32), q)
+    t = np.asarray(tracking_state)
+    # uint8 (a message's bytes) as it is, anything else through int64 (range checked below)
+    t = t.copy() if t.dtype == np.uint8 else t.astype(np.int64)
+    p, t, r, q = validate_arrays(p, t, np.asarray(reliability, dtype=np.float32), q)
     return SkeletonFrame(positions=p, tracking_state=t, reliability=r, orientations=q,
                          user_id=int(user_id), stamp_ns=int(stamp_ns), frame_id=frame_id)
 
