@@ -14,8 +14,9 @@ import numpy as np
 
 from skeleton_core.geometry import (NormalizeTransform, facing_yaw, quat_from_yaw, quat_multiply,
                                     retarget_by_joint)
-from skeleton_core.model import (NUM_JOINTS, PARENTS, PATH_TO_ROOT, ROOT, SEGMENT_CHILDREN,
-                                 SEGMENT_PARENTS, Body, standard_body)
+from skeleton_core.model import (HIP_LEFT, HIP_RIGHT, NUM_JOINTS, PARENTS, PATH_TO_ROOT, ROOT,
+                                 SEGMENT_CHILDREN, SEGMENT_PARENTS, SHOULDER_LEFT, SHOULDER_RIGHT,
+                                 Body, standard_body)
 
 _PAR = np.array([max(p, 0) for p in PARENTS])
 _SEG_P = np.array(SEGMENT_PARENTS)
@@ -35,6 +36,19 @@ _STRICT_ANCESTORS_F = STRICT_ANCESTORS.astype(float)
 _PARENT_DIFF = np.eye(NUM_JOINTS)
 _PARENT_DIFF[np.arange(NUM_JOINTS), _PAR] -= 1.0
 _PARENT_DIFF[ROOT] = 0.0
+_NON_ROOT = np.array([j for j in range(NUM_JOINTS) if j != ROOT])
+_LINES = [HIP_LEFT, HIP_RIGHT, SHOULDER_LEFT, SHOULDER_RIGHT]
+
+
+def _weighted_yaw(p: np.ndarray, w: np.ndarray):
+    """``facing_yaw(p, np.maximum(w, 1e-3))`` for one posture (20, 3), the same arithmetic on
+    the four hip and shoulder joints as Python floats."""
+    (hl, hr, sl, sr), (whl, whr, wsl, wsr) = p[_LINES, :2].tolist(), w[_LINES].tolist()
+    wh = min(max(whl, 1e-3), max(whr, 1e-3))
+    ws = min(max(wsl, 1e-3), max(wsr, 1e-3))
+    lx = wh * (hl[0] - hr[0]) + ws * (sl[0] - sr[0])
+    ly = wh * (hl[1] - hr[1]) + ws * (sl[1] - sr[1])
+    return np.arctan2(-lx, ly)
 
 
 @dataclass
@@ -145,16 +159,20 @@ class QueryPreparer:
         p = np.asarray(positions, float)
         # fast_normalize + fast_retarget in a few matrix products (same results)
         if yaw is None:
-            yaw = facing_yaw(p, np.maximum(w, 1e-3))
+            yaw = _weighted_yaw(p, w)
         t = p[ROOT].copy()
         c, s = np.cos(yaw), np.sin(yaw)
         norm = (p - t) @ np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
         d = _PARENT_DIFF @ norm
         n = np.sqrt(np.einsum('jk,jk->j', d, d))
         unit = d / np.maximum(n, 1e-12)[:, None]
-        zero = n <= 1e-9
-        if zero.any():
+        # the root's row (no parent: d = 0) always takes its rest direction; another joint only
+        # when it sits on its parent
+        if (n.take(_NON_ROOT) <= 1e-9).any():
+            zero = n <= 1e-9
             unit[zero] = self.rest_dirs[zero]
+        else:
+            unit[ROOT] = self.rest_dirs[ROOT]
         unit *= self.lengths[:, None]      # the root's length is 0: no offset
         ret = ANCESTORS @ unit
         tf = NormalizeTransform(yaw=np.asarray(yaw), translation=t)
