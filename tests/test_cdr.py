@@ -77,3 +77,16 @@ def test_truncated_buffers_raise_a_clear_error(cut):
     data = serialize_message(frames_to_array_msg(_frames(np.random.default_rng(1), 2), 1, 'k'))
     with pytest.raises(CdrError):
         frames_from_cdr(data[:cut] if cut >= 0 else data[:-7])
+
+
+def test_validated_frames_are_written_as_they_are():
+    """frames_to_cdr(validated=True) on validate_arrays' output (what the nodes publish) gives
+    the bytes frames_to_cdr gives on the raw frames."""
+    from skeleton_core.conversions import validate_arrays
+    frames = _frames(np.random.default_rng(3), n=3)
+    checked = [SkeletonFrame(*validate_arrays(f.positions, f.tracking_state, f.reliability,
+                                              f.orientations),
+                             user_id=f.user_id, stamp_ns=f.stamp_ns, frame_id=f.frame_id)
+               for f in frames]
+    assert (frames_to_cdr(checked, 5, 'kinect', validated=True)
+            == frames_to_cdr(frames, 5, 'kinect'))

@@ -87,3 +87,20 @@ def test_message_constants_match_the_skeleton_model():
         assert getattr(Skeleton, const) == j, const
     assert (Skeleton.NOT_TRACKED, Skeleton.INFERRED, Skeleton.TRACKED) == (
         m.NOT_TRACKED, m.INFERRED, m.TRACKED)
+
+
+def test_copy_owns_its_arrays_and_takes_changes_as_given():
+    f = SkeletonFrame(positions=np.zeros((20, 3)), tracking_state=np.full(20, 2, np.uint8),
+                      orientations=np.tile([0.0, 0.0, 0.0, 1.0], (20, 1)), user_id=4,
+                      stamp_ns=7, frame_id='k')
+    c = f.copy()
+    for name in ('positions', 'tracking_state', 'reliability', 'orientations'):
+        assert getattr(c, name) is not getattr(f, name)
+        np.testing.assert_array_equal(getattr(c, name), getattr(f, name))
+    assert (c.user_id, c.stamp_ns, c.frame_id) == (4, 7, 'k')
+    p = np.ones((20, 3))
+    c = f.copy(positions=p, orientations=None, stamp_ns=9)
+    assert c.positions is p and c.orientations is None and c.stamp_ns == 9
+    assert c.tracking_state is not f.tracking_state
+    with pytest.raises(TypeError):
+        f.copy(position=p)

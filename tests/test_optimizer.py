@@ -430,3 +430,30 @@ def test_heading_follows_the_database_while_the_torso_is_unreliable(small_db):
     assert errs[0.0] > 20.0 and errs[0.5] < errs[0.0] - 5.0
     with pytest.raises(ValueError):
         Reconstructor(small_db, method='C', yaw_rate=1.5)
+
+
+def test_users_on_one_database_share_its_arrays_with_the_same_results(case):
+    """The KNN / PCA arrays derived from a database are computed once and shared by every user's
+    optimizer (and completion): a second user on the same database gets what a user on a fresh
+    copy of the database gets."""
+    from pose_reconstruction.posture_space import as_database_arrays
+    db, _, obs, ts = case
+    arr = as_database_arrays(db)
+    a = Reconstructor(arr, method='C')
+    b = Reconstructor(arr, method='C')
+    assert a.core._XA is b.core._XA and not a.core._XA.flags.writeable
+    assert (Reconstructor(arr, method='A').core.components
+            is Reconstructor(arr, method='A').core.components)
+    fresh, _ = run(as_database_arrays(db.positions.copy()), obs[:20], ts[:20])
+    shared, _ = run(arr, obs[:20], ts[:20])
+    np.testing.assert_array_equal(shared, fresh)
+
+
+def test_query_heading_matches_facing_yaw():
+    from pose_reconstruction.posture_space import _weighted_yaw
+    from skeleton_core.geometry import facing_yaw
+    rng = np.random.default_rng(4)
+    for _ in range(2000):
+        p = rng.normal(size=(NUM_JOINTS, 3))
+        w = rng.choice([0.0, 1e-4, 0.3, 1.0], NUM_JOINTS)
+        assert _weighted_yaw(p, w) == facing_yaw(p, np.maximum(w, 1e-3))

@@ -263,3 +263,20 @@ def test_tpose_of_a_skeleton_with_dropped_hip_joints_is_recognised():
             d = np.linalg.norm(p[j] - p[sh])
             arms[j] = p[sh] - np.array([0.0, 0.0, d])
     assert reference_pose_match(arms, 25.0) == 'standing'
+
+
+def test_fast_medians_equal_numpy():
+    """The running medians (observed reference lengths, height) give np.nanmedian's and
+    np.median's values exactly."""
+    from pose_reconstruction.reliability import _column_nanmedian, _median_of
+    rng = np.random.default_rng(2)
+    for rows in (1, 2, 5, 10, 37, 90):
+        obs = rng.normal(1.0, 0.3, (rows, 19))
+        obs[rng.random(obs.shape) < 0.4] = np.nan
+        count = np.sum(np.isfinite(obs), axis=0)
+        ok = count >= 1
+        with np.errstate(all='ignore'):
+            ref = np.nanmedian(obs[:, ok], axis=0)
+        np.testing.assert_array_equal(_column_nanmedian(obs, count)[ok], ref)
+        v = list(rng.normal(1.7, 0.1, rows))
+        assert _median_of(v) == float(np.median(v))

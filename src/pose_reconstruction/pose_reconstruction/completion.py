@@ -64,9 +64,18 @@ class PCACompletion:
         if pca_dims < 1:
             raise ValueError('pca_dims must be >= 1')
         self.pca_dims = int(pca_dims)
-        self.mean, self.components, _ = pca_basis(self.db.flat, self.pca_dims)
-        self.projected = np.ascontiguousarray((self.db.flat - self.mean) @ self.components.T)
-        self._projected_sq = np.einsum('nd,nd->n', self.projected, self.projected)
+        # the database's PCA basis and projections, computed once per database and dimension
+        # count and shared read-only (a new user costs no SVD of the database)
+        key = ('completion_pca', self.pca_dims)
+        arrays = self.db.derived.get(key)
+        if arrays is None:
+            mean, components, _ = pca_basis(self.db.flat, self.pca_dims)
+            projected = np.ascontiguousarray((self.db.flat - mean) @ components.T)
+            projected_sq = np.einsum('nd,nd->n', projected, projected)
+            for a in (mean, components, projected, projected_sq):
+                a.setflags(write=False)
+            arrays = self.db.derived[key] = (mean, components, projected, projected_sq)
+        self.mean, self.components, self.projected, self._projected_sq = arrays
         self._mean_pose = self.mean.reshape(NUM_JOINTS, 3)
 
     def search(self, query_flat: np.ndarray) -> tuple:

@@ -88,6 +88,24 @@ def _local_pca(Yc: np.ndarray, dims: int, G: Optional[np.ndarray] = None):
     return V, s, zn
 
 
+def _knn_arrays(db) -> tuple:
+    """The database matrices of the KNN searches, computed once per database (shared read-only
+    by every optimizer on it: a new user costs no pass over the database):
+    ``|x_j|^2`` (N, 20); Eq. 9 for every posture as one matrix-vector product,
+    ``[|x_j|^2 (20) | x (60)] . [w | -2 w q]`` (N, 80); and the coordinate rows of every posture
+    (N * 3, 20), for weighted centroids (translate=True)."""
+    arrays = db.derived.get('knn')
+    if arrays is None:
+        sq = np.einsum('njd,njd->nj', db.positions, db.positions)
+        XA = np.ascontiguousarray(np.hstack((sq, db.flat)))
+        coord = np.ascontiguousarray(db.positions.transpose(0, 2, 1).reshape(-1, NUM_JOINTS),
+                                     dtype=float)
+        for a in (sq, XA, coord):
+            a.setflags(write=False)
+        arrays = db.derived['knn'] = (sq, XA, coord)
+    return arrays
+
+
 @dataclass
 class OptimizerResult:
     positions: np.ndarray                 # (20, 3) normalised standard-body posture
@@ -123,12 +141,7 @@ class NaturalPostureOptimizer:
         self._Lcol = self.L[:, None]
         X = self.db.flat
         self._X = X
-        self._Xsq_joint = np.einsum('njd,njd->nj', self.db.positions, self.db.positions)  # (N, 20)
-        # Eq. 9 for every posture as one matrix-vector product: [|x_j|^2 (20) | x (60)] . [w | -2 w q]
-        self._XA = np.ascontiguousarray(np.hstack((self._Xsq_joint, X)))
-        # (N * 3, 20): coordinate rows of every posture, for weighted centroids (translate=True)
-        self._Xcoord = np.ascontiguousarray(
-            self.db.positions.transpose(0, 2, 1).reshape(-1, NUM_JOINTS), dtype=float)
+        self._Xsq_joint, self._XA, self._Xcoord = _knn_arrays(self.db)
         self.seed = seed
         self.rng = np.random.default_rng(seed)
         self._kdtree = None

@@ -7,8 +7,8 @@ that a query costs tens of microseconds.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Optional
+from dataclasses import dataclass, field
+from typing import Dict, Optional
 
 import numpy as np
 
@@ -60,6 +60,9 @@ class DatabaseArrays:
     orientations: Optional[np.ndarray]    # (N, 20, 4) or None
     twists: Optional[np.ndarray]          # (N, 19) or None
     body: Body
+    # arrays the methods derive from the database (KNN matrices, PCA bases), computed by the first
+    # method instance that needs them and shared, read-only, by the later ones (one per user)
+    derived: Dict[str, object] = field(default_factory=dict, repr=False, compare=False)
 
     @property
     def size(self) -> int:
