@@ -280,3 +280,13 @@ def test_fast_medians_equal_numpy():
         np.testing.assert_array_equal(_column_nanmedian(obs, count)[ok], ref)
         v = list(rng.normal(1.7, 0.1, rows))
         assert _median_of(v) == float(np.median(v))
+
+
+def test_fast_column_median_equals_numpy():
+    from pose_reconstruction.reliability import _column_median
+    rng = np.random.default_rng(6)
+    for rows in (1, 2, 3, 8, 15):
+        a = rng.normal(0.3, 0.05, (rows, 19))
+        np.testing.assert_array_equal(_column_median(a), np.median(a, axis=0))
+        a[0, 4] = np.nan
+        np.testing.assert_array_equal(_column_median(a), np.median(a, axis=0))

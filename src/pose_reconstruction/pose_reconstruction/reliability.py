@@ -71,6 +71,7 @@ _POSE_SEGS = np.array([k for k, c in enumerate(SEGMENT_CHILDREN)
                                     HIP_LEFT, HIP_RIGHT, SHOULDER_LEFT, SHOULDER_RIGHT)])
 _REF_STACK = np.stack([_REF_DIRS['tpose'][_POSE_SEGS], _REF_DIRS['standing'][_POSE_SEGS]])
 _REF_NAMES = ('tpose', 'standing')
+_LINES = [HIP_LEFT, HIP_RIGHT, SHOULDER_LEFT, SHOULDER_RIGHT]
 # model.estimate_height from precomputed segment lengths: the leg + trunk + head chain against the
 # standard body's
 _HEIGHT_CHAIN = np.array([SEGMENT_OF_JOINT[j] for j in (SPINE, SHOULDER_CENTER, HEAD, KNEE_LEFT,
@@ -88,6 +89,17 @@ def _column_nanmedian(obs: np.ndarray, count: np.ndarray) -> np.ndarray:
     h = count // 2
     lo = np.where(count % 2 == 1, h, np.maximum(h - 1, 0))
     return (s[lo, _SEG_COLS] + s[h, _SEG_COLS]) / 2.0
+
+
+def _column_median(a: np.ndarray) -> np.ndarray:
+    """``np.median(a, axis=0)`` (same values, NaN where a column holds one) by one sort."""
+    s = np.sort(a, axis=0)
+    n = len(s)
+    med = (s[(n - 1) // 2] + s[n // 2]) / 2.0
+    nan = np.isnan(s[-1])
+    if nan.any():
+        med[nan] = np.nan
+    return med
 
 
 def _median_of(values) -> float:
@@ -172,11 +184,13 @@ def _pose_match_segments(p: np.ndarray, seg: np.ndarray, ln: np.ndarray,
     ``ln`` (19,): the same heading (hips + shoulders) and decision, compared as cosines."""
     if ln.min() < 1e-6:
         return None
-    lx = (p[HIP_LEFT, 0] - p[HIP_RIGHT, 0]) + (p[SHOULDER_LEFT, 0] - p[SHOULDER_RIGHT, 0])
-    ly = (p[HIP_LEFT, 1] - p[HIP_RIGHT, 1]) + (p[SHOULDER_LEFT, 1] - p[SHOULDER_RIGHT, 1])
+    (hl, hr, sl, sr) = p[_LINES, :2].tolist()
+    lx = (hl[0] - hr[0]) + (sl[0] - sr[0])
+    ly = (hl[1] - hr[1]) + (sl[1] - sr[1])
     yaw = np.arctan2(-lx, ly)
     c, s = np.cos(yaw), np.sin(yaw)
-    u = seg[_POSE_SEGS] / ln[_POSE_SEGS, None]
+    u = seg.take(_POSE_SEGS, axis=0)
+    u /= ln.take(_POSE_SEGS)[:, None]
     rot = np.empty_like(u)
     rot[:, 0] = c * u[:, 0] + s * u[:, 1]
     rot[:, 1] = c * u[:, 1] - s * u[:, 0]
@@ -289,7 +303,7 @@ class ReliabilityEstimator:
             return self._fixed_reference
         if self._reference is None:
             if self._captured:
-                self._reference = np.median(np.asarray(self._captured), axis=0)
+                self._reference = _column_median(np.asarray(self._captured))
             else:
                 std = self._standard_lengths(self.height)
                 med = self._observed_median
