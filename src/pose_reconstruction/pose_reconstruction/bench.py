@@ -8,7 +8,10 @@ Prints
    normalise+retarget, KNN, local PCA, optimisation, orientations, output), median ms and ratio to
    the 33 ms frame budget, for both solvers, on the default database;
 3. method A time per query;
-4. how time grows with database size (1k -> 50k postures, jittered copies) for brute-force BLAS
+4. the reconstruction node's work per two-user message without DDS (CDR decode, reliability +
+   method C for each user through FusedProcessor, result check, CDR encode) and the cost of a
+   user's first frame (building the per-user state);
+5. how time grows with database size (1k -> 50k postures, jittered copies) for brute-force BLAS
    KNN vs cKDTree in PCA space (with its recall of the exact Eq. 9 neighbours), and with K.
 
 The machine may be shared: figures are medians over the frames of a clip.
@@ -21,12 +24,14 @@ from typing import Dict, List
 
 import numpy as np
 
-from skeleton_core.conversions import SkeletonFrame
+from skeleton_core.cdr import frames_from_cdr, frames_to_cdr
+from skeleton_core.conversions import SkeletonFrame, validate_arrays
 
+from .fused import FusedProcessor
 from .optimizer import NaturalPostureOptimizer
 from .posture_space import as_database_arrays, parent_relative_error
 from .reconstructor import Reconstructor
-from .synthetic import SyntheticDatabase, scenario
+from .synthetic import SyntheticDatabase, corrupt_clip, scenario
 
 BUDGET_MS = 1000.0 / 30.0
 
@@ -50,6 +55,43 @@ def run_clip(db, obs, ts, method: str, **params):
 def stage_medians(stages: List[Dict[str, float]]) -> Dict[str, float]:
     keys = stages[0].keys()
     return {k: float(np.median([s[k] for s in stages])) for k in keys}
+
+
+def node_messages(db, obs, ts, obs2, ts2) -> Dict[str, np.ndarray]:
+    """What the fused reconstruction node does per message, without DDS: two users' skeletons
+    as one serialized SkeletonArray -> frames -> FusedProcessor per user (reconstructed output
+    only) -> results checked -> serialized. ms per message, and per new user (its first frame:
+    the processor is built)."""
+    msgs = []
+    for t in range(len(obs)):
+        stamp = (t + 1) * 33_333_333
+        frames = [SkeletonFrame(positions=o[t], tracking_state=np.asarray(s[t], np.uint8),
+                                user_id=u, stamp_ns=stamp, frame_id='kinect')
+                  for u, o, s in ((1, obs, ts), (2, obs2, ts2))]
+        msgs.append(frames_to_cdr(frames, stamp, 'kinect'))
+    db = as_database_arrays(db)
+    FusedProcessor(db, {})  # the database's shared arrays, built once as in the node
+    users: Dict[int, FusedProcessor] = {}
+    per_msg, first = [], []
+    wanted = (True, False, False)
+    for data in msgs:
+        t0 = time.perf_counter()
+        stamp, frame_id, frames = frames_from_cdr(data, [])
+        out = []
+        for f in frames:
+            proc = users.get(f.user_id)
+            if proc is None:
+                t1 = time.perf_counter()
+                proc = users[f.user_id] = FusedProcessor(db, {})
+                first.append(1e3 * (time.perf_counter() - t1))
+            res = proc.process(f, wanted)[0]
+            out.append(SkeletonFrame(*validate_arrays(res.positions, res.tracking_state,
+                                                      res.reliability, res.orientations),
+                                     user_id=res.user_id, stamp_ns=res.stamp_ns,
+                                     frame_id=res.frame_id))
+        frames_to_cdr(out, stamp, frame_id, validated=True)
+        per_msg.append(1e3 * (time.perf_counter() - t0))
+    return {'message': np.array(per_msg[1:]), 'new_user': np.array(first)}
 
 
 def jittered(db, size: int, seed: int = 0) -> SyntheticDatabase:
@@ -119,7 +161,15 @@ def main(argv=None) -> int:
           f'(+ reliability {med_a["reliability"]:.3f} ms; total {np.median(tot_a):.2f} ms wall, '
           f'{np.median(ra.cpu_ms):.2f} ms CPU per frame)')
 
-    # 3. scaling with database size and K (KNN only, and the whole frame)
+    # 4. the node's work per message, two users
+    obs2, ts2 = corrupt_clip(truth + np.array([0.8, 0.3, 0.0]), seed=7)
+    nm = node_messages(db, obs, ts, obs2, ts2)
+    print(f'\n## reconstruction node per two-user message, no DDS (decode, reliability + C per user, '
+          f'check, encode): median {np.median(nm["message"]):.2f} ms, p95 '
+          f'{np.percentile(nm["message"], 95):.2f} ms; a new user\'s state '
+          f'{np.median(nm["new_user"]):.2f} ms')
+
+    # 5. scaling with database size and K (KNN only, and the whole frame)
     sizes = (1000, 3000, 10000) if a.quick else (1000, 3000, 10000, 50000)
     print('\n## KNN (Eq. 9) vs database size: median ms per query; kdtree recall of the exact '
           'neighbours')
