@@ -264,8 +264,8 @@ def test_table3_none_is_the_old_protocol():
     old = E.evaluate_streams(['holt'], {'b': base},
                              frame_transform=lambda s: E.subset_frames(s, E.TABLE3_SUBSETS['b'][1]))
     # bit for bit (NaN -> None: the root has no Eq. 18 term)
-    assert (E._json_safe(res['results']['holt']['b']['metrics']) ==
-            E._json_safe(old['results']['holt']['b']['metrics']))
+    assert (E.json_safe(res['results']['holt']['b']['metrics']) ==
+            E.json_safe(old['results']['holt']['b']['metrics']))
     # the calibration changes a stateful method's output (the filter starts from the T-pose)
     cal = E.table3(['holt'], [clip], subsets=('b',), calibration='tpose', seed=2)
     a = cal['results']['holt']['b']['metrics']['eq18_cm']['overall']

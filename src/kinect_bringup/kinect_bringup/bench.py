@@ -47,10 +47,13 @@ class LatencyProbe:
         self.lat: Dict[str, List[float]] = {t: [] for t in TOPICS}
         self.count: Dict[str, int] = {t: 0 for t in TOPICS}
         self.nan = 0
+        self.diagnostics: Dict[str, Dict[str, str]] = {}   # node name -> its latest key/values
         qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
         for t in TOPICS:  # serialized: the probe's own decoding must not delay what it measures
             self.node.create_subscription(SkeletonArray, t, lambda m, t=t: self._cb(t, m), qos,
                                           raw=True)
+        from diagnostic_msgs.msg import DiagnosticArray
+        self.node.create_subscription(DiagnosticArray, '/diagnostics', self._on_diag, 50)
         self.ex = SingleThreadedExecutor(context=self.ctx)
         self.ex.add_node(self.node)
         self.running = True
@@ -76,8 +79,16 @@ class LatencyProbe:
             if topic != '/kinect/skeletons':
                 self.nan += sum(e.cause.startswith('non-finite') for e in errors)
 
+    def _on_diag(self, msg):
+        if not self.recording:
+            return
+        with self.lock:
+            for st in msg.status:
+                self.diagnostics[st.name.lstrip('/')] = {kv.key: kv.value for kv in st.values}
+
     def start(self):
         with self.lock:
+            self.diagnostics.clear()
             for t in TOPICS:
                 self.stamps[t].clear()
                 self.lat[t].clear()
@@ -117,6 +128,22 @@ def _proc_stats(graph: Graph, seconds: float) -> Dict[str, Dict[str, float]]:
     return out
 
 
+# what each node's diagnostics call latency (skeleton_core.health, the last ~10 s)
+NODE_LATENCY = {'driver': 'timer lateness (capture time -> tick)',
+                'reconstruction': 'callback (decode, process, encode, publish)',
+                'physics': 'capture -> character published'}
+
+
+def _node_latencies(diagnostics: Dict[str, Dict[str, str]]) -> Dict[str, Dict[str, float]]:
+    out = {}
+    for name, kv in diagnostics.items():
+        try:
+            out[name] = {k: float(kv[k]) for k in ('p50_ms', 'p95_ms') if k in kv}
+        except ValueError:
+            continue
+    return out
+
+
 def run_case(probe: LatencyProbe, mode: str, users: int, seconds: float, warmup: float,
              physics: bool, log_dir: Path, reconstruction: str = 'fused') -> Dict:
     overrides = {'driver': {'num_users': users, 'scenario': 'b'}}
@@ -141,7 +168,7 @@ def run_case(probe: LatencyProbe, mode: str, users: int, seconds: float, warmup:
     with probe.lock:
         res = {'mode': mode, 'reconstruction': reconstruction, 'users': users,
                'seconds': seconds, 'processes': stats,
-               'nan_outputs': probe.nan}
+               'nan_outputs': probe.nan, 'nodes': _node_latencies(probe.diagnostics)}
         src = probe.stamps['/kinect/skeletons']
         for topic, key in TOPICS.items():
             lat = np.array(probe.lat[topic])
@@ -213,6 +240,17 @@ def to_markdown(results: List[Dict], bag_speed: Dict, commit: str) -> str:
                          f"{o['p50_ms']:.1f} | {o['p95_ms']:.1f} | {o['p99_ms']:.1f} | "
                          f"{o['p95_ms'] / BUDGET_MS:.2f} | {o.get('dropped', 0)} "
                          f"({100 * o.get('dropped_fraction', 0):.1f} %) |")
+    lines += ['', 'Where the time goes (p50 / p95 ms): `input` = capture -> /kinect/skeletons at the '
+              'probe (driver tick lateness + one DDS hop); the nodes\' own figures from their '
+              '/diagnostics: ' + '; '.join(f'{k} = {v}' for k, v in NODE_LATENCY.items()) + '.',
+              '', '| mode | users | input | driver | reconstruction | physics |',
+              '|---|---:|---|---|---|---|']
+    for r in results:
+        def cell(d):
+            return f"{d['p50_ms']:.1f} / {d['p95_ms']:.1f}" if 'p95_ms' in d else '-'
+        nodes = r.get('nodes', {})
+        lines.append(f"| {_label(r)} | {r['users']} | {cell(r.get('input', {}))} | "
+                     + ' | '.join(cell(nodes.get(k, {})) for k in NODE_LATENCY) + ' |')
     lines += ['', '| mode | users | process | CPU % | RSS MB |', '|---|---:|---|---:|---:|']
     for r in results:
         for name, s in r['processes'].items():

@@ -17,12 +17,15 @@ result goes back to the sensor frame.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Optional
 
 import numpy as np
 
 from skeleton_core.model import NUM_JOINTS, PARENTS
+
+_PAR = np.array([max(k, 0) for k in PARENTS])
 
 from .posture_space import (QueryPreparer, as_database_arrays, fast_denormalize,
                             orientations_to_sensor, rest_directions)
@@ -58,6 +61,7 @@ class PCACompletion:
         self.substitution = substitution
         self.preparer = QueryPreparer(self.body, reliability_threshold)
         self._rest_dirs = rest_directions(self.body)
+        self._standard_bones = self.body.bone_lengths_by_joint()
         self.set_dims(pca_dims)
 
     def set_dims(self, pca_dims: int) -> None:
@@ -91,38 +95,41 @@ class PCACompletion:
         p = np.asarray(positions, float)
         r = np.asarray(reliability, float)
         missing = ~(r >= self.reliability_threshold)  # NaN counts as missing
-        prep = self.preparer.prepare(p, np.where(missing, 0.0, 1.0), user_height)
-        q = prep.query.copy()
+        prep = self.preparer.prepare(p, (~missing).astype(float), user_height)
+        q = prep.query  # a new array of prepare's
         q[missing] = self._mean_pose[missing]  # Shum & Ho 2012 Sec. 5.2
         idx, dist = self.search(q.reshape(-1))
         match = self.db.positions[idx]
         out = p.copy()
-        if missing.any():
+        miss = np.flatnonzero(missing).tolist()
+        yaw = float(prep.transform.yaw)
+        if miss:
             if self.substitution == 'absolute':
                 full = fast_denormalize(match / prep.scale, prep.transform)
                 out[missing] = full[missing]
             else:
                 if user_bone_lengths is None:
-                    bone = self.body.bone_lengths_by_joint() / prep.scale
+                    bone = self._standard_bones / prep.scale
                 else:
                     bone = np.asarray(user_bone_lengths, float)
-                yaw = float(prep.transform.yaw)
-                c, s = np.cos(yaw), np.sin(yaw)
-                rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-                rel = match - match[[max(k, 0) for k in PARENTS]]
-                n = np.linalg.norm(rel, axis=1, keepdims=True)
-                unit = np.where(n > 1e-9, rel / np.maximum(n, 1e-12), self._rest_dirs)
-                world_off = (unit * bone[:, None]) @ rot.T
-                if missing[0]:
-                    # root missing: place it from the match relative to the observed hips' centre
-                    full = fast_denormalize(match / prep.scale, prep.transform)
-                    out[0] = full[0]
-                for j in range(1, NUM_JOINTS):  # parents first; only a few joints are missing
-                    if missing[j]:
-                        out[j] = out[PARENTS[j]] + world_off[j]
+                # the match's parent-relative directions of the missing joints, turned back by
+                # the removed yaw and given the user's bone lengths
+                rel = match[miss] - match[_PAR[miss]]
+                n = np.sqrt(np.einsum('jk,jk->j', rel, rel))[:, None]
+                unit = np.where(n > 1e-9, rel / np.maximum(n, 1e-12), self._rest_dirs[miss])
+                c, s = math.cos(yaw), math.sin(yaw)
+                off = unit * bone[miss][:, None]
+                world_off = off @ np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
+                for k, j in enumerate(miss):  # parents first (the joint order is a tree order)
+                    if j == 0:
+                        # root missing: place it from the match relative to the observed hips'
+                        # centre
+                        out[0] = fast_denormalize(match[:1] / prep.scale, prep.transform)[0]
+                    else:
+                        out[j] = out[PARENTS[j]] + world_off[k]
         ori = None
         if self.db.orientations is not None:
-            db_q = orientations_to_sensor(self.db.orientations[idx], float(prep.transform.yaw))
+            db_q = orientations_to_sensor(self.db.orientations[idx], yaw)
             if orientations is None:
                 ori = db_q
             else:

@@ -7,13 +7,13 @@ that a query costs tens of microseconds.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Dict, Optional
 
 import numpy as np
 
-from skeleton_core.geometry import (NormalizeTransform, facing_yaw, quat_from_yaw, quat_multiply,
-                                    retarget_by_joint)
+from skeleton_core.geometry import NormalizeTransform, facing_yaw, retarget_by_joint
 from skeleton_core.model import (HIP_LEFT, HIP_RIGHT, NUM_JOINTS, PARENTS, PATH_TO_ROOT, ROOT,
                                  SEGMENT_CHILDREN, SEGMENT_PARENTS, SHOULDER_LEFT, SHOULDER_RIGHT,
                                  Body, standard_body)
@@ -196,9 +196,16 @@ def to_sensor_frame(normalized: np.ndarray, transform: NormalizeTransform,
     return fast_denormalize(p, transform)
 
 
+def yaw_quat_matrix(yaw: float) -> np.ndarray:
+    """(4, 4) left multiplication by the quaternion of a rotation about +z (x, y, z, w order):
+    ``quat_multiply(quat_from_yaw(yaw), q) == q @ M.T``."""
+    s, c = math.sin(0.5 * yaw), math.cos(0.5 * yaw)
+    return np.array([[c, -s, 0.0, 0.0], [s, c, 0.0, 0.0], [0.0, 0.0, c, s], [0.0, 0.0, -s, c]])
+
+
 def orientations_to_sensor(quats: np.ndarray, yaw: float) -> np.ndarray:
     """Rotate normalised-frame orientations (..., 4) back by the removed yaw."""
-    return quat_multiply(quat_from_yaw(np.asarray(yaw, float))[None, :], quats)
+    return np.asarray(quats, float) @ yaw_quat_matrix(float(yaw)).T
 
 
 def user_bone_lengths(segment_lengths_19: np.ndarray) -> np.ndarray:

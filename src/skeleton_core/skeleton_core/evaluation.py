@@ -333,17 +333,18 @@ def evaluate_streams(methods, streams: Dict[str, List[KinectStream]],
     return {'results': results, 'method_params': params}
 
 
-def _json_safe(o):
+def json_safe(o):
+    """``o`` with numpy numbers and arrays as Python ones and non-finite numbers as None (JSON)."""
     if isinstance(o, dict):
-        return {str(k): _json_safe(v) for k, v in o.items()}
+        return {str(k): json_safe(v) for k, v in o.items()}
     if isinstance(o, (list, tuple)):
-        return [_json_safe(v) for v in o]
+        return [json_safe(v) for v in o]
     if isinstance(o, (np.floating, float)):
         return None if not np.isfinite(o) else float(o)
     if isinstance(o, np.integer):
         return int(o)
     if isinstance(o, np.ndarray):
-        return _json_safe(o.tolist())
+        return json_safe(o.tolist())
     return o
 
 
@@ -644,7 +645,7 @@ def fig8(method: str, clips, params: Sequence[str] = tuple(FIG8_SWEEPS), seed: i
 # Reports
 # ------------------------------------------------------------------------------------------
 def to_json(results: Dict, path=None) -> str:
-    text = json.dumps(_json_safe(results), indent=1)
+    text = json.dumps(json_safe(results), indent=1)
     if path is not None:
         Path(path).parent.mkdir(parents=True, exist_ok=True)
         Path(path).write_text(text)
@@ -755,7 +756,7 @@ def to_markdown(results: Dict) -> str:
     lines += _meta_lines(results.get('meta', {}))
     if results.get('method_params'):
         lines.append('- method parameters: ' + '; '.join(
-            f'{m}: {json.dumps(_json_safe(p))}' for m, p in results['method_params'].items()))
+            f'{m}: {json.dumps(json_safe(p))}' for m, p in results['method_params'].items()))
     if 'sensor_statistics' in results:
         lines += ['', format_statistics(results['sensor_statistics'])]
     return '\n'.join(lines) + '\n'

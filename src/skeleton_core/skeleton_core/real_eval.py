@@ -30,6 +30,7 @@ from typing import Dict, Optional, Sequence
 
 import numpy as np
 
+from .evaluation import json_safe
 from .model import HAND_LEFT, HAND_RIGHT, NUM_JOINTS
 
 DEFAULT_METHODS = ('raw', 'holt', 'one_euro', 'A', 'B', 'C')
@@ -214,24 +215,12 @@ def to_markdown(res: Dict) -> str:
     return '\n'.join(lines)
 
 
-def _json_safe(o):
-    if isinstance(o, dict):
-        return {str(k): _json_safe(v) for k, v in o.items()}
-    if isinstance(o, (list, tuple)):
-        return [_json_safe(v) for v in o]
-    if isinstance(o, (np.floating, float)):
-        return None if not np.isfinite(o) else float(o)
-    if isinstance(o, np.integer):
-        return int(o)
-    return o
-
-
 def write_outputs(res: Dict, out) -> str:
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     md = to_markdown(res)
     (out / 'real_eval.md').write_text(md + '\n')
-    (out / 'real_eval.json').write_text(json.dumps(_json_safe(res), indent=1))
+    (out / 'real_eval.json').write_text(json.dumps(json_safe(res), indent=1))
     return md
 
 
