@@ -41,17 +41,9 @@ _SEG_C = np.array(SEGMENT_CHILDREN)
 
 SOLVERS = ('stochastic', 'gauss_newton')
 KNN_MODES = ('brute', 'kdtree')
-# (60, 57): flat posture -> flat segment vectors (child - parent); (57, 19): squared components ->
-# squared segment lengths
-_DSEG = np.zeros((NUM_JOINTS * 3, NUM_SEGMENTS * 3))
-for _s, (_p, _c) in enumerate(zip(SEGMENT_PARENTS, SEGMENT_CHILDREN)):
-    for _k in range(3):
-        _DSEG[3 * _c + _k, 3 * _s + _k] += 1.0
-        _DSEG[3 * _p + _k, 3 * _s + _k] -= 1.0
-_SUM3 = np.kron(np.eye(NUM_SEGMENTS), np.ones((3, 1)))
 # flat coordinate indices of the segments' child and parent joints, by coordinate (the x of every
 # segment, then y, then z): ``flat[_SEGX_C] - flat[_SEGX_P]`` is the (57,) segment vector block of
-# the energy matrix (the same values as ``flat @ _DSEG`` reordered: one subtraction each)
+# the energy matrix (child - parent, one subtraction per component)
 _SEGX_C = np.array([3 * c + k for k in range(3) for c in SEGMENT_CHILDREN])
 _SEGX_P = np.array([3 * p + k for k in range(3) for p in SEGMENT_PARENTS])
 
