@@ -430,3 +430,50 @@ def test_heading_follows_the_database_while_the_torso_is_unreliable(small_db):
     assert errs[0.0] > 20.0 and errs[0.5] < errs[0.0] - 5.0
     with pytest.raises(ValueError):
         Reconstructor(small_db, method='C', yaw_rate=1.5)
+
+
+def test_anchored_filled_segments_keep_the_speed_term():
+    # Table III style: only the hands and feet tracked, the rest NOT_TRACKED and frozen. Every
+    # segment is then filled by the database; filtering them all with smooth_filled_scale times
+    # the whole One Euro cutoff made the body trail the tracked hands and feet. With
+    # smooth_anchored_speed (default) a segment with a tracked joint below it keeps the speed
+    # term: the output follows the unsmoothed reconstruction more closely when the arms move.
+    from skeleton_core.evaluation import toy_clip
+    from skeleton_core.geometry import normalize
+    from skeleton_core.model import (FOOT_LEFT, FOOT_RIGHT, HAND_RIGHT, NOT_TRACKED,
+                                     SEGMENT_CHILDREN, SEGMENT_PARENTS)
+    clip = toy_clip(4.0)
+    pos = np.asarray(clip.positions, float)
+    db = normalize(pos)[0]
+    keep = [HAND_LEFT, HAND_RIGHT, FOOT_LEFT, FOOT_RIGHT]
+    hidden = np.setdiff1d(np.arange(NUM_JOINTS), keep)
+    rng = np.random.default_rng(2)
+    frames = []
+    for t in range(len(pos)):
+        p = pos[t] + rng.normal(0, 0.003, (NUM_JOINTS, 3))
+        p[hidden] = pos[0][hidden]
+        ts = np.full(NUM_JOINTS, TRACKED, np.uint8)
+        ts[hidden] = NOT_TRACKED
+        frames.append(SkeletonFrame(positions=p, tracking_state=ts, stamp_ns=t * 33_333_333))
+
+    def segs(**kw):
+        r = Reconstructor(db, method='C', samples=20, **kw)
+        out = np.array([r.process(f.copy()).positions for f in frames])
+        return out[:, list(SEGMENT_CHILDREN)] - out[:, list(SEGMENT_PARENTS)]
+
+    raw = segs(smooth_min_cutoff=0.0)  # no output filter at all: nothing to lag behind
+    new, old = segs(), segs(smooth_anchored_speed=False)
+    lag_new = np.linalg.norm(new - raw, axis=-1)[10:].mean()
+    lag_old = np.linalg.norm(old - raw, axis=-1)[10:].mean()
+    assert lag_new < 0.85 * lag_old
+    # a reliable torso (one forearm hidden): the filled segments are smoothed as before
+    ts = np.full(NUM_JOINTS, TRACKED, np.uint8)
+    ts[[WRIST_RIGHT, HAND_RIGHT]] = NOT_TRACKED
+    occl = [SkeletonFrame(positions=pos[t] + rng.normal(0, 0.01, (NUM_JOINTS, 3)),
+                          tracking_state=ts, stamp_ns=t * 33_333_333) for t in range(60)]
+    a = Reconstructor(db, method='C', samples=20)
+    b = Reconstructor(db, method='C', samples=20, smooth_anchored_speed=False)
+    for f in occl:
+        assert np.array_equal(a.process(f.copy()).positions, b.process(f.copy()).positions)
+    with pytest.raises(ValueError):
+        Reconstructor(db, method='C', smooth_anchored_speed='yes')
