@@ -466,14 +466,18 @@ def test_anchored_filled_segments_keep_the_speed_term():
     lag_new = np.linalg.norm(new - raw, axis=-1)[10:].mean()
     lag_old = np.linalg.norm(old - raw, axis=-1)[10:].mean()
     assert lag_new < 0.85 * lag_old
-    # a reliable torso (one forearm hidden): the filled segments are smoothed as before
+    # outside the few-reliable-joints regime the filled segments are smoothed as before: a
+    # reliable torso with one forearm hidden, or the torso hidden with one forearm tracked
     ts = np.full(NUM_JOINTS, TRACKED, np.uint8)
     ts[[WRIST_RIGHT, HAND_RIGHT]] = NOT_TRACKED
-    occl = [SkeletonFrame(positions=pos[t] + rng.normal(0, 0.01, (NUM_JOINTS, 3)),
-                          tracking_state=ts, stamp_ns=t * 33_333_333) for t in range(60)]
-    a = Reconstructor(db, method='C', samples=20)
-    b = Reconstructor(db, method='C', samples=20, smooth_anchored_speed=False)
-    for f in occl:
-        assert np.array_equal(a.process(f.copy()).positions, b.process(f.copy()).positions)
+    ts2 = np.full(NUM_JOINTS, NOT_TRACKED, np.uint8)
+    ts2[keep + [ELBOW_RIGHT, WRIST_RIGHT]] = TRACKED
+    for states in (ts, ts2):
+        occl = [SkeletonFrame(positions=pos[t] + rng.normal(0, 0.01, (NUM_JOINTS, 3)),
+                              tracking_state=states, stamp_ns=t * 33_333_333) for t in range(60)]
+        a = Reconstructor(db, method='C', samples=20)
+        b = Reconstructor(db, method='C', samples=20, smooth_anchored_speed=False)
+        for f in occl:
+            assert np.array_equal(a.process(f.copy()).positions, b.process(f.copy()).positions)
     with pytest.raises(ValueError):
         Reconstructor(db, method='C', smooth_anchored_speed='yes')

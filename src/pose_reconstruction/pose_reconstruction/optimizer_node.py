@@ -93,10 +93,10 @@ SPECS = [
               '(the One Euro speed term is kept: less lag in fast motion, more jitter: class c '
               '22.4 -> 29.3 m/s2 against raw 23.4; Table III hands+feet 8.63 -> 8.35 cm)'),
     ParamSpec('smooth_anchored_speed', True,
-              'segments, torso (hip and shoulder lines) unreliable: a filled segment with a '
-              'reliable joint at or below its child keeps the One Euro speed term (as '
-              'smooth_filled_speed, for it alone): the body no longer trails the tracked hands '
-              'and feet (Table III hands+feet 8.63 -> 8.34 cm; class c jitter 22.39 -> 22.41)'),
+              'segments, few reliable joints (hips, shoulders and every segment unreliable): a '
+              'filled segment with a reliable joint at or below its child keeps the One Euro '
+              'speed term (as smooth_filled_speed, for it alone): the body no longer trails the '
+              'tracked hands and feet (Table III hands+feet 8.63 -> 8.34 cm)'),
 ]
 CORE_NAMES = [s.name for s in SPECS if s.name not in ('database', 'method')]
 

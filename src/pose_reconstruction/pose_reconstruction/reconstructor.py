@@ -54,16 +54,16 @@ Both need at least three reliable joints. ``smooth_filled_speed``: ``smooth_fill
 only the minimum cutoff of a filled segment, not the One Euro speed term (less lag in fast
 motion, but more jitter: off by default).
 
-``smooth_anchored_speed`` (default on): while the torso is unreliable (the hip and the shoulder
-line both below ``reliable_threshold``), a filled segment with a reliable joint at or below its
-child (a tracked hand or foot hanging from it) keeps the One Euro speed term as with
-``smooth_filled_speed``, in proportion to that joint's reliability (1 at or above
-``reliable_threshold``). Then every segment is filled, and filtering them all with
+``smooth_anchored_speed`` (default on): with few reliable joints (as above: the hip and the
+shoulder line unreliable and no segment with two reliable ends), a filled segment with a
+reliable joint at or below its child (a tracked hand or foot hanging from it) keeps the One Euro
+speed term as with ``smooth_filled_speed``, in proportion to that joint's reliability (1 at or
+above ``reliable_threshold``). Then every segment is filled, and filtering them all with
 ``smooth_filled_scale`` times the whole cutoff made the whole body trail the tracked hands and
 feet by about two frames (Table III hands + feet: the error was lowest against the reference
-two frames earlier); the speed of an anchored segment is mostly the tracked joint's motion. A
-torso that is reliable keeps every filled segment smoothed as before (the default experiment's
-occlusions).
+two frames earlier); the speed of an anchored segment is mostly the tracked joint's motion.
+Outside that regime filled segments are smoothed as before (the default experiment's
+occlusions: unchanged).
 
 Trust in the sensor (graceful degradation), ``trust_mode``:
 
@@ -502,11 +502,11 @@ class Reconstructor:
                 f = self._seg_filter
                 anchored = None
                 if (not self.smooth_filled_speed and self.smooth_anchored_speed
-                        and self._torso_weight(w) < thr):
-                    # filled segments with a reliable joint hanging from them (module docstring)
+                        and self._torso_weight(w) < thr and not (wmin >= thr).any()):
+                    # few reliable joints: filled segments with a reliable joint hanging from
+                    # them (module docstring)
                     anchored = np.minimum((_SEG_BELOW * w).max(axis=1)
                                           * (1.0 / max(thr, 1e-6)), 1.0)
-                    anchored[rel_frac >= 1.0] = 0.0
                     if not anchored.any():
                         anchored = None
                 if ((self.smooth_filled_speed or anchored is not None) and f.all_started
