@@ -100,14 +100,3 @@ def test_fast_helpers_match_geometry_and_model():
     assert np.allclose(fast_retarget(a, body.bone_lengths_by_joint(), rest_directions(body)),
                        retarget(a, body))
 
-
-def test_orientations_to_sensor_is_the_yaw_quaternion_product():
-    # the matrix form must equal quat_from_yaw(yaw) * q for any orientation and yaw
-    from skeleton_core.geometry import quat_from_yaw, quat_multiply
-    from pose_reconstruction.posture_space import orientations_to_sensor
-    rng = np.random.default_rng(3)
-    q = rng.normal(size=(NUM_JOINTS, 4))
-    q /= np.linalg.norm(q, axis=1, keepdims=True)
-    for yaw in (0.0, 0.7, -2.9, 3.1):
-        ref = quat_multiply(quat_from_yaw(np.asarray(yaw))[None, :], q)
-        assert np.allclose(orientations_to_sensor(q, yaw), ref, atol=1e-12)

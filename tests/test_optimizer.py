@@ -217,7 +217,7 @@ def test_fast_paths_equal_the_reference_functions():
     from pose_reconstruction.posture_space import (STRICT_ANCESTORS, QueryPreparer,
                                                    fast_normalize, fast_retarget,
                                                    orientations_to_sensor)
-    from pose_reconstruction.reconstructor import _yaw_quat_matrix
+    from skeleton_core.geometry import quat_from_yaw, quat_multiply
     from skeleton_core.filters import OneEuroFilter
     body = standard_body()
     prep = QueryPreparer(body, 0.5)
@@ -236,7 +236,8 @@ def test_fast_paths_equal_the_reference_functions():
         q = rng.normal(size=(NUM_JOINTS, 4))
         q /= np.linalg.norm(q, axis=1, keepdims=True)
         yaw = rng.uniform(-np.pi, np.pi)
-        assert np.allclose(q @ _yaw_quat_matrix(yaw).T, orientations_to_sensor(q, yaw), atol=1e-12)
+        ref = quat_multiply(quat_from_yaw(np.asarray(yaw))[None, :], q)
+        assert np.allclose(orientations_to_sensor(q, yaw), ref, atol=1e-12)
     a, b = OneEuroFilter(2.0, 10.0, 1.0, num_joints=20), OneEuroFilter(2.0, 10.0, 1.0, num_joints=20)
     ts = np.full(NUM_JOINTS, TRACKED, np.uint8)
     for t in range(30):
@@ -457,3 +458,54 @@ def test_query_heading_matches_facing_yaw():
         p = rng.normal(size=(NUM_JOINTS, 3))
         w = rng.choice([0.0, 1e-4, 0.3, 1.0], NUM_JOINTS)
         assert _weighted_yaw(p, w) == facing_yaw(p, np.maximum(w, 1e-3))
+
+
+def test_anchored_filled_segments_keep_the_speed_term():
+    # Table III style: only the hands and feet tracked, the rest NOT_TRACKED and frozen. Every
+    # segment is then filled by the database; filtering them all with smooth_filled_scale times
+    # the whole One Euro cutoff made the body trail the tracked hands and feet. With
+    # smooth_anchored_speed (default) a segment with a tracked joint below it keeps the speed
+    # term: the output follows the unsmoothed reconstruction more closely when the arms move.
+    from skeleton_core.evaluation import toy_clip
+    from skeleton_core.geometry import normalize
+    from skeleton_core.model import (FOOT_LEFT, FOOT_RIGHT, HAND_RIGHT, NOT_TRACKED,
+                                     SEGMENT_CHILDREN, SEGMENT_PARENTS)
+    clip = toy_clip(4.0)
+    pos = np.asarray(clip.positions, float)
+    db = normalize(pos)[0]
+    keep = [HAND_LEFT, HAND_RIGHT, FOOT_LEFT, FOOT_RIGHT]
+    hidden = np.setdiff1d(np.arange(NUM_JOINTS), keep)
+    rng = np.random.default_rng(2)
+    frames = []
+    for t in range(len(pos)):
+        p = pos[t] + rng.normal(0, 0.003, (NUM_JOINTS, 3))
+        p[hidden] = pos[0][hidden]
+        ts = np.full(NUM_JOINTS, TRACKED, np.uint8)
+        ts[hidden] = NOT_TRACKED
+        frames.append(SkeletonFrame(positions=p, tracking_state=ts, stamp_ns=t * 33_333_333))
+
+    def segs(**kw):
+        r = Reconstructor(db, method='C', samples=20, **kw)
+        out = np.array([r.process(f.copy()).positions for f in frames])
+        return out[:, list(SEGMENT_CHILDREN)] - out[:, list(SEGMENT_PARENTS)]
+
+    raw = segs(smooth_min_cutoff=0.0)  # no output filter at all: nothing to lag behind
+    new, old = segs(), segs(smooth_anchored_speed=False)
+    lag_new = np.linalg.norm(new - raw, axis=-1)[10:].mean()
+    lag_old = np.linalg.norm(old - raw, axis=-1)[10:].mean()
+    assert lag_new < 0.85 * lag_old
+    # outside the few-reliable-joints regime the filled segments are smoothed as before: a
+    # reliable torso with one forearm hidden, or the torso hidden with one forearm tracked
+    ts = np.full(NUM_JOINTS, TRACKED, np.uint8)
+    ts[[WRIST_RIGHT, HAND_RIGHT]] = NOT_TRACKED
+    ts2 = np.full(NUM_JOINTS, NOT_TRACKED, np.uint8)
+    ts2[keep + [ELBOW_RIGHT, WRIST_RIGHT]] = TRACKED
+    for states in (ts, ts2):
+        occl = [SkeletonFrame(positions=pos[t] + rng.normal(0, 0.01, (NUM_JOINTS, 3)),
+                              tracking_state=states, stamp_ns=t * 33_333_333) for t in range(60)]
+        a = Reconstructor(db, method='C', samples=20)
+        b = Reconstructor(db, method='C', samples=20, smooth_anchored_speed=False)
+        for f in occl:
+            assert np.array_equal(a.process(f.copy()).positions, b.process(f.copy()).positions)
+    with pytest.raises(ValueError):
+        Reconstructor(db, method='C', smooth_anchored_speed='yes')

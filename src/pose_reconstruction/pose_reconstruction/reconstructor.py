@@ -54,6 +54,17 @@ Both need at least three reliable joints. ``smooth_filled_speed``: ``smooth_fill
 only the minimum cutoff of a filled segment, not the One Euro speed term (less lag in fast
 motion, but more jitter: off by default).
 
+``smooth_anchored_speed`` (default on): with few reliable joints (as above: the hip and the
+shoulder line unreliable and no segment with two reliable ends), a filled segment with a
+reliable joint at or below its child (a tracked hand or foot hanging from it) keeps the One Euro
+speed term as with ``smooth_filled_speed``, in proportion to that joint's reliability (1 at or
+above ``reliable_threshold``). Then every segment is filled, and filtering them all with
+``smooth_filled_scale`` times the whole cutoff made the whole body trail the tracked hands and
+feet by about two frames (Table III hands + feet: the error was lowest against the reference
+two frames earlier); the speed of an anchored segment is mostly the tracked joint's motion.
+Outside that regime filled segments are smoothed as before (the default experiment's
+occlusions: unchanged).
+
 Trust in the sensor (graceful degradation), ``trust_mode``:
 
 * ``'noise_ratio'`` (default) — the RMS distance (per reliable joint) of the nearest database
@@ -89,7 +100,7 @@ from skeleton_core.model import (HIP_LEFT, HIP_RIGHT, MIRROR, NUM_JOINTS, NUM_SE
 from .completion import PCACompletion
 from .optimizer import NaturalPostureOptimizer
 from .posture_space import (ANCESTORS, QueryPreparer, as_database_arrays,
-                            rest_directions, to_sensor_frame, user_bone_lengths)
+                            rest_directions, to_sensor_frame, user_bone_lengths, yaw_quat_matrix)
 from .reliability import ReliabilityEstimator
 
 METHODS = ('A', 'B', 'C')
@@ -104,6 +115,8 @@ _SEG_DIFF = np.zeros((NUM_SEGMENTS, NUM_JOINTS))
 _SEG_DIFF[np.arange(NUM_SEGMENTS), _SEG_C] = 1.0
 _SEG_DIFF[np.arange(NUM_SEGMENTS), _SEG_P] -= 1.0
 _SEG_CHAIN = ANCESTORS[:, _SEG_C]
+# (19, 20): 1 for the joints at and below each segment's child (what hangs from the segment)
+_SEG_BELOW = np.ascontiguousarray(ANCESTORS[:, _SEG_C].T)
 
 
 def _yaw_matrix(yaw: float) -> np.ndarray:
@@ -112,11 +125,6 @@ def _yaw_matrix(yaw: float) -> np.ndarray:
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
 
 
-def _yaw_quat_matrix(yaw: float) -> np.ndarray:
-    """(4, 4) left multiplication by the quaternion of a rotation about +z (x, y, z, w order):
-    ``quat_multiply(quat_from_yaw(yaw), q) == q @ M.T``."""
-    s, c = np.sin(0.5 * yaw), np.cos(0.5 * yaw)
-    return np.array([[c, -s, 0.0, 0.0], [s, c, 0.0, 0.0], [0.0, 0.0, c, s], [0.0, 0.0, -s, c]])
 _MIN_FIT_JOINTS = 3  # the fewest points that fix a rotation and a scale
 RELIABILITY_PARAMS = ('d_min', 'f_b', 'theta_floor_deg', 'theta_roof_deg', 'f_total',
                       'sigma_frames', 'tracked_value', 'inferred_value', 'not_tracked_value',
@@ -166,7 +174,8 @@ class Reconstructor:
                  smooth_min_cutoff: float = 3.0, smooth_beta: float = 10.0,
                  smooth_d_cutoff: float = 1.0, smooth_filled_scale: float = 0.2,
                  float_root: bool = True, height_frames: int = 30, yaw_rate: float = 0.5,
-                 yaw_search: int = 12, smooth_filled_speed: bool = False, **params):
+                 yaw_search: int = 12, smooth_filled_speed: bool = False,
+                 smooth_anchored_speed: bool = True, **params):
         method = str(method).upper()
         if method not in METHODS:
             raise ValueError(f'method must be one of {METHODS}, got {method!r}')
@@ -196,6 +205,9 @@ class Reconstructor:
             raise ValueError('smooth_filled_scale must be in (0, 1]')
         self.smooth_filled_scale = float(smooth_filled_scale)
         self.smooth_filled_speed = bool(smooth_filled_speed)
+        if not isinstance(smooth_anchored_speed, (bool, np.bool_)):
+            raise ValueError('smooth_anchored_speed must be a bool')
+        self.smooth_anchored_speed = bool(smooth_anchored_speed)
         self.float_root = bool(float_root)
         if int(height_frames) < 0 or int(yaw_search) < 0 or not 0.0 <= yaw_rate <= 1.0:
             raise ValueError('height_frames, yaw_search must be >= 0 and yaw_rate in [0, 1]')
@@ -483,14 +495,29 @@ class Reconstructor:
                 scale = np.ones(NUM_SEGMENTS + 1)
                 scale[:NUM_SEGMENTS] = fs + (1.0 - fs) * rel_frac
                 f = self._seg_filter
-                if self.smooth_filled_speed and f.all_started and f.beta > 0.0:
+                anchored = None
+                if (not self.smooth_filled_speed and self.smooth_anchored_speed
+                        and self._torso_weight(w) < thr and not (wmin >= thr).any()):
+                    # few reliable joints: filled segments with a reliable joint hanging from
+                    # them (module docstring)
+                    anchored = np.minimum((_SEG_BELOW * w).max(axis=1)
+                                          * (1.0 / max(thr, 1e-6)), 1.0)
+                    if not anchored.any():
+                        anchored = None
+                if ((self.smooth_filled_speed or anchored is not None) and f.all_started
+                        and f.beta > 0.0):
                     # the factor applies to the minimum cutoff only: the One Euro speed term
                     # (beta |speed|, the filter's own estimate) is kept, so that a filled
                     # segment is smoothed at rest but does not lag when the body moves
                     ad = 1.0 / (1.0 + 1.0 / (2.0 * np.pi * f.d_cutoff * dt))
                     edx = ad * ((vr - f.raw) * (1.0 / dt)) + (1.0 - ad) * f.dx
                     bs = f.beta * np.sqrt(np.einsum('jk,jk->j', edx, edx))
-                    scale = (scale * f.min_cutoff + bs) / (f.min_cutoff + bs)
+                    sp = (scale * f.min_cutoff + bs) / (f.min_cutoff + bs)
+                    if anchored is None:
+                        scale = sp
+                    else:
+                        scale[:NUM_SEGMENTS] += anchored * (sp[:NUM_SEGMENTS]
+                                                            - scale[:NUM_SEGMENTS])
             vr = self._seg_filter.update(vr, None, self._filter_clock_ns, scale)
             v = vr[:NUM_SEGMENTS]
             nv = np.sqrt(np.einsum('sk,sk->s', v, v))
@@ -574,7 +601,7 @@ class Reconstructor:
                                        + alpha * frame.positions[keep])
             ori = None
             if res.orientations is not None:
-                ori = res.orientations @ _yaw_quat_matrix(yaw).T
+                ori = res.orientations @ yaw_quat_matrix(yaw).T
             elif frame.orientations is not None:
                 ori = frame.orientations.copy()
             self.timings_ms = {'reliability': 1e3 * (t1 - t0),
