@@ -27,6 +27,32 @@ def msg_class(msgtype: str):
     return getattr(importlib.import_module(f'{pkg}.msg'), name)
 
 
+class Spinner:
+    """Spins ``nodes`` on one executor thread until :meth:`stop`, which lets the callback in
+    flight finish before shutting the executor down: rclpy's ``Executor.shutdown`` does not
+    wait for running callbacks (its wait is skipped), so shutting down a spinning
+    MultiThreadedExecutor destroys its guard condition under them ("exception never retrieved:
+    cannot use Destroyable" at exit)."""
+
+    def __init__(self, context, *nodes):
+        self.context = context
+        self.executor = SingleThreadedExecutor(context=context)
+        for n in nodes:
+            self.executor.add_node(n)
+        self._running = True
+        self._thread = threading.Thread(target=self._spin, daemon=True)
+        self._thread.start()
+
+    def _spin(self):
+        while self._running and self.context.ok():
+            self.executor.spin_once(timeout_sec=0.05)
+
+    def stop(self):
+        self._running = False
+        self._thread.join(timeout=5)
+        self.executor.shutdown()
+
+
 class Probe:
     """A node in its own context and spin thread that records arrival times (and the last few
     messages) on a set of topics, and can query/set parameters of other nodes."""

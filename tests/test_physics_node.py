@@ -1,6 +1,5 @@
 """physics node over real DDS: a short clip in on the input topic, simulated skeletons out on
 /character/skeletons (stamps and frame preserved), object markers, pushes, parameter validation."""
-import threading
 import time
 
 import numpy as np
@@ -10,7 +9,6 @@ rclpy = pytest.importorskip('rclpy')
 pytest.importorskip('skeleton_msgs.msg', reason='skeleton_msgs not built (run scripts/setup.sh)')
 
 from geometry_msgs.msg import Vector3  # noqa: E402
-from rclpy.executors import MultiThreadedExecutor  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 from skeleton_msgs.msg import SkeletonArray  # noqa: E402
 from skeleton_msgs.srv import ApplyPush  # noqa: E402
@@ -19,7 +17,7 @@ from visualization_msgs.msg import MarkerArray  # noqa: E402
 from skeleton_core.conversions import SkeletonFrame, frames_from_array_msg, frames_to_array_msg  # noqa: E402
 from skeleton_core.model import NUM_JOINTS, segment_lengths, standard_body  # noqa: E402
 from physics_sim.physics_node import PhysicsNode  # noqa: E402
-from ros_helpers import wait_until as _wait  # noqa: E402
+from ros_helpers import Spinner, wait_until as _wait  # noqa: E402
 
 BODY = standard_body()
 
@@ -47,14 +45,9 @@ def graph(rclpy_context):
         Parameter('input_topic', value='/test_physics/in'), Parameter('body_height', value=1.75),
         Parameter('balls', value=[1.0, 1.0, 0.1, 0.1, 0.5])])
     peer = rclpy.create_node('physics_test_peer', context=rclpy_context)
-    ex = MultiThreadedExecutor(num_threads=2, context=rclpy_context)
-    ex.add_node(node)
-    ex.add_node(peer)
-    th = threading.Thread(target=ex.spin, daemon=True)
-    th.start()
+    spinner = Spinner(rclpy_context, node, peer)
     yield node, peer
-    ex.shutdown()
-    th.join(timeout=5)
+    spinner.stop()
     node.destroy_node()
     peer.destroy_node()
 

@@ -1,6 +1,5 @@
 """viz node over real DDS: SkeletonArray in, MarkerArray out; run-time parameter changes."""
 import os
-import threading
 import time
 import uuid
 
@@ -10,7 +9,6 @@ import pytest
 rclpy = pytest.importorskip('rclpy')
 pytest.importorskip('skeleton_msgs.msg', reason='skeleton_msgs not built (run scripts/setup.sh)')
 
-from rclpy.executors import MultiThreadedExecutor  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 from rclpy.qos import qos_profile_sensor_data  # noqa: E402
 from skeleton_msgs.msg import SkeletonArray  # noqa: E402
@@ -19,6 +17,7 @@ from visualization_msgs.msg import Marker, MarkerArray  # noqa: E402
 from skeleton_core.conversions import SkeletonFrame, frames_to_array_msg  # noqa: E402
 from skeleton_core.model import ELBOW_LEFT, NUM_JOINTS, NUM_SEGMENTS, standard_body  # noqa: E402
 from viz.viz_node import VizNode  # noqa: E402
+from ros_helpers import Spinner  # noqa: E402
 
 
 def _array(uids, reliability=None):
@@ -48,14 +47,9 @@ def graph(rclpy_context):
         Parameter('max_rate_hz', value=20.0), Parameter('stale_timeout_s', value=30.0)] + [
         Parameter(k, value=v) for k, v in TOPICS.items()])
     peer = rclpy.create_node('viz_test_peer', context=rclpy_context)
-    ex = MultiThreadedExecutor(num_threads=2, context=rclpy_context)
-    ex.add_node(viz)
-    ex.add_node(peer)
-    th = threading.Thread(target=ex.spin, daemon=True)
-    th.start()
+    spinner = Spinner(rclpy_context, viz, peer)
     yield viz, peer
-    ex.shutdown()
-    th.join(timeout=5)
+    spinner.stop()
     viz.destroy_node()
     peer.destroy_node()
 
