@@ -138,9 +138,11 @@ def _node_latencies(diagnostics: Dict[str, Dict[str, str]]) -> Dict[str, Dict[st
     out = {}
     for name, kv in diagnostics.items():
         try:
-            out[name] = {k: float(kv[k]) for k in ('p50_ms', 'p95_ms') if k in kv}
+            vals = {k: float(kv[k]) for k in ('p50_ms', 'p95_ms') if k in kv}
         except ValueError:
             continue
+        if vals and all(np.isfinite(v) for v in vals.values()):  # nan: no samples yet
+            out[name] = vals
     return out
 
 
