@@ -96,3 +96,16 @@ def test_one_euro_rejects_bad_parameters():
         OneEuroFilter(min_cutoff=0.0)
     with pytest.raises(ValueError):
         HoltFilter(smoothing=1.0)
+
+
+def test_one_euro_speed_scale_scales_the_minimum_cutoff_only():
+    # cutoff_scale with speed_scale = 1 is a filter with min_cutoff * scale and the same speed term
+    rng = np.random.default_rng(5)
+    a = OneEuroFilter(2.0, 10.0, 1.0, num_joints=4)
+    b = OneEuroFilter(0.5, 10.0, 1.0, num_joints=4)
+    scale = np.full(4, 0.25)
+    for t in range(40):
+        x = rng.normal(0, 0.05, (4, 3)) + 0.02 * t
+        stamp = t * 33_333_333
+        assert np.allclose(a.update(x, None, stamp, scale, np.ones(4)), b.update(x, None, stamp),
+                           atol=1e-12)

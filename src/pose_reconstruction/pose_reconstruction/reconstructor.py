@@ -116,7 +116,7 @@ _SEG_DIFF[np.arange(NUM_SEGMENTS), _SEG_C] = 1.0
 _SEG_DIFF[np.arange(NUM_SEGMENTS), _SEG_P] -= 1.0
 _SEG_CHAIN = ANCESTORS[:, _SEG_C]
 # (19, 20): 1 for the joints at and below each segment's child (what hangs from the segment)
-_SEG_BELOW = np.ascontiguousarray(ANCESTORS[:, _SEG_C].T)
+_SEG_BELOW = np.ascontiguousarray(_SEG_CHAIN.T)
 
 
 def _yaw_matrix(yaw: float) -> np.ndarray:
@@ -487,38 +487,28 @@ class Reconstructor:
                 dt = (stamp - self._last_stamp) * 1e-9
             self._last_stamp = stamp
             self._filter_clock_ns += int(round(dt * 1e9))
-            scale = None
+            scale = speed = None
             if self.smooth_filled_scale != 1.0:
                 # a segment the database fills in (an end with reliability 0) is smoothed with
                 # smooth_filled_scale times the cutoff, a reliable one as set, linear between
                 fs = self.smooth_filled_scale
                 scale = np.ones(NUM_SEGMENTS + 1)
                 scale[:NUM_SEGMENTS] = fs + (1.0 - fs) * rel_frac
-                f = self._seg_filter
-                anchored = None
-                if (not self.smooth_filled_speed and self.smooth_anchored_speed
-                        and self._torso_weight(w) < thr and not (wmin >= thr).any()):
+                if self.smooth_filled_speed:
+                    # the factor applies to the minimum cutoff only: the One Euro speed term is
+                    # kept, so that a filled segment is smoothed at rest but does not lag when
+                    # the body moves
+                    speed = np.ones(NUM_SEGMENTS + 1)
+                elif (self.smooth_anchored_speed and self._torso_weight(w) < thr
+                        and not (wmin >= thr).any()):
                     # few reliable joints: filled segments with a reliable joint hanging from
-                    # them (module docstring)
+                    # them keep the speed term too, in proportion (module docstring)
                     anchored = np.minimum((_SEG_BELOW * w).max(axis=1)
                                           * (1.0 / max(thr, 1e-6)), 1.0)
-                    if not anchored.any():
-                        anchored = None
-                if ((self.smooth_filled_speed or anchored is not None) and f.all_started
-                        and f.beta > 0.0):
-                    # the factor applies to the minimum cutoff only: the One Euro speed term
-                    # (beta |speed|, the filter's own estimate) is kept, so that a filled
-                    # segment is smoothed at rest but does not lag when the body moves
-                    ad = 1.0 / (1.0 + 1.0 / (2.0 * np.pi * f.d_cutoff * dt))
-                    edx = ad * ((vr - f.raw) * (1.0 / dt)) + (1.0 - ad) * f.dx
-                    bs = f.beta * np.sqrt(np.einsum('jk,jk->j', edx, edx))
-                    sp = (scale * f.min_cutoff + bs) / (f.min_cutoff + bs)
-                    if anchored is None:
-                        scale = sp
-                    else:
-                        scale[:NUM_SEGMENTS] += anchored * (sp[:NUM_SEGMENTS]
-                                                            - scale[:NUM_SEGMENTS])
-            vr = self._seg_filter.update(vr, None, self._filter_clock_ns, scale)
+                    if anchored.any():
+                        speed = scale.copy()
+                        speed[:NUM_SEGMENTS] += anchored * (1.0 - scale[:NUM_SEGMENTS])
+            vr = self._seg_filter.update(vr, None, self._filter_clock_ns, scale, speed)
             v = vr[:NUM_SEGMENTS]
             nv = np.sqrt(np.einsum('sk,sk->s', v, v))
             keep = nv > 1e-9

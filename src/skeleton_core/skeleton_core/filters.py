@@ -143,11 +143,23 @@ class OneEuroFilter:
         tau = 1.0 / (2 * np.pi * cutoff)
         return 1.0 / (1.0 + tau / dt)
 
+    def _cutoff(self, speed: np.ndarray, cutoff_scale, speed_scale) -> np.ndarray:
+        """Per-row cutoff from ``beta * |speed|`` (see :meth:`update`)."""
+        if speed_scale is not None:
+            cs = 1.0 if cutoff_scale is None else cutoff_scale
+            return self.min_cutoff * cs + speed * speed_scale
+        cutoff = self.min_cutoff + speed
+        return cutoff if cutoff_scale is None else cutoff * cutoff_scale
+
     def update(self, positions: np.ndarray, tracking_state: Optional[np.ndarray] = None,
                stamp_ns: Optional[int] = None,
-               cutoff_scale: Optional[np.ndarray] = None) -> np.ndarray:
+               cutoff_scale: Optional[np.ndarray] = None,
+               speed_scale: Optional[np.ndarray] = None) -> np.ndarray:
         """Filter one frame. ``cutoff_scale`` (n,) > 0 optionally multiplies each row's cutoff
-        (lower = smoother for that row)."""
+        (lower = smoother for that row); with ``speed_scale`` (n,) as well, ``cutoff_scale``
+        multiplies the minimum cutoff only and ``speed_scale`` the speed term: the cutoff is
+        ``min_cutoff * cutoff_scale + beta * |speed| * speed_scale`` (1 keeps the speed term:
+        smooth at rest, no extra lag in motion)."""
         x = np.asarray(positions, float)
         dt = self.default_dt
         if stamp_ns is not None and self.t_ns is not None and stamp_ns > self.t_ns:
@@ -158,9 +170,8 @@ class OneEuroFilter:
             # every row valid and continuing: the same arithmetic without the masks
             ad = self._alpha(self.d_cutoff, dt)
             edx = ad * ((x - self.raw) / dt) + (1 - ad) * self.dx
-            cutoff = self.min_cutoff + self.beta * np.sqrt(np.einsum('jk,jk->j', edx, edx))
-            if cutoff_scale is not None:
-                cutoff = cutoff * cutoff_scale
+            speed = self.beta * np.sqrt(np.einsum('jk,jk->j', edx, edx))
+            cutoff = self._cutoff(speed, cutoff_scale, speed_scale)
             a = (1.0 / (1.0 + (1.0 / (2 * np.pi * cutoff)) / dt))[:, None]
             out = a * x + (1 - a) * self.x
             self.dx = edx
@@ -175,9 +186,10 @@ class OneEuroFilter:
             dx = (x[cont] - self.raw[cont]) / dt
             ad = self._alpha(self.d_cutoff, dt)
             edx = ad * dx + (1 - ad) * self.dx[cont]
-            cutoff = self.min_cutoff + self.beta * np.linalg.norm(edx, axis=1, keepdims=True)
-            if cutoff_scale is not None:
-                cutoff = cutoff * np.asarray(cutoff_scale, float)[cont][:, None]
+            speed = self.beta * np.linalg.norm(edx, axis=1)
+            cutoff = self._cutoff(
+                speed, None if cutoff_scale is None else np.asarray(cutoff_scale, float)[cont],
+                None if speed_scale is None else np.asarray(speed_scale, float)[cont])[:, None]
             a = self._alpha(cutoff, dt)
             out[cont] = a * x[cont] + (1 - a) * self.x[cont]
             self.dx[cont] = edx
