@@ -25,9 +25,7 @@ import numpy as np
 
 from skeleton_core.model import NUM_JOINTS, PARENTS
 
-_PAR = np.array([max(k, 0) for k in PARENTS])
-
-from .posture_space import (QueryPreparer, as_database_arrays, fast_denormalize,
+from .posture_space import (PARENT_ROWS, QueryPreparer, as_database_arrays, fast_denormalize,
                             orientations_to_sensor, rest_directions)
 
 
@@ -114,7 +112,7 @@ class PCACompletion:
                     bone = np.asarray(user_bone_lengths, float)
                 # the match's parent-relative directions of the missing joints, turned back by
                 # the removed yaw and given the user's bone lengths
-                rel = match[miss] - match[_PAR[miss]]
+                rel = match[miss] - match[PARENT_ROWS[miss]]
                 n = np.sqrt(np.einsum('jk,jk->j', rel, rel))[:, None]
                 unit = np.where(n > 1e-9, rel / np.maximum(n, 1e-12), self._rest_dirs[miss])
                 c, s = math.cos(yaw), math.sin(yaw)

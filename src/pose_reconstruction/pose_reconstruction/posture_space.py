@@ -14,11 +14,11 @@ from typing import Dict, Optional
 import numpy as np
 
 from skeleton_core.geometry import NormalizeTransform, facing_yaw, retarget_by_joint
-from skeleton_core.model import (HIP_LEFT, HIP_RIGHT, NUM_JOINTS, PARENTS, PATH_TO_ROOT, ROOT,
-                                 SEGMENT_CHILDREN, SEGMENT_PARENTS, SHOULDER_LEFT, SHOULDER_RIGHT,
-                                 Body, standard_body)
+from skeleton_core.model import (HEADING_JOINTS, NUM_JOINTS, PARENTS, PATH_TO_ROOT, ROOT,
+                                 SEGMENT_CHILDREN, SEGMENT_PARENTS, Body, standard_body)
 
-_PAR = np.array([max(p, 0) for p in PARENTS])
+# each joint's parent (the root's own index for the root)
+PARENT_ROWS = np.array([max(p, 0) for p in PARENTS])
 _SEG_P = np.array(SEGMENT_PARENTS)
 _SEG_C = np.array(SEGMENT_CHILDREN)
 
@@ -34,16 +34,16 @@ for _j in range(NUM_JOINTS):
 _STRICT_ANCESTORS_F = STRICT_ANCESTORS.astype(float)
 # (20, 20): positions -> offsets from the parent (the root's row 0)
 _PARENT_DIFF = np.eye(NUM_JOINTS)
-_PARENT_DIFF[np.arange(NUM_JOINTS), _PAR] -= 1.0
+_PARENT_DIFF[np.arange(NUM_JOINTS), PARENT_ROWS] -= 1.0
 _PARENT_DIFF[ROOT] = 0.0
+_HEADING = list(HEADING_JOINTS)
 _NON_ROOT = np.array([j for j in range(NUM_JOINTS) if j != ROOT])
-_LINES = [HIP_LEFT, HIP_RIGHT, SHOULDER_LEFT, SHOULDER_RIGHT]
 
 
 def _weighted_yaw(p: np.ndarray, w: np.ndarray):
     """``facing_yaw(p, np.maximum(w, 1e-3))`` for one posture (20, 3), the same arithmetic on
     the four hip and shoulder joints as Python floats."""
-    (hl, hr, sl, sr), (whl, whr, wsl, wsr) = p[_LINES, :2].tolist(), w[_LINES].tolist()
+    (hl, hr, sl, sr), (whl, whr, wsl, wsr) = p[_HEADING, :2].tolist(), w[_HEADING].tolist()
     wh = min(max(whl, 1e-3), max(whr, 1e-3))
     ws = min(max(wsl, 1e-3), max(wsr, 1e-3))
     lx = wh * (hl[0] - hr[0]) + ws * (sl[0] - sr[0])

@@ -31,14 +31,15 @@ import numpy as np
 
 from skeleton_core.geometry import normalize
 from skeleton_core.model import (ANKLE_LEFT, ANKLE_RIGHT, ELBOW_LEFT, ELBOW_RIGHT, FOOT_LEFT,
-                                 FOOT_RIGHT, HAND_LEFT, HAND_RIGHT, HEAD, HIP_LEFT, HIP_RIGHT,
-                                 INFERRED, KNEE_LEFT, KNEE_RIGHT, NOT_TRACKED, NUM_JOINTS,
-                                 NUM_SEGMENTS, SEGMENT_CHILDREN, SEGMENT_OF_JOINT,
+                                 FOOT_RIGHT, HAND_LEFT, HAND_RIGHT, HEAD, HEADING_JOINTS, HIP_LEFT,
+                                 HIP_RIGHT, INFERRED, KNEE_LEFT, KNEE_RIGHT, NOT_TRACKED,
+                                 NUM_JOINTS, NUM_SEGMENTS, SEGMENT_CHILDREN, SEGMENT_OF_JOINT,
                                  SEGMENT_PARENTS, SHOULDER_CENTER, SHOULDER_LEFT, SHOULDER_RIGHT,
                                  SPINE, STANDARD_HEIGHT, TRACKED, WRIST_LEFT, WRIST_RIGHT,
                                  estimate_height, segment_lengths, standard_body)
 
 REFERENCE_MODES = ('observed', 'standard')
+_HEADING = list(HEADING_JOINTS)
 _SEG_P = np.array(SEGMENT_PARENTS)
 _SEG_C = np.array(SEGMENT_CHILDREN)
 
@@ -71,7 +72,6 @@ _POSE_SEGS = np.array([k for k, c in enumerate(SEGMENT_CHILDREN)
                                     HIP_LEFT, HIP_RIGHT, SHOULDER_LEFT, SHOULDER_RIGHT)])
 _REF_STACK = np.stack([_REF_DIRS['tpose'][_POSE_SEGS], _REF_DIRS['standing'][_POSE_SEGS]])
 _REF_NAMES = ('tpose', 'standing')
-_LINES = [HIP_LEFT, HIP_RIGHT, SHOULDER_LEFT, SHOULDER_RIGHT]
 # model.estimate_height from precomputed segment lengths: the leg + trunk + head chain against the
 # standard body's
 _HEIGHT_CHAIN = np.array([SEGMENT_OF_JOINT[j] for j in (SPINE, SHOULDER_CENTER, HEAD, KNEE_LEFT,
@@ -184,7 +184,7 @@ def _pose_match_segments(p: np.ndarray, seg: np.ndarray, ln: np.ndarray,
     ``ln`` (19,): the same heading (hips + shoulders) and decision, compared as cosines."""
     if ln.min() < 1e-6:
         return None
-    (hl, hr, sl, sr) = p[_LINES, :2].tolist()
+    (hl, hr, sl, sr) = p[_HEADING, :2].tolist()
     lx = (hl[0] - hr[0]) + (sl[0] - sr[0])
     ly = (hl[1] - hr[1]) + (sl[1] - sr[1])
     yaw = np.arctan2(-lx, ly)

@@ -91,6 +91,8 @@ LIMB_JOINTS: Dict[str, Tuple[int, ...]] = {
     'right_leg': (HIP_RIGHT, KNEE_RIGHT, ANKLE_RIGHT, FOOT_RIGHT),
 }
 END_EFFECTORS: Tuple[int, ...] = (HEAD, HAND_LEFT, HAND_RIGHT, FOOT_LEFT, FOOT_RIGHT)
+# the hip and shoulder lines a body's heading is measured from (geometry.facing_yaw)
+HEADING_JOINTS: Tuple[int, ...] = (HIP_LEFT, HIP_RIGHT, SHOULDER_LEFT, SHOULDER_RIGHT)
 
 # --------------------------------------------------------------------------------------------
 # NiTE2 (OpenNI2 user tracker): 15 joints, nite::JointType order
