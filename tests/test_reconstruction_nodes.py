@@ -12,7 +12,7 @@ pytestmark = pytest.mark.ros
 
 rclpy = pytest.importorskip('rclpy')
 
-from ros_helpers import wait_until as _wait  # noqa: E402
+from ros_helpers import Spinner, wait_until as _wait  # noqa: E402
 
 
 @pytest.fixture(scope='module')
@@ -22,7 +22,6 @@ def case():
 
 
 def test_pipeline_over_dds(rclpy_context, case):
-    from rclpy.executors import MultiThreadedExecutor
     from rclpy.node import Node
     from rclpy.parameter import Parameter
 
@@ -65,11 +64,7 @@ def test_pipeline_over_dds(rclpy_context, case):
 
     subs = [client.create_subscription(SkeletonArray, t, make_cb(t), 100) for t in got]  # noqa
     pub = client.create_publisher(SkeletonArray, t_in, 100)
-    ex = MultiThreadedExecutor(num_threads=4, context=ctx)
-    for n in nodes + [client]:
-        ex.add_node(n)
-    th = threading.Thread(target=ex.spin, daemon=True)
-    th.start()
+    spinner = Spinner(ctx, *nodes, client)
     try:
         assert _wait(lambda: pub.get_subscription_count() >= 1 and all(
             client.count_publishers(t) >= 1 for t in got), 10.0)
@@ -122,10 +117,8 @@ def test_pipeline_over_dds(rclpy_context, case):
         assert opt.set_parameters([Parameter('method', value='B')])[0].successful
         assert not opt.set_parameters([Parameter('database', value='/nonexistent/db.npz')])[0].successful
     finally:
-        ex.shutdown(timeout_sec=5.0)
-        th.join(timeout=5.0)
+        spinner.stop()
         for n in nodes + [client]:
-            ex.remove_node(n)
             n.destroy_node()
 
 
@@ -239,7 +232,6 @@ def test_fused_parameters_map_the_three_config_files():
 def test_fused_node_over_dds(rclpy_context, case):
     """The one-node reconstruction: same outputs as the three nodes from /kinect/skeletons;
     the completion is computed only while /posture/completed has a subscriber."""
-    from rclpy.executors import MultiThreadedExecutor
     from rclpy.node import Node
     from rclpy.parameter import Parameter
 
@@ -271,11 +263,7 @@ def test_fused_node_over_dds(rclpy_context, case):
     subs = {t: client.create_subscription(SkeletonArray, t, make_cb(t), 100)
             for t in (t_rel, t_rec)}
     pub = client.create_publisher(SkeletonArray, t_in, 100)
-    ex = MultiThreadedExecutor(num_threads=3, context=ctx)
-    for n in (node, client):
-        ex.add_node(n)
-    th = threading.Thread(target=ex.spin, daemon=True)
-    th.start()
+    spinner = Spinner(ctx, node, client)
     t0 = 1_700_000_000_000_000_000
 
     def send(i):
@@ -323,8 +311,6 @@ def test_fused_node_over_dds(rclpy_context, case):
         assert node._users == {}
         assert node.make_processor(dict(node.params.values)).rec.core.k == 12
     finally:
-        ex.shutdown(timeout_sec=5.0)
-        th.join(timeout=5.0)
+        spinner.stop()
         for n in (node, client):
-            ex.remove_node(n)
             n.destroy_node()
