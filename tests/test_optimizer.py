@@ -433,6 +433,38 @@ def test_heading_follows_the_database_while_the_torso_is_unreliable(small_db):
         Reconstructor(small_db, method='C', yaw_rate=1.5)
 
 
+def test_database_heading_fit_recovers_a_rotation_without_preferring_the_current_one(small_db):
+    # hands and feet of a database posture turned by 30 degrees about the vertical (and, with
+    # the root unreliable, moved): the rotation-invariant fit over the whole database finds the
+    # posture and the rotation exactly, from any starting heading of the query; the joints not
+    # tracked (placed far off) do not count
+    from skeleton_core.model import JOINT_INDEX
+    r = Reconstructor(small_db, method='C', yaw_neighbours=1)
+    X = np.asarray(small_db.positions, float)
+    ends = [JOINT_INDEX[n] for n in ('HandLeft', 'HandRight', 'FootLeft', 'FootRight')]
+    w = np.zeros(NUM_JOINTS)
+    w[ends] = 1.0
+    for deg in (30.0, -75.0, 170.0):
+        a, q = _turned(X[123], deg, 1.75)
+        q[w == 0] = 50.0
+        theta = r._database_yaw(q, w, centre=True)
+        assert abs(np.degrees(np.angle(np.exp(1j * (theta + a))))) < 1e-6   # q is off by +a
+        q0 = q - [2.5, 0.3, 0.0]                                      # root at the origin
+        assert abs(np.degrees(np.angle(np.exp(1j * (r._database_yaw(q0, w, centre=False) + a))))) < 1e-6
+    # a smaller user (height not known yet): the scale-invariant fit still finds the rotation
+    a, q = _turned(X[123], 30.0, 1.50)
+    assert abs(np.degrees(np.angle(np.exp(1j * (r._database_yaw(q, w, True, scaled=True) + a))))) < 1e-6
+    # the uncentred fit is not translation invariant: a moved query matches worse
+    a, q = _turned(X[123], 30.0, 1.75)
+    theta = r._database_yaw(q, w, centre=False)
+    assert abs(np.degrees(np.angle(np.exp(1j * (theta + a))))) > 1e-3
+    w1 = np.zeros(NUM_JOINTS)
+    w1[ends[0]] = 1.0
+    assert r._database_yaw(q, w1, centre=True) is None                 # one joint: no rotation
+    with pytest.raises(ValueError):
+        Reconstructor(small_db, method='C', yaw_neighbours=0)
+
+
 def test_users_on_one_database_share_its_arrays_with_the_same_results(case):
     """The KNN / PCA arrays derived from a database are computed once and shared by every user's
     optimizer (and completion): a second user on the same database gets what a user on a fresh

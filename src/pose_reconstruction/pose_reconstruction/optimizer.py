@@ -133,7 +133,8 @@ class NaturalPostureOptimizer:
         self._Lcol = self.L[:, None]
         X = self.db.flat
         self._X = X
-        self._Xsq_joint, self._XA, self._Xcoord = _knn_arrays(self.db)
+        self.knn_arrays = _knn_arrays(self.db)
+        self._Xsq_joint, self._XA, self._Xcoord = self.knn_arrays
         self.seed = seed
         self.rng = np.random.default_rng(seed)
         self._kdtree = None

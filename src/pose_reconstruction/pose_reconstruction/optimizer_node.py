@@ -82,12 +82,16 @@ SPECS = [
               'then kept; 0 = off (standard height)', (0, 100000)),
     ParamSpec('yaw_rate', 0.5,
               'few reliable joints (hips, shoulders and every segment unreliable): fraction per frame of the heading correction that '
-              'best fits the reliable joints to the database neighbours; 0 = keep the last '
-              'heading', (0.0, 1.0)),
+              'best fits the reliable joints to the database; 0 = keep the last heading',
+              (0.0, 1.0)),
     ParamSpec('yaw_search', 12,
               'few reliable joints from the first frame: headings tried against '
               'the database (from the one the unreliable torso gives); 0 = take that one',
               (0, 360)),
+    ParamSpec('yaw_neighbours', 5,
+              'few reliable joints: database postures whose best rotations (each a weighted 2-D '
+              'Procrustes of the reliable joints) are averaged into the heading correction',
+              (1, 1000)),
     ParamSpec('smooth_filled_speed', False,
               'segments: smooth_filled_scale lowers only the minimum cutoff of a filled segment '
               '(the One Euro speed term is kept: less lag in fast motion, more jitter: class c '

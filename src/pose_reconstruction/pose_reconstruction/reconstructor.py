@@ -48,7 +48,8 @@ positions reported for the unreliable joints must not decide them. Then
 * heading: the last heading of the reliable torso is kept (at the start, the best of
   ``yaw_search`` headings against the database, from the one the unreliable torso gives) and
   turned each frame by ``yaw_rate`` times the rotation that best fits the reliable joints to
-  the database neighbours (weighted 2-D Procrustes).
+  the database (:meth:`Reconstructor._database_yaw`: per database posture a weighted 2-D
+  Procrustes, the ``yaw_neighbours`` best postures averaged).
 
 Both need at least three reliable joints. ``smooth_filled_speed``: ``smooth_filled_scale`` lowers
 only the minimum cutoff of a filled segment, not the One Euro speed term (less lag in fast
@@ -139,7 +140,7 @@ OWN_PARAMS = ('use_reliability', 'use_input_reliability', 'reliable_threshold',
               'trust_mode', 'trust_sensor_ratio', 'noise_alpha', 'length_frames',
               'smooth_min_cutoff', 'smooth_beta', 'smooth_d_cutoff', 'observation_weight',
               'symmetric_lengths', 'smooth_filled_scale', 'float_root', 'height_frames',
-              'yaw_rate', 'yaw_search', 'smooth_filled_speed')
+              'yaw_rate', 'yaw_search', 'yaw_neighbours', 'smooth_filled_speed')
 
 
 def split_params(method: str, params: Dict) -> tuple:
@@ -174,8 +175,9 @@ class Reconstructor:
                  smooth_min_cutoff: float = 3.0, smooth_beta: float = 10.0,
                  smooth_d_cutoff: float = 1.0, smooth_filled_scale: float = 0.2,
                  float_root: bool = True, height_frames: int = 30, yaw_rate: float = 0.5,
-                 yaw_search: int = 12, smooth_filled_speed: bool = False,
-                 smooth_anchored_speed: bool = True, **params):
+                 yaw_search: int = 12, yaw_neighbours: int = 5,
+                 smooth_filled_speed: bool = False, smooth_anchored_speed: bool = True,
+                 **params):
         method = str(method).upper()
         if method not in METHODS:
             raise ValueError(f'method must be one of {METHODS}, got {method!r}')
@@ -211,6 +213,9 @@ class Reconstructor:
         self.float_root = bool(float_root)
         if int(height_frames) < 0 or int(yaw_search) < 0 or not 0.0 <= yaw_rate <= 1.0:
             raise ValueError('height_frames, yaw_search must be >= 0 and yaw_rate in [0, 1]')
+        if int(yaw_neighbours) < 1:
+            raise ValueError('yaw_neighbours must be >= 1')
+        self.yaw_neighbours = int(yaw_neighbours)
         self.height_frames = int(height_frames)
         self.yaw_rate = float(yaw_rate)
         self.yaw_search = int(yaw_search)
@@ -363,31 +368,67 @@ class Reconstructor:
                 best, best_d = float(yaw), d
         return best
 
-    def _neighbour_yaw(self, query: np.ndarray, w: np.ndarray, neighbours: np.ndarray,
-                       distances: np.ndarray, centre: bool) -> Optional[float]:
-        """The rotation about the vertical that brings the reliable joints of ``query`` (20, 3)
-        closest to the database neighbours (weighted 2-D Procrustes per neighbour, after
-        removing the weighted centroids when ``centre``, i.e. the root is unreliable; the
-        circular inverse-distance weighted mean over the neighbours): the query's heading is
-        off by it. None with fewer than two reliable joints."""
+    def _database_yaw(self, query: np.ndarray, w: np.ndarray, centre: bool,
+                      scaled: bool = False) -> Optional[float]:
+        """The rotation about the vertical by which the reliable joints of ``query`` (20, 3) are
+        off the database: Eq. 9 over the reliable joints minimised, for every database posture,
+        over that rotation (closed-form weighted 2-D Procrustes; with ``centre``, i.e. the root
+        unreliable, over a translation too: weighted centroids removed); the circular
+        inverse-distance weighted mean of the rotations of the ``yaw_neighbours`` nearest.
+        Unlike a fit to the KNN neighbours of the query at its current heading, which favour
+        that heading, no heading is preferred. ``scaled``: minimised over a uniform scale of the
+        query as well (while the user's height is not known). None with fewer than two reliable
+        joints."""
         rel = w >= self.reliable_threshold
         if rel.sum() < 2:
             return None
-        inv = 1.0 / (np.asarray(distances, float) + 1e-6)
-        Y = self.db.positions[neighbours][:, rel]               # (K, m, 3)
-        q = query[rel]
-        wr = w[rel]
+        wr = np.where(rel, w, 0.0)
+        ws = float(wr.sum())
+        q = np.asarray(query, float)
         if centre:
-            wn = wr / wr.sum()
-            q = q - wn @ q
-            Y = Y - np.einsum('j,kjd->kd', wn, Y)[:, None, :]
+            q = q - (wr @ q) * (1.0 / ws)
+        Yh, Yz = self._yaw_arrays()
+        sq, coord = self.core.knn_arrays[0], self.core.knn_arrays[2]
         # sum_j w_j conj(q_j) y_j with the horizontal coordinates as complex numbers: its angle
-        # is the best rotation of q onto y
-        c = (Y[..., 0] + 1j * Y[..., 1]) @ (wr * (q[:, 0] - 1j * q[:, 1]))   # (K,)
+        # is the best rotation of q onto y, and sum_j w_j |y_j - rot q_j|^2 (horizontal) is
+        # sum_j w_j (|y_j|^2 + |q_j|^2) - 2 |c| at that rotation. With q centred, y's centroid
+        # drops out of c and of the vertical cross term and leaves -|w| |centroid|^2.
+        c = Yh @ (wr * (q[:, 0] - 1j * q[:, 1]))                   # (N,)
         ac = np.abs(c)
-        if ac.max() < 1e-9:
+        syy = sq @ wr                                               # sum_j w_j |y_j|^2
+        if centre:
+            yc = (coord @ wr).reshape(-1, 3)
+            syy -= np.einsum('nd,nd->n', yc, yc) * (1.0 / ws)
+        sqq = float(wr @ np.einsum('jd,jd->j', q, q))
+        sxq = Yz @ (wr * q[:, 2])                                  # the vertical: not rotated
+        sxq += ac
+        if scaled:
+            # minimised over a uniform scale of the query too: the shape distance of
+            # NaturalPostureOptimizer.knn_scaled (the user's height is not known yet)
+            d = 1.0 - np.maximum(sxq, 0.0) ** 2 / (np.maximum(syy, 1e-12) * max(sqq, 1e-12))
+        else:
+            d = syy - 2.0 * sxq
+            d += sqq
+        k = min(self.yaw_neighbours, len(d))
+        idx = np.argpartition(d, k - 1)[:k]
+        a = ac[idx]
+        if a.max() < 1e-9:
             return None
-        return float(np.angle(inv @ (c / np.maximum(ac, 1e-12))))
+        inv = 1.0 / (np.maximum(d[idx], 0.0) + 1e-6)
+        return float(np.angle(inv @ (c[idx] / np.maximum(a, 1e-12))))
+
+    def _yaw_arrays(self) -> tuple:
+        """The database's horizontal coordinates as complex numbers (N, 20) and heights (N, 20),
+        computed once per database and shared."""
+        arrays = self.db.derived.get('yaw')
+        if arrays is None:
+            P = self.db.positions
+            Yh = np.ascontiguousarray(P[..., 0] + 1j * P[..., 1])
+            Yz = np.ascontiguousarray(P[..., 2], dtype=float)
+            for x in (Yh, Yz):
+                x.setflags(write=False)
+            arrays = self.db.derived['yaw'] = (Yh, Yz)
+        return arrays
 
     def _fit_height(self, query: np.ndarray, w: np.ndarray, height: float,
                     translate: bool) -> None:
@@ -562,8 +603,8 @@ class Reconstructor:
             self._prev.append((res.positions, yaw))
             theta = None
             if few and fit_ok and self.yaw_rate > 0.0:
-                theta = self._neighbour_yaw(prep.query, w, res.neighbours, res.distances,
-                                            translate)
+                theta = self._database_yaw(prep.query, w, translate,
+                                           scaled=not self._height_settled())
             self._yaw_state = yaw if theta is None else yaw - self.yaw_rate * theta
             if not self._height_settled():
                 self._fit_height(prep.query, w, height, translate)
