@@ -447,6 +447,7 @@ def test_database_heading_fit_recovers_a_rotation_without_preferring_the_current
     for deg in (30.0, -75.0, 170.0):
         a, q = _turned(X[123], deg, 1.75)
         q[w == 0] = 50.0
+        q[0] = np.nan
         theta = r._database_yaw(q, w, centre=True)
         assert abs(np.degrees(np.angle(np.exp(1j * (theta + a))))) < 1e-6   # q is off by +a
         q0 = q - [2.5, 0.3, 0.0]                                      # root at the origin

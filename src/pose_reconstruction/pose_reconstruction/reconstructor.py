@@ -384,7 +384,7 @@ class Reconstructor:
             return None
         wr = np.where(rel, w, 0.0)
         ws = float(wr.sum())
-        q = np.asarray(query, float)
+        q = np.where(rel[:, None], query, 0.0)  # the other rows do not count (nor a NaN there)
         if centre:
             q = q - (wr @ q) * (1.0 / ws)
         Yh, Yz = self._yaw_arrays()
