@@ -590,7 +590,7 @@ class Reconstructor:
             yaw_in = None
             if few:
                 # the hips and shoulders are unreliable: keep the heading they last gave (or
-                # search one at the start), corrected below from the database neighbours
+                # search one at the start), corrected below from the database
                 if self._yaw_state is None and self.yaw_search > 0 and fit_ok:
                     self._yaw_state = self._search_yaw(obs, w, height, translate)
                 yaw_in = self._yaw_state
