@@ -100,3 +100,70 @@ def test_fast_helpers_match_geometry_and_model():
     assert np.allclose(fast_retarget(a, body.bone_lengths_by_joint(), rest_directions(body)),
                        retarget(a, body))
 
+
+
+def reference_complete(c, p, rel, height, orientations=None, bones=None):
+    """Method A written the straightforward way (geometry.normalize / retarget, brute-force
+    distances in the reduced space, one joint at a time): what PCACompletion.complete's few-call
+    fast path must reproduce."""
+    from pose_reconstruction.posture_space import STRICT_ANCESTORS
+    from skeleton_core.geometry import normalize, quat_from_yaw, quat_multiply, retarget
+    from skeleton_core.model import PARENTS, ROOT
+    missing = ~(rel >= c.reliability_threshold)
+    norm, tf = normalize(p, np.maximum((~missing).astype(float), 1e-3))
+    scale = c.body.height / max(height, 0.5)
+    q = retarget(norm, c.body)
+    below = (STRICT_ANCESTORS & missing[None, :]).any(axis=1)
+    q[below] = norm[below] * scale                 # uniformly scaled below a missing joint
+    prepared = q.copy()
+    q[missing] = c.mean.reshape(NUM_JOINTS, 3)[missing]
+    z = c.components @ (q.reshape(-1) - c.mean)
+    i = int(np.argmin(np.sum((c.projected - z) ** 2, axis=1)))
+    match = np.asarray(c.db.positions[i], float)
+    out = p.copy()
+    bone = c.body.bone_lengths_by_joint() / scale if bones is None else bones
+    yaw = float(tf.yaw)
+    rz = np.array([[np.cos(yaw), -np.sin(yaw), 0.0], [np.sin(yaw), np.cos(yaw), 0.0], [0, 0, 1]])
+    rest = c.body.rest_offsets / np.maximum(np.linalg.norm(c.body.rest_offsets, axis=1),
+                                            1e-12)[:, None]
+    for j in np.flatnonzero(missing):
+        if j == ROOT:
+            out[j] = denormalize(match[j:j + 1] / scale, tf)[0]
+        else:
+            d = match[j] - match[PARENTS[j]]
+            u = d / np.linalg.norm(d) if np.linalg.norm(d) > 1e-9 else rest[j]
+            out[j] = out[PARENTS[j]] + rz @ (u * bone[j])
+    ori = quat_multiply(quat_from_yaw(np.asarray(yaw))[None, :], c.db.orientations[i])
+    if orientations is not None:
+        ori = np.where(missing[:, None], ori, orientations)
+    return out, ori, i, prepared
+
+
+def test_fast_completion_equals_the_straightforward_computation(db):
+    # complete() works on cached joint sets, a (20, 19) bone-to-position matrix and Python
+    # floats (posture_space.QueryPreparer.prepare_rows): the same results as the reference
+    c = PCACompletion(db)
+    rng = np.random.default_rng(5)
+    body = standard_body()
+    for k in range(60):
+        height = rng.uniform(1.4, 2.0)
+        p = place(body.scaled(height).rest_positions() + rng.normal(0, 0.08, (NUM_JOINTS, 3)),
+                  yaw=rng.uniform(-np.pi, np.pi), t=rng.normal(0, 1, 3))
+        rel = rng.uniform(0, 1, NUM_JOINTS) ** 0.3   # mostly reliable
+        rel[rng.random(NUM_JOINTS) < 0.15] = 0.0
+        if k % 5 == 0:
+            rel[0] = np.nan                          # a NaN counts as missing, the root too
+        if k % 7 == 0:
+            p[9] = p[8]                              # a joint on its parent: rest direction
+        ori = rng.normal(size=(NUM_JOINTS, 4)) if k % 2 else None
+        bones = body.scaled(height).bone_lengths_by_joint() if k % 3 else None
+        res = c.complete(p, rel, height, ori, bones)
+        out, ref_ori, i, prepared = reference_complete(c, p, rel, height, ori, bones)
+        assert res.match_index == i
+        assert np.array_equal(res.substituted, ~(rel >= 0.5))
+        np.testing.assert_allclose(res.positions, out, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(res.orientations, ref_ori, rtol=0, atol=1e-12)
+        # method C's entry point (QueryPreparer.prepare) shares the fast preparation
+        w = (rel >= 0.5).astype(float)
+        np.testing.assert_allclose(c.preparer.prepare(p, w, height).query, prepared, rtol=0,
+                                   atol=1e-12)

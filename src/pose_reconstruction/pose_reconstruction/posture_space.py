@@ -2,14 +2,16 @@
 retargeting, query preparation (normalise + retarget, Shum et al. 2013 Sec. V-B) and the way back
 to the sensor frame.
 
-Everything works on one posture at a time with vectorised numpy (no Python loop over joints), so
-that a query costs tens of microseconds.
+Everything works on one posture at a time with vectorised numpy (no Python loop over all the
+joints), so that a query costs tens of microseconds; at that size numpy's per-call overhead is
+most of the cost, hence the few-call forms below (combined matrices, cached joint sets, np.dot).
 """
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
-from typing import Dict, Optional
+from typing import Dict, List, NamedTuple, Optional
 
 import numpy as np
 
@@ -31,24 +33,83 @@ for _j in range(NUM_JOINTS):
     while _k >= 0:
         STRICT_ANCESTORS[_j, _k] = True
         _k = PARENTS[_k]
-_STRICT_ANCESTORS_F = STRICT_ANCESTORS.astype(float)
 # (20, 20): positions -> offsets from the parent (the root's row 0)
 _PARENT_DIFF = np.eye(NUM_JOINTS)
 _PARENT_DIFF[np.arange(NUM_JOINTS), PARENT_ROWS] -= 1.0
 _PARENT_DIFF[ROOT] = 0.0
 _HEADING = list(HEADING_JOINTS)
 _NON_ROOT = np.array([j for j in range(NUM_JOINTS) if j != ROOT])
+# flat indices of the x and y of the four heading joints in a (20, 3) posture: one ``take`` reads
+# them (fancy row + column indexing costs about three times as much)
+_HEADING_XY = np.array([[3 * j, 3 * j + 1] for j in _HEADING]).ravel()
+# (19, 20): positions -> the bones (offset of each non-root joint from its parent), and
+# (20, 19): bones -> positions relative to the root (ANCESTORS without the root's column, which
+# is zero anyway)
+_BONE_DIFF = _PARENT_DIFF[_NON_ROOT]
+_BONE_ANCESTORS = np.ascontiguousarray(ANCESTORS[:, _NON_ROOT])
+# _DESCENDANT_BITS[k]: bit j set when k is a proper ancestor of j (the joints whose chain to the
+# root passes through k)
+_DESCENDANT_BITS = [sum(1 << j for j in range(NUM_JOINTS) if STRICT_ANCESTORS[j, k])
+                    for k in range(NUM_JOINTS)]
+
+
+class JointSet(NamedTuple):
+    """A set of joints (the unreliable ones of a frame, say) in the forms the per-frame code
+    indexes with. Fancy indexing with a Python list converts the list on every call and a
+    boolean mask costs a comparison per frame: ~1-3 us each, the price of a whole (20, 3)
+    product. The few sets a stream meets are built once (:func:`joint_set`)."""
+
+    rows: List[int]          # the joints, ascending (a tree order: parents first)
+    index: np.ndarray        # the same as an index array (for ``take``)
+    mask: np.ndarray         # (20,) bool
+    column: np.ndarray       # (20, 1) bool: ``np.copyto(a, b, where=column)`` sets the rows
+    weights: List[float]     # 0.0 for the joints of the set, 1.0 for the others
+    below: int               # bits of the joints with a proper ancestor in the set
+
+
+@functools.lru_cache(maxsize=4096)
+def joint_set(bits: int) -> JointSet:
+    """The :class:`JointSet` of the joints whose bits (``1 << joint``) are set in ``bits``
+    (arrays read-only, shared)."""
+    rows = [j for j in range(NUM_JOINTS) if bits >> j & 1]
+    mask = np.zeros(NUM_JOINTS, bool)
+    mask[rows] = True
+    index = np.array(rows, dtype=np.intp)
+    column = mask[:, None].copy()
+    for a in (mask, index, column):
+        a.setflags(write=False)
+    below = 0
+    for j in rows:
+        below |= _DESCENDANT_BITS[j]
+    return JointSet(rows=rows, index=index, mask=mask, column=column,
+                    weights=[0.0 if bits >> j & 1 else 1.0 for j in range(NUM_JOINTS)],
+                    below=below)
+
+
+def _heading_yaw(p: np.ndarray, w) -> np.float64:
+    """``facing_yaw(p, np.maximum(w, 1e-3))`` for one posture (20, 3) and its weights ``w`` (any
+    sequence of 20 numbers): the same arithmetic on the four hip and shoulder joints as Python
+    floats. ``np.arctan2`` (not ``math.atan2``) so that the result stays equal to facing_yaw's
+    wherever numpy's arctan2 is not the C library's (SIMD builds)."""
+    hlx, hly, hrx, hry, slx, sly, srx, sry = p.take(_HEADING_XY).tolist()
+    whl, whr, wsl, wsr = w[_HEADING[0]], w[_HEADING[1]], w[_HEADING[2]], w[_HEADING[3]]
+    wh = min(max(whl, 1e-3), max(whr, 1e-3))
+    ws = min(max(wsl, 1e-3), max(wsr, 1e-3))
+    lx = wh * (hlx - hrx) + ws * (slx - srx)
+    ly = wh * (hly - hry) + ws * (sly - sry)
+    return np.arctan2(-lx, ly)
 
 
 def _weighted_yaw(p: np.ndarray, w: np.ndarray):
-    """``facing_yaw(p, np.maximum(w, 1e-3))`` for one posture (20, 3), the same arithmetic on
-    the four hip and shoulder joints as Python floats."""
-    (hl, hr, sl, sr), (whl, whr, wsl, wsr) = p[_HEADING, :2].tolist(), w[_HEADING].tolist()
-    wh = min(max(whl, 1e-3), max(whr, 1e-3))
-    ws = min(max(wsl, 1e-3), max(wsr, 1e-3))
-    lx = wh * (hl[0] - hr[0]) + ws * (sl[0] - sr[0])
-    ly = wh * (hl[1] - hr[1]) + ws * (sl[1] - sr[1])
-    return np.arctan2(-lx, ly)
+    """``facing_yaw(p, np.maximum(w, 1e-3))`` for one posture (20, 3), weights (20,)."""
+    return _heading_yaw(p, w.tolist())
+
+
+def _yaw_rotation(c: float, s: float) -> np.ndarray:
+    """(3, 3) ``R`` with ``x @ R`` = rows of ``x`` turned by -yaw about +z (the normalisation:
+    ``c = cos(yaw)``, ``s = sin(yaw)``); ``x @ R.T`` turns them back. Built from a flat list
+    (a nested list costs twice as much)."""
+    return np.array([c, -s, 0.0, s, c, 0.0, 0.0, 0.0, 1.0]).reshape(3, 3)
 
 
 @dataclass
@@ -153,38 +214,66 @@ class QueryPreparer:
         self.lengths = bone_lengths(body)
         self.rest_dirs = rest_directions(body)
         self.reliable_threshold = reliable_threshold
+        self._bone_lengths = self.lengths[_NON_ROOT]
 
     def prepare(self, positions: np.ndarray, reliability: np.ndarray,
                 user_height: float, yaw: Optional[float] = None) -> PreparedQuery:
         """``yaw``: the heading to remove (default: from the reliability-weighted hip and
         shoulder lines)."""
-        w = np.asarray(reliability, float)
+        w = np.asarray(reliability, float).tolist()
         p = np.asarray(positions, float)
-        # fast_normalize + fast_retarget in a few matrix products (same results)
         if yaw is None:
-            yaw = _weighted_yaw(p, w)
-        t = p[ROOT].copy()
-        c, s = np.cos(yaw), np.sin(yaw)
-        norm = (p - t) @ np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-        d = _PARENT_DIFF @ norm
+            yaw = _heading_yaw(p, w)
+        thr = self.reliable_threshold
+        bad = 0
+        for j, x in enumerate(w):
+            if x < thr:  # a NaN reliability is not below
+                bad |= 1 << j
+        query, t, _, scale = self.prepare_rows(p, bad, user_height, yaw)
+        return PreparedQuery(query=query, transform=NormalizeTransform(yaw=np.asarray(yaw),
+                                                                       translation=t),
+                             scale=scale)
+
+    def prepare_rows(self, p: np.ndarray, bad: int, user_height: float, yaw: float):
+        """:meth:`prepare`'s work for a float (20, 3) posture ``p`` whose heading ``yaw`` is
+        known and whose unreliable joints are the bits ``bad`` (``1 << joint``, as
+        :func:`joint_set`): ``(query, root translation, rotation, scale)``, the rotation ``R``
+        being :func:`_yaw_rotation` (``(x - t) @ R`` is the normalisation, ``x @ R.T`` turns
+        back). Method A's completion calls it directly: it needs the rotation as well, and
+        knows its unreliable joints already."""
+        c, s = math.cos(yaw), math.sin(yaw)
+        rot = _yaw_rotation(c, s)
+        t = p.take(ROOT, 0)  # a copy
+        scale = self.body.height / max(user_height, 0.5)
+        # fast_normalize + fast_retarget in a few matrix products (the same results to rounding,
+        # ~1e-16 m). A rotation keeps the bones' lengths and a translation does not change them,
+        # so the bones are taken from the sensor posture, scaled to the standard lengths and
+        # summed down the tree by one (20, 19) matrix, ANCESTORS with each bone's factor, and
+        # turned only then: one (3, 3) product for the rotation, no subtraction of the root.
+        # A joint below an unreliable joint is scaled uniformly instead (see the class doc):
+        # its row of the matrix takes ``scale`` for every bone. np.dot, not @: the same BLAS
+        # call for 2-D arrays with less dispatch (~0.4 us a call).
+        bones = np.dot(_BONE_DIFF, p)
+        n = np.sqrt(np.einsum('jk,jk->j', bones, bones))
+        if n.min() > 1e-9:
+            m = _BONE_ANCESTORS * (self._bone_lengths / n)
+            below = joint_set(bad).below if bad else 0
+            if below:
+                np.multiply(_BONE_ANCESTORS, scale, out=m, where=joint_set(below).column)
+            return np.dot(np.dot(m, bones), rot), t, rot, scale
+        # a joint on its parent (or a NaN): the joint takes its rest direction, which is given
+        # in the normalised frame, so normalise first (the straightforward way)
+        norm = np.dot(p - t, rot)
+        d = np.dot(_PARENT_DIFF, norm)
         n = np.sqrt(np.einsum('jk,jk->j', d, d))
         unit = d / np.maximum(n, 1e-12)[:, None]
-        # the root's row (no parent: d = 0) always takes its rest direction; another joint only
-        # when it sits on its parent
-        if (n.take(_NON_ROOT) <= 1e-9).any():
-            zero = n <= 1e-9
-            unit[zero] = self.rest_dirs[zero]
-        else:
-            unit[ROOT] = self.rest_dirs[ROOT]
+        zero = n <= 1e-9   # the root's row (no parent: d = 0) always
+        unit[zero] = self.rest_dirs[zero]
         unit *= self.lengths[:, None]      # the root's length is 0: no offset
-        ret = ANCESTORS @ unit
-        tf = NormalizeTransform(yaw=np.asarray(yaw), translation=t)
-        scale = self.body.height / max(user_height, 0.5)
-        bad = w < self.reliable_threshold
-        if bad.any():
-            chain_bad = (_STRICT_ANCESTORS_F @ bad) > 0.0
-            ret[chain_bad] = norm[chain_bad] * scale
-        return PreparedQuery(query=ret, transform=tf, scale=scale)
+        ret = np.dot(ANCESTORS, unit)
+        if bad and joint_set(bad).below:
+            np.copyto(ret, norm * scale, where=joint_set(joint_set(bad).below).column)
+        return ret, t, rot, scale
 
 
 def to_sensor_frame(normalized: np.ndarray, transform: NormalizeTransform,
@@ -198,9 +287,11 @@ def to_sensor_frame(normalized: np.ndarray, transform: NormalizeTransform,
 
 def yaw_quat_matrix(yaw: float) -> np.ndarray:
     """(4, 4) left multiplication by the quaternion of a rotation about +z (x, y, z, w order):
-    ``quat_multiply(quat_from_yaw(yaw), q) == q @ M.T``."""
+    ``quat_multiply(quat_from_yaw(yaw), q) == q @ M.T``. Built from a flat list (a nested one
+    costs twice as much)."""
     s, c = math.sin(0.5 * yaw), math.cos(0.5 * yaw)
-    return np.array([[c, -s, 0.0, 0.0], [s, c, 0.0, 0.0], [0.0, 0.0, c, s], [0.0, 0.0, -s, c]])
+    return np.array([c, -s, 0.0, 0.0, s, c, 0.0, 0.0,
+                     0.0, 0.0, c, s, 0.0, 0.0, -s, c]).reshape(4, 4)
 
 
 def orientations_to_sensor(quats: np.ndarray, yaw: float) -> np.ndarray:
