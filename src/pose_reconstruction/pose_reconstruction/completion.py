@@ -25,8 +25,8 @@ import numpy as np
 from skeleton_core.geometry import NormalizeTransform
 from skeleton_core.model import NUM_JOINTS, PARENTS, ROOT
 
-from .posture_space import (PARENT_ROWS, QueryPreparer, _heading_yaw, as_database_arrays,
-                            fast_denormalize, joint_set, rest_directions, yaw_quat_matrix)
+from .posture_space import (PARENT_ROWS, QueryPreparer, as_database_arrays, fast_denormalize,
+                            heading_yaw, joint_set, rest_directions, yaw_quat_matrix)
 
 
 def pca_basis(flat: np.ndarray, dims: int):
@@ -117,7 +117,7 @@ class PCACompletion:
         ms = joint_set(bits)
         # normalise (heading from the reliable hip / shoulder joints) and retarget: what
         # ``self.preparer.prepare(p, ms.weights, user_height)`` does, keeping the rotation
-        yaw = _heading_yaw(p, ms.weights)
+        yaw = heading_yaw(p, ms.weights)
         q, t, rot, scale = self.preparer.prepare_rows(p, bits, user_height, yaw)
         # Shum & Ho 2012 Sec. 5.2: a missing joint takes the database mean, i.e. it adds
         # nothing to the projection (the same numbers as filling in the mean: mean - mean = 0)

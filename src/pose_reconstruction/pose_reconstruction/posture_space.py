@@ -86,7 +86,7 @@ def joint_set(bits: int) -> JointSet:
                     below=below)
 
 
-def _heading_yaw(p: np.ndarray, w) -> np.float64:
+def heading_yaw(p: np.ndarray, w) -> np.float64:
     """``facing_yaw(p, np.maximum(w, 1e-3))`` for one posture (20, 3) and its weights ``w`` (any
     sequence of 20 numbers): the same arithmetic on the four hip and shoulder joints as Python
     floats. ``np.arctan2`` (not ``math.atan2``) so that the result stays equal to facing_yaw's
@@ -102,7 +102,7 @@ def _heading_yaw(p: np.ndarray, w) -> np.float64:
 
 def _weighted_yaw(p: np.ndarray, w: np.ndarray):
     """``facing_yaw(p, np.maximum(w, 1e-3))`` for one posture (20, 3), weights (20,)."""
-    return _heading_yaw(p, w.tolist())
+    return heading_yaw(p, w.tolist())
 
 
 def _yaw_rotation(c: float, s: float) -> np.ndarray:
@@ -223,7 +223,7 @@ class QueryPreparer:
         w = np.asarray(reliability, float).tolist()
         p = np.asarray(positions, float)
         if yaw is None:
-            yaw = _heading_yaw(p, w)
+            yaw = heading_yaw(p, w)
         thr = self.reliable_threshold
         bad = 0
         for j, x in enumerate(w):
