@@ -484,13 +484,13 @@ def test_users_on_one_database_share_its_arrays_with_the_same_results(case):
 
 
 def test_query_heading_matches_facing_yaw():
-    from pose_reconstruction.posture_space import _weighted_yaw
+    from pose_reconstruction.posture_space import heading_yaw
     from skeleton_core.geometry import facing_yaw
     rng = np.random.default_rng(4)
     for _ in range(2000):
         p = rng.normal(size=(NUM_JOINTS, 3))
         w = rng.choice([0.0, 1e-4, 0.3, 1.0], NUM_JOINTS)
-        assert _weighted_yaw(p, w) == facing_yaw(p, np.maximum(w, 1e-3))
+        assert heading_yaw(p, w.tolist()) == facing_yaw(p, np.maximum(w, 1e-3))
 
 
 def test_anchored_filled_segments_keep_the_speed_term():

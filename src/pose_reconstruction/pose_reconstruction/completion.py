@@ -26,7 +26,7 @@ from skeleton_core.geometry import NormalizeTransform
 from skeleton_core.model import NUM_JOINTS, PARENTS, ROOT
 
 from .posture_space import (PARENT_ROWS, QueryPreparer, as_database_arrays, fast_denormalize,
-                            heading_yaw, joint_set, rest_directions, yaw_quat_matrix)
+                            heading_yaw, joint_set, orientations_to_sensor, rest_directions)
 
 
 def pca_basis(flat: np.ndarray, dims: int):
@@ -158,14 +158,14 @@ class PCACompletion:
         ori = None
         db_ori = self.db.orientations
         if db_ori is not None:
-            # the match's rotations turned back by the removed yaw (orientations_to_sensor);
-            # not computed when no row of them is used
+            # the match's rotations turned back by the removed yaw; not computed when no row of
+            # them is used
             if orientations is None:
-                ori = np.dot(db_ori[idx], yaw_quat_matrix(yaw).T)
+                ori = orientations_to_sensor(db_ori[idx], yaw)
             else:
                 ori = np.array(orientations, float)
                 if bits:
-                    np.copyto(ori, np.dot(db_ori[idx], yaw_quat_matrix(yaw).T), where=ms.column)
+                    np.copyto(ori, orientations_to_sensor(db_ori[idx], yaw), where=ms.column)
         elif orientations is not None:
             ori = np.array(orientations, float)
         return CompletionResult(positions=out, orientations=ori, substituted=ms.mask.copy(),

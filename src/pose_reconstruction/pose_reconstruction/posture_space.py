@@ -100,15 +100,11 @@ def heading_yaw(p: np.ndarray, w) -> np.float64:
     return np.arctan2(-lx, ly)
 
 
-def _weighted_yaw(p: np.ndarray, w: np.ndarray):
-    """``facing_yaw(p, np.maximum(w, 1e-3))`` for one posture (20, 3), weights (20,)."""
-    return heading_yaw(p, w.tolist())
-
-
-def _yaw_rotation(c: float, s: float) -> np.ndarray:
-    """(3, 3) ``R`` with ``x @ R`` = rows of ``x`` turned by -yaw about +z (the normalisation:
-    ``c = cos(yaw)``, ``s = sin(yaw)``); ``x @ R.T`` turns them back. Built from a flat list
-    (a nested list costs twice as much)."""
+def yaw_rotation(yaw: float) -> np.ndarray:
+    """(3, 3) rotation about +z by ``yaw``: ``x @ R.T`` turns rows of ``x`` by ``yaw``, ``x @ R``
+    by ``-yaw`` (the normalisation). Built from a flat list (a nested one costs twice as
+    much)."""
+    c, s = math.cos(yaw), math.sin(yaw)
     return np.array([c, -s, 0.0, s, c, 0.0, 0.0, 0.0, 1.0]).reshape(3, 3)
 
 
@@ -238,11 +234,10 @@ class QueryPreparer:
         """:meth:`prepare`'s work for a float (20, 3) posture ``p`` whose heading ``yaw`` is
         known and whose unreliable joints are the bits ``bad`` (``1 << joint``, as
         :func:`joint_set`): ``(query, root translation, rotation, scale)``, the rotation ``R``
-        being :func:`_yaw_rotation` (``(x - t) @ R`` is the normalisation, ``x @ R.T`` turns
+        being :func:`yaw_rotation` (``(x - t) @ R`` is the normalisation, ``x @ R.T`` turns
         back). Method A's completion calls it directly: it needs the rotation as well, and
         knows its unreliable joints already."""
-        c, s = math.cos(yaw), math.sin(yaw)
-        rot = _yaw_rotation(c, s)
+        rot = yaw_rotation(yaw)
         t = p.take(ROOT, 0)  # a copy
         scale = self.body.height / max(user_height, 0.5)
         # fast_normalize + fast_retarget in a few matrix products (the same results to rounding,

@@ -101,7 +101,8 @@ from skeleton_core.model import (HIP_LEFT, HIP_RIGHT, MIRROR, NUM_JOINTS, NUM_SE
 from .completion import PCACompletion
 from .optimizer import NaturalPostureOptimizer
 from .posture_space import (ANCESTORS, QueryPreparer, as_database_arrays,
-                            rest_directions, to_sensor_frame, user_bone_lengths, yaw_quat_matrix)
+                            rest_directions, to_sensor_frame, user_bone_lengths, yaw_quat_matrix,
+                            yaw_rotation)
 from .reliability import ReliabilityEstimator
 
 METHODS = ('A', 'B', 'C')
@@ -118,12 +119,6 @@ _SEG_DIFF[np.arange(NUM_SEGMENTS), _SEG_P] -= 1.0
 _SEG_CHAIN = ANCESTORS[:, _SEG_C]
 # (19, 20): 1 for the joints at and below each segment's child (what hangs from the segment)
 _SEG_BELOW = np.ascontiguousarray(_SEG_CHAIN.T)
-
-
-def _yaw_matrix(yaw: float) -> np.ndarray:
-    """(3, 3) rotation about +z by ``yaw``; ``x @ M.T`` rotates row vectors."""
-    c, s = np.cos(yaw), np.sin(yaw)
-    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
 
 
 _MIN_FIT_JOINTS = 3  # the fewest points that fix a rotation and a scale
@@ -497,7 +492,7 @@ class Reconstructor:
         L = self.output_segment_lengths(obs, w, len_obs)
         vs = _SEG_DIFF @ solution
         if yaw is not None:
-            vs = vs @ _yaw_matrix(yaw).T
+            vs = vs @ yaw_rotation(yaw).T
         ns = np.sqrt(np.einsum('sk,sk->s', vs, vs))
         us = vs / np.maximum(ns, 1e-9)[:, None]
         uo = seg_obs / np.maximum(len_obs, 1e-9)[:, None]
@@ -598,7 +593,7 @@ class Reconstructor:
             yaw = float(prep.transform.yaw)
             prev = []
             for x, y in self._prev:  # bring earlier solutions into this frame's heading
-                prev.append(x @ _yaw_matrix(y - yaw).T)
+                prev.append(x @ yaw_rotation(y - yaw).T)
             res = self.core.solve(prep.query, w, prev[::-1], translate=translate)
             self._prev.append((res.positions, yaw))
             theta = None
@@ -617,7 +612,7 @@ class Reconstructor:
             if res.shift is not None and alpha < 1.0:
                 # the root towards where the database neighbours place it, as far as the
                 # database is trusted more than the sensor
-                root = obs[ROOT] - ((1.0 - alpha) / prep.scale) * (_yaw_matrix(yaw) @ res.shift)
+                root = obs[ROOT] - ((1.0 - alpha) / prep.scale) * (yaw_rotation(yaw) @ res.shift)
             if segments:
                 positions = self._segments_output(frame, res.positions, w, alpha, yaw=yaw,
                                                   seg_obs=seg_obs, len_obs=len_obs, root=root)

@@ -31,15 +31,17 @@ import numpy as np
 
 from skeleton_core.geometry import normalize
 from skeleton_core.model import (ANKLE_LEFT, ANKLE_RIGHT, ELBOW_LEFT, ELBOW_RIGHT, FOOT_LEFT,
-                                 FOOT_RIGHT, HAND_LEFT, HAND_RIGHT, HEAD, HEADING_JOINTS, HIP_LEFT,
+                                 FOOT_RIGHT, HAND_LEFT, HAND_RIGHT, HEAD, HIP_LEFT,
                                  HIP_RIGHT, INFERRED, KNEE_LEFT, KNEE_RIGHT, NOT_TRACKED,
                                  NUM_JOINTS, NUM_SEGMENTS, SEGMENT_CHILDREN, SEGMENT_OF_JOINT,
                                  SEGMENT_PARENTS, SHOULDER_CENTER, SHOULDER_LEFT, SHOULDER_RIGHT,
                                  SPINE, STANDARD_HEIGHT, TRACKED, WRIST_LEFT, WRIST_RIGHT,
                                  estimate_height, segment_lengths, standard_body)
 
+from .posture_space import heading_yaw
+
 REFERENCE_MODES = ('observed', 'standard')
-_HEADING = list(HEADING_JOINTS)
+_ONES = [1.0] * NUM_JOINTS   # heading_yaw's weights: the hip and shoulder lines alike
 _SEG_P = np.array(SEGMENT_PARENTS)
 _SEG_C = np.array(SEGMENT_CHILDREN)
 
@@ -184,10 +186,7 @@ def _pose_match_segments(p: np.ndarray, seg: np.ndarray, ln: np.ndarray,
     ``ln`` (19,): the same heading (hips + shoulders) and decision, compared as cosines."""
     if ln.min() < 1e-6:
         return None
-    (hl, hr, sl, sr) = p[_HEADING, :2].tolist()
-    lx = (hl[0] - hr[0]) + (sl[0] - sr[0])
-    ly = (hl[1] - hr[1]) + (sl[1] - sr[1])
-    yaw = np.arctan2(-lx, ly)
+    yaw = heading_yaw(p, _ONES)
     c, s = np.cos(yaw), np.sin(yaw)
     u = seg.take(_POSE_SEGS, axis=0)
     u /= ln.take(_POSE_SEGS)[:, None]
