@@ -25,7 +25,7 @@ from typing import Dict, List
 import numpy as np
 
 from skeleton_core.cdr import frames_from_cdr, frames_to_cdr
-from skeleton_core.conversions import SkeletonFrame, validate_arrays
+from skeleton_core.conversions import SkeletonFrame, frame_from_arrays
 
 from .fused import FusedProcessor
 from .optimizer import NaturalPostureOptimizer
@@ -85,10 +85,9 @@ def node_messages(db, obs, ts, obs2, ts2) -> Dict[str, np.ndarray]:
                 proc = users[f.user_id] = FusedProcessor(db, {})
                 first.append(1e3 * (time.perf_counter() - t1))
             res = proc.process(f, wanted)[0]
-            out.append(SkeletonFrame(*validate_arrays(res.positions, res.tracking_state,
-                                                      res.reliability, res.orientations),
-                                     user_id=res.user_id, stamp_ns=res.stamp_ns,
-                                     frame_id=res.frame_id))
+            out.append(frame_from_arrays(res.positions, res.tracking_state, res.reliability,
+                                         res.orientations, res.user_id, res.stamp_ns,
+                                         res.frame_id))
         frames_to_cdr(out, stamp, frame_id, validated=True)
         per_msg.append(1e3 * (time.perf_counter() - t0))
     return {'message': np.array(per_msg[1:]), 'new_user': np.array(first)}

@@ -19,7 +19,7 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile
 
 from skeleton_core.cdr import CdrError, frames_from_cdr, frames_to_cdr
-from skeleton_core.conversions import SkeletonFormatError, SkeletonFrame, validate_arrays
+from skeleton_core.conversions import SkeletonFormatError, frame_from_arrays
 from skeleton_core.health import Health
 from skeleton_core.rosnode import DiagnosticsPublisher, ParamSpec, Parameters
 
@@ -189,11 +189,9 @@ class SkeletonArrayNode(Node):
                     outs = proc.process(f, wanted) if self._multi else (proc.process(f),)
                     # every result checked before any is kept; the checked arrays are what
                     # gets serialized (frames_to_cdr(validated=True) does not check again)
-                    checked = [None if res is None else SkeletonFrame(
-                        *validate_arrays(res.positions, res.tracking_state, res.reliability,
-                                         res.orientations),
-                        user_id=res.user_id, stamp_ns=res.stamp_ns, frame_id=res.frame_id)
-                        for res in outs]
+                    checked = [None if res is None else frame_from_arrays(
+                        res.positions, res.tracking_state, res.reliability, res.orientations,
+                        res.user_id, res.stamp_ns, res.frame_id) for res in outs]
                     for i, res in enumerate(checked):
                         if res is not None:
                             results[i].append(res)
