@@ -100,6 +100,7 @@ from skeleton_core.model import (HIP_LEFT, HIP_RIGHT, MIRROR, NUM_JOINTS, NUM_SE
 
 from .completion import PCACompletion
 from .optimizer import NaturalPostureOptimizer
+from .plausibility import PLAUSIBILITY_PARAMS
 from .posture_space import (ANCESTORS, QueryPreparer, as_database_arrays,
                             rest_directions, to_sensor_frame, user_bone_lengths, yaw_quat_matrix,
                             yaw_rotation)
@@ -125,7 +126,7 @@ _MIN_FIT_JOINTS = 3  # the fewest points that fix a rotation and a scale
 RELIABILITY_PARAMS = ('d_min', 'f_b', 'theta_floor_deg', 'theta_roof_deg', 'f_total',
                       'sigma_frames', 'tracked_value', 'inferred_value', 'not_tracked_value',
                       'reference_pose_tolerance_deg', 'reference_frames', 'reference_mode',
-                      'observed_window')
+                      'observed_window') + PLAUSIBILITY_PARAMS
 OPTIMIZER_PARAMS = ('k', 'pca_dims', 'steps', 'samples', 'w_control', 'w_style', 'w_kinematics',
                     'w_continuity', 'step_scale', 'solver', 'gn_iterations', 'seed', 'knn',
                     'kdtree_dims', 'kdtree_candidates')
@@ -242,6 +243,7 @@ class Reconstructor:
 
     def reset(self) -> None:
         self.reliability.reset()
+        self._last_output: Optional[SkeletonFrame] = None
         self._prev = deque(maxlen=2)  # (normalised solution (20, 3), yaw)
         self._lengths = np.full((self.length_window, NUM_SEGMENTS), np.nan)
         self._lengths_n = 0
@@ -559,6 +561,12 @@ class Reconstructor:
         t0 = time.perf_counter()
         obs = np.asarray(frame.positions, float)
         R = np.asarray(self._reliability_for(frame), float)
+        if self.reliability.plausibility.skeleton_outlier and self._last_output is not None:
+            # the whole skeleton jumped (another person / a chair): nothing of this frame is
+            # the user; the last output is held until the skeleton is back (plausibility.py)
+            self.timings_ms = {'reliability': 1e3 * (time.perf_counter() - t0)}
+            return self._last_output.copy(stamp_ns=frame.stamp_ns,
+                                          reliability=R.astype(np.float32))
         seg_obs = _SEG_DIFF @ obs
         len_obs = np.sqrt(np.einsum('sk,sk->s', seg_obs, seg_obs))
         segments = self.method != 'A' and self.output_mode == 'segments'
@@ -635,6 +643,8 @@ class Reconstructor:
                                **res.timings_ms,
                                'output': 1e3 * (time.perf_counter() - t2)}
         self.last_result = res
-        return frame.copy(positions=np.asarray(positions, float),
-                          reliability=R.astype(np.float32),
-                          orientations=None if ori is None else np.asarray(ori, float))
+        out = frame.copy(positions=np.asarray(positions, float),
+                         reliability=R.astype(np.float32),
+                         orientations=None if ori is None else np.asarray(ori, float))
+        self._last_output = out
+        return out

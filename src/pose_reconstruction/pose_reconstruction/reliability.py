@@ -38,6 +38,7 @@ from skeleton_core.model import (ANKLE_LEFT, ANKLE_RIGHT, ELBOW_LEFT, ELBOW_RIGH
                                  SPINE, STANDARD_HEIGHT, TRACKED, WRIST_LEFT, WRIST_RIGHT,
                                  estimate_height, segment_lengths, standard_body)
 
+from .plausibility import PLAUSIBILITY_DEFAULTS, PlausibilityCheck
 from .posture_space import heading_yaw
 
 REFERENCE_MODES = ('observed', 'standard')
@@ -215,7 +216,12 @@ class ReliabilityEstimator:
                  not_tracked_value: float = 0.0, reference_pose_tolerance_deg: float = 25.0,
                  reference_frames: int = 15, reference_mode: str = 'observed',
                  observed_window: int = 90, height: Optional[float] = None,
-                 reference_lengths: Optional[np.ndarray] = None):
+                 reference_lengths: Optional[np.ndarray] = None, **plausibility):
+        unknown = set(plausibility) - set(PLAUSIBILITY_DEFAULTS)
+        if unknown:
+            raise TypeError(f'unknown reliability parameters: {sorted(unknown)}')
+        # the confident-failure term (plausibility.py); min(Eq. 8, R_p)
+        self.plausibility = PlausibilityCheck(**{**PLAUSIBILITY_DEFAULTS, **plausibility})
         if not 0 <= theta_floor_deg < theta_roof_deg <= 180:
             raise ValueError('need 0 <= theta_floor < theta_roof <= 180 degrees')
         if f_b < 1 or f_total < 1 or sigma_frames <= 0 or d_min < 0:
@@ -267,6 +273,7 @@ class ReliabilityEstimator:
         self._observed_median: Optional[np.ndarray] = None
         self.last_terms: Optional[Tuple[np.ndarray, np.ndarray, np.ndarray]] = None
         self.reliability = np.ones(NUM_JOINTS)
+        self.plausibility.reset()
 
     # -- reference lengths ---------------------------------------------------------------------
     @property
@@ -407,6 +414,9 @@ class ReliabilityEstimator:
         self._minima.append(m)
         w = self._gauss[len(self._minima)]
         r = w @ np.asarray(self._minima)
+        if self.plausibility.enabled:
+            # confident failures: implausible now is unreliable now (not Gaussian-delayed)
+            np.minimum(r, self.plausibility.update(p, ts, ref, seg, ln), out=r)
         np.maximum(r, 0.0, out=r)
         np.minimum(r, 1.0, out=r)
         self.reliability = r

@@ -534,7 +534,7 @@ class _Corrupter:
 
         # hand snap
         hs = cfp.get('hand_snap') or {}
-        if self.cf['hand_snap'] is None and rng.random() < rate('hand_snap'):
+        if self.cf['hand_snap'] is None and self._onset(rate('hand_snap')):
             hand = HAND_LEFT if rng.random() < 0.5 else HAND_RIGHT
             other = HAND_RIGHT if hand == HAND_LEFT else HAND_LEFT
             joints = [hand] + ([PARENTS[hand]] if rng.random() < float(hs['wrist_probability'])
@@ -574,7 +574,7 @@ class _Corrupter:
         # left/right limb swap while side-on
         ls = cfp.get('limb_swap') or {}
         side_on = rel_deg >= float(ls.get('side_on_deg', 45.0))
-        if self.cf['limb_swap'] is None and side_on and rng.random() < rate('limb_swap'):
+        if self.cf['limb_swap'] is None and side_on and self._onset(rate('limb_swap')):
             legs = rng.random() < float(ls['legs_probability'])
             a, b = (('left_leg', 'right_leg') if legs else ('left_arm', 'right_arm'))
             joints = list(LIMB_JOINTS[a]) + list(LIMB_JOINTS[b])
@@ -592,7 +592,7 @@ class _Corrupter:
 
         # foot slide
         fs = cfp.get('foot_slide') or {}
-        if self.cf['foot_slide'] is None and rng.random() < rate('foot_slide'):
+        if self.cf['foot_slide'] is None and self._onset(rate('foot_slide')):
             foot = FOOT_LEFT if rng.random() < 0.5 else FOOT_RIGHT
             joints = [foot] + ([PARENTS[foot]] if rng.random() < float(fs['ankle_probability'])
                                else [])
@@ -619,7 +619,7 @@ class _Corrupter:
 
         # the whole skeleton jumps to another person
         pj = cfp.get('person_jump') or {}
-        if self.cf['person_jump'] is None and rng.random() < rate('person_jump'):
+        if self.cf['person_jump'] is None and self._onset(rate('person_jump')):
             lo, hi = (int(v) for v in pj['duration_frames'])
             n = int(rng.integers(lo, hi + 1))
             other = self.truth_all[int(rng.integers(0, self.T))]
@@ -637,6 +637,11 @@ class _Corrupter:
             state[:] = TRACKED
             clean[:] = False
             self._tick('person_jump')
+
+    def _onset(self, p: float) -> bool:
+        """A Bernoulli draw with probability ``p``; no draw at all when ``p`` is 0, so classes
+        without confident failures keep the random sequence (and streams) they had before."""
+        return p > 0.0 and self.rng.random() < p
 
     def _tick(self, mode, count=True):
         e = self.cf[mode]

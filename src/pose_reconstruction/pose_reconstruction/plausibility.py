@@ -1,0 +1,253 @@
+"""Plausibility of a skeleton the sensor reports as TRACKED: a reliability term for confident failures.
+
+Shum et al. 2013's reliability (Eq. 1-8, :mod:`.reliability`) trusts the tracking state (Eq. 7)
+and looks for vibration (Eq. 1-4) and stretched segments (Eq. 5-6, averaged over a joint's
+segments). A Kinect that is confidently wrong — a hand snapped to a table or to the other hand, the
+left and right limbs swapped when the user is side-on, a foot slid into the floor, the whole
+skeleton on a second person for a few frames — reports TRACKED joints that do not vibrate. This
+module gives each joint a plausibility ``R_p`` in [0, 1] per frame from what a body cannot do;
+:class:`~.reliability.ReliabilityEstimator` takes ``min(Eq. 8, R_p)``, so an implausible joint is
+unreliable from the frame it becomes implausible and the optimizer fills it from the database.
+
+Terms (each 1 = plausible):
+
+* **bone length against the user's profile** — segment ``s`` with both ends TRACKED:
+  ``excess = |l_s - L_s| - (bone_tolerance L_s + bone_tolerance_m)``, score
+  ``1 - excess / (bone_reject L_s)`` clipped to [0, 1]. Blame goes to the segment's child and, for
+  a limb segment, to every joint below it (a snapped wrist drags its hand); a girdle or trunk
+  segment blames its child only. ``L`` is the profile (the reliability estimator's reference
+  lengths: captured in a reference posture, else the running median of tracked lengths).
+* **segment speed** — a limb segment's child moving faster than ``max_segment_speed_m_s``
+  relative to its parent between two frames (a snap, a swap onset) blames it and what hangs
+  from it for that frame.
+* **left/right against the heading** — the shoulder and the hip lines each give a heading; the
+  body heading follows the girdles that agree with it at ``heading_rate`` per frame. A girdle
+  more than ``lr_flip_deg`` off the body heading while the other girdle agrees with it has its
+  left and right swapped: both of its limbs (girdle joints included) get 0. (Both girdles off at
+  once is a fast turn or a whole-body mirror: the heading is taken over.)
+* **floor penetration** — the floor height is the median, over the last ``floor_window`` frames,
+  of the lowest TRACKED foot; a joint ``floor_tolerance_m`` below it starts losing plausibility,
+  ``floor_reject_m`` below it has none.
+* **whole-skeleton jump** — the root moving more than ``jump_m`` in one frame makes every joint 0
+  (:attr:`PlausibilityCheck.skeleton_outlier` True) until the root is back within ``jump_m`` of
+  where it left, for at most ``jump_frames`` frames (then the new place is accepted: a real
+  re-acquisition).
+
+``plausibility=False`` turns the whole term off (R_p = 1: the paper's reliability).
+"""
+from __future__ import annotations
+
+import collections
+from typing import Dict, Optional
+
+import numpy as np
+
+from skeleton_core.model import (FOOT_LEFT, FOOT_RIGHT, HIP_LEFT, HIP_RIGHT, LIMB_JOINTS,
+                                 NUM_JOINTS, NUM_SEGMENTS, PARENTS, ROOT, SEGMENT_CHILDREN,
+                                 SEGMENT_PARENTS, SHOULDER_LEFT, SHOULDER_RIGHT, TRACKED)
+
+PLAUSIBILITY_DEFAULTS: Dict = dict(
+    plausibility=True, bone_tolerance=0.25, bone_tolerance_m=0.03, bone_reject=0.5,
+    max_segment_speed_m_s=8.0, lr_flip_deg=110.0, heading_rate=0.3, floor_tolerance_m=0.05,
+    floor_reject_m=0.12, floor_window=150, jump_m=0.35, jump_frames=15)
+PLAUSIBILITY_PARAMS = tuple(PLAUSIBILITY_DEFAULTS)
+
+_SEG_P = np.array(SEGMENT_PARENTS)
+_SEG_C = np.array(SEGMENT_CHILDREN)
+_LIMB = set(LIMB_JOINTS['left_arm'][1:] + LIMB_JOINTS['right_arm'][1:]
+            + LIMB_JOINTS['left_leg'][1:] + LIMB_JOINTS['right_leg'][1:])
+
+
+def _below(j: int) -> np.ndarray:
+    """(20,) bool: ``j`` and every joint below it."""
+    out = np.zeros(NUM_JOINTS, bool)
+    for k in range(NUM_JOINTS):
+        a = k
+        while a >= 0:
+            if a == j:
+                out[k] = True
+                break
+            a = PARENTS[a] if a != ROOT else -1
+    return out
+
+
+# (19, 20): the joints a segment's implausibility is blamed on
+BLAME = np.zeros((NUM_SEGMENTS, NUM_JOINTS), bool)
+for _s, _c in enumerate(SEGMENT_CHILDREN):
+    if _c in _LIMB:
+        BLAME[_s] = _below(_c)
+    else:
+        BLAME[_s, _c] = True
+_ARMS = np.zeros(NUM_JOINTS, bool)
+_ARMS[list(LIMB_JOINTS['left_arm'] + LIMB_JOINTS['right_arm'])] = True
+_LEGS = np.zeros(NUM_JOINTS, bool)
+_LEGS[list(LIMB_JOINTS['left_leg'] + LIMB_JOINTS['right_leg'])] = True
+
+
+def _wrap(a: float) -> float:
+    return (a + np.pi) % (2.0 * np.pi) - np.pi
+
+
+def girdle_yaw(p: np.ndarray, left: int, right: int) -> float:
+    """Heading (rad, 0 facing +x) of a girdle: its right-to-left line turned by -90 deg."""
+    d = p[left] - p[right]
+    return float(np.arctan2(-d[0], d[1]))
+
+
+def validate(values: Dict) -> Optional[str]:
+    """Why a set of plausibility parameters is unusable, or None."""
+    v = {**PLAUSIBILITY_DEFAULTS, **values}
+    if v['bone_tolerance'] < 0 or v['bone_tolerance_m'] < 0 or not v['bone_reject'] > 0:
+        return 'bone_tolerance, bone_tolerance_m must be >= 0 and bone_reject > 0'
+    if not v['floor_reject_m'] > v['floor_tolerance_m'] >= 0:
+        return 'need 0 <= floor_tolerance_m < floor_reject_m'
+    if not 0 < v['heading_rate'] <= 1 or not 0 < v['lr_flip_deg'] <= 180:
+        return 'heading_rate must be in (0, 1] and lr_flip_deg in (0, 180]'
+    if not v['max_segment_speed_m_s'] > 0 or not v['jump_m'] > 0:
+        return 'max_segment_speed_m_s and jump_m must be > 0'
+    if int(v['floor_window']) < 1 or int(v['jump_frames']) < 1:
+        return 'floor_window and jump_frames must be >= 1'
+    return None
+
+
+class PlausibilityCheck:
+    """Streaming per-user plausibility (module docstring); :meth:`update` once per frame."""
+
+    def __init__(self, plausibility: bool = True, bone_tolerance: float = 0.25,
+                 bone_tolerance_m: float = 0.03, bone_reject: float = 0.5,
+                 max_segment_speed_m_s: float = 8.0, lr_flip_deg: float = 110.0,
+                 heading_rate: float = 0.3, floor_tolerance_m: float = 0.05,
+                 floor_reject_m: float = 0.12, floor_window: int = 150, jump_m: float = 0.35,
+                 jump_frames: int = 15, fps: float = 30.0):
+        why = validate(dict(bone_tolerance=bone_tolerance, bone_tolerance_m=bone_tolerance_m,
+                            bone_reject=bone_reject, floor_tolerance_m=floor_tolerance_m,
+                            floor_reject_m=floor_reject_m, heading_rate=heading_rate,
+                            lr_flip_deg=lr_flip_deg, max_segment_speed_m_s=max_segment_speed_m_s,
+                            jump_m=jump_m, floor_window=floor_window, jump_frames=jump_frames))
+        if why:
+            raise ValueError(why)
+        self.enabled = bool(plausibility)
+        self.bone_tolerance = float(bone_tolerance)
+        self.bone_tolerance_m = float(bone_tolerance_m)
+        self.bone_reject = float(bone_reject)
+        self.max_step = float(max_segment_speed_m_s) / float(fps)
+        self.lr_flip = np.radians(float(lr_flip_deg))
+        self.heading_rate = float(heading_rate)
+        self.floor_tolerance = float(floor_tolerance_m)
+        self.floor_reject = float(floor_reject_m)
+        self.floor_window = int(floor_window)
+        self.jump_m = float(jump_m)
+        self.jump_frames = int(jump_frames)
+        self.reset()
+
+    def reset(self) -> None:
+        self.heading: Optional[float] = None
+        self._floor_z: collections.deque = collections.deque(maxlen=self.floor_window)
+        self.floor: Optional[float] = None
+        self._last_rel: Optional[np.ndarray] = None
+        self._anchor: Optional[np.ndarray] = None
+        self._jumped = 0
+        self.skeleton_outlier = False
+        self.swapped = {'arms': False, 'legs': False}
+        self.terms: Dict[str, np.ndarray] = {}
+        self.value = np.ones(NUM_JOINTS)
+
+    # ------------------------------------------------------------------------------------
+    def _jump(self, p: np.ndarray) -> bool:
+        root = p[ROOT]
+        if self._anchor is None:
+            self._anchor = root.copy()
+            return False
+        if self._jumped == 0:
+            if np.linalg.norm(root - self._anchor) > self.jump_m:
+                self._jumped = 1
+                return True
+            self._anchor = root.copy()
+            return False
+        if np.linalg.norm(root - self._anchor) <= self.jump_m or self._jumped >= self.jump_frames:
+            self._jumped = 0
+            self._anchor = root.copy()
+            return False
+        self._jumped += 1
+        return True
+
+    def _bones(self, seg_len, both, ref) -> np.ndarray:
+        excess = np.abs(seg_len - ref) - (self.bone_tolerance * ref + self.bone_tolerance_m)
+        score = 1.0 - np.maximum(excess, 0.0) / np.maximum(self.bone_reject * ref, 1e-6)
+        score = np.where(both, np.clip(score, 0.0, 1.0), 1.0)
+        return score
+
+    def _speed(self, rel, both) -> np.ndarray:
+        score = np.ones(NUM_SEGMENTS)
+        if self._last_rel is not None:
+            step = np.linalg.norm(rel - self._last_rel, axis=1)
+            score = np.where(both & (step > self.max_step), 0.0, 1.0)
+        self._last_rel = rel
+        return score
+
+    def _left_right(self, p) -> np.ndarray:
+        out = np.ones(NUM_JOINTS)
+        hs = girdle_yaw(p, SHOULDER_LEFT, SHOULDER_RIGHT)
+        hh = girdle_yaw(p, HIP_LEFT, HIP_RIGHT)
+        if self.heading is None:
+            self.heading = float(np.arctan2(np.sin(hs) + np.sin(hh), np.cos(hs) + np.cos(hh)))
+            return out
+        ds, dh = abs(_wrap(hs - self.heading)), abs(_wrap(hh - self.heading))
+        apart = abs(_wrap(hs - hh)) > self.lr_flip
+        arms = apart and ds > self.lr_flip and dh <= self.lr_flip
+        legs = apart and dh > self.lr_flip and ds <= self.lr_flip
+        self.swapped = {'arms': arms, 'legs': legs}
+        if arms:
+            out[_ARMS] = 0.0
+            target = hh
+        elif legs:
+            out[_LEGS] = 0.0
+            target = hs
+        else:
+            target = float(np.arctan2(np.sin(hs) + np.sin(hh), np.cos(hs) + np.cos(hh)))
+            if ds > self.lr_flip and dh > self.lr_flip:   # both off: a fast turn or a mirror
+                self.heading = target
+                return out
+        self.heading = _wrap(self.heading + self.heading_rate * _wrap(target - self.heading))
+        return out
+
+    def _floor(self, p, tracked) -> np.ndarray:
+        feet = [j for j in (FOOT_LEFT, FOOT_RIGHT) if tracked[j]]
+        if feet:
+            self._floor_z.append(float(min(p[j, 2] for j in feet)))
+            if len(self._floor_z) >= 5:
+                self.floor = float(np.median(self._floor_z))
+        if self.floor is None:
+            return np.ones(NUM_JOINTS)
+        depth = self.floor - p[:, 2]
+        score = 1.0 - (depth - self.floor_tolerance) / (self.floor_reject - self.floor_tolerance)
+        return np.clip(score, 0.0, 1.0)
+
+    def update(self, positions: np.ndarray, tracking_state: np.ndarray,
+               reference_lengths: np.ndarray, seg: Optional[np.ndarray] = None,
+               seg_len: Optional[np.ndarray] = None) -> np.ndarray:
+        """``R_p`` (20,) for one frame. ``reference_lengths`` (19,): the user's profile;
+        ``seg`` (19, 3) / ``seg_len`` (19,): this frame's segment vectors and lengths if known."""
+        if not self.enabled:
+            return self.value
+        p = np.asarray(positions, float)
+        tracked = np.asarray(tracking_state) == TRACKED
+        if seg is None:
+            seg = p[_SEG_C] - p[_SEG_P]
+            seg_len = np.linalg.norm(seg, axis=1)
+        both = tracked[_SEG_P] & tracked[_SEG_C]
+        jump = self._jump(p)
+        self.skeleton_outlier = jump
+        if jump:
+            self.value = np.zeros(NUM_JOINTS)
+            self.terms = {'jump': self.value}
+            return self.value
+        seg_score = np.minimum(self._bones(seg_len, both, np.asarray(reference_lengths, float)),
+                               self._speed(seg, both))
+        blamed = np.where(BLAME, seg_score[:, None], 1.0).min(axis=0)
+        lr = self._left_right(p)
+        fl = self._floor(p, tracked)
+        self.terms = {'segments': blamed, 'left_right': lr, 'floor': fl}
+        v = np.minimum(np.minimum(blamed, lr), fl)
+        self.value = v
+        return v
