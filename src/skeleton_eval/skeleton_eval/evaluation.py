@@ -302,6 +302,17 @@ def make_streams(clips, scenarios=('a', 'b', 'c'), seed: int = 0,
             for sc in scenarios}
 
 
+def reliable_latency_ms(out: np.ndarray, stream: KinectStream) -> float:
+    """Latency (ms) a method adds on the joints the sensor reported correctly: the delay of
+    ``out`` behind the raw input (:func:`metrics.added_latency_ms`, the shift that fits best)
+    over the joint-frames the sensor model marks clean (no occlusion, false positive, turn or
+    confident failure), the others left out."""
+    raw = np.array(stream.positions, float)
+    if stream.clean is not None:
+        raw[~stream.clean] = np.nan
+    return M.added_latency_ms(out, raw, stream.fps)
+
+
 def evaluate_streams(methods, streams: Dict[str, List[KinectStream]],
                      frame_transform: Optional[Callable] = None, progress=None,
                      warmup: Optional[Callable] = None) -> Dict:
@@ -315,19 +326,24 @@ def evaluate_streams(methods, streams: Dict[str, List[KinectStream]],
         method = factory()
         results[label] = {}
         for sc, lst in streams.items():
-            parts, weights, times, missing = [], [], [], 0
+            parts, weights, times, missing, lats = [], [], [], 0, []
             for s in lst:
                 frames = None if frame_transform is None else frame_transform(s)
                 out, t = run_method(method, s, frames,
                                     None if warmup is None else warmup(s))
                 missing += int(np.isnan(out).any(axis=(1, 2)).sum())
                 parts.append(M.compute_all(out, s.truth, s.fps))
+                lats.append(reliable_latency_ms(out, s))
                 weights.append(len(s))
                 times.append(t)
                 if progress:
                     progress(label, sc, s.clip_name)
+            ok = np.isfinite(lats)
             results[label][sc] = {'frames': int(sum(weights)), 'missing_frames': missing,
                                   'metrics': _combine(parts, weights),
+                                  'latency_ms': (float(np.average(np.asarray(lats)[ok],
+                                                                  weights=np.asarray(weights)[ok]))
+                                                 if ok.any() else float('nan')),
                                   'time': _time_summary(np.concatenate(times) if times else
                                                         np.zeros(0))}
     return {'results': results, 'method_params': params}

@@ -15,6 +15,7 @@ where either input is NaN are skipped (per joint); a quantity with no valid fram
   :func:`bone_length_error` — mean |length - true length|, cm.
 * :func:`bone_direction_error` — mean angle between estimated and true segment directions, deg
   (length-free).
+* :func:`added_latency_ms` — the delay of an output behind its input (the best-fitting shift).
 """
 from __future__ import annotations
 
@@ -116,6 +117,31 @@ def bone_direction_error(pred, truth) -> Tuple[np.ndarray, float]:
     cos = np.where((na > 1e-9) & (nb > 1e-9), cos, np.nan)
     ang = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
     return _nanmean0(ang), _overall(ang)
+
+
+MAX_LATENCY_FRAMES = 10
+
+
+def added_latency_ms(out: np.ndarray, raw: np.ndarray, fps: float = 30.0,
+                     max_frames: int = MAX_LATENCY_FRAMES) -> float:
+    """Delay of ``out`` behind ``raw`` (ms): the shift k >= 0 minimising mean |out(t) - raw(t-k)|,
+    refined to sub-frame by a parabola through the minimum."""
+    errs = []
+    for k in range(0, max_frames + 1):
+        a = out[k:]
+        b = raw[:len(raw) - k]
+        d = np.linalg.norm(a - b, axis=-1)
+        errs.append(np.nanmean(d) if np.isfinite(d).any() else np.inf)
+    errs = np.asarray(errs)
+    if not np.isfinite(errs).any():
+        return float('nan')
+    k = int(np.argmin(errs))
+    frac = 0.0
+    if 0 < k < len(errs) - 1 and np.isfinite(errs[k - 1:k + 2]).all():
+        den = errs[k - 1] - 2 * errs[k] + errs[k + 1]
+        if den > 1e-12:
+            frac = 0.5 * (errs[k - 1] - errs[k + 1]) / den
+    return float((k + frac) * 1000.0 / fps)
 
 
 METRICS = ('eq18_cm', 'mpjpe_cm', 'jitter_ms2', 'bone_std_cm', 'bone_err_cm', 'bone_dir_deg')

@@ -31,35 +31,13 @@ from typing import Dict, Optional, Sequence
 import numpy as np
 
 from .evaluation import json_safe
+from .metrics import MAX_LATENCY_FRAMES, added_latency_ms  # noqa: F401 (public here too)
 from skeleton_core.model import HAND_LEFT, HAND_RIGHT, NUM_JOINTS
 
 DEFAULT_METHODS = ('raw', 'holt', 'one_euro', 'A', 'B', 'C')
-MAX_LATENCY_FRAMES = 10
 TABLE_METRICS = (('eq18_cm', 'Eq.18 (cm)'), ('mpjpe_cm', 'MPJPE (cm)'),
                  ('bone_dir_deg', 'bone dir (deg)'), ('bone_std_cm', 'bone-length std (cm)'),
                  ('bone_err_cm', 'bone-length err (cm)'), ('jitter_ms2', 'jitter (m/s^2)'))
-
-
-def added_latency_ms(out: np.ndarray, raw: np.ndarray, fps: float = 30.0,
-                     max_frames: int = MAX_LATENCY_FRAMES) -> float:
-    """Delay of ``out`` behind ``raw`` (ms): the shift k >= 0 minimising mean |out(t) - raw(t-k)|,
-    refined to sub-frame by a parabola through the minimum."""
-    errs = []
-    for k in range(0, max_frames + 1):
-        a = out[k:]
-        b = raw[:len(raw) - k]
-        d = np.linalg.norm(a - b, axis=-1)
-        errs.append(np.nanmean(d) if np.isfinite(d).any() else np.inf)
-    errs = np.asarray(errs)
-    if not np.isfinite(errs).any():
-        return float('nan')
-    k = int(np.argmin(errs))
-    frac = 0.0
-    if 0 < k < len(errs) - 1 and np.isfinite(errs[k - 1:k + 2]).all():
-        den = errs[k - 1] - 2 * errs[k] + errs[k + 1]
-        if den > 1e-12:
-            frac = 0.5 * (errs[k - 1] - errs[k + 1]) / den
-    return float((k + frac) * 1000.0 / fps)
 
 
 def make_streams(clips, fps: float = 30.0) -> Dict[str, list]:
