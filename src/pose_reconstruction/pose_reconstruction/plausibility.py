@@ -23,15 +23,17 @@ Terms (each 1 = plausible):
 * **left/right against the heading** — the shoulder and the hip lines each give a heading; the
   body heading follows the girdles that agree with it at ``heading_rate`` per frame. A girdle
   more than ``lr_flip_deg`` off the body heading while the other girdle agrees with it has its
-  left and right swapped: both of its limbs (girdle joints included) get 0. (Both girdles off at
-  once is a fast turn or a whole-body mirror: the heading is taken over.)
+  left and right swapped (:attr:`PlausibilityCheck.swapped`): with ``lr_unswap`` the
+  reconstructor swaps the two limbs back (:func:`unswap`) and keeps them, else both limbs
+  (girdle joints included) get 0. (Both girdles off at once is a fast turn or a whole-body
+  mirror: the heading is taken over.)
 * **floor penetration** — the floor height is the median, over the last ``floor_window`` frames,
   of the lowest TRACKED foot; a joint ``floor_tolerance_m`` below it starts losing plausibility,
   ``floor_reject_m`` below it has none.
-* **whole-skeleton jump** — the root moving more than ``jump_m`` in one frame makes every joint 0
-  (:attr:`PlausibilityCheck.skeleton_outlier` True) until the root is back within ``jump_m`` of
-  where it left, for at most ``jump_frames`` frames (then the new place is accepted: a real
-  re-acquisition).
+* **whole-skeleton jump** — the TRACKED joints moving, in the median, more than ``jump_m`` from
+  where each was last plausibly makes every joint 0 (:attr:`PlausibilityCheck.skeleton_outlier`
+  True) until they are back within ``jump_m``, for at most ``jump_frames`` frames (then the new
+  place is accepted: a real re-acquisition).
 
 ``plausibility=False`` turns the whole term off (R_p = 1: the paper's reliability).
 """
@@ -47,8 +49,9 @@ from skeleton_core.model import (FOOT_LEFT, FOOT_RIGHT, HIP_LEFT, HIP_RIGHT, LIM
                                  SEGMENT_PARENTS, SHOULDER_LEFT, SHOULDER_RIGHT, TRACKED)
 
 PLAUSIBILITY_DEFAULTS: Dict = dict(
-    plausibility=True, bone_tolerance=0.25, bone_tolerance_m=0.03, bone_reject=0.5,
-    max_segment_speed_m_s=8.0, lr_flip_deg=110.0, heading_rate=0.3, floor_tolerance_m=0.05,
+    plausibility=True, bone_tolerance=0.4, bone_tolerance_m=0.03, bone_reject=1.0,
+    max_segment_speed_m_s=8.0, lr_flip_deg=110.0, lr_unswap=True, heading_rate=0.3,
+    floor_tolerance_m=0.05,
     floor_reject_m=0.12, floor_window=150, jump_m=0.35, jump_frames=15)
 PLAUSIBILITY_PARAMS = tuple(PLAUSIBILITY_DEFAULTS)
 
@@ -94,6 +97,22 @@ def girdle_yaw(p: np.ndarray, left: int, right: int) -> float:
     return float(np.arctan2(-d[0], d[1]))
 
 
+_PERM = {'arms': np.arange(NUM_JOINTS), 'legs': np.arange(NUM_JOINTS)}
+for _g, _limbs in (('arms', ('left_arm', 'right_arm')), ('legs', ('left_leg', 'right_leg'))):
+    _a, _b = LIMB_JOINTS[_limbs[0]], LIMB_JOINTS[_limbs[1]]
+    _PERM[_g][list(_a)] = _b
+    _PERM[_g][list(_b)] = _a
+
+
+def unswap_permutation(swapped: Dict[str, bool]) -> Optional[np.ndarray]:
+    """(20,) joint index array that swaps back the girdles flagged in ``swapped`` (None: none)."""
+    perm = None
+    for g in ('arms', 'legs'):
+        if swapped.get(g):
+            perm = _PERM[g].copy() if perm is None else perm[_PERM[g]]
+    return perm
+
+
 def validate(values: Dict) -> Optional[str]:
     """Why a set of plausibility parameters is unusable, or None."""
     v = {**PLAUSIBILITY_DEFAULTS, **values}
@@ -113,10 +132,10 @@ def validate(values: Dict) -> Optional[str]:
 class PlausibilityCheck:
     """Streaming per-user plausibility (module docstring); :meth:`update` once per frame."""
 
-    def __init__(self, plausibility: bool = True, bone_tolerance: float = 0.25,
-                 bone_tolerance_m: float = 0.03, bone_reject: float = 0.5,
+    def __init__(self, plausibility: bool = True, bone_tolerance: float = 0.4,
+                 bone_tolerance_m: float = 0.03, bone_reject: float = 1.0,
                  max_segment_speed_m_s: float = 8.0, lr_flip_deg: float = 110.0,
-                 heading_rate: float = 0.3, floor_tolerance_m: float = 0.05,
+                 lr_unswap: bool = True, heading_rate: float = 0.3, floor_tolerance_m: float = 0.05,
                  floor_reject_m: float = 0.12, floor_window: int = 150, jump_m: float = 0.35,
                  jump_frames: int = 15, fps: float = 30.0):
         why = validate(dict(bone_tolerance=bone_tolerance, bone_tolerance_m=bone_tolerance_m,
@@ -132,6 +151,7 @@ class PlausibilityCheck:
         self.bone_reject = float(bone_reject)
         self.max_step = float(max_segment_speed_m_s) / float(fps)
         self.lr_flip = np.radians(float(lr_flip_deg))
+        self.lr_unswap = bool(lr_unswap)
         self.heading_rate = float(heading_rate)
         self.floor_tolerance = float(floor_tolerance_m)
         self.floor_reject = float(floor_reject_m)
@@ -153,23 +173,21 @@ class PlausibilityCheck:
         self.value = np.ones(NUM_JOINTS)
 
     # ------------------------------------------------------------------------------------
-    def _jump(self, p: np.ndarray) -> bool:
-        root = p[ROOT]
+    def _jump(self, p: np.ndarray, tracked: np.ndarray) -> bool:
+        """Whole-skeleton jump: the median distance of the TRACKED joints from where they last
+        were plausibly (a held INFERRED root snapping back is not a jump)."""
         if self._anchor is None:
-            self._anchor = root.copy()
+            self._anchor = p.copy()
             return False
-        if self._jumped == 0:
-            if np.linalg.norm(root - self._anchor) > self.jump_m:
-                self._jumped = 1
-                return True
-            self._anchor = root.copy()
-            return False
-        if np.linalg.norm(root - self._anchor) <= self.jump_m or self._jumped >= self.jump_frames:
-            self._jumped = 0
-            self._anchor = root.copy()
-            return False
-        self._jumped += 1
-        return True
+        if not tracked.any():
+            return self._jumped > 0
+        d = float(np.median(np.linalg.norm(p[tracked] - self._anchor[tracked], axis=1)))
+        if d > self.jump_m and self._jumped < self.jump_frames:
+            self._jumped += 1
+            return True
+        self._jumped = 0
+        self._anchor[tracked] = p[tracked]
+        return False
 
     def _bones(self, seg_len, both, ref) -> np.ndarray:
         excess = np.abs(seg_len - ref) - (self.bone_tolerance * ref + self.bone_tolerance_m)
@@ -196,12 +214,14 @@ class PlausibilityCheck:
         apart = abs(_wrap(hs - hh)) > self.lr_flip
         arms = apart and ds > self.lr_flip and dh <= self.lr_flip
         legs = apart and dh > self.lr_flip and ds <= self.lr_flip
-        self.swapped = {'arms': arms, 'legs': legs}
+        self.swapped = {'arms': bool(arms), 'legs': bool(legs)}
         if arms:
-            out[_ARMS] = 0.0
+            if not self.lr_unswap:
+                out[_ARMS] = 0.0
             target = hh
         elif legs:
-            out[_LEGS] = 0.0
+            if not self.lr_unswap:
+                out[_LEGS] = 0.0
             target = hs
         else:
             target = float(np.arctan2(np.sin(hs) + np.sin(hh), np.cos(hs) + np.cos(hh)))
@@ -236,7 +256,7 @@ class PlausibilityCheck:
             seg = p[_SEG_C] - p[_SEG_P]
             seg_len = np.linalg.norm(seg, axis=1)
         both = tracked[_SEG_P] & tracked[_SEG_C]
-        jump = self._jump(p)
+        jump = self._jump(p, tracked)
         self.skeleton_outlier = jump
         if jump:
             self.value = np.zeros(NUM_JOINTS)

@@ -100,7 +100,7 @@ from skeleton_core.model import (HIP_LEFT, HIP_RIGHT, MIRROR, NUM_JOINTS, NUM_SE
 
 from .completion import PCACompletion
 from .optimizer import NaturalPostureOptimizer
-from .plausibility import PLAUSIBILITY_PARAMS
+from .plausibility import PLAUSIBILITY_PARAMS, unswap_permutation
 from .posture_space import (ANCESTORS, QueryPreparer, as_database_arrays,
                             rest_directions, to_sensor_frame, user_bone_lengths, yaw_quat_matrix,
                             yaw_rotation)
@@ -136,7 +136,8 @@ OWN_PARAMS = ('use_reliability', 'use_input_reliability', 'reliable_threshold',
               'trust_mode', 'trust_sensor_ratio', 'noise_alpha', 'length_frames',
               'smooth_min_cutoff', 'smooth_beta', 'smooth_d_cutoff', 'observation_weight',
               'symmetric_lengths', 'smooth_filled_scale', 'float_root', 'height_frames',
-              'yaw_rate', 'yaw_search', 'yaw_neighbours', 'smooth_filled_speed')
+              'yaw_rate', 'yaw_search', 'yaw_neighbours', 'smooth_filled_speed',
+              'smooth_anchored_speed', 'smooth_lead')
 
 
 def split_params(method: str, params: Dict) -> tuple:
@@ -168,12 +169,12 @@ class Reconstructor:
                  trust_mode: str = 'noise_ratio', trust_sensor_ratio: float = 8.0,
                  noise_alpha: float = 0.05, length_frames: int = 15,
                  symmetric_lengths: bool = True, observation_weight: float = 0.3,
-                 smooth_min_cutoff: float = 3.0, smooth_beta: float = 10.0,
-                 smooth_d_cutoff: float = 1.0, smooth_filled_scale: float = 0.2,
+                 smooth_min_cutoff: float = 1.3, smooth_beta: float = 5.0,
+                 smooth_d_cutoff: float = 2.0, smooth_filled_scale: float = 0.2,
                  float_root: bool = True, height_frames: int = 30, yaw_rate: float = 0.5,
                  yaw_search: int = 12, yaw_neighbours: int = 5,
                  smooth_filled_speed: bool = False, smooth_anchored_speed: bool = True,
-                 **params):
+                 smooth_lead: float = 1.0, **params):
         method = str(method).upper()
         if method not in METHODS:
             raise ValueError(f'method must be one of {METHODS}, got {method!r}')
@@ -206,6 +207,9 @@ class Reconstructor:
         if not isinstance(smooth_anchored_speed, (bool, np.bool_)):
             raise ValueError('smooth_anchored_speed must be a bool')
         self.smooth_anchored_speed = bool(smooth_anchored_speed)
+        if not 0.0 <= smooth_lead <= 1.0:
+            raise ValueError('smooth_lead must be in [0, 1]')
+        self.smooth_lead = float(smooth_lead)
         self.float_root = bool(float_root)
         if int(height_frames) < 0 or int(yaw_search) < 0 or not 0.0 <= yaw_rate <= 1.0:
             raise ValueError('height_frames, yaw_search must be >= 0 and yaw_rate in [0, 1]')
@@ -546,7 +550,14 @@ class Reconstructor:
                     if anchored.any():
                         speed = scale.copy()
                         speed[:NUM_SEGMENTS] += anchored * (1.0 - scale[:NUM_SEGMENTS])
-            vr = self._seg_filter.update(vr, None, self._filter_clock_ns, scale, speed)
+            lead = None
+            if self.smooth_lead > 0.0:
+                # prediction correction on what the sensor gives reliably (filters.OneEuroFilter
+                # lead): no lag there; the database-filled segments keep the plain low-pass
+                lead = np.empty(NUM_SEGMENTS + 1)
+                lead[:NUM_SEGMENTS] = self.smooth_lead * rel_frac
+                lead[NUM_SEGMENTS] = self.smooth_lead  # the root is never heavily smoothed
+            vr = self._seg_filter.update(vr, None, self._filter_clock_ns, scale, speed, lead)
             v = vr[:NUM_SEGMENTS]
             nv = np.sqrt(np.einsum('sk,sk->s', v, v))
             keep = nv > 1e-9
@@ -567,6 +578,15 @@ class Reconstructor:
             self.timings_ms = {'reliability': 1e3 * (time.perf_counter() - t0)}
             return self._last_output.copy(stamp_ns=frame.stamp_ns,
                                           reliability=R.astype(np.float32))
+        perm = None
+        if self.reliability.plausibility.lr_unswap:
+            perm = unswap_permutation(self.reliability.plausibility.swapped)
+        if perm is not None:
+            # the sensor swapped left and right limbs (plausibility.py): swap them back, each
+            # joint with its own reliability
+            frame = frame.copy(positions=obs[perm], tracking_state=frame.tracking_state[perm])
+            obs = np.asarray(frame.positions, float)
+            R = R[perm]
         seg_obs = _SEG_DIFF @ obs
         len_obs = np.sqrt(np.einsum('sk,sk->s', seg_obs, seg_obs))
         segments = self.method != 'A' and self.output_mode == 'segments'
