@@ -23,6 +23,9 @@ from skeleton_core.conversions import SkeletonFormatError, frame_from_arrays
 from skeleton_core.health import Health
 from skeleton_core.rosnode import DiagnosticsPublisher, ParamSpec, Parameters
 
+from .plausibility import PLAUSIBILITY_PARAMS
+from .plausibility import validate as validate_plausibility
+
 # Reliability parameters (Shum et al. 2013 Sec. IV), shared by every node that may estimate it
 RELIABILITY_SPECS = [
     ParamSpec('d_min', 0.03, 'Eq. 3: minimum displacement (m) for an angle to count', (0.0, 0.5)),
@@ -47,6 +50,53 @@ RELIABILITY_SPECS = [
     ParamSpec('observed_window', 90, "reference_mode observed: frames in the running median",
               (1, 10000)),
 ]
+# Plausibility of TRACKED joints (confident failures; plausibility.py), min(Eq. 8, R_p)
+PLAUSIBILITY_SPECS = [
+    ParamSpec('plausibility', True,
+              'confident failures: lower the reliability of TRACKED joints a body cannot have '
+              '(bone lengths against the profile, segment speed, left/right against the heading, '
+              'floor, whole-skeleton jump); false = Eq. 1-8 only (paper)'),
+    ParamSpec('bone_tolerance', 0.4,
+              'plausibility: relative segment-length deviation from the user profile tolerated',
+              (0.0, 10.0)),
+    ParamSpec('bone_tolerance_m', 0.03,
+              'plausibility: absolute segment-length deviation (m) tolerated on top', (0.0, 1.0)),
+    ParamSpec('bone_reject', 1.0,
+              'plausibility: relative deviation beyond the tolerance at which a segment (and what '
+              'hangs from it) has no plausibility left', (0.01, 100.0)),
+    ParamSpec('max_segment_speed_m_s', 8.0,
+              'plausibility: fastest a segment end moves relative to its parent (m/s); faster '
+              'is a snap onset', (0.1, 1000.0)),
+    ParamSpec('latch_frames', 45,
+              'plausibility: frames a segment stays implausible after a snap onset unless it '
+              'jumps back first; 0 = the onset frame only', (0, 100000)),
+    ParamSpec('lr_flip_deg', 110.0,
+              'plausibility: a girdle (shoulders or hips) this far (deg) off the body heading, '
+              'the other girdle agreeing with it, has its left and right swapped', (1.0, 180.0)),
+    ParamSpec('lr_unswap', True,
+              'plausibility: swap detected left/right limbs back (true) or make both limbs '
+              'unreliable (false)'),
+    ParamSpec('heading_rate', 0.3,
+              'plausibility: per-frame rate at which the body heading follows the girdles that '
+              'agree with it', (0.001, 1.0)),
+    ParamSpec('floor_tolerance_m', 0.05,
+              'plausibility: depth (m) below the estimated floor a joint may reach unpunished',
+              (0.0, 2.0)),
+    ParamSpec('floor_reject_m', 0.12,
+              'plausibility: depth (m) below the floor at which a joint has no plausibility left',
+              (0.001, 5.0)),
+    ParamSpec('floor_window', 150,
+              'plausibility: frames whose lowest TRACKED foot gives the floor (median)',
+              (1, 100000)),
+    ParamSpec('jump_m', 0.35,
+              'plausibility: median distance (m) of the TRACKED joints from their last plausible '
+              'place that makes the whole skeleton another person (last output held)',
+              (0.01, 100.0)),
+    ParamSpec('jump_frames', 15,
+              'plausibility: frames a whole-skeleton jump is rejected before the new place is '
+              'accepted (re-acquisition)', (1, 10000)),
+]
+RELIABILITY_SPECS = RELIABILITY_SPECS + PLAUSIBILITY_SPECS
 RELIABILITY_NAMES = [s.name for s in RELIABILITY_SPECS]
 
 
@@ -67,7 +117,7 @@ def common_specs(input_topic: str, output_topic: str) -> List[ParamSpec]:
 def check_reliability_params(values: Dict[str, Any]) -> Optional[str]:
     if values['theta_floor_deg'] >= values['theta_roof_deg']:
         return 'theta_floor_deg must be below theta_roof_deg'
-    return None
+    return validate_plausibility({k: values[k] for k in PLAUSIBILITY_PARAMS if k in values})
 
 
 class SkeletonArrayNode(Node):

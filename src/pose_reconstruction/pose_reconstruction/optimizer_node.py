@@ -64,11 +64,16 @@ SPECS = [
               'segments: reliable observations averaged per segment length, then frozen',
               (1, 100000)),
     ParamSpec('symmetric_lengths', True, 'segments: left and right limbs share their mean lengths'),
-    ParamSpec('smooth_min_cutoff', 3.0,
+    ParamSpec('smooth_min_cutoff', 1.3,
               'segments: One Euro minimum cutoff (Hz) of segment and root smoothing, 0 = off',
               (0.0, 1000.0)),
-    ParamSpec('smooth_beta', 10.0, 'segments: One Euro speed coefficient (s/m)', (0.0, 1e6)),
-    ParamSpec('smooth_d_cutoff', 1.0, 'segments: One Euro speed cutoff (Hz)', (1e-3, 1000.0)),
+    ParamSpec('smooth_beta', 5.0, 'segments: One Euro speed coefficient (s/m)', (0.0, 1e6)),
+    ParamSpec('smooth_d_cutoff', 2.0, 'segments: One Euro speed cutoff (Hz)', (1e-3, 1000.0)),
+    ParamSpec('smooth_lead', 1.0,
+              'segments: prediction correction of the smoothing on reliable segments and the '
+              'root (fraction of the low-pass lag added back along the smoothed velocity; 1 = no '
+              'lag on a ramp, 0 = plain One Euro); filled segments keep the plain low-pass',
+              (0.0, 1.0)),
     ParamSpec('smooth_filled_scale', 0.2,
               'segments: cutoff factor of a segment the database fills in (an end with '
               'reliability 0; 1 at or above reliable_threshold, linear between), 1 = same '

@@ -15,11 +15,14 @@ Terms (each 1 = plausible):
   ``excess = |l_s - L_s| - (bone_tolerance L_s + bone_tolerance_m)``, score
   ``1 - excess / (bone_reject L_s)`` clipped to [0, 1]. Blame goes to the segment's child and, for
   a limb segment, to every joint below it (a snapped wrist drags its hand); a girdle or trunk
-  segment blames its child only. ``L`` is the profile (the reliability estimator's reference
-  lengths: captured in a reference posture, else the running median of tracked lengths).
-* **segment speed** — a limb segment's child moving faster than ``max_segment_speed_m_s``
-  relative to its parent between two frames (a snap, a swap onset) blames it and what hangs
-  from it for that frame.
+  segment blames its child only. ``L`` is the profile
+  (:attr:`~.reliability.ReliabilityEstimator.profile_lengths`: captured in a reference posture,
+  else the running median of the plausible tracked lengths; a segment not observed yet is not
+  judged).
+* **segment speed** — a segment's child moving faster than ``max_segment_speed_m_s`` relative to
+  its parent between two frames (a snap onset) blames it and what hangs from it, latched until
+  it jumps again (the snap ends) or ``latch_frames`` pass: a wrist and hand snapped together
+  onto a point their own lengths allow keeps every bone length.
 * **left/right against the heading** — the shoulder and the hip lines each give a heading; the
   body heading follows the girdles that agree with it at ``heading_rate`` per frame. A girdle
   more than ``lr_flip_deg`` off the body heading while the other girdle agrees with it has its
@@ -50,7 +53,8 @@ from skeleton_core.model import (FOOT_LEFT, FOOT_RIGHT, HIP_LEFT, HIP_RIGHT, LIM
 
 PLAUSIBILITY_DEFAULTS: Dict = dict(
     plausibility=True, bone_tolerance=0.4, bone_tolerance_m=0.03, bone_reject=1.0,
-    max_segment_speed_m_s=8.0, lr_flip_deg=110.0, lr_unswap=True, heading_rate=0.3,
+    max_segment_speed_m_s=8.0, latch_frames=45, lr_flip_deg=110.0, lr_unswap=True,
+    heading_rate=0.3,
     floor_tolerance_m=0.05,
     floor_reject_m=0.12, floor_window=150, jump_m=0.35, jump_frames=15)
 PLAUSIBILITY_PARAMS = tuple(PLAUSIBILITY_DEFAULTS)
@@ -124,8 +128,8 @@ def validate(values: Dict) -> Optional[str]:
         return 'heading_rate must be in (0, 1] and lr_flip_deg in (0, 180]'
     if not v['max_segment_speed_m_s'] > 0 or not v['jump_m'] > 0:
         return 'max_segment_speed_m_s and jump_m must be > 0'
-    if int(v['floor_window']) < 1 or int(v['jump_frames']) < 1:
-        return 'floor_window and jump_frames must be >= 1'
+    if int(v['floor_window']) < 1 or int(v['jump_frames']) < 1 or int(v['latch_frames']) < 0:
+        return 'floor_window and jump_frames must be >= 1 and latch_frames >= 0'
     return None
 
 
@@ -134,7 +138,8 @@ class PlausibilityCheck:
 
     def __init__(self, plausibility: bool = True, bone_tolerance: float = 0.4,
                  bone_tolerance_m: float = 0.03, bone_reject: float = 1.0,
-                 max_segment_speed_m_s: float = 8.0, lr_flip_deg: float = 110.0,
+                 max_segment_speed_m_s: float = 8.0, latch_frames: int = 45,
+                 lr_flip_deg: float = 110.0,
                  lr_unswap: bool = True, heading_rate: float = 0.3, floor_tolerance_m: float = 0.05,
                  floor_reject_m: float = 0.12, floor_window: int = 150, jump_m: float = 0.35,
                  jump_frames: int = 15, fps: float = 30.0):
@@ -142,7 +147,8 @@ class PlausibilityCheck:
                             bone_reject=bone_reject, floor_tolerance_m=floor_tolerance_m,
                             floor_reject_m=floor_reject_m, heading_rate=heading_rate,
                             lr_flip_deg=lr_flip_deg, max_segment_speed_m_s=max_segment_speed_m_s,
-                            jump_m=jump_m, floor_window=floor_window, jump_frames=jump_frames))
+                            jump_m=jump_m, floor_window=floor_window, jump_frames=jump_frames,
+                            latch_frames=latch_frames))
         if why:
             raise ValueError(why)
         self.enabled = bool(plausibility)
@@ -150,6 +156,7 @@ class PlausibilityCheck:
         self.bone_tolerance_m = float(bone_tolerance_m)
         self.bone_reject = float(bone_reject)
         self.max_step = float(max_segment_speed_m_s) / float(fps)
+        self.latch_frames = int(latch_frames)
         self.lr_flip = np.radians(float(lr_flip_deg))
         self.lr_unswap = bool(lr_unswap)
         self.heading_rate = float(heading_rate)
@@ -165,6 +172,8 @@ class PlausibilityCheck:
         self._floor_z: collections.deque = collections.deque(maxlen=self.floor_window)
         self.floor: Optional[float] = None
         self._last_rel: Optional[np.ndarray] = None
+        self._latch = np.zeros(NUM_SEGMENTS, int)
+        self._last_both = np.zeros(NUM_SEGMENTS, bool)
         self._anchor: Optional[np.ndarray] = None
         self._jumped = 0
         self.skeleton_outlier = False
@@ -190,17 +199,29 @@ class PlausibilityCheck:
         return False
 
     def _bones(self, seg_len, both, ref) -> np.ndarray:
-        excess = np.abs(seg_len - ref) - (self.bone_tolerance * ref + self.bone_tolerance_m)
-        score = 1.0 - np.maximum(excess, 0.0) / np.maximum(self.bone_reject * ref, 1e-6)
-        score = np.where(both, np.clip(score, 0.0, 1.0), 1.0)
-        return score
+        with np.errstate(invalid='ignore'):
+            excess = np.abs(seg_len - ref) - (self.bone_tolerance * ref + self.bone_tolerance_m)
+            score = 1.0 - np.maximum(excess, 0.0) / np.maximum(self.bone_reject * ref, 1e-6)
+        # a segment without a profile length yet (NaN) is not judged
+        return np.where(both & np.isfinite(score), np.clip(score, 0.0, 1.0), 1.0)
 
     def _speed(self, rel, both) -> np.ndarray:
+        """A segment whose child jumps faster than ``max_segment_speed_m_s`` relative to its parent
+        is latched implausible until it jumps again (the snap ends) or ``latch_frames`` pass."""
         score = np.ones(NUM_SEGMENTS)
         if self._last_rel is not None:
             step = np.linalg.norm(rel - self._last_rel, axis=1)
-            score = np.where(both & (step > self.max_step), 0.0, 1.0)
+            # TRACKED in both frames: a joint re-acquired after an occlusion may jump
+            jump = both & self._last_both & (step > self.max_step)
+            ended = jump & (self._latch > 0)          # the jump back
+            self._latch[jump & ~ended] = 1
+            self._latch[ended] = 0
+            on = self._latch > 0
+            self._latch[on] += 1
+            self._latch[self._latch > self.latch_frames] = 0
+            score[(self._latch > 0) | jump] = 0.0
         self._last_rel = rel
+        self._last_both = both
         return score
 
     def _left_right(self, p) -> np.ndarray:

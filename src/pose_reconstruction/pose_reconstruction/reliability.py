@@ -316,6 +316,18 @@ class ReliabilityEstimator:
                 self._reference = std if med is None else np.where(np.isfinite(med), med, std)
         return self._reference
 
+    @property
+    def profile_lengths(self) -> np.ndarray:
+        """(19,) the user's own segment lengths for the plausibility term: fixed or captured in a
+        reference posture, else (reference_mode 'observed') the running median of the tracked
+        lengths, NaN for a segment not observed yet (never the standard body, whose layout may
+        differ from the sensor's); reference_mode 'standard': the reference lengths."""
+        if (self._fixed_reference is not None or self._captured
+                or self.reference_mode == 'standard'):
+            return self.reference_lengths
+        med = self._observed_median
+        return np.full(NUM_SEGMENTS, np.nan) if med is None else med
+
     def _standard_lengths(self, height: float) -> np.ndarray:
         """``standard_body(height).segment_lengths``, kept for the last height asked for (the
         reference is recomputed whenever the observed median is refreshed)."""
@@ -373,9 +385,17 @@ class ReliabilityEstimator:
         seg -= p.take(_SEG_P, axis=0)
         ln = np.sqrt(np.einsum('sk,sk->s', seg, seg))
         tracked = ts == TRACKED
-        if tracked.all():
+        profile = tracked
+        rp = None
+        if self.plausibility.enabled:
+            # confident failures (plausibility.py) against the profile so far; the profile
+            # learns only from plausible joints: a hand snapped to a table for a second must not
+            # become the user's forearm
+            rp = self.plausibility.update(p, ts, self.profile_lengths, seg, ln)
+            profile = tracked & (rp >= 0.5)
+        if profile.all():
             self._observe_reference(p, seg, ln)
-        self._observe_lengths(tracked, ln)
+        self._observe_lengths(profile, ln)
         # Eq. 1-4, one new angle per frame (as behaviour_term on the last f_b + 2 positions)
         if self._last_p is not None:
             d = p - self._last_p
@@ -414,9 +434,9 @@ class ReliabilityEstimator:
         self._minima.append(m)
         w = self._gauss[len(self._minima)]
         r = w @ np.asarray(self._minima)
-        if self.plausibility.enabled:
+        if rp is not None:
             # confident failures: implausible now is unreliable now (not Gaussian-delayed)
-            np.minimum(r, self.plausibility.update(p, ts, ref, seg, ln), out=r)
+            np.minimum(r, rp, out=r)
         np.maximum(r, 0.0, out=r)
         np.minimum(r, 1.0, out=r)
         self.reliability = r
