@@ -136,3 +136,39 @@ def test_node_parameters_exist(page):
             bad += [f'{line.strip()}: {name} is not in {config.name}'
                     for name in ROS_PARAM.findall(line) if name not in keys]
     assert not bad, f'{page.name}:\n' + '\n'.join(bad)
+
+
+PACKAGES = sorted(p.parent.name for p in (ROOT / 'src').glob('*/package.xml'))
+FILE_REF = re.compile(r'^(?:src/)?([a-z_]+)/([\w/]+\.(?:py|yaml|msg|srv))$')
+MODULE_REF = re.compile(r'^([a-z_]+)\.([a-z_][\w.]*)$')
+
+
+def _file_exists(first: str, rest: str) -> bool:
+    if first in PACKAGES:
+        return any(p.is_file() for p in ((ROOT / 'src' / first / first / rest),
+                                         (ROOT / 'src' / first / rest)))
+    return (ROOT / first / rest).is_file()
+
+
+def _module_exists(pkg: str, dotted: str) -> bool:
+    """``pkg.a.b.c``: some prefix a[.b[.c]] is a module or package of pkg (the rest attributes)."""
+    parts = dotted.split('.')
+    base = ROOT / 'src' / pkg / pkg
+    return any((base.joinpath(*parts[:n]).with_suffix('.py')).is_file()
+               or (base.joinpath(*parts[:n]) / '__init__.py').is_file()
+               for n in range(1, len(parts) + 1))
+
+
+@pytest.mark.parametrize('page', PAGES, ids=_pages_ids())
+def test_code_references_exist(page):
+    """Files (``physics_sim/mjcf_world.py``, ``config/driver.yaml``) and modules
+    (``skeleton_eval.metrics.eq18_error``) named in code spans exist."""
+    bad = []
+    for span in SPAN.findall(FENCE.sub('', page.read_text())):
+        m = FILE_REF.match(span)
+        if m and not _file_exists(*m.groups()):
+            bad.append(span)
+        m = MODULE_REF.match(span)
+        if m and not span.endswith(('.py', '.yaml', '.md', '.mcap')) and m.group(1) in PACKAGES and not _module_exists(*m.groups()):
+            bad.append(span)
+    assert not bad, f'{page.name}: no such file or module: {bad}'
