@@ -5,8 +5,8 @@ RUN := scripts/run.sh
 
 help:
 	@echo "make demo       run the node graph on the default input, write out/ (bag, animation, plots)"
-	@echo "make test       bootstrap if needed and run the test suite"
-	@echo "make lint       ruff check of the whole workspace (ruff.toml; also part of make test)"
+	@echo "make test       bootstrap if needed and run the test suite (lint included)"
+	@echo "make lint       only the linter (ruff, configured in ruff.toml)"
 	@echo "make setup      only bootstrap (venv / ROS 2, launch tooling, colcon build)"
 	@echo "make build-db   build the motion database from ../shared/mocap/cmu (or built-in motions)"
 	@echo "make evaluate   accuracy table of every method on the sensor-model streams"

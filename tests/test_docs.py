@@ -2,8 +2,9 @@
 
 Every relative link resolves; every ``make TARGET``, ``ros2 run PKG EXE`` and ``ros2 launch PKG
 FILE`` written in a code span or block exists (Makefile target, console script whose module is in
-the package's own directory, launch file) with the ``--options`` given to it, every ``name:=`` given to a launch file is one of its
-arguments, every ``-p name:=`` given to a node is in its config YAML; the README stays short.
+the package's own directory, launch file) with the ``--options`` given to it; every ``name:=``
+given to a launch file is one of its arguments, every ``-p name:=`` given to a node is in its
+config YAML; files and modules named in code spans exist; the README stays short.
 """
 import re
 from pathlib import Path
@@ -169,6 +170,7 @@ def test_code_references_exist(page):
         if m and not _file_exists(*m.groups()):
             bad.append(span)
         m = MODULE_REF.match(span)
-        if m and not span.endswith(('.py', '.yaml', '.md', '.mcap')) and m.group(1) in PACKAGES and not _module_exists(*m.groups()):
+        if (m and not span.endswith(('.py', '.yaml', '.md', '.mcap')) and m.group(1) in PACKAGES
+                and not _module_exists(*m.groups())):
             bad.append(span)
     assert not bad, f'{page.name}: no such file or module: {bad}'
