@@ -181,21 +181,35 @@ class PlausibilityCheck:
         self.terms: Dict[str, np.ndarray] = {}
         self.value = np.ones(NUM_JOINTS)
 
+    def lengths_plausible(self) -> np.ndarray:
+        """(20,) bool: the joints whose segments were plausible in the last frame (length and
+        speed; not on another person): what the user's length profile may learn from. The
+        floor and left/right terms say where a joint is, not how long a segment is."""
+        if not self.enabled:
+            return np.ones(NUM_JOINTS, bool)
+        if self.skeleton_outlier:
+            return np.zeros(NUM_JOINTS, bool)
+        seg = self.terms.get('segments')
+        return np.ones(NUM_JOINTS, bool) if seg is None else seg >= 0.5
+
     # ------------------------------------------------------------------------------------
     def _jump(self, p: np.ndarray, tracked: np.ndarray) -> bool:
-        """Whole-skeleton jump: the median distance of the TRACKED joints from where they last
-        were plausibly (a held INFERRED root snapping back is not a jump)."""
+        """Whole-skeleton jump: the median distance of the joints TRACKED now and when last
+        plausible from where they were then (a held INFERRED root snapping back is not a jump;
+        fewer than 3 such joints: no judgement)."""
         if self._anchor is None:
             self._anchor = p.copy()
+            self._anchor_ok = tracked.copy()
             return False
-        if not tracked.any():
-            return self._jumped > 0
-        d = float(np.median(np.linalg.norm(p[tracked] - self._anchor[tracked], axis=1)))
-        if d > self.jump_m and self._jumped < self.jump_frames:
-            self._jumped += 1
-            return True
+        both = tracked & self._anchor_ok
+        if both.sum() >= 3:
+            d = float(np.median(np.linalg.norm(p[both] - self._anchor[both], axis=1)))
+            if d > self.jump_m and self._jumped < self.jump_frames:
+                self._jumped += 1
+                return True
         self._jumped = 0
         self._anchor[tracked] = p[tracked]
+        self._anchor_ok |= tracked
         return False
 
     def _bones(self, seg_len, both, ref) -> np.ndarray:

@@ -392,7 +392,7 @@ class ReliabilityEstimator:
             # learns only from plausible joints: a hand snapped to a table for a second must not
             # become the user's forearm
             rp = self.plausibility.update(p, ts, self.profile_lengths, seg, ln)
-            profile = tracked & (rp >= 0.5)
+            profile = tracked & self.plausibility.lengths_plausible()
         if profile.all():
             self._observe_reference(p, seg, ln)
         self._observe_lengths(profile, ln)
