@@ -47,8 +47,8 @@ PARAMS = [
               '(head_1, neck_1, ...) on /tf'),
     ParamSpec('tf_prefix', '', 'prefix of the TF joint frame names'),
     # synthetic
-    ParamSpec('scenario', 'b', 'synthetic: sensor-model scenario class a | b | c',
-              choices=('a', 'b', 'c', 'clean'), read_only=True),
+    ParamSpec('scenario', 'b', 'synthetic: sensor-model scenario class a | b | c | d (d: '
+              'confident failures)', choices=('a', 'b', 'c', 'd', 'clean'), read_only=True),
     ParamSpec('seed', 0, 'synthetic: random seed of the sensor model and motions',
               range=(0, 2 ** 31 - 1), read_only=True),
     ParamSpec('num_users', 1, 'synthetic: number of users side by side', range=(1, 6),

@@ -12,6 +12,12 @@ For every joint ``i`` and frame ``f`` three terms in [0, 1] are computed:
 and the reliability is the Gaussian-weighted sum, over the last ``f_total`` frames, of the
 per-frame minimum of the three (Eq. 8), the most recent frame weighted most.
 
+Beyond the paper (``plausibility``, default on): the Kinect's confident failures — joints reported
+TRACKED at a wrong place — are caught by :mod:`.plausibility` (bone lengths against the user's
+profile, segment speed, left/right against the heading, floor penetration, whole-skeleton jumps);
+the reliability is ``min(Eq. 8, R_p)``, so an implausible joint is unreliable from the frame it
+becomes implausible, and the length profile learns only from plausible segments.
+
 Reference segment lengths (Sec. IV-B) are captured automatically whenever every joint is tracked
 and the posture is close to one of the two reference postures (T-pose, standing with arms down),
 and refreshed the same way later. Until the first capture, ``reference_mode='observed'`` (default)

@@ -63,8 +63,8 @@ class SyntheticSource(Source):
                  sensor_params: str = '', with_truth: bool = True):
         if not 1 <= int(num_users) <= MAX_USERS:
             raise SourceError(f'num_users must be 1-{MAX_USERS}, got {num_users}')
-        if scenario not in ('clean', 'a', 'b', 'c'):
-            raise SourceError(f"scenario must be one of a, b, c (or 'clean'), got {scenario!r}")
+        if scenario not in ('clean', 'a', 'b', 'c', 'd'):
+            raise SourceError(f"scenario must be one of a, b, c, d (or 'clean'), got {scenario!r}")
         self.scenario = scenario
         self.seed = int(seed)
         self.num_users = int(num_users)
