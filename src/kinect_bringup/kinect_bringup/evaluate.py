@@ -63,6 +63,9 @@ def _parser():
     p.add_argument('--perturb-factors', default='0.5,1.5', help='--perturb: scale factors')
     p.add_argument('--perturb-groups', default='noise,offset,occlusion,failure',
                    help='--perturb: parameter groups (noise, offset, occlusion, failure)')
+    p.add_argument('--method-params', default='', metavar='JSON',
+                   help='table4 / --perturb: parameter overrides per method, e.g. '
+                        '\'{"C": {"plausibility": false, "smooth_lead": 0}}\'')
     p.add_argument('--quiet', action='store_true', help='no progress lines')
     p.add_argument('--real', nargs='?', const='auto', default=None, metavar='UIPRMD_DIR',
                    help='real-data mode: score the methods on the UI-PRMD Kinect recordings '
@@ -87,6 +90,18 @@ def run_real(args) -> int:
     return real_eval.main(argv)
 
 
+def _with_params(methods, text):
+    """``methods`` with the ``--method-params`` overrides: (name, params, name) for those named."""
+    import json
+    over = json.loads(text) if text else {}
+    if not isinstance(over, dict) or not all(isinstance(v, dict) for v in over.values()):
+        raise ValueError('--method-params must be a JSON object of objects')
+    unknown = set(over) - set(methods)
+    if unknown:
+        raise ValueError(f'--method-params names methods not run: {sorted(unknown)}')
+    return [(m, over[m], m) if m in over else m for m in methods]
+
+
 def run_perturb(args, dev_clips, source) -> int:
     from skeleton_eval import perturb as P
     from skeleton_eval.evaluation import to_json
@@ -107,8 +122,14 @@ def run_perturb(args, dev_clips, source) -> int:
     def progress(label, seed):
         if not args.quiet:
             print(f'[evaluate] perturb {label} seed {seed}', file=sys.stderr)
-    res = P.run(methods, dev_clips, scenarios, seeds, factors, groups, max_frames,
+    try:
+        run_methods = _with_params(methods, args.method_params)
+    except ValueError as exc:
+        print(f'evaluate: {exc}', file=sys.stderr)
+        return 2
+    res = P.run(run_methods, dev_clips, scenarios, seeds, factors, groups, max_frames,
                 args.sensor_params, source, progress)
+    res['method_params'] = args.method_params
     method = 'C' if 'C' in methods else methods[-1]
     md = P.to_markdown(res, method=method, reference='raw' if 'raw' in methods else methods[0])
     out = Path(args.out)
@@ -154,6 +175,11 @@ def run(argv=None) -> int:
     if args.perturb:
         return run_perturb(args, dev_clips, source)
     if exp == 'table4':
+        try:
+            methods = _with_params(methods, args.method_params)
+        except ValueError as exc:
+            print(f'evaluate: {exc}', file=sys.stderr)
+            return 2
         res = E.evaluate(methods, dev_clips, scenarios, seed=args.seed, max_frames=max_frames,
                          sensor_params=args.sensor_params, data_source=source, progress=progress,
                          repeats=args.repeats)
