@@ -161,7 +161,7 @@ def to_markdown(res: Dict, method: str = 'C', reference: str = 'raw') -> str:
               for sc in scs]
         w = np.array([c[sc]['frames'] for sc in scs], float)
 
-        def avg(d, key):
+        def avg(d, key, w=w):
             v = np.array([d[sc][key] for sc in scs], float)
             ok = np.isfinite(v)
             return float((v[ok] * w[ok]).sum() / w[ok].sum()) if ok.any() else float('nan')
