@@ -6,7 +6,8 @@ the output against the Vicon-derived joint centres registered into the sensor fr
 (:func:`skeleton_eval.paired.load_dataset`), with the same metrics as the synthetic table
 (:func:`skeleton_eval.metrics.compute_all`: Eq. 18, MPJPE after the per-session rigid registration,
 bone-direction error (length-free), bone-length std and error, jitter) plus the latency the method
-adds (the shift of its output against the raw input that fits best, ms) and the processing time.
+adds (the shift of its output against the raw input that fits best, on the joints the sensor
+reports TRACKED, ms) and the processing time.
 
 Rows: per movement (m01-m10, subjects with the reference), ``overall``, and ``m03_s01`` (the real
 tracking failure: no marker reference exists for subject 1, so only the reference-free metrics —
@@ -38,6 +39,16 @@ DEFAULT_METHODS = ('raw', 'holt', 'one_euro', 'A', 'B', 'C')
 TABLE_METRICS = (('eq18_cm', 'Eq.18 (cm)'), ('mpjpe_cm', 'MPJPE (cm)'),
                  ('bone_dir_deg', 'bone dir (deg)'), ('bone_std_cm', 'bone-length std (cm)'),
                  ('bone_err_cm', 'bone-length err (cm)'), ('jitter_ms2', 'jitter (m/s^2)'))
+
+
+def tracked_only(stream) -> np.ndarray:
+    """The raw positions with every joint the sensor did not report TRACKED set to NaN: the
+    latency is measured on the joints the sensor gives (the hands, not recorded and
+    extrapolated NOT_TRACKED, are left out as from every other score)."""
+    from skeleton_core.model import TRACKED
+    raw = np.array(stream.positions, float)
+    raw[np.asarray(stream.tracking_state) != TRACKED] = np.nan
+    return raw
 
 
 def make_streams(clips, fps: float = 30.0) -> Dict[str, list]:
@@ -112,7 +123,7 @@ def evaluate_real(src, methods: Optional[Sequence[str]] = None, subjects=None, m
                 out, t = E.run_method(method, s)
                 parts.append(M.compute_all(out, s.truth, s.fps))
                 weights.append(len(s))
-                lats.append(added_latency_ms(out, s.positions, s.fps))
+                lats.append(added_latency_ms(out, tracked_only(s), s.fps))
                 times.append(t)
                 if progress:
                     progress(name, row, s.clip_name)
