@@ -153,6 +153,8 @@ def main(argv=None) -> int:
     ap.add_argument('--e1', type=float, default=None, help='e1 threshold (default: node default)')
     ap.add_argument('--e2', type=float, default=None)
     ap.add_argument('--min-activity', type=float, default=None)
+    ap.add_argument('--set', action='append', default=[], metavar='KEY=VALUE',
+                    help='another recognizer parameter (RecognizerParams field), e.g. smoothing=0.1')
     a = ap.parse_args(argv)
     world = load_world(a.world)
     rp = RecognizerParams()
@@ -162,6 +164,12 @@ def main(argv=None) -> int:
         rp.e2_threshold = a.e2
     if a.min_activity is not None:
         rp.min_activity = a.min_activity
+    for kv in a.set:
+        k, _, val = kv.partition('=')
+        if not hasattr(rp, k):
+            ap.error(f'--set {kv}: no recognizer parameter {k}')
+        setattr(rp, k, type(getattr(rp, k))(float(val)))
+    rp.validate()
     seed0 = 0 if a.dev else 1000
     try:
         commit = subprocess.run(['git', 'rev-parse', '--short', 'HEAD'], capture_output=True,
@@ -170,8 +178,7 @@ def main(argv=None) -> int:
         commit = '?'
     print(f'# bench_control world={world.name} seeds={"dev" if a.dev else "test"} '
           f'performers={a.performers} noise={not a.no_noise} commit={commit}')
-    print(f'# thresholds e1={rp.e1_threshold} e2={rp.e2_threshold} '
-          f'min_activity={rp.min_activity}')
+    print(f'# recognizer {rp}')
     t0 = time.time()
     r = recognition(world, rp, seed0, a.performers, not a.no_noise)
     rate = r['hit'] / max(r['windows'], 1)

@@ -75,22 +75,23 @@ def reconstruction_error(v: np.ndarray, a: np.ndarray) -> np.ndarray:
 
 @dataclass
 class RecognizerParams:
-    e1_threshold: float = 0.02
-    e2_threshold: float = 0.01
+    e1_threshold: float = 0.03
+    e2_threshold: float = 0.03
     tau: float = 0.25           # s: weight of velocities against positions in w
-    lag: int = 3                # frames: velocity and dw over this many frames
-    smoothing: float = 0.15     # s: time constant of the error averages
-    min_activity: float = 0.35  # share of the example's RMS effector speed needed
-    activity_window: float = 0.6   # s: time constant of the mean squared speed (the gate)
-    prefilter: float = 0.08     # s: exponential low-pass of the relative joint positions (noise)
+    lag: int = 2                # frames: velocity and dw over this many frames
+    smoothing: float = 0.05     # s: time constant of the error averages
+    min_activity: float = 0.3   # share of the example's RMS effector speed needed
+    activity_window: float = 0.3   # s: time constant of the mean squared speed (the gate)
+    activity_lag: int = 9       # frames: the gate's speed is the displacement over this many
+    prefilter: float = 0.05     # s: exponential low-pass of the relative joint positions (noise)
     fps: float = 30.0
 
     def validate(self) -> None:
         for k in ('e1_threshold', 'e2_threshold', 'tau', 'fps'):
             if not getattr(self, k) > 0:
                 raise ValueError(f'{k} must be positive')
-        if not 1 <= int(self.lag) <= 30:
-            raise ValueError('lag must be in [1, 30] frames')
+        if not 1 <= int(self.lag) <= 30 or not 1 <= int(self.activity_lag) <= 60:
+            raise ValueError('lag must be in [1, 30] frames, activity_lag in [1, 60]')
         if not (self.smoothing >= 0 and self.min_activity >= 0 and self.activity_window >= 0):
             raise ValueError('smoothing, activity_window and min_activity must be >= 0')
 
@@ -121,8 +122,12 @@ class ExampleModel:
         w = feature_vectors(self.positions, self.effectors, self.height, params)
         self.w = w
         self.mean, self.A, self.eigenvalues = pca_basis(w, components)
-        npos = 3 * len(self.effectors)
-        self.rms_speed = float(np.sqrt(np.mean(np.sum(w[:, npos:] ** 2, axis=1)))) / params.tau
+        # the activity gate's normaliser: the example's RMS effector speed measured as the gate
+        # measures it (displacement over activity_lag frames)
+        r = relative_effectors(self.positions, self.effectors) / self.height
+        k = min(int(params.activity_lag), len(r) - 1)
+        v = (r[k:] - r[:-k]).reshape(len(r) - k, -1) * (params.fps / k)
+        self.rms_speed = float(np.sqrt(np.mean(np.sum(v * v, axis=1))))
 
     def errors(self, w: np.ndarray, dw: np.ndarray):
         return (float(reconstruction_error(w - self.mean, self.A)),
@@ -176,15 +181,18 @@ class IntentionRecognizer:
             rel = self._hist[-1] + g * (rel - self._hist[-1])
         self._hist.append(rel)
         lag = int(prm.lag)
-        if len(self._hist) > lag + 1:
+        keep = max(lag, int(prm.activity_lag)) + 1
+        if len(self._hist) > keep:
             self._hist.pop(0)
         dt = 1.0 / prm.fps if self._last_t is None else max(t - self._last_t, 1e-3)
         self._last_t = t
         alpha = 1.0 if prm.smoothing <= 0 else 1.0 - math.exp(-dt / prm.smoothing)
         beta = 1.0 if prm.activity_window <= 0 else 1.0 - math.exp(-dt / prm.activity_window)
         out = {}
-        old = self._hist[0]
-        k = len(self._hist) - 1
+        k = min(len(self._hist) - 1, lag)
+        old = self._hist[-1 - k]
+        ka = min(len(self._hist) - 1, int(prm.activity_lag))
+        old_a = self._hist[-1 - ka]
         for m in self.models:
             idx = list(m.effectors)
             r = rel[idx].reshape(-1)
@@ -196,7 +204,8 @@ class IntentionRecognizer:
                 wh.pop(0)
             dw = w - wh[0]
             e1, e2 = m.errors(w, dw)
-            sp2 = float(np.sum(v * v)) / max(m.rms_speed, 1e-9) ** 2
+            va = (r - old_a[idx].reshape(-1)) * (prm.fps / ka) if ka else np.zeros_like(r)
+            sp2 = float(np.sum(va * va)) / max(m.rms_speed, 1e-9) ** 2
             a = self._avg.get(m.name)
             if a is None:
                 a = self._avg[m.name] = [e1, e2, sp2]
