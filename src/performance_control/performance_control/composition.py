@@ -23,11 +23,12 @@ import math
 from typing import Dict, List, Optional, Sequence
 
 import numpy as np
-from skeleton_core.model import (HEAD, HIP_CENTER, SHOULDER_CENTER, SPINE, ANKLE_LEFT, ANKLE_RIGHT, ELBOW_LEFT, ELBOW_RIGHT, FOOT_LEFT,
-                                 FOOT_RIGHT, HAND_LEFT, HAND_RIGHT, HIP_LEFT, HIP_RIGHT,
-                                 JOINT_INDEX, KNEE_LEFT, KNEE_RIGHT, NUM_JOINTS, SEGMENT_CHILDREN,
-                                 SEGMENT_PARENTS, SEGMENT_RADIUS_FRACTION, JOINT_NAMES,
-                                 SHOULDER_LEFT, SHOULDER_RIGHT, WRIST_LEFT, WRIST_RIGHT, subtree)
+from skeleton_core.model import (ANKLE_LEFT, ANKLE_RIGHT, ELBOW_LEFT, ELBOW_RIGHT, FOOT_LEFT,
+                                 FOOT_RIGHT, HAND_LEFT, HAND_RIGHT, HEAD, HIP_CENTER, HIP_LEFT,
+                                 HIP_RIGHT, JOINT_NAMES, KNEE_LEFT, KNEE_RIGHT, NUM_JOINTS,
+                                 SEGMENT_CHILDREN, SEGMENT_PARENTS, SEGMENT_RADIUS_FRACTION,
+                                 SHOULDER_CENTER, SHOULDER_LEFT, SHOULDER_RIGHT, SPINE, WRIST_LEFT,
+                                 WRIST_RIGHT, subtree)
 
 from .intention import ExampleModel, center_of_mass, pca_basis, yaw_rotation
 

@@ -16,7 +16,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
-from typing import Dict, List, Optional
+from typing import Dict, Optional
 
 import numpy as np
 from physics_sim.simulation import SensorPose
@@ -123,7 +123,6 @@ class PerformanceController:
 
     def _start_com(self, rel_world: np.ndarray) -> np.ndarray:
         """Where the COM starts: the world's spawn on the floor, or the start feature's pose."""
-        h = self.height
         feet_z = min(rel_world[FOOT_LEFT, 2], rel_world[FOOT_RIGHT, 2])
         stand = np.array([*self.world.spawn, -feet_z + 0.04])
         if not self.start:

@@ -2,7 +2,7 @@
 without mocap data, and the users' imitations of them used by the tests and the benchmark.
 
 Each generator returns joint positions (T, 20, 3) at ``fps`` on a given body, built with
-:func:`skeleton_core.motions.pose_from_rotations` (exact segment lengths):
+:func:`skeleton_data.motions.pose_from_rotations` (exact segment lengths):
 
 * ``monkey_swing`` -- hanging from a bar with both hands, the whole body swinging about the bar
   (pitch ``amplitude_deg``), hips and knees lagging the swing; one cycle = ``period`` s.
@@ -26,7 +26,7 @@ from skeleton_core.geometry import quat_rotate
 from skeleton_core.model import (ANKLE_LEFT, ANKLE_RIGHT, ELBOW_LEFT, ELBOW_RIGHT, FOOT_LEFT,
                                  FOOT_RIGHT, HAND_LEFT, HAND_RIGHT, KNEE_LEFT, KNEE_RIGHT,
                                  WRIST_LEFT, WRIST_RIGHT, Body, standard_body)
-from skeleton_core.motions import pose_from_rotations
+from skeleton_data.motions import pose_from_rotations
 
 FPS = 30.0
 
@@ -201,10 +201,7 @@ def example_motion(example, body: Optional[Body] = None, fps: float = FPS) -> np
     (default the standard body), or the frames of its BVH file."""
     body = body or standard_body()
     if example.bvh:
-        try:
-            from skeleton_data.mocap import load_cmu_clip   # after the package split
-        except ImportError:
-            from skeleton_core.mocap import load_cmu_clip
+        from skeleton_data.mocap import load_cmu_clip
         clip = load_cmu_clip(example.bvh)
         p = np.asarray(clip.positions, float)
         if clip.fps != fps:

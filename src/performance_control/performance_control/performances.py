@@ -15,7 +15,7 @@ from typing import Dict, List, Optional, Tuple
 
 import numpy as np
 from skeleton_core.model import Body, standard_body
-from skeleton_core.motions import builtin_clips, pose_from_rotations
+from skeleton_data.motions import builtin_clips, pose_from_rotations
 
 from .examples import FPS, _legs, imitation, random_style
 
@@ -111,10 +111,7 @@ def to_sensor(positions: np.ndarray, name: str, seed: int, noise: bool = True,
               sensor_params=None) -> np.ndarray:
     """A world clip as the sensor reports it (sensor frame): the sensor model's stream (placement,
     noise, dropouts; scenario a) or, with ``noise=False``, just placed 2.5 m ahead facing it."""
-    try:
-        from skeleton_eval.sensor_model import SensorModel   # after the package split
-    except ImportError:
-        from skeleton_core.sensor_model import SensorModel
+    from skeleton_eval.sensor_model import SensorModel
     sm = SensorModel(PERFORMANCE_PLACEMENT if sensor_params is None else sensor_params, seed=seed)
     clip = SimpleNamespace(name=name, positions=positions, fps=FPS)
     if not noise:
@@ -123,4 +120,5 @@ def to_sensor(positions: np.ndarray, name: str, seed: int, noise: bool = True,
     return np.asarray(s.positions, float)
 
 
-__all__ = ['PERFORMANCE_PLACEMENT', 'SENSOR_HEIGHT', 'imitation_stream', 'jump_stream', 'non_imitation_clips', 'to_sensor', 'performer']
+__all__ = ['PERFORMANCE_PLACEMENT', 'SENSOR_HEIGHT', 'imitation_stream', 'jump_stream',
+           'non_imitation_clips', 'to_sensor', 'performer']
