@@ -10,6 +10,7 @@ from performance_control.features import EFFECTORS, WorldError, load_world, pars
 from skeleton_core.model import standard_body
 
 WORLD = load_world('playground')
+BAR_Z = WORLD.features['monkey_bars'].geoms[0].vec('from')[2]
 UP = {'HandLeft': np.array([0.0, 0.2, 1.1]), 'HandRight': np.array([0.0, -0.2, 1.1]),
       'FootLeft': np.array([0.0, 0.1, -0.95]), 'FootRight': np.array([0.0, -0.1, -0.95])}
 
@@ -23,7 +24,7 @@ def _hold(dp, seconds, rel=None):
 
 def test_engage_holds_the_character_and_release_drops_it():
     bars = WORLD.features['monkey_bars']
-    dp = DynamicProcess(WORLD, 75.0, [3.0, 0.0, 2.4 - 1.1], UP)
+    dp = DynamicProcess(WORLD, 75.0, [3.0, 0.0, BAR_Z - 1.1], UP)
     for e in ('HandLeft', 'HandRight'):
         dist, body, pt = dp.feature_distance(e, bars)
         assert body == 'world' and dist < bars.engage.distance
@@ -33,8 +34,8 @@ def test_engage_holds_the_character_and_release_drops_it():
     # hanging: the hands stay on the bar, the COM hangs below it at |r^| minus the spring's sag
     # (m g / 2 ks per arm = 75 * 9.81 / 18000 = 4 cm)
     assert dp.constraint_gap() < 0.005
-    assert dp.effectors()[0] == pytest.approx([3.0, 0.2, 2.4], abs=0.01)
-    assert 2.4 - 1.1 - 0.08 < dp.com[2] < 2.4 - 1.1 + 0.01
+    assert dp.effectors()[0] == pytest.approx([3.0, 0.2, BAR_Z], abs=0.01)
+    assert BAR_Z - 1.1 - 0.08 < dp.com[2] < BAR_Z - 1.1 + 0.01
     z_hang = dp.com[2]
     dp.release_all()
     assert not dp.contacts and not dp.data.eq_active.any()
@@ -45,7 +46,7 @@ def test_engage_holds_the_character_and_release_drops_it():
 def test_user_swinging_the_arms_swings_the_character_about_the_bar():
     """Fig. 4: the pitch PD through the contact turns the user's arm swing into a COM swing."""
     bars = WORLD.features['monkey_bars']
-    dp = DynamicProcess(WORLD, 75.0, [3.0, 0.0, 1.3], UP)
+    dp = DynamicProcess(WORLD, 75.0, [3.0, 0.0, BAR_Z - 1.1], UP)
     for e in ('HandLeft', 'HandRight'):
         _, body, pt = dp.feature_distance(e, bars)
         dp.engage(e, bars, body, pt)

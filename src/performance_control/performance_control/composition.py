@@ -24,10 +24,10 @@ from typing import Dict, List, Optional, Sequence
 
 import numpy as np
 from skeleton_core.model import (ANKLE_LEFT, ANKLE_RIGHT, ELBOW_LEFT, ELBOW_RIGHT, FOOT_LEFT,
-                                 FOOT_RIGHT, HAND_LEFT, HAND_RIGHT, HEAD, HIP_CENTER, HIP_LEFT,
+                                 FOOT_RIGHT, HAND_LEFT, HAND_RIGHT, HIP_LEFT,
                                  HIP_RIGHT, JOINT_NAMES, KNEE_LEFT, KNEE_RIGHT, NUM_JOINTS,
                                  SEGMENT_CHILDREN, SEGMENT_PARENTS, SEGMENT_RADIUS_FRACTION,
-                                 SHOULDER_CENTER, SHOULDER_LEFT, SHOULDER_RIGHT, SPINE, WRIST_LEFT,
+                                 SHOULDER_LEFT, SHOULDER_RIGHT, WRIST_LEFT,
                                  WRIST_RIGHT, subtree)
 
 from .intention import ExampleModel, center_of_mass, pca_basis, yaw_rotation
@@ -41,6 +41,9 @@ CHAINS = {'HandLeft': (SHOULDER_LEFT, ELBOW_LEFT, WRIST_LEFT, HAND_LEFT),
 BRANCH = {'HandLeft': subtree(ELBOW_LEFT), 'HandRight': subtree(ELBOW_RIGHT),
           'FootLeft': subtree(KNEE_LEFT), 'FootRight': subtree(KNEE_RIGHT)}
 _SEG_R = np.array([SEGMENT_RADIUS_FRACTION[JOINT_NAMES[c]] for c in SEGMENT_CHILDREN])
+# the segments that move with the body as a whole (trunk, head, pelvis, legs; not the arms)
+_BODY_SEGS = [(a, b) for a, b in zip(SEGMENT_PARENTS, SEGMENT_CHILDREN)
+              if b not in subtree(SHOULDER_LEFT) + subtree(SHOULDER_RIGHT)]
 # radius (fraction of height) of the thickest segment capsule meeting at each joint
 _JOINT_R = np.zeros(NUM_JOINTS)
 for _k, (_a, _b) in enumerate(zip(SEGMENT_PARENTS, SEGMENT_CHILDREN)):
@@ -159,15 +162,19 @@ def integrate_motion(pose: np.ndarray, com_target: np.ndarray,
             off = p[eff] - p[c]
             mid, end = _two_bone(p[a], p[b], p[c], np.asarray(tgt, float) - off)
             p[b], p[c], p[eff] = mid, end, end + off
-    if obstacles is not None and contacts:
+    if obstacles is not None:
         # the trunk and head clear the features by moving the whole body (the held limbs bend
         # to keep their contacts), then the IK again
-        for _ in range(3):
-            move = obstacles.trunk_clearance(p, height)
+        # away from the features: backwards (a character holds a rope or a bar in front of it)
+        from skeleton_core.geometry import facing_yaw
+        yaw = float(facing_yaw(p))
+        direction = np.array([-math.cos(yaw), -math.sin(yaw), 0.0])
+        for _ in range(10):
+            move, direction = obstacles.trunk_clearance(p, height, direction)
             if not np.any(move):
                 break
             p += move
-            for e, tgt in contacts.items():
+            for e, tgt in (contacts or {}).items():
                 a, b, c, eff = CHAINS[e]
                 off = p[eff] - p[c]
                 mid, end = _two_bone(p[a], p[b], p[c], np.asarray(tgt, float) - off)
@@ -213,26 +220,34 @@ class Obstacles:
         cp = a[None] + t[..., None] * ab[None]
         return np.linalg.norm(pts[:, None, :] - cp, axis=2), cp
 
-    def trunk_clearance(self, p: np.ndarray, height: float) -> np.ndarray:
-        """The translation (3,) that takes the trunk and head capsules out of the capsule
-        obstacles (bars, rope): the largest of the per-point push-outs."""
+    def trunk_clearance(self, p: np.ndarray, height: float,
+                        direction: Optional[np.ndarray] = None):
+        """(translation (3,), direction) that moves the body's capsules (all but the arms) out of the
+        capsule obstacles (bars, rope) horizontally: the direction away from the deepest
+        obstacle, seen from the trunk's centre (kept from the first call when given: a rope
+        across the trunk would otherwise push it back and forth), the length of the deepest
+        penetration."""
         a, b, rc, _ = self._caps()
         if not len(rc):
-            return np.zeros(3)
-        ts = np.linspace(0.0, 1.0, 4)
-        segs = [(HIP_CENTER, SPINE), (SPINE, SHOULDER_CENTER), (SHOULDER_CENTER, HEAD)]
+            return np.zeros(3), direction
+        ts = np.linspace(0.0, 1.0, 9)   # a superset of the metric's 5 samples
+        segs = _BODY_SEGS
         pts = np.concatenate([p[i] + ts[:, None] * (p[j] - p[i]) for i, j in segs])
         rad = np.repeat([_SEG_R[SEGMENT_CHILDREN.index(j)] * height for _, j in segs], len(ts))
         d, cp = self._dist(pts, a, b)
         depth = rad[:, None] + rc[None] - d
         i, k = np.unravel_index(np.argmax(depth), depth.shape)
         if depth[i, k] <= 0:
-            return np.zeros(3)
-        n = pts[i] - cp[i, k]
-        n[2] = 0.0          # horizontally: the body hangs where the contacts hold it
-        nn = np.linalg.norm(n)
-        n = n / nn if nn > 1e-9 else np.array([-1.0, 0.0, 0.0])
-        return n * (depth[i, k] + 1e-3)
+            return np.zeros(3), direction
+        if direction is None:
+            centre = pts.mean(axis=0)
+            ab = b[k] - a[k]
+            t = np.clip((centre - a[k]) @ ab / max(ab @ ab, 1e-12), 0.0, 1.0)
+            n = centre - (a[k] + t * ab)
+            n[2] = 0.0          # horizontally: the body hangs where the contacts hold it
+            nn = np.linalg.norm(n)
+            direction = n / nn if nn > 1e-9 else np.array([-1.0, 0.0, 0.0])
+        return direction * (depth[i, k] + 1e-3), direction
 
     def push_out(self, p: np.ndarray, skip, height: float) -> None:
         """Project joints (not in ``skip``) out of the obstacles, in place."""

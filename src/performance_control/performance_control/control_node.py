@@ -40,7 +40,7 @@ from .markers import contact_shapes, to_marker_array, world_shapes
 
 REC_KEYS = ('e1_threshold', 'e2_threshold', 'tau', 'smoothing', 'min_activity',
             'activity_window', 'prefilter')
-CTRL_KEYS = ('free_gain', 'release_after', 'hand_release_margin', 'foot_down_height',
+CTRL_KEYS = ('free_gain', 'release_after', 'hand_release_margin', 'regrab_speed', 'foot_down_height',
              'blend_time', 'w_e', 'w_s')
 _R = RecognizerParams()
 _C = ControlParams()
@@ -78,6 +78,9 @@ PARAMS: List[ParamSpec] = [
               range=(0.0, 60.0)),
     ParamSpec('hand_release_margin', _C.hand_release_margin, 'm: a held hand lets go when the '
               'user\'s hand drops this far below the feature\'s engage joint', range=(0.0, 1.0)),
+    ParamSpec('regrab_speed', _C.regrab_speed, 'm/s: on a feature with engage.regrab (the rope) a '
+              'held hand the user raises faster lets go to grab higher (hand over hand)',
+              range=(0.05, 10.0)),
     ParamSpec('foot_down_height', _C.foot_down_height, 'm: the user\'s foot this close to their '
               'floor is constrained (may hold the floor / trampoline)', range=(0.005, 0.5)),
     ParamSpec('free_gain', _C.free_gain, 'N/m (N/rad): gain of effectors without a contact',

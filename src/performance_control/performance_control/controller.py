@@ -40,6 +40,7 @@ class ControlParams:
     free_gain: float = 1500.0          # N/m (N/rad): effectors without a contact follow the user
     release_after: float = 1.0         # s without imitation before held hands let go (0 = never)
     hand_release_margin: float = 0.05  # m below the engage joint before a hand lets go
+    regrab_speed: float = 0.5          # m/s: a held hand raised faster lets go (regrab features)
     foot_down_height: float = 0.06     # m: user's foot this close to the user's floor = constrained
     blend_time: float = 0.3            # s: transition in/out of the composed pose (Sec. 6.2)
     compose_components: int = 6        # pose PCA size m of Eq. 7
@@ -116,6 +117,8 @@ class PerformanceController:
         self.blend_feature = ''
         self.obstacles = Obstacles()
         self.frames = 0
+        self._hand_z: Dict[str, float] = {}
+        self._hand_vz: Dict[str, float] = {e: 0.0 for e in HANDS}
 
     # ------------------------------------------------------------------ set-up
     def _offsets(self, rel_world: np.ndarray) -> Dict[str, np.ndarray]:
@@ -147,7 +150,8 @@ class PerformanceController:
         if kind == 'water':
             g = next(g for g in f.geoms if g.type == 'volume')
             c = g.vec('center')
-            return np.array([c[0], c[1], float(st.get('com_z', c[2]))])
+            xy = np.asarray(st.get('com_xy', c[:2]), float)
+            return np.array([xy[0], xy[1], float(st.get('com_z', c[2]))])
         if kind == 'trampoline':
             g = next(g for g in f.geoms if g.type == 'box')
             c, hf = g.vec('center'), g.vec('half')
@@ -214,6 +218,16 @@ class PerformanceController:
     def _user_foot_down(self, p: np.ndarray, e: str) -> bool:
         return bool(p[JOINT_INDEX[e], 2] - self.user_floor < self.params.foot_down_height)
 
+    def _track_hands(self, p: np.ndarray, dt: float) -> None:
+        """Smoothed vertical speed (0.1 s) of the user's hands relative to their COM."""
+        com_z = float(center_of_mass(p)[2])
+        g = 1.0 - math.exp(-dt / 0.1)
+        for e in HANDS:
+            z = float(p[JOINT_INDEX[e], 2]) - com_z
+            if e in self._hand_z:
+                self._hand_vz[e] += g * ((z - self._hand_z[e]) / dt - self._hand_vz[e])
+            self._hand_z[e] = z
+
     def _update_contacts(self, p: np.ndarray, recs: Dict[str, Recognition], t: float) -> None:
         dp, prm = self.dp, self.params
         vel = dp.effector_velocities()
@@ -225,7 +239,11 @@ class PerformanceController:
                     lost = (f.name in self.models and prm.release_after > 0
                             and t - max(self.last_imitation.get(f.name, c.since_wall),
                                         c.since_wall) > prm.release_after)
-                    if lost or not self._user_hand_raised(p, e, f, prm.hand_release_margin):
+                    other = HANDS[1 - HANDS.index(e)]
+                    regrab = (f.engage.regrab and other in dp.contacts
+                              and self._hand_vz[e] > prm.regrab_speed)
+                    if lost or regrab or not self._user_hand_raised(p, e, f,
+                                                                    prm.hand_release_margin):
                         dp.release(e)
                 elif not self._user_foot_down(p, e):
                     dp.release(e)
@@ -260,6 +278,7 @@ class PerformanceController:
         self.t_last = t
         self.frames += 1
         recs = self.recognizer.update(p, t)
+        self._track_hands(p, dt)
         for n, r in recs.items():
             if r.imitating:
                 self.last_imitation[n] = t

@@ -53,13 +53,16 @@ class Engage:
     """Engage conditions C (Sec. 4, 8): an effector may hold the feature when it is within
     ``distance`` of the geometry, the user's hand is above ``hand_above`` (a joint name; the
     paper's "hand closed") and the effector is slower than ``max_speed``; ``com_inside``: the
-    feature engages when the character's COM is inside its volume."""
+    feature engages when the character's COM is inside its volume; ``regrab``: while the other
+    hand holds, a hand the user raises faster than the controller's ``regrab_speed`` lets go (and
+    grabs again higher up: hand over hand)."""
 
     effectors: Tuple[str, ...] = ()
     distance: float = 0.1
     hand_above: Optional[str] = None
     max_speed: float = float('inf')
     com_inside: bool = False
+    regrab: bool = False     # a held hand the user moves up fast lets go to grab higher (climb)
 
 
 @dataclass
@@ -186,7 +189,8 @@ def parse_world(doc: Dict, path: str = '<dict>') -> World:
             if above is not None and above not in JOINT_INDEX:
                 raise ValueError(f'engage.hand_above {above!r} is not a joint name')
             engage = Engage(eff, float(ed.get('distance', 0.1)), above,
-                            float(ed.get('max_speed', float('inf'))), bool(ed.get('com_inside', False)))
+                            float(ed.get('max_speed', float('inf'))), bool(ed.get('com_inside', False)),
+                            bool(ed.get('regrab', False)))
             if not engage.distance > 0:
                 raise ValueError('engage.distance must be positive')
             ex = None
