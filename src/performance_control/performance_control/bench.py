@@ -168,7 +168,11 @@ def main(argv=None) -> int:
         k, _, val = kv.partition('=')
         if not hasattr(rp, k):
             ap.error(f'--set {kv}: no recognizer parameter {k}')
-        setattr(rp, k, type(getattr(rp, k))(float(val)))
+        cur = getattr(rp, k)
+        if isinstance(cur, bool):
+            setattr(rp, k, val.lower() in ('1', 'true', 'yes'))
+        else:
+            setattr(rp, k, val if isinstance(cur, str) else type(cur)(float(val)))
     rp.validate()
     seed0 = 0 if a.dev else 1000
     try:

@@ -145,6 +145,8 @@ def integrate_motion(pose: np.ndarray, com_target: np.ndarray,
     the mean residual when a contact is out of reach), joints pushed out of ``obstacles``."""
     p = np.array(pose, float)
     p += np.asarray(com_target, float) - center_of_mass(p)
+    if obstacles is not None:     # only what the body can reach this frame
+        obstacles = obstacles.near(com_target, 1.5 * height)
     if contacts:
         shift = np.zeros(3)
         for e, tgt in contacts.items():
@@ -204,6 +206,18 @@ class Obstacles:
                      np.array([x[1] for x in c]).reshape(-1, 3),
                      np.array([x[2] for x in c], float), [x[3] for x in c])
         return self
+
+    def near(self, point: np.ndarray, radius: float) -> 'Obstacles':
+        """The obstacles whose capsules pass within ``radius`` of ``point`` (boxes and the floor
+        kept): the per-frame constraints and the metric then test a few capsules, not all."""
+        a, b, rc, feats = self._caps()
+        out = Obstacles()
+        out.boxes, out.floor = self.boxes, self.floor
+        if len(rc):
+            d, _ = self._dist(np.asarray(point, float)[None], a, b)
+            keep = np.nonzero(d[0] - rc < radius)[0]
+            out.capsules = [self.capsules[k] for k in keep]
+        return out.freeze()
 
     def _caps(self):
         if self._arr is None or len(self._arr[2]) != len(self.capsules):

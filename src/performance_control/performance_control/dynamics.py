@@ -265,17 +265,18 @@ class DynamicProcess:
                                rh, rhd, self._gains, self._yaw)
 
     def step(self, duration: float) -> None:
-        """Advance ``duration`` s."""
+        """Advance ``duration`` s: at every physics step Eq. 2-4 from the current state (one numba
+        call writing ``xfrc_applied``), then ``mj_step``."""
         m, d = self.model, self.data
         self._update_water()
         n = max(1, int(round(duration / m.opt.timestep)))
         xfrc = d.xfrc_applied
+        xfrc[:] = 0.0
+        xpos, qvel = d.xpos, d.qvel
         for _ in range(n):
-            f = self.forces(self.time)
-            xfrc[:] = 0.0
-            xfrc[self.eff_body, :3] = f
-            xfrc[self.com_body, :3] = -f.sum(axis=0)
-            xfrc[self.com_body, 2] += self._buoy
+            _apply_forces(xpos, qvel, xfrc, self.com_body, self.com_dof, self.eff_body,
+                          self.eff_dof, self._r0, self._r1, self.time, self._t0, self._period,
+                          self._gains, self._yaw, self._buoy)
             mujoco.mj_step(m, d)
             self.time = float(d.time)
         if not (np.all(np.isfinite(d.qpos)) and np.all(np.isfinite(d.qvel))):
@@ -329,6 +330,33 @@ def _contact_forces(x, v, pe, ve, rh_w, rhd_w, g, yaw):  # pragma: no cover - nu
         out[k, 1] = s * f[0] + c * f[1]
         out[k, 2] = f[2]
     return out
+
+
+@njit(cache=True)
+def _apply_forces(xpos, qvel, xfrc, com_body, com_dof, eff_body, eff_dof, r0, r1, t, t0, period,
+                  gains, yaw, buoy):  # pragma: no cover - numba
+    """One step's forces into ``xfrc`` (MuJoCo's xfrc_applied): Eq. 2-4 on the effectors at
+    time ``t`` (targets interpolated from ``r0`` to ``r1`` over ``period`` from ``t0``), their
+    sum reversed on the COM (Eq. 1) with the buoyancy ``buoy`` (N, up)."""
+    s = min(max((t - t0) / period, 0.0), 1.0)
+    rh = r0 + s * (r1 - r0)
+    rhd = (r1 - r0) / period if s < 1.0 else np.zeros_like(r0)
+    pe = np.empty((4, 3))
+    ve = np.empty((4, 3))
+    for k in range(4):
+        for a in range(3):
+            pe[k, a] = xpos[eff_body[k], a]
+            ve[k, a] = qvel[eff_dof[k] + a]
+    x = xpos[com_body].copy()
+    v = qvel[com_dof:com_dof + 3].copy()
+    f = _contact_forces(x, v, pe, ve, rh, rhd, gains, yaw)
+    for a in range(3):
+        tot = 0.0
+        for k in range(4):
+            xfrc[eff_body[k], a] = f[k, a]
+            tot += f[k, a]
+        xfrc[com_body, a] = -tot
+    xfrc[com_body, 2] += buoy
 
 
 __all__ = ['DynamicProcess', 'Contact', 'GAIN_KEYS']

@@ -84,12 +84,21 @@ class RecognizerParams:
     activity_window: float = 0.3   # s: time constant of the mean squared speed (the gate)
     activity_lag: int = 9       # frames: the gate's speed is the displacement over this many
     prefilter: float = 0.05     # s: exponential low-pass of the relative joint positions (noise)
+    # 'and': e1 and e2 under their thresholds; 'or': either (the paper's consistency condition
+    # "allows the user's pose to be dissimilar from the example as long as the deviation is
+    # nearly constant over time")
+    combine: str = 'and'
+    # e1, e2 in units of the example's own spread (total variance of w, mean |dw|^2 over lag):
+    # one threshold fits features whose examples move more or less
+    normalise: bool = False
     fps: float = 30.0
 
     def validate(self) -> None:
         for k in ('e1_threshold', 'e2_threshold', 'tau', 'fps'):
             if not getattr(self, k) > 0:
                 raise ValueError(f'{k} must be positive')
+        if self.combine not in ('and', 'or'):
+            raise ValueError("combine must be 'and' or 'or'")
         if not 1 <= int(self.lag) <= 30 or not 1 <= int(self.activity_lag) <= 60:
             raise ValueError('lag must be in [1, 30] frames, activity_lag in [1, 60]')
         if not (self.smoothing >= 0 and self.min_activity >= 0 and self.activity_window >= 0):
@@ -122,6 +131,11 @@ class ExampleModel:
         w = feature_vectors(self.positions, self.effectors, self.height, params)
         self.w = w
         self.mean, self.A, self.eigenvalues = pca_basis(w, components)
+        # the example's own spread: total variance of w and of dw over ``lag`` frames (the units
+        # of the normalised errors)
+        lag = min(int(params.lag), len(w) - 1)
+        self.var_w = float(np.sum(np.var(w, axis=0)))
+        self.var_dw = float(np.mean(np.sum((w[lag:] - w[:-lag]) ** 2, axis=1)))
         # the activity gate's normaliser: the example's RMS effector speed measured as the gate
         # measures it (displacement over activity_lag frames)
         r = relative_effectors(self.positions, self.effectors) / self.height
@@ -130,8 +144,13 @@ class ExampleModel:
         self.rms_speed = float(np.sqrt(np.mean(np.sum(v * v, axis=1))))
 
     def errors(self, w: np.ndarray, dw: np.ndarray):
-        return (float(reconstruction_error(w - self.mean, self.A)),
-                float(reconstruction_error(dw, self.A)))
+        """(e1, e2) of Eq. 5-6; divided by the example's total variance of w and mean |dw|^2
+        when ``params.normalise``."""
+        e1 = float(reconstruction_error(w - self.mean, self.A))
+        e2 = float(reconstruction_error(dw, self.A))
+        if getattr(getattr(self, 'params', None), 'normalise', False):
+            return e1 / max(self.var_w, 1e-12), e2 / max(self.var_dw, 1e-12)
+        return e1, e2
 
 
 @dataclass
@@ -214,7 +233,8 @@ class IntentionRecognizer:
                 a[1] += alpha * (e2 - a[1])
                 a[2] += beta * (sp2 - a[2])
             act = math.sqrt(max(a[2], 0.0))
-            ratio = max(a[0] / prm.e1_threshold, a[1] / prm.e2_threshold)
+            r1, r2 = a[0] / prm.e1_threshold, a[1] / prm.e2_threshold
+            ratio = max(r1, r2) if prm.combine == 'and' else min(r1, r2)
             imitating = bool(ratio < 1.0 and act >= prm.min_activity and k >= lag)
             conf = 1.0 / (1.0 + ratio * ratio)
             if act < prm.min_activity:
