@@ -173,6 +173,7 @@ class PerformanceController:
             for e in f.engage.effectors:
                 dist, body, pt = self.dp.feature_distance(e, f)
                 if body is not None and dist < 3 * f.engage.distance:
+                    self.dp.move_effector(e, pt)     # already holding: no jump at the start
                     self.dp.engage(e, f, body, pt)
         self._refresh_obstacles()
 
@@ -253,6 +254,8 @@ class PerformanceController:
                     continue
                 if e in HANDS and not self._user_hand_raised(p, e, f):
                     continue
+                if e in HANDS and f.engage.regrab and self._hand_vz[e] > 0.1:
+                    continue      # climbing: grab at the top of the reach, not on the way up
                 if e in FEET and not self._user_foot_down(p, e):
                     continue
                 if float(np.linalg.norm(vel[k])) > f.engage.max_speed:

@@ -205,6 +205,15 @@ class DynamicProcess:
                 return True
         return False
 
+    def move_effector(self, effector: str, point) -> None:
+        """Teleport one effector body to ``point`` (world), at rest."""
+        k = EFFECTORS.index(effector)
+        a = self.eff_dof[k]
+        d = self.data
+        d.qpos[a:a + 3] += np.asarray(point, float) - d.xpos[self.eff_body[k]]
+        d.qvel[a:a + 3] = 0.0
+        mujoco.mj_forward(self.model, d)
+
     def engage(self, effector: str, feature: Feature, body: str, point) -> None:
         """Hold ``effector`` at ``point`` (world) on ``body`` of ``feature`` (an equality
         constraint switched on)."""

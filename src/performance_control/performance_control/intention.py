@@ -79,11 +79,11 @@ class RecognizerParams:
     e2_threshold: float = 0.03
     tau: float = 0.25           # s: weight of velocities against positions in w
     lag: int = 2                # frames: velocity and dw over this many frames
-    smoothing: float = 0.05     # s: time constant of the error averages
+    smoothing: float = 0.03     # s: time constant of the error averages
     min_activity: float = 0.3   # share of the example's RMS effector speed needed
     activity_window: float = 0.3   # s: time constant of the mean squared speed (the gate)
     activity_lag: int = 9       # frames: the gate's speed is the displacement over this many
-    prefilter: float = 0.05     # s: exponential low-pass of the relative joint positions (noise)
+    prefilter: float = 0.03     # s: exponential low-pass of the relative joint positions (noise)
     # 'and': e1 and e2 under their thresholds; 'or': either (the paper's consistency condition
     # "allows the user's pose to be dissimilar from the example as long as the deviation is
     # nearly constant over time")
