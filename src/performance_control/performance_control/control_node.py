@@ -39,7 +39,7 @@ from .intention import RecognizerParams
 from .markers import contact_shapes, to_marker_array, world_shapes
 
 REC_KEYS = ('e1_threshold', 'e2_threshold', 'tau', 'smoothing', 'min_activity',
-            'activity_window', 'prefilter')
+            'activity_window', 'prefilter', 'combine', 'normalise')
 CTRL_KEYS = ('free_gain', 'release_after', 'hand_release_margin', 'regrab_speed', 'foot_down_height',
              'blend_time', 'w_e', 'w_s')
 _R = RecognizerParams()
@@ -73,6 +73,12 @@ PARAMS: List[ParamSpec] = [
               'user must reach to be imitating (a still pose has dw = 0)', range=(0.0, 10.0)),
     ParamSpec('activity_window', _R.activity_window, 'time constant (s) of the speed average of '
               'the activity gate', range=(0.0, 10.0)),
+    ParamSpec('activity_lag', _R.activity_lag, 'frames of the activity gate\'s displacement',
+              range=(1, 60), read_only=True),
+    ParamSpec('combine', _R.combine, 'and: e1 and e2 under their thresholds; or: either (the '
+              'paper\'s consistency read as an alternative to similarity)', choices=('and', 'or')),
+    ParamSpec('normalise', _R.normalise, 'e1/e2 in units of each example\'s own spread (total '
+              'variance of w, mean |dw|^2); the thresholds are then in those units'),
     ParamSpec('release_after', _C.release_after, 's without imitation before hands on a feature '
               'with an example let go (the character falls when the user stops; 0 = never)',
               range=(0.0, 60.0)),
@@ -119,7 +125,8 @@ class ControlNode(Node):
         if v['start_feature'] and v['start_feature'] not in self.world.features:
             raise ValueError(f'control: start_feature {v["start_feature"]!r} is not in world '
                              f'{self.world.name} ({sorted(self.world.features)})')
-        self.rp = RecognizerParams(**{k: v[k] for k in REC_KEYS}, lag=v['lag'])
+        self.rp = RecognizerParams(**{k: v[k] for k in REC_KEYS}, lag=v['lag'],
+                                   activity_lag=v['activity_lag'])
         self.cp = ControlParams(recognizer=self.rp, sensor_height=v['sensor_height'],
                                 sensor_pitch=math.radians(v['sensor_pitch_deg']),
                                 body_mass=v['body_mass'], **{k: v[k] for k in CTRL_KEYS})
@@ -142,7 +149,7 @@ class ControlNode(Node):
     def _on_params(self, changed: Dict) -> Optional[str]:
         for k, val in changed.items():
             if k in REC_KEYS:
-                setattr(self.rp, k, float(val))
+                setattr(self.rp, k, val if isinstance(val, (str, bool)) else float(val))
             elif k in CTRL_KEYS:
                 setattr(self.cp, k, float(val))
         return None
