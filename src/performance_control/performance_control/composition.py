@@ -41,9 +41,10 @@ CHAINS = {'HandLeft': (SHOULDER_LEFT, ELBOW_LEFT, WRIST_LEFT, HAND_LEFT),
 BRANCH = {'HandLeft': subtree(ELBOW_LEFT), 'HandRight': subtree(ELBOW_RIGHT),
           'FootLeft': subtree(KNEE_LEFT), 'FootRight': subtree(KNEE_RIGHT)}
 _SEG_R = np.array([SEGMENT_RADIUS_FRACTION[JOINT_NAMES[c]] for c in SEGMENT_CHILDREN])
-# the segments that move with the body as a whole (trunk, head, pelvis, legs; not the arms)
+# the segments that move with the body as a whole (trunk, head, shoulders, pelvis, legs; not
+# the arms from the shoulder joint on)
 _BODY_SEGS = [(a, b) for a, b in zip(SEGMENT_PARENTS, SEGMENT_CHILDREN)
-              if b not in subtree(SHOULDER_LEFT) + subtree(SHOULDER_RIGHT)]
+              if b not in subtree(ELBOW_LEFT) + subtree(ELBOW_RIGHT)]
 # radius (fraction of height) of the thickest segment capsule meeting at each joint
 _JOINT_R = np.zeros(NUM_JOINTS)
 for _k, (_a, _b) in enumerate(zip(SEGMENT_PARENTS, SEGMENT_CHILDREN)):
@@ -136,6 +137,47 @@ def _two_bone(a, b, c, target):
     return mid, end
 
 
+def _rotate_about(v: np.ndarray, axis: np.ndarray, ang: float) -> np.ndarray:
+    """Rodrigues' rotation of ``v`` about the unit ``axis``."""
+    c, s_ = math.cos(ang), math.sin(ang)
+    return v * c + np.cross(axis, v) * s_ + axis * (axis @ v) * (1.0 - c)
+
+
+def _swivel_clear(p: np.ndarray, chain, obstacles: 'Obstacles', height: float) -> None:
+    """Turn an arm's elbow about the shoulder-wrist line (the hand stays where it is) to the
+    swivel angle nearest the current one whose upper arm and forearm clear the obstacles."""
+    a, b, c, _ = chain
+    ax = p[c] - p[a]
+    n = np.linalg.norm(ax)
+    if n < 1e-6:
+        return
+    ax = ax / n
+    k_up, k_fore = SEGMENT_CHILDREN.index(b), SEGMENT_CHILDREN.index(c)
+
+    def depth(elbow):
+        pts = np.concatenate([p[a] + np.linspace(0, 1, 5)[:, None] * (elbow - p[a]),
+                              elbow + np.linspace(0, 1, 5)[:, None] * (p[c] - elbow)])
+        rad = np.repeat([_SEG_R[k_up] * height, _SEG_R[k_fore] * height], 5)
+        ca, cb, rc, _ = obstacles._caps()
+        if not len(rc):
+            return 0.0
+        d, _ = obstacles._dist(pts, ca, cb)
+        return float(np.max(rad[:, None] + rc[None] - d))
+    if depth(p[b]) <= 0:
+        return
+    rel = p[b] - p[a]
+    best = None
+    for ang in sorted(np.radians(np.arange(-180, 180, 20)), key=abs):
+        elbow = p[a] + _rotate_about(rel, ax, float(ang))
+        dd = depth(elbow)
+        if dd <= 0:
+            p[b] = elbow
+            return
+        if best is None or dd < best[0]:
+            best = (dd, elbow)
+    p[b] = best[1]
+
+
 def integrate_motion(pose: np.ndarray, com_target: np.ndarray,
                      contacts: Dict[str, np.ndarray], obstacles: Optional['Obstacles'] = None,
                      engaged_feature: Optional[Dict[str, str]] = None,
@@ -171,8 +213,10 @@ def integrate_motion(pose: np.ndarray, com_target: np.ndarray,
         from skeleton_core.geometry import facing_yaw
         yaw = float(facing_yaw(p))
         direction = np.array([-math.cos(yaw), -math.sin(yaw), 0.0])
-        for _ in range(10):
-            move, direction = obstacles.trunk_clearance(p, height, direction)
+        fixed = False
+        for _ in range(15):
+            move, direction = obstacles.trunk_clearance(p, height, direction, fixed)
+            fixed = True
             if not np.any(move):
                 break
             p += move
@@ -182,6 +226,8 @@ def integrate_motion(pose: np.ndarray, com_target: np.ndarray,
                 mid, end = _two_bone(p[a], p[b], p[c], np.asarray(tgt, float) - off)
                 p[b], p[c], p[eff] = mid, end, end + off
     if obstacles is not None:
+        for e in ('HandLeft', 'HandRight'):
+            _swivel_clear(p, CHAINS[e], obstacles, height)
         skip = set()
         for e in (contacts or {}):
             skip |= set(CHAINS[e][2:])
@@ -235,11 +281,12 @@ class Obstacles:
         return np.linalg.norm(pts[:, None, :] - cp, axis=2), cp
 
     def trunk_clearance(self, p: np.ndarray, height: float,
-                        direction: Optional[np.ndarray] = None):
+                        direction: Optional[np.ndarray] = None, fixed: bool = True):
         """(translation (3,), direction) that moves the body's capsules (all but the arms) out of the
         capsule obstacles (bars, rope) horizontally: the direction away from the deepest
-        obstacle, seen from the trunk's centre (kept from the first call when given: a rope
-        across the trunk would otherwise push it back and forth), the length of the deepest
+        obstacle, seen from the trunk's centre; with ``fixed=False`` the given ``direction`` is
+        only an axis, turned towards the side of the obstacle the body is on (then kept: a rope
+        across the trunk would otherwise push it back and forth); the length of the deepest
         penetration."""
         a, b, rc, _ = self._caps()
         if not len(rc):
@@ -253,14 +300,17 @@ class Obstacles:
         i, k = np.unravel_index(np.argmax(depth), depth.shape)
         if depth[i, k] <= 0:
             return np.zeros(3), direction
-        if direction is None:
+        if direction is None or fixed is False:
             centre = pts.mean(axis=0)
             ab = b[k] - a[k]
             t = np.clip((centre - a[k]) @ ab / max(ab @ ab, 1e-12), 0.0, 1.0)
             n = centre - (a[k] + t * ab)
             n[2] = 0.0          # horizontally: the body hangs where the contacts hold it
-            nn = np.linalg.norm(n)
-            direction = n / nn if nn > 1e-9 else np.array([-1.0, 0.0, 0.0])
+            if direction is not None:     # the preferred axis, towards the side the body is on
+                direction = direction * (1.0 if n @ direction >= 0 else -1.0)
+            else:
+                nn = np.linalg.norm(n)
+                direction = n / nn if nn > 1e-9 else np.array([-1.0, 0.0, 0.0])
         return direction * (depth[i, k] + 1e-3), direction
 
     def push_out(self, p: np.ndarray, skip, height: float) -> None:
