@@ -25,6 +25,7 @@ All costs are vectorised over samples, joints and neighbours.
 """
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass, field
 from typing import Callable, Dict, Optional, Sequence
@@ -33,6 +34,7 @@ import numpy as np
 
 from skeleton_core.geometry import quat_average
 from skeleton_core.model import NUM_JOINTS, NUM_SEGMENTS, SEGMENT_CHILDREN, SEGMENT_PARENTS
+from skeleton_core.params import check, param
 
 from .posture_space import as_database_arrays
 
@@ -119,14 +121,43 @@ class OptimizerResult:
         return self._terms
 
 
-class NaturalPostureOptimizer:
-    """Methods B/C core. Stateless apart from the RNG: the caller passes the previous solutions."""
+@dataclass
+class OptimizerConfig:
+    """Parameters of methods B / C (:class:`NaturalPostureOptimizer`; Shum et al. 2013 Table V,
+    Eq. 15)."""
 
-    def __init__(self, db, k: int = 30, pca_dims: int = 20, steps: int = 20, samples: int = 100,
-                 w_control: float = 1.0, w_style: float = 8.0, w_kinematics: float = 1.5,
-                 w_continuity: float = 0.25, step_scale: float = 0.5,
-                 solver: str = 'stochastic', gn_iterations: int = 6, seed: int = 0,
-                 knn: str = 'brute', kdtree_dims: int = 12, kdtree_candidates: int = 4):
+    k: int = param(30, 'Table V: neighbours of the KNN search (Eq. 9)', range=(2, 1000))
+    pca_dims: int = param(20, 'Table V: dimensions of the natural posture space', range=(1, 60))
+    steps: int = param(20, 'Table V: maximum optimisation steps', range=(0, 1000))
+    samples: int = param(100, 'Table V: samples per optimisation step', range=(1, 100000))
+    w_control: float = param(1.0, 'Eq. 15: weight of the control term E_c', range=(0.0, 1000.0))
+    w_style: float = param(8.0, 'Eq. 15: weight of the style term E_s (paper 0.5; 8 measured on '
+                           'the sensor-model streams)', range=(0.0, 1000.0))
+    w_kinematics: float = param(1.5, 'Eq. 15: weight of the kinematics term E_k',
+                                range=(0.0, 1000.0))
+    w_continuity: float = param(0.25, 'Eq. 15: weight of the continuity term E_m',
+                                range=(0.0, 1000.0))
+    step_scale: float = param(0.5, 'stochastic search: sample spread in neighbour standard '
+                              'deviations', range=(1e-4, 100.0))
+    solver: str = param('stochastic', 'stochastic (paper) or gauss_newton (deterministic)',
+                        choices=SOLVERS)
+    gn_iterations: int = param(6, 'gauss_newton: maximum iterations', range=(1, 1000))
+    seed: int = param(0, 'random seed of the stochastic search', range=(0, 2 ** 31 - 1))
+    knn: str = param('brute', 'KNN search: brute (exact BLAS) or kdtree (approximate)',
+                     choices=KNN_MODES)
+    kdtree_dims: int = param(12, 'kdtree: global PCA dimensions of the tree', range=(1, 60))
+    kdtree_candidates: int = param(4, 'kdtree: candidates fetched per neighbour', range=(1, 100))
+
+
+_INT_PARAMS = tuple(n for n, t in OptimizerConfig.__annotations__.items() if t == 'int')
+_FLOAT_PARAMS = tuple(n for n, t in OptimizerConfig.__annotations__.items() if t == 'float')
+
+
+class NaturalPostureOptimizer:
+    """Methods B/C core. Stateless apart from the RNG: the caller passes the previous solutions.
+    Parameters: :class:`OptimizerConfig` fields as keywords (or ``config``)."""
+
+    def __init__(self, db, config: Optional[OptimizerConfig] = None, **params):
         self.db = as_database_arrays(db)
         self.body = self.db.body
         self.L = self.body.segment_lengths.copy()  # (19,)
@@ -135,35 +166,23 @@ class NaturalPostureOptimizer:
         self._X = X
         self.knn_arrays = _knn_arrays(self.db)
         self._Xsq_joint, self._XA, self._Xcoord = self.knn_arrays
-        self.seed = seed
-        self.rng = np.random.default_rng(seed)
         self._kdtree = None
-        self.configure(k=k, pca_dims=pca_dims, steps=steps, samples=samples, w_control=w_control,
-                       w_style=w_style, w_kinematics=w_kinematics, w_continuity=w_continuity,
-                       step_scale=step_scale, solver=solver, gn_iterations=gn_iterations,
-                       knn=knn, kdtree_dims=kdtree_dims, kdtree_candidates=kdtree_candidates)
+        self.config = config or OptimizerConfig()
+        self.configure(**params)
+        self.rng = np.random.default_rng(self.seed)
 
     def configure(self, **kw) -> None:
-        """Change parameters (validated)."""
-        for name, value in kw.items():
-            if name in ('k', 'pca_dims', 'steps', 'samples', 'gn_iterations', 'kdtree_dims',
-                        'kdtree_candidates'):
-                value = int(value)
-                if value < (0 if name == 'steps' else 1):
-                    raise ValueError(f'{name} must be positive')
-            elif name == 'solver':
-                if value not in SOLVERS:
-                    raise ValueError(f'solver must be one of {SOLVERS}')
-            elif name == 'knn':
-                if value not in KNN_MODES:
-                    raise ValueError(f'knn must be one of {KNN_MODES}')
-            else:
-                value = float(value)
-                if not np.isfinite(value) or value < 0:
-                    raise ValueError(f'{name} must be finite and >= 0')
-            setattr(self, name, value)
-        if self.k < 2:
-            raise ValueError('k must be >= 2')
+        """Change parameters (validated against :class:`OptimizerConfig`)."""
+        unknown = set(kw) - set(_INT_PARAMS) - set(_FLOAT_PARAMS) - {'solver', 'knn'}
+        if unknown:
+            raise ValueError(f'unknown optimizer parameters: {sorted(unknown)}')
+        kw = {k: (int(v) if k in _INT_PARAMS else float(v) if k in _FLOAT_PARAMS else v)
+              for k, v in kw.items()}
+        cfg = dataclasses.replace(self.config, **kw)
+        check(cfg)
+        self.config = cfg
+        for name in _INT_PARAMS + _FLOAT_PARAMS + ('solver', 'knn'):
+            setattr(self, name, getattr(cfg, name))
         self.k = min(self.k, self.db.size)
         if self.knn == 'kdtree' and ('knn' in kw or 'kdtree_dims' in kw or self._kdtree is None):
             self._build_kdtree()

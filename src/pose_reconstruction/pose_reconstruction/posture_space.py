@@ -18,6 +18,7 @@ import numpy as np
 from skeleton_core.geometry import NormalizeTransform, facing_yaw, retarget_by_joint
 from skeleton_core.model import (HEADING_JOINTS, NUM_JOINTS, PARENTS, PATH_TO_ROOT, ROOT,
                                  SEGMENT_CHILDREN, SEGMENT_PARENTS, Body, standard_body)
+from skeleton_core.params import param
 
 # each joint's parent (the root's own index for the root)
 PARENT_ROWS = np.array([max(p, 0) for p in PARENTS])
@@ -197,6 +198,16 @@ class PreparedQuery:
     scale: float                      # standard height / user height
 
 
+@dataclass
+class QueryConfig:
+    """What counts as reliable; shared by every reconstruction method (the completion's and the
+    optimizer's configurations extend it)."""
+
+    reliable_threshold: float = param(
+        0.5, 'a joint at or above this reliability counts as reliable (method A: the joints '
+        'below it are substituted from the database)', range=(0.0, 1.0))
+
+
 class QueryPreparer:
     """Normalise (yaw + translation removed, reliability-weighted heading) and retarget a sensor
     posture to the database's standard body (Shum et al. 2013 Sec. V-B; Shum & Ho Eq. 3-4).
@@ -205,7 +216,7 @@ class QueryPreparer:
     direction is garbage), so it is scaled uniformly by standard/user height instead.
     """
 
-    def __init__(self, body: Body, reliable_threshold: float = 0.5):
+    def __init__(self, body: Body, reliable_threshold: float = QueryConfig.reliable_threshold):
         self.body = body
         self.lengths = bone_lengths(body)
         self.rest_dirs = rest_directions(body)

@@ -88,6 +88,7 @@ from __future__ import annotations
 
 import time
 from collections import deque
+from dataclasses import dataclass
 from typing import Dict, Optional
 
 import numpy as np
@@ -97,13 +98,15 @@ from skeleton_core.filters import OneEuroFilter
 from skeleton_core.geometry import facing_yaw
 from skeleton_core.model import (HIP_LEFT, HIP_RIGHT, MIRROR, NUM_JOINTS, NUM_SEGMENTS, ROOT,
                                  SEGMENT_CHILDREN, SEGMENT_PARENTS, SHOULDER_LEFT, SHOULDER_RIGHT)
+from skeleton_core.params import build, check, param
+from skeleton_core.params import split as params_split
 
-from .completion import PCACompletion
-from .optimizer import NaturalPostureOptimizer
-from .posture_space import (ANCESTORS, QueryPreparer, as_database_arrays,
+from .completion import CompletionConfig, PCACompletion
+from .optimizer import NaturalPostureOptimizer, OptimizerConfig
+from .posture_space import (ANCESTORS, QueryConfig, QueryPreparer, as_database_arrays,
                             rest_directions, to_sensor_frame, user_bone_lengths, yaw_quat_matrix,
                             yaw_rotation)
-from .reliability import ReliabilityEstimator
+from .reliability import ReliabilityConfig, ReliabilityEstimator
 
 METHODS = ('A', 'B', 'C')
 OUTPUT_MODES = ('segments', 'blend')
@@ -122,119 +125,145 @@ _SEG_BELOW = np.ascontiguousarray(_SEG_CHAIN.T)
 
 
 _MIN_FIT_JOINTS = 3  # the fewest points that fix a rotation and a scale
-RELIABILITY_PARAMS = ('d_min', 'f_b', 'theta_floor_deg', 'theta_roof_deg', 'f_total',
-                      'sigma_frames', 'tracked_value', 'inferred_value', 'not_tracked_value',
-                      'reference_pose_tolerance_deg', 'reference_frames', 'reference_mode',
-                      'observed_window')
-OPTIMIZER_PARAMS = ('k', 'pca_dims', 'steps', 'samples', 'w_control', 'w_style', 'w_kinematics',
-                    'w_continuity', 'step_scale', 'solver', 'gn_iterations', 'seed', 'knn',
-                    'kdtree_dims', 'kdtree_candidates')
-COMPLETION_PARAMS = ('pca_dims', 'reliability_threshold', 'substitution')
-OWN_PARAMS = ('use_reliability', 'use_input_reliability', 'reliable_threshold',
-              'trust_sensor_distance', 'output_scale', 'length_window', 'output_mode',
-              'trust_mode', 'trust_sensor_ratio', 'noise_alpha', 'length_frames',
-              'smooth_min_cutoff', 'smooth_beta', 'smooth_d_cutoff', 'observation_weight',
-              'symmetric_lengths', 'smooth_filled_scale', 'float_root', 'height_frames',
-              'yaw_rate', 'yaw_search', 'yaw_neighbours', 'smooth_filled_speed')
+
+
+@dataclass
+class ReconstructorConfig(QueryConfig):
+    """The reconstruction's own parameters (the output stage of B / C, the trust in the sensor,
+    the few-reliable-joints regime: module docstring); its core's are in
+    :class:`~.optimizer.OptimizerConfig` / :class:`~.completion.CompletionConfig`, the reliability's
+    in :class:`~.reliability.ReliabilityConfig`."""
+
+    use_input_reliability: bool = param(
+        True, 'use the reliability field of the input when it is filled (else estimate it)')
+    trust_sensor_distance: float = param(
+        0.12, 'nearest database posture farther than this (RMS m per reliable joint): reliable '
+        'joints blend towards their observed positions (fully at twice it)', range=(0.0, 100.0))
+    output_scale: str = param('user', "user: result retargeted to the user's bone lengths; "
+                              'standard: the database body', choices=('user', 'standard'))
+    output_mode: str = param(
+        'segments', 'segments: blended segment directions, constant user lengths, chained from '
+        'the root, smoothed; blend: solution blended towards the observed joints (paper)',
+        choices=OUTPUT_MODES)
+    length_window: int = param(90, 'blend: frames of observed segment lengths whose median gives '
+                               "the user's lengths", range=(1, 100000))
+    trust_mode: str = param(
+        'noise_ratio', "trust in the sensor from noise_ratio (database distance / the sensor's "
+        'measured noise) or distance (trust_sensor_distance, earlier rule)', choices=TRUST_MODES)
+    trust_sensor_ratio: float = param(
+        8.0, 'noise_ratio: database distance / sensor noise at which the trust starts to rise '
+        '(full at twice it)', range=(1e-3, 1e6))
+    noise_alpha: float = param(0.05, 'noise_ratio: exponential-average rate of the noise '
+                               'estimate', range=(1e-4, 1.0))
+    observation_weight: float = param(
+        0.3, 'segments: weight of the observed direction of a segment with two reliable ends',
+        range=(0.0, 1.0))
+    length_frames: int = param(
+        15, 'segments: reliable observations averaged per segment length, then frozen',
+        range=(1, 100000))
+    symmetric_lengths: bool = param(True, 'segments: left and right limbs share their mean '
+                                    'lengths')
+    smooth_min_cutoff: float = param(
+        3.0, 'segments: One Euro minimum cutoff (Hz) of segment and root smoothing, 0 = off',
+        range=(0.0, 1000.0))
+    smooth_beta: float = param(10.0, 'segments: One Euro speed coefficient (s/m)',
+                               range=(0.0, 1e6))
+    smooth_d_cutoff: float = param(1.0, 'segments: One Euro speed cutoff (Hz)',
+                                   range=(1e-3, 1000.0))
+    smooth_filled_scale: float = param(
+        0.2, 'segments: cutoff factor of a segment the database fills in (an end with '
+        'reliability 0; 1 at or above reliable_threshold, linear between), 1 = same smoothing '
+        'everywhere', range=(0.01, 1.0))
+    float_root: bool = param(
+        True, 'when the root joint is unreliable, match the database translation-invariantly '
+        'and place the root (and the query) where the neighbours put it')
+    height_frames: int = param(
+        30, 'no frame with every joint tracked yet: frames of scale-invariant database fits '
+        "whose median is taken as the user's height (query scale, standard-body lengths), then "
+        'kept; 0 = off (standard height)', range=(0, 100000))
+    yaw_rate: float = param(
+        0.5, 'few reliable joints (hips, shoulders and every segment unreliable): fraction per '
+        'frame of the heading correction that best fits the reliable joints to the database; '
+        '0 = keep the last heading', range=(0.0, 1.0))
+    yaw_search: int = param(
+        12, 'few reliable joints from the first frame: headings tried against the database '
+        '(from the one the unreliable torso gives); 0 = take that one', range=(0, 360))
+    yaw_neighbours: int = param(
+        5, 'few reliable joints: database postures whose best rotations (each a weighted 2-D '
+        'Procrustes of the reliable joints) are averaged into the heading correction',
+        range=(1, 1000))
+    smooth_filled_speed: bool = param(
+        False, 'segments: smooth_filled_scale lowers only the minimum cutoff of a filled segment '
+        '(the One Euro speed term is kept: less lag in fast motion, more jitter: class c '
+        '22.4 -> 29.3 m/s2 against raw 23.4)')
+    smooth_anchored_speed: bool = param(
+        True, 'segments, few reliable joints (hips, shoulders and every segment unreliable): a '
+        'filled segment with a reliable joint at or below its child keeps the One Euro speed '
+        'term (as smooth_filled_speed, for it alone): the body no longer trails the tracked '
+        'hands and feet (Table III hands+feet 8.63 -> 8.34 cm)')
 
 
 def split_params(method: str, params: Dict) -> tuple:
-    rel = {k: v for k, v in params.items() if k in RELIABILITY_PARAMS}
-    if method == 'A':
-        core = {k: v for k, v in params.items() if k in COMPLETION_PARAMS}
-        if 'reliable_threshold' in params and 'reliability_threshold' not in params:
-            core['reliability_threshold'] = params['reliable_threshold']
-    else:
-        core = {k: v for k, v in params.items() if k in OPTIMIZER_PARAMS}
-    own = {k: v for k, v in params.items() if k in OWN_PARAMS}
-    unknown = set(params) - set(rel) - set(core) - set(own) - {'reliable_threshold'}
-    if method == 'A':
-        unknown -= set(OPTIMIZER_PARAMS)  # accepted and ignored, so one config serves all
-    else:
-        unknown -= set(COMPLETION_PARAMS)
+    """``params`` by owner: (:class:`ReliabilityConfig`, the core's config (method A:
+    :class:`CompletionConfig`, else :class:`OptimizerConfig`), :class:`ReconstructorConfig`).
+    The other core's parameters are accepted and ignored (one set of values serves every method);
+    any other name is refused."""
+    core_cls, other_cls = ((CompletionConfig, OptimizerConfig) if method == 'A'
+                           else (OptimizerConfig, CompletionConfig))
+    own, rel, core, other, unknown = params_split(params, ReconstructorConfig, ReliabilityConfig,
+                                                  core_cls, other_cls)
     if unknown:
         raise ValueError(f'unknown reconstruction parameters: {sorted(unknown)}')
     return rel, core, own
 
 
 class Reconstructor:
-    """One user's reconstruction pipeline (see module docstring)."""
+    """One user's reconstruction pipeline (see module docstring). Parameters: the fields of
+    :class:`ReconstructorConfig`, :class:`ReliabilityConfig` and the core's config as keywords.
+    ``use_reliability``: weight the query by the reliability (default: method C only)."""
 
-    def __init__(self, db, method: str = 'C', use_reliability: Optional[bool] = None,
-                 use_input_reliability: bool = True, reliable_threshold: float = 0.5,
-                 trust_sensor_distance: float = 0.12, output_scale: str = 'user',
-                 length_window: int = 90, output_mode: str = 'segments',
-                 trust_mode: str = 'noise_ratio', trust_sensor_ratio: float = 8.0,
-                 noise_alpha: float = 0.05, length_frames: int = 15,
-                 symmetric_lengths: bool = True, observation_weight: float = 0.3,
-                 smooth_min_cutoff: float = 3.0, smooth_beta: float = 10.0,
-                 smooth_d_cutoff: float = 1.0, smooth_filled_scale: float = 0.2,
-                 float_root: bool = True, height_frames: int = 30, yaw_rate: float = 0.5,
-                 yaw_search: int = 12, yaw_neighbours: int = 5,
-                 smooth_filled_speed: bool = False, smooth_anchored_speed: bool = True,
-                 **params):
+    def __init__(self, db, method: str = 'C', use_reliability: Optional[bool] = None, **params):
         method = str(method).upper()
         if method not in METHODS:
             raise ValueError(f'method must be one of {METHODS}, got {method!r}')
-        if output_scale not in ('user', 'standard'):
-            raise ValueError("output_scale must be 'user' or 'standard'")
-        if output_mode not in OUTPUT_MODES:
-            raise ValueError(f'output_mode must be one of {OUTPUT_MODES}')
-        if trust_mode not in TRUST_MODES:
-            raise ValueError(f'trust_mode must be one of {TRUST_MODES}')
-        if not trust_sensor_ratio > 0 or not 0 < noise_alpha <= 1:
-            raise ValueError('trust_sensor_ratio must be > 0 and noise_alpha in (0, 1]')
-        if int(length_frames) < 1:
-            raise ValueError('length_frames must be >= 1')
-        if smooth_min_cutoff < 0 or smooth_beta < 0 or smooth_d_cutoff <= 0:
-            raise ValueError('smooth_min_cutoff, smooth_beta must be >= 0, smooth_d_cutoff > 0')
-        self.output_mode = output_mode
-        self.trust_mode = trust_mode
-        self.trust_sensor_ratio = float(trust_sensor_ratio)
-        self.noise_alpha = float(noise_alpha)
-        self.length_frames = int(length_frames)
-        self.symmetric_lengths = bool(symmetric_lengths)
-        if not 0.0 <= observation_weight <= 1.0:
-            raise ValueError('observation_weight must be in [0, 1]')
-        self.observation_weight = float(observation_weight)
-        self.smooth = (float(smooth_min_cutoff), float(smooth_beta), float(smooth_d_cutoff))
-        if not 0.0 < smooth_filled_scale <= 1.0:
-            raise ValueError('smooth_filled_scale must be in (0, 1]')
-        self.smooth_filled_scale = float(smooth_filled_scale)
-        self.smooth_filled_speed = bool(smooth_filled_speed)
-        if not isinstance(smooth_anchored_speed, (bool, np.bool_)):
-            raise ValueError('smooth_anchored_speed must be a bool')
-        self.smooth_anchored_speed = bool(smooth_anchored_speed)
-        self.float_root = bool(float_root)
-        if int(height_frames) < 0 or int(yaw_search) < 0 or not 0.0 <= yaw_rate <= 1.0:
-            raise ValueError('height_frames, yaw_search must be >= 0 and yaw_rate in [0, 1]')
-        if int(yaw_neighbours) < 1:
-            raise ValueError('yaw_neighbours must be >= 1')
-        self.yaw_neighbours = int(yaw_neighbours)
-        self.height_frames = int(height_frames)
-        self.yaw_rate = float(yaw_rate)
-        self.yaw_search = int(yaw_search)
+        rel, core, own = split_params(method, params)
+        cfg = build(ReconstructorConfig, own)
+        check(cfg)
+        self.config = cfg
+        self.output_mode = cfg.output_mode
+        self.trust_mode = cfg.trust_mode
+        self.trust_sensor_ratio = float(cfg.trust_sensor_ratio)
+        self.noise_alpha = float(cfg.noise_alpha)
+        self.length_frames = int(cfg.length_frames)
+        self.symmetric_lengths = bool(cfg.symmetric_lengths)
+        self.observation_weight = float(cfg.observation_weight)
+        self.smooth = (float(cfg.smooth_min_cutoff), float(cfg.smooth_beta),
+                       float(cfg.smooth_d_cutoff))
+        self.smooth_filled_scale = float(cfg.smooth_filled_scale)
+        self.smooth_filled_speed = bool(cfg.smooth_filled_speed)
+        self.smooth_anchored_speed = bool(cfg.smooth_anchored_speed)
+        self.float_root = bool(cfg.float_root)
+        self.yaw_neighbours = int(cfg.yaw_neighbours)
+        self.height_frames = int(cfg.height_frames)
+        self.yaw_rate = float(cfg.yaw_rate)
+        self.yaw_search = int(cfg.yaw_search)
         self.method = method
         self.name = method
         self.db = as_database_arrays(db)
-        rel, core, _ = split_params(method, params)
         self.reliability = ReliabilityEstimator(**rel)
         self.use_reliability = (method == 'C') if use_reliability is None else bool(use_reliability)
-        self.use_input_reliability = bool(use_input_reliability)
-        self.reliable_threshold = float(reliable_threshold)
-        self.trust_sensor_distance = float(trust_sensor_distance)
-        self.output_scale = output_scale
+        self.use_input_reliability = bool(cfg.use_input_reliability)
+        self.reliable_threshold = float(cfg.reliable_threshold)
+        self.trust_sensor_distance = float(cfg.trust_sensor_distance)
+        self.output_scale = cfg.output_scale
         self.preparer = QueryPreparer(self.db.body, self.reliable_threshold)
         self._rest_dirs = rest_directions(self.db.body)
         self._standard_lengths = np.asarray(self.db.body.segment_lengths, float)
         if method == 'A':
-            core.setdefault('reliability_threshold', self.reliable_threshold)
-            self.core = PCACompletion(self.db, **core)
+            self.core = PCACompletion(self.db, reliable_threshold=self.reliable_threshold, **core)
         else:
             self.core = NaturalPostureOptimizer(self.db, **core)
-        self.length_window = int(length_window)
-        if self.length_window < 1:
-            raise ValueError('length_window must be >= 1')
+        self.length_window = int(cfg.length_window)
         self.timings_ms: Dict[str, float] = {}
         self.trust_sensor = 0.0
         self.last_result = None
