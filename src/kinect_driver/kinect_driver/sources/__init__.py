@@ -23,7 +23,6 @@ BUILTIN: Dict[str, str] = {
     'live': 'kinect_driver.sources.openni_live:LiveSource',
 }
 _registered: Dict[str, Union[str, type]] = {}
-SOURCE_NAMES = tuple(BUILTIN)   # the built-in ones (source_names() has every registered one)
 
 
 def register_source(name: str, target: Union[str, type]) -> None:
