@@ -21,8 +21,8 @@ from typing import Optional
 
 import numpy as np
 from skeleton_core.geometry import quat_conjugate, quat_multiply, swing_twist
-from skeleton_core.model import (HIP_CENTER, HIP_LEFT, HIP_RIGHT, NUM_JOINTS, SEGMENT_CHILDREN,
-                                 SEGMENT_PARENTS, SEGMENTS, SPINE)
+from skeleton_core.model import (HIP_CENTER, HIP_LEFT, HIP_RIGHT, NUM_JOINTS, SEGMENTS,
+                                 SEGMENT_CHILDREN, SEGMENT_CHILD_INDEX, SEGMENT_PARENTS, SPINE)
 from skeleton_core.params import param
 
 from .mjcf_body import ROOT_SEGMENT, body_order, segment_parent_body
@@ -136,23 +136,6 @@ def _pelvis_quat(p) -> tuple:
     return (q[0] / n, q[1] / n, q[2] / n, q[3] / n)
 
 
-def _qmul(a, b):
-    """Product of two quaternions given as (x, y, z, w) tuples of floats."""
-    ax, ay, az, aw = a
-    bx, by, bz, bw = b
-    return (aw * bx + ax * bw + ay * bz - az * by, aw * by - ax * bz + ay * bw + az * bx,
-            aw * bz + ax * by - ay * bx + az * bw, aw * bw - ax * bx - ay * by - az * bz)
-
-
-def _qrot(q, v):
-    """Vector ``v`` (3 floats) rotated by the unit quaternion ``q`` (x, y, z, w)."""
-    x, y, z, w = q
-    vx, vy, vz = v
-    tx, ty, tz = 2.0 * (y * vz - z * vy), 2.0 * (z * vx - x * vz), 2.0 * (x * vy - y * vx)
-    return (vx + w * tx + y * tz - z * ty, vy + w * ty + z * tx - x * tz,
-            vz + w * tz + x * ty - y * tx)
-
-
 def _arc(a, b):
     """Shortest-arc quaternion turning unit vector ``a`` onto unit vector ``b`` (floats)."""
     d = a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
@@ -235,13 +218,13 @@ def _unit_rest(rest_offsets) -> list:
 
 def joint_quats_to_segment(q_by_joint: np.ndarray) -> np.ndarray:
     """(20, 4) orientations by child joint (Skeleton.orientations) -> (19, 4) by segment."""
-    return np.asarray(q_by_joint, float)[list(SEGMENT_CHILDREN)]
+    return np.asarray(q_by_joint, float)[SEGMENT_CHILD_INDEX]
 
 
 def segment_quats_to_joints(q_seg: np.ndarray) -> np.ndarray:
     """(19, 4) segment orientations -> (20, 4) by child joint; the root joint gets the root body's."""
     out = np.zeros((NUM_JOINTS, 4))
-    out[list(SEGMENT_CHILDREN)] = q_seg
+    out[SEGMENT_CHILD_INDEX] = q_seg
     out[HIP_CENTER] = q_seg[ROOT_SEGMENT]
     return out
 

@@ -33,13 +33,12 @@ from typing import Callable, Dict, Optional, Sequence
 import numpy as np
 
 from skeleton_core.geometry import quat_average
-from skeleton_core.model import NUM_JOINTS, NUM_SEGMENTS, SEGMENT_CHILDREN, SEGMENT_PARENTS
+from skeleton_core.model import (NUM_JOINTS, NUM_SEGMENTS, SEGMENT_CHILDREN, SEGMENT_CHILD_INDEX,
+                                 SEGMENT_PARENTS, SEGMENT_PARENT_INDEX)
 from skeleton_core.params import check, param
 
 from .posture_space import as_database_arrays
 
-_SEG_P = np.array(SEGMENT_PARENTS)
-_SEG_C = np.array(SEGMENT_CHILDREN)
 
 SOLVERS = ('stochastic', 'gauss_newton')
 KNN_MODES = ('brute', 'kdtree')
@@ -434,14 +433,14 @@ class NaturalPostureOptimizer:
         cs = self.w_style / NUM_JOINTS
         ck = self.w_kinematics / NUM_SEGMENTS
         Vr = Vt.reshape(NUM_JOINTS, 3, d)
-        dV = Vr[_SEG_C] - Vr[_SEG_P]                          # (19, 3, d)
+        dV = Vr[SEGMENT_CHILD_INDEX] - Vr[SEGMENT_PARENT_INDEX]                          # (19, 3, d)
         eye = np.eye(d)
         z, e = z0, e0
         it = 0
         for it in range(1, self.gn_iterations + 1):
             n = int(np.argmin(np.sum((S['zn'] - z) ** 2, axis=1)))  # closest neighbour (E_s)
             x = (mu + z @ V).reshape(NUM_JOINTS, 3)
-            seg = x[_SEG_C] - x[_SEG_P]
+            seg = x[SEGMENT_CHILD_INDEX] - x[SEGMENT_PARENT_INDEX]
             ln = np.linalg.norm(seg, axis=1)
             u = seg / np.maximum(ln, 1e-9)[:, None]
             Jk = np.einsum('sk,skd->sd', u, dV)                # (19, d)

@@ -95,31 +95,29 @@ import numpy as np
 
 from skeleton_core.conversions import SkeletonFrame
 from skeleton_core.filters import OneEuroFilter
-from skeleton_core.geometry import facing_yaw
+from skeleton_core.geometry import facing_yaw, yaw_matrix
 from skeleton_core.model import (HIP_LEFT, HIP_RIGHT, MIRROR, NUM_JOINTS, NUM_SEGMENTS, ROOT,
-                                 SEGMENT_CHILDREN, SEGMENT_PARENTS, SHOULDER_LEFT, SHOULDER_RIGHT)
+                                 SEGMENT_CHILDREN, SEGMENT_CHILD_INDEX, SEGMENT_PARENT_INDEX,
+                                 SHOULDER_LEFT, SHOULDER_RIGHT)
 from skeleton_core.params import build, check, param
 from skeleton_core.params import split as params_split
 
 from .completion import CompletionConfig, PCACompletion
 from .optimizer import NaturalPostureOptimizer, OptimizerConfig
 from .posture_space import (ANCESTORS, QueryConfig, QueryPreparer, as_database_arrays,
-                            rest_directions, to_sensor_frame, user_bone_lengths, yaw_quat_matrix,
-                            yaw_rotation)
+                            rest_directions, to_sensor_frame, user_bone_lengths, yaw_quat_matrix)
 from .reliability import ReliabilityConfig, ReliabilityEstimator
 
 METHODS = ('A', 'B', 'C')
 OUTPUT_MODES = ('segments', 'blend')
 TRUST_MODES = ('noise_ratio', 'distance')
-_SEG_P = np.array(SEGMENT_PARENTS)
-_SEG_C = np.array(SEGMENT_CHILDREN)
 _MIRROR_SEG = np.array([SEGMENT_CHILDREN.index(MIRROR[c]) for c in SEGMENT_CHILDREN])
 # (19, 20): positions -> segment vectors (child - parent); (20, 19): segment vectors -> positions
 # relative to the root (the segments on the way from the root)
 _SEG_DIFF = np.zeros((NUM_SEGMENTS, NUM_JOINTS))
-_SEG_DIFF[np.arange(NUM_SEGMENTS), _SEG_C] = 1.0
-_SEG_DIFF[np.arange(NUM_SEGMENTS), _SEG_P] -= 1.0
-_SEG_CHAIN = ANCESTORS[:, _SEG_C]
+_SEG_DIFF[np.arange(NUM_SEGMENTS), SEGMENT_CHILD_INDEX] = 1.0
+_SEG_DIFF[np.arange(NUM_SEGMENTS), SEGMENT_PARENT_INDEX] -= 1.0
+_SEG_CHAIN = ANCESTORS[:, SEGMENT_CHILD_INDEX]
 # (19, 20): 1 for the joints at and below each segment's child (what hangs from the segment)
 _SEG_BELOW = np.ascontiguousarray(_SEG_CHAIN.T)
 
@@ -325,7 +323,7 @@ class Reconstructor:
 
     def _observe_lengths(self, ln: np.ndarray, R: np.ndarray) -> None:
         """``ln`` (19,) this frame's observed segment lengths, ``R`` (20,) reliabilities."""
-        good = (R[_SEG_P] >= self.reliable_threshold) & (R[_SEG_C] >= self.reliable_threshold)
+        good = (R[SEGMENT_PARENT_INDEX] >= self.reliable_threshold) & (R[SEGMENT_CHILD_INDEX] >= self.reliable_threshold)
         self._lengths[self._lengths_n % self.length_window] = np.where(good, ln, np.nan)
         self._lengths_n += 1
 
@@ -341,12 +339,12 @@ class Reconstructor:
         if self.output_scale == 'standard':
             self._frozen_lengths = self._standard_lengths
             return self._frozen_lengths
-        good = (R[_SEG_P] >= self.reliable_threshold) & (R[_SEG_C] >= self.reliable_threshold)
+        good = (R[SEGMENT_PARENT_INDEX] >= self.reliable_threshold) & (R[SEGMENT_CHILD_INDEX] >= self.reliable_threshold)
         good &= self._seg_count < self.length_frames
         if good.any():
             ln = lengths
             if ln is None:
-                ln = np.linalg.norm(positions[_SEG_C] - positions[_SEG_P], axis=1)
+                ln = np.linalg.norm(positions[SEGMENT_CHILD_INDEX] - positions[SEGMENT_PARENT_INDEX], axis=1)
             self._seg_sum[good] += ln[good]
             self._seg_count[good] += 1
         none = self._seg_count == 0
@@ -468,7 +466,7 @@ class Reconstructor:
         reliable ones is retargeted to the standard lengths instead and says nothing about the
         user's size)."""
         rel = w >= self.reliable_threshold
-        if rel.sum() < _MIN_FIT_JOINTS or (rel[_SEG_P] & rel[_SEG_C]).any():
+        if rel.sum() < _MIN_FIT_JOINTS or (rel[SEGMENT_PARENT_INDEX] & rel[SEGMENT_CHILD_INDEX]).any():
             return
         lo, hi = 1.0, 2.3   # the reliability estimator's height range
         _, dist, s = self.core.knn_scaled(query, np.where(rel, w, 0.0), translate,
@@ -521,14 +519,14 @@ class Reconstructor:
         L = self.output_segment_lengths(obs, w, len_obs)
         vs = _SEG_DIFF @ solution
         if yaw is not None:
-            vs = vs @ yaw_rotation(yaw).T
+            vs = vs @ yaw_matrix(yaw).T
         ns = np.sqrt(np.einsum('sk,sk->s', vs, vs))
         us = vs / np.maximum(ns, 1e-9)[:, None]
         uo = seg_obs / np.maximum(len_obs, 1e-9)[:, None]
         zero = len_obs <= 1e-9
         if zero.any():
             uo[zero] = us[zero]
-        wmin = np.minimum(w[_SEG_P], w[_SEG_C])
+        wmin = np.minimum(w[SEGMENT_PARENT_INDEX], w[SEGMENT_CHILD_INDEX])
         thr = self.reliable_threshold
         rel_frac = np.minimum(wmin * (1.0 / max(thr, 1e-6)), 1.0)
         beta = rel_frac * trust
@@ -607,7 +605,7 @@ class Reconstructor:
             rel = w >= self.reliable_threshold
             # few reliable joints: the torso is unreliable and no segment has two reliable ends
             few = (self._torso_weight(w) < self.reliable_threshold
-                   and not (rel[_SEG_P] & rel[_SEG_C]).any())
+                   and not (rel[SEGMENT_PARENT_INDEX] & rel[SEGMENT_CHILD_INDEX]).any())
             # a heading / scale fit needs at least three reliable joints (two leave the
             # rotation about their line and, with the translation free, the scale undetermined)
             fit_ok = int(rel.sum()) >= _MIN_FIT_JOINTS
@@ -622,7 +620,7 @@ class Reconstructor:
             yaw = float(prep.transform.yaw)
             prev = []
             for x, y in self._prev:  # bring earlier solutions into this frame's heading
-                prev.append(x @ yaw_rotation(y - yaw).T)
+                prev.append(x @ yaw_matrix(y - yaw).T)
             res = self.core.solve(prep.query, w, prev[::-1], translate=translate)
             self._prev.append((res.positions, yaw))
             theta = None
@@ -641,7 +639,7 @@ class Reconstructor:
             if res.shift is not None and alpha < 1.0:
                 # the root towards where the database neighbours place it, as far as the
                 # database is trusted more than the sensor
-                root = obs[ROOT] - ((1.0 - alpha) / prep.scale) * (yaw_rotation(yaw) @ res.shift)
+                root = obs[ROOT] - ((1.0 - alpha) / prep.scale) * (yaw_matrix(yaw) @ res.shift)
             if segments:
                 positions = self._segments_output(frame, res.positions, w, alpha, yaw=yaw,
                                                   seg_obs=seg_obs, len_obs=len_obs, root=root)

@@ -34,31 +34,30 @@ import numpy as np
 from skeleton_core.geometry import normalize
 from skeleton_core.params import check, param
 from skeleton_core.model import (ANKLE_LEFT, ANKLE_RIGHT, ELBOW_LEFT, ELBOW_RIGHT, FOOT_LEFT,
-                                 FOOT_RIGHT, HAND_LEFT, HAND_RIGHT, HEAD, HIP_LEFT,
-                                 HIP_RIGHT, INFERRED, KNEE_LEFT, KNEE_RIGHT, NOT_TRACKED,
-                                 NUM_JOINTS, NUM_SEGMENTS, SEGMENT_CHILDREN, SEGMENT_OF_JOINT,
-                                 SEGMENT_PARENTS, SHOULDER_CENTER, SHOULDER_LEFT, SHOULDER_RIGHT,
-                                 SPINE, STANDARD_HEIGHT, TRACKED, WRIST_LEFT, WRIST_RIGHT,
-                                 estimate_height, segment_lengths, standard_body)
+                                 FOOT_RIGHT, HAND_LEFT, HAND_RIGHT, HEAD, HIP_LEFT, HIP_RIGHT,
+                                 INFERRED, KNEE_LEFT, KNEE_RIGHT, NOT_TRACKED, NUM_JOINTS,
+                                 NUM_SEGMENTS, SEGMENT_CHILDREN, SEGMENT_CHILD_INDEX,
+                                 SEGMENT_OF_JOINT, SEGMENT_PARENT_INDEX, SHOULDER_CENTER,
+                                 SHOULDER_LEFT, SHOULDER_RIGHT, SPINE, STANDARD_HEIGHT, TRACKED,
+                                 WRIST_LEFT, WRIST_RIGHT, estimate_height, segment_lengths,
+                                 standard_body)
 
 from .posture_space import heading_yaw
 
 REFERENCE_MODES = ('observed', 'standard')
 _ONES = [1.0] * NUM_JOINTS   # heading_yaw's weights: the hip and shoulder lines alike
-_SEG_P = np.array(SEGMENT_PARENTS)
-_SEG_C = np.array(SEGMENT_CHILDREN)
 
 # Joint-segment incidence (20, 19): a joint touches the segment ending at it and those leaving it.
 INCIDENCE = np.zeros((NUM_JOINTS, NUM_SEGMENTS))
-INCIDENCE[_SEG_P, np.arange(NUM_SEGMENTS)] = 1.0
-INCIDENCE[_SEG_C, np.arange(NUM_SEGMENTS)] = 1.0
+INCIDENCE[SEGMENT_PARENT_INDEX, np.arange(NUM_SEGMENTS)] = 1.0
+INCIDENCE[SEGMENT_CHILD_INDEX, np.arange(NUM_SEGMENTS)] = 1.0
 _INCIDENCE_COUNT = INCIDENCE.sum(axis=1)
 
 
 def reference_directions() -> dict:
     """Unit segment directions (19, 3) of the two reference postures, facing +x (Fig. 2)."""
     body = standard_body()
-    rest = body.rest_offsets[_SEG_C]
+    rest = body.rest_offsets[SEGMENT_CHILD_INDEX]
     tpose = rest / np.linalg.norm(rest, axis=1, keepdims=True)
     standing = tpose.copy()
     seg_of = {c: k for k, c in enumerate(SEGMENT_CHILDREN)}
@@ -169,7 +168,7 @@ def reference_pose_match(positions: np.ndarray, tolerance_deg: float) -> Optiona
     feet left out: short and noisy on Kinect) must be below ``tolerance_deg``.
     """
     p, _ = normalize(positions)
-    d = p[_SEG_C] - p[_SEG_P]
+    d = p[SEGMENT_CHILD_INDEX] - p[SEGMENT_PARENT_INDEX]
     n = np.linalg.norm(d, axis=1)
     if np.any(n < 1e-6):
         return None
@@ -356,7 +355,7 @@ class ReliabilityEstimator:
         ``tracked`` (20,) bool, ``lengths`` (19,) this frame's segment lengths."""
         if self.reference_mode != 'observed':
             return
-        good = tracked[_SEG_P] & tracked[_SEG_C]
+        good = tracked[SEGMENT_PARENT_INDEX] & tracked[SEGMENT_CHILD_INDEX]
         row = self._observed[self._observed_n % self.observed_window]
         row[:] = lengths
         row[~good] = np.nan
@@ -396,8 +395,8 @@ class ReliabilityEstimator:
         """Add one frame; return the reliability (20,) in [0, 1] (Eq. 8)."""
         p = np.asarray(positions, float)
         ts = np.asarray(tracking_state)
-        seg = p.take(_SEG_C, axis=0)
-        seg -= p.take(_SEG_P, axis=0)
+        seg = p.take(SEGMENT_CHILD_INDEX, axis=0)
+        seg -= p.take(SEGMENT_PARENT_INDEX, axis=0)
         ln = np.sqrt(np.einsum('sk,sk->s', seg, seg))
         tracked = ts == TRACKED
         if tracked.all():

@@ -25,8 +25,8 @@ from typing import Dict, Iterable, List, Optional, Sequence, Tuple
 import numpy as np
 
 from skeleton_core.conversions import SkeletonFrame
-from skeleton_core.model import (INFERRED, NOT_TRACKED, NUM_JOINTS, SEGMENT_CHILDREN,
-                                 SEGMENT_PARENTS, SEGMENTS, estimate_height, standard_body)
+from skeleton_core.model import (INFERRED, NOT_TRACKED, NUM_JOINTS, SEGMENTS, SEGMENT_CHILD_INDEX,
+                                 SEGMENT_PARENT_INDEX, estimate_height, standard_body)
 from skeleton_core.params import param
 
 LAYERS: Tuple[str, ...] = ('raw', 'reliability', 'reconstructed', 'completed', 'character')
@@ -38,7 +38,6 @@ ADD, DELETE = 'ADD', 'DELETE'
 
 # Capsule radius per metre of body height (standard_body radii are proportional to the height)
 _RADIUS_PER_HEIGHT = standard_body().segment_radii / standard_body().height
-_SEG_P, _SEG_C = list(SEGMENT_PARENTS), list(SEGMENT_CHILDREN)
 
 # Marker ids inside one skeleton namespace
 JOINTS_ID, BONES_ID = 0, 1
@@ -266,7 +265,7 @@ def capsule_markers(frame: SkeletonFrame, style: Style, layer: str = 'character'
     p = _shift(style, layer, np.asarray(frame.positions, dtype=float))
     radii = (_RADIUS_PER_HEIGHT * character_height(frame, style)).tolist()
     color = _rgba(style.character_color)
-    pa, pb = p[_SEG_P], p[_SEG_C]
+    pa, pb = p[SEGMENT_PARENT_INDEX], p[SEGMENT_CHILD_INDEX]
     d = pb - pa
     lengths = np.maximum(np.linalg.norm(d, axis=1), 1e-4).tolist()
     mids = (0.5 * (pa + pb)).tolist()
