@@ -283,7 +283,8 @@ def standalone_character_xml(body: Body, params: Optional[CharacterParams] = Non
             f'  <actuator>\n{character_actuator_xml(prefix, params)}\n  </actuator>\n</mujoco>')
 
 
-__all__ = ['CharacterParams', 'ElementNames', 'character_prefix', 'ROOT_SEGMENT', 'PIN_JOINTS', 'body_order', 'segment_parent_body',
+__all__ = ['CharacterParams', 'ElementNames', 'character_prefix', 'ROOT_SEGMENT', 'PIN_JOINTS',
+           'body_order', 'segment_parent_body',
            'joint_anchor', 'segment_local_end', 'character_bodies_xml', 'character_mocap_xml',
            'character_equality_xml', 'character_xml_parts', 'character_actuator_xml',
            'ORIGIN_SITE', 'AXES', 'standalone_character_xml', 'fmt',
