@@ -19,8 +19,8 @@ read from ``world`` (a name in the package's config/worlds or a YAML path) at st
 """
 from __future__ import annotations
 
-import math
 import time
+from dataclasses import dataclass
 from typing import Dict, List, Optional
 
 import numpy as np
@@ -29,84 +29,41 @@ from skeleton_core.cdr import CdrError, frames_from_cdr, frames_to_cdr
 from skeleton_core.conversions import SkeletonFrame, ns_to_stamp
 from skeleton_core.health import Health
 from skeleton_core.model import NUM_JOINTS, TRACKED
-from skeleton_core.rosnode import DiagnosticsPublisher, Parameters, ParamSpec, run_node
+from skeleton_core.params import ParamSpec, assign, build, param, specs
+from skeleton_core.rosnode import DiagnosticsPublisher, Parameters, run_node
 from skeleton_msgs.msg import Intention, SkeletonArray
 from visualization_msgs.msg import MarkerArray
 
 from .controller import ControlParams, PerformanceController, build_models
 from .features import WorldError, load_world
-from .intention import RecognizerParams
 from .markers import contact_shapes, to_marker_array, world_shapes
 
-REC_KEYS = ('e1_threshold', 'e2_threshold', 'tau', 'smoothing', 'min_activity',
-            'activity_window', 'prefilter', 'combine', 'normalise')
-CTRL_KEYS = ('free_gain', 'release_after', 'hand_release_margin', 'regrab_speed', 'foot_down_height',
-             'blend_time', 'w_e', 'w_s')
-_R = RecognizerParams()
-_C = ControlParams()
 
-PARAMS: List[ParamSpec] = [
-    ParamSpec('world', 'playground', 'feature world: a name in config/worlds or a YAML path',
-              read_only=True),
-    ParamSpec('start_feature', '', 'feature a new character starts on ("" = the world\'s spawn '
-              'on the floor; e.g. monkey_bars: hanging from the nearest bar)', read_only=True),
-    ParamSpec('input_topic', '/posture/reconstructed', 'performances (SkeletonArray)',
-              read_only=True),
-    ParamSpec('output_topic', '/control/target', 'composed poses for the physics (SkeletonArray)',
-              read_only=True),
-    ParamSpec('intention_topic', '/control/intention', 'skeleton_msgs/Intention', read_only=True),
-    ParamSpec('markers_topic', '/control/markers', 'features and contacts (MarkerArray)',
-              read_only=True),
-    ParamSpec('e1_threshold', _R.e1_threshold, 'Eq. 5 threshold (squared error, body-height '
-              'units): the user\'s pose near the example\'s PCA subspace', range=(1e-5, 10.0)),
-    ParamSpec('e2_threshold', _R.e2_threshold, 'Eq. 6 threshold: consistency of the user\'s '
-              'change over lag frames with the example', range=(1e-5, 10.0)),
-    ParamSpec('tau', _R.tau, 'weight (s) of the effector velocities against positions in w',
-              range=(0.0, 2.0)),
-    ParamSpec('lag', _R.lag, 'frames of the velocity and of dw in Eq. 6', range=(1, 30),
-              read_only=True),
-    ParamSpec('smoothing', _R.smoothing, 'time constant (s) of the e1/e2 averages',
-              range=(0.0, 5.0)),
-    ParamSpec('prefilter', _R.prefilter, 'time constant (s) of the low-pass on the relative '
-              'joint positions before the features (sensor noise)', range=(0.0, 1.0)),
-    ParamSpec('min_activity', _R.min_activity, 'share of the example\'s RMS effector speed the '
-              'user must reach to be imitating (a still pose has dw = 0)', range=(0.0, 10.0)),
-    ParamSpec('activity_window', _R.activity_window, 'time constant (s) of the speed average of '
-              'the activity gate', range=(0.0, 10.0)),
-    ParamSpec('activity_lag', _R.activity_lag, 'frames of the activity gate\'s displacement',
-              range=(1, 60), read_only=True),
-    ParamSpec('combine', _R.combine, 'and: e1 and e2 under their thresholds; or: either (the '
-              'paper\'s consistency read as an alternative to similarity)', choices=('and', 'or')),
-    ParamSpec('normalise', _R.normalise, 'e1/e2 in units of each example\'s own spread (total '
-              'variance of w, mean |dw|^2); the thresholds are then in those units'),
-    ParamSpec('release_after', _C.release_after, 's without imitation before hands on a feature '
-              'with an example let go (the character falls when the user stops; 0 = never)',
-              range=(0.0, 60.0)),
-    ParamSpec('hand_release_margin', _C.hand_release_margin, 'm: a held hand lets go when the '
-              'user\'s hand drops this far below the feature\'s engage joint', range=(0.0, 1.0)),
-    ParamSpec('regrab_speed', _C.regrab_speed, 'm/s: on a feature with engage.regrab (the rope) a '
-              'held hand the user raises faster lets go to grab higher (hand over hand)',
-              range=(0.05, 10.0)),
-    ParamSpec('foot_down_height', _C.foot_down_height, 'm: the user\'s foot this close to their '
-              'floor is constrained (may hold the floor / trampoline)', range=(0.005, 0.5)),
-    ParamSpec('free_gain', _C.free_gain, 'N/m (N/rad): gain of effectors without a contact',
-              range=(10.0, 1e5)),
-    ParamSpec('blend_time', _C.blend_time, 's: transition in/out of the composed pose',
-              range=(0.01, 5.0)),
-    ParamSpec('w_e', _C.w_e, 'Eq. 8 weight of G_E (example similarity; w_P = 1)',
-              range=(0.0, 100.0)),
-    ParamSpec('w_s', _C.w_s, 'Eq. 8 weight of G_S (smoothness)', range=(0.0, 100.0)),
-    ParamSpec('sensor_height', _C.sensor_height, 'm above the floor (the same world as the '
-              'physics node)', range=(0.0, 5.0), read_only=True),
-    ParamSpec('sensor_pitch_deg', 0.0, 'sensor tilt down (deg)', range=(-45.0, 45.0),
-              read_only=True),
-    ParamSpec('body_mass', _C.body_mass, 'kg at 1.75 m (scaled with height^3)',
-              range=(20.0, 300.0), read_only=True),
-    ParamSpec('user_timeout', 2.0, 's without a user before its controller is dropped',
-              range=(0.1, 60.0)),
-    ParamSpec('max_users', 6, 'users controlled at once (more are ignored)', range=(1, 30),
-              read_only=True),
-]
+@dataclass
+class ControlNodeConfig:
+    """The control node's own parameters (the controller's are ControlParams')."""
+
+    world: str = param('playground', 'feature world: a name in config/worlds or a YAML path',
+                       read_only=True)
+    start_feature: str = param('', "feature a new character starts on ('' = the world's spawn on "
+                               'the floor; e.g. monkey_bars: hanging from the nearest bar)',
+                               read_only=True)
+    input_topic: str = param('/posture/reconstructed', 'performances (SkeletonArray)',
+                             read_only=True)
+    output_topic: str = param('/control/target', 'composed poses for the physics (SkeletonArray)',
+                              read_only=True)
+    intention_topic: str = param('/control/intention', 'skeleton_msgs/Intention', read_only=True)
+    markers_topic: str = param('/control/markers', 'features and contacts (MarkerArray)',
+                               read_only=True)
+    user_timeout: float = param(2.0, 's without a user before its controller is dropped',
+                                range=(0.1, 60.0))
+    max_users: int = param(6, 'users controlled at once (more are ignored)', range=(1, 30),
+                           read_only=True)
+
+
+CONTROL_PARAMS = specs(ControlParams)
+PARAMS: List[ParamSpec] = specs(ControlNodeConfig) + CONTROL_PARAMS
+LIVE = {s.name: s for s in CONTROL_PARAMS if not s.read_only}
 
 
 class ControlNode(Node):
@@ -125,11 +82,8 @@ class ControlNode(Node):
         if v['start_feature'] and v['start_feature'] not in self.world.features:
             raise ValueError(f'control: start_feature {v["start_feature"]!r} is not in world '
                              f'{self.world.name} ({sorted(self.world.features)})')
-        self.rp = RecognizerParams(**{k: v[k] for k in REC_KEYS}, lag=v['lag'],
-                                   activity_lag=v['activity_lag'])
-        self.cp = ControlParams(recognizer=self.rp, sensor_height=v['sensor_height'],
-                                sensor_pitch=math.radians(v['sensor_pitch_deg']),
-                                body_mass=v['body_mass'], **{k: v[k] for k in CTRL_KEYS})
+        self.cp = build(ControlParams, v)
+        self.rp = self.cp.recognizer          # shared by every user's controller: live changes
         self.cp.validate()
         self.models = build_models(self.world, self.rp)
         self.users: Dict[int, PerformanceController] = {}
@@ -148,10 +102,8 @@ class ControlNode(Node):
 
     def _on_params(self, changed: Dict) -> Optional[str]:
         for k, val in changed.items():
-            if k in REC_KEYS:
-                setattr(self.rp, k, val if isinstance(val, (str, bool)) else float(val))
-            elif k in CTRL_KEYS:
-                setattr(self.cp, k, float(val))
+            if k in LIVE:
+                assign(self.cp, LIVE[k], val)
         return None
 
     def _diag(self) -> Dict:

@@ -15,12 +15,13 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Dict, Optional
 
 import numpy as np
 from physics_sim.simulation import SensorPose
 from skeleton_core.geometry import facing_yaw
+from skeleton_core.params import check, nested, param
 from skeleton_core.model import (FOOT_LEFT, FOOT_RIGHT, JOINT_INDEX, estimate_height)
 
 from .composition import Obstacles, PoseComposer, integrate_motion, integrate_rule
@@ -36,23 +37,42 @@ FEET = ('FootLeft', 'FootRight')
 
 @dataclass
 class ControlParams:
-    recognizer: RecognizerParams = field(default_factory=RecognizerParams)
-    free_gain: float = 1500.0          # N/m (N/rad): effectors without a contact follow the user
-    release_after: float = 1.0         # s without imitation before held hands let go (0 = never)
-    hand_release_margin: float = 0.05  # m below the engage joint before a hand lets go
-    regrab_speed: float = 0.5          # m/s: a held hand raised faster lets go (regrab features)
-    foot_down_height: float = 0.06     # m: user's foot this close to the user's floor = constrained
-    blend_time: float = 0.3            # s: transition in/out of the composed pose (Sec. 6.2)
-    compose_components: int = 6        # pose PCA size m of Eq. 7
-    compose_k: int = 4                 # nearest example frames in q_rep (Eq. 10)
-    w_e: float = 0.05                  # Eq. 8 weights (w_P = 1)
-    w_s: float = 0.2
-    sensor_height: float = 0.8         # m, as the physics node (the same world)
-    sensor_pitch: float = 0.0          # rad
-    body_mass: float = 75.0            # kg at 1.75 m (scaled with height^3)
-    compute_penetration: bool = True
+    """The controller; every field is a node parameter (skeleton_core.params)."""
+
+    recognizer: RecognizerParams = nested(RecognizerParams)
+    free_gain: float = param(1500.0, 'N/m (N/rad): gain of effectors without a contact',
+                             range=(10.0, 1e5))
+    release_after: float = param(1.0, 's without imitation before hands on a feature with an '
+                                 'example let go (the character falls when the user stops; '
+                                 '0 = never)', range=(0.0, 60.0))
+    hand_release_margin: float = param(0.05, "m: a held hand lets go when the user's hand drops "
+                                       "this far below the feature's engage joint",
+                                       range=(0.0, 1.0))
+    regrab_speed: float = param(0.5, 'm/s: on a feature with engage.regrab (the rope) a held hand '
+                                'the user raises faster lets go to grab higher (hand over hand)',
+                                range=(0.05, 10.0))
+    foot_down_height: float = param(0.06, "m: the user's foot this close to their floor is "
+                                    'constrained (may hold the floor / trampoline)',
+                                    range=(0.005, 0.5))
+    blend_time: float = param(0.3, 's: transition in/out of the composed pose (Sec. 6.2)',
+                              range=(0.01, 5.0))
+    compose_components: int = param(6, 'pose PCA size m of Eq. 7', range=(1, 30), read_only=True)
+    compose_k: int = param(4, 'nearest example frames in q_rep (Eq. 10)', range=(1, 50),
+                           read_only=True)
+    w_e: float = param(0.05, 'Eq. 8 weight of G_E (example similarity; w_P = 1)',
+                       range=(0.0, 100.0))
+    w_s: float = param(0.2, 'Eq. 8 weight of G_S (smoothness)', range=(0.0, 100.0))
+    sensor_height: float = param(0.8, 'm above the floor (the same world as the physics node)',
+                                 range=(0.0, 5.0), read_only=True)
+    sensor_pitch: float = param(0.0, 'sensor tilt down (deg)', range=(-45.0, 45.0),
+                                read_only=True, name='sensor_pitch_deg', degrees=True)
+    body_mass: float = param(75.0, 'kg at 1.75 m (scaled with height^3)', range=(20.0, 300.0),
+                             read_only=True)
+    compute_penetration: bool = param(True, 'measure the deepest penetration of the body into '
+                                      'the features every frame (diagnostics, the benchmark)')
 
     def validate(self) -> None:
+        check(self, nested=False)
         self.recognizer.validate()
         for k in ('free_gain', 'blend_time', 'body_mass', 'foot_down_height'):
             if not getattr(self, k) > 0:

@@ -20,6 +20,7 @@ from typing import Dict, Optional, Sequence
 
 import numpy as np
 from skeleton_core.geometry import facing_yaw
+from skeleton_core.params import check, param
 from skeleton_core.model import (JOINT_INDEX, SEGMENT_CHILDREN, SEGMENT_MASS_FRACTION,
                                  SEGMENT_PARENTS, JOINT_NAMES, estimate_height)
 
@@ -75,25 +76,34 @@ def reconstruction_error(v: np.ndarray, a: np.ndarray) -> np.ndarray:
 
 @dataclass
 class RecognizerParams:
-    e1_threshold: float = 0.03
-    e2_threshold: float = 0.03
-    tau: float = 0.25           # s: weight of velocities against positions in w
-    lag: int = 2                # frames: velocity and dw over this many frames
-    smoothing: float = 0.03     # s: time constant of the error averages
-    min_activity: float = 0.3   # share of the example's RMS effector speed needed
-    activity_window: float = 0.3   # s: time constant of the mean squared speed (the gate)
-    activity_lag: int = 9       # frames: the gate's speed is the displacement over this many
-    prefilter: float = 0.03     # s: exponential low-pass of the relative joint positions (noise)
-    # 'and': e1 and e2 under their thresholds; 'or': either (the paper's consistency condition
-    # "allows the user's pose to be dissimilar from the example as long as the deviation is
-    # nearly constant over time")
-    combine: str = 'and'
-    # e1, e2 in units of the example's own spread (total variance of w, mean |dw|^2 over lag):
-    # one threshold fits features whose examples move more or less
-    normalise: bool = False
+    """Intention recognition (Sec. 6.1); every field is a node parameter (skeleton_core.params)."""
+
+    e1_threshold: float = param(0.03, "Eq. 5 threshold (squared error, body-height units): the "
+                                "user's pose near the example's PCA subspace", range=(1e-5, 10.0))
+    e2_threshold: float = param(0.03, "Eq. 6 threshold: consistency of the user's change over "
+                                "lag frames with the example", range=(1e-5, 10.0))
+    tau: float = param(0.25, 'weight (s) of the effector velocities against positions in w',
+                       range=(0.0, 2.0))
+    lag: int = param(2, 'frames of the velocity and of dw in Eq. 6', range=(1, 30), read_only=True)
+    smoothing: float = param(0.03, 'time constant (s) of the e1/e2 averages', range=(0.0, 5.0))
+    min_activity: float = param(0.3, "share of the example's RMS effector speed the user must "
+                                "reach to be imitating (a still pose has dw = 0)",
+                                range=(0.0, 10.0))
+    activity_window: float = param(0.3, 'time constant (s) of the speed average of the activity '
+                                   'gate', range=(0.0, 10.0))
+    activity_lag: int = param(9, "frames of the activity gate's displacement", range=(1, 60),
+                              read_only=True)
+    prefilter: float = param(0.03, 'time constant (s) of the low-pass on the relative joint '
+                             'positions before the features (sensor noise)', range=(0.0, 1.0))
+    combine: str = param('and', "and: e1 and e2 under their thresholds; or: either (the paper's "
+                         "consistency read as an alternative to similarity)",
+                         choices=('and', 'or'))
+    normalise: bool = param(False, "e1/e2 in units of each example's own spread (total "
+                            "variance of w, mean |dw|^2); the thresholds are then in those units")
     fps: float = 30.0
 
     def validate(self) -> None:
+        check(self)
         for k in ('e1_threshold', 'e2_threshold', 'tau', 'fps'):
             if not getattr(self, k) > 0:
                 raise ValueError(f'{k} must be positive')
