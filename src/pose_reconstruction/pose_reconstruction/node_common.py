@@ -21,83 +21,16 @@ from rclpy.qos import QoSProfile
 from skeleton_core.cdr import CdrError, frames_from_cdr, frames_to_cdr
 from skeleton_core.conversions import SkeletonFormatError, frame_from_arrays
 from skeleton_core.health import Health
-from skeleton_core.rosnode import DiagnosticsPublisher, ParamSpec, Parameters
+from skeleton_core.params import ParamSpec, build, specs
+from skeleton_core.rosnode import DiagnosticsPublisher, Parameters
 
-from .plausibility import PLAUSIBILITY_PARAMS
-from .plausibility import validate as validate_plausibility
+from .reliability import ReliabilityConfig
 
-# Reliability parameters (Shum et al. 2013 Sec. IV), shared by every node that may estimate it
-RELIABILITY_SPECS = [
-    ParamSpec('d_min', 0.03, 'Eq. 3: minimum displacement (m) for an angle to count', (0.0, 0.5)),
-    ParamSpec('f_b', 3, 'Eq. 4: frames averaged by the behaviour term', (1, 30)),
-    ParamSpec('theta_floor_deg', 90.0, 'Eq. 4: acceptable angle change (deg)', (0.0, 180.0)),
-    ParamSpec('theta_roof_deg', 135.0, 'Eq. 4: fully unacceptable angle change (deg)',
-              (0.0, 180.0)),
-    ParamSpec('f_total', 6, 'Eq. 8: frames in the Gaussian-weighted window', (1, 60)),
-    ParamSpec('sigma_frames', 2.0, 'Eq. 8: width (frames) of the Gaussian weight', (0.1, 60.0)),
-    ParamSpec('tracked_value', 1.0, 'Eq. 7: R_t of a tracked joint', (0.0, 1.0)),
-    ParamSpec('inferred_value', 0.0, 'Eq. 7: R_t of an inferred joint', (0.0, 1.0)),
-    ParamSpec('not_tracked_value', 0.0, 'Eq. 7: R_t of a not-tracked joint', (0.0, 1.0)),
-    ParamSpec('reference_pose_tolerance_deg', 25.0,
-              'largest segment-direction error (deg) to accept a T-pose / standing reference posture',
-              (1.0, 90.0)),
-    ParamSpec('reference_frames', 15, 'reference segment lengths: median of this many captures',
-              (1, 300)),
-    ParamSpec('reference_mode', 'observed',
-              'reference lengths before a reference posture is captured: observed (running median '
-              'of tracked segments) or standard (the standard body at the user height, paper)',
-              choices=('observed', 'standard')),
-    ParamSpec('observed_window', 90, "reference_mode observed: frames in the running median",
-              (1, 10000)),
-]
-# Plausibility of TRACKED joints (confident failures; plausibility.py), min(Eq. 8, R_p)
-PLAUSIBILITY_SPECS = [
-    ParamSpec('plausibility', True,
-              'confident failures: lower the reliability of TRACKED joints a body cannot have '
-              '(bone lengths against the profile, segment speed, left/right against the heading, '
-              'floor, whole-skeleton jump); false = Eq. 1-8 only (paper)'),
-    ParamSpec('bone_tolerance', 0.4,
-              'plausibility: relative segment-length deviation from the user profile tolerated',
-              (0.0, 10.0)),
-    ParamSpec('bone_tolerance_m', 0.03,
-              'plausibility: absolute segment-length deviation (m) tolerated on top', (0.0, 1.0)),
-    ParamSpec('bone_reject', 1.0,
-              'plausibility: relative deviation beyond the tolerance at which a segment (and what '
-              'hangs from it) has no plausibility left', (0.01, 100.0)),
-    ParamSpec('max_segment_speed_m_s', 8.0,
-              'plausibility: fastest a segment end moves relative to its parent (m/s); faster '
-              'is a snap onset', (0.1, 1000.0)),
-    ParamSpec('latch_frames', 45,
-              'plausibility: frames a segment stays implausible after a snap onset unless it '
-              'jumps back first; 0 = the onset frame only', (0, 100000)),
-    ParamSpec('lr_flip_deg', 110.0,
-              'plausibility: a girdle (shoulders or hips) this far (deg) off the body heading, '
-              'the other girdle agreeing with it, has its left and right swapped', (1.0, 180.0)),
-    ParamSpec('lr_unswap', True,
-              'plausibility: swap detected left/right limbs back (true) or make both limbs '
-              'unreliable (false)'),
-    ParamSpec('heading_rate', 0.3,
-              'plausibility: per-frame rate at which the body heading follows the girdles that '
-              'agree with it', (0.001, 1.0)),
-    ParamSpec('floor_tolerance_m', 0.05,
-              'plausibility: depth (m) below the estimated floor a joint may reach unpunished',
-              (0.0, 2.0)),
-    ParamSpec('floor_reject_m', 0.12,
-              'plausibility: depth (m) below the floor at which a joint has no plausibility left',
-              (0.001, 5.0)),
-    ParamSpec('floor_window', 150,
-              'plausibility: frames whose lowest TRACKED foot gives the floor (median)',
-              (1, 100000)),
-    ParamSpec('jump_m', 0.35,
-              'plausibility: median distance (m) of the TRACKED joints from their last plausible '
-              'place that makes the whole skeleton another person (last output held)',
-              (0.01, 100.0)),
-    ParamSpec('jump_frames', 15,
-              'plausibility: frames a whole-skeleton jump is rejected before the new place is '
-              'accepted (re-acquisition)', (1, 10000)),
-]
-RELIABILITY_SPECS = RELIABILITY_SPECS + PLAUSIBILITY_SPECS
+# Reliability parameters (Shum et al. 2013 Sec. IV, declared on ReliabilityConfig), shared by every
+# node that may estimate it
+RELIABILITY_SPECS = specs(ReliabilityConfig)
 RELIABILITY_NAMES = [s.name for s in RELIABILITY_SPECS]
+DATABASE_SPEC = ParamSpec('database', '', "motion database file ('' = built-in / CMU default)")
 
 
 def common_specs(input_topic: str, output_topic: str) -> List[ParamSpec]:
@@ -115,9 +48,12 @@ def common_specs(input_topic: str, output_topic: str) -> List[ParamSpec]:
 
 
 def check_reliability_params(values: Dict[str, Any]) -> Optional[str]:
-    if values['theta_floor_deg'] >= values['theta_roof_deg']:
-        return 'theta_floor_deg must be below theta_roof_deg'
-    return validate_plausibility({k: values[k] for k in PLAUSIBILITY_PARAMS if k in values})
+    """The cross-parameter checks of ReliabilityConfig (an error text or None)."""
+    try:
+        build(ReliabilityConfig, values).validate()
+    except ValueError as e:
+        return str(e)
+    return None
 
 
 class SkeletonArrayNode(Node):

@@ -43,21 +43,75 @@ Terms (each 1 = plausible):
 from __future__ import annotations
 
 import collections
+import dataclasses
+from dataclasses import dataclass
 from typing import Dict, Optional
 
 import numpy as np
 
+from skeleton_core.params import check, defaults, names, param
 from skeleton_core.model import (FOOT_LEFT, FOOT_RIGHT, HIP_LEFT, HIP_RIGHT, LIMB_JOINTS,
                                  NUM_JOINTS, NUM_SEGMENTS, PARENTS, ROOT, SEGMENT_CHILDREN,
                                  SEGMENT_PARENTS, SHOULDER_LEFT, SHOULDER_RIGHT, TRACKED)
 
-PLAUSIBILITY_DEFAULTS: Dict = dict(
-    plausibility=True, bone_tolerance=0.4, bone_tolerance_m=0.03, bone_reject=1.0,
-    max_segment_speed_m_s=8.0, latch_frames=45, lr_flip_deg=110.0, lr_unswap=True,
-    heading_rate=0.3,
-    floor_tolerance_m=0.05,
-    floor_reject_m=0.12, floor_window=150, jump_m=0.35, jump_frames=15)
-PLAUSIBILITY_PARAMS = tuple(PLAUSIBILITY_DEFAULTS)
+@dataclass
+class PlausibilityConfig:
+    """Parameters of :class:`PlausibilityCheck` (nested in the reliability's configuration; our
+    values, tuned on the dev clips with sensor seed 0: docs/robustness.md)."""
+
+    plausibility: bool = param(
+        True, 'confident failures: lower the reliability of TRACKED joints a body cannot have '
+        '(bone lengths against the profile, segment speed, left/right against the heading, '
+        'floor, whole-skeleton jump); false = Eq. 1-8 only (paper)')
+    bone_tolerance: float = param(
+        0.4, 'plausibility: relative segment-length deviation from the user profile tolerated',
+        range=(0.0, 10.0))
+    bone_tolerance_m: float = param(
+        0.03, 'plausibility: absolute segment-length deviation (m) tolerated on top',
+        range=(0.0, 1.0))
+    bone_reject: float = param(
+        1.0, 'plausibility: relative deviation beyond the tolerance at which a segment (and what '
+        'hangs from it) has no plausibility left', range=(0.01, 100.0))
+    max_segment_speed_m_s: float = param(
+        8.0, 'plausibility: fastest a segment end moves relative to its parent (m/s); faster is '
+        'a snap onset', range=(0.1, 1000.0))
+    latch_frames: int = param(
+        45, 'plausibility: frames a segment stays implausible after a snap onset unless it jumps '
+        'back first; 0 = the onset frame only', range=(0, 100000))
+    lr_flip_deg: float = param(
+        110.0, 'plausibility: a girdle (shoulders or hips) this far (deg) off the body heading, '
+        'the other girdle agreeing with it, has its left and right swapped', range=(1.0, 180.0))
+    lr_unswap: bool = param(
+        True, 'plausibility: swap detected left/right limbs back (true) or make both limbs '
+        'unreliable (false)')
+    heading_rate: float = param(
+        0.3, 'plausibility: per-frame rate at which the body heading follows the girdles that '
+        'agree with it', range=(0.001, 1.0))
+    floor_tolerance_m: float = param(
+        0.05, 'plausibility: depth (m) below the estimated floor a joint may reach unpunished',
+        range=(0.0, 2.0))
+    floor_reject_m: float = param(
+        0.12, 'plausibility: depth (m) below the floor at which a joint has no plausibility '
+        'left', range=(0.001, 5.0))
+    floor_window: int = param(
+        150, 'plausibility: frames whose lowest TRACKED foot gives the floor (median)',
+        range=(1, 100000))
+    jump_m: float = param(
+        0.35, 'plausibility: median distance (m) of the TRACKED joints from their last plausible '
+        'place that makes the whole skeleton another person (last output held)',
+        range=(0.01, 100.0))
+    jump_frames: int = param(
+        15, 'plausibility: frames a whole-skeleton jump is rejected before the new place is '
+        'accepted (re-acquisition)', range=(1, 10000))
+
+    def validate(self) -> None:
+        check(self)
+        if not self.floor_reject_m > self.floor_tolerance_m:
+            raise ValueError('floor_tolerance_m must be below floor_reject_m')
+
+
+PLAUSIBILITY_PARAMS = tuple(names(PlausibilityConfig))
+PLAUSIBILITY_DEFAULTS: Dict = defaults(PlausibilityConfig)
 
 _SEG_P = np.array(SEGMENT_PARENTS)
 _SEG_C = np.array(SEGMENT_CHILDREN)
@@ -119,52 +173,36 @@ def unswap_permutation(swapped: Dict[str, bool]) -> Optional[np.ndarray]:
 
 def validate(values: Dict) -> Optional[str]:
     """Why a set of plausibility parameters is unusable, or None."""
-    v = {**PLAUSIBILITY_DEFAULTS, **values}
-    if v['bone_tolerance'] < 0 or v['bone_tolerance_m'] < 0 or not v['bone_reject'] > 0:
-        return 'bone_tolerance, bone_tolerance_m must be >= 0 and bone_reject > 0'
-    if not v['floor_reject_m'] > v['floor_tolerance_m'] >= 0:
-        return 'need 0 <= floor_tolerance_m < floor_reject_m'
-    if not 0 < v['heading_rate'] <= 1 or not 0 < v['lr_flip_deg'] <= 180:
-        return 'heading_rate must be in (0, 1] and lr_flip_deg in (0, 180]'
-    if not v['max_segment_speed_m_s'] > 0 or not v['jump_m'] > 0:
-        return 'max_segment_speed_m_s and jump_m must be > 0'
-    if int(v['floor_window']) < 1 or int(v['jump_frames']) < 1 or int(v['latch_frames']) < 0:
-        return 'floor_window and jump_frames must be >= 1 and latch_frames >= 0'
+    try:
+        dataclasses.replace(PlausibilityConfig(), **{k: v for k, v in values.items()
+                                                     if k in PLAUSIBILITY_PARAMS}).validate()
+    except ValueError as exc:
+        return str(exc)
     return None
 
 
 class PlausibilityCheck:
     """Streaming per-user plausibility (module docstring); :meth:`update` once per frame."""
 
-    def __init__(self, plausibility: bool = True, bone_tolerance: float = 0.4,
-                 bone_tolerance_m: float = 0.03, bone_reject: float = 1.0,
-                 max_segment_speed_m_s: float = 8.0, latch_frames: int = 45,
-                 lr_flip_deg: float = 110.0,
-                 lr_unswap: bool = True, heading_rate: float = 0.3, floor_tolerance_m: float = 0.05,
-                 floor_reject_m: float = 0.12, floor_window: int = 150, jump_m: float = 0.35,
-                 jump_frames: int = 15, fps: float = 30.0):
-        why = validate(dict(bone_tolerance=bone_tolerance, bone_tolerance_m=bone_tolerance_m,
-                            bone_reject=bone_reject, floor_tolerance_m=floor_tolerance_m,
-                            floor_reject_m=floor_reject_m, heading_rate=heading_rate,
-                            lr_flip_deg=lr_flip_deg, max_segment_speed_m_s=max_segment_speed_m_s,
-                            jump_m=jump_m, floor_window=floor_window, jump_frames=jump_frames,
-                            latch_frames=latch_frames))
-        if why:
-            raise ValueError(why)
-        self.enabled = bool(plausibility)
-        self.bone_tolerance = float(bone_tolerance)
-        self.bone_tolerance_m = float(bone_tolerance_m)
-        self.bone_reject = float(bone_reject)
-        self.max_step = float(max_segment_speed_m_s) / float(fps)
-        self.latch_frames = int(latch_frames)
-        self.lr_flip = np.radians(float(lr_flip_deg))
-        self.lr_unswap = bool(lr_unswap)
-        self.heading_rate = float(heading_rate)
-        self.floor_tolerance = float(floor_tolerance_m)
-        self.floor_reject = float(floor_reject_m)
-        self.floor_window = int(floor_window)
-        self.jump_m = float(jump_m)
-        self.jump_frames = int(jump_frames)
+    def __init__(self, config: Optional[PlausibilityConfig] = None, fps: float = 30.0,
+                 **params):
+        cfg = dataclasses.replace(config or PlausibilityConfig(), **params)
+        cfg.validate()
+        self.config = cfg
+        self.enabled = bool(cfg.plausibility)
+        self.bone_tolerance = float(cfg.bone_tolerance)
+        self.bone_tolerance_m = float(cfg.bone_tolerance_m)
+        self.bone_reject = float(cfg.bone_reject)
+        self.max_step = float(cfg.max_segment_speed_m_s) / float(fps)
+        self.latch_frames = int(cfg.latch_frames)
+        self.lr_flip = np.radians(float(cfg.lr_flip_deg))
+        self.lr_unswap = bool(cfg.lr_unswap)
+        self.heading_rate = float(cfg.heading_rate)
+        self.floor_tolerance = float(cfg.floor_tolerance_m)
+        self.floor_reject = float(cfg.floor_reject_m)
+        self.floor_window = int(cfg.floor_window)
+        self.jump_m = float(cfg.jump_m)
+        self.jump_frames = int(cfg.jump_frames)
         self.reset()
 
     def reset(self) -> None:
