@@ -8,6 +8,7 @@ help:
 	@echo "make test       bootstrap if needed and run the test suite"
 	@echo "make setup      only bootstrap (venv / ROS 2, launch tooling, colcon build)"
 	@echo "make build-db   build the motion database from ../shared/mocap/cmu (or built-in motions)"
+	@echo "make build-correction  learn the sensor correction from ../shared/kinect/ui-prmd (or ARGS=\"--src DIR\")"
 	@echo "make evaluate   accuracy table of every method on the sensor-model streams"
 	@echo "make bench      end-to-end latency/throughput benchmark"
 	@echo "make soak       10-minute soak of the running graph"
@@ -24,6 +25,9 @@ demo:
 build-db:
 	@$(RUN) ros2 run skeleton_core build_db $(ARGS)
 
+build-correction:
+	@$(RUN) ros2 run pose_reconstruction build_correction $(ARGS)
+
 evaluate:
 	@$(RUN) ros2 run kinect_bringup evaluate $(ARGS)
 
@@ -33,4 +37,4 @@ bench:
 soak:
 	@$(RUN) ros2 run kinect_bringup soak $(ARGS)
 
-.PHONY: help setup test demo build-db evaluate bench soak
+.PHONY: help setup test demo build-db build-correction evaluate bench soak

@@ -26,6 +26,8 @@ setup(
             'reconstruction = pose_reconstruction.reconstruction_node:main',
             'process_bag = pose_reconstruction.process_bag:main',
             'bench_reconstruction = pose_reconstruction.bench:main',
+            'build_correction = pose_reconstruction.correction:main',
+            'build_profile = pose_reconstruction.profile:main',
         ],
     },
 )

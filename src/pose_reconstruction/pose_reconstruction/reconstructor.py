@@ -79,6 +79,15 @@ Trust in the sensor (graceful degradation), ``trust_mode``:
 * ``'distance'`` — the earlier rule: linear from 0 at ``trust_sensor_distance`` (RMS m per
   reliable joint, standard body) to 1 at twice it.
 
+Learned sensor correction (``correction``, a :class:`~.correction.SensorCorrection`, default
+None = off): the tracker's posture-dependent offset from the anatomical joint centres is removed
+from each input frame, ``correction_stage`` ``'input'`` (default: before the reliability, every
+joint) or ``'reliable'`` (after it, only the joints at or above ``reliable_threshold``, with the
+posture features of the reliable bones). The correction is refused (``TrackerMismatch``) unless
+``input_tracker`` names the tracker it was learned from. ``profile`` (a
+:class:`~.profile.UserProfile` or (19,) lengths): the user's segment lengths, used from the first
+frame instead of the mean of the first ``length_frames`` observations.
+
 ``trust_sensor`` holds the last trust factor. The paper's behaviour: ``output_mode='blend'``,
 ``trust_mode='distance'``, ``reference_mode='standard'``, ``w_style=0.5`` (the default 8 weights
 the closest-neighbour style term 16x higher: measured on the sensor-model dev streams, Eq. 18 a/b/c
@@ -103,10 +112,13 @@ from .optimizer import NaturalPostureOptimizer
 from .posture_space import (ANCESTORS, QueryPreparer, as_database_arrays,
                             rest_directions, to_sensor_frame, user_bone_lengths, yaw_quat_matrix,
                             yaw_rotation)
+from .correction import check_tracker
+from .profile import from_optional as profile_lengths
 from .reliability import ReliabilityEstimator
 
 METHODS = ('A', 'B', 'C')
 OUTPUT_MODES = ('segments', 'blend')
+CORRECTION_STAGES = ('input', 'reliable')
 TRUST_MODES = ('noise_ratio', 'distance')
 _SEG_P = np.array(SEGMENT_PARENTS)
 _SEG_C = np.array(SEGMENT_CHILDREN)
@@ -135,7 +147,8 @@ OWN_PARAMS = ('use_reliability', 'use_input_reliability', 'reliable_threshold',
               'trust_mode', 'trust_sensor_ratio', 'noise_alpha', 'length_frames',
               'smooth_min_cutoff', 'smooth_beta', 'smooth_d_cutoff', 'observation_weight',
               'symmetric_lengths', 'smooth_filled_scale', 'float_root', 'height_frames',
-              'yaw_rate', 'yaw_search', 'yaw_neighbours', 'smooth_filled_speed')
+              'yaw_rate', 'yaw_search', 'yaw_neighbours', 'smooth_filled_speed',
+              'correction', 'correction_stage', 'input_tracker', 'profile')
 
 
 def split_params(method: str, params: Dict) -> tuple:
@@ -172,7 +185,8 @@ class Reconstructor:
                  float_root: bool = True, height_frames: int = 30, yaw_rate: float = 0.5,
                  yaw_search: int = 12, yaw_neighbours: int = 5,
                  smooth_filled_speed: bool = False, smooth_anchored_speed: bool = True,
-                 **params):
+                 correction=None, correction_stage: str = 'input', input_tracker: str = '',
+                 profile=None, **params):
         method = str(method).upper()
         if method not in METHODS:
             raise ValueError(f'method must be one of {METHODS}, got {method!r}')
@@ -216,6 +230,13 @@ class Reconstructor:
         self.yaw_search = int(yaw_search)
         self.method = method
         self.name = method
+        if correction_stage not in CORRECTION_STAGES:
+            raise ValueError(f'correction_stage must be one of {CORRECTION_STAGES}')
+        if correction is not None:
+            check_tracker(correction, input_tracker)  # never applied to another tracker
+        self.correction = correction
+        self.correction_stage = correction_stage
+        self._profile_lengths = profile_lengths(profile)
         self.db = as_database_arrays(db)
         rel, core, _ = split_params(method, params)
         self.reliability = ReliabilityEstimator(**rel)
@@ -269,6 +290,11 @@ class Reconstructor:
         if isinstance(self.core, NaturalPostureOptimizer):
             self.core.reset_rng()
 
+    def set_profile(self, profile) -> None:
+        """Use another user profile (UserProfile, (19,) lengths or None) and forget the user."""
+        self._profile_lengths = profile_lengths(profile)
+        self.reset()
+
     def _reliability_for(self, frame: SkeletonFrame) -> np.ndarray:
         est = self.reliability.update(frame.positions, frame.tracking_state)
         given = np.asarray(frame.reliability, float)
@@ -281,6 +307,8 @@ class Reconstructor:
         segments whose two joints were reliable over the last ``length_window`` frames, where
         there are at least 5 such frames; else the reliability reference (captured T-pose /
         standing lengths, or the standard body at the user's height)."""
+        if self._profile_lengths is not None:
+            return self._profile_lengths
         ref = self.reliability.reference_lengths
         if self.reliability.reference_source != 'standard':
             return ref  # lengths captured in a reference posture (Sec. IV-B)
@@ -308,6 +336,10 @@ class Reconstructor:
         reliability reference length it had when first needed. ``lengths`` (19,): the observed
         segment lengths of ``positions`` when already known."""
         if self._frozen_lengths is not None:
+            return self._frozen_lengths
+        if self._profile_lengths is not None and self.output_scale == 'user':
+            L = self._profile_lengths
+            self._frozen_lengths = 0.5 * (L + L[_MIRROR_SEG]) if self.symmetric_lengths else L
             return self._frozen_lengths
         if self.output_scale == 'standard':
             self._frozen_lengths = self._standard_lengths
@@ -557,8 +589,13 @@ class Reconstructor:
 
     def process(self, frame: SkeletonFrame) -> SkeletonFrame:
         t0 = time.perf_counter()
-        obs = np.asarray(frame.positions, float)
+        corr = self.correction
+        if corr is not None and self.correction_stage == 'input':
+            frame = frame.copy(positions=corr.apply(frame.positions))
         R = np.asarray(self._reliability_for(frame), float)
+        if corr is not None and self.correction_stage == 'reliable':
+            frame = frame.copy(positions=corr.apply(frame.positions, R, self.reliable_threshold))
+        obs = np.asarray(frame.positions, float)
         seg_obs = _SEG_DIFF @ obs
         len_obs = np.sqrt(np.einsum('sk,sk->s', seg_obs, seg_obs))
         segments = self.method != 'A' and self.output_mode == 'segments'
