@@ -102,6 +102,12 @@ def profiles_leave_clip_out(streams: Sequence, correction=None,
     return out
 
 
+def training_clips(clips, held_out: int) -> list:
+    """The clips a fold that scores subject ``held_out`` may learn from: every other subject's
+    clips with a registered reference (never one of the held-out subject)."""
+    return [c for c in clips if c.clip.subject != held_out and c.reference is not None]
+
+
 def _make(variant: str, correction, db):
     from skeleton_core import evaluation as E
     if variant == 'raw+corr':
@@ -116,25 +122,59 @@ def _make(variant: str, correction, db):
     return E.make_method('C', db=db, **kw)
 
 
+def session_registered_mpjpe(outputs: Dict[str, np.ndarray], truths: Dict[str, np.ndarray],
+                             setup_of: Dict[str, str]) -> Dict[str, Dict]:
+    """MPJPE (cm) after one rigid registration per recording setup *of this output*: the
+    reference is placed, per setup, where it best fits the method's own output (Kabsch over all
+    frames and joints of the setup's clips), so no method is scored in a frame fitted to another
+    (the reference of :func:`skeleton_core.uiprmd.load_dataset` is registered to the raw Kinect,
+    which favours raw). {clip: {'per_joint', 'overall'}}."""
+    from skeleton_core import metrics as M
+    from skeleton_core.registration import apply_transform, kabsch
+    by_setup: Dict[str, List[str]] = {}
+    for name in outputs:
+        by_setup.setdefault(setup_of.get(name, name), []).append(name)
+    res = {}
+    for names in by_setup.values():
+        try:
+            r, t = kabsch(np.concatenate([truths[n] for n in names]),
+                          np.concatenate([outputs[n] for n in names]))
+        except ValueError:
+            continue
+        for n in names:
+            per, tot = M.mpjpe(outputs[n], apply_transform(r, t, truths[n]))
+            res[n] = {'per_joint': [float(v) for v in per], 'overall': tot}
+    return res
+
+
 def run_variant(variant: str, streams: Sequence, correction=None, profiles=None, db=None,
-                progress=None) -> Dict[str, Dict]:
-    """{clip: {'metrics', 'latency_ms', 'times', 'frames'}} of one variant on some streams."""
+                progress=None, setup_of: Optional[Dict[str, str]] = None) -> Dict[str, Dict]:
+    """{clip: {'metrics', 'latency_ms', 'times', 'frames'}} of one variant on some streams;
+    the metrics include ``mpjpe_reg_cm`` (:func:`session_registered_mpjpe`)."""
     from skeleton_core import evaluation as E
     from skeleton_core import metrics as M
     from skeleton_core.real_eval import added_latency_ms
     method = _make(variant, correction, db)
     out = {}
+    outputs, truths = {}, {}
     for s in streams:
         if profiles is not None:
             if s.clip_name not in profiles:
                 continue
             method.set_profile(profiles[s.clip_name])
         pos, t = E.run_method(method, s)
+        outputs[s.clip_name], truths[s.clip_name] = pos, s.truth
         out[s.clip_name] = {'metrics': M.compute_all(pos, s.truth, s.fps),
                             'latency_ms': added_latency_ms(pos, s.positions, s.fps),
                             'times': t.tolist(), 'frames': len(s)}
         if progress:
             progress(variant, s.clip_name)
+    nan = {'per_joint': [float('nan')] * len(out[next(iter(out))]['metrics']['mpjpe_cm']
+                                             ['per_joint']), 'overall': float('nan')} \
+        if out else None
+    reg = session_registered_mpjpe(outputs, truths, setup_of or {})
+    for name, r in out.items():
+        r['metrics']['mpjpe_reg_cm'] = reg.get(name, nan)
     return out
 
 
@@ -194,6 +234,7 @@ def evaluate(src, variants: Sequence[str] = DEFAULT_VARIANTS, loso: bool = True,
                 rows[k] = [lst[i] for i in sorted(set(idx))]
     row_of = {s.clip_name: r for r, lst in rows.items() for s in lst}
     every = [s for lst in make_streams(clips).values() for s in lst]  # profiles: all clips
+    setup_of = {c.clip.name: c.setup or c.clip.session for c in clips}
     streams = [s for lst in rows.values() for s in lst]
     test_subjects = sorted({_subject(s.clip_name) for s in streams})
     code = _code_digest()
@@ -208,8 +249,9 @@ def evaluate(src, variants: Sequence[str] = DEFAULT_VARIANTS, loso: bool = True,
         corr = None
         if needs_corr:
             if loso:
-                train = [c for c in clips if c.clip.subject != subj and c.reference is not None]
-                corr = build_from_clips(train)
+                corr = build_from_clips(training_clips(clips, subj))
+                if f's{subj:02d}' in corr.meta['subjects']:  # cannot happen; never report it
+                    raise RuntimeError(f'fold s{subj:02d} trained on its own subject')
             else:
                 corr = correction
                 if corr is None:
@@ -240,7 +282,7 @@ def evaluate(src, variants: Sequence[str] = DEFAULT_VARIANTS, loso: bool = True,
                    'clips': [s.clip_name for s in fold_streams], 'src': src_res,
                    'height': height}
             res = _cached(cache, key, lambda v=v, prof=prof, corr=corr: run_variant(
-                v, fold_streams, corr, prof, db, progress))
+                v, fold_streams, corr, prof, db, progress, setup_of))
             per_clip[v].update(res)
     # tables in real_eval's format
     results: Dict[str, Dict] = {}
@@ -291,8 +333,9 @@ def summary(res: Dict) -> str:
     if 'raw' not in R:
         return ''
     lines = ['### Against raw (overall; negative = better)', '',
-             '| row | Eq. 18 | MPJPE | bone dir | bone-length std | movements better than raw '
-             '(Eq. 18) | latency (ms) |', '|---|---|---|---|---|---|---|']
+             '| row | Eq. 18 | MPJPE | MPJPE, own registration | bone dir | bone-length std | '
+             'movements better than raw (Eq. 18) | latency (ms) |',
+             '|---|---|---|---|---|---|---|---|']
     movs = [r for r in res['rows'] if r not in ('overall', 'm03_s01')]
     for v in res['methods']:
         if v == 'raw' or 'overall' not in R[v]:
@@ -301,8 +344,8 @@ def summary(res: Dict) -> str:
         better = sum(R[v][m]['metrics']['eq18_cm']['overall']
                      < R['raw'][m]['metrics']['eq18_cm']['overall'] for m in movs if m in R[v])
         lines.append(f'| {v} | ' + ' | '.join(_pct(o[k]['overall'], b[k]['overall']) for k in
-                                              ('eq18_cm', 'mpjpe_cm', 'bone_dir_deg',
-                                               'bone_std_cm'))
+                                              ('eq18_cm', 'mpjpe_cm', 'mpjpe_reg_cm',
+                                               'bone_dir_deg', 'bone_std_cm'))
                      + f' | {better}/{len(movs)} | {R[v]["overall"]["latency_ms"]:.1f} |')
     return '\n'.join(lines)
 
@@ -317,7 +360,20 @@ def to_markdown(res: Dict) -> str:
     if res.get('correction_ms_per_frame') is not None:
         head.append(f'- correction cost: {res["correction_ms_per_frame"]:.3f} ms per frame and '
                     f'user (mean, one frame at a time)')
-    return '\n'.join(head) + '\n\n' + summary(res) + '\n\n' + base(res)
+    lines = ['', '### MPJPE (cm) after one rigid registration per setup of each output', '',
+             '| row | ' + ' | '.join(res['methods']) + ' |',
+             '|---' * (len(res['methods']) + 1) + '|']
+    order = [r for r in res['rows'] if r not in ('overall', 'm03_s01')] + \
+        [r for r in ('overall', 'm03_s01') if r in res['rows']]
+    for row in order:
+        vals = []
+        for m in res['methods']:
+            r = res['results'][m].get(row)
+            v = r['metrics'].get('mpjpe_reg_cm', {}).get('overall') if r else None
+            vals.append('n/a' if v is None or not np.isfinite(v) else f'{v:.2f}')
+        lines.append(f'| {row} | ' + ' | '.join(vals) + ' |')
+    return ('\n'.join(head) + '\n\n' + summary(res) + '\n\n' + base(res) + '\n'
+            + '\n'.join(lines))
 
 
 def main(argv=None) -> int:
@@ -349,11 +405,20 @@ def main(argv=None) -> int:
     ints = (lambda s: [int(x.strip().lstrip('sm')) for x in s.split(',') if x.strip()] or None)
     corr = None
     try:
+        variants = [v.strip() for v in args.variants.split(',') if v.strip()]
         if args.no_loso:
             corr = C.load(args.correction) if args.correction else C.load_or_build_default(
                 log=lambda m: print(f'[real_loso] {m}', file=sys.stderr))
+            if corr is None:
+                dropped = [v for v in variants if 'corr' in v]
+                variants = [v for v in variants if 'corr' not in v]
+                print(f'[real_loso] no sensor correction (no paired recordings under '
+                      f'<shared>/kinect/ui-prmd and no {C.default_path()}): '
+                      f'{", ".join(dropped)} not scored', file=sys.stderr)
+            else:
+                print(f'[real_loso] {C.describe_file(corr)}', file=sys.stderr)
         prog = None if args.quiet else (lambda v, c: print(f'  {v:15s} {c}', file=sys.stderr))
-        res = evaluate(src, [v.strip() for v in args.variants.split(',') if v.strip()],
+        res = evaluate(src, variants,
                        loso=not args.no_loso, correction=corr, subjects=ints(args.subjects),
                        movements=ints(args.movements), max_clips=args.max_clips or None,
                        cache=None if args.no_cache else default_cache_dir() / 'real_eval',

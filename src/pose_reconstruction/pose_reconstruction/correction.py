@@ -198,6 +198,11 @@ def load(path) -> SensorCorrection:
         raise CorrectionFileError(f'sensor correction {str(p)!r}: {e}') from e
 
 
+def describe_file(correction: SensorCorrection) -> str:
+    return (correction.describe() + (f' from {correction.meta["source"]}'
+                                     if correction.meta.get('source') else ''))
+
+
 def check_tracker(correction: SensorCorrection, input_tracker: str) -> None:
     """Raise :class:`TrackerMismatch` unless the stream's declared tracker is the correction's."""
     if not input_tracker:

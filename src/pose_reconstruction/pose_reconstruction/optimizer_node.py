@@ -7,7 +7,7 @@ from typing import Any, Dict, Optional
 
 from skeleton_core.rosnode import ParamSpec, run_node
 
-from .node_common import (RELIABILITY_NAMES, RELIABILITY_SPECS, DatabaseNode,
+from .node_common import (CORRECTION_SPECS, RELIABILITY_NAMES, RELIABILITY_SPECS, DatabaseNode,
                           check_reliability_params, common_specs)
 from .optimizer import KNN_MODES, SOLVERS
 from .reconstructor import Reconstructor
@@ -108,7 +108,7 @@ CORE_NAMES = [s.name for s in SPECS if s.name not in ('database', 'method')]
 class OptimizerNode(DatabaseNode):
     def __init__(self, database_obj=None, **kwargs):
         specs = (common_specs('/kinect/skeletons_reliability', '/posture/reconstructed') + SPECS
-                 + RELIABILITY_SPECS)
+                 + RELIABILITY_SPECS + CORRECTION_SPECS)
         super().__init__('optimizer', specs, database_obj=database_obj, **kwargs)
 
     def validate(self, values: Dict[str, Any]) -> Optional[str]:
@@ -116,7 +116,7 @@ class OptimizerNode(DatabaseNode):
 
     def make_processor(self, values: Dict[str, Any]):
         params = {k: values[k] for k in RELIABILITY_NAMES + CORE_NAMES}
-        return Reconstructor(self.db, method=values['method'], **params)
+        return Reconstructor(self.db, method=values['method'], **params, **self.user_terms)
 
 
 def main(args=None) -> int:
