@@ -49,8 +49,10 @@ def _subject(name: str) -> int:
 def _code_digest() -> str:
     import pose_reconstruction
     import skeleton_core
+    import skeleton_data
+    import skeleton_eval
     h = hashlib.sha256()
-    for pkg in (pose_reconstruction, skeleton_core):
+    for pkg in (pose_reconstruction, skeleton_core, skeleton_data, skeleton_eval):
         for f in sorted(Path(pkg.__file__).parent.glob('*.py')):
             h.update(f.read_bytes())
     h.update(Path(__file__).read_bytes())
@@ -83,7 +85,7 @@ def profiles_leave_clip_out(streams: Sequence, correction=None,
     frames, left/right averaged), after ``correction`` when given; tracking-failure clips are
     scored with a profile but do not contribute to one. ``scored``: only these clips get one."""
     from pose_reconstruction.profile import measure
-    from skeleton_core.uiprmd import TRACKING_FAILURE_CASES
+    from skeleton_data.uiprmd import TRACKING_FAILURE_CASES
     fail = {f'{m}_{s}' for m, s in TRACKING_FAILURE_CASES}
     by_subject: Dict[int, List] = {}
     for s in streams:
@@ -109,7 +111,7 @@ def training_clips(clips, held_out: int) -> list:
 
 
 def _make(variant: str, correction, db):
-    from skeleton_core import evaluation as E
+    from skeleton_eval import evaluation as E
     if variant == 'raw+corr':
         return _Corrected(correction)
     base = variant.split('+')[0]
@@ -127,10 +129,10 @@ def session_registered_mpjpe(outputs: Dict[str, np.ndarray], truths: Dict[str, n
     """MPJPE (cm) after one rigid registration per recording setup *of this output*: the
     reference is placed, per setup, where it best fits the method's own output (Kabsch over all
     frames and joints of the setup's clips), so no method is scored in a frame fitted to another
-    (the reference of :func:`skeleton_core.uiprmd.load_dataset` is registered to the raw Kinect,
+    (the reference of :func:`skeleton_eval.paired.load_dataset` is registered to the raw Kinect,
     which favours raw). {clip: {'per_joint', 'overall'}}."""
-    from skeleton_core import metrics as M
-    from skeleton_core.registration import apply_transform, kabsch
+    from skeleton_eval import metrics as M
+    from skeleton_eval.registration import apply_transform, kabsch
     by_setup: Dict[str, List[str]] = {}
     for name in outputs:
         by_setup.setdefault(setup_of.get(name, name), []).append(name)
@@ -151,9 +153,9 @@ def run_variant(variant: str, streams: Sequence, correction=None, profiles=None,
                 progress=None, setup_of: Optional[Dict[str, str]] = None) -> Dict[str, Dict]:
     """{clip: {'metrics', 'latency_ms', 'times', 'frames'}} of one variant on some streams;
     the metrics include ``mpjpe_reg_cm`` (:func:`session_registered_mpjpe`)."""
-    from skeleton_core import evaluation as E
-    from skeleton_core import metrics as M
-    from skeleton_core.real_eval import added_latency_ms
+    from skeleton_eval import evaluation as E
+    from skeleton_eval import metrics as M
+    from skeleton_eval.real_eval import added_latency_ms
     method = _make(variant, correction, db)
     out = {}
     outputs, truths = {}, {}
@@ -190,7 +192,7 @@ def _cached(cache: Optional[Path], key: Dict, compute):
             pass
     res = compute()
     cache.mkdir(parents=True, exist_ok=True)
-    from skeleton_core.evaluation import json_safe
+    from skeleton_eval.evaluation import json_safe
     f.write_text(json.dumps(json_safe(res)))
     return res
 
@@ -207,14 +209,14 @@ def evaluate(src, variants: Sequence[str] = DEFAULT_VARIANTS, loso: bool = True,
              cache: Optional[Path] = None, progress=None) -> Dict:
     """Score ``variants`` on the clips under ``src`` (module docstring). ``loso``: corrections
     learned per held-out subject from the other subjects of ``src``; else ``correction`` (learned
-    elsewhere) for every clip. Returns a dict :func:`skeleton_core.real_eval.to_markdown` prints,
+    elsewhere) for every clip. Returns a dict :func:`skeleton_eval.real_eval.to_markdown` prints,
     plus ``protocol``, ``folds`` and ``correction_ms``."""
     from pose_reconstruction.correction import build_from_clips
     from pose_reconstruction.methods import default_database
-    from skeleton_core import evaluation as E
-    from skeleton_core.real_eval import make_streams
-    from skeleton_core.sensor_model import load_params
-    from skeleton_core.uiprmd import load_dataset
+    from skeleton_eval import evaluation as E
+    from skeleton_eval.real_eval import make_streams
+    from skeleton_eval.sensor_model import load_params
+    from skeleton_eval.paired import load_dataset
     t_start = time.time()
     E.load_plugins()
     bad = [v for v in variants if v not in VARIANTS]
@@ -351,7 +353,7 @@ def summary(res: Dict) -> str:
 
 
 def to_markdown(res: Dict) -> str:
-    from skeleton_core.real_eval import to_markdown as base
+    from skeleton_eval.real_eval import to_markdown as base
     head = [f'Protocol: {res["protocol"]}.']
     for f in res['folds']:
         if f['trained_on']:
@@ -395,8 +397,8 @@ def main(argv=None) -> int:
     ap.add_argument('--quiet', action='store_true')
     args = ap.parse_args(argv)
     from pose_reconstruction import correction as C
-    from skeleton_core.database import default_cache_dir
-    from skeleton_core.evaluation import json_safe
+    from skeleton_data.database import default_cache_dir
+    from skeleton_eval.evaluation import json_safe
     src = Path(args.src) if args.src else C.default_source()
     if src is None or not Path(src).is_dir():
         print(f'real_loso: no UI-PRMD folder at {args.src or "<shared>/kinect/ui-prmd"}',

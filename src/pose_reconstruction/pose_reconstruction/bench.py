@@ -130,7 +130,7 @@ def main(argv=None) -> int:
     if a.source == 'synthetic':
         db, src = sdb, 'synthetic'
     else:
-        from skeleton_core.database import load_or_build_default
+        from skeleton_data.database import load_or_build_default
         db = load_or_build_default(source=a.source)
         src = db.meta.get('source', a.source)
     n = len(db.positions)
@@ -189,9 +189,9 @@ def main(argv=None) -> int:
         tb, tk, rec = [], [], []
         for q, R in zip(queries, Rs):
             t0 = time.perf_counter()
-            ib, _ = brute.knn_search(q, R)
+            ib, _ = brute.search.knn_search(q, R)
             t1 = time.perf_counter()
-            ik, _ = tree.knn_search(q, R)
+            ik, _ = tree.search.knn_search(q, R)
             t2 = time.perf_counter()
             tb.append(1e3 * (t1 - t0))
             tk.append(1e3 * (t2 - t1))

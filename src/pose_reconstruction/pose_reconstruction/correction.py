@@ -304,14 +304,14 @@ UIPRMD_TRACKER = 'kinect_v2_sdk'  # UI-PRMD's skeletons: the Kinect v2 SDK body 
 
 def default_source() -> Optional[Path]:
     """The paired development recordings (``<shared>/kinect/ui-prmd``) if present."""
-    from skeleton_core.database import default_shared_dir
+    from skeleton_data.database import default_shared_dir
     shared = default_shared_dir()
     p = None if shared is None else Path(shared) / 'kinect' / 'ui-prmd'
     return p if p is not None and (p / 'Vicon' / 'Positions').is_dir() else None
 
 
 def default_path(tracker: str = UIPRMD_TRACKER) -> Path:
-    from skeleton_core.database import default_cache_dir
+    from skeleton_data.database import default_cache_dir
     return default_cache_dir() / f'sensor_correction_{tracker}.npz'
 
 
@@ -325,10 +325,11 @@ def _source_digest(src: Path) -> str:
     here = Path(__file__).resolve()
     h.update(here.read_bytes())
     try:
-        import skeleton_core.registration as reg
-        import skeleton_core.uiprmd as ui
-        import skeleton_core.vicon as vi
-        for m in (reg, ui, vi):
+        import skeleton_data.uiprmd as ui
+        import skeleton_data.vicon as vi
+        import skeleton_eval.paired as pa
+        import skeleton_eval.registration as reg
+        for m in (reg, ui, vi, pa):
             h.update(Path(m.__file__).read_bytes())
     except ImportError:  # pragma: no cover
         pass
@@ -353,7 +354,7 @@ def paired_sequences(clips, subjects: Optional[Sequence[int]] = None):
 
 def build_from_clips(clips, subjects: Optional[Sequence[int]] = None, posture: bool = True,
                      meta: Optional[Dict] = None) -> SensorCorrection:
-    """Fit a correction on loaded UI-PRMD clips (:func:`skeleton_core.uiprmd.load_dataset`)."""
+    """Fit a correction on loaded UI-PRMD clips (:func:`skeleton_eval.paired.load_dataset`)."""
     K, R, G, N = paired_sequences(clips, subjects)
     if not K:
         raise ValueError('no clip with a registered marker reference to learn from')
@@ -364,7 +365,7 @@ def build_from_clips(clips, subjects: Optional[Sequence[int]] = None, posture: b
 def build(src, out=None, subjects: Optional[Sequence[int]] = None,
           posture: bool = True) -> tuple:
     """Load paired recordings under ``src`` (UI-PRMD layout), fit, save; (correction, path)."""
-    from skeleton_core.uiprmd import load_dataset
+    from skeleton_eval.paired import load_dataset
     src = Path(src)
     clips, skipped, _ = load_dataset(src, subjects=subjects)
     corr = build_from_clips(clips, subjects, posture,

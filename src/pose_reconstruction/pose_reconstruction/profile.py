@@ -134,7 +134,7 @@ def profile_path(name: str, directory=None) -> Path:
     if not isinstance(name, str) or not _NAME_RE.match(name):
         raise ProfileError(f'user profile name {name!r} must be 1-64 letters, digits, _ . -')
     if directory is None or directory == '':
-        from skeleton_core.database import default_cache_dir
+        from skeleton_data.database import default_cache_dir
         directory = default_cache_dir() / 'profiles'
     return Path(directory).expanduser() / f'{name}.json'
 
