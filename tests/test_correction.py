@@ -215,3 +215,25 @@ def test_profiles_never_use_the_scored_clip():
     np.testing.assert_allclose(prof['m01_s01_e01'], 1.15 * sym, rtol=1e-9)  # median of 1.1, 1.2
     np.testing.assert_allclose(prof['m03_s01_e01'], 1.1 * sym, rtol=1e-9)   # of 1.0, 1.1, 1.2
     assert 'm01_s02_e01' not in prof  # no other clip of s02
+
+
+def test_node_terms_load_a_named_correction_and_profile(tmp_path):
+    from pose_reconstruction.node_common import load_user_terms
+    corr = C.SensorCorrection('nite2', np.zeros((NUM_JOINTS, 3)),
+                              np.zeros((C.NUM_FEATURES, 3 * NUM_JOINTS)), np.zeros(C.NUM_FEATURES))
+    path = corr.save(tmp_path / 'lab.npz')
+    P.UserProfile('bob', np.full(NUM_SEGMENTS, 0.3)).save(tmp_path / 'bob.json')
+    logged = []
+    log = SimpleNamespace(info=logged.append, warning=logged.append)
+    values = {'sensor_correction': str(path), 'input_tracker': 'nite2',
+              'correction_stage': 'reliable', 'user_profile': 'bob',
+              'profiles_dir': str(tmp_path)}
+    terms = load_user_terms(values, log)
+    assert terms['correction'].tracker == 'nite2' and terms['correction_stage'] == 'reliable'
+    assert terms['profile'].name == 'bob'
+    (tmp_path / 'broken.json').write_text('{')
+    for key, value, err in (('sensor_correction', str(tmp_path / 'none.npz'),
+                             C.CorrectionFileError), ('user_profile', 'broken', P.ProfileError)):
+        with pytest.raises(err) as e:
+            load_user_terms({**values, key: value}, log)
+        assert '\n' not in str(e.value)

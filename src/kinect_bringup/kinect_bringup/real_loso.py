@@ -322,6 +322,7 @@ def evaluate(src, variants: Sequence[str] = DEFAULT_VARIANTS, loso: bool = True,
             'clips_per_row': {k: len(v) for k, v in rows.items()},
             'skipped': [{'file': p, 'reason': r} for p, r in skipped],
             'wall_s': time.time() - t_start, 'results': results, 'protocol': protocol,
+            'loso': bool(loso),
             'folds': folds, 'correction_ms_per_frame': float(np.mean(corr_ms)) if corr_ms else None}
 
 
@@ -357,7 +358,8 @@ def to_markdown(res: Dict) -> str:
     head = [f'Protocol: {res["protocol"]}.']
     for f in res['folds']:
         if f['trained_on']:
-            head.append(f'- held out {f["held_out"]} ({f["clips"]} clips): correction trained on '
+            head.append(f'- {"held out" if res.get("loso") else "scored"} {f["held_out"]} '
+                        f'({f["clips"]} clips): correction trained on '
                         f'{", ".join(f["trained_on"])}, ridge alpha {f["ridge_alpha"]}')
     if res.get('correction_ms_per_frame') is not None:
         head.append(f'- correction cost: {res["correction_ms_per_frame"]:.3f} ms per frame and '
