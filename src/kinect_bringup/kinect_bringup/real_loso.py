@@ -283,8 +283,8 @@ def evaluate(src, variants: Sequence[str] = DEFAULT_VARIANTS, loso: bool = True,
             key = {'variant': v, 'code': code, 'correction': cdig if 'corr' in v else None,
                    'clips': [s.clip_name for s in fold_streams], 'src': src_res,
                    'height': height}
-            res = _cached(cache, key, lambda v=v, prof=prof, corr=corr: run_variant(
-                v, fold_streams, corr, prof, db, progress, setup_of))
+            res = _cached(cache, key, lambda v=v, prof=prof, corr=corr, fs=fold_streams:
+                          run_variant(v, fs, corr, prof, db, progress, setup_of))
             per_clip[v].update(res)
     # tables in real_eval's format
     results: Dict[str, Dict] = {}
@@ -406,7 +406,8 @@ def main(argv=None) -> int:
         print(f'real_loso: no UI-PRMD folder at {args.src or "<shared>/kinect/ui-prmd"}',
               file=sys.stderr)
         return 1
-    ints = (lambda s: [int(x.strip().lstrip('sm')) for x in s.split(',') if x.strip()] or None)
+    def ints(text):
+        return [int(x.strip().lstrip('sm')) for x in text.split(',') if x.strip()] or None
     corr = None
     try:
         variants = [v.strip() for v in args.variants.split(',') if v.strip()]

@@ -18,7 +18,7 @@ from typing import Any, Dict, Optional
 from skeleton_core.rosnode import ParamSpec, run_node
 
 from . import completion_node, optimizer_node
-from .node_common import (CORRECTION_NAMES, CORRECTION_SPECS, RELIABILITY_SPECS, DatabaseNode,
+from .node_common import (CORRECTION_SPECS, RELIABILITY_SPECS, DatabaseNode,
                           check_reliability_params, common_specs)
 from .fused import FusedProcessor, section
 
