@@ -13,6 +13,7 @@ help:
 	@echo "make evaluate   accuracy table of every method on the sensor-model streams"
 	@echo "make bench      end-to-end latency/throughput benchmark"
 	@echo "make soak       10-minute soak of the running graph"
+	@echo "make params     write config/*.yaml and docs/parameters.md from the parameter declarations"
 
 setup:
 	@scripts/setup.sh
@@ -41,4 +42,7 @@ bench:
 soak:
 	@$(RUN) ros2 run kinect_bringup soak $(ARGS)
 
-.PHONY: help setup test lint demo build-db build-correction evaluate bench soak
+params:
+	@$(RUN) ros2 run kinect_bringup param_docs $(ARGS)
+
+.PHONY: help setup test lint demo build-db build-correction evaluate bench soak params

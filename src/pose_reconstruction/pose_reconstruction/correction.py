@@ -43,6 +43,7 @@ from typing import Dict, Optional, Sequence
 import numpy as np
 
 from skeleton_core.geometry import facing_yaw
+from skeleton_core.params import param
 from skeleton_core.model import (HAND_LEFT, HAND_RIGHT, NUM_JOINTS, NUM_SEGMENTS,
                                  SEGMENT_CHILDREN, SEGMENT_PARENTS, WRIST_LEFT, WRIST_RIGHT)
 
@@ -55,6 +56,31 @@ RIDGE_GRID = (1e-3, 3e-3, 1e-2, 3e-2, 1e-1, 3e-1, 1.0)  # ridge strength / train
 _SC = np.array(SEGMENT_CHILDREN)
 _SP = np.array(SEGMENT_PARENTS)
 _COPY = ((HAND_LEFT, WRIST_LEFT), (HAND_RIGHT, WRIST_RIGHT))
+
+
+STAGES = ('input', 'reliable')
+
+
+@dataclass
+class CorrectionConfig:
+    """The node parameters of the learned correction and the user profile (files and names are
+    resolved by the node: :func:`pose_reconstruction.node_common.load_user_terms`)."""
+
+    sensor_correction: str = param(
+        'auto', "learned sensor correction file; 'auto' = "
+        'cache/sensor_correction_kinect_v2_sdk.npz, built from <shared>/kinect/ui-prmd when '
+        "those paired recordings exist (else off); '' = off")
+    input_tracker: str = param(
+        '', 'skeleton tracker of the input stream (kinect_v2_sdk, kinect_v1_sdk, nite2, '
+        "sensor_model; '' = not declared): a correction is applied only to the tracker it was "
+        'learned from', choices=('',) + TRACKERS)
+    correction_stage: str = param(
+        'input', 'where the correction runs: input (every joint, before the reliability) or '
+        'reliable (the reliable joints, after it)', choices=STAGES)
+    user_profile: str = param(
+        '', "user profile name (<profiles_dir>/<name>.json, from build_profile): the user's "
+        "segment lengths from the first frame; '' = measured per user")
+    profiles_dir: str = param('', "directory of user profiles ('' = cache/profiles)")
 
 
 class CorrectionFileError(ValueError):

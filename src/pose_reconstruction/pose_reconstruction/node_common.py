@@ -21,53 +21,20 @@ from rclpy.qos import QoSProfile
 from skeleton_core.cdr import CdrError, frames_from_cdr, frames_to_cdr
 from skeleton_core.conversions import SkeletonFormatError, frame_from_arrays
 from skeleton_core.health import Health
-from skeleton_core.rosnode import DiagnosticsPublisher, ParamSpec, Parameters
+from skeleton_core.params import ParamSpec, build, specs
+from skeleton_core.rosnode import DiagnosticsPublisher, Parameters
 
-# Reliability parameters (Shum et al. 2013 Sec. IV), shared by every node that may estimate it
-RELIABILITY_SPECS = [
-    ParamSpec('d_min', 0.03, 'Eq. 3: minimum displacement (m) for an angle to count', (0.0, 0.5)),
-    ParamSpec('f_b', 3, 'Eq. 4: frames averaged by the behaviour term', (1, 30)),
-    ParamSpec('theta_floor_deg', 90.0, 'Eq. 4: acceptable angle change (deg)', (0.0, 180.0)),
-    ParamSpec('theta_roof_deg', 135.0, 'Eq. 4: fully unacceptable angle change (deg)',
-              (0.0, 180.0)),
-    ParamSpec('f_total', 6, 'Eq. 8: frames in the Gaussian-weighted window', (1, 60)),
-    ParamSpec('sigma_frames', 2.0, 'Eq. 8: width (frames) of the Gaussian weight', (0.1, 60.0)),
-    ParamSpec('tracked_value', 1.0, 'Eq. 7: R_t of a tracked joint', (0.0, 1.0)),
-    ParamSpec('inferred_value', 0.0, 'Eq. 7: R_t of an inferred joint', (0.0, 1.0)),
-    ParamSpec('not_tracked_value', 0.0, 'Eq. 7: R_t of a not-tracked joint', (0.0, 1.0)),
-    ParamSpec('reference_pose_tolerance_deg', 25.0,
-              'largest segment-direction error (deg) to accept a T-pose / standing reference posture',
-              (1.0, 90.0)),
-    ParamSpec('reference_frames', 15, 'reference segment lengths: median of this many captures',
-              (1, 300)),
-    ParamSpec('reference_mode', 'observed',
-              'reference lengths before a reference posture is captured: observed (running median '
-              'of tracked segments) or standard (the standard body at the user height, paper)',
-              choices=('observed', 'standard')),
-    ParamSpec('observed_window', 90, "reference_mode observed: frames in the running median",
-              (1, 10000)),
-]
+from .correction import CorrectionConfig
+from .reliability import ReliabilityConfig
+
+# Reliability parameters (Shum et al. 2013 Sec. IV, declared on ReliabilityConfig), shared by every
+# node that may estimate it
+RELIABILITY_SPECS = specs(ReliabilityConfig)
 RELIABILITY_NAMES = [s.name for s in RELIABILITY_SPECS]
+DATABASE_SPEC = ParamSpec('database', '', "motion database file ('' = built-in / CMU default)")
 
 # Learned sensor correction and user profile (pose_reconstruction.correction / .profile)
-_TRACKER_CHOICES = ('', 'kinect_v2_sdk', 'kinect_v1_sdk', 'nite2', 'sensor_model')
-CORRECTION_SPECS = [
-    ParamSpec('sensor_correction', 'auto',
-              "learned sensor correction file; 'auto' = cache/sensor_correction_kinect_v2_sdk.npz, "
-              'built from <shared>/kinect/ui-prmd when those paired recordings exist (else off); '
-              "'' = off"),
-    ParamSpec('input_tracker', '',
-              'skeleton tracker of the input stream (kinect_v2_sdk, kinect_v1_sdk, nite2, '
-              "sensor_model; '' = not declared): a correction is applied only to the tracker it "
-              'was learned from', choices=_TRACKER_CHOICES),
-    ParamSpec('correction_stage', 'input',
-              'where the correction runs: input (every joint, before the reliability) or reliable '
-              '(the reliable joints, after it)', choices=('input', 'reliable')),
-    ParamSpec('user_profile', '',
-              "user profile name (<profiles_dir>/<name>.json, from build_profile): the user's "
-              "segment lengths from the first frame; '' = measured per user"),
-    ParamSpec('profiles_dir', '', "directory of user profiles ('' = cache/profiles)"),
-]
+CORRECTION_SPECS = specs(CorrectionConfig)
 CORRECTION_NAMES = [s.name for s in CORRECTION_SPECS]
 
 
@@ -86,8 +53,11 @@ def common_specs(input_topic: str, output_topic: str) -> List[ParamSpec]:
 
 
 def check_reliability_params(values: Dict[str, Any]) -> Optional[str]:
-    if values['theta_floor_deg'] >= values['theta_roof_deg']:
-        return 'theta_floor_deg must be below theta_roof_deg'
+    """The cross-parameter checks of ReliabilityConfig (an error text or None)."""
+    try:
+        build(ReliabilityConfig, values).validate()
+    except ValueError as e:
+        return str(e)
     return None
 
 
