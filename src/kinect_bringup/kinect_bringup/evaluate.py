@@ -68,26 +68,37 @@ def _parser():
                         '\'{"C": {"plausibility": false, "smooth_lead": 0}}\'')
     p.add_argument('--quiet', action='store_true', help='no progress lines')
     p.add_argument('--real', nargs='?', const='auto', default=None, metavar='UIPRMD_DIR',
-                   help='real-data mode: score the methods on the UI-PRMD Kinect recordings '
-                        'against the Vicon marker reference (default dir ../shared/kinect/ui-prmd)')
-    p.add_argument('--max-clips', type=int, default=4,
+                   help='real-data mode: raw, holt, one_euro, C and C with the learned sensor '
+                        'correction and user profiles on UI-PRMD-layout Kinect recordings against '
+                        'their Vicon marker reference. Default dir ../shared/kinect/ui-prmd: '
+                        'leave-one-subject-out; another dir (other subjects): the correction '
+                        'learned from all development subjects (--methods: variants of '
+                        'kinect_bringup.real_loso)')
+    p.add_argument('--max-clips', type=int, default=0,
                    help='--real: clips per movement row, 0 = all')
     return p
 
 
 def run_real(args) -> int:
-    from skeleton_eval import real_eval
+    """``--real``: the development subjects (default folder) leave-one-subject-out; another
+    folder (other subjects, same layout) with the correction learned from every development
+    subject (kinect_bringup.real_loso)."""
+    from . import real_loso
     from .graph import repo_root
     src = args.real
+    shared = os.environ.get('KP_SHARED') or str((repo_root() or Path.cwd()).parent / 'shared')
+    dev = Path(shared) / 'kinect' / 'ui-prmd'
     if src == 'auto':
-        shared = os.environ.get('KP_SHARED') or str((repo_root() or Path.cwd()).parent / 'shared')
-        src = str(Path(shared) / 'kinect' / 'ui-prmd')
+        src = str(dev)
     argv = ['--src', src, '--out', args.out, '--max-clips', str(args.max_clips)]
     if args.methods:
-        argv += ['--methods', args.methods]
+        argv += ['--variants', args.methods]
     if args.quiet:
         argv.append('--quiet')
-    return real_eval.main(argv)
+    same = dev.is_dir() and Path(src).resolve() == dev.resolve()
+    if not same:
+        argv.append('--no-loso')  # other subjects: the correction from all development ones
+    return real_loso.main(argv)
 
 
 def _with_params(methods, text):

@@ -104,6 +104,8 @@ class SegmentOutput:
         self.smooth_filled_speed = bool(config.smooth_filled_speed)
         self.smooth_anchored_speed = bool(config.smooth_anchored_speed)
         self.smooth_lead = float(config.smooth_lead)
+        # the user's profile lengths (19,), used from the first frame when set (Reconstructor)
+        self.profile_lengths: Optional[np.ndarray] = None
         self.reset()
 
     def reset(self) -> None:
@@ -126,6 +128,10 @@ class SegmentOutput:
         reliability reference length it had when first needed. ``lengths`` (19,): the observed
         segment lengths of ``positions`` when already known."""
         if self._frozen_lengths is not None:
+            return self._frozen_lengths
+        if self.profile_lengths is not None and self.output_scale == 'user':
+            L = self.profile_lengths
+            self._frozen_lengths = 0.5 * (L + L[_MIRROR_SEG]) if self.symmetric_lengths else L
             return self._frozen_lengths
         if self.output_scale == 'standard':
             self._frozen_lengths = self._standard_lengths

@@ -160,8 +160,9 @@ def to_markdown(res: Dict) -> str:
              + (f' (not available: {", ".join(res["methods_unavailable"])})'
                 if res['methods_unavailable'] else '') + '.',
              'Reference: Plug-in-Gait joint-centre estimates, one rigid registration per subject '
-             'session (Kabsch, no scaling), lag per clip. Hands excluded (not recorded). '
-             'm03_s01 has no reference: reference-free metrics only. Latency = shift of the '
+             'session, or per rigid setup where a session\'s movements were recorded in several '
+             '(Kabsch, no scaling), lag per clip. Hands excluded (not recorded). m03_s01: the '
+             'tracking failure, reported apart. Latency = shift of the '
              'output against the raw input. Time = processing per frame (machine shared, '
              'loaded).', '']
     clip_info = ', '.join(f'{k}: {v}' for k, v in sorted(res['clips_per_row'].items()))
