@@ -12,7 +12,7 @@ from skeleton_core.model import (ELBOW_LEFT, FOOT_LEFT, HAND_LEFT, HAND_RIGHT, H
                                  WRIST_LEFT, standard_body)
 from skeleton_eval import perturb as P
 from skeleton_eval.evaluation import toy_clip
-from skeleton_eval.metrics import added_latency_ms
+from skeleton_eval.metrics import added_latency_ms, latency_curve, signed_latency_from_curves
 from skeleton_eval.sensor_model import CONFIDENT_FAILURES, DEFAULT_PARAMS, SensorModel
 
 FPS = 30.0
@@ -178,6 +178,21 @@ def test_prediction_corrected_smoother_lag_on_a_ramp_within_5_ms():
     out = np.array([f.update(x, None, int(s), lead=np.ones(1)) for x, s in zip(noise, stamps)])
     acc = lambda p: np.linalg.norm(p[2:] - 2 * p[1:-1] + p[:-2], axis=-1).mean()  # noqa: E731
     assert acc(out[10:]) < 0.5 * acc(noise[10:])
+
+
+def test_signed_latency_reads_a_lead_and_a_delay_the_one_sided_one_clamps():
+    t = np.arange(300) / FPS
+    x = np.zeros((300, 2, 3))
+    x[:, 1, 0] = 0.3 * np.sin(2 * np.pi * 0.7 * t)
+    x[:, 1, 1] = 0.2 * np.sin(2 * np.pi * 0.3 * t + 1.0)
+
+    def signed(out, ref):
+        return signed_latency_from_curves(latency_curve(out, ref), latency_curve(ref, out))
+    # out(t) = ref(t - 2): 2 frames behind; out(t) = ref(t + 2): 2 frames ahead
+    assert abs(signed(x[:-2], x[2:]) - 2000.0 / FPS) < 3.0
+    assert abs(signed(x[2:], x[:-2]) + 2000.0 / FPS) < 3.0
+    assert added_latency_ms(x[2:], x[:-2]) == 0.0         # the one-sided measure clamps a lead
+    assert abs(added_latency_ms(x[:-2], x[2:]) - 2000.0 / FPS) < 3.0
 
 
 def test_perturbed_params_scale_one_group():

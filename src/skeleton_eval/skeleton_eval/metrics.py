@@ -148,6 +148,31 @@ def latency_from_curve(sums, counts, fps: float = 30.0) -> float:
     return float((k + frac) * 1000.0 / fps)
 
 
+def signed_latency_from_curves(behind, ahead, fps: float = 30.0) -> float:
+    """The delay (ms) from two :func:`latency_curve` results, ``behind`` =
+    ``latency_curve(out, raw)`` (output shifted back) and ``ahead`` = ``latency_curve(raw, out)``
+    (output shifted forward): the shift of the smallest mean distance over ``-K..K``, refined to
+    sub-frame by a parabola; negative when the output leads. Unlike :func:`latency_from_curve`
+    (shifts >= 0 only) its error is not folded onto the positive side: where the curve is flat (the
+    output differs from the input by far more than any delay moves it) the one-sided minimum
+    wanders and is clamped at 0, so its mean over streams or seeds reads a delay that is not
+    there."""
+    with np.errstate(invalid='ignore', divide='ignore'):
+        e = [np.where(np.asarray(c) > 0, np.asarray(s) / np.asarray(c), np.inf)
+             for s, c in (behind, ahead)]
+    K = len(e[0]) - 1
+    errs = np.concatenate([e[1][:0:-1], e[0]])   # shifts -K .. K
+    if not np.isfinite(errs).any():
+        return float('nan')
+    k = int(np.argmin(errs))
+    frac = 0.0
+    if 0 < k < len(errs) - 1 and np.isfinite(errs[k - 1:k + 2]).all():
+        den = errs[k - 1] - 2 * errs[k] + errs[k + 1]
+        if den > 1e-12:
+            frac = 0.5 * (errs[k - 1] - errs[k + 1]) / den
+    return float((k - K + frac) * 1000.0 / fps)
+
+
 def added_latency_ms(out: np.ndarray, raw: np.ndarray, fps: float = 30.0,
                      max_frames: int = MAX_LATENCY_FRAMES) -> float:
     """Delay of ``out`` behind ``raw`` (ms): the shift k >= 0 minimising mean |out(t) - raw(t-k)|,

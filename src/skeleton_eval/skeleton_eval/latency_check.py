@@ -1,0 +1,127 @@
+"""How well the synthetic added-latency figure resolves a delay (issue 21, docs/robustness.md).
+
+For C on the dev clips, per sensor-model variant and seed and per class a-d: the one-sided delay the
+evaluation table reports (:func:`.evaluation.reliable_latency_curve`, shifts >= 0), the signed delay
+over shifts -K..K (:func:`.metrics.signed_latency_from_curves`, negative = the output leads), the
+mean distance at shift 0 and how much one frame of shift changes it (the depth of the minimum the
+delay is read from), and the delay behind the *true* motion from the peak of the cross-correlation
+of root-relative joint velocities (output against truth, clean joint-frames): blind to static and
+slowly turning offsets between output and input, and to the sensor noise (absent from the truth). Frame-weighted means over the classes as in the perturbation table.
+
+    python -m skeleton_eval.latency_check --variants nominal,noise:0.5,offset:1.5 --seeds 0,1,2
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from typing import Dict
+
+import numpy as np
+
+from . import evaluation as E
+from . import metrics as M
+from . import perturb as P
+from .sensor_model import SensorModel
+
+
+def _peak_ms(xc: np.ndarray, K: int, fps: float = 30.0) -> float:
+    """The shift (ms, -K..K, parabola-refined) of the largest velocity cross-correlation."""
+    k = int(np.argmax(xc))
+    frac = 0.0
+    if 0 < k < len(xc) - 1:
+        den = xc[k - 1] - 2 * xc[k] + xc[k + 1]
+        if den < -1e-12:
+            frac = 0.5 * (xc[k - 1] - xc[k + 1]) / den
+    return float((k - K + frac) * 1000.0 / fps)
+
+
+def check(method, clips, group, factor, seed, scenarios='abcd', max_frames=300) -> Dict:
+    """Per class: frames, one-sided and signed delay (ms), distance at shift 0 and the change
+    from shift 0 to 1 (mm); and their frame-weighted means (key ``'all'``)."""
+    params = P.load_params(None) if group is None else P.perturbed_params(group, factor, None)
+    sensor = SensorModel(params, seed=seed)
+    out: Dict[str, Dict] = {}
+    for sc in scenarios:
+        behind = [np.zeros(M.MAX_LATENCY_FRAMES + 1), np.zeros(M.MAX_LATENCY_FRAMES + 1)]
+        ahead = [np.zeros(M.MAX_LATENCY_FRAMES + 1), np.zeros(M.MAX_LATENCY_FRAMES + 1)]
+        frames = 0
+        K = M.MAX_LATENCY_FRAMES
+        xc = np.zeros(2 * K + 1)
+        for s in E.make_streams(clips, (sc,), seed, max_frames, sensor)[sc]:
+            pred, _ = E.run_method(method, s)
+            raw = np.array(s.positions, float)
+            raw -= raw[:, :1]
+            raw[~s.clean] = np.nan
+            raw[~s.clean[:, 0]] = np.nan
+            rel = pred - pred[:, :1]
+            tru = np.array(s.truth, float)
+            tru -= tru[:, :1]
+            vo, vt = np.diff(rel, axis=0), np.diff(tru, axis=0)
+            ok = np.isfinite(raw[1:]).all(-1) & np.isfinite(raw[:-1]).all(-1)
+            vo[~ok] = 0.0
+            for i, k in enumerate(range(-K, K + 1)):
+                # sum of v_out(t) . v_truth(t - k) over the clean joint-frames
+                a, b = (vo[k:], vt[:len(vt) - k]) if k >= 0 else (vo[:k], vt[-k:])
+                xc[i] += np.nansum(a * b)
+            for acc, c in ((behind, M.latency_curve(rel, raw)), (ahead, M.latency_curve(raw, rel))):
+                acc[0] += c[0]
+                acc[1] += c[1]
+            frames += len(s)
+        d = behind[0] / np.maximum(behind[1], 1) * 1000.0
+        out[sc] = {'frames': frames,
+                   'one_sided_ms': M.latency_from_curve(*behind, 30.0),
+                   'signed_ms': M.signed_latency_from_curves(behind, ahead, 30.0),
+                   'dist0_mm': float(d[0]), 'step_mm': float(d[1] - d[0]),
+                   'xcorr_ms': _peak_ms(xc, K)}
+    w = np.array([v['frames'] for v in out.values()], float)
+    out['all'] = {k: float(np.dot(w, [v[k] for v in out.values()]) / w.sum())
+                  for k in ('one_sided_ms', 'signed_ms', 'dist0_mm', 'step_mm', 'xcorr_ms')}
+    return out
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split('\n')[0])
+    p.add_argument('--variants', default='nominal,noise:0.5,offset:1.5',
+                   help='comma list of nominal or group:factor (groups of skeleton_eval.perturb)')
+    p.add_argument('--seeds', default='0,1,2')
+    p.add_argument('--method', default='C')
+    p.add_argument('--max-frames', type=int, default=300)
+    p.add_argument('--json', default='', help='also write the results here')
+    a = p.parse_args(argv)
+    E.load_plugins()
+    try:
+        variants = []
+        for v in a.variants.split(','):
+            if v == 'nominal':
+                variants.append((v, None, 1.0))
+            else:
+                g, f = v.split(':')
+                if g not in P.GROUPS:
+                    raise ValueError(f'unknown group {g!r}')
+                variants.append((v, g, float(f)))
+        seeds = [int(s) for s in a.seeds.split(',') if s]
+    except ValueError as exc:
+        print(f'latency_check: {exc}', file=sys.stderr)
+        return 2
+    _, dev, _ = E.load_clips('auto', 0)
+    method = E.make_method(a.method)
+    res = {}
+    for label, g, f in variants:
+        for seed in seeds:
+            r = check(method, dev, g, f, seed, max_frames=a.max_frames)
+            res[f'{label} seed {seed}'] = r
+            al = r['all']
+            print(f'{label:12s} seed {seed}: one-sided {al["one_sided_ms"]:5.1f} ms, signed '
+                  f'{al["signed_ms"]:6.1f} ms, distance at 0 {al["dist0_mm"]:5.1f} mm, '
+                  f'+1 frame {al["step_mm"]:+5.2f} mm, velocity x-corr vs truth {al["xcorr_ms"]:5.1f} ms | ' + ' '.join(
+                      f'{sc}: {v["one_sided_ms"]:.1f}/{v["signed_ms"]:.1f}/{v["xcorr_ms"]:.1f}'
+                      for sc, v in r.items() if sc != 'all'), flush=True)
+    if a.json:
+        with open(a.json, 'w') as fh:
+            json.dump(E.json_safe(res), fh, indent=1)
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
