@@ -6,7 +6,8 @@ over shifts -K..K (:func:`.metrics.signed_latency_from_curves`, negative = the o
 mean distance at shift 0 and how much one frame of shift changes it (the depth of the minimum the
 delay is read from), and the delay behind the *true* motion from the peak of the cross-correlation
 of root-relative joint velocities (output against truth, clean joint-frames): blind to static and
-slowly turning offsets between output and input, and to the sensor noise (absent from the truth). Frame-weighted means over the classes as in the perturbation table.
+slowly turning offsets between output and input, and to the sensor noise (absent from the truth).
+Frame-weighted means over the classes as in the perturbation table.
 
     python -m skeleton_eval.latency_check --variants nominal,noise:0.5,offset:1.5 --seeds 0,1,2
 """
