@@ -145,7 +145,7 @@ def stable_run(cfg: SimConfig, seconds: float = 1.5) -> bool:
             if i == 6:
                 sim.apply_push(0, 'ShoulderCenter', (300.0, 0.0, 0.0), 0.1)
             st = sim.step({0: tp})[0]
-            v = sim.data.qvel[sim.characters[0].dofs[:3]]
+            v = sim.world_of(0).data.qvel[sim.characters[0].dofs[:3]]
             if sim.counters['nan_reset'] or not np.all(np.isfinite(st.positions)) \
                     or np.linalg.norm(v) > 20.0:
                 return False

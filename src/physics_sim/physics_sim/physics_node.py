@@ -41,7 +41,8 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 from .controller import Gains
 from .mjcf_world import ObjectSpec
-from .simulation import CONTROLLERS, INTEGRATORS, SOLVERS, SimConfig, Simulation
+from .config import INTEGRATORS, SOLVERS, WORLD_SPLITS, controllers
+from .simulation import SimConfig, Simulation
 
 
 def _tuples(n: int):
@@ -83,13 +84,21 @@ PARAMS: List[ParamSpec] = [
     ParamSpec('controller', 'auto',
               'actuator_pd = Eq. 1-2 evaluated by MuJoCo actuators at every step (fast for few '
               'characters); explicit_pd = the papers\' external PD forces computed in Python at '
-              'every step (reference; faster from ~4 characters); auto = actuator_pd below '
-              'auto_explicit_from characters, explicit_pd from there; mocap_constraints = soft '
-              'connect constraints to mocap targets',
-              choices=CONTROLLERS, read_only=True),
+              'every step (reference; faster from ~4 characters in one world); auto = per world, '
+              'actuator_pd below auto_explicit_from characters, explicit_pd from there; '
+              'mocap_constraints = soft connect constraints to mocap targets',
+              choices=controllers(), read_only=True),
     ParamSpec('auto_explicit_from', 4,
-              'controller auto: explicit_pd from this many characters on (the same control law; '
-              'actuator_pd grows with the square of the characters)', range=(1, 100),
+              'controller auto: explicit_pd from this many characters in one world on (the same '
+              'control law; actuator_pd grows with the square of the characters)', range=(1, 100),
+              read_only=True),
+    ParamSpec('world_split', 'contact',
+              'contact = characters that cannot touch each other are simulated in separate MuJoCo '
+              'models (merged while their boxes come within contact_margin; all in one while there '
+              'are objects); shared = one model for all', choices=WORLD_SPLITS, read_only=True),
+    ParamSpec('contact_margin', 0.25,
+              'world_split contact: margin (m) added to every side of a character\'s horizontal box '
+              '(joint points and newest target) when deciding who may touch whom', range=(0.0, 5.0),
               read_only=True),
     ParamSpec('integrator', 'euler',
               'MuJoCo integrator: euler = explicit like the paper (fastest; stable up to Kd ~300 '
@@ -194,6 +203,7 @@ def config_from_params(v: Dict) -> SimConfig:
                      implicit_joint_damping=v['implicit_joint_damping'],
                      slow_control_every=v['slow_control_every'],
                      auto_explicit_from=v['auto_explicit_from'],
+                     world_split=v['world_split'], contact_margin=v['contact_margin'],
                      track_timeconst=v['track_timeconst'], track_dampratio=v['track_dampratio'],
                      track_impedance=v['track_impedance'],
                      velocity_smoothing=v['velocity_smoothing'],
