@@ -49,9 +49,17 @@ def test_characters_share_a_world_while_they_can_touch():
     assert len(sim.worlds) == 1 and sim.counters['regroups'] >= 1
     assert sim.world.model.nbody > 2 * 19        # both characters in one model
     assert np.abs(st[1].positions - before[1].positions).max() < 1.2   # no jump on regrouping
-    for _ in range(20):
+    for _ in range(15):   # apart for half a second: still together (PART_AFTER)
+        st = sim.step({1: tpose(-2.5), 2: tpose(2.5)})
+    assert len(sim.worlds) == 1
+    for _ in range(25):
         st = sim.step({1: tpose(-2.5), 2: tpose(2.5)})
     assert len(sim.worlds) == 2
+    rebuilds = sim.counters['rebuilds']
+    for y in np.linspace(2.5, 0.9, 10):   # meeting again: the pair's compiled model is reused
+        sim.step({1: tpose(-y), 2: tpose(y)})
+    assert len(sim.worlds) == 1
+    assert sim.counters['rebuilds'] == rebuilds and sim.counters['reused_models'] >= 1
     for s in st.values():
         assert np.linalg.norm(s.positions - s.target_world, axis=1).mean() < 0.05
     assert sim.counters['nan_reset'] == 0
@@ -67,7 +75,8 @@ def test_shared_world_and_objects_keep_one_model():
     sim.throw_ball((2.5, 0.0, 1.0), (0.0, 0.0, 0.0))
     assert len(sim.worlds) == 1 and len(sim.states()) == 2
     sim.remove_object('thrown1')
-    sim.step({1: tpose(-3.0), 2: tpose(3.0)})
+    for _ in range(40):   # split again after PART_AFTER
+        sim.step({1: tpose(-3.0), 2: tpose(3.0)})
     assert len(sim.worlds) == 2
     with pytest.raises(ValueError):
         SimConfig(world_split='nowhere').validate()

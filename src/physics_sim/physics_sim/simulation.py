@@ -56,6 +56,8 @@ from .world import Shared, World, controller_for
 class Simulation:
     """The characters (one per user) and objects, in one or more MuJoCo worlds."""
 
+    PART_AFTER = 1.0   # s apart before two characters sharing a world are split up
+
     def __init__(self, config: Optional[SimConfig] = None, objects: Sequence[ObjectSpec] = ()):
         self.config = config or SimConfig()
         self.config.validate()
@@ -63,13 +65,17 @@ class Simulation:
         self.shared = Shared(self.config,
                              {'constraint_conflict': 0, 'virtual_joint_released': 0,
                               'nan_reset': 0, 'refused_target': 0, 'rebuilds': 0, 'pins': 0,
-                              'regroups': 0},
+                              'regroups': 0, 'reused_models': 0},
                              list(objects))
         self.counters = self.shared.counters
         self._ball_count = 0
         self.time = 0.0
         self.worlds: List[World] = [World(self.shared, [], True, self.time)]
         self._world_of: Dict[int, World] = {}
+        # compiled worlds of groups that were split up or merged, by their user ids: characters
+        # that keep meeting and parting reuse them instead of recompiling
+        self._cache: Dict[tuple, World] = {}
+        self._apart: Dict[tuple, float] = {}   # merged pair -> sim time since they are apart
 
     # ------------------------------------------------------------------ shared state
     @property
@@ -123,13 +129,19 @@ class Simulation:
 
     def _set_worlds(self, groups: List[List[int]], rebuild_objects: bool = False) -> None:
         """One world per group of ``groups`` (user ids): a world whose characters are exactly a
-        group is kept, every other one is compiled anew from the characters' current state. The
-        objects live in the first world (all characters while there are objects);
-        ``rebuild_objects``: they changed, recompile that world even when it is kept."""
+        group is kept, a cached one of the same characters is taken back, every other one is
+        compiled anew; all from the characters' current state. The objects live in the first
+        world (all characters while there are objects); ``rebuild_objects``: they changed,
+        recompile that world even when it is kept."""
         old = list(self.worlds)
         new = []
         for k, g in enumerate([sorted(g) for g in groups] or [[]]):
             w = next((w for w in old if sorted(w.user_ids()) == g and w not in new), None)
+            if w is None:
+                w = self._cached(g, with_objects=k == 0)
+                if w is not None:
+                    w.time = self.time
+                    w.rebuild(old, recompile=False)
             if w is None:
                 w = World(self.shared, [self.characters[u] for u in g], k == 0, self.time,
                           old=old)
@@ -137,8 +149,22 @@ class Simulation:
                 w.with_objects = k == 0
                 w.rebuild()
             new.append(w)
+        for w in old:
+            if w not in new and w.chars and not self.objects:
+                self._cache[tuple(sorted(w.user_ids()))] = w
+        while len(self._cache) > 16:
+            self._cache.pop(next(iter(self._cache)))
         self.worlds = new
         self._world_of = {u: w for w in new for u in w.user_ids()}
+
+    def _cached(self, uids: List[int], with_objects: bool) -> Optional[World]:
+        """The cached world of exactly these characters (the same Character objects), if any."""
+        w = self._cache.pop(tuple(uids), None)
+        if (w is None or self.objects or
+                any(self.characters.get(ch.user_id) is not ch for ch in w.chars)):
+            return None
+        w.with_objects = with_objects
+        return w
 
     def _rebuild(self, objects: bool = False) -> None:
         """Recompile after a character (or, ``objects``, an object) came or went."""
@@ -164,11 +190,17 @@ class Simulation:
                 ua, ub = uids[a], uids[b]
                 together = (ua in self._world_of and self._world_of.get(ua) is
                             self._world_of.get(ub))
-                # widened boxes overlap: merge; a merged pair parts beyond twice the margin
-                reach = (4.0 if together else 2.0) * c.contact_margin
+                # widened boxes overlap: merge; a merged pair parts once it has been apart by
+                # twice the margin for PART_AFTER seconds
                 ba, bb = bounds[ua], bounds[ub]
                 gap = np.maximum(ba[0] - bb[1], bb[0] - ba[1]).max()
-                if gap < reach:
+                if together:
+                    if gap < 4.0 * c.contact_margin:
+                        self._apart.pop((ua, ub), None)
+                    else:
+                        since = self._apart.setdefault((ua, ub), self.time)
+                        together = self.time - since < self.PART_AFTER
+                if together or gap < 2.0 * c.contact_margin:
                     parent[root(ua)] = root(ub)
         comps: Dict[int, List[int]] = {}
         for u in uids:
@@ -196,6 +228,9 @@ class Simulation:
         if sorted(sorted(g) for g in groups) != current:
             self.counters['regroups'] += 1
             self._set_worlds(groups)
+        if len(self._apart) > 64:   # pairs no longer sharing a world
+            self._apart = {k: v for k, v in self._apart.items()
+                           if self._world_of.get(k[0]) is self._world_of.get(k[1])}
 
     # ------------------------------------------------------------------ targets
     def _sensor_pose(self, first_world_positions: Optional[np.ndarray] = None) -> SensorPose:

@@ -107,19 +107,26 @@ class World:
         return (c.implicit_joint_damping
                 or c.timestep * c.joint_damping > 0.25 * c.joint_armature)
 
-    def rebuild(self, old: Sequence['World'] = ()) -> None:
+    def rebuild(self, old: Sequence['World'] = (), recompile: bool = True) -> None:
         """(Re)compile the model from the current characters and objects, keeping the state of
-        everything that already existed here or in the ``old`` worlds (matched by name)."""
-        self.controller_name = controller_for(self.config, len(self.chars))
-        self.controller = make_controller(self.controller_name)
-        entries = [CharacterEntry(ch.prefix, ch.body, tuple(ch.cur.positions[0]), ch.slot,
-                                  ch.cur.positions) for ch in self.chars]
-        xml = world_xml(entries, self.objects, self._world_params())
-        m = mujoco.MjModel.from_xml_string(xml)
-        d = mujoco.MjData(m)
-        self.xml = xml
-        sources = ([(self.model, self.data)] if self.model is not None else []) + \
-            [(w.model, w.data) for w in old if w is not self]
+        everything that already existed here or in the ``old`` worlds (matched by name). With
+        ``recompile=False`` the model is kept (a world taken back from the simulation's cache for
+        the same characters): only the state is copied in from ``old``."""
+        if recompile or self.model is None:
+            self.controller_name = controller_for(self.config, len(self.chars))
+            self.controller = make_controller(self.controller_name)
+            entries = [CharacterEntry(ch.prefix, ch.body, tuple(ch.cur.positions[0]), ch.slot,
+                                      ch.cur.positions) for ch in self.chars]
+            xml = world_xml(entries, self.objects, self._world_params())
+            m = mujoco.MjModel.from_xml_string(xml)
+            d = mujoco.MjData(m)
+            self.xml = xml
+            sources = ([(self.model, self.data)] if self.model is not None else []) + \
+                [(w.model, w.data) for w in old if w is not self]
+        else:
+            m, d = self.model, self.data
+            d.eq_active[:] = m.eq_active0
+            sources = [(w.model, w.data) for w in old if w is not self]
         for om, od in sources:
             _copy_state(om, od, m, d)
         d.time = self.time
@@ -144,7 +151,7 @@ class World:
         self._pack_indices()
         self.controller.bind(self)
         self.pack_targets()
-        self.counters['rebuilds'] += 1
+        self.counters['rebuilds' if recompile else 'reused_models'] += 1
 
     def obj_id(self, name: str) -> int:
         return mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_BODY, f'obj_{name}')
