@@ -290,6 +290,7 @@ class PhysicsNode(Node):
         out = {f'sim_{k}': v for k, v in self.sim.counters.items()}
         out['characters'] = len(self.sim.characters)
         out['objects'] = len(self.sim.objects)
+        out['worlds'] = len(self.sim.worlds)
         if self._wall_in_step > 0:
             out['real_time_factor'] = self._sim_in_step / self._wall_in_step
         return out
