@@ -542,3 +542,25 @@ def test_anchored_filled_segments_keep_the_speed_term():
             assert np.array_equal(a.process(f.copy()).positions, b.process(f.copy()).positions)
     with pytest.raises(ValueError):
         Reconstructor(db, method='C', smooth_anchored_speed='yes')
+
+
+def test_large_database_screened_knn_equals_the_exact_search():
+    """From SCREEN_FROM postures on, Eq. 9 is screened in single precision and the best
+    candidates re-ranked in double: the same neighbours and distances as the exact double
+    search, with and without the translation-invariant variant."""
+    from pose_reconstruction import optimizer as opt_mod
+    db = random_database(opt_mod.SCREEN_FROM + 500, seed=11)
+    opt = NaturalPostureOptimizer(db, k=30)
+    assert opt._screen is not None
+    exact = NaturalPostureOptimizer(db, k=30)
+    exact._screen = None
+    rng = np.random.default_rng(2)
+    for i in range(20):
+        q = np.asarray(db.positions[rng.integers(len(db.positions))], float)
+        q = q + rng.normal(0.0, 0.03, q.shape) + (0.4 if i % 2 else 0.0)
+        w = rng.uniform(0.0, 1.0, NUM_JOINTS)
+        for translate in (False, True):
+            a, b = opt.knn_search(q, w, translate), exact.knn_search(q, w, translate)
+            assert list(a[0]) == list(b[0])
+            for x, y in zip(a[1:], b[1:]):
+                np.testing.assert_allclose(x, y, rtol=1e-9, atol=1e-9)
