@@ -232,3 +232,29 @@ def test_a_slow_tick_skips_stale_targets_instead_of_queueing_them(graph, monkeyp
     assert 2 <= taken <= 3, taken   # the first, the newest (and at most one in flight), not 9
     st = node.sim.states()[4]
     assert st.stamp_ns == 7_000_000_000 + 8 * 33_333_333
+
+
+def test_a_frame_arriving_in_a_burst_is_simulated_not_dropped(graph, monkeypatch):
+    """Two frames delivered together (a delayed frame and the next one): the first ticks at once,
+    the second 0.75 period after it (a one-shot timer), so both stamps are published."""
+    from rclpy.serialization import serialize_message
+    node, peer = graph
+    node.timer.cancel()
+    got = []
+    peer.create_subscription(SkeletonArray, '/character/skeletons',
+                             lambda m: got.append(frames_from_array_msg(m)[0].stamp_ns), 50)
+    assert _wait(lambda: node.pub.get_subscription_count() >= 1, 10.0)
+    ticks = []
+    real_tick = node._tick
+    monkeypatch.setattr(node, '_tick', lambda: (ticks.append(time.monotonic()), real_tick()))
+    p = clip(1)[0]
+    node._on_input(serialize_message(_msg(p, 8_966_666_667)))   # spawns the character
+    time.sleep(0.1)
+    del ticks[:]
+    node._on_input(serialize_message(_msg(p, 9_000_000_000)))
+    node._on_input(serialize_message(_msg(p, 9_033_333_333)))
+    assert len(ticks) == 1
+    assert _wait(lambda: len(ticks) == 2, 5.0)
+    assert ticks[1] - ticks[0] >= 0.7 / 30
+    assert _wait(lambda: 9_033_333_333 in got, 5.0)
+    assert 9_000_000_000 in got

@@ -80,7 +80,8 @@ PARAMS: List[ParamSpec] = [
               'tick as soon as a target arrives (phase-locked to the sensor: the output leaves '
               'right after its input instead of up to one period later); the timer keeps the '
               'output rate when input is slower or stops. Each tick simulates the wall time since '
-              'the previous one (0.5 to 1.5 periods)'),
+              'the previous one (0.5 to 1.5 periods); a target arriving sooner than 0.75 period '
+              'after the last tick is simulated 0.75 period after it'),
     ParamSpec('controller', 'auto',
               'actuator_pd = Eq. 1-2 evaluated by MuJoCo actuators at every step (fast for few '
               'characters); explicit_pd = the papers\' external PD forces computed in Python at '
@@ -258,6 +259,7 @@ class PhysicsNode(Node):
         self._sim_in_step = 0.0
         self._last_tick: Optional[float] = None
         self._last_input_tick: Optional[float] = None
+        self._deferred = None   # one-shot timer of a frame that arrived too soon after a tick
         self._time_debt = 0.0
         self.pub = self.create_publisher(SkeletonArray, v['output_topic'], 10)
         self.obj_pub = self.create_publisher(MarkerArray, v['objects_topic'], 10)
@@ -332,8 +334,26 @@ class PhysicsNode(Node):
             # ticks when no input ticked for a period (see _on_timer)
             period = 1.0 / self.params['output_rate']
             if self._last_input_tick is None or now - self._last_input_tick >= 0.75 * period:
+                self._cancel_deferred()
                 self._last_input_tick = now
                 self._tick()
+            elif self._deferred is None:
+                # too soon after the last tick (a burst: frames delayed and then delivered
+                # together): tick when 0.75 period has passed, so this frame's target is still
+                # simulated and published unless a newer one replaces it before then
+                delay = max(0.75 * period - (now - self._last_input_tick), 1e-4)
+                self._deferred = self.create_timer(delay, self._on_deferred)
+
+    def _on_deferred(self) -> None:
+        self._cancel_deferred()
+        self._last_input_tick = time.monotonic()
+        self._tick()
+
+    def _cancel_deferred(self) -> None:
+        if self._deferred is not None:
+            self._deferred.cancel()
+            self.destroy_timer(self._deferred)
+            self._deferred = None
 
     def _push(self, user_id: int, segment: str, force, duration: float) -> str:
         try:
