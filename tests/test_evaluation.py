@@ -4,9 +4,9 @@ import json
 import numpy as np
 import pytest
 
-from skeleton_core import evaluation as E
+from skeleton_eval import evaluation as E
 from skeleton_core.model import HAND_LEFT, NOT_TRACKED, NUM_JOINTS, TRACKED
-from skeleton_core.sensor_model import SensorModel
+from skeleton_eval.sensor_model import SensorModel
 
 
 class Oracle:
@@ -285,7 +285,7 @@ def test_method_c_takes_its_segment_lengths_from_the_calibration():
     out, _ = E.run_method(m, s, E.subset_frames(s, E.TABLE3_SUBSETS['c'][1]),
                           warmup=E.calibration_frames(cs))
     # frozen after length_frames (15) calibration frames: their mean, left/right averaged
-    cal = segment_lengths(cs.positions[:m.length_frames]).mean(axis=0)
+    cal = segment_lengths(cs.positions[:m.segment_output.length_frames]).mean(axis=0)
     mirror = [SEGMENT_CHILDREN.index(MIRROR[c]) for c in SEGMENT_CHILDREN]
     want = 0.5 * (cal + cal[mirror])
     got = segment_lengths(out)

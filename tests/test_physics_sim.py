@@ -194,7 +194,7 @@ def test_physics_method_processes_frames_and_registers():
     assert np.linalg.norm(out.positions[7] - tpose_sensor()[7]) < 0.1
     m.reset()
     assert not m.sim.characters
-    evaluation = pytest.importorskip('skeleton_core.evaluation')
+    evaluation = pytest.importorskip('skeleton_eval.evaluation')
     assert register()
     assert {'physics', 'physics_raw'} <= set(evaluation.available_methods())
     raw = evaluation.make_method('physics_raw')
@@ -220,7 +220,7 @@ def test_twist_torque_turns_a_segment_about_its_axis():
         sim.step({1: (p, ori)})                      # spawn untwisted
         ori[WRIST_LEFT] = [0.0, np.sin(half / 2), 0.0, np.cos(half / 2)]
         for _ in range(30):
-            st = sim.step({1: (p, ori)})[1]
+            sim.step({1: (p, ori)})
         qs = sim.characters[1].segment_quats(sim.data)[k]
         twists[scale] = 2 * np.arctan2(qs[1], qs[3])
     assert twists[1.0] > 0.2 and abs(twists[0.0]) < 0.05
@@ -277,7 +277,7 @@ def test_actuator_pd_tracks_like_the_explicit_reference():
     states = {}
     for ctrl in ('explicit_pd', 'actuator_pd'):
         sim = Simulation(SimConfig(controller=ctrl, body_height=1.75, integrator='euler'))
-        st = run(sim, target, 1.0)
+        run(sim, target, 1.0)
         moving = target.copy()
         out = []
         for i in range(30):  # raise the left forearm and hand over one second
@@ -316,7 +316,7 @@ def test_implicit_damping_keeps_stiff_gains_stable():
 
 def _walk_targets(n=45):
     """The first frames of the built-in walk, sensor frame (a moving target with foot contacts)."""
-    from skeleton_core.motions import builtin_clips
+    from skeleton_data.motions import builtin_clips
     clip = next(c for c in builtin_clips(0) if c.name == 'builtin_walk')
     return clip.positions[:n] + np.array([2.5, 0.0, -0.8])
 

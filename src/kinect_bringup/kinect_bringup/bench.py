@@ -32,7 +32,7 @@ import numpy as np
 from .graph import RECONSTRUCTION, graph_nodes, repo_root
 from .processes import Graph
 
-PROCESS_BAG_MODULE = 'pose_reconstruction.process_bag'
+PROCESS_BAG_MODULE = 'kinect_bringup.process_bag'
 
 BUDGET_MS = 1000.0 / 30.0
 FLOOR_TOPIC = '/bench/passthrough'
@@ -411,7 +411,7 @@ def main(argv=None) -> int:
                                 capture_output=True).stdout.strip() or 'unknown'
     except OSError:
         commit = 'unknown'
-    from skeleton_core.database import load_or_build_default
+    from skeleton_data.database import load_or_build_default
     load_or_build_default()  # build the cache once, outside the measurement
     probe = LatencyProbe()
     results = []

@@ -133,7 +133,7 @@ def main(argv=None) -> int:
     if a.source == 'synthetic':
         db, src = sdb, 'synthetic'
     else:
-        from skeleton_core.database import load_or_build_default
+        from skeleton_data.database import load_or_build_default
         db = load_or_build_default(source=a.source)
         src = db.meta.get('source', a.source)
     n = len(db.positions)
@@ -192,9 +192,9 @@ def main(argv=None) -> int:
         tb, tk, rec = [], [], []
         for q, R in zip(queries, Rs):
             t0 = time.perf_counter()
-            ib, _ = brute.knn_search(q, R)
+            ib, _ = brute.search.knn_search(q, R)
             t1 = time.perf_counter()
-            ik, _ = tree.knn_search(q, R)
+            ik, _ = tree.search.knn_search(q, R)
             t2 = time.perf_counter()
             tb.append(1e3 * (t1 - t0))
             tk.append(1e3 * (t2 - t1))
@@ -219,7 +219,7 @@ def main(argv=None) -> int:
 def big_database(obs, ts) -> None:
     """Section 6: method C on every CMU clip and its mirror image (no filter)."""
     from skeleton_core.database import DatabaseError, load_or_build_default
-    from . import optimizer as opt_mod
+    from . import search as opt_mod
     try:
         db = load_or_build_default(source='cmu', classes=None, split='all', mirror=True,
                                    threshold=0.0)

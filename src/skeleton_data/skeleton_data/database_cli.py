@@ -1,4 +1,4 @@
-"""``ros2 run skeleton_core build_db`` / ``make build-db``: build (or fetch from the cache) the
+"""``ros2 run skeleton_data build_db`` / ``make build-db``: build (or fetch from the cache) the
 motion database and print what went into it.
 
 Examples::
@@ -59,7 +59,6 @@ def _bar(total, desc, enabled):
 def main(argv=None) -> int:
     args = _parser().parse_args(argv)
     logging.basicConfig(level=logging.INFO, format='%(message)s')
-    log = logging.getLogger('build_db')
     progress = not args.no_progress and sys.stderr.isatty()
     threshold = 0.0 if args.no_filter else (
         database.DEFAULT_THRESHOLD if args.threshold is None else args.threshold)
