@@ -17,7 +17,7 @@ def tpose(y, x=2.5):
 
 
 def _wave(n):
-    from skeleton_core.motions import builtin_clips
+    from skeleton_data.motions import builtin_clips
     clip = next(c for c in builtin_clips(0) if c.name == 'builtin_wave')
     return clip.positions[:n] + np.array([2.5, 0.0, -0.8])
 

@@ -40,7 +40,7 @@ from typing import Dict, List, Mapping, Optional, Sequence
 import numpy as np
 from skeleton_core.conversions import validate_arrays
 from skeleton_core.geometry import quat_rotate, retarget, retarget_by_joint
-from skeleton_core.model import (FOOT_LEFT, HAND_LEFT, HAND_RIGHT, HEAD, JOINT_INDEX,
+from skeleton_core.model import (FOOT_LEFT, FOOT_RIGHT, HAND_LEFT, HAND_RIGHT, HEAD, JOINT_INDEX,
                                  JOINT_NAMES, SEGMENT_OF_JOINT, SEGMENTS, Body, estimate_height,
                                  standard_body)
 

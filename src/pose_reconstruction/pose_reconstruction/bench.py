@@ -218,7 +218,7 @@ def main(argv=None) -> int:
 
 def big_database(obs, ts) -> None:
     """Section 6: method C on every CMU clip and its mirror image (no filter)."""
-    from skeleton_core.database import DatabaseError, load_or_build_default
+    from skeleton_data.database import DatabaseError, load_or_build_default
     from . import search as opt_mod
     try:
         db = load_or_build_default(source='cmu', classes=None, split='all', mirror=True,
