@@ -4,19 +4,17 @@ when the target lifts or slides away, or when the pin conflicts with the targets
 than ``pin_max_force`` or is stretched beyond ``conflict_release``)."""
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, List
+from typing import List
 
 import numpy as np
 from skeleton_core.model import NUM_JOINTS
-
-if TYPE_CHECKING:
-    from .world import World
 
 
 class FootPins:
     """The foot pins of every character of one world."""
 
-    def __init__(self, world: 'World'):
+    def __init__(self, world):
+        """``world``: the :class:`~physics_sim.world.World` whose feet these are."""
         self.world = world
         self.feet: List[tuple] = []    # (character index, joint, PinState)
         self.idx = np.zeros(0, int)    # stacked joint row of every foot

@@ -11,7 +11,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from . import register
+from .registry import register
 from .chunked import ChunkedController
 
 

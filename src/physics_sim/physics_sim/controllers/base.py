@@ -1,12 +1,7 @@
 """The interface every physics controller implements (see :mod:`physics_sim.controllers`)."""
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, ClassVar
-
-if TYPE_CHECKING:   # annotations only: the world imports the controllers
-    from ..config import SimConfig
-    from ..mjcf_body import CharacterParams
-    from ..world import World
+from typing import ClassVar
 
 
 class Controller:
@@ -23,18 +18,19 @@ class Controller:
     # MuJoCo constraint solver for SimConfig.solver == 'auto'
     solver: ClassVar[str] = 'pgs'
 
-    def character_params(self, config: 'SimConfig', params: 'CharacterParams') -> 'CharacterParams':
-        """The MJCF parameters of every character with this controller's features switched on."""
+    def character_params(self, config, params):
+        """The MJCF parameters (``mjcf_body.CharacterParams``) of every character with this
+        controller's features switched on, for ``config`` (``SimConfig``)."""
         return params
 
-    def bind(self, world: 'World') -> None:
+    def bind(self, world) -> None:
         """Look up this controller's ids in the world's freshly built model."""
 
-    def targets_changed(self, world: 'World') -> None:
+    def targets_changed(self, world) -> None:
         """The world repacked its targets (every advance, a pin set by hand): forget what was
         derived from the old ones."""
 
-    def advance(self, world: 'World', nsteps: int) -> None:
+    def advance(self, world, nsteps: int) -> None:
         """Simulate ``nsteps`` steps of ``world.model.opt.timestep``, setting ``world.time``."""
         raise NotImplementedError
 

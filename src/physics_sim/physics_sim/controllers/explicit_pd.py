@@ -8,7 +8,7 @@ from __future__ import annotations
 import mujoco
 
 from ..controller import explicit_pd_wrenches
-from . import register
+from .registry import register
 from .base import Controller
 
 

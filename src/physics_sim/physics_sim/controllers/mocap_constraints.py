@@ -9,7 +9,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from . import register
+from .registry import register
 from .chunked import ChunkedController
 
 
