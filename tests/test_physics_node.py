@@ -174,7 +174,7 @@ def test_ticks_follow_the_input_but_keep_the_output_rate(graph, monkeypatch):
                                                           perf_counter=time.perf_counter))
     ticks = []
     real_tick = node._tick
-    monkeypatch.setattr(node, '_tick', lambda: (ticks.append(clock.t), real_tick()))
+    monkeypatch.setattr(node, '_tick', lambda *a: (ticks.append(clock.t), real_tick(*a)))
     period = 1 / 30
 
     def send(i):
@@ -191,7 +191,7 @@ def test_ticks_follow_the_input_but_keep_the_output_rate(graph, monkeypatch):
     del ticks[:]
     for i in range(60):                        # 60 Hz for 1 s: about 30 ticks, not 60
         clock.t += period / 2
-        send(100 + i)
+        node._on_input(serialize_message(_msg(clip(1)[0], 6_000_000_000 + i * 16_666_667)))
     assert 28 <= len(ticks) <= 31
     del ticks[:]
     clock.t += period
@@ -200,6 +200,12 @@ def test_ticks_follow_the_input_but_keep_the_output_rate(graph, monkeypatch):
     assert len(ticks) == 2
     # each tick simulated the clock time since the previous one
     assert node._sim_in_step > 0
+    del ticks[:]
+    for i in range(10):     # frames 30 Hz apart by their stamps delivered in pairs (a delay):
+        clock.t += period * (2 if i % 2 == 0 else 0.05)      # each ticks, at once
+        send(200 + i)
+        assert ticks[-1] == clock.t
+    assert len(ticks) == 10
 
 
 def test_a_slow_tick_skips_stale_targets_instead_of_queueing_them(graph, monkeypatch):
@@ -212,9 +218,9 @@ def test_a_slow_tick_skips_stale_targets_instead_of_queueing_them(graph, monkeyp
     ticks = []
     real_tick = node._tick
 
-    def slow_tick():
+    def slow_tick(*a):
         ticks.append(time.monotonic())
-        real_tick()
+        real_tick(*a)
         if len(ticks) == 1:
             time.sleep(0.6)   # a tick far slower than the input
 
@@ -235,8 +241,9 @@ def test_a_slow_tick_skips_stale_targets_instead_of_queueing_them(graph, monkeyp
 
 
 def test_a_frame_arriving_in_a_burst_is_simulated_not_dropped(graph, monkeypatch):
-    """Two frames delivered together (a delayed frame and the next one): the first ticks at once,
-    the second 0.75 period after it (a one-shot timer), so both stamps are published."""
+    """Frames delivered together after a delay (their stamps one frame apart) tick at once, each;
+    a frame sooner than 0.75 period after the last by its stamp (input faster than the output
+    rate) ticks 0.75 period after it (a one-shot timer): every stamp is published."""
     from rclpy.serialization import serialize_message
     node, peer = graph
     node.timer.cancel()
@@ -246,15 +253,17 @@ def test_a_frame_arriving_in_a_burst_is_simulated_not_dropped(graph, monkeypatch
     assert _wait(lambda: node.pub.get_subscription_count() >= 1, 10.0)
     ticks = []
     real_tick = node._tick
-    monkeypatch.setattr(node, '_tick', lambda: (ticks.append(time.monotonic()), real_tick()))
+    monkeypatch.setattr(node, '_tick', lambda *a: (ticks.append(time.monotonic()), real_tick(*a)))
     p = clip(1)[0]
     node._on_input(serialize_message(_msg(p, 8_966_666_667)))   # spawns the character
     time.sleep(0.1)
     del ticks[:]
     node._on_input(serialize_message(_msg(p, 9_000_000_000)))
     node._on_input(serialize_message(_msg(p, 9_033_333_333)))
-    assert len(ticks) == 1
-    assert _wait(lambda: len(ticks) == 2, 5.0)
-    assert ticks[1] - ticks[0] >= 0.7 / 30
-    assert _wait(lambda: 9_033_333_333 in got, 5.0)
-    assert 9_000_000_000 in got
+    assert len(ticks) == 2
+    node._on_input(serialize_message(_msg(p, 9_043_333_333)))   # 10 ms later by its stamp
+    assert len(ticks) == 2
+    assert _wait(lambda: len(ticks) == 3, 5.0)
+    assert ticks[2] - ticks[1] >= 0.7 / 30
+    assert _wait(lambda: 9_043_333_333 in got, 5.0)
+    assert {9_000_000_000, 9_033_333_333} <= set(got)
