@@ -7,6 +7,7 @@ import math
 from typing import Optional
 
 import numpy as np
+from skeleton_core import jit
 from skeleton_core.geometry import quat_conjugate, quat_multiply
 from skeleton_core.model import (HIP_CENTER, HIP_LEFT, HIP_RIGHT, NUM_JOINTS, SEGMENT_CHILDREN,
                                  SEGMENT_PARENTS, SEGMENTS, SPINE)
@@ -77,7 +78,7 @@ def _unit3(v, fallback):
 _TREE = None   # (segment, parent body, parent joint, child joint) in body order, root first
 
 
-def segment_quats_from_positions(positions: np.ndarray, rest_offsets: np.ndarray) -> np.ndarray:
+def _segment_quats_python(positions: np.ndarray, rest_offsets: np.ndarray) -> np.ndarray:
     """World orientation (x, y, z, w) of every segment (19, SEGMENTS order) from joint positions
     (20, 3): the root segment follows the pelvis frame; every other segment is its parent body's
     orientation followed by the shortest arc turning the parent-carried rest direction onto the
@@ -137,6 +138,108 @@ def _unit_rest(rest_offsets) -> list:
             out.append((v[0] / n, v[1] / n, v[2] / n) if n > 1e-9 else (1.0, 0.0, 0.0))
         _REST_UNIT = (rest_offsets, out)
     return _REST_UNIT[1]
+
+
+def _tree_array() -> np.ndarray:
+    """(19, 4) int: (segment, parent body, parent joint, child joint) in body order."""
+    return np.array([(k, segment_parent_body(k), SEGMENT_PARENTS[k], SEGMENT_CHILDREN[k])
+                     for k in body_order()], np.int64)
+
+
+_TREE_A = _tree_array()
+_PELVIS_JOINTS = np.array([HIP_LEFT, HIP_RIGHT, SPINE, HIP_CENTER], np.int64)
+_REST_ARRAYS: dict = {}   # id(rest offsets) -> (the array, its unit directions (20, 3))
+
+
+def _segment_quats_kernel(p, rest, tree, pelvis, q):
+    """Numba twin of :func:`_segment_quats_python` (the same arithmetic, in the same order)."""
+    hl, hr, sp, hc = pelvis[0], pelvis[1], pelvis[2], pelvis[3]
+    for row in range(tree.shape[0]):
+        k, pb, pj, cj = tree[row, 0], tree[row, 1], tree[row, 2], tree[row, 3]
+        if pb < 0:   # pelvis frame: y left, z up the spine, x forward
+            yx, yy, yz = p[hl, 0] - p[hr, 0], p[hl, 1] - p[hr, 1], p[hl, 2] - p[hr, 2]
+            n = np.sqrt(yx * yx + yy * yy + yz * yz)
+            if n > 1e-9:
+                yx, yy, yz = yx / n, yy / n, yz / n
+            else:
+                yx, yy, yz = 0.0, 1.0, 0.0
+            zx, zy, zz = p[sp, 0] - p[hc, 0], p[sp, 1] - p[hc, 1], p[sp, 2] - p[hc, 2]
+            dz = zx * yx + zy * yy + zz * yz
+            zx, zy, zz = zx - dz * yx, zy - dz * yy, zz - dz * yz
+            n = np.sqrt(zx * zx + zy * zy + zz * zz)
+            if n > 1e-9:
+                zx, zy, zz = zx / n, zy / n, zz / n
+            else:
+                zx, zy, zz = 0.0, 0.0, 1.0
+            xx, xy, xz = yy * zz - yz * zy, yz * zx - yx * zz, yx * zy - yy * zx
+            r00, r11, r22 = xx, yy, zz
+            tr = r00 + r11 + r22
+            if tr > 0.0:
+                s = 2.0 * np.sqrt(tr + 1.0)
+                a0, a1, a2, a3 = (yz - zy) / s, (zx - xz) / s, (xy - yx) / s, 0.25 * s
+            elif r00 >= r11 and r00 >= r22:
+                s = 2.0 * np.sqrt(max(1.0 + r00 - r11 - r22, 1e-300))
+                a0, a1, a2, a3 = 0.25 * s, (yx + xy) / s, (zx + xz) / s, (yz - zy) / s
+            elif r11 >= r22:
+                s = 2.0 * np.sqrt(max(1.0 + r11 - r00 - r22, 1e-300))
+                a0, a1, a2, a3 = (yx + xy) / s, 0.25 * s, (zy + yz) / s, (zx - xz) / s
+            else:
+                s = 2.0 * np.sqrt(max(1.0 + r22 - r00 - r11, 1e-300))
+                a0, a1, a2, a3 = (zx + xz) / s, (zy + yz) / s, 0.25 * s, (xy - yx) / s
+            n = np.sqrt(a0 * a0 + a1 * a1 + a2 * a2 + a3 * a3) * (-1.0 if a3 < 0 else 1.0)
+            q[k, 0], q[k, 1], q[k, 2], q[k, 3] = a0 / n, a1 / n, a2 / n, a3 / n
+            continue
+        x, y, z, w = q[pb, 0], q[pb, 1], q[pb, 2], q[pb, 3]
+        vx, vy, vz = rest[cj, 0], rest[cj, 1], rest[cj, 2]
+        tx, ty, tz = 2.0 * (y * vz - z * vy), 2.0 * (z * vx - x * vz), 2.0 * (x * vy - y * vx)
+        rx = vx + w * tx + y * tz - z * ty
+        ry = vy + w * ty + z * tx - x * tz
+        rz = vz + w * tz + x * ty - y * tx
+        dx, dy, dz = p[cj, 0] - p[pj, 0], p[cj, 1] - p[pj, 1], p[cj, 2] - p[pj, 2]
+        n = np.sqrt(dx * dx + dy * dy + dz * dz)
+        if n > 1e-9:
+            dx, dy, dz = dx / n, dy / n, dz / n
+        else:
+            dx, dy, dz = rx, ry, rz
+        dot = rx * dx + ry * dy + rz * dz
+        if 1.0 + dot < 1e-9:   # opposite: half a turn about an axis orthogonal to the rest dir
+            ox, oy, oz = 0.0, rz, -ry                       # rest x (1, 0, 0)
+            if np.sqrt(ox * ox + oy * oy + oz * oz) < 1e-6:
+                ox, oy, oz = -rz, 0.0, rx                   # rest x (0, 1, 0)
+            n = np.sqrt(ox * ox + oy * oy + oz * oz)
+            ax, ay, az, aw = ox / n, oy / n, oz / n, 0.0
+        else:
+            ax, ay, az, aw = ry * dz - rz * dy, rz * dx - rx * dz, rx * dy - ry * dx, 1.0 + dot
+            n = 1.0 / np.sqrt(ax * ax + ay * ay + az * az + aw * aw)
+            ax, ay, az, aw = ax * n, ay * n, az * n, aw * n
+        q[k, 0] = aw * x + ax * w + ay * z - az * y
+        q[k, 1] = aw * y - ax * z + ay * w + az * x
+        q[k, 2] = aw * z + ax * y - ay * x + az * w
+        q[k, 3] = aw * w - ax * x - ay * y - az * z
+
+
+_segment_quats_numba = jit.njit(_segment_quats_kernel)
+
+
+def _segment_quats_compiled(positions: np.ndarray, rest_offsets: np.ndarray) -> np.ndarray:
+    entry = _REST_ARRAYS.get(id(rest_offsets))
+    if entry is None or entry[0] is not rest_offsets:
+        if len(_REST_ARRAYS) > 64:
+            _REST_ARRAYS.clear()
+        entry = _REST_ARRAYS[id(rest_offsets)] = (rest_offsets,
+                                                  np.array(_unit_rest(rest_offsets), float))
+    q = np.empty((len(SEGMENTS), 4))
+    _segment_quats_numba(np.ascontiguousarray(positions, dtype=float), entry[1], _TREE_A,
+                         _PELVIS_JOINTS, q)
+    return q
+
+
+# World orientation (x, y, z, w) of every segment (19, SEGMENTS order) from joint positions (20, 3):
+# the root segment follows the pelvis frame; every other segment is its parent body's orientation
+# followed by the shortest arc turning the parent-carried rest direction onto the segment's
+# direction (no twist added). Compiled by numba where available (one call per target frame and
+# character), else the scalar Python of _segment_quats_python; both give the same numbers.
+segment_quats_from_positions = jit.pick(_segment_quats_compiled, _segment_quats_python)
 
 
 def joint_quats_to_segment(q_by_joint: np.ndarray) -> np.ndarray:
