@@ -185,22 +185,26 @@ class Simulation:
                 u = parent[u]
             return u
 
+        # horizontal gap between every pair of boxes (negative: overlapping), all at once
+        B = np.array([bounds[u] for u in uids])                   # (N, 2 min/max, 2 xy)
+        gaps = np.maximum(B[:, None, 0] - B[None, :, 1], B[None, :, 0] - B[:, None, 1]).max(-1)
+        gaps = gaps.tolist()
+        merge, part = 2.0 * c.contact_margin, 4.0 * c.contact_margin
         for a in range(len(uids)):
             for b in range(a + 1, len(uids)):
                 ua, ub = uids[a], uids[b]
+                gap = gaps[a][b]
                 together = (ua in self._world_of and self._world_of.get(ua) is
                             self._world_of.get(ub))
                 # widened boxes overlap: merge; a merged pair parts once it has been apart by
                 # twice the margin for PART_AFTER seconds
-                ba, bb = bounds[ua], bounds[ub]
-                gap = np.maximum(ba[0] - bb[1], bb[0] - ba[1]).max()
                 if together:
-                    if gap < 4.0 * c.contact_margin:
+                    if gap < part:
                         self._apart.pop((ua, ub), None)
                     else:
                         since = self._apart.setdefault((ua, ub), self.time)
                         together = self.time - since < self.PART_AFTER
-                if together or gap < 2.0 * c.contact_margin:
+                if together or gap < merge:
                     parent[root(ua)] = root(ub)
         comps: Dict[int, List[int]] = {}
         for u in uids:
