@@ -27,7 +27,7 @@ def test_a_character_alone_in_its_world_moves_as_if_it_were_the_only_one():
     where the shared world couples them through the constraint solver."""
     seq = _wave(30)
     alone = Simulation(SimConfig(body_height=1.75))
-    pair = Simulation(SimConfig(body_height=1.75))
+    pair = Simulation(SimConfig(body_height=1.75, world_split='contact'))
     a = [alone.step({1: p + [0.0, -1.5, 0.0]})[1].positions for p in seq]
     b = [pair.step({1: p + [0.0, -1.5, 0.0], 2: p + [0.0, 1.5, 0.0]})[1].positions for p in seq]
     assert len(pair.worlds) == 2 and pair.world_of(1) is not pair.world_of(2)
@@ -38,7 +38,7 @@ def test_a_character_alone_in_its_world_moves_as_if_it_were_the_only_one():
 def test_characters_share_a_world_while_they_can_touch():
     """Walking towards each other, two characters are merged into one world (and collide there),
     keep their motion across the recompile, and part when they move apart again."""
-    sim = Simulation(SimConfig(body_height=1.75, contact_margin=0.2))
+    sim = Simulation(SimConfig(body_height=1.75, world_split='contact', contact_margin=0.2))
     for _ in range(10):
         sim.step({1: tpose(-2.0), 2: tpose(2.0)})
     assert len(sim.worlds) == 2
@@ -69,7 +69,8 @@ def test_shared_world_and_objects_keep_one_model():
     sim = Simulation(SimConfig(body_height=1.75, world_split='shared'))
     sim.step({1: tpose(-3.0), 2: tpose(3.0)})
     assert len(sim.worlds) == 1
-    sim = Simulation(SimConfig(body_height=1.75))
+    assert SimConfig().world_split == 'shared'   # the default
+    sim = Simulation(SimConfig(body_height=1.75, world_split='contact'))
     sim.step({1: tpose(-3.0), 2: tpose(3.0)})
     assert len(sim.worlds) == 2
     sim.throw_ball((2.5, 0.0, 1.0), (0.0, 0.0, 0.0))

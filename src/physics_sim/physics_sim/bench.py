@@ -68,14 +68,17 @@ def synthetic(n: int) -> np.ndarray:
     return seq
 
 
-# real-time factor only: the speed-ups side by side with what they replace. *_shared = every character
-# in one MuJoCo model (world_split shared, as before the worlds were split); *_numpy = explicit_pd
-# with the numpy formulation of its per-step Eq. 1 instead of the numba kernel
-RTF_VARIANTS = {'actuator_pd_shared': ('actuator_pd', dict(world_split='shared')),
-                'explicit_pd_shared': ('explicit_pd', dict(world_split='shared')),
+# real-time factor only: the alternatives side by side with the defaults. *_split = characters that
+# cannot touch each other in separate MuJoCo models (world_split contact; the default is one model);
+# explicit_pd_numpy = explicit_pd with the numpy formulation of its per-step Eq. 1 instead of the
+# numba kernel; auto = the node's default (controller auto, Euler)
+RTF_VARIANTS = {'actuator_pd_split': ('actuator_pd', dict(world_split='contact')),
+                'actuator_pd_implicit_split': ('actuator_pd', dict(integrator='implicitfast',
+                                                                   world_split='contact')),
+                'explicit_pd_split': ('explicit_pd', dict(world_split='contact')),
                 'explicit_pd_numpy': ('explicit_pd', {}),
-                'auto': ('auto', dict(integrator='euler')),   # the node's default
-                'auto_shared': ('auto', dict(integrator='euler', world_split='shared'))}
+                'auto': ('auto', dict(integrator='euler')),
+                'auto_split': ('auto', dict(integrator='euler', world_split='contact'))}
 
 
 def config(variant: str, **kw) -> SimConfig:
@@ -314,8 +317,8 @@ def main(argv=None) -> int:
     ap.add_argument('--quick', action='store_true', help='fewer clips and sweep points')
     ap.add_argument('--long', action='store_true', help='10 min noisy run instead of 60 s')
     ap.add_argument('--rtf-only', action='store_true',
-                    help='only the real-time factors (every controller, and the speed-ups beside '
-                         'what they replace: one shared model, the numpy Eq. 1)')
+                    help='only the real-time factors (every controller, and the alternatives beside '
+                         'the defaults: one model per group that can touch, the numpy Eq. 1)')
     ap.add_argument('--out', default='out/bench_physics.json')
     args = ap.parse_args(argv if argv is not None else sys.argv[1:])
     load = os.getloadavg()[0] if hasattr(os, 'getloadavg') else float('nan')

@@ -79,13 +79,14 @@ class SimConfig:
     # controllers' targets); 0 = auto: 4 for explicit_pd, the whole advance (<= 50) otherwise
     slow_control_every: int = 0
     # controller 'auto': explicit_pd from this many characters on, actuator_pd below
-    auto_explicit_from: int = 4
+    auto_explicit_from: int = 3
     twist_scale: Optional[Sequence[float]] = None  # per-segment factor on Eq. 2 gains (19, SEGMENTS)
     # worlds: 'contact' = characters that cannot touch each other are simulated in separate MuJoCo
-    # models (the cost of one model grows with the square of its characters), merged into one while
-    # their bounding boxes come within contact_margin; 'shared' = one model for all. Objects (balls,
-    # boxes, the mace) can touch anyone: while there are objects, all characters share one model
-    world_split: str = 'contact'
+    # models (actuator_pd's cost in one model grows with the square of its characters), merged into
+    # one while their bounding boxes come within contact_margin; 'shared' = one model for all (the
+    # default: with explicit_pd's compiled Eq. 1, one model of 6 characters steps faster than 6
+    # models, bench_physics --rtf-only). Objects can touch anyone: with objects, one model
+    world_split: str = 'shared'
     contact_margin: float = 0.25    # m added to each side of a character's box (a frame of motion)
 
     def validate(self) -> None:

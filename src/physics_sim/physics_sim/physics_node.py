@@ -84,19 +84,21 @@ PARAMS: List[ParamSpec] = [
               'period after the last by its stamp is simulated 0.75 period after it'),
     ParamSpec('controller', 'auto',
               'actuator_pd = Eq. 1-2 evaluated by MuJoCo actuators at every step (fast for few '
-              'characters); explicit_pd = the papers\' external PD forces computed in Python at '
-              'every step (reference; faster from ~4 characters in one world); auto = per world, '
+              'characters); explicit_pd = the papers\' external PD forces computed at every step '
+              '(Eq. 1 compiled; faster from ~3 characters in one model); auto = per model, '
               'actuator_pd below auto_explicit_from characters, explicit_pd from there; '
               'mocap_constraints = soft connect constraints to mocap targets',
               choices=controllers(), read_only=True),
-    ParamSpec('auto_explicit_from', 4,
+    ParamSpec('auto_explicit_from', 3,
               'controller auto: explicit_pd from this many characters in one world on (the same '
               'control law; actuator_pd grows with the square of the characters)', range=(1, 100),
               read_only=True),
-    ParamSpec('world_split', 'contact',
-              'contact = characters that cannot touch each other are simulated in separate MuJoCo '
-              'models (merged while their boxes come within contact_margin; all in one while there '
-              'are objects); shared = one model for all', choices=WORLD_SPLITS, read_only=True),
+    ParamSpec('world_split', 'shared',
+              'shared = one MuJoCo model for all characters (fastest with explicit_pd\'s compiled '
+              'Eq. 1); contact = characters that cannot touch each other in separate models '
+              '(faster for actuator_pd at several characters; merged while their boxes come within '
+              'contact_margin; one model while there are objects)', choices=WORLD_SPLITS,
+              read_only=True),
     ParamSpec('contact_margin', 0.25,
               'world_split contact: margin (m) added to every side of a character\'s horizontal box '
               '(joint points and newest target) when deciding who may touch whom', range=(0.0, 5.0),

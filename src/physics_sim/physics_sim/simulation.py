@@ -19,19 +19,21 @@ foot pins; :mod:`~physics_sim.controllers` the controllers (one class per file, 
 name) and :mod:`~physics_sim.controller` Eq. 1-2 themselves; :mod:`~physics_sim.mjcf_world` /
 :mod:`~physics_sim.mjcf_body` build the MJCF; :mod:`~physics_sim.config` the settings.
 
-Worlds (``SimConfig.world_split``): a MuJoCo model's cost grows with the square of its characters
-(every site actuator takes a Jacobian over all degrees of freedom of its model; the constraint
-solver sees all contacts), so characters that cannot touch each other are simulated in separate
-models, stepped one after the other in the same loop over the same time steps. Two characters share
-a model while their horizontal boxes (joint points and newest target, widened by
-``contact_margin`` on every side) overlap; they part again when the gap exceeds the margin once
-more (hysteresis: merging or parting recompiles the models involved, keeping every body's state).
-While there are objects, every character shares one model with them.
+Worlds (``SimConfig.world_split``): with ``contact``, characters that cannot touch each other are
+simulated in separate MuJoCo models, stepped one after the other over the same time steps (a model's
+cost for ``actuator_pd`` grows with the square of its characters: every site actuator takes a
+Jacobian over all degrees of freedom of its model). Two characters share a model while their
+horizontal boxes (joint points and newest target, widened by ``contact_margin`` on every side)
+overlap; they part once they have been apart by twice that for ``PART_AFTER`` (recompiling the
+models involved, keeping every body's state; a group's compiled model is reused when it meets
+again). While there are objects, every character shares one model with them. The default is
+``shared`` (one model): with ``explicit_pd``'s compiled Eq. 1, ``auto``'s choice from 3
+characters, one model of 6 characters steps faster than 6 models (``bench_physics --rtf-only``).
 
 Controllers (``SimConfig.controller``; :mod:`physics_sim.controllers`): ``explicit_pd`` (the
 papers' scheme, Eq. 1 at every step in compiled code), ``actuator_pd`` (Eq. 1-2 as MuJoCo
-actuators), ``mocap_constraints`` (soft connects to mocap targets) and ``auto`` (per world:
-``actuator_pd`` below ``auto_explicit_from`` characters, ``explicit_pd`` from there on).
+actuators), ``mocap_constraints`` (soft connects to mocap targets) and ``auto`` (per model:
+``actuator_pd`` below ``auto_explicit_from`` (3) characters, ``explicit_pd`` from there on).
 """
 from __future__ import annotations
 
