@@ -65,5 +65,20 @@ _energy_numba = jit.njit(_energy_kernel)
 # for the numpy twin
 energy_from_products = jit.pick(_energy_numba, _energy_numpy)
 
+_warm = [False]
 
-__all__ = ['energy_from_products']
+
+def warm_up() -> None:
+    """Compile (or load from numba's cache) the kernels now, with the argument types of the real
+    calls, rather than on a user's first frame; once per process, nothing without numba."""
+    if _warm[0] or energy_from_products is not _energy_numba:
+        return
+    _warm[0] = True
+    d, m, k = 2, 4, 3
+    P, ZT = np.ones((d + 3 * NUM_SEGMENTS + k, m)), np.ones((d + 1, m))
+    L, sq = np.ones(NUM_SEGMENTS), np.empty((3 * NUM_SEGMENTS, m))
+    for work in (None, sq):   # energy() passes no work array, the stochastic search one
+        _energy_numba(P, ZT, d, 0.0, L, 1.0, 1.0, work)
+
+
+__all__ = ['energy_from_products', 'warm_up']

@@ -34,7 +34,7 @@ import numpy as np
 from skeleton_core.geometry import quat_average
 from skeleton_core.model import NUM_JOINTS, NUM_SEGMENTS, SEGMENT_CHILDREN, SEGMENT_PARENTS
 
-from .kernels import energy_from_products
+from .kernels import energy_from_products, warm_up
 from .posture_space import as_database_arrays
 from .search import KNN_MODES, DatabaseSearch
 
@@ -110,6 +110,7 @@ class NaturalPostureOptimizer:
                  w_continuity: float = 0.25, step_scale: float = 0.5,
                  solver: str = 'stochastic', gn_iterations: int = 6, seed: int = 0,
                  knn: str = 'brute', kdtree_dims: int = 12, kdtree_candidates: int = 4):
+        warm_up()   # the compiled kernels, once per process: not on a user's first frame
         self.db = as_database_arrays(db)
         self.body = self.db.body
         self.L = self.body.segment_lengths.copy()  # (19,)
