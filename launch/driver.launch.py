@@ -15,7 +15,7 @@ from launch_ros.parameter_descriptions import ParameterValue
 
 def generate_launch_description():
     config = os.path.join(get_package_share_directory('kinect_bringup'), 'config', 'driver.yaml')
-    args = [('source', 'synthetic', 'synthetic | replay | live'),
+    args = [('source', 'synthetic', 'synthetic | replay | live (or a registered source)'),
             ('replay_file', '', 'bag (.mcap) or CSV for source:=replay'),
             ('scenario', 'b', 'synthetic scenario class a | b | c'),
             ('num_users', '1', 'synthetic users (1-6)'),

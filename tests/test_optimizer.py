@@ -550,9 +550,9 @@ def test_large_database_screened_knn_equals_the_exact_search():
     search, with and without the translation-invariant variant."""
     from pose_reconstruction.search import SCREEN_FROM, DatabaseSearch
     db = random_database(SCREEN_FROM + 500, seed=11)
-    opt = DatabaseSearch(db, k=30)
+    opt = DatabaseSearch(db, k=30, knn='brute', kdtree_dims=12, kdtree_candidates=4)
     assert opt._screen is not None
-    exact = DatabaseSearch(db, k=30)
+    exact = DatabaseSearch(db, k=30, knn='brute', kdtree_dims=12, kdtree_candidates=4)
     exact._screen = None
     rng = np.random.default_rng(2)
     for i in range(20):

@@ -21,18 +21,23 @@ from dataclasses import dataclass
 import numpy as np
 from skeleton_core import jit
 from skeleton_core.geometry import quat_conjugate, quat_multiply, swing_twist
+from skeleton_core.params import param
 
 
 @dataclass
 class Gains:
     """Controller gains and limits (the paper hand-tunes one Ke/Kd pair for all joints)."""
 
-    ke: float = 4000.0          # N/m, Eq. 1 elasticity
-    kd: float = 100.0           # N s/m, Eq. 1 damping
-    max_force: float = 800.0    # N, |F| bound
-    twist_ke: float = 400.0     # 1/s^2: Ke_i = twist_ke * I_i (I_i = axial inertia + armature)
-    twist_kd: float = 40.0      # 1/s:   Kd_i = twist_kd * I_i
-    max_torque: float = 50.0    # N m, |T| bound
+    ke: float = param(4000.0, 'Ke of Eq. 1 (N/m), shared by all joints', range=(0.0, 1e6),
+                      name='kp')
+    kd: float = param(100.0, 'Kd of Eq. 1 (N s/m), shared by all joints', range=(0.0, 1e4))
+    max_force: float = param(800.0, 'bound on |F| of Eq. 1 (N)', range=(0.0, 1e5))
+    twist_ke: float = param(400.0, 'Eq. 2 elasticity per unit axial inertia (1/s^2): Ke_i = '
+                            'twist_kp * I_i (I_i = axial inertia + armature)', range=(0.0, 1e5),
+                            name='twist_kp')
+    twist_kd: float = param(40.0, 'Eq. 2 damping per unit axial inertia (1/s): Kd_i = twist_kd '
+                            '* I_i', range=(0.0, 1e4))
+    max_torque: float = param(50.0, 'bound on |T| of Eq. 2 (N m)', range=(0.0, 1e4))
 
     def validate(self) -> None:
         for name in ('ke', 'kd', 'max_force', 'twist_ke', 'twist_kd', 'max_torque'):

@@ -9,8 +9,8 @@ from typing import Optional
 import numpy as np
 from skeleton_core import jit
 from skeleton_core.geometry import quat_conjugate, quat_multiply
-from skeleton_core.model import (HIP_CENTER, HIP_LEFT, HIP_RIGHT, NUM_JOINTS, SEGMENT_CHILDREN,
-                                 SEGMENT_PARENTS, SEGMENTS, SPINE)
+from skeleton_core.model import (HIP_CENTER, HIP_LEFT, HIP_RIGHT, NUM_JOINTS, SEGMENT_CHILD_INDEX,
+                                 SEGMENT_CHILDREN, SEGMENT_PARENTS, SEGMENTS, SPINE)
 
 from .mjcf_body import ROOT_SEGMENT, body_order, segment_parent_body
 
@@ -244,13 +244,13 @@ segment_quats_from_positions = jit.pick(_segment_quats_compiled, _segment_quats_
 
 def joint_quats_to_segment(q_by_joint: np.ndarray) -> np.ndarray:
     """(20, 4) orientations by child joint (Skeleton.orientations) -> (19, 4) by segment."""
-    return np.asarray(q_by_joint, float)[list(SEGMENT_CHILDREN)]
+    return np.asarray(q_by_joint, float)[SEGMENT_CHILD_INDEX]
 
 
 def segment_quats_to_joints(q_seg: np.ndarray) -> np.ndarray:
     """(19, 4) segment orientations -> (20, 4) by child joint; the root joint gets the root body's."""
     out = np.zeros((NUM_JOINTS, 4))
-    out[list(SEGMENT_CHILDREN)] = q_seg
+    out[SEGMENT_CHILD_INDEX] = q_seg
     out[HIP_CENTER] = q_seg[ROOT_SEGMENT]
     return out
 
