@@ -189,10 +189,10 @@ def test_ticks_follow_the_input_but_keep_the_output_rate(graph, monkeypatch):
     node._on_timer()                           # input flowing: the timer leaves the ticks to it
     assert len(ticks) == 30
     del ticks[:]
-    for i in range(60):                        # 60 Hz for 1 s: about 30 ticks, not 60
-        clock.t += period / 2
+    for i in range(60):     # 60 Hz for 1 s: ticks at least 0.75 period apart (by the stamps),
+        clock.t += period / 2                  # not 60 (a frame arriving sooner waits on a
         node._on_input(serialize_message(_msg(clip(1)[0], 6_000_000_000 + i * 16_666_667)))
-    assert 28 <= len(ticks) <= 31
+    assert 28 <= len(ticks) <= 41              # one-shot timer, which fires in real time here)
     del ticks[:]
     clock.t += period
     node._on_timer()                           # input stopped: the timer ticks, at the output rate
