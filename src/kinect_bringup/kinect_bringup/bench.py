@@ -408,6 +408,11 @@ def to_markdown(results: List[Dict], bag_speed: Dict, commit: str) -> str:
 
 
 def main(argv=None) -> int:
+    import signal
+    # started in the background by a shell, this process ignores SIGINT, and so would every node
+    # it starts (Python keeps an inherited SIG_IGN): the graphs could not be stopped cleanly (a
+    # recorder killed mid-file). A handler of our own is reset to the default in the children
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     root = repo_root() or Path.cwd()
     p = argparse.ArgumentParser(prog='bench', description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
