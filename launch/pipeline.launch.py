@@ -3,6 +3,7 @@
     ros2 launch kinect_bringup pipeline.launch.py                      # synthetic source, method C
     ros2 launch kinect_bringup pipeline.launch.py source:=replay replay_file:=out/demo.mcap
     ros2 launch kinect_bringup pipeline.launch.py source:=live method:=A physics:=false rviz:=true
+    ros2 launch kinect_bringup pipeline.launch.py control:=true world:=playground   # Ishigaki 2009
 
 The reconstruction is one node (`reconstruction`: reliability, completion and optimizer without DDS
 hops between them) or, with reconstruction:=split, the three nodes `reliability`, `completion` and
@@ -33,7 +34,16 @@ ARGS = [
      'default: optimizer.yaml'),
     ('reconstruction', 'fused', 'fused: one reconstruction node; split: reliability, completion and '
      'optimizer nodes (same topics)'),
+    ('input_tracker', '', 'skeleton tracker of the input: kinect_v2_sdk (e.g. replayed UI-PRMD bags: '
+     'the learned sensor correction applies) | nite2 | kinect_v1_sdk | sensor_model; default: '
+     'nite2 for source:=live, sensor_model for source:=synthetic, else optimizer.yaml'),
+    ('user_profile', '', 'user profile name (cache/profiles/<name>.json, from build_profile)'),
     ('physics', 'true', 'run the MuJoCo physics character'),
+    ('control', 'false', 'performance-based control (Ishigaki 2009) between the reconstruction '
+     'and the physics: the physics character tracks /control/target'),
+    ('world', 'playground', 'control:=true: feature world (name in performance_control/config/'
+     'worlds or a YAML path)'),
+    ('start_feature', '', 'control:=true: feature a new character starts on ("" = the spawn)'),
     ('viz', 'true', 'run the RViz marker node'),
     ('rviz', 'false', 'start RViz with the bundled config'),
     ('record', '', 'record every pipeline topic to this MCAP file ("" = no recording)'),
@@ -67,13 +77,20 @@ def _nodes(context):
     db = arg('database')
     db_over = {'database': db} if db else {}
 
+    from kinect_driver.driver_node import driver_params
+    driver_specs = {s.name: s for s in driver_params()}
     driver_over = {}
-    for name, cast in (('source', str), ('scenario', str), ('replay_file', str),
-                       ('device_uri', str), ('nite2_path', str),
-                       ('num_users', int), ('seed', int)):
-        if arg(name):
-            driver_over[name] = cast(arg(name))
+    for name in ('source', 'scenario', 'replay_file', 'device_uri', 'nite2_path', 'num_users',
+                 'seed'):
+        if arg(name):   # typed as declared
+            driver_over[name] = type(driver_specs[name].default)(arg(name))
     opt_over = dict(db_over)
+    tracker = arg('input_tracker') or {'live': 'nite2', 'synthetic': 'sensor_model'}.get(
+        arg('source'), '')
+    if tracker:
+        opt_over['input_tracker'] = tracker
+    if arg('user_profile'):
+        opt_over['user_profile'] = arg('user_profile')
     if method in ('B', 'C'):
         opt_over['method'] = method
     nodes = [Node(package='kinect_driver', executable='driver', name='driver',
@@ -96,10 +113,22 @@ def _nodes(context):
         ]
     else:
         raise RuntimeError(f'reconstruction:={mode} is not one of fused, split')
+    posture_topic = ''
+    if method:
+        posture_topic = '/posture/completed' if method == 'A' else '/posture/reconstructed'
+    control = arg('control').lower() in ('true', '1', 'yes')
+    if control:
+        ctl_over = {'world': arg('world'), 'start_feature': arg('start_feature')}
+        if posture_topic:
+            ctl_over['input_topic'] = posture_topic
+        nodes.append(Node(package='performance_control', executable='control', name='control',
+                          parameters=params('control', **ctl_over), **common))
     if arg('physics').lower() in ('true', '1', 'yes'):
         phys_over = {}
-        if method:
-            phys_over['input_topic'] = '/posture/completed' if method == 'A' else '/posture/reconstructed'
+        if control:
+            phys_over['input_topic'] = '/control/target'
+        elif posture_topic:
+            phys_over['input_topic'] = posture_topic
         nodes.append(Node(package='physics_sim', executable='physics', name='physics',
                           parameters=params('physics', **phys_over), **common))
     if arg('viz').lower() in ('true', '1', 'yes'):
