@@ -87,6 +87,7 @@ def main(argv=None) -> int:
                    help='comma list of nominal or group:factor (groups of skeleton_eval.perturb)')
     p.add_argument('--seeds', default='0,1,2')
     p.add_argument('--method', default='C')
+    p.add_argument('--method-params', default='', help='JSON parameter overrides of the method')
     p.add_argument('--max-frames', type=int, default=300)
     p.add_argument('--json', default='', help='also write the results here')
     a = p.parse_args(argv)
@@ -106,7 +107,12 @@ def main(argv=None) -> int:
         print(f'latency_check: {exc}', file=sys.stderr)
         return 2
     _, dev, _ = E.load_clips('auto', 0)
-    method = E.make_method(a.method)
+    try:
+        over = json.loads(a.method_params) if a.method_params else {}
+        method = E.make_method(a.method, **over)
+    except (ValueError, TypeError) as exc:
+        print(f'latency_check: --method-params: {exc}', file=sys.stderr)
+        return 2
     res = {}
     for label, g, f in variants:
         for seed in seeds:
