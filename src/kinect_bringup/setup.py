@@ -28,6 +28,7 @@ setup(
             'soak = kinect_bringup.soak:main',
             'evaluate = kinect_bringup.evaluate:main',
             'recorder = kinect_bringup.recorder:main',
+            'recover_bag = kinect_bringup.recover_bag:main',
         ],
     },
 )
