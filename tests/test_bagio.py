@@ -157,7 +157,7 @@ def test_unreadable_bag_names_the_file(tmp_path, content):
 
 def test_truncated_and_missing_bags(tmp_path):
     good = tmp_path / 'good.mcap'
-    with BagWriter(good, compression='none') as bag:
+    with BagWriter(good, compression='none', chunk_size=4000) as bag:
         for k in range(50):
             bag.write('/kinect/skeletons', _array_msg(k), k)
     data = good.read_bytes()
