@@ -22,7 +22,7 @@ demo:
 	@$(RUN) ros2 run kinect_bringup demo
 
 build-db:
-	@$(RUN) ros2 run skeleton_core build_db $(ARGS)
+	@$(RUN) ros2 run skeleton_data build_db $(ARGS)
 
 evaluate:
 	@$(RUN) ros2 run kinect_bringup evaluate $(ARGS)

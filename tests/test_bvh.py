@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from skeleton_core.bvh import BvhError, load_bvh, parse_bvh
+from skeleton_data.bvh import BvhError, load_bvh, parse_bvh
 
 GOOD = """HIERARCHY
 ROOT Hips

@@ -5,13 +5,13 @@ import logging
 import numpy as np
 import pytest
 
-from skeleton_core.database import (DEFAULT_THRESHOLD, DatabaseError, MotionDatabase,
+from skeleton_data.database import (DEFAULT_THRESHOLD, DatabaseError, MotionDatabase,
                                     build_database, filter_postures, load_or_build_default,
                                     segment_twists)
 from skeleton_core.geometry import quat_from_yaw, quat_multiply, quat_rotate
-from skeleton_core.mocap import MotionClip, load_cmu_clip
+from skeleton_data.mocap import MotionClip, load_cmu_clip
 from skeleton_core.model import HEAD, SEGMENT_OF_JOINT, segment_lengths, standard_body
-from skeleton_core.motions import builtin_clips
+from skeleton_data.motions import builtin_clips
 
 
 @pytest.fixture(scope='module')
@@ -144,7 +144,7 @@ class _Records(logging.Handler):
 
 def test_default_builtin_is_cached(tmp_path):
     st1, st2 = {}, {}
-    logger = logging.getLogger('skeleton_core.database')
+    logger = logging.getLogger('skeleton_data.database')
     rec, old_level = _Records(), logger.level
     logger.addHandler(rec)
     logger.setLevel(logging.INFO)
@@ -169,7 +169,7 @@ def test_default_builtin_is_cached(tmp_path):
 
 
 def test_build_db_cli(tmp_path, capsys):
-    from skeleton_core import database_cli
+    from skeleton_data import database_cli
     out = tmp_path / 'db.npz'
     assert database_cli.main(['--source', 'builtin', '--out', str(out), '--no-progress',
                               '--threshold', '0.05']) == 0

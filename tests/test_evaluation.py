@@ -4,9 +4,9 @@ import json
 import numpy as np
 import pytest
 
-from skeleton_core import evaluation as E
+from skeleton_eval import evaluation as E
 from skeleton_core.model import HAND_LEFT, NOT_TRACKED, NUM_JOINTS, TRACKED
-from skeleton_core.sensor_model import SensorModel
+from skeleton_eval.sensor_model import SensorModel
 
 
 class Oracle:

@@ -1,7 +1,7 @@
 """Accuracy metrics on hand-made cases with hand-computed numbers."""
 import numpy as np
 
-from skeleton_core import metrics as M
+from skeleton_eval import metrics as M
 from skeleton_core.model import (ELBOW_LEFT, HAND_LEFT, NUM_JOINTS, SEGMENT_OF_JOINT, WRIST_LEFT,
                                  standard_body)
 

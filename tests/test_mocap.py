@@ -2,9 +2,9 @@
 import numpy as np
 import pytest
 
-from skeleton_core.bvh import load_bvh
+from skeleton_data.bvh import load_bvh
 from skeleton_core.geometry import facing_yaw, quat_rotate
-from skeleton_core.mocap import (CMU_TO_KINECT, CMU_UNIT, BVH_TO_REP103, MotionClip,
+from skeleton_data.mocap import (CMU_TO_KINECT, CMU_UNIT, BVH_TO_REP103, MotionClip,
                                  load_cmu_clip, load_cmu_clips, mirror_clip, rest_directions,
                                  split_clips)
 from skeleton_core.model import (HIP_LEFT, HIP_RIGHT, JOINT_NAMES, PARENTS, ROOT, segment_lengths,

@@ -3,10 +3,10 @@ import numpy as np
 import pytest
 
 from skeleton_core.geometry import quat_rotate
-from skeleton_core.mocap import FIVE_CLASSES, rest_directions
+from skeleton_data.mocap import FIVE_CLASSES, rest_directions
 from skeleton_core.model import (ANKLE_LEFT, FOOT_LEFT, FOOT_RIGHT, HAND_LEFT, HAND_RIGHT, PARENTS,
                                  ROOT, segment_lengths, standard_body)
-from skeleton_core.motions import builtin_clips, builtin_split
+from skeleton_data.motions import builtin_clips, builtin_split
 
 
 @pytest.fixture(scope='module')

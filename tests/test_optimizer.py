@@ -499,7 +499,7 @@ def test_anchored_filled_segments_keep_the_speed_term():
     # the whole One Euro cutoff made the body trail the tracked hands and feet. With
     # smooth_anchored_speed (default) a segment with a tracked joint below it keeps the speed
     # term: the output follows the unsmoothed reconstruction more closely when the arms move.
-    from skeleton_core.evaluation import toy_clip
+    from skeleton_eval.evaluation import toy_clip
     from skeleton_core.geometry import normalize
     from skeleton_core.model import (FOOT_LEFT, FOOT_RIGHT, HAND_RIGHT, NOT_TRACKED,
                                      SEGMENT_CHILDREN, SEGMENT_PARENTS)

@@ -194,7 +194,7 @@ def test_physics_method_processes_frames_and_registers():
     assert np.linalg.norm(out.positions[7] - tpose_sensor()[7]) < 0.1
     m.reset()
     assert not m.sim.characters
-    evaluation = pytest.importorskip('skeleton_core.evaluation')
+    evaluation = pytest.importorskip('skeleton_eval.evaluation')
     assert register()
     assert {'physics', 'physics_raw'} <= set(evaluation.available_methods())
     raw = evaluation.make_method('physics_raw')
@@ -316,7 +316,7 @@ def test_implicit_damping_keeps_stiff_gains_stable():
 
 def _walk_targets(n=45):
     """The first frames of the built-in walk, sensor frame (a moving target with foot contacts)."""
-    from skeleton_core.motions import builtin_clips
+    from skeleton_data.motions import builtin_clips
     clip = next(c for c in builtin_clips(0) if c.name == 'builtin_walk')
     return clip.positions[:n] + np.array([2.5, 0.0, -0.8])
 

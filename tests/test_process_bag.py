@@ -13,10 +13,10 @@ from skeleton_msgs.msg import SkeletonArray  # noqa: E402
 from skeleton_core.bagio import BagWriter, bag_topics, read_messages  # noqa: E402
 from skeleton_core.cdr import SKELETON_ARRAY, frames_to_cdr  # noqa: E402
 from skeleton_core.conversions import SkeletonFrame, frames_from_array_msg  # noqa: E402
-from skeleton_core.evaluation import toy_clip  # noqa: E402
-from skeleton_core.sensor_model import SensorModel  # noqa: E402
+from skeleton_eval.evaluation import toy_clip  # noqa: E402
+from skeleton_eval.sensor_model import SensorModel  # noqa: E402
 
-from pose_reconstruction.process_bag import process  # noqa: E402
+from kinect_bringup.process_bag import process  # noqa: E402
 
 
 def _bag(path, frames=90, corrupt_at=40):

@@ -176,7 +176,7 @@ def test_state_per_user_dropped_after_timeout(rclpy_context, case):
 
 
 def test_methods_register_with_the_evaluation_harness(case):
-    evaluation = pytest.importorskip('skeleton_core.evaluation')
+    evaluation = pytest.importorskip('skeleton_eval.evaluation')
     import pose_reconstruction.methods as methods
 
     db = case[0]

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from skeleton_core import registration as R
+from skeleton_eval import registration as R
 from skeleton_core.model import standard_body
 
 

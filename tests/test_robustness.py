@@ -138,7 +138,7 @@ def _logs(log_dir: Path, node: str) -> str:
 
 @pytest.fixture(scope='module')
 def running(tmp_path_factory):
-    from skeleton_core.database import load_or_build_default
+    from skeleton_data.database import load_or_build_default
     load_or_build_default()  # warm the cache once, not in two nodes at the same time
 
     log_dir = tmp_path_factory.mktemp('graph_logs')

@@ -5,11 +5,11 @@ import numpy as np
 import pytest
 import yaml
 
-from skeleton_core.evaluation import toy_clip
+from skeleton_eval.evaluation import toy_clip
 from skeleton_core.model import (FOOT_LEFT, FOOT_RIGHT, HAND_LEFT, HAND_RIGHT, HIP_CENTER, INFERRED,
                                  NOT_TRACKED, TRACKED)
 from skeleton_core.model import SEGMENT_NAMES, SEGMENTS
-from skeleton_core.sensor_model import (DEFAULT_PARAMS, JOINT_GROUP, SCENARIOS, SensorModel,
+from skeleton_eval.sensor_model import (DEFAULT_PARAMS, JOINT_GROUP, SCENARIOS, SensorModel,
                                         load_params, statistics)
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -4,7 +4,7 @@ import gzip
 import numpy as np
 import pytest
 
-from skeleton_core import uiprmd as U
+from skeleton_data import uiprmd as U
 from skeleton_core.model import (HAND_LEFT, HAND_RIGHT, JOINT_NAMES, NOT_TRACKED, PARENTS,
                                  TRACKED, WRIST_LEFT, ELBOW_LEFT)
 
@@ -155,7 +155,7 @@ def test_malformed_file_raises_naming_file(tmp_path, case):
 
 
 def test_cli_skips_bad_files_and_writes_the_rest(tmp_path, capsys):
-    from skeleton_core import uiprmd_cli
+    from skeleton_eval import uiprmd_cli
     from skeleton_core.bagio import bag_topics, read_messages
     src = tmp_path / 'src'
     _make_src(src, 'm01_s09_e01')
@@ -178,7 +178,7 @@ def test_cli_skips_bad_files_and_writes_the_rest(tmp_path, capsys):
 
 
 def test_real_clip_import(shared_dir, tmp_path):
-    from skeleton_core import uiprmd_cli
+    from skeleton_eval import uiprmd_cli
     from skeleton_core.bagio import bag_topics, read_messages
     from skeleton_core.conversions import frames_from_array_msg
     src = shared_dir / 'kinect' / 'ui-prmd'

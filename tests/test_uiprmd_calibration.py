@@ -2,8 +2,9 @@
 import numpy as np
 import pytest
 
-from skeleton_core import calibration as C
-from skeleton_core import uiprmd as U
+from skeleton_eval import calibration as C
+from skeleton_data import uiprmd as U
+from skeleton_eval import paired as P
 from skeleton_core.model import HAND_LEFT, NUM_JOINTS, TRACKED, standard_body
 
 
@@ -37,7 +38,7 @@ def test_rigid_motion_has_no_bone_length_variation_and_offsets_are_exact():
 
 def _clip(name, positions):
     st = np.full(NUM_JOINTS, TRACKED, np.uint8)
-    return U.RealClip(kinect=U.KinectClip(U.parse_name(name + '_positions.txt.gz'), positions, st,
+    return P.RealClip(kinect=U.KinectClip(U.parse_name(name + '_positions.txt.gz'), positions, st,
                                           np.zeros((len(positions), 22, 3))))
 
 
@@ -52,7 +53,7 @@ def test_tracking_failures_flags_stretched_frames():
 
 
 def test_added_latency():
-    from skeleton_core.real_eval import added_latency_ms
+    from skeleton_eval.real_eval import added_latency_ms
     p = _moving(200)
     p[:, :, 1] += 0.1 * np.sin(np.arange(200) / 5.0)[:, None]
     delayed = np.concatenate([np.repeat(p[:1], 3, 0), p[:-3]])
@@ -61,7 +62,7 @@ def test_added_latency():
 
 
 def test_evaluate_real_scores_raw_against_the_reference():
-    from skeleton_core.real_eval import evaluate_real, to_markdown
+    from skeleton_eval.real_eval import evaluate_real, to_markdown
     rng = np.random.default_rng(3)
     clips = []
     for i in range(1, 3):

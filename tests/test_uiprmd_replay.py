@@ -22,7 +22,7 @@ DOMAIN = 1 + (os.getpid() * 7 + 13) % 100
 
 
 def test_imported_real_clip_replays_over_dds(shared_dir, tmp_path):
-    from skeleton_core import uiprmd_cli
+    from skeleton_eval import uiprmd_cli
     src = shared_dir / 'kinect' / 'ui-prmd'
     assert uiprmd_cli.main(['--src', str(src), '--out', str(tmp_path), '--subjects', 's02',
                             '--movements', 'm07', '--repetitions', '1', '--quiet']) == 0

@@ -1,7 +1,7 @@
 """Plug-in-Gait joint-centre reference from the Vicon markers."""
 import numpy as np
 
-from skeleton_core import vicon as V
+from skeleton_data import vicon as V
 from skeleton_core.model import (ANKLE_LEFT, HEAD, HIP_CENTER, HIP_LEFT, HIP_RIGHT, KNEE_LEFT,
                                  NUM_JOINTS, SHOULDER_LEFT, segment_lengths, SEGMENT_NAMES)
 

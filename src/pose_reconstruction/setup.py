@@ -24,7 +24,7 @@ setup(
             'completion = pose_reconstruction.completion_node:main',
             'optimizer = pose_reconstruction.optimizer_node:main',
             'reconstruction = pose_reconstruction.reconstruction_node:main',
-            'process_bag = pose_reconstruction.process_bag:main',
+            'process_bag = kinect_bringup.process_bag:main',
             'bench_reconstruction = pose_reconstruction.bench:main',
         ],
     },

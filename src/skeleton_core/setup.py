@@ -14,12 +14,12 @@ setup(
     zip_safe=True,
     maintainer='Kinect Posture Team',
     maintainer_email='robotics@example.com',
-    description='Skeleton model, mocap import, motion database, sensor model and evaluation.',
+    description='Run-time core every node imports: skeleton model, geometry, conversions, CDR, bag I/O, filters, node helpers.',
     license='Apache-2.0',
     entry_points={
         'console_scripts': [
-            'build_db = skeleton_core.database_cli:main',
-            'import_uiprmd = skeleton_core.uiprmd_cli:main',
+            'build_db = skeleton_data.database_cli:main',
+            'import_uiprmd = skeleton_eval.uiprmd_cli:main',
         ],
     },
 )

@@ -201,7 +201,7 @@ def process_bag_speed(log_dir: Path) -> Dict:
         out = log_dir / 'bench_output.mcap'
         report = log_dir / 'bench_output.json'
         t0 = time.monotonic()
-        proc = subprocess.run([sys.executable, '-m', 'pose_reconstruction.process_bag', str(bag),
+        proc = subprocess.run([sys.executable, '-m', 'kinect_bringup.process_bag', str(bag),
                                '--out', str(out), '--method', 'C', '--no-progress',
                                '--report', str(report)],
                               capture_output=True, text=True)
@@ -292,7 +292,7 @@ def main(argv=None) -> int:
                                 capture_output=True).stdout.strip() or 'unknown'
     except OSError:
         commit = 'unknown'
-    from skeleton_core.database import load_or_build_default
+    from skeleton_data.database import load_or_build_default
     load_or_build_default()  # build the cache once, outside the measurement
     probe = LatencyProbe()
     results = []

@@ -121,7 +121,7 @@ def main(argv=None) -> int:
 
     # Build (or load from cache) the motion database first, so the nodes start at once.
     t0 = time.monotonic()
-    from skeleton_core.database import load_or_build_default
+    from skeleton_data.database import load_or_build_default
     db = load_or_build_default()
     print(f'[demo] motion database: {len(db)} postures ({db.meta.get("source", "?")}), '
           f'{time.monotonic() - t0:.1f} s', flush=True)

@@ -61,7 +61,7 @@ def _parser():
 
 
 def run_real(args) -> int:
-    from skeleton_core import real_eval
+    from skeleton_eval import real_eval
     from .graph import repo_root
     src = args.real
     if src == 'auto':
@@ -79,7 +79,7 @@ def run(argv=None) -> int:
     args = _parser().parse_args(argv)
     if args.real:
         return run_real(args)
-    from skeleton_core import evaluation as E
+    from skeleton_eval import evaluation as E
 
     plugins = E.load_plugins()
     for mod, st in plugins.items():
@@ -123,7 +123,7 @@ def run(argv=None) -> int:
         from skeleton_core.model import standard_body
         db = None
         try:
-            from skeleton_core.database import load_or_build_default
+            from skeleton_data.database import load_or_build_default
             db = load_or_build_default(source='auto' if args.source == 'auto' else args.source)
         except Exception as exc:  # database module absent or failing: use the clips directly
             print(f'[evaluate] no motion database ({type(exc).__name__}: {exc}); '

@@ -87,7 +87,7 @@ def main(argv=None) -> int:
     from rclpy.node import Node
     from skeleton_msgs.msg import SkeletonArray
 
-    from skeleton_core.database import load_or_build_default
+    from skeleton_data.database import load_or_build_default
     from .fuzz import MUTATIONS, malformed, valid_array
     load_or_build_default()
 

@@ -12,7 +12,7 @@ explicit Euler integration as the paper and with implicitfast (``actuator_pd_imp
   seconds (whole 2 ms steps: 34 ms per 1/30 s frame) per second; all runs are stepped
   interleaved in chunks of 10 frames and each figure is the median over its chunks,
 * steady-state tracking error on a static T-pose and on the built-in motion clips
-  (``skeleton_core.motions.builtin_clips``, 30 fps), segment length preservation, pinned foot drift,
+  (``skeleton_data.motions.builtin_clips``, 30 fps), segment length preservation, pinned foot drift,
 * output jitter against the raw input with Kinect-like noise (mean |second difference|),
 * the stability limits (largest stable Ke at 2 ms with the damping ratio kept, largest stable Kd)
   of explicit_pd and of actuator_pd with either integrator, and the constraint option's stiffest
@@ -48,7 +48,7 @@ VARIANTS = (('actuator_pd', 'actuator_pd', 'euler'),
 
 def clips(quick: bool):
     try:
-        from skeleton_core.motions import builtin_clips
+        from skeleton_data.motions import builtin_clips
         cs = builtin_clips(0)
         names = ('builtin_walk', 'builtin_punch', 'builtin_squat_lift', 'builtin_wave',
                  'builtin_kick', 'builtin_sword_swing')

@@ -6,7 +6,7 @@ character of ``frame.user_id``; the simulation advances by the stamp difference 
 frame (1/30 s when unknown) and the simulated joint positions/orientations are returned in the
 input's frame, with the input's stamp, user id and frame id.
 
-:func:`register` adds it to ``skeleton_core.evaluation`` (import guarded: this module works
+:func:`register` adds it to ``skeleton_eval.evaluation`` (import guarded: this module works
 without the harness). The evaluation harness's
 frames arrive in the sensor frame (sensor 0.8 m above the floor, ``sensor_model.yaml``);
 ``auto_floor`` instead puts the floor under the first frame's lowest foot.
@@ -132,7 +132,7 @@ def make_physics(upstream: Optional[str] = 'C', controller: str = 'explicit_pd',
                     sensor_pitch=sensor_pitch, auto_floor=auto_floor)
     up = None
     if upstream:
-        from skeleton_core import evaluation
+        from skeleton_eval import evaluation
         if upstream not in evaluation.available_methods():
             evaluation.load_plugins(('pose_reconstruction.methods',))
         up = evaluation.make_method(upstream, **upstream_params)
@@ -144,7 +144,7 @@ def register() -> bool:
     """Register ``physics`` (method C -> physics), ``physics_A`` (A -> physics) and
     ``physics_raw`` (raw stream -> physics) with the evaluation harness; False without it."""
     try:
-        from skeleton_core.evaluation import register_method
+        from skeleton_eval.evaluation import register_method
     except ImportError:
         return False
     import functools

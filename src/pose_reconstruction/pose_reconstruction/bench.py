@@ -130,7 +130,7 @@ def main(argv=None) -> int:
     if a.source == 'synthetic':
         db, src = sdb, 'synthetic'
     else:
-        from skeleton_core.database import load_or_build_default
+        from skeleton_data.database import load_or_build_default
         db = load_or_build_default(source=a.source)
         src = db.meta.get('source', a.source)
     n = len(db.positions)

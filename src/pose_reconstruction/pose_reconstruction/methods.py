@@ -4,9 +4,9 @@ Each factory returns a streaming, one-user :class:`~.reconstructor.Reconstructor
 ``reset()``, ``process(frame) -> frame``) and accepts keyword overrides of any parameter
 (``k``, ``pca_dims``, ``steps``, ``samples``, ``solver``, the energy weights, the reliability
 parameters, ...) and an optional ``db`` (a MotionDatabase or (N, 20, 3) array; default: the built-in
-/ CMU database from ``skeleton_core.database.load_or_build_default``).
+/ CMU database from ``skeleton_data.database.load_or_build_default``).
 
-:func:`register` registers them with ``skeleton_core.evaluation.register_method`` when that
+:func:`register` registers them with ``skeleton_eval.evaluation.register_method`` when that
 harness is available (it is called on import, guarded).
 """
 from __future__ import annotations
@@ -26,7 +26,7 @@ def default_database():
     """The default motion database (cached per process)."""
     global _DEFAULT_DB
     if _DEFAULT_DB is None:
-        from skeleton_core.database import load_or_build_default
+        from skeleton_data.database import load_or_build_default
         _DEFAULT_DB = load_or_build_default()
     return _DEFAULT_DB
 
@@ -84,7 +84,7 @@ FACTORIES: Dict[str, Callable[..., Reconstructor]] = {
 def register() -> bool:
     """Register A, B, C with the evaluation harness; False when the harness is not there."""
     try:
-        from skeleton_core.evaluation import register_method
+        from skeleton_eval.evaluation import register_method
     except ImportError:
         return False
     for name, factory in FACTORIES.items():

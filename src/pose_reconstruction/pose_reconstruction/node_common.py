@@ -242,9 +242,9 @@ def load_database(path: str, loader: Optional[Callable[[], Any]] = None):
     if loader is not None:
         return loader()
     try:
-        from skeleton_core import database as dbmod
+        from skeleton_data import database as dbmod
     except ImportError as e:  # pragma: no cover - the library ships with the workspace
-        raise RuntimeError(f'skeleton_core.database is not available: {e}') from e
+        raise RuntimeError(f'skeleton_data.database is not available: {e}') from e
     if not path:
         try:
             return dbmod.load_or_build_default()

@@ -127,7 +127,7 @@ class DatabaseArrays:
 
 
 def as_database_arrays(db, body: Optional[Body] = None) -> DatabaseArrays:
-    """Adapt ``skeleton_core.database.MotionDatabase`` (or any object with ``positions``
+    """Adapt ``skeleton_data.database.MotionDatabase`` (or any object with ``positions``
     (N, 20, 3) and optional ``orientations`` / ``twists``) or a bare (N, 20, 3) array."""
     if isinstance(db, DatabaseArrays):
         return db

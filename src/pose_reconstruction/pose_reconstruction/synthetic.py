@@ -113,7 +113,7 @@ def segment_orientations(positions: np.ndarray, body: Optional[Body] = None) -> 
 
 @dataclass
 class SyntheticDatabase:
-    """Same attributes as skeleton_core.database.MotionDatabase uses here."""
+    """Same attributes as skeleton_data.database.MotionDatabase uses here."""
 
     positions: np.ndarray     # (N, 20, 3)
     orientations: np.ndarray  # (N, 20, 4)

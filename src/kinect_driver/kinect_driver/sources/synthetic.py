@@ -1,8 +1,8 @@
 """Synthetic source (the default): ground-truth motion through the Kinect sensor model.
 
-Motion (``clip``): ``''`` = the built-in motions (``skeleton_core.motions.builtin_clips``; user k
+Motion (``clip``): ``''`` = the built-in motions (``skeleton_data.motions.builtin_clips``; user k
 gets motion k), the name of a built-in clip (e.g. ``builtin_wave``), or a path to a CMU BVH file
-(``skeleton_core.mocap.load_cmu_clip``, e.g. one under ``/work/shared/mocap/cmu``). When every user
+(``skeleton_data.mocap.load_cmu_clip``, e.g. one under ``/work/shared/mocap/cmu``). When every user
 plays the same clip, user k starts k/num_users of the way into it.
 
 Each of ``num_users`` (1-6) users gets its own sensor-model stream (``SensorModel.stream``,
@@ -37,7 +37,7 @@ MAX_CATCHUP = 15  # frames (0.5 s at 30 Hz)
 
 def _load_motion(clip: str, seed: int):
     """The list of clips users cycle through."""
-    from skeleton_core.motions import builtin_clips
+    from skeleton_data.motions import builtin_clips
     if not clip:
         return builtin_clips(seed)
     builtins = {c.name: c for c in builtin_clips(seed)}
@@ -48,7 +48,7 @@ def _load_motion(clip: str, seed: int):
     if not p.is_file():
         raise SourceError(f'clip {clip!r} is neither a file nor a built-in motion '
                           f'({", ".join(sorted(builtins))})')
-    from skeleton_core.mocap import load_cmu_clip
+    from skeleton_data.mocap import load_cmu_clip
     try:
         return [load_cmu_clip(p)]
     except Exception as e:  # BvhError / MocapError / OSError: one line naming the file
@@ -83,7 +83,7 @@ class SyntheticSource(Source):
         self._ready = None  # the next frame's simulated data, computed ahead by prepare()
 
     def open(self) -> None:
-        from skeleton_core import sensor_model
+        from skeleton_eval import sensor_model
         if self.sensor_params and not Path(self.sensor_params).is_file():
             raise SourceError(f'sensor model parameter file {self.sensor_params} not found')
         try:

@@ -2,8 +2,8 @@
 bag without DDS, as fast as possible, and write an output bag (+ an accuracy report when the bag
 holds ground truth on /kinect/ground_truth).
 
-    ros2 run pose_reconstruction process_bag out/demo.mcap --out out/processed.mcap
-    ros2 run pose_reconstruction process_bag cache/uiprmd/m01_s02_e01.mcap --method A --physics
+    ros2 run kinect_bringup process_bag out/demo.mcap --out out/processed.mcap
+    ros2 run kinect_bringup process_bag cache/uiprmd/m01_s02_e01.mcap --method A --physics
 
 The output bag holds every input topic unchanged plus ``/posture/completed`` (method A) or
 ``/posture/reconstructed`` (B, C) and, with ``--physics``, ``/character/skeletons`` — the same
@@ -43,8 +43,8 @@ def process(bag: Path, out: Path, method: str = 'C', database: str = '', physics
     """Process ``bag`` into ``out``; returns a summary (frames, wall time, accuracy)."""
     from skeleton_core.bagio import BagWriter, bag_topics, read_messages
     from skeleton_core.cdr import SKELETON_ARRAY, CdrError, frames_from_cdr, frames_to_cdr
-    from .node_common import load_database
-    from .reconstructor import Reconstructor
+    from pose_reconstruction.node_common import load_database
+    from pose_reconstruction.reconstructor import Reconstructor
 
     topics = bag_topics(str(bag))
     if input_topic not in topics:
@@ -124,7 +124,7 @@ def process(bag: Path, out: Path, method: str = 'C', database: str = '', physics
 
 def accuracy(truth: Dict, streams: Dict[str, Dict]) -> Dict:
     """Per-stream MPJPE and Eq. 18 error (cm) against the ground truth, matched by (user, stamp)."""
-    from skeleton_core.metrics import eq18_error, mpjpe
+    from skeleton_eval.metrics import eq18_error, mpjpe
     out = {}
     for name, data in streams.items():
         keys = sorted(k for k in data if k in truth)

@@ -21,7 +21,7 @@ from typing import List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from .model import (ANKLE_LEFT, ANKLE_RIGHT, ELBOW_LEFT, ELBOW_RIGHT, FOOT_LEFT, FOOT_RIGHT,
+from skeleton_core.model import (ANKLE_LEFT, ANKLE_RIGHT, ELBOW_LEFT, ELBOW_RIGHT, FOOT_LEFT, FOOT_RIGHT,
                     HAND_LEFT, HAND_RIGHT, HEAD, HIP_CENTER, KNEE_LEFT, KNEE_RIGHT, NUM_JOINTS,
                     WRIST_LEFT, WRIST_RIGHT)
 

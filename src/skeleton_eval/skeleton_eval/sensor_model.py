@@ -21,7 +21,7 @@ Offline: :meth:`SensorModel.corrupt` -> :class:`KinectStream`; live:
 :meth:`SensorModel.stream` yields ``(positions, tracking_state, truth)`` frame by frame. Both run the
 same per-frame state machine, so they have the same statistics. A clip is any object with ``name``,
 ``fps`` and ``positions`` (T, 20, 3) in a world frame (REP-103, floor at z = 0), e.g.
-``skeleton_core.mocap.MotionClip``.
+``skeleton_data.mocap.MotionClip``.
 """
 from __future__ import annotations
 
@@ -34,8 +34,8 @@ from typing import Dict, Iterator, List, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
-from .geometry import facing_yaw
-from .model import (CHILDREN, HIP_CENTER, HIP_LEFT, HIP_RIGHT, JOINT_INDEX, JOINT_NAMES, LIMB_JOINTS,
+from skeleton_core.geometry import facing_yaw
+from skeleton_core.model import (CHILDREN, HIP_CENTER, HIP_LEFT, HIP_RIGHT, JOINT_INDEX, JOINT_NAMES, LIMB_JOINTS,
                     MIRROR, NOT_TRACKED, INFERRED, NUM_JOINTS, PARENTS, SEGMENT_CHILDREN,
                     SEGMENT_PARENTS, SHOULDER_LEFT, SHOULDER_RIGHT, SPINE, TRACKED, estimate_height,
                     standard_body, segment_lengths)
@@ -710,7 +710,7 @@ def format_statistics(stats: Dict) -> str:
     for j, n in enumerate(JOINT_NAMES):
         lines.append(f'| {n} | {stats["jitter_mm"][j]:.1f} | {stats["offset_mm"][j]:.1f} |')
     lines += ['', '| segment | length std (mm) |', '|---|---:|']
-    from .model import SEGMENT_NAMES
+    from skeleton_core.model import SEGMENT_NAMES
     for k, n in enumerate(SEGMENT_NAMES):
         lines.append(f'| {n} | {stats["bone_length_std_mm"][k]:.1f} |')
     lines += ['', '| scenario | minutes | not tracked | inferred | false positive | events/min |',

@@ -3,7 +3,7 @@
 A :class:`MotionClip` holds world-space joint positions and segment orientations of the 20 Kinect
 joints (``model.JOINT_NAMES``) in REP-103 metres: x forward, y left, z up, floor at z = 0.
 
-Orientation convention (shared with :mod:`skeleton_core.motions` and the database)
+Orientation convention (shared with :mod:`skeleton_data.motions` and the database)
 ---------------------------------------------------------------------------------
 ``orientations[t, j]`` (xyzw) is the global orientation of the segment that *ends* at joint j
 (joint 0: the pelvis). Identity means "as in the standard body's T-pose facing +x", i.e.
@@ -52,8 +52,8 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from .bvh import Bvh, BvhError, load_bvh
-from .geometry import quat_multiply, quat_rotate
-from .model import JOINT_NAMES, MIRROR, NUM_JOINTS, PARENTS, standard_body
+from skeleton_core.geometry import quat_multiply, quat_rotate
+from skeleton_core.model import JOINT_NAMES, MIRROR, NUM_JOINTS, PARENTS, standard_body
 
 __all__ = [
     'MotionClip', 'MocapError', 'CMU_TO_KINECT', 'CMU_ORIENTATION_SOURCE', 'CMU_UNIT',

@@ -52,7 +52,7 @@ from typing import Dict, Tuple
 
 import numpy as np
 
-from .model import (ANKLE_LEFT, ANKLE_RIGHT, ELBOW_LEFT, ELBOW_RIGHT, FOOT_LEFT, FOOT_RIGHT,
+from skeleton_core.model import (ANKLE_LEFT, ANKLE_RIGHT, ELBOW_LEFT, ELBOW_RIGHT, FOOT_LEFT, FOOT_RIGHT,
                     HAND_LEFT, HAND_RIGHT, HEAD, HIP_CENTER, HIP_LEFT, HIP_RIGHT, KNEE_LEFT,
                     KNEE_RIGHT, NUM_JOINTS, SHOULDER_CENTER, SHOULDER_LEFT, SHOULDER_RIGHT, SPINE,
                     WRIST_LEFT, WRIST_RIGHT)

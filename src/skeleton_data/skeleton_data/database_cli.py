@@ -1,4 +1,4 @@
-"""``ros2 run skeleton_core build_db`` / ``make build-db``: build (or fetch from the cache) the
+"""``ros2 run skeleton_data build_db`` / ``make build-db``: build (or fetch from the cache) the
 motion database and print what went into it.
 
 Examples::

@@ -17,7 +17,7 @@ Conventions (the usual BVH ones)
   gives ``R = Rz @ Ry @ Rx`` (column vectors, child-to-parent).
 * A joint's position is ``p_parent + R_parent_global @ (offset + translation_channels)``; its
   global rotation is ``R_parent_global @ R_local``.
-* Positions are in file units; scale them yourself (see :mod:`skeleton_core.mocap`).
+* Positions are in file units; scale them yourself (see :mod:`skeleton_data.mocap`).
 
 Errors raise :class:`BvhError`; its message starts with ``<file>:<line>:``.
 """

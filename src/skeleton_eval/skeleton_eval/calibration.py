@@ -1,6 +1,6 @@
 """Sensor-model calibration against the real UI-PRMD Kinect recordings.
 
-``ros2 run skeleton_core import_uiprmd --src ../shared/kinect/ui-prmd --calibrate`` measures, on the
+``ros2 run skeleton_eval import_uiprmd --src ../shared/kinect/ui-prmd --calibrate`` measures, on the
 real Kinect streams:
 
 * **high-frequency jitter** per joint: RMS (per axis) of the trajectory minus its own
@@ -19,7 +19,7 @@ real Kinect streams:
   per movement, with m03_s01 (the known failure) separately.
 
 and puts the same quantities computed on synthetic streams next to them: the marker reference of
-the same clips (the true motion) run through :class:`skeleton_core.sensor_model.SensorModel`
+the same clips (the true motion) run through :class:`skeleton_eval.sensor_model.SensorModel`
 ('clean' scenario, unoccluded) — same motion, same measuring code, so the comparison is like for
 like. Hands are excluded (not in the recordings).
 """
@@ -32,7 +32,7 @@ from typing import Dict, List, Optional, Sequence
 
 import numpy as np
 
-from .model import (HAND_LEFT, HAND_RIGHT, JOINT_NAMES, NUM_JOINTS, SEGMENT_CHILDREN,
+from skeleton_core.model import (HAND_LEFT, HAND_RIGHT, JOINT_NAMES, NUM_JOINTS, SEGMENT_CHILDREN,
                     SEGMENT_NAMES, segment_lengths)
 
 SG_WINDOW, SG_ORDER = 9, 2
@@ -175,14 +175,14 @@ def _reference_clips(with_ref, src, max_clips):
     constant segment lengths (Shum & Ho Eq. 3-4 retargeting to its median lengths), so the model
     output's bone-length variation is the model's alone. Clips whose reference has gaps inside
     are left out; gaps at the ends are trimmed."""
-    from .geometry import retarget
-    from .model import standard_body
+    from skeleton_core.geometry import retarget
+    from skeleton_core.model import standard_body
     pick = with_ref[:: max(1, len(with_ref) // max_clips)] if with_ref else []
     out = []
     for rc in pick:
         r, fps = None, 100.0
         if src is not None:
-            from .vicon import load_reference, vicon_path_for
+            from skeleton_data.vicon import load_reference, vicon_path_for
             try:
                 r = load_reference(vicon_path_for(src, rc.clip.name))
             except Exception:
@@ -261,7 +261,7 @@ def fit_params(result, ref_clips, params, iterations: int = 3) -> Dict:
 
 def calibrate(clips, registrations=None, src=None, max_model_clips: int = 60,
               params=None, fit_iterations: int = 3) -> Dict:
-    """Real-vs-model statistics. ``clips``: :func:`skeleton_core.uiprmd.load_dataset` output.
+    """Real-vs-model statistics. ``clips``: :func:`skeleton_eval.paired.load_dataset` output.
 
     The model side needs the raw 100 Hz reference of clips with Vicon; ``src`` (the UI-PRMD folder)
     is used to re-read it, else the reference at 30 Hz in the sensor frame is used (fps=30)."""

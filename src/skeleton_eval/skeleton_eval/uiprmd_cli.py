@@ -1,12 +1,12 @@
-"""``ros2 run skeleton_core import_uiprmd``: UI-PRMD Kinect recordings -> MCAP bags.
+"""``ros2 run skeleton_eval import_uiprmd``: UI-PRMD Kinect recordings -> MCAP bags.
 
-    ros2 run skeleton_core import_uiprmd --src ../shared/kinect/ui-prmd --out cache/uiprmd
-    ros2 run skeleton_core import_uiprmd --src ../shared/kinect/ui-prmd --calibrate
+    ros2 run skeleton_eval import_uiprmd --src ../shared/kinect/ui-prmd --out cache/uiprmd
+    ros2 run skeleton_eval import_uiprmd --src ../shared/kinect/ui-prmd --calibrate
 
 One bag per repetition, ``<out>/mMM_sSS_eEE.mcap``: ``skeleton_msgs/msg/SkeletonArray`` at 30 Hz on
 ``/kinect/skeletons`` (one skeleton, user_id 1, frame ``kinect_link``: REP-103 axes of the sensor,
 origin ``--sensor-height`` (default 0.8 m, nominal) above the floor, see
-:mod:`skeleton_core.uiprmd`) with monotonic stamps starting at
+:mod:`skeleton_data.uiprmd`) with monotonic stamps starting at
 ``--start-sec``; where a Vicon file exists, the marker-derived joint centres registered into the
 same frame on ``/kinect/ground_truth`` with the same stamps (frames the Vicon recording does not
 cover have no ground-truth message). ``<out>/import_report.json`` lists the clips written, the
@@ -39,11 +39,11 @@ def _int_list(text, prefix):
 
 
 def write_clip_bag(path, rc, start_ns: int, user_id: int = 1, frame_id: str = 'kinect_link'):
-    """Write one :class:`~skeleton_core.uiprmd.RealClip` to an MCAP bag; returns message counts."""
-    from .bagio import BagWriter
-    from .conversions import frames_to_array_msg
-    from .model import NUM_JOINTS, TRACKED
-    from .uiprmd import clip_frames
+    """Write one :class:`~skeleton_eval.paired.RealClip` to an MCAP bag; returns message counts."""
+    from skeleton_core.bagio import BagWriter
+    from skeleton_core.conversions import frames_to_array_msg
+    from skeleton_core.model import NUM_JOINTS, TRACKED
+    from skeleton_data.uiprmd import clip_frames
 
     frames = clip_frames(rc.kinect, start_ns, user_id, frame_id)
     n_sk = n_gt = 0
@@ -93,7 +93,7 @@ def build_parser():
 
 def main(argv=None):
     args = build_parser().parse_args(argv)
-    from .uiprmd import load_dataset
+    from .paired import load_dataset
     src = Path(args.src)
     if not src.is_dir():
         print(f'import_uiprmd: no UI-PRMD folder at {src}', file=sys.stderr)

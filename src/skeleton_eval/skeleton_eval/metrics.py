@@ -22,7 +22,7 @@ from typing import Dict, Tuple
 
 import numpy as np
 
-from .model import NUM_JOINTS, PARENTS, SEGMENT_CHILDREN, SEGMENT_PARENTS
+from skeleton_core.model import NUM_JOINTS, PARENTS, SEGMENT_CHILDREN, SEGMENT_PARENTS
 
 _PAR = np.array(PARENTS[1:])
 _SC = np.array(SEGMENT_CHILDREN)

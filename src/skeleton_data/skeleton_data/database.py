@@ -45,9 +45,9 @@ from typing import Dict, List, Optional, Sequence, Tuple
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .geometry import normalize, quat_from_yaw, quat_multiply, retarget, swing_twist
+from skeleton_core.geometry import normalize, quat_from_yaw, quat_multiply, retarget, swing_twist
 from .mocap import FIVE_CLASSES, MOTION_CLASSES, MotionClip, rest_directions
-from .model import JOINT_NAMES, NUM_JOINTS, SEGMENT_CHILDREN, SEGMENT_NAMES, Body, standard_body
+from skeleton_core.model import JOINT_NAMES, NUM_JOINTS, SEGMENT_CHILDREN, SEGMENT_NAMES, Body, standard_body
 
 __all__ = ['MotionDatabase', 'DatabaseError', 'build_database', 'load_or_build_default',
            'segment_twists', 'filter_postures', 'DEFAULT_THRESHOLD', 'FORMAT_VERSION',
@@ -134,7 +134,7 @@ class MotionDatabase:
         path = Path(path)
         if not path.is_file():
             raise DatabaseError(f'motion database {path} does not exist '
-                                f'(build it with `ros2 run skeleton_core build_db`)')
+                                f'(build it with `ros2 run skeleton_data build_db`)')
         try:
             with np.load(path, allow_pickle=False) as z:
                 missing = {'positions', 'orientations', 'twists', 'clip_index', 'frame_index',

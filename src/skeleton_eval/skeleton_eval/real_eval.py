@@ -3,8 +3,8 @@
 :func:`evaluate_real` (what ``evaluate --real`` calls) runs every method (default: raw, holt,
 one_euro and whatever plug-ins register, e.g. A, B, C) on the real Kinect recordings and scores
 the output against the Vicon-derived joint centres registered into the sensor frame
-(:func:`skeleton_core.uiprmd.load_dataset`), with the same metrics as the synthetic table
-(:func:`skeleton_core.metrics.compute_all`: Eq. 18, MPJPE after the per-session rigid registration,
+(:func:`skeleton_eval.paired.load_dataset`), with the same metrics as the synthetic table
+(:func:`skeleton_eval.metrics.compute_all`: Eq. 18, MPJPE after the per-session rigid registration,
 bone-direction error (length-free), bone-length std and error, jitter) plus the latency the method
 adds (the shift of its output against the raw input that fits best, ms) and the processing time.
 
@@ -17,7 +17,7 @@ reference hands are set to NaN and take no part in any score. The streams are pl
 synthetic sensor frame convention (origin ``sensor_height_m`` above the floor, from the sensor
 model parameters) so methods see the same frame as in the synthetic evaluation.
 
-Command line: ``python -m skeleton_core.real_eval --src ../shared/kinect/ui-prmd --out out/real``.
+Command line: ``python -m skeleton_eval.real_eval --src ../shared/kinect/ui-prmd --out out/real``.
 """
 from __future__ import annotations
 
@@ -31,7 +31,7 @@ from typing import Dict, Optional, Sequence
 import numpy as np
 
 from .evaluation import json_safe
-from .model import HAND_LEFT, HAND_RIGHT, NUM_JOINTS
+from skeleton_core.model import HAND_LEFT, HAND_RIGHT, NUM_JOINTS
 
 DEFAULT_METHODS = ('raw', 'holt', 'one_euro', 'A', 'B', 'C')
 MAX_LATENCY_FRAMES = 10
@@ -105,11 +105,11 @@ def evaluate_real(src, methods: Optional[Sequence[str]] = None, subjects=None, m
 
     ``max_clips``: at most this many clips per row (movement), spread over subjects and
     repetitions, to keep slow methods affordable. ``clips``: already loaded
-    :func:`~skeleton_core.uiprmd.load_dataset` clips (else loaded from ``src``)."""
+    :func:`~skeleton_eval.paired.load_dataset` clips (else loaded from ``src``)."""
     from . import evaluation as E
     from . import metrics as M
     from .sensor_model import load_params
-    from .uiprmd import load_dataset
+    from .paired import load_dataset
     t_start = time.time()
     skipped = []
     if clips is None:

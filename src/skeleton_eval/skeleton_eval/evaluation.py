@@ -37,9 +37,9 @@ from typing import Callable, Dict, Iterable, List, Optional, Protocol, Sequence,
 import numpy as np
 
 from . import metrics as M
-from .conversions import SkeletonFrame
-from .filters import HOLT_DEFAULTS, ONE_EURO_DEFAULTS, HoltFilter, OneEuroFilter
-from .model import (ELBOW_LEFT, ELBOW_RIGHT, FOOT_LEFT, FOOT_RIGHT, HAND_LEFT,
+from skeleton_core.conversions import SkeletonFrame
+from skeleton_core.filters import HOLT_DEFAULTS, ONE_EURO_DEFAULTS, HoltFilter, OneEuroFilter
+from skeleton_core.model import (ELBOW_LEFT, ELBOW_RIGHT, FOOT_LEFT, FOOT_RIGHT, HAND_LEFT,
                     HAND_RIGHT, JOINT_NAMES, KNEE_LEFT, KNEE_RIGHT, NOT_TRACKED, NUM_JOINTS,
                     TRACKED, standard_body)
 from .sensor_model import KinectStream, SensorModel, format_statistics, statistics
@@ -181,20 +181,20 @@ def load_clips(source: str = 'auto', seed: int = 0):
         raise ValueError(f"source must be auto, cmu or builtin, got {source!r}")
     cmu = shared_dir() / 'mocap' / 'cmu'
     if source in ('auto', 'cmu') and cmu.is_dir():
-        from .mocap import cmu_split
+        from skeleton_data.mocap import cmu_split
         db, dev = cmu_split(cmu)
         return db, dev, f'cmu:{cmu}'
     if source == 'cmu':
         raise FileNotFoundError(f'no CMU mocap at {cmu}')
-    from .motions import builtin_split
+    from skeleton_data.motions import builtin_split
     db, dev = builtin_split(seed)
     return db, dev, f'builtin:seed={seed}'
 
 
 def toy_clip(seconds: float = 10.0, fps: float = 30.0, name: str = 'toy_arm_swing'):
     """The standard body standing with both arms swinging up and down (for tests and smoke runs)."""
-    from .mocap import MotionClip
-    from .model import (ELBOW_LEFT as EL, ELBOW_RIGHT as ER, SHOULDER_LEFT as SL,
+    from skeleton_data.mocap import MotionClip
+    from skeleton_core.model import (ELBOW_LEFT as EL, ELBOW_RIGHT as ER, SHOULDER_LEFT as SL,
                         SHOULDER_RIGHT as SR, WRIST_LEFT as WL, WRIST_RIGHT as WR)
     body = standard_body()
     rest = body.rest_positions()
@@ -420,14 +420,14 @@ def calibration_pose(clip, pose: str = 'tpose', cmu_dir=None):
 
     ``pose='standing'``: the same skeleton with both arms hanging straight down from the
     shoulders (the reliability estimator's second reference posture)."""
-    from .model import (ELBOW_LEFT as EL, ELBOW_RIGHT as ER, SHOULDER_LEFT as SL,
+    from skeleton_core.model import (ELBOW_LEFT as EL, ELBOW_RIGHT as ER, SHOULDER_LEFT as SL,
                         SHOULDER_RIGHT as SR, WRIST_LEFT as WL, WRIST_RIGHT as WR, estimate_height)
     if pose not in ('tpose', 'standing'):
         raise ValueError(f"calibration pose must be 'tpose' or 'standing', got {pose!r}")
     src = str(getattr(clip, 'source', '') or '')
     p = None
     if src.startswith('cmu:'):
-        from .mocap import load_cmu_clip
+        from skeleton_data.mocap import load_cmu_clip
         folder = Path(cmu_dir) if cmu_dir is not None else shared_dir() / 'mocap' / 'cmu'
         path = folder / src[4:]
         if path.is_file():
@@ -455,7 +455,7 @@ def calibration_stream(sensor: SensorModel, clip, pose: str = 'tpose', seed: int
     sensor model's 'clean' path (same placement and noise model as the clip's stream). It is the
     same session as ``sensor.corrupt(clip, 'clean', seed)``: the same systematic joint-centre
     offsets, with independent jitter and drift. Stamps end one frame before ``start_ns``."""
-    from .mocap import MotionClip
+    from skeleton_data.mocap import MotionClip
     pos, desc = calibration_pose(clip, pose, cmu_dir)
     fps = sensor.fps
     n = max(1, int(round(float(seconds) * fps)))
@@ -555,7 +555,7 @@ def calibration_text(results: Dict) -> str:
 def _database_postures(database=None, clips=None) -> np.ndarray:
     """(N, 20, 3) normalised postures of a MotionDatabase (several attribute names tried) or of
     clips (normalised and retargeted to the standard body here, as the database does)."""
-    from .geometry import normalize, retarget
+    from skeleton_core.geometry import normalize, retarget
     if database is not None:
         for attr in ('positions', 'postures', 'normalized_positions', 'poses'):
             arr = getattr(database, attr, None)

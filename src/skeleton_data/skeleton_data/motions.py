@@ -1,7 +1,7 @@
 """Built-in motions produced by code: the default database when no mocap data is available.
 
 Every clip is driven by joint rotations on the standard body (``model.standard_body``), so segment
-lengths are exact and orientations follow the :mod:`skeleton_core.mocap` convention (identity = the
+lengths are exact and orientations follow the :mod:`skeleton_data.mocap` convention (identity = the
 T-pose facing +x; ``quat_rotate(q[j], rest_dir[j])`` is the segment direction, exactly). Motions are
 sums of smooth periodic or smoothly interpolated random curves (30 fps, 6 s each). Feet: the root
 height is set every frame so that the lowest sole point (toe joint, or heel = ankle minus the ankle
@@ -19,9 +19,9 @@ from typing import Callable, Dict, List, Optional, Tuple
 
 import numpy as np
 
-from .geometry import quat_conjugate, quat_multiply, quat_rotate
+from skeleton_core.geometry import quat_conjugate, quat_multiply, quat_rotate
 from .mocap import MotionClip, rest_directions
-from .model import (ANKLE_LEFT, ANKLE_RIGHT, ELBOW_LEFT, ELBOW_RIGHT, FOOT_LEFT, FOOT_RIGHT, HEAD,
+from skeleton_core.model import (ANKLE_LEFT, ANKLE_RIGHT, ELBOW_LEFT, ELBOW_RIGHT, FOOT_LEFT, FOOT_RIGHT, HEAD,
                     HAND_LEFT, HAND_RIGHT, HIP_LEFT, HIP_RIGHT, KNEE_LEFT, KNEE_RIGHT, NUM_JOINTS,
                     PARENTS, SHOULDER_CENTER, SPINE, WRIST_LEFT, WRIST_RIGHT, Body, standard_body)
 
