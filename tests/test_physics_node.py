@@ -152,6 +152,31 @@ def test_user_leaving_removes_the_character_and_bad_input_is_dropped(graph):
     assert sum(node.health.dropped.values()) >= 1
 
 
+def test_characters_leave_when_the_input_stops_altogether(graph):
+    """No message arrives any more (driver killed, a gap in a bag): the input's clock runs on with
+    the wall clock, the users age out after user_timeout and the node stops publishing them."""
+    node, peer = graph
+    got = []
+    peer.create_subscription(SkeletonArray, '/character/skeletons', got.append, 100)
+    pub = peer.create_publisher(SkeletonArray, '/test_physics/in', 10)
+    assert node.set_parameters([Parameter('user_timeout', value=0.3)])[0].successful
+    deadline = time.time() + 10
+    while pub.get_subscription_count() == 0 and time.time() < deadline:
+        time.sleep(0.05)
+    for i, p in enumerate(clip(10)):
+        pub.publish(_msg(p, 11_000_000_000 + i * 33_333_333, uid=3))
+        time.sleep(1 / 30)
+    assert _wait(lambda: 3 in node.sim.characters, 10)
+    stopped = time.monotonic()
+    assert _wait(lambda: not node.sim.characters, 5), 'the character outlived its input'
+    gone_after = time.monotonic() - stopped
+    assert 0.2 <= gone_after < 2.0, gone_after
+    assert _wait(lambda: got and len(got[-1].skeletons) == 0, 5)   # one empty array: it left
+    n = len(got)
+    time.sleep(0.3)
+    assert len(got) == n, 'still publishing after every user left'
+
+
 class _Clock:
     def __init__(self):
         self.t = 1000.0

@@ -18,7 +18,11 @@ Service
 
 The simulation runs on a timer, independent of input arrival: each tick advances it by
 1/output_rate in ``timestep`` steps; the last target is kept when input stops. A user who is absent
-from incoming arrays for ``user_timeout`` s is removed; a new user spawns a character.
+from incoming arrays for ``user_timeout`` s of the input's time is removed (its character too); a
+new user spawns a character. The input's time (:class:`skeleton_core.presence.Presence`, the same
+mechanism as ``process_bag``) is the newest header stamp, running on with the wall clock while
+nothing arrives: when the input stops altogether (driver killed, a gap in a bag) the characters
+leave ``user_timeout`` s later instead of being published forever.
 """
 from __future__ import annotations
 
@@ -34,6 +38,7 @@ from skeleton_core.cdr import CdrError, frames_from_cdr, frames_to_cdr
 from skeleton_core.conversions import SkeletonFormatError, SkeletonFrame, ns_to_stamp
 from skeleton_core.health import Health
 from skeleton_core.model import NUM_JOINTS, TRACKED
+from skeleton_core.presence import Presence
 from skeleton_core.rosnode import DiagnosticsPublisher, Parameters, ParamSpec, run_node
 from skeleton_msgs.msg import SkeletonArray
 from skeleton_msgs.srv import ApplyPush
@@ -239,8 +244,7 @@ class PhysicsNode(Node):
         except ValueError as e:
             raise ValueError(f'physics: {e}') from e
         self.frame_id = v['frame_id']
-        self._last_seen: Dict[int, float] = {}
-        self._last_msg = None
+        self.presence = Presence(v['user_timeout'])
         self._published_empty = True
         self._mace_given = False
         self._next_throw = None
@@ -301,16 +305,17 @@ class PhysicsNode(Node):
             cause = getattr(e, 'cause', 'malformed')
             self._drop(cause, str(e))
         now = time.monotonic()
-        self._last_msg = now
         if header_frame:
             self.frame_id = header_frame
+        self.presence.observe(header_stamp, (), wall=now)   # the input's clock moves on:
+        self._expire(now)                                   # who left before this message?
         for f in frames:
             try:
                 stamp = f.stamp_ns or header_stamp
                 self.sim.set_target(f.user_id, f.positions, f.orientations, stamp)
-                self._last_seen[f.user_id] = now
             except (SkeletonFormatError, ValueError) as e:
                 self._drop('bad target', str(e))
+        self.presence.observe(header_stamp, [f.user_id for f in frames], wall=now)
         if self.params['mace'] and not self._mace_given and self.sim.characters:
             uid = next(iter(self.sim.characters))
             self.sim.hold(uid, 'mace', self.params['mace_hand'])
@@ -323,6 +328,13 @@ class PhysicsNode(Node):
             if self._last_input_tick is None or now - self._last_input_tick >= 0.75 * period:
                 self._last_input_tick = now
                 self._tick()
+
+    def _expire(self, wall: float) -> None:
+        """Remove the characters of users unseen for ``user_timeout`` s of the input's time."""
+        self.presence.timeout_s = self.params['user_timeout']
+        for uid in self.presence.expired(wall=wall):
+            if self.sim.remove_character(uid):
+                self.get_logger().info(f'user {uid} left: character removed')
 
     def _push(self, user_id: int, segment: str, force, duration: float) -> str:
         try:
@@ -368,13 +380,7 @@ class PhysicsNode(Node):
         else:
             dt = period
         self._last_tick = now
-        timeout = self.params['user_timeout']
-        if self._last_msg is not None:
-            for uid in list(self.sim.characters):
-                if self._last_msg - self._last_seen.get(uid, self._last_msg) > timeout:
-                    self.sim.remove_character(uid)
-                    self._last_seen.pop(uid, None)
-                    self.get_logger().info(f'user {uid} left: character removed')
+        self._expire(now)
         throw = self.params['auto_throw_period']
         if throw > 0 and self.sim.characters:
             if self._next_throw is None or now >= self._next_throw:
