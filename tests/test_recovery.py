@@ -38,9 +38,14 @@ def test_a_bag_cut_at_any_byte_reads_its_complete_messages(tmp_path, compression
     assert truncation(tmp_path / 'full.mcap') is None
     cut = tmp_path / 'cut.mcap'
     previous = 0
+    header_end = 8 + 9 + int.from_bytes(data[9:17], 'little')
     offsets = sorted(set(range(8, len(data), 37)) | {len(data) - 1, len(data) - 9})
     for at in offsets:
         cut.write_bytes(data[:at])
+        if at < header_end:   # not even the header record: nothing to read, one clear error
+            with pytest.raises(BagError, match='cut.mcap: corrupt or cut before its first'):
+                list(read_messages(cut))
+            continue
         warnings = []
         msgs = list(read_messages(cut, warn=warnings.append))
         t = truncation(cut)
@@ -116,6 +121,9 @@ def test_unreadable_files_still_name_the_file(tmp_path):
     p.write_bytes(b'\x89MCA')
     with pytest.raises(BagError, match='garbage.mcap: not an MCAP file'):
         list(read_messages(p))
+    p.write_bytes(b'\x89MCAP0\r\ngarbage')
+    with pytest.raises(BagError, match='garbage.mcap: corrupt or cut before its first record'):
+        bag_topics(p)
 
 
 @pytest.mark.ros

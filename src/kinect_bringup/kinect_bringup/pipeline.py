@@ -14,7 +14,8 @@ import threading
 from pathlib import Path
 from typing import Dict, List, Optional
 
-from .graph import RECONSTRUCTION, config_dir, graph_nodes, load_params, node_class, params_file
+from .graph import (RECONSTRUCTION, config_dir, graph_nodes, load_params, node_class, params_file,
+                    skeleton_subscribers)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -125,7 +126,10 @@ def main(argv=None) -> int:
     rclpy.init(args=None, signal_handler_options=SignalHandlerOptions.NO)
     nodes = []
     try:
-        nodes = create_nodes(names, node_overrides(args), directory)
+        over = node_overrides(args)
+        # a replay holds its first frame until every node reading /kinect/skeletons is there
+        over['driver'].setdefault('wait_for_subscribers', skeleton_subscribers(names, directory))
+        nodes = create_nodes(names, over, directory)
         executor = make_executor(args.executor, args.threads)
     except (ValueError, FileNotFoundError, RuntimeError, OSError, ImportError) as e:
         print(f'[pipeline] ERROR: {e}', file=sys.stderr)

@@ -4,7 +4,10 @@
 * ``synthetic`` (default): built-in or CMU motion through the Kinect sensor model
   (:mod:`kinect_driver.sources.synthetic`); optionally the ground truth on ``/kinect/ground_truth``.
 * ``replay``: a recorded bag (MCAP) or CSV file (:mod:`kinect_driver.sources.replay`); bag messages
-  are republished byte for byte unless ``restamp`` is set.
+  are republished byte for byte unless ``restamp`` is set, and so is every other topic of the bag
+  that the graph does not produce itself (``/kinect/ground_truth`` included). Before the first
+  frame the replay waits until ``/kinect/skeletons`` has ``wait_for_subscribers`` subscribers
+  (at most ``wait_timeout_s``), so a graph started with it loses no frame while it comes up.
 * ``live``: an OpenNI2 sensor or ``.oni`` recording with the NiTE2 user tracker
   (:mod:`kinect_driver.sources.openni_live`, docs/live_kinect.md).
 
@@ -27,6 +30,7 @@ from skeleton_core.health import Health
 from skeleton_core.rosnode import DiagnosticsPublisher, ParamSpec, Parameters, run_node
 
 from .sources import SOURCE_NAMES, SourceError, SourceOutput
+from .sources.replay import GRAPH_OUTPUTS
 from .tf_names import tf_frames
 
 SKELETONS_TOPIC = '/kinect/skeletons'
@@ -72,6 +76,19 @@ PARAMS = [
     ParamSpec('loop', False, 'replay: start again after the last message', read_only=True),
     ParamSpec('restamp', False, 'replay: stamp messages with the current time instead of the '
               'recorded stamps', read_only=True),
+    ParamSpec('replay_other_topics', True,
+              "replay: also play the bag's other topics (ground truth, ...) as recorded, except "
+              'replay_skip_topics', read_only=True),
+    ParamSpec('replay_skip_topics', list(GRAPH_OUTPUTS),
+              'replay: topics not replayed (by default those the node graph produces itself)',
+              read_only=True),
+    ParamSpec('wait_for_subscribers', 1,
+              'replay: before the first frame, wait until /kinect/skeletons has this many '
+              'subscribers (the launch file and pipeline set the graph\'s count; 0 = start at '
+              'once)', range=(0, 100), read_only=True),
+    ParamSpec('wait_timeout_s', 30.0,
+              'replay: start anyway (with a warning) after waiting this long for subscribers',
+              range=(0.0, 3600.0), read_only=True),
     # live
     ParamSpec('device_uri', '', "live: OpenNI2 device URI ('' = first device) or an .oni "
               "recording path", read_only=True),
@@ -105,7 +122,9 @@ def make_source(v, log=None, clock_ns=None):
     if name == 'replay':
         from .sources.replay import ReplaySource
         return ReplaySource(v['replay_file'], topic=v['replay_topic'], rate=v['rate'],
-                            loop=v['loop'], frame_id=v['frame_id'])
+                            loop=v['loop'], frame_id=v['frame_id'],
+                            play_other_topics=v['replay_other_topics'],
+                            skip_topics=v['replay_skip_topics'], warn=log)
     if name == 'live':
         from .sources.openni_live import LiveSource
         kw = {} if clock_ns is None else {'clock_ns': clock_ns}
@@ -142,8 +161,12 @@ class DriverNode(Node):
         self._finished_logged = False
         self._stalled = False
         self._retry_timer = None
+        self._other_pubs = {}
+        self._waiting_since = None   # replay: monotonic time the wait for subscribers began
+        self._waited = v['source'] != 'replay' or v['wait_for_subscribers'] == 0
         try:
             self.source.open()
+            self._open_other_topics()
             self._started()
         except SourceError as e:
             if v['source'] == 'live' and e.retryable and v['retry_s'] > 0:
@@ -173,8 +196,52 @@ class DriverNode(Node):
         elif v['source'] == 'replay':
             extra = f" {v['replay_file']} ({self.source.count} frames, rate {v['rate']:g}" + \
                 (', loop)' if v['loop'] else ')')
+            if self._other_pubs:
+                extra += '; also replaying ' + ', '.join(self._other_pubs)
         self.get_logger().info(f"source {v['source']} started at "
                                f'{1.0 / self.source.period_s:.1f} Hz on {SKELETONS_TOPIC};{extra}')
+
+    def _open_other_topics(self) -> None:
+        """Publishers for the replayed bag's other topics (types from the installed packages)."""
+        import importlib
+        for topic, msgtype in getattr(self.source, 'other_topics', {}).items():
+            try:
+                pkg, kind, name = msgtype.split('/')
+                cls = getattr(importlib.import_module(f'{pkg}.{kind}'), name)
+            except (ImportError, AttributeError, ValueError):
+                self._warn_once(f'replay: {topic} ({msgtype}) is not replayed: the message type '
+                                f'is not installed')
+                continue
+            self._other_pubs[topic] = self.create_publisher(cls, topic, QoSProfile(depth=100))
+
+    def _subscribers_ready(self) -> bool:
+        """Replay: hold the first frame until /kinect/skeletons has the expected subscribers
+        (and, for at most half a second more, until every other replayed topic has one)."""
+        import time
+        now = time.monotonic()
+        v = self.params.values
+        want = v['wait_for_subscribers']
+        if self._waiting_since is None:
+            self._waiting_since = now
+            self._main_ready_at = None
+            self.get_logger().info(f'replay: waiting for {want} subscriber(s) on '
+                                   f'{SKELETONS_TOPIC} before the first frame')
+        have = self.pub.get_subscription_count()
+        if have >= want:
+            if self._main_ready_at is None:
+                self._main_ready_at = now
+            others = [t for t, p in self._other_pubs.items() if p.get_subscription_count() == 0]
+            if others and now - self._main_ready_at < 0.5:
+                return False
+            self.get_logger().info(f'replay: {have} subscriber(s) after '
+                                   f'{now - self._waiting_since:.1f} s: playing')
+            return True
+        if now - self._waiting_since >= v['wait_timeout_s']:
+            self.get_logger().warning(
+                f'replay: only {have} of {want} subscriber(s) on {SKELETONS_TOPIC} after '
+                f'{v["wait_timeout_s"]:g} s: playing anyway (frames may be lost)')
+            return True
+        return False
 
     def _retry_open(self) -> None:
         try:
@@ -188,6 +255,10 @@ class DriverNode(Node):
         self._started()
 
     def _tick(self) -> None:
+        if not self._waited:
+            if not self._subscribers_ready():
+                return
+            self._waited = True
         now = self._now_ns()
         try:
             outputs = self.source.poll(now)
@@ -220,7 +291,24 @@ class DriverNode(Node):
             self._finished_logged = True
             self.get_logger().info('replay finished (set loop:=true to repeat)')
 
+    def _publish_other(self, out: SourceOutput, now: int) -> None:
+        """A replayed message of another topic: as recorded (restamped like the skeletons)."""
+        pub = self._other_pubs.get(out.topic)
+        if pub is None:
+            return
+        data = out.raw
+        if self.params['restamp'] and out.msgtype == 'skeleton_msgs/msg/SkeletonArray':
+            from rclpy.serialization import deserialize_message
+            data = deserialize_message(out.raw, self._msg_type)
+            ns_to_stamp(now, data.header.stamp)
+            for sk in data.skeletons:
+                ns_to_stamp(now, sk.header.stamp)
+        pub.publish(data)
+
     def _publish(self, out: SourceOutput, now: int) -> None:
+        if out.topic:
+            self._publish_other(out, now)
+            return
         v = self.params.values
         self.health.on_receive()
         live_stamp = v['source'] != 'replay' or v['restamp']

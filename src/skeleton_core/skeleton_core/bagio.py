@@ -439,6 +439,19 @@ def _scan(f, size: int, topics: Optional[set] = None):
     return schemas, channels, out, Truncation(pos, count, size)
 
 
+def _scan_file(p: Path, f, size: int, topics: Optional[set] = None, warn=None, quiet=False):
+    """:func:`_scan` of an unfinished file; BagError when not even its header record is whole
+    (nothing of it can be read), else one warning line (unless ``quiet``)."""
+    out = _scan(f, size, topics)
+    t = out[3]
+    if t.offset <= len(_MAGIC):
+        raise BagError(f'cannot read bag {p}: corrupt or cut before its first record (byte '
+                       f'{t.offset} of {size})')
+    if not quiet:
+        _warn(p, t, warn)
+    return out
+
+
 def _warn(p: Path, t: Truncation, warn) -> None:
     key = (str(p.resolve()), t.size)
     if key in _WARNED:
@@ -459,7 +472,7 @@ def truncation(path) -> Optional[Truncation]:
         size = os.fstat(f.fileno()).st_size
         if _complete(f, size):
             return None
-        return _scan(f, size, topics=set())[3]
+        return _scan_file(p, f, size, topics=set(), quiet=True)[3]
 
 
 def bag_topics(path, warn=None) -> Dict[str, Tuple[str, int]]:
@@ -470,8 +483,7 @@ def bag_topics(path, warn=None) -> Dict[str, Tuple[str, int]]:
     with f:
         size = os.fstat(f.fileno()).st_size
         if not _complete(f, size):
-            schemas, channels, msgs, t = _scan(f, size)
-            _warn(p, t, warn)
+            schemas, channels, msgs, t = _scan_file(p, f, size, warn=warn)
             out: Dict[str, List] = {}
             for ch in channels.values():
                 sc = schemas.get(ch.schema_id)
@@ -541,8 +553,8 @@ def read_messages(path, topics: Optional[Iterable[str]] = None,
                 f.seek(0)
                 it = make_reader(f).iter_messages(topics=topic_list, log_time_order=True)
             else:
-                _, _, msgs, t = _scan(f, size, None if topic_list is None else set(topic_list))
-                _warn(p, t, warn)
+                _, _, msgs, t = _scan_file(p, f, size, None if topic_list is None
+                                           else set(topic_list), warn)
                 msgs.sort(key=lambda smc: smc[2].log_time)   # stable: file order on equal times
                 it = iter(msgs)
             for schema, channel, message in it:
@@ -592,8 +604,7 @@ def recover(src, dst, warn=None) -> Tuple[int, Optional[Truncation]]:
                 reader = make_reader(f)
                 items = list(reader.iter_messages(log_time_order=False))
             else:
-                _, _, items, t = _scan(f, size)
-                _warn(p, t, warn)
+                _, _, items, t = _scan_file(p, f, size, warn=warn)
         except BagError:
             raise
         except Exception as e:

@@ -8,6 +8,12 @@
   with ``ros2 bag convert`` to MCAP.
 * **CSV** (``.csv``): the format of :mod:`kinect_driver.csv_format`; timing follows ``stamp_ns``.
 
+Every other topic of the bag is replayed too, as ``ros2 bag play`` would (ground truth on
+``/kinect/ground_truth`` included), at its recorded time among the skeletons, except the topics
+in ``skip_topics`` (by default those the node graph produces itself from the skeletons: replaying
+a recorded reconstruction beside the live one would mix the two). ``play_other_topics=False``
+replays only ``topic``.
+
 ``rate`` scales the speed (2.0 = twice as fast); ``loop`` starts again after the last message (one
 median message interval after it). Outputs are due when ``(t_recorded - t_first) / rate`` has
 elapsed since the first poll; a poll releases everything due up to half a period ahead, so a
@@ -16,7 +22,7 @@ elapsed since the first poll; a poll releases everything due up to half a period
 from __future__ import annotations
 
 from pathlib import Path
-from typing import List, Optional, Tuple
+from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -27,14 +33,25 @@ from ..csv_format import CsvFormatError, read_csv
 from .base import Source, SourceError, SourceOutput
 
 SKELETON_ARRAY = 'skeleton_msgs/msg/SkeletonArray'
+# topics the node graph produces itself (and the ROS infrastructure's): not replayed by default
+GRAPH_OUTPUTS = ('/kinect/skeletons_reliability', '/posture/completed', '/posture/reconstructed',
+                 '/character/skeletons', '/viz/markers', '/physics/objects', '/diagnostics',
+                 '/rosout', '/parameter_events', '/tf', '/tf_static')
 
 
 class ReplaySource(Source):
     name = 'replay'
 
     def __init__(self, path: str, topic: str = '/kinect/skeletons', rate: float = 1.0,
-                 loop: bool = False, frame_id: str = 'kinect_link'):
+                 loop: bool = False, frame_id: str = 'kinect_link',
+                 play_other_topics: bool = True, skip_topics: Sequence[str] = GRAPH_OUTPUTS,
+                 warn=None):
         self.path = str(path)
+        self.play_other_topics = bool(play_other_topics)
+        self.skip_topics = set(skip_topics)
+        self.other_topics: Dict[str, str] = {}   # replayed besides ``topic``: name -> type
+        self.frames = 0                          # skeleton messages
+        self._warn = warn
         self.topic = topic
         self.rate = float(rate)
         self.loop = bool(loop)
@@ -66,7 +83,7 @@ class ReplaySource(Source):
             raise SourceError(f'replay file {p} holds no skeleton frames'
                               + (f' on {self.topic}' if self.kind == 'bag' else ''))
         t = np.array([t for t, _ in self._items], dtype=np.int64)
-        dt = np.diff(t)
+        dt = np.diff(np.array([t for t, o in self._items if not o.topic], dtype=np.int64))
         dt = dt[dt > 0]
         median = float(np.median(dt)) if dt.size else 1e9 / 30.0
         self.period_s = median / 1e9 / self.rate
@@ -77,7 +94,7 @@ class ReplaySource(Source):
     def _open_bag(self, p: Path) -> None:
         self.kind = 'bag'
         try:
-            topics = bag_topics(p)
+            topics = bag_topics(p, warn=self._warn)
         except BagError as e:
             raise SourceError(str(e)) from None
         arrays = sorted(t for t, (ty, _) in topics.items() if ty == SKELETON_ARRAY)
@@ -91,15 +108,26 @@ class ReplaySource(Source):
             raise SourceError(f'replay bag {p}: {topic} holds {topics[topic][0]}, not '
                               f'{SKELETON_ARRAY}')
         self.topic = topic
+        if self.play_other_topics:
+            self.other_topics = {t: ty for t, (ty, n) in sorted(topics.items())
+                                 if t != topic and t not in self.skip_topics and n > 0 and ty}
         items = []
         try:
-            for m in read_messages(p, topics=[topic]):
-                items.append((m.stamp_ns, SourceOutput(
-                    stamp_ns=stamp_to_ns(m.msg.header.stamp), raw=m.data,
-                    frame_id=m.msg.header.frame_id)))
+            for m in read_messages(p, topics=[topic, *self.other_topics], decode=[topic],
+                                   warn=self._warn):
+                if m.topic == topic:
+                    items.append((m.stamp_ns, SourceOutput(
+                        stamp_ns=stamp_to_ns(m.msg.header.stamp), raw=m.data,
+                        frame_id=m.msg.header.frame_id)))
+                else:
+                    items.append((m.stamp_ns, SourceOutput(stamp_ns=m.stamp_ns, raw=m.data,
+                                                           topic=m.topic, msgtype=m.msgtype)))
         except BagError as e:
             raise SourceError(str(e)) from None
         self._items = items
+        self.frames = sum(1 for _, o in items if not o.topic)
+        if not self.frames:
+            self._items = []
 
     def _open_csv(self, p: Path) -> None:
         self.kind = 'csv'
@@ -109,6 +137,7 @@ class ReplaySource(Source):
             raise SourceError(str(e)) from None
         self._items = [(stamp, SourceOutput(stamp_ns=stamp, frames=frames, frame_id=self.frame_id))
                        for stamp, frames in rows]
+        self.frames = len(self._items)
 
     # ------------------------------------------------------------------------------------
     def poll(self, now_ns: int) -> List[SourceOutput]:
@@ -136,8 +165,10 @@ class ReplaySource(Source):
 
     @property
     def count(self) -> int:
-        return len(self._items)
+        """Skeleton frames (messages of ``topic``)."""
+        return self.frames
 
     def status(self) -> dict:
-        return {'replay_file': self.path, 'messages': len(self._items), 'lap': self._lap,
+        return {'replay_file': self.path, 'messages': len(self._items), 'frames': self.frames,
+                'other_topics': ', '.join(self.other_topics), 'lap': self._lap,
                 'position': self._next}
