@@ -314,7 +314,12 @@ class PhysicsNode(Node):
                 stamp = f.stamp_ns or header_stamp
                 self.sim.set_target(f.user_id, f.positions, f.orientations, stamp)
             except (SkeletonFormatError, ValueError) as e:
-                self._drop('bad target', str(e))
+                if 'max_characters' in str(e):   # counted per reason, logged once
+                    self._drop(f'too many users (max_characters '
+                               f'{self.sim.config.max_characters})',
+                               f'user {f.user_id} gets no character while {e}')
+                else:
+                    self._drop('bad target', str(e))
         self.presence.observe(header_stamp, [f.user_id for f in frames], wall=now)
         if self.params['mace'] and not self._mace_given and self.sim.characters:
             uid = next(iter(self.sim.characters))

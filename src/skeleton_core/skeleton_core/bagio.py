@@ -453,7 +453,7 @@ def _scan_file(p: Path, f, size: int, topics: Optional[set] = None, warn=None, q
 
 
 def _warn(p: Path, t: Truncation, warn) -> None:
-    key = (str(p.resolve()), t.size)
+    key = (str(p.resolve()), t.size, warn)   # once per file, size and receiver
     if key in _WARNED:
         return
     _WARNED.add(key)
@@ -538,7 +538,7 @@ def read_messages(path, topics: Optional[Iterable[str]] = None,
     An unfinished file (a recording still being written, or one whose writer was killed) or a
     truncated one is read up to its last complete message, with one warning line
     ``"x.mcap is truncated at byte N: read M messages, the rest is lost"`` (passed to
-    ``warn(text)``; default: stderr, once per file and size in a process)."""
+    ``warn(text)``; default: stderr; once per file, size and ``warn`` in a process)."""
     from mcap.reader import make_reader
     from mcap_ros2.decoder import DecoderFactory
     p, f = _open(path)
