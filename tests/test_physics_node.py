@@ -167,6 +167,15 @@ def test_characters_leave_when_the_input_stops_altogether(graph):
         pub.publish(_msg(p, 11_000_000_000 + i * 33_333_333, uid=3))
         time.sleep(1 / 30)
     assert _wait(lambda: 3 in node.sim.characters, 10)
+    # the last target again, and an older one: dropped where they arrive, counted
+    # (input_depth 1 may skip stale messages: one at a time, each waited for)
+    time.sleep(0.2)
+    last = node._user_stamp[3]
+    pub.publish(_msg(clip(10)[-1], last, uid=3))
+    assert _wait(lambda: node.health.dropped.get('duplicate stamp') == 1, 5), node.health.dropped
+    pub.publish(_msg(clip(10)[0], last - 100_000_000, uid=3))
+    assert _wait(lambda: node.health.dropped.get('out-of-order stamp') == 1, 5), \
+        node.health.dropped
     stopped = time.monotonic()
     assert _wait(lambda: not node.sim.characters, 5), 'the character outlived its input'
     gone_after = time.monotonic() - stopped

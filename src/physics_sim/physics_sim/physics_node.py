@@ -245,6 +245,7 @@ class PhysicsNode(Node):
             raise ValueError(f'physics: {e}') from e
         self.frame_id = v['frame_id']
         self.presence = Presence(v['user_timeout'])
+        self._user_stamp: Dict[int, int] = {}   # stamp of each user's newest target
         self._published_empty = True
         self._mace_given = False
         self._next_throw = None
@@ -310,9 +311,17 @@ class PhysicsNode(Node):
         self.presence.observe(header_stamp, (), wall=now)   # the input's clock moves on:
         self._expire(now)                                   # who left before this message?
         for f in frames:
+            stamp = f.stamp_ns or header_stamp
+            last = self._user_stamp.get(f.user_id)
+            if stamp and last is not None and last - 1_000_000_000 <= stamp <= last:
+                # a target already applied, or an older one (a bigger step back is a bag loop or
+                # a restarted sensor: taken)
+                self._drop('duplicate stamp' if stamp == last else 'out-of-order stamp',
+                           f'user {f.user_id}: {(last - stamp) * 1e-6:.1f} ms back')
+                continue
             try:
-                stamp = f.stamp_ns or header_stamp
                 self.sim.set_target(f.user_id, f.positions, f.orientations, stamp)
+                self._user_stamp[f.user_id] = stamp
             except (SkeletonFormatError, ValueError) as e:
                 if 'max_characters' in str(e):   # counted per reason, logged once
                     self._drop(f'too many users (max_characters '
@@ -338,6 +347,7 @@ class PhysicsNode(Node):
         """Remove the characters of users unseen for ``user_timeout`` s of the input's time."""
         self.presence.timeout_s = self.params['user_timeout']
         for uid in self.presence.expired(wall=wall):
+            self._user_stamp.pop(uid, None)
             if self.sim.remove_character(uid):
                 self.get_logger().info(f'user {uid} left: character removed')
 
