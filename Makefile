@@ -5,7 +5,8 @@ RUN := scripts/run.sh
 
 help:
 	@echo "make demo       run the node graph on the default input, write out/ (bag, animation, plots)"
-	@echo "make test       bootstrap if needed and run the test suite"
+	@echo "make test       bootstrap if needed and run the test suite (lint included)"
+	@echo "make lint       only the linter (ruff, configured in ruff.toml)"
 	@echo "make setup      only bootstrap (venv / ROS 2, launch tooling, colcon build)"
 	@echo "make build-db   build the motion database from ../shared/mocap/cmu (or built-in motions)"
 	@echo "make evaluate   accuracy table of every method on the sensor-model streams"
@@ -17,6 +18,9 @@ setup:
 
 test:
 	@scripts/run-tests.sh
+
+lint:
+	@$(RUN) ruff check .
 
 demo:
 	@$(RUN) ros2 run kinect_bringup demo
@@ -33,4 +37,4 @@ bench:
 soak:
 	@$(RUN) ros2 run kinect_bringup soak $(ARGS)
 
-.PHONY: help setup test demo build-db evaluate bench soak
+.PHONY: help setup test lint demo build-db evaluate bench soak

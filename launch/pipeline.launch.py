@@ -6,8 +6,9 @@
 
 The reconstruction is one node (`reconstruction`: reliability, completion and optimizer without DDS
 hops between them) or, with reconstruction:=split, the three nodes `reliability`, `completion` and
-`optimizer`; both publish the same topics. Parameters come from the package's config/<node>.yaml files (the same files the one-process
-`pipeline` executable reads); launch arguments override the few that users change most.
+`optimizer`; both publish the same topics. Parameters come from the package's config/<node>.yaml
+files (the same files the one-process `pipeline` executable reads); launch arguments override the
+few that users change most.
 """
 import os
 

@@ -84,7 +84,7 @@ def test_unknown_channel_names_line(tmp_path):
     text = GOOD.replace('CHANNELS 3 Zrotation Yrotation Xrotation',
                         'CHANNELS 3 Zrotation Wrotation Xrotation')
     err, msg = _err(text, tmp_path)
-    assert err.line == 9 and f'bad.bvh:9:' in msg and "'Wrotation'" in msg
+    assert err.line == 9 and 'bad.bvh:9:' in msg and "'Wrotation'" in msg
 
 
 def test_bad_number_names_line(tmp_path):

@@ -148,7 +148,7 @@ def _record_bag(path, n=90, users=(2, 5)):
 def test_replayed_bag_reproduces_recorded_bytes_at_30hz(dds, tmp_path):
     bag = tmp_path / 'take.mcap'
     recorded = _record_bag(bag)
-    proc = _start(f'source:=replay', f'replay_file:={bag}', 'loop:=true')
+    proc = _start('source:=replay', f'replay_file:={bag}', 'loop:=true')
     try:
         got = _collect(dds, '/kinect/skeletons', 4.0, raw=True, proc=proc)
     finally:

@@ -285,7 +285,7 @@ def test_method_c_takes_its_segment_lengths_from_the_calibration():
     out, _ = E.run_method(m, s, E.subset_frames(s, E.TABLE3_SUBSETS['c'][1]),
                           warmup=E.calibration_frames(cs))
     # frozen after length_frames (15) calibration frames: their mean, left/right averaged
-    cal = segment_lengths(cs.positions[:m.length_frames]).mean(axis=0)
+    cal = segment_lengths(cs.positions[:m.segment_output.length_frames]).mean(axis=0)
     mirror = [SEGMENT_CHILDREN.index(MIRROR[c]) for c in SEGMENT_CHILDREN]
     want = 0.5 * (cal + cal[mirror])
     got = segment_lengths(out)

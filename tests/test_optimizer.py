@@ -34,21 +34,21 @@ def test_weighted_knn_matches_eq9_brute_force(small_db):
     opt = NaturalPostureOptimizer(small_db, k=10)
     q = np.asarray(small_db.positions[42], float) + 0.01
     w = np.linspace(0.0, 1.0, NUM_JOINTS)
-    idx, d = opt.knn_search(q, w)
+    idx, d = opt.search.knn_search(q, w)
     ref = np.einsum('njd,j->n', (np.asarray(small_db.positions, float) - q) ** 2, w)  # Eq. 9
     assert set(idx) == set(np.argsort(ref)[:10])
     assert np.allclose(d, np.sort(ref)[:10], atol=1e-9)
     # a zero-weight joint does not matter at all
     q2 = q.copy()
     q2[0] += 10.0
-    assert list(opt.knn_search(q2, w)[0]) == list(idx)
+    assert list(opt.search.knn_search(q2, w)[0]) == list(idx)
 
 
 def test_energy_terms_match_equations(small_db):
     opt = NaturalPostureOptimizer(small_db, k=12, pca_dims=5, w_style=0.5)
     q = np.asarray(small_db.positions[3], float)
     w = np.full(NUM_JOINTS, 0.5)
-    idx, _ = opt.knn_search(q, w)
+    idx, _ = opt.search.knn_search(q, w)
     Y = np.asarray(small_db.flat, float)[idx]
     prev = [q + 0.01, q - 0.02]
     S = opt._setup(Y, q, w, 2 * prev[0] - prev[1])
@@ -288,7 +288,7 @@ def test_translation_invariant_knn_and_floating_root(small_db):
     q = np.asarray(small_db.positions[40], float) + rng.normal(0, 0.01, (NUM_JOINTS, 3))
     w = rng.uniform(0.2, 1.0, NUM_JOINTS)
     t = np.array([0.08, -0.05, 0.12])
-    idx, d, shifts = opt.knn_search(q + t, w, translate=True)
+    idx, d, shifts = opt.search.knn_search(q + t, w, translate=True)
     # the distance is Eq. 9 at the best translation, found exactly by brute force
     X = np.asarray(small_db.positions, float)
     best_t = np.einsum('njd,j->nd', X - (q + t), w) / w.sum()
@@ -329,7 +329,7 @@ def test_scale_invariant_knn_matches_brute_force(small_db):
     w = rng.uniform(0.0, 1.0, NUM_JOINTS)
     q = X[40] * 0.85 + [0.3, -0.2, 0.1]          # a smaller body, elsewhere
     for translate in (False, True):
-        idx, d, s = opt.knn_scaled(q, w, translate=translate, scale_range=(0.5, 2.0))
+        idx, d, s = opt.search.knn_scaled(q, w, translate=translate, scale_range=(0.5, 2.0))
         # brute force: centre (with translate), best scale, shape distance 1 - cos^2
         qc, Xc = q, X
         if translate:
@@ -344,7 +344,7 @@ def test_scale_invariant_knn_matches_brute_force(small_db):
     # translated and scaled: the original posture at the inverse scale, a perfect fit
     assert idx[0] == 40 and d[0] < 1e-9 and abs(s[0] - 1 / 0.85) < 1e-6
     # the scale range is respected
-    _, _, s = opt.knn_scaled(q, w, translate=True, scale_range=(0.9, 1.1))
+    _, _, s = opt.search.knn_scaled(q, w, translate=True, scale_range=(0.9, 1.1))
     assert s.max() <= 1.1 and s.min() >= 0.9
 
 
@@ -397,11 +397,11 @@ def test_height_and_heading_from_the_database_when_no_segment_is_observed(small_
         return r, out
     r, out = run_few()
     assert abs(r.reliability.height - 1.50) < 0.02 and _yaw_err(out, a) < 2.0
-    assert len(r._height_fits) == 30 and r._height_done        # then kept
+    assert len(r.body_fit.height_fits) == 30 and r.body_fit.height_done        # then kept
     L = np.linalg.norm(out[list(SEGMENT_CHILDREN)] - out[list(SEGMENT_PARENTS)], axis=1)
     assert np.allclose(L, standard_body(r.reliability.height).segment_lengths, atol=1e-6)
     r0, out0 = run_few(height_frames=0, yaw_search=0, yaw_rate=0.0)   # off: standard, no heading
-    assert r0.reliability.height == 1.75 and not r0._height_fits and _yaw_err(out0, a) > 20.0
+    assert r0.reliability.height == 1.75 and not r0.body_fit.height_fits and _yaw_err(out0, a) > 20.0
     assert parent_relative_error(out[None], p[None]) < 0.5 * parent_relative_error(out0[None],
                                                                                    p[None])
     # once a frame has every joint tracked, the sensor's height is used, not the prior
@@ -448,20 +448,20 @@ def test_database_heading_fit_recovers_a_rotation_without_preferring_the_current
         a, q = _turned(X[123], deg, 1.75)
         q[w == 0] = 50.0
         q[0] = np.nan
-        theta = r._database_yaw(q, w, centre=True)
+        theta = r.body_fit.database_yaw(q, w, centre=True)
         assert abs(np.degrees(np.angle(np.exp(1j * (theta + a))))) < 1e-6   # q is off by +a
         q0 = q - [2.5, 0.3, 0.0]                                      # root at the origin
-        assert abs(np.degrees(np.angle(np.exp(1j * (r._database_yaw(q0, w, centre=False) + a))))) < 1e-6
+        assert abs(np.degrees(np.angle(np.exp(1j * (r.body_fit.database_yaw(q0, w, centre=False) + a))))) < 1e-6
     # a smaller user (height not known yet): the scale-invariant fit still finds the rotation
     a, q = _turned(X[123], 30.0, 1.50)
-    assert abs(np.degrees(np.angle(np.exp(1j * (r._database_yaw(q, w, True, scaled=True) + a))))) < 1e-6
+    assert abs(np.degrees(np.angle(np.exp(1j * (r.body_fit.database_yaw(q, w, True, scaled=True) + a))))) < 1e-6
     # the uncentred fit is not translation invariant: a moved query matches worse
     a, q = _turned(X[123], 30.0, 1.75)
-    theta = r._database_yaw(q, w, centre=False)
+    theta = r.body_fit.database_yaw(q, w, centre=False)
     assert abs(np.degrees(np.angle(np.exp(1j * (theta + a))))) > 1e-3
     w1 = np.zeros(NUM_JOINTS)
     w1[ends[0]] = 1.0
-    assert r._database_yaw(q, w1, centre=True) is None                 # one joint: no rotation
+    assert r.body_fit.database_yaw(q, w1, centre=True) is None                 # one joint: no rotation
     with pytest.raises(ValueError):
         Reconstructor(small_db, method='C', yaw_neighbours=0)
 
@@ -475,7 +475,7 @@ def test_users_on_one_database_share_its_arrays_with_the_same_results(case):
     arr = as_database_arrays(db)
     a = Reconstructor(arr, method='C')
     b = Reconstructor(arr, method='C')
-    assert a.core._XA is b.core._XA and not a.core._XA.flags.writeable
+    assert a.core.search._XA is b.core.search._XA and not a.core.search._XA.flags.writeable
     assert (Reconstructor(arr, method='A').core.components
             is Reconstructor(arr, method='A').core.components)
     fresh, _ = run(as_database_arrays(db.positions.copy()), obs[:20], ts[:20])

@@ -2,7 +2,6 @@
 import numpy as np
 import pytest
 
-from skeleton_core.geometry import quat_multiply
 from skeleton_core.model import standard_body
 
 from physics_sim.controller import (apply_at_points, ball_qpos, pd_force, pd_twist_torque,

@@ -220,7 +220,7 @@ def test_twist_torque_turns_a_segment_about_its_axis():
         sim.step({1: (p, ori)})                      # spawn untwisted
         ori[WRIST_LEFT] = [0.0, np.sin(half / 2), 0.0, np.cos(half / 2)]
         for _ in range(30):
-            st = sim.step({1: (p, ori)})[1]
+            sim.step({1: (p, ori)})
         qs = sim.characters[1].segment_quats(sim.data)[k]
         twists[scale] = 2 * np.arctan2(qs[1], qs[3])
     assert twists[1.0] > 0.2 and abs(twists[0.0]) < 0.05
@@ -277,7 +277,7 @@ def test_actuator_pd_tracks_like_the_explicit_reference():
     states = {}
     for ctrl in ('explicit_pd', 'actuator_pd'):
         sim = Simulation(SimConfig(controller=ctrl, body_height=1.75, integrator='euler'))
-        st = run(sim, target, 1.0)
+        run(sim, target, 1.0)
         moving = target.copy()
         out = []
         for i in range(30):  # raise the left forearm and hand over one second

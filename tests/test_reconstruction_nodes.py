@@ -78,7 +78,7 @@ def test_pipeline_over_dds(rclpy_context, case):
                               frame_id='kinect_depth')
             pub.publish(frames_to_array_msg([f], stamp, 'kinect_depth'))
             # lock-step (the machine may be loaded): the next frame once this one came out
-            _wait(lambda: all(stamp in v for v in got.values()), 3.0, step=0.002)
+            _wait(lambda stamp=stamp: all(stamp in v for v in got.values()), 3.0, step=0.002)
         assert _wait(lambda: all(len(v) >= len(obs) for v in got.values()), 10.0), \
             ({k: len(v) for k, v in got.items()}, [n.health.snapshot() for n in nodes])
         # a malformed skeleton (wrong joint count) and an out-of-order array are dropped
@@ -280,7 +280,7 @@ def test_fused_node_over_dds(rclpy_context, case):
         # nobody subscribes to the completion yet: not computed, not published
         for i in range(10):
             s = send(i)
-            assert _wait(lambda: s in got[t_rec] and s in got[t_rel], 3.0, step=0.002)
+            assert _wait(lambda s=s: s in got[t_rec] and s in got[t_rel], 3.0, step=0.002)
         assert node._users[4].comp is None and not got[t_comp]
         subs[t_comp] = client.create_subscription(SkeletonArray, t_comp, make_cb(t_comp), 100)
         assert _wait(lambda: node._pubs[2].get_subscription_count() >= 1, 10.0)
@@ -288,7 +288,7 @@ def test_fused_node_over_dds(rclpy_context, case):
         for i in range(10, len(obs)):
             s = send(i)
             stamps.append(s)
-            _wait(lambda: all(s in v for v in got.values()), 3.0, step=0.002)
+            _wait(lambda s=s: all(s in v for v in got.values()), 3.0, step=0.002)
         assert _wait(lambda: all(s in got[t] for s in stamps for t in got), 10.0), \
             ({k: len(v) for k, v in got.items()}, node.health.snapshot())
         with lock:

@@ -1,4 +1,3 @@
-from glob import glob
 
 from setuptools import find_packages, setup
 
@@ -24,7 +23,6 @@ setup(
             'completion = pose_reconstruction.completion_node:main',
             'optimizer = pose_reconstruction.optimizer_node:main',
             'reconstruction = pose_reconstruction.reconstruction_node:main',
-            'process_bag = kinect_bringup.process_bag:main',
             'bench_reconstruction = pose_reconstruction.bench:main',
         ],
     },

@@ -31,7 +31,6 @@ import time
 from typing import Dict, List, Optional
 
 import numpy as np
-import rclpy
 from geometry_msgs.msg import WrenchStamped
 from rclpy.node import Node
 from skeleton_core.cdr import CdrError, frames_from_cdr, frames_to_cdr

@@ -189,9 +189,9 @@ def main(argv=None) -> int:
         tb, tk, rec = [], [], []
         for q, R in zip(queries, Rs):
             t0 = time.perf_counter()
-            ib, _ = brute.knn_search(q, R)
+            ib, _ = brute.search.knn_search(q, R)
             t1 = time.perf_counter()
-            ik, _ = tree.knn_search(q, R)
+            ik, _ = tree.search.knn_search(q, R)
             t2 = time.perf_counter()
             tb.append(1e3 * (t1 - t0))
             tk.append(1e3 * (t2 - t1))

@@ -2,7 +2,7 @@
 
 Per frame, on a query posture already normalised and retargeted to the database's standard body:
 
-1. reliability-weighted K nearest neighbours (Eq. 9, K = 30);
+1. reliability-weighted K nearest neighbours (Eq. 9, K = 30; :mod:`.search`);
 2. local PCA of the neighbours: the natural posture space (20 dimensions);
 3. minimise ``E = w_c E_c + w_s E_s + w_k E_k + w_m E_m`` (Eq. 10-15, weights 1.0, 0.5, 1.5,
    0.25) over the latent coordinates, with
@@ -35,12 +35,12 @@ from skeleton_core.geometry import quat_average
 from skeleton_core.model import NUM_JOINTS, NUM_SEGMENTS, SEGMENT_CHILDREN, SEGMENT_PARENTS
 
 from .posture_space import as_database_arrays
+from .search import KNN_MODES, DatabaseSearch
 
 _SEG_P = np.array(SEGMENT_PARENTS)
 _SEG_C = np.array(SEGMENT_CHILDREN)
 
 SOLVERS = ('stochastic', 'gauss_newton')
-KNN_MODES = ('brute', 'kdtree')
 # flat coordinate indices of the segments' child and parent joints, by coordinate (the x of every
 # segment, then y, then z): ``flat[_SEGX_C] - flat[_SEGX_P]`` is the (57,) segment vector block of
 # the energy matrix (child - parent, one subtraction per component)
@@ -80,24 +80,6 @@ def _local_pca(Yc: np.ndarray, dims: int, G: Optional[np.ndarray] = None):
     return V, s, zn
 
 
-def _knn_arrays(db) -> tuple:
-    """The database matrices of the KNN searches, computed once per database (shared read-only
-    by every optimizer on it: a new user costs no pass over the database):
-    ``|x_j|^2`` (N, 20); Eq. 9 for every posture as one matrix-vector product,
-    ``[|x_j|^2 (20) | x (60)] . [w | -2 w q]`` (N, 80); and the coordinate rows of every posture
-    (N * 3, 20), for weighted centroids (translate=True)."""
-    arrays = db.derived.get('knn')
-    if arrays is None:
-        sq = np.einsum('njd,njd->nj', db.positions, db.positions)
-        XA = np.ascontiguousarray(np.hstack((sq, db.flat)))
-        coord = np.ascontiguousarray(db.positions.transpose(0, 2, 1).reshape(-1, NUM_JOINTS),
-                                     dtype=float)
-        for a in (sq, XA, coord):
-            a.setflags(write=False)
-        arrays = db.derived['knn'] = (sq, XA, coord)
-    return arrays
-
-
 @dataclass
 class OptimizerResult:
     positions: np.ndarray                 # (20, 3) normalised standard-body posture
@@ -131,13 +113,10 @@ class NaturalPostureOptimizer:
         self.body = self.db.body
         self.L = self.body.segment_lengths.copy()  # (19,)
         self._Lcol = self.L[:, None]
-        X = self.db.flat
-        self._X = X
-        self.knn_arrays = _knn_arrays(self.db)
-        self._Xsq_joint, self._XA, self._Xcoord = self.knn_arrays
+        self._X = self.db.flat
         self.seed = seed
         self.rng = np.random.default_rng(seed)
-        self._kdtree = None
+        self.search: Optional[DatabaseSearch] = None
         self.configure(k=k, pca_dims=pca_dims, steps=steps, samples=samples, w_control=w_control,
                        w_style=w_style, w_kinematics=w_kinematics, w_continuity=w_continuity,
                        step_scale=step_scale, solver=solver, gn_iterations=gn_iterations,
@@ -165,95 +144,14 @@ class NaturalPostureOptimizer:
         if self.k < 2:
             raise ValueError('k must be >= 2')
         self.k = min(self.k, self.db.size)
-        if self.knn == 'kdtree' and ('knn' in kw or 'kdtree_dims' in kw or self._kdtree is None):
-            self._build_kdtree()
+        if self.search is None:
+            self.search = DatabaseSearch(self.db, self.k, self.knn, self.kdtree_dims,
+                                         self.kdtree_candidates)
+        else:
+            self.search.configure(self.k, self.knn, self.kdtree_dims, self.kdtree_candidates)
 
     def reset_rng(self) -> None:
         self.rng = np.random.default_rng(self.seed)
-
-    # -- 1. KNN (Eq. 9) -----------------------------------------------------------------------
-    def _build_kdtree(self) -> None:
-        from scipy.spatial import cKDTree
-        X = self._X
-        self._kd_mean = X.mean(axis=0)
-        _, _, vt = np.linalg.svd(X - self._kd_mean, full_matrices=False)
-        self._kd_axes = vt[:self.kdtree_dims]
-        self._kdtree = cKDTree((X - self._kd_mean) @ self._kd_axes.T)
-
-    def knn_search(self, query: np.ndarray, weights: np.ndarray, translate: bool = False):
-        """K nearest database postures under Eq. 9 with per-joint ``weights`` (20,).
-
-        ``translate``: the distance is minimised over a translation of the query (for a query
-        whose root, and so its origin, is unreliable): ``sum_i w_i |x_i - q_i - t|^2`` at the best
-        ``t`` = weighted centroid of x - that of q. Returns ``(idx, distances, t (K, 3))`` then.
-
-        ``knn='brute'``: exact, two BLAS matrix-vector products over the whole database.
-        ``knn='kdtree'``: approximate; a cKDTree in a global PCA space proposes
-        ``kdtree_candidates * K`` postures (unreliable joints filled from the database mean),
-        which are re-ranked exactly by Eq. 9.
-        """
-        w = np.asarray(weights, float)
-        q = np.asarray(query, float)
-        if self.knn == 'kdtree' and self._kdtree is not None:
-            qf = np.where((w >= 0.5)[:, None], q, self._kd_mean.reshape(NUM_JOINTS, 3)).ravel()
-            m = min(self.db.size, self.k * self.kdtree_candidates)
-            _, cand = self._kdtree.query((qf - self._kd_mean) @ self._kd_axes.T, k=m)
-            cand = np.atleast_1d(cand)
-            P = self.db.positions[cand]
-            d = np.einsum('njd,j->n', (P - q) ** 2, w)
-            order = np.argsort(d)[:self.k]
-            return cand[order], d[order]
-        wq = w[:, None] * q
-        v = np.concatenate((w, -2.0 * wq.ravel()))
-        d = self._XA @ v
-        d += float(np.einsum('jd,jd->', wq, q))
-        if translate:
-            ws = max(float(w.sum()), 1e-12)
-            shift = (self._Xcoord @ w).reshape(-1, 3)
-            shift -= wq.sum(axis=0)
-            shift *= 1.0 / ws
-            d -= ws * np.einsum('nd,nd->n', shift, shift)
-        k = self.k
-        idx = np.argpartition(d, k - 1)[:k] if k < len(d) else np.arange(len(d))
-        dk = d[idx]
-        order = np.argsort(dk)
-        dk = dk[order]
-        np.maximum(dk, 0.0, out=dk)
-        idx = idx[order]
-        if translate:
-            return idx, dk, shift[idx]
-        return idx, dk
-
-    def knn_scaled(self, query: np.ndarray, weights: np.ndarray, translate: bool = False,
-                   scale_range: tuple = (0.5, 2.0)):
-        """K nearest database postures under Eq. 9 minimised over a uniform scale ``s`` of the
-        query (in ``scale_range``) and, with ``translate``, a translation:
-        ``sum_i w_i |x_i - s q_i - t|^2``. For a query whose size is unknown (the user's height
-        not measured yet). Exact (brute force, a few BLAS products over the database).
-        Returns ``(idx (K,), distances (K,), scales (K,))``."""
-        w = np.asarray(weights, float)
-        q = np.asarray(query, float)
-        wq = w[:, None] * q
-        sxx = self._Xsq_joint @ w                              # sum_i w_i |x_i|^2
-        sxq = self._X @ wq.ravel()                             # sum_i w_i x_i . q_i
-        sqq = float(np.einsum('jd,jd->', wq, q))
-        if translate:
-            ws = max(float(w.sum()), 1e-12)
-            cx = (self._Xcoord @ w).reshape(-1, 3) * (1.0 / ws)    # weighted centroids
-            cq = wq.sum(axis=0) * (1.0 / ws)
-            sxx = sxx - ws * np.einsum('nd,nd->n', cx, cx)
-            sxq = sxq - ws * (cx @ cq)
-            sqq -= ws * float(cq @ cq)
-        sqq = max(sqq, 1e-12)
-        s = np.clip(sxq * (1.0 / sqq), scale_range[0], scale_range[1])
-        # rank by the scale-free shape distance 1 - cos^2 of the two (centred) configurations:
-        # Eq. 9 at the best scale, sxx - sxq^2 / sqq, would favour compact database postures
-        # (shrinking the query towards them costs little)
-        d = 1.0 - np.maximum(sxq, 0.0) ** 2 / (np.maximum(sxx, 1e-12) * sqq)
-        k = self.k
-        idx = np.argpartition(d, k - 1)[:k] if k < len(d) else np.arange(len(d))
-        idx = idx[np.argsort(d[idx])]
-        return idx, np.maximum(d[idx], 0.0), s[idx]
 
     # -- energy -------------------------------------------------------------------------------
     def _setup(self, Y: np.ndarray, query: np.ndarray, weights: np.ndarray,
@@ -456,12 +354,12 @@ class NaturalPostureOptimizer:
         shift = None
         query = np.asarray(query, float)
         if translate:
-            idx, dist, shifts = self.knn_search(query, w_knn, translate=True)
+            idx, dist, shifts = self.search.knn_search(query, w_knn, translate=True)
             inv = 1.0 / (dist + 1e-6)
             shift = (inv @ shifts) / inv.sum()
             query = query + shift
         else:
-            idx, dist = self.knn_search(query, w_knn)
+            idx, dist = self.search.knn_search(query, w_knn)
         t1 = time.perf_counter()
         if len(previous) >= 2:
             c = 2.0 * previous[0] - previous[1]

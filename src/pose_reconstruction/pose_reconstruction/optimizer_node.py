@@ -81,8 +81,8 @@ SPECS = [
               "whose median is taken as the user's height (query scale, standard-body lengths), "
               'then kept; 0 = off (standard height)', (0, 100000)),
     ParamSpec('yaw_rate', 0.5,
-              'few reliable joints (hips, shoulders and every segment unreliable): fraction per frame of the heading correction that '
-              'best fits the reliable joints to the database; 0 = keep the last heading',
+              'few reliable joints (hips, shoulders and every segment unreliable): fraction per frame '
+              'of the heading correction that best fits the reliable joints to the database; 0 = keep the last heading',
               (0.0, 1.0)),
     ParamSpec('yaw_search', 12,
               'few reliable joints from the first frame: headings tried against '

@@ -40,13 +40,13 @@ import time
 import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Dict, List, Optional, Sequence, Tuple
+from typing import Dict, List, Optional, Sequence
 
 import numpy as np
 from scipy.spatial import cKDTree
 
 from skeleton_core.geometry import normalize, quat_from_yaw, quat_multiply, retarget, swing_twist
-from .mocap import FIVE_CLASSES, MOTION_CLASSES, MotionClip, rest_directions
+from .mocap import FIVE_CLASSES, MotionClip, rest_directions
 from skeleton_core.model import JOINT_NAMES, NUM_JOINTS, SEGMENT_CHILDREN, SEGMENT_NAMES, Body, standard_body
 
 __all__ = ['MotionDatabase', 'DatabaseError', 'build_database', 'load_or_build_default',

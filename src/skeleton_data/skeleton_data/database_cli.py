@@ -59,7 +59,6 @@ def _bar(total, desc, enabled):
 def main(argv=None) -> int:
     args = _parser().parse_args(argv)
     logging.basicConfig(level=logging.INFO, format='%(message)s')
-    log = logging.getLogger('build_db')
     progress = not args.no_progress and sys.stderr.isatty()
     threshold = 0.0 if args.no_filter else (
         database.DEFAULT_THRESHOLD if args.threshold is None else args.threshold)

@@ -43,8 +43,7 @@ from __future__ import annotations
 
 import csv
 import logging
-import os
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Dict, List, Optional, Sequence, Tuple
 

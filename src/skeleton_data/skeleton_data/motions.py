@@ -22,7 +22,7 @@ import numpy as np
 from skeleton_core.geometry import quat_conjugate, quat_multiply, quat_rotate
 from .mocap import MotionClip, rest_directions
 from skeleton_core.model import (ANKLE_LEFT, ANKLE_RIGHT, ELBOW_LEFT, ELBOW_RIGHT, FOOT_LEFT, FOOT_RIGHT, HEAD,
-                    HAND_LEFT, HAND_RIGHT, HIP_LEFT, HIP_RIGHT, KNEE_LEFT, KNEE_RIGHT, NUM_JOINTS,
+                    HAND_LEFT, HAND_RIGHT, KNEE_LEFT, KNEE_RIGHT, NUM_JOINTS,
                     PARENTS, SHOULDER_CENTER, SPINE, WRIST_LEFT, WRIST_RIGHT, Body, standard_body)
 
 __all__ = ['builtin_clips', 'builtin_split', 'BUILTIN_MOTIONS', 'pose_from_rotations']

@@ -1,0 +1,199 @@
+"""Output stage ``'segments'`` of methods B/C: constant user lengths, blended and smoothed segments.
+
+Every segment's direction is a blend of the database solution's and the observed one; the
+weight of the observation is the larger of ``observation_weight`` (for a segment whose two ends
+are reliable, at or above ``reliable_threshold``; 0 otherwise) and the *trust in the sensor*
+(:mod:`.trust`) times min(1, reliability of the less reliable end / ``reliable_threshold``). The
+segments get constant user lengths (the mean observed length over the first ``length_frames``
+reliable observations of each segment, then frozen; with ``symmetric_lengths`` the left and right
+limbs share the mean of their two lengths) and are chained from the observed root. The segment
+vectors and the root are smoothed by a One Euro filter (``smooth_min_cutoff`` Hz, ``smooth_beta``
+s/m, ``smooth_d_cutoff`` Hz; ``smooth_min_cutoff`` 0 = off); a segment the database fills in (an
+end with reliability 0) gets ``smooth_filled_scale`` times the cutoff (1 at or above
+``reliable_threshold``, linear between). ``smooth_filled_speed`` and ``smooth_anchored_speed``:
+see :mod:`.reconstructor`.
+"""
+from __future__ import annotations
+
+from typing import Callable, Optional
+
+import numpy as np
+
+from skeleton_core.conversions import SkeletonFrame
+from skeleton_core.filters import OneEuroFilter
+from skeleton_core.model import MIRROR, NUM_JOINTS, NUM_SEGMENTS, ROOT, SEGMENT_CHILDREN, SEGMENT_PARENTS
+
+from .body_fit import torso_weight
+from .posture_space import ANCESTORS, yaw_rotation
+
+_SEG_P = np.array(SEGMENT_PARENTS)
+_SEG_C = np.array(SEGMENT_CHILDREN)
+_MIRROR_SEG = np.array([SEGMENT_CHILDREN.index(MIRROR[c]) for c in SEGMENT_CHILDREN])
+# (19, 20): positions -> segment vectors (child - parent); (20, 19): segment vectors -> positions
+# relative to the root (the segments on the way from the root)
+SEG_DIFF = np.zeros((NUM_SEGMENTS, NUM_JOINTS))
+SEG_DIFF[np.arange(NUM_SEGMENTS), _SEG_C] = 1.0
+SEG_DIFF[np.arange(NUM_SEGMENTS), _SEG_P] -= 1.0
+_SEG_CHAIN = ANCESTORS[:, _SEG_C]
+# (19, 20): 1 for the joints at and below each segment's child (what hangs from the segment)
+_SEG_BELOW = np.ascontiguousarray(_SEG_CHAIN.T)
+
+
+class SegmentOutput:
+    """One user's segment output: lengths frozen once observed, the One Euro filter state."""
+
+    def __init__(self, reliability, standard_lengths: np.ndarray,
+                 height_settled: Callable[[], bool], reliable_threshold: float = 0.5,
+                 output_scale: str = 'user', length_frames: int = 15,
+                 symmetric_lengths: bool = True, observation_weight: float = 0.3,
+                 smooth_min_cutoff: float = 3.0, smooth_beta: float = 10.0,
+                 smooth_d_cutoff: float = 1.0, smooth_filled_scale: float = 0.2,
+                 smooth_filled_speed: bool = False, smooth_anchored_speed: bool = True):
+        if int(length_frames) < 1:
+            raise ValueError('length_frames must be >= 1')
+        if smooth_min_cutoff < 0 or smooth_beta < 0 or smooth_d_cutoff <= 0:
+            raise ValueError('smooth_min_cutoff, smooth_beta must be >= 0, smooth_d_cutoff > 0')
+        if not 0.0 <= observation_weight <= 1.0:
+            raise ValueError('observation_weight must be in [0, 1]')
+        if not 0.0 < smooth_filled_scale <= 1.0:
+            raise ValueError('smooth_filled_scale must be in (0, 1]')
+        if not isinstance(smooth_anchored_speed, (bool, np.bool_)):
+            raise ValueError('smooth_anchored_speed must be a bool')
+        self.reliability = reliability
+        self._standard_lengths = np.asarray(standard_lengths, float)
+        self.height_settled = height_settled
+        self.reliable_threshold = float(reliable_threshold)
+        self.output_scale = output_scale
+        self.length_frames = int(length_frames)
+        self.symmetric_lengths = bool(symmetric_lengths)
+        self.observation_weight = float(observation_weight)
+        self.smooth = (float(smooth_min_cutoff), float(smooth_beta), float(smooth_d_cutoff))
+        self.smooth_filled_scale = float(smooth_filled_scale)
+        self.smooth_filled_speed = bool(smooth_filled_speed)
+        self.smooth_anchored_speed = bool(smooth_anchored_speed)
+        self.reset()
+
+    def reset(self) -> None:
+        self._seg_sum = np.zeros(NUM_SEGMENTS)
+        self._seg_count = np.zeros(NUM_SEGMENTS, int)
+        self._seg_fallback = np.full(NUM_SEGMENTS, np.nan)
+        self._frozen_lengths: Optional[np.ndarray] = None
+        mc, b, dc = self.smooth
+        self._last_stamp: Optional[int] = None
+        self._filter_clock_ns = 0
+        # one filter for the 19 segment vectors and the root (rows 0-18, 19): the same per-row
+        # One Euro filter as two separate ones, in one call
+        self._seg_filter = OneEuroFilter(mc, b, dc, num_joints=NUM_SEGMENTS + 1) if mc > 0 else None
+
+    def lengths(self, positions: np.ndarray, R: np.ndarray,
+                lengths: Optional[np.ndarray] = None) -> np.ndarray:
+        """(19,) constant user lengths: the mean observed length of each
+        segment over its first ``length_frames`` reliable observations (both ends at or above
+        ``reliable_threshold``), frozen afterwards; a segment not yet observed reliably keeps the
+        reliability reference length it had when first needed. ``lengths`` (19,): the observed
+        segment lengths of ``positions`` when already known."""
+        if self._frozen_lengths is not None:
+            return self._frozen_lengths
+        if self.output_scale == 'standard':
+            self._frozen_lengths = self._standard_lengths
+            return self._frozen_lengths
+        good = (R[_SEG_P] >= self.reliable_threshold) & (R[_SEG_C] >= self.reliable_threshold)
+        good &= self._seg_count < self.length_frames
+        if good.any():
+            ln = lengths
+            if ln is None:
+                ln = np.linalg.norm(positions[_SEG_C] - positions[_SEG_P], axis=1)
+            self._seg_sum[good] += ln[good]
+            self._seg_count[good] += 1
+        none = self._seg_count == 0
+        if none.any():
+            unset = none & ~np.isfinite(self._seg_fallback)
+            if not self.height_settled():
+                unset = none  # the database height fit is still converging: follow it
+            if unset.any():
+                self._seg_fallback[unset] = self.reliability.reference_lengths[unset]
+        L = np.where(none, self._seg_fallback, self._seg_sum / np.maximum(self._seg_count, 1))
+        if self.symmetric_lengths:
+            L = 0.5 * (L + L[_MIRROR_SEG])
+        if self._seg_count.min() >= self.length_frames:
+            self._frozen_lengths = L  # every segment complete: constant from now on
+        return L
+
+    def output(self, frame: SkeletonFrame, solution: np.ndarray, w: np.ndarray,
+               trust: float, yaw: Optional[float] = None,
+               seg_obs: Optional[np.ndarray] = None,
+               len_obs: Optional[np.ndarray] = None,
+               root: Optional[np.ndarray] = None) -> np.ndarray:
+        """The output positions (20, 3), sensor frame (module docstring). ``solution`` (20, 3): in the sensor frame,
+        or, with ``yaw``, the normalised solution (only its segment directions matter: they are
+        turned by ``yaw``). ``seg_obs`` / ``len_obs``: the observed segment vectors (19, 3) and
+        lengths (19,) when already computed."""
+        obs = np.asarray(frame.positions, float)
+        if seg_obs is None:
+            seg_obs = SEG_DIFF @ obs
+            len_obs = np.sqrt(np.einsum('sk,sk->s', seg_obs, seg_obs))
+        L = self.lengths(obs, w, len_obs)
+        vs = SEG_DIFF @ solution
+        if yaw is not None:
+            vs = vs @ yaw_rotation(yaw).T
+        ns = np.sqrt(np.einsum('sk,sk->s', vs, vs))
+        us = vs / np.maximum(ns, 1e-9)[:, None]
+        uo = seg_obs / np.maximum(len_obs, 1e-9)[:, None]
+        zero = len_obs <= 1e-9
+        if zero.any():
+            uo[zero] = us[zero]
+        wmin = np.minimum(w[_SEG_P], w[_SEG_C])
+        thr = self.reliable_threshold
+        rel_frac = np.minimum(wmin * (1.0 / max(thr, 1e-6)), 1.0)
+        beta = rel_frac * trust
+        if self.observation_weight > 0.0:
+            np.maximum(beta, self.observation_weight * (wmin >= thr), out=beta)
+        u = us + beta[:, None] * (uo - us)
+        nu = np.sqrt(np.einsum('sk,sk->s', u, u))
+        small = nu <= 1e-9
+        u /= np.maximum(nu, 1e-9)[:, None]
+        if small.any():
+            u[small] = us[small]
+        vr = np.empty((NUM_SEGMENTS + 1, 3))
+        vr[:NUM_SEGMENTS] = u
+        vr[:NUM_SEGMENTS] *= L[:, None]
+        vr[NUM_SEGMENTS] = obs[ROOT] if root is None else root
+        if self._seg_filter is not None:
+            # filter clock: the stamps' steps where plausible (1 ms - 0.5 s), else 30 Hz
+            stamp = int(frame.stamp_ns or 0)
+            dt = 1.0 / 30.0
+            if self._last_stamp is not None and 1e6 <= stamp - self._last_stamp <= 5e8:
+                dt = (stamp - self._last_stamp) * 1e-9
+            self._last_stamp = stamp
+            self._filter_clock_ns += int(round(dt * 1e9))
+            scale = speed = None
+            if self.smooth_filled_scale != 1.0:
+                # a segment the database fills in (an end with reliability 0) is smoothed with
+                # smooth_filled_scale times the cutoff, a reliable one as set, linear between
+                fs = self.smooth_filled_scale
+                scale = np.ones(NUM_SEGMENTS + 1)
+                scale[:NUM_SEGMENTS] = fs + (1.0 - fs) * rel_frac
+                if self.smooth_filled_speed:
+                    # the factor applies to the minimum cutoff only: the One Euro speed term is
+                    # kept, so that a filled segment is smoothed at rest but does not lag when
+                    # the body moves
+                    speed = np.ones(NUM_SEGMENTS + 1)
+                elif (self.smooth_anchored_speed and torso_weight(w) < thr
+                        and not (wmin >= thr).any()):
+                    # few reliable joints: filled segments with a reliable joint hanging from
+                    # them keep the speed term too, in proportion (module docstring)
+                    anchored = np.minimum((_SEG_BELOW * w).max(axis=1)
+                                          * (1.0 / max(thr, 1e-6)), 1.0)
+                    if anchored.any():
+                        speed = scale.copy()
+                        speed[:NUM_SEGMENTS] += anchored * (1.0 - scale[:NUM_SEGMENTS])
+            vr = self._seg_filter.update(vr, None, self._filter_clock_ns, scale, speed)
+            v = vr[:NUM_SEGMENTS]
+            nv = np.sqrt(np.einsum('sk,sk->s', v, v))
+            keep = nv > 1e-9
+            v = (v / np.maximum(nv, 1e-9)[:, None]) if keep.all() else \
+                np.where(keep[:, None], v / np.maximum(nv, 1e-9)[:, None], u)
+            v *= L[:, None]
+        else:
+            v = vr[:NUM_SEGMENTS]
+        return vr[NUM_SEGMENTS] + _SEG_CHAIN @ v

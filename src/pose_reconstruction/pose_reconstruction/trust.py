@@ -1,0 +1,70 @@
+"""Trust in the sensor (graceful degradation of the reconstruction's output).
+
+How far the output follows the reliable observed joints rather than the database solution, per
+frame in [0, 1] (:mod:`.reconstructor`, ``trust_mode``):
+
+* ``'noise_ratio'`` — the RMS distance per reliable joint of the nearest database posture, smoothed
+  over time, divided by the sensor's frame-to-frame noise (an exponential average, rate
+  ``noise_alpha``, of the median second difference of the reliable joints); the trust rises
+  linearly from 0 at ``ratio`` to 1 at twice it (1 until the noise is known);
+* ``'distance'`` — linear from 0 at ``distance`` (RMS m per reliable joint, standard body) to 1 at
+  twice it.
+"""
+from __future__ import annotations
+
+from collections import deque
+from typing import Optional
+
+import numpy as np
+
+TRUST_MODES = ('noise_ratio', 'distance')
+
+
+class SensorTrust:
+    """One user's trust in the sensor; ``update`` once per frame."""
+
+    def __init__(self, mode: str = 'noise_ratio', ratio: float = 8.0, noise_alpha: float = 0.05,
+                 distance: float = 0.12, reliable_threshold: float = 0.5):
+        if mode not in TRUST_MODES:
+            raise ValueError(f'trust_mode must be one of {TRUST_MODES}')
+        if not ratio > 0 or not 0 < noise_alpha <= 1:
+            raise ValueError('trust_sensor_ratio must be > 0 and noise_alpha in (0, 1]')
+        self.mode = mode
+        self.ratio = float(ratio)
+        self.noise_alpha = float(noise_alpha)
+        self.distance = float(distance)
+        self.reliable_threshold = float(reliable_threshold)
+        self.reset()
+
+    def reset(self) -> None:
+        self._hist = deque(maxlen=2)  # previous observed positions (noise estimate)
+        self._noise: Optional[float] = None
+        self._noise_n = 0
+        self._rms_avg: Optional[float] = None
+        self.noise = float('nan')
+
+    def update(self, positions: np.ndarray, w: np.ndarray, rms: float) -> float:
+        """This frame's trust: ``positions`` (20, 3) observed, ``w`` (20,) reliabilities, ``rms``
+        the nearest database posture's RMS distance per reliable joint."""
+        if self.mode == 'distance':
+            d0 = self.distance  # standard-body metres
+            return min(max((rms - d0) / max(d0, 1e-6), 0.0), 1.0)
+        if len(self._hist) == 2:
+            rel = w >= self.reliable_threshold
+            if rel.any():
+                a = positions - 2.0 * self._hist[-1] + self._hist[-2]
+                a = a[rel]
+                an = np.sort(np.sqrt(np.einsum('jk,jk->j', a, a)))
+                m = len(an)
+                n = 0.5 * float(an[(m - 1) // 2] + an[m // 2])  # the median
+                self._noise_n += 1  # running mean first, then exponential
+                rate = max(self.noise_alpha, 1.0 / self._noise_n)
+                self._noise = n if self._noise is None else (1 - rate) * self._noise + rate * n
+        self._hist.append(positions)
+        rate = max(2.0 * self.noise_alpha, 1.0 / (self._noise_n + 1))
+        self._rms_avg = rms if self._rms_avg is None else (1 - rate) * self._rms_avg + rate * rms
+        if self._noise is None:
+            return 1.0
+        self.noise = self._noise
+        r0 = self.ratio
+        return min(max((self._rms_avg / max(self._noise, 1e-4) - r0) / r0, 0.0), 1.0)
