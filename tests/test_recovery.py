@@ -3,10 +3,7 @@ with one warning line, recover() rewrites it into a complete bag, and a recorder
 with SIGKILL leaves a file holding all but the last flush period of what it received."""
 from __future__ import annotations
 
-import os
 import signal
-import subprocess
-import sys
 import time
 
 import numpy as np
