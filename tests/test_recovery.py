@@ -163,3 +163,45 @@ def test_a_recorder_killed_with_sigkill_keeps_what_it_received(tmp_path):
     assert (killed_ns - t[0]) * 1e-9 >= 9.5 and kept >= 0.95
     n, _ = recover(bag, tmp_path / 'fixed.mcap', warn=lambda s: None)
     assert n == len(msgs) and truncation(tmp_path / 'fixed.mcap') is None
+
+
+def _skeleton_bag(path, n=150):
+    pytest.importorskip('skeleton_msgs.msg')
+    from skeleton_core.cdr import SKELETON_ARRAY, frames_to_cdr
+    from skeleton_core.conversions import SkeletonFrame
+    from skeleton_core.model import standard_body
+    body = standard_body().rest_positions() + [2.5, 0.0, -0.8]
+    with BagWriter(path, chunk_size=8000, flush_period_s=0) as bag:
+        for k in range(n):
+            stamp = 1_700_000_000_000_000_000 + k * 33_333_333
+            f = SkeletonFrame(positions=body + 0.01 * np.sin(k), user_id=1, stamp_ns=stamp,
+                              tracking_state=np.full(20, 2, np.uint8), frame_id='kinect_link')
+            data = frames_to_cdr([f], stamp, 'kinect_link')
+            bag.write_raw('/kinect/skeletons', data, stamp, SKELETON_ARRAY)
+            bag.write_raw('/kinect/ground_truth', data, stamp, SKELETON_ARRAY)
+    return path.read_bytes()
+
+
+def test_replay_source_and_process_bag_read_a_cut_bag(tmp_path):
+    """The replay source and process_bag take a cut recording: every complete frame, one
+    warning, instead of refusing the file."""
+    from kinect_driver.sources.replay import ReplaySource
+    data = _skeleton_bag(tmp_path / 'full.mcap')
+    cut = tmp_path / 'cut.mcap'
+    cut.write_bytes(data[:int(len(data) * 0.6)])
+    complete = sum(1 for m in read_messages(cut, warn=lambda s: None)
+                   if m.topic == '/kinect/skeletons')
+    assert 0 < complete < 150
+    warned = []
+    src = ReplaySource(str(cut), warn=warned.append)
+    src.open()
+    out, now = [], 0
+    while not src.finished:
+        out += src.poll(now)
+        now += 10 ** 8
+    assert sum(1 for o in out if not o.topic) == complete == src.count
+    assert {o.topic for o in out if o.topic} == {'/kinect/ground_truth'}
+    assert len(warned) == 1 and 'cut.mcap is truncated at byte' in warned[0]
+    from kinect_bringup.process_bag import process
+    s = process(cut, tmp_path / 'out.mcap', 'A', progress=False)
+    assert s['frames'] == complete and s['accuracy']['A']['frames'] == complete
