@@ -3,6 +3,7 @@ with one warning line, recover() rewrites it into a complete bag, and a recorder
 with SIGKILL leaves a file holding all but the last flush period of what it received."""
 from __future__ import annotations
 
+import os
 import signal
 import time
 
@@ -205,3 +206,18 @@ def test_replay_source_and_process_bag_read_a_cut_bag(tmp_path):
     from kinect_bringup.process_bag import process
     s = process(cut, tmp_path / 'out.mcap', 'A', progress=False)
     assert s['frames'] == complete and s['accuracy']['A']['frames'] == complete
+
+
+def test_fsync_runs_beside_the_writer_and_stops_on_close(tmp_path, monkeypatch):
+    synced = []
+    real = os.fsync
+    monkeypatch.setattr(os, 'fsync', lambda fd: (synced.append(fd), real(fd)))
+    bag = BagWriter(tmp_path / 's.mcap', flush_period_s=0.01, fsync=True)
+    for k in range(3):
+        bag.write_raw('/a', _cdr_string(str(k)), k, STRING)
+        time.sleep(0.02)
+        bag.poll()
+    thread = bag._sync_thread
+    bag.close()
+    assert synced and not thread.is_alive()
+    assert len(list(read_messages(tmp_path / 's.mcap'))) == 3
