@@ -25,8 +25,13 @@ are read from the installed ``share/<pkg>/msg/*.msg`` (ament index / ``AMENT_PRE
 decoded message) is encoded from its attributes with the schema, giving the same bytes except for
 alignment padding, which the Python encoder zeroes and Fast CDR leaves uninitialized. Either way
 rclpy deserializes them to an equal message. For recording, subscribing with ``raw=True`` and
-calling :meth:`BagWriter.write_raw` avoids serialization altogether. Unreadable or corrupt
-files raise :class:`BagError` naming the file.
+calling :meth:`BagWriter.write_raw` avoids serialization altogether.
+
+Nothing lost (docs/recovery.md): the writer puts what it has on the file at least every
+``flush_period_s``; an unfinished or cut file (a writer killed, a recording still being written)
+is read up to its last complete message with one warning line, and :func:`recover` rewrites it
+into a complete, indexed bag (``ros2 run kinect_bringup recover_bag``). Files that cannot be read
+at all raise :class:`BagError` naming the file.
 """
 from __future__ import annotations
 
