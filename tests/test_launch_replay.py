@@ -93,3 +93,12 @@ def test_replay_through_launch_reconstructs_every_frame_and_is_scored():
     for role in ('raw', 'reconstructed'):   # scored against the replayed ground truth
         got = summary['methods'][role]
         assert got['matched_frames'] == FRAMES and np.isfinite(got['mean_error_m']), got
+
+
+def test_the_replay_waits_for_every_reader_of_the_skeletons():
+    from kinect_bringup.graph import graph_nodes, skeleton_subscribers
+    assert skeleton_subscribers(graph_nodes()) == 2                    # reconstruction, viz raw
+    assert skeleton_subscribers(graph_nodes(record=True)) == 3         # + the recorder
+    assert skeleton_subscribers(graph_nodes(physics=False, viz=False, record=True)) == 2
+    assert skeleton_subscribers(graph_nodes(reconstruction='split')) == 2   # reliability, viz
+    assert skeleton_subscribers(['recorder'], recorded_topics=['/posture/reconstructed']) == 0
