@@ -122,3 +122,12 @@ def test_the_checks_catch_a_cycle_and_an_upward_import(tmp_path):
     (pkg / 'y.py').write_text('')
     names = set(_imports(pkg / 'x.py', 'skeleton_core.x'))
     assert {'viz.markers', 'skeleton_core.y'} <= names
+
+
+@pytest.mark.parametrize('pkg', PYTHON_PACKAGES)
+def test_entry_points_run_the_packages_own_modules(pkg):
+    """An executable of package P runs a module of P (``ros2 run P exe``), never one of another."""
+    import re
+    targets = re.findall(r"'\w+ = ([\w.]+):\w+'", (ROOT / 'src' / pkg / 'setup.py').read_text())
+    foreign = [t for t in targets if t.split('.')[0] != pkg]
+    assert not foreign, f'{pkg}/setup.py runs {foreign}'

@@ -16,10 +16,4 @@ setup(
     maintainer_email='robotics@example.com',
     description='Run-time core every node imports: skeleton model, geometry, conversions, CDR, bag I/O, filters, node helpers.',
     license='Apache-2.0',
-    entry_points={
-        'console_scripts': [
-            'build_db = skeleton_data.database_cli:main',
-            'import_uiprmd = skeleton_eval.uiprmd_cli:main',
-        ],
-    },
 )
