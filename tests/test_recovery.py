@@ -164,6 +164,18 @@ def test_a_recorder_killed_with_sigkill_keeps_what_it_received(tmp_path):
     assert (killed_ns - t[0]) * 1e-9 >= 9.5 and kept >= 0.95
     n, _ = recover(bag, tmp_path / 'fixed.mcap', warn=lambda s: None)
     assert n == len(msgs) and truncation(tmp_path / 'fixed.mcap') is None
+    # a recorder started again on the same output (a respawn) keeps the killed one's bag
+    g2 = Graph('processes', nodes=['recorder'], log_dir=tmp_path / 'logs2',
+               overrides={'recorder': {'output': str(bag), 'topics': ['/kinect/skeletons']}})
+    try:
+        kept = []
+        deadline = time.monotonic() + 60
+        while not kept and time.monotonic() < deadline:
+            kept = list(tmp_path.glob('killed.unfinished-*.mcap'))
+            time.sleep(0.2)
+    finally:
+        g2.stop()
+    assert len(kept) == 1 and truncation(kept[0]).messages == len(msgs)
 
 
 def _skeleton_bag(path, n=150):

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import importlib
 import threading
+import time
 from pathlib import Path
 
 from rclpy.node import Node
@@ -32,8 +33,9 @@ class RecorderNode(Node):
     def __init__(self, **kwargs):
         super().__init__('recorder', **kwargs)
         self.params = Parameters(self, [
-            ParamSpec('output', 'out/recording.mcap', 'MCAP file to write (overwritten)',
-                      read_only=True),
+            ParamSpec('output', 'out/recording.mcap',
+                      'MCAP file to write (a finished bag there is overwritten; an unfinished one, '
+                      'left by a killed recorder, is moved aside)', read_only=True),
             ParamSpec('topics', list(TOPICS), 'topics to record (types from the graph table)',
                       read_only=True),
             ParamSpec('flush_period', 0.25,
@@ -48,6 +50,7 @@ class RecorderNode(Node):
         self.path = Path(self.params['output']).expanduser().resolve()
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._lock = threading.Lock()
+        self._keep_unfinished()
         self._writer = BagWriter(str(self.path), flush_period_s=self.params['flush_period'],
                                  fsync=self.params['fsync'])
         if self.params['flush_period'] > 0:
@@ -75,6 +78,25 @@ class RecorderNode(Node):
             self._writer.write_raw(topic, msg, now, msgtype=msgtype)  # CDR bytes as received
             self.counts[topic] += 1
         self.health.on_publish()
+
+    def _keep_unfinished(self):
+        """An unfinished bag at the output path is the recording of a recorder that was killed
+        (a restarted node, a respawn): moved aside, never overwritten."""
+        from skeleton_core.bagio import BagError, truncation
+        if not self.path.is_file():
+            return
+        try:
+            cut = truncation(self.path)
+        except BagError:
+            cut = None   # not a readable bag: overwritten as documented
+        if cut is None:
+            return
+        stamp = time.strftime('%Y%m%d-%H%M%S')
+        aside = self.path.with_name(f'{self.path.stem}.unfinished-{stamp}{self.path.suffix}')
+        self.path.rename(aside)
+        self.get_logger().warning(
+            f'{self.path.name} is an unfinished recording ({cut.messages} complete messages): '
+            f'kept as {aside} (ros2 run kinect_bringup recover_bag {aside})')
 
     def _poll(self):
         with self._lock:
