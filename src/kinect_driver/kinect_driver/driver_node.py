@@ -82,10 +82,11 @@ PARAMS = [
     ParamSpec('replay_skip_topics', list(GRAPH_OUTPUTS),
               'replay: topics not replayed (by default those the node graph produces itself)',
               read_only=True),
-    ParamSpec('wait_for_subscribers', 1,
+    ParamSpec('wait_for_subscribers', 0,
               'replay: before the first frame, wait until /kinect/skeletons has this many '
-              'subscribers (the launch file and pipeline set the graph\'s count; 0 = start at '
-              'once)', range=(0, 100), read_only=True),
+              'subscribers, and after it until they acknowledged it (the launch file and '
+              'pipeline set the graph\'s count; 0 = start at once, like ros2 bag play)',
+              range=(0, 100), read_only=True),
     ParamSpec('wait_timeout_s', 30.0,
               'replay: start anyway (with a warning) after waiting this long for subscribers',
               range=(0.0, 3600.0), read_only=True),
@@ -163,6 +164,7 @@ class DriverNode(Node):
         self._retry_timer = None
         self._other_pubs = {}
         self._waiting_since = None   # replay: monotonic time the wait for subscribers began
+        self._ack_since = None       # replay: monotonic time the first frame was published
         self._waited = v['source'] != 'replay' or v['wait_for_subscribers'] == 0
         try:
             self.source.open()
@@ -243,6 +245,32 @@ class DriverNode(Node):
             return True
         return False
 
+    def _acks_pending(self) -> bool:
+        """Replay: a subscription counted by the publisher may not have discovered the publisher
+        yet (discovery is two-way; on a loaded machine one direction lagged 2.4 s, and the frames
+        sent meanwhile were lost beyond the queue depth). After the first frame the replay's
+        clock is therefore held (without blocking the node) until every reliable subscriber has
+        acknowledged it (1-3 s: acknowledgements follow DDS heartbeats), at most
+        ``wait_timeout_s``; nothing is released in a burst afterwards. True while holding."""
+        import time
+        from rclpy.duration import Duration
+        now = time.monotonic()
+        zero = Duration(seconds=0)
+        acked = all(p.wait_for_all_acked(zero) for p in [self.pub, *self._other_pubs.values()])
+        held = now - self._ack_since
+        if not acked and held < self.params['wait_timeout_s']:
+            return True
+        self._ack_since = None
+        if hasattr(self.source, 'delay'):
+            self.source.delay(int(held * 1e9))
+        if acked:
+            self.get_logger().info(f'replay: the first frame acknowledged by every subscriber '
+                                   f'after {held:.2f} s: playing on')
+        else:
+            self.get_logger().warning(f'replay: the first frame not acknowledged by every '
+                                      f'subscriber after {held:.1f} s: playing on')
+        return False
+
     def _retry_open(self) -> None:
         try:
             self.source.open()
@@ -255,10 +283,13 @@ class DriverNode(Node):
         self._started()
 
     def _tick(self) -> None:
+        first = False
         if not self._waited:
             if not self._subscribers_ready():
                 return
-            self._waited = True
+            self._waited = first = True
+        elif self._ack_since is not None and self._acks_pending():
+            return
         now = self._now_ns()
         try:
             outputs = self.source.poll(now)
@@ -273,6 +304,9 @@ class DriverNode(Node):
             if not self.context.ok():  # shutting down (Ctrl-C / SIGTERM) mid-callback
                 return
             raise
+        if first and outputs:
+            import time
+            self._ack_since = time.monotonic()
         try:
             self.source.prepare()
         except Exception as e:  # noqa: BLE001 - as poll(): counted and logged, never fatal

@@ -163,6 +163,12 @@ class ReplaySource(Source):
             self._next += 1
         return out
 
+    def delay(self, ns: int) -> None:
+        """Hold the replay's clock by ``ns`` (the node waited that long after the first frame):
+        what follows keeps its recorded spacing instead of coming out in a burst."""
+        if self._start_ns is not None:
+            self._start_ns += int(ns)
+
     @property
     def count(self) -> int:
         """Skeleton frames (messages of ``topic``)."""
