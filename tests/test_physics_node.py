@@ -122,7 +122,7 @@ def test_user_leaving_removes_the_character_and_bad_input_is_dropped(graph):
     got = []
     peer.create_subscription(SkeletonArray, '/character/skeletons', got.append, 50)
     pub = peer.create_publisher(SkeletonArray, '/test_physics/in', 10)
-    assert node.set_parameters([Parameter('user_timeout', value=0.2)])[0].successful
+    assert node.set_parameters([Parameter('user_timeout_s', value=0.2)])[0].successful
     deadline = time.time() + 10
     while pub.get_subscription_count() == 0 and time.time() < deadline:
         time.sleep(0.05)
@@ -154,12 +154,12 @@ def test_user_leaving_removes_the_character_and_bad_input_is_dropped(graph):
 
 def test_characters_leave_when_the_input_stops_altogether(graph):
     """No message arrives any more (driver killed, a gap in a bag): the input's clock runs on with
-    the wall clock, the users age out after user_timeout and the node stops publishing them."""
+    the wall clock, the users age out after user_timeout_s and the node stops publishing them."""
     node, peer = graph
     got = []
     peer.create_subscription(SkeletonArray, '/character/skeletons', got.append, 100)
     pub = peer.create_publisher(SkeletonArray, '/test_physics/in', 10)
-    assert node.set_parameters([Parameter('user_timeout', value=0.3)])[0].successful
+    assert node.set_parameters([Parameter('user_timeout_s', value=0.3)])[0].successful
     deadline = time.time() + 10
     while pub.get_subscription_count() == 0 and time.time() < deadline:
         time.sleep(0.05)

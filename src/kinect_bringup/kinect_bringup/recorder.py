@@ -27,24 +27,27 @@ def _msg_class(msgtype: str):
     return getattr(importlib.import_module(f'{pkg}.msg'), name)
 
 
+PARAMS = [
+    ParamSpec('output', 'out/recording.mcap',
+              'MCAP file to write (a finished bag there is overwritten; an unfinished one, left by '
+              'a killed recorder, is moved aside)', read_only=True),
+    ParamSpec('topics', list(TOPICS), 'topics to record (types from the graph table)',
+              read_only=True),
+    ParamSpec('flush_period', 0.25,
+              'write what was received to the file at least this often (s): a killed recorder '
+              'loses at most this much; 0 = only full 1 MiB chunks', range=(0.0, 60.0),
+              read_only=True),
+    ParamSpec('fsync', True, 'also force each flush onto the disk (survives a power cut)',
+              read_only=True),
+]
+
+
 class RecorderNode(Node):
     """Subscribes to every configured topic and appends each message to one MCAP file."""
 
     def __init__(self, **kwargs):
         super().__init__('recorder', **kwargs)
-        self.params = Parameters(self, [
-            ParamSpec('output', 'out/recording.mcap',
-                      'MCAP file to write (a finished bag there is overwritten; an unfinished one, '
-                      'left by a killed recorder, is moved aside)', read_only=True),
-            ParamSpec('topics', list(TOPICS), 'topics to record (types from the graph table)',
-                      read_only=True),
-            ParamSpec('flush_period', 0.25,
-                      'write what was received to the file at least this often (s): a killed '
-                      'recorder loses at most this much; 0 = only full 1 MiB chunks',
-                      range=(0.0, 60.0), read_only=True),
-            ParamSpec('fsync', True, 'also force each flush onto the disk (survives a power cut)',
-                      read_only=True),
-        ])
+        self.params = Parameters(self, PARAMS)
         from skeleton_core.bagio import BagWriter
         self.health = Health()
         self.path = Path(self.params['output']).expanduser().resolve()

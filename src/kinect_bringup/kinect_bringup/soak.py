@@ -345,7 +345,7 @@ def _users_phase(pub, spin_for, characters, refusals) -> Dict:
     start = time.monotonic()
     for u in SEQUENCE_USERS:
         play((u,), SEQUENCE_S)
-    spin_for(1.5)   # the last ones leave (physics user_timeout 1 s)
+    spin_for(1.5)   # the last ones leave (physics user_timeout_s 1)
     seq_end = time.monotonic()
     got_seq = sorted({u for t, us in characters if start <= t for u in us} & set(SEQUENCE_USERS))
     refused_before = sum(refusals.values())

@@ -52,7 +52,8 @@ from scipy.spatial.transform import Rotation
 
 from .bvh import Bvh, BvhError, load_bvh
 from skeleton_core.geometry import quat_multiply, quat_rotate
-from skeleton_core.model import JOINT_NAMES, MIRROR, NUM_JOINTS, PARENTS, standard_body
+from skeleton_core.model import (JOINT_NAMES, MIRROR, NUM_JOINTS, PARENTS, SEGMENT_PARENT_INDEX,
+                                 standard_body)
 
 __all__ = [
     'MotionClip', 'MocapError', 'CMU_TO_KINECT', 'CMU_ORIENTATION_SOURCE', 'CMU_UNIT',
@@ -268,7 +269,7 @@ def load_cmu_clip(path, motion_class: Optional[str] = None, drop_first: bool = T
     # Segments spanning several mocap bones (trunk, neck) are not rigid with their source bone:
     # swing the orientation by the small residual so it points exactly along the segment (the
     # twist still comes from the source bone).
-    seg = kin[:, 1:] - kin[:, list(PARENTS[1:])]
+    seg = kin[:, 1:] - kin[:, SEGMENT_PARENT_INDEX]
     seg /= np.maximum(np.linalg.norm(seg, axis=-1, keepdims=True), 1e-12)
     pred = quat_rotate(q[:, 1:], np.broadcast_to(a_std[1:], seg.shape))
     q[:, 1:] = quat_multiply(_min_rotation_batch(pred, seg), q[:, 1:])

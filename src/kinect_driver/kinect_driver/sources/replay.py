@@ -10,9 +10,10 @@
 
 Every other topic of the bag is replayed too, as ``ros2 bag play`` would (ground truth on
 ``/kinect/ground_truth`` included), at its recorded time among the skeletons, except the topics
-in ``skip_topics`` (by default those the node graph produces itself from the skeletons: replaying
-a recorded reconstruction beside the live one would mix the two). ``play_other_topics=False``
-replays only ``topic``.
+in ``replay_skip_topics`` (by default those the node graph produces itself from the skeletons:
+replaying a recorded reconstruction beside the live one would mix the two).
+``replay_other_topics=False`` replays only the skeleton topic. ``wait_for_subscribers`` and
+``wait_timeout_s`` are applied by the driver node (nothing lost while the graph comes up).
 
 ``rate`` scales the speed (2.0 = twice as fast); ``loop`` starts again after the last message (one
 median message interval after it). Outputs are due when ``(t_recorded - t_first) / rate`` has
@@ -21,6 +22,7 @@ elapsed since the first poll; a poll releases everything due up to half a period
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Dict, List, Optional, Sequence, Tuple
 
@@ -28,6 +30,7 @@ import numpy as np
 
 from skeleton_core.bagio import BagError, bag_topics, read_messages
 from skeleton_core.conversions import stamp_to_ns
+from skeleton_core.params import param
 
 from ..csv_format import CsvFormatError, read_csv
 from .base import Source, SourceError, SourceOutput
@@ -39,22 +42,50 @@ GRAPH_OUTPUTS = ('/kinect/skeletons_reliability', '/posture/completed', '/postur
                  '/rosout', '/parameter_events', '/tf', '/tf_static')
 
 
+@dataclass
+class ReplayConfig:
+    """Parameters of :class:`ReplaySource`."""
+
+    replay_file: str = param('', 'bag (.mcap file or rosbag2 directory) or CSV file')
+    replay_topic: str = param('/kinect/skeletons', "SkeletonArray topic in the bag ('' = the "
+                              "bag's only SkeletonArray topic)")
+    rate: float = param(1.0, 'speed factor (2 = twice as fast)', range=(0.05, 20.0))
+    loop: bool = param(False, 'start again after the last message')
+    replay_other_topics: bool = param(
+        True, "also play the bag's other topics (ground truth, ...) as recorded, except "
+        'replay_skip_topics')
+    replay_skip_topics: list = param(list(GRAPH_OUTPUTS), 'topics not replayed (by default '
+                                     'those the node graph produces itself)')
+    wait_for_subscribers: int = param(
+        0, 'before the first frame, wait until /kinect/skeletons has this many subscribers, and '
+        'after it until they acknowledged it (the launch file and pipeline set the graph\'s '
+        'count; 0 = start at once, like ros2 bag play)', range=(0, 100))
+    wait_timeout_s: float = param(30.0, 'play anyway (with a warning) after waiting this long '
+                                  'for subscribers (s)', range=(0.0, 3600.0))
+
+
 class ReplaySource(Source):
     name = 'replay'
+    config_class = ReplayConfig
+    recorded = True
 
-    def __init__(self, path: str, topic: str = '/kinect/skeletons', rate: float = 1.0,
-                 loop: bool = False, frame_id: str = 'kinect_link',
-                 play_other_topics: bool = True, skip_topics: Sequence[str] = GRAPH_OUTPUTS,
-                 warn=None):
-        self.path = str(path)
-        self.play_other_topics = bool(play_other_topics)
-        self.skip_topics = set(skip_topics)
+    def __init__(self, path: Optional[str] = None, config: Optional[ReplayConfig] = None,
+                 frame_id: str = 'kinect_link', topic: Optional[str] = None,
+                 rate: Optional[float] = None, loop: Optional[bool] = None,
+                 play_other_topics: Optional[bool] = None,
+                 skip_topics: Optional[Sequence[str]] = None, warn=None):
+        cfg = config or ReplayConfig()
+        self.config = cfg
+        self.play_other_topics = bool(cfg.replay_other_topics if play_other_topics is None
+                                      else play_other_topics)
+        self.skip_topics = set(cfg.replay_skip_topics if skip_topics is None else skip_topics)
         self.other_topics: Dict[str, str] = {}   # replayed besides ``topic``: name -> type
         self.frames = 0                          # skeleton messages
         self._warn = warn
-        self.topic = topic
-        self.rate = float(rate)
-        self.loop = bool(loop)
+        self.path = str(cfg.replay_file if path is None else path)
+        self.topic = cfg.replay_topic if topic is None else topic
+        self.rate = float(cfg.rate if rate is None else rate)
+        self.loop = bool(cfg.loop if loop is None else loop)
         self.frame_id = frame_id
         self._items: List[Tuple[int, SourceOutput]] = []   # (recorded time ns, output)
         self._next = 0
@@ -163,6 +194,10 @@ class ReplaySource(Source):
             self._next += 1
         return out
 
+    @classmethod
+    def from_config(cls, config, frame_id: str, log=None, clock_ns=None) -> 'ReplaySource':
+        return cls(config=config, frame_id=frame_id, warn=log)
+
     def delay(self, ns: int) -> None:
         """Hold the replay's clock by ``ns`` (the node waited that long after the first frame):
         what follows keeps its recorded spacing instead of coming out in a burst."""
@@ -173,6 +208,11 @@ class ReplaySource(Source):
     def count(self) -> int:
         """Skeleton frames (messages of ``topic``)."""
         return self.frames
+
+    def describe(self) -> str:
+        return f'{self.path} ({self.count} frames, rate {self.rate:g}' + \
+            (', loop)' if self.loop else ')') + \
+            (f'; also replaying {", ".join(self.other_topics)}' if self.other_topics else '')
 
     def status(self) -> dict:
         return {'replay_file': self.path, 'messages': len(self._items), 'frames': self.frames,
