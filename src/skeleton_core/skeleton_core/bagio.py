@@ -425,9 +425,7 @@ def _scan(f, size: int, topics: Optional[set] = None):
         elif isinstance(rec, Channel):
             channels[rec.id] = rec
         elif isinstance(rec, Message):
-            ch = channels.get(rec.channel_id)
-            if ch is None:
-                raise ValueError(f'message on unknown channel {rec.channel_id}')
+            ch = channels[rec.channel_id]
             count += 1
             if topics is None or ch.topic in topics:
                 out.append((schemas.get(ch.schema_id), ch, rec))
@@ -441,7 +439,7 @@ def _scan(f, size: int, topics: Optional[set] = None):
         opcode, length = _RECORD_HEAD.unpack(head)
         if opcode not in _KNOWN_OPCODES or pos + 9 + length > size:
             break   # zero-filled tail, garbage, or a record cut off by the end of the file
-        if opcode == 0x02:   # a footer in an unfinished file: the file is finished after all
+        if opcode == 0x02:   # a footer (without the closing magic): the records end here
             break
         body = f.read(length)
         if len(body) < length:
@@ -454,17 +452,13 @@ def _scan(f, size: int, topics: Optional[set] = None):
                 recs = breakup_chunk(rec, validate_crc=True) if opcode == 0x06 else [rec]
             else:
                 recs = []   # indexes, statistics, attachments, metadata: not needed here
-            n_before, len_before = count, len(out)
-            s_before, c_before = dict(schemas), dict(channels)
-            try:
-                for rec in recs:
-                    take(rec)
-            except Exception:
-                count, schemas, channels = n_before, s_before, c_before
-                del out[len_before:]
-                raise
         except Exception:   # noqa: BLE001 - a corrupt record ends the readable part
             break
+        known = set(channels) | {r.id for r in recs if isinstance(r, Channel)}
+        if any(isinstance(r, Message) and r.channel_id not in known for r in recs):
+            break           # a message of no channel: corrupt too
+        for rec in recs:
+            take(rec)
         pos += 9 + length
     return schemas, channels, out, Truncation(pos, count, size)
 
