@@ -12,8 +12,8 @@ import pytest
 
 pytest.importorskip('mcap_ros2')
 from skeleton_core import bagio  # noqa: E402
-from skeleton_core.bagio import (BagError, BagWriter, bag_topics, read_messages,  # noqa: E402
-                                 recover, truncation)
+from skeleton_core.bagio import (BagError, BagWriter, bag_topics, finished,  # noqa: E402
+                                 read_messages, recover, truncation)
 
 STRING = 'std_msgs/msg/String'
 
@@ -70,7 +70,7 @@ def test_recover_rewrites_a_cut_bag_into_a_complete_indexed_one(tmp_path):
     n, t = recover(cut, tmp_path / 'fixed.mcap', warn=lambda s: None)
     assert t is not None and n == t.messages > 0
     fixed = tmp_path / 'fixed.mcap'
-    assert truncation(fixed) is None
+    assert truncation(fixed) is None and finished(fixed) and not finished(cut)
     with open(fixed, 'rb') as f:
         summary = make_reader(f).get_summary()
     assert summary.statistics.message_count == n and summary.chunk_indexes

@@ -85,21 +85,20 @@ class RecorderNode(Node):
     def _keep_unfinished(self):
         """An unfinished bag at the output path is the recording of a recorder that was killed
         (a restarted node, a respawn): moved aside, never overwritten."""
-        from skeleton_core.bagio import BagError, truncation
+        from skeleton_core.bagio import BagError, finished
         if not self.path.is_file():
             return
         try:
-            cut = truncation(self.path)
+            if finished(self.path):
+                return
         except BagError:
-            cut = None   # not a readable bag: overwritten as documented
-        if cut is None:
-            return
+            return   # not a bag at all: overwritten as documented
         stamp = time.strftime('%Y%m%d-%H%M%S')
         aside = self.path.with_name(f'{self.path.stem}.unfinished-{stamp}{self.path.suffix}')
         self.path.rename(aside)
         self.get_logger().warning(
-            f'{self.path.name} is an unfinished recording ({cut.messages} complete messages): '
-            f'kept as {aside} (ros2 run kinect_bringup recover_bag {aside})')
+            f'{self.path.name} is an unfinished recording (a killed recorder\'s): kept as '
+            f'{aside} (ros2 run kinect_bringup recover_bag {aside})')
 
     def _poll(self):
         with self._lock:

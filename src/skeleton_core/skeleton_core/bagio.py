@@ -489,6 +489,14 @@ def _warn(p: Path, t: Truncation, warn) -> None:
         print(f'warning: {text}', file=sys.stderr, flush=True)
 
 
+def finished(path) -> bool:
+    """True if the bag ends with its footer (written to the end and closed); cheap: reads only
+    the last bytes. An unfinished or cut file gives False."""
+    p, f = _open(path)
+    with f:
+        return _complete(f, os.fstat(f.fileno()).st_size)
+
+
 def truncation(path) -> Optional[Truncation]:
     """None for a finished bag; where an unfinished or cut one ends otherwise (no warning)."""
     p, f = _open(path)
