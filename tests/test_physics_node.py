@@ -237,7 +237,7 @@ def test_ticks_follow_the_input_but_keep_the_output_rate(graph, monkeypatch):
     del ticks[:]
     for i in range(10):     # frames 30 Hz apart by their stamps delivered in pairs (a delay):
         clock.t += period * (2 if i % 2 == 0 else 0.05)      # each ticks, at once
-        send(200 + i)
+        send(61 + i)   # stamps go on from the 60 Hz ones (seconds ahead = a user gone that long)
         assert ticks[-1] == clock.t
     assert len(ticks) == 10
 
