@@ -358,11 +358,15 @@ def _code_digest() -> str:
     """Hash of the modules whose code decides the database content (so edits invalidate it)."""
     h = hashlib.sha256()
     here = Path(__file__).resolve().parent
-    for name in ('database.py', 'mocap.py', 'motions.py', 'bvh.py', 'geometry.py', 'model.py'):
+    from skeleton_core import geometry, model
+    from .joint_map import maps_dir
+    for path in [here / n for n in ('database.py', 'mocap.py', 'motions.py', 'bvh.py',
+                                     'joint_map.py', 'vicon.py')] \
+            + [Path(geometry.__file__), Path(model.__file__), maps_dir() / 'cmu_bvh.yaml']:
         try:
-            h.update((here / name).read_bytes())
+            h.update(path.read_bytes())
         except OSError:  # pragma: no cover
-            h.update(name.encode())
+            h.update(path.name.encode())
     return h.hexdigest()[:16]
 
 
