@@ -1,0 +1,160 @@
+"""What a database of the lab's own mocap does to method C, scored on a held-out subject.
+
+For each held-out subject s of the UI-PRMD development set (folds), two motion databases:
+
+* ``CMU`` — the default database (CMU five-class database clips);
+* ``CMU+vicon`` — the same clips plus the Vicon (Plug-in-Gait marker -> joint centre) postures of
+  the *other* subjects (:func:`skeleton_data.database.uiprmd_vicon_source`, through
+  ``config/joint_maps/plug_in_gait.yaml``), built into ``cache/`` like the default one.
+
+Subject s's Kinect clips are then reconstructed by method C with each database (default
+parameters) and scored against s's own marker reference (:func:`skeleton_eval.paired.load_dataset`,
+:func:`skeleton_eval.metrics.compute_all`), next to the raw Kinect skeleton. Subject s's postures
+are never in the database its clips are scored with (checked: the fold stops if a database clip
+names subject s). Nothing is tuned: C runs with its defaults.
+
+Rows: per movement (m01-m10) and ``overall`` (frame-weighted over the folds' clips, m03_s01, the
+tracking failure, excluded as in ``evaluate --real``).
+
+``python -m kinect_bringup.mocap_db_eval --folds 1,2,3,4,5 [--max-clips N] [--out out/mocap_db]``
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+from typing import Dict, List, Sequence
+
+import numpy as np
+
+SUBJECTS = (1, 2, 3, 4, 5)
+VARIANTS = ('raw', 'C (CMU)', 'C (CMU+vicon)')
+METRICS = (('eq18_cm', 'Eq. 18 (cm)'), ('mpjpe_cm', 'MPJPE (cm)'),
+           ('bone_dir_deg', 'bone dir (deg)'), ('bone_std_cm', 'bone-length std (cm)'),
+           ('jitter_ms2', 'jitter (m/s^2)'))
+
+
+def fold_database(src, held_out: int, subjects: Sequence[int] = SUBJECTS, stats=None):
+    """The CMU + Vicon-postures database of the fold that scores ``held_out`` (training subjects
+    only); raises RuntimeError if a clip of ``held_out`` got in."""
+    from skeleton_data.database import load_or_build_default, uiprmd_vicon_source
+    train = [s for s in subjects if s != held_out]
+    db = load_or_build_default(mapped=[uiprmd_vicon_source(src, subjects=train)], stats=stats)
+    leak = [c for c in db.meta.get('clips', []) if f'_s{held_out:02d}_' in c]
+    if leak:
+        raise RuntimeError(f'fold s{held_out:02d}: database holds its clips {leak[:3]}')
+    return db
+
+
+def _pick(streams: List, max_clips: int) -> List:
+    if not max_clips or len(streams) <= max_clips:
+        return streams
+    idx = np.linspace(0, len(streams) - 1, max_clips).round().astype(int)
+    return [streams[i] for i in sorted(set(idx))]
+
+
+def evaluate(src, folds: Sequence[int] = SUBJECTS, max_clips: int = 0, progress=None) -> Dict:
+    from pose_reconstruction.methods import default_database
+    from skeleton_eval import evaluation as E
+    from skeleton_eval import metrics as M
+    from skeleton_eval.paired import load_dataset
+    from skeleton_eval.real_eval import make_streams
+    from skeleton_eval.sensor_model import load_params
+    E.load_plugins()
+    height = float(load_params(None)['placement']['sensor_height_m'])
+    db_cmu = default_database()
+    parts: Dict[str, Dict[str, list]] = {v: {} for v in VARIANTS}
+    folds_info = []
+    t0 = time.time()
+    for s in folds:
+        st: Dict = {}
+        db_mix = fold_database(src, s, stats=st)
+        clips, _, _ = load_dataset(src, subjects=[s], sensor_height=height)
+        rows = make_streams(clips)
+        rows.pop('m03_s01', None)
+        info = {'held_out': s, 'db_cmu': len(db_cmu), 'db_mix': len(db_mix),
+                'db_mix_path': st.get('path'), 'clips': 0, 'frames': 0}
+        methods = {'raw': E.make_method('raw'), 'C (CMU)': E.make_method('C', db=db_cmu),
+                   'C (CMU+vicon)': E.make_method('C', db=db_mix)}
+        for row in sorted(rows):
+            for stream in _pick(rows[row], max_clips):
+                info['clips'] += 1
+                info['frames'] += len(stream)
+                for v, m in methods.items():
+                    out, _ = E.run_method(m, stream)
+                    res = M.compute_all(out, stream.truth, stream.fps)
+                    for key in (row, 'overall', f'fold s{s:02d}'):
+                        parts[v].setdefault(key, []).append((res, len(stream)))
+                if progress:
+                    progress(s, stream.clip_name)
+        folds_info.append(info)
+    results = {v: {row: E._combine([p for p, _ in lst], [w for _, w in lst])
+                   for row, lst in rows_.items()} for v, rows_ in parts.items()}
+    return {'source': str(src), 'folds': folds_info, 'max_clips': max_clips,
+            'wall_s': time.time() - t0, 'results': results}
+
+
+def _order(rows):
+    mv = sorted(r for r in rows if r.startswith('m'))
+    fo = sorted(r for r in rows if r.startswith('fold'))
+    return mv + fo + ['overall']
+
+
+def to_markdown(res: Dict) -> str:
+    f = ', '.join(f"s{i['held_out']:02d} ({i['clips']} clips, database {i['db_cmu']} -> "
+                  f"{i['db_mix']} postures)" for i in res['folds'])
+    lines = [f'Held-out folds: {f}.', '']
+    rows = _order(res['results']['raw'])
+    for key, head in METRICS:
+        lines += [f'| {head} | ' + ' | '.join(VARIANTS) + ' | C+vicon vs C |',
+                  '|---' * (len(VARIANTS) + 2) + '|']
+        for row in rows:
+            vals = [res['results'][v][row][key]['overall'] for v in VARIANTS]
+            a, b = vals[1], vals[2]
+            rel = f'{100 * (b - a) / a:+.1f} %' if np.isfinite(a) and a else 'n/a'
+            lines.append(f'| {row} | ' + ' | '.join(f'{x:.2f}' for x in vals) + f' | {rel} |')
+        lines.append('')
+    return '\n'.join(lines)
+
+
+def main(argv=None) -> int:
+    from skeleton_data.database import default_shared_dir
+    from skeleton_eval.evaluation import json_safe
+    shared = default_shared_dir()
+    ap = argparse.ArgumentParser(prog='mocap_db_eval', description=__doc__.split('\n')[0])
+    ap.add_argument('--src', type=Path,
+                    default=(shared / 'kinect' / 'ui-prmd') if shared else None)
+    ap.add_argument('--folds', default='1,2,3,4,5', help='held-out subjects [%(default)s]')
+    ap.add_argument('--max-clips', type=int, default=0,
+                    help='clips per movement and fold, 0 = all [%(default)s]')
+    ap.add_argument('--out', type=Path, default=Path('out/mocap_db'))
+    ap.add_argument('--quiet', action='store_true')
+    args = ap.parse_args(argv)
+    if args.src is None or not Path(args.src).is_dir():
+        print(f'mocap_db_eval: no UI-PRMD folder at {args.src}', file=sys.stderr)
+        return 1
+    try:
+        folds = [int(x) for x in args.folds.split(',') if x.strip()]
+    except ValueError:
+        print(f'mocap_db_eval: --folds must be subject numbers, got {args.folds!r}',
+              file=sys.stderr)
+        return 2
+    bad = [s for s in folds if s not in SUBJECTS]
+    if bad:
+        print(f'mocap_db_eval: unknown subject(s) {bad}; development subjects: {SUBJECTS}',
+              file=sys.stderr)
+        return 2
+    prog = None if args.quiet else (lambda s, c: print(f'  s{s:02d} {c}', file=sys.stderr))
+    res = evaluate(args.src, folds, args.max_clips, prog)
+    md = to_markdown(res)
+    args.out.mkdir(parents=True, exist_ok=True)
+    (args.out / 'mocap_db.md').write_text(md + '\n')
+    (args.out / 'mocap_db.json').write_text(json.dumps(json_safe(res), indent=1))
+    print(md)
+    return 0
+
+
+if __name__ == '__main__':  # pragma: no cover
+    sys.exit(main())
