@@ -66,6 +66,7 @@ def evaluate(src, folds: Sequence[int] = SUBJECTS, max_clips: int = 0, progress=
     height = float(load_params(None)['placement']['sensor_height_m'])
     db_cmu = default_database()
     parts: Dict[str, Dict[str, list]] = {v: {} for v in VARIANTS}
+    times: Dict[str, list] = {v: [] for v in VARIANTS}
     folds_info = []
     t0 = time.time()
     for s in folds:
@@ -83,7 +84,8 @@ def evaluate(src, folds: Sequence[int] = SUBJECTS, max_clips: int = 0, progress=
                 info['clips'] += 1
                 info['frames'] += len(stream)
                 for v, m in methods.items():
-                    out, _ = E.run_method(m, stream)
+                    out, t = E.run_method(m, stream)
+                    times[v].append(t)
                     res = M.compute_all(out, stream.truth, stream.fps)
                     for key in (row, 'overall', f'fold s{s:02d}'):
                         parts[v].setdefault(key, []).append((res, len(stream)))
@@ -93,7 +95,8 @@ def evaluate(src, folds: Sequence[int] = SUBJECTS, max_clips: int = 0, progress=
     results = {v: {row: E._combine([p for p, _ in lst], [w for _, w in lst])
                    for row, lst in rows_.items()} for v, rows_ in parts.items()}
     return {'source': str(src), 'folds': folds_info, 'max_clips': max_clips,
-            'wall_s': time.time() - t0, 'results': results}
+            'wall_s': time.time() - t0, 'results': results,
+            'time_ms': {v: E._time_summary(np.concatenate(t)) for v, t in times.items() if t}}
 
 
 def _order(rows):
@@ -116,6 +119,8 @@ def to_markdown(res: Dict) -> str:
             rel = f'{100 * (b - a) / a:+.1f} %' if np.isfinite(a) and a else 'n/a'
             lines.append(f'| {row} | ' + ' | '.join(f'{x:.2f}' for x in vals) + f' | {rel} |')
         lines.append('')
+    lines.append('Time per frame p50/p95 (ms, machine shared): ' + ', '.join(
+        f"{v} {t['p50_ms']:.2f}/{t['p95_ms']:.2f}" for v, t in res.get('time_ms', {}).items()))
     return '\n'.join(lines)
 
 
