@@ -55,6 +55,22 @@ def _pick(streams: List, max_clips: int) -> List:
     return [streams[i] for i in sorted(set(idx))]
 
 
+class _TrustProbe:
+    """Wraps a method; after every frame records its trust in the sensor (method C: 1 = the
+    output follows the observation, 0 = the database solution)."""
+
+    def __init__(self, method):
+        self.method, self.name, self.trust = method, method.name, []
+
+    def reset(self):
+        self.method.reset()
+
+    def process(self, frame):
+        out = self.method.process(frame)
+        self.trust.append(float(getattr(self.method, 'trust_sensor', np.nan)))
+        return out
+
+
 def evaluate(src, folds: Sequence[int] = SUBJECTS, max_clips: int = 0, progress=None) -> Dict:
     from pose_reconstruction.methods import default_database
     from skeleton_eval import evaluation as E
@@ -67,6 +83,7 @@ def evaluate(src, folds: Sequence[int] = SUBJECTS, max_clips: int = 0, progress=
     db_cmu = default_database()
     parts: Dict[str, Dict[str, list]] = {v: {} for v in VARIANTS}
     times: Dict[str, list] = {v: [] for v in VARIANTS}
+    trust: Dict[str, Dict[str, list]] = {v: {} for v in VARIANTS[1:]}
     folds_info = []
     t0 = time.time()
     for s in folds:
@@ -77,8 +94,9 @@ def evaluate(src, folds: Sequence[int] = SUBJECTS, max_clips: int = 0, progress=
         rows.pop('m03_s01', None)
         info = {'held_out': s, 'db_cmu': len(db_cmu), 'db_mix': len(db_mix),
                 'db_mix_path': st.get('path'), 'clips': 0, 'frames': 0}
-        methods = {'raw': E.make_method('raw'), 'C (CMU)': E.make_method('C', db=db_cmu),
-                   'C (CMU+vicon)': E.make_method('C', db=db_mix)}
+        methods = {'raw': E.make_method('raw'),
+                   'C (CMU)': _TrustProbe(E.make_method('C', db=db_cmu)),
+                   'C (CMU+vicon)': _TrustProbe(E.make_method('C', db=db_mix))}
         for row in sorted(rows):
             for stream in _pick(rows[row], max_clips):
                 info['clips'] += 1
@@ -86,6 +104,10 @@ def evaluate(src, folds: Sequence[int] = SUBJECTS, max_clips: int = 0, progress=
                 for v, m in methods.items():
                     out, t = E.run_method(m, stream)
                     times[v].append(t)
+                    if isinstance(m, _TrustProbe):
+                        for key in (row, 'overall'):
+                            trust[v].setdefault(key, []).extend(m.trust)
+                        m.trust = []
                     res = M.compute_all(out, stream.truth, stream.fps)
                     for key in (row, 'overall', f'fold s{s:02d}'):
                         parts[v].setdefault(key, []).append((res, len(stream)))
@@ -96,7 +118,9 @@ def evaluate(src, folds: Sequence[int] = SUBJECTS, max_clips: int = 0, progress=
                    for row, lst in rows_.items()} for v, rows_ in parts.items()}
     return {'source': str(src), 'folds': folds_info, 'max_clips': max_clips,
             'wall_s': time.time() - t0, 'results': results,
-            'time_ms': {v: E._time_summary(np.concatenate(t)) for v, t in times.items() if t}}
+            'time_ms': {v: E._time_summary(np.concatenate(t)) for v, t in times.items() if t},
+            'trust': {v: {row: float(np.nanmean(x)) for row, x in rows_.items()}
+                      for v, rows_ in trust.items()}}
 
 
 def _order(rows):
@@ -118,6 +142,13 @@ def to_markdown(res: Dict) -> str:
             a, b = vals[1], vals[2]
             rel = f'{100 * (b - a) / a:+.1f} %' if np.isfinite(a) and a else 'n/a'
             lines.append(f'| {row} | ' + ' | '.join(f'{x:.2f}' for x in vals) + f' | {rel} |')
+        lines.append('')
+    if res.get('trust'):
+        lines += ['| mean trust in the sensor | ' + ' | '.join(VARIANTS[1:]) + ' |',
+                  '|---' * len(VARIANTS) + '|']
+        for row in [r for r in rows if not r.startswith('fold')]:
+            lines.append(f'| {row} | ' + ' | '.join(f"{res['trust'][v][row]:.2f}"
+                                                    for v in VARIANTS[1:]) + ' |')
         lines.append('')
     lines.append('Time per frame p50/p95 (ms, machine shared): ' + ', '.join(
         f"{v} {t['p50_ms']:.2f}/{t['p95_ms']:.2f}" for v, t in res.get('time_ms', {}).items()))
