@@ -352,3 +352,13 @@ def test_vicon_posture_database_excludes_held_out_subject(tmp_path, capsys):
     db2 = MotionDatabase.load(out)
     assert not any('_s02_' in c for c in db2.meta['clips']) and len(db2) == 12
     assert isinstance(src, MappedSource)
+
+
+def test_fold_database_trains_on_the_other_subjects_only(tmp_path):
+    from kinect_bringup.mocap_db_eval import fold_database
+    _uiprmd_vicon(tmp_path, subjects=(1, 2, 3, 4))
+    for held in (1, 3):
+        db = fold_database(tmp_path, held, subjects=(1, 2, 3, 4), source='none',
+                           cache_dir=tmp_path / 'cache')
+        subjects = sorted({c.split('_')[1] for c in db.meta['clips']})
+        assert subjects == [f's{s:02d}' for s in (1, 2, 3, 4) if s != held]

@@ -25,7 +25,7 @@ import json
 import sys
 import time
 from pathlib import Path
-from typing import Dict, List, Sequence
+from typing import Dict, List, Optional, Sequence
 
 import numpy as np
 
@@ -36,12 +36,14 @@ METRICS = (('eq18_cm', 'Eq. 18 (cm)'), ('mpjpe_cm', 'MPJPE (cm)'),
            ('jitter_ms2', 'jitter (m/s^2)'))
 
 
-def fold_database(src, held_out: int, subjects: Sequence[int] = SUBJECTS, stats=None):
-    """The CMU + Vicon-postures database of the fold that scores ``held_out`` (training subjects
-    only); raises RuntimeError if a clip of ``held_out`` got in."""
+def fold_database(src, held_out: int, subjects: Sequence[int] = SUBJECTS, stats=None,
+                  source: str = 'auto', cache_dir=None):
+    """The default (``source``) + Vicon-postures database of the fold that scores ``held_out``
+    (training subjects only); raises RuntimeError if a clip of ``held_out`` got in."""
     from skeleton_data.database import load_or_build_default, uiprmd_vicon_source
     train = [s for s in subjects if s != held_out]
-    db = load_or_build_default(mapped=[uiprmd_vicon_source(src, subjects=train)], stats=stats)
+    db = load_or_build_default(source, cache_dir=cache_dir, stats=stats,
+                               mapped=[uiprmd_vicon_source(src, subjects=train)])
     leak = [c for c in db.meta.get('clips', []) if f'_s{held_out:02d}_' in c]
     if leak:
         raise RuntimeError(f'fold s{held_out:02d}: database holds its clips {leak[:3]}')
@@ -71,7 +73,9 @@ class _TrustProbe:
         return out
 
 
-def evaluate(src, folds: Sequence[int] = SUBJECTS, max_clips: int = 0, progress=None) -> Dict:
+def evaluate(src, folds: Sequence[int] = SUBJECTS, max_clips: int = 0, progress=None,
+             params: Optional[Dict] = None) -> Dict:
+    """``params``: overrides of C's parameters, the same for both databases."""
     from pose_reconstruction.methods import default_database
     from skeleton_eval import evaluation as E
     from skeleton_eval import metrics as M
@@ -95,8 +99,8 @@ def evaluate(src, folds: Sequence[int] = SUBJECTS, max_clips: int = 0, progress=
         info = {'held_out': s, 'db_cmu': len(db_cmu), 'db_mix': len(db_mix),
                 'db_mix_path': st.get('path'), 'clips': 0, 'frames': 0}
         methods = {'raw': E.make_method('raw'),
-                   'C (CMU)': _TrustProbe(E.make_method('C', db=db_cmu)),
-                   'C (CMU+vicon)': _TrustProbe(E.make_method('C', db=db_mix))}
+                   'C (CMU)': _TrustProbe(E.make_method('C', db=db_cmu, **(params or {}))),
+                   'C (CMU+vicon)': _TrustProbe(E.make_method('C', db=db_mix, **(params or {})))}
         for row in sorted(rows):
             for stream in _pick(rows[row], max_clips):
                 info['clips'] += 1
@@ -116,7 +120,7 @@ def evaluate(src, folds: Sequence[int] = SUBJECTS, max_clips: int = 0, progress=
         folds_info.append(info)
     results = {v: {row: E._combine([p for p, _ in lst], [w for _, w in lst])
                    for row, lst in rows_.items()} for v, rows_ in parts.items()}
-    return {'source': str(src), 'folds': folds_info, 'max_clips': max_clips,
+    return {'source': str(src), 'folds': folds_info, 'max_clips': max_clips, 'params': params or {},
             'wall_s': time.time() - t0, 'results': results,
             'time_ms': {v: E._time_summary(np.concatenate(t)) for v, t in times.items() if t},
             'trust': {v: {row: float(np.nanmean(x)) for row, x in rows_.items()}
@@ -132,7 +136,8 @@ def _order(rows):
 def to_markdown(res: Dict) -> str:
     f = ', '.join(f"s{i['held_out']:02d} ({i['clips']} clips, database {i['db_cmu']} -> "
                   f"{i['db_mix']} postures)" for i in res['folds'])
-    lines = [f'Held-out folds: {f}.', '']
+    lines = [f'Held-out folds: {f}.'
+             + (f" C parameters: {res['params']}." if res.get('params') else ''), '']
     rows = _order(res['results']['raw'])
     for key, head in METRICS:
         lines += [f'| {head} | ' + ' | '.join(VARIANTS) + ' | C+vicon vs C |',
@@ -166,6 +171,8 @@ def main(argv=None) -> int:
     ap.add_argument('--max-clips', type=int, default=0,
                     help='clips per movement and fold, 0 = all [%(default)s]')
     ap.add_argument('--out', type=Path, default=Path('out/mocap_db'))
+    ap.add_argument('--set', action='append', default=[], metavar='NAME=VALUE',
+                    help='override a parameter of C for both databases (robustness checks)')
     ap.add_argument('--quiet', action='store_true')
     args = ap.parse_args(argv)
     if args.src is None or not Path(args.src).is_dir():
@@ -182,8 +189,18 @@ def main(argv=None) -> int:
         print(f'mocap_db_eval: unknown subject(s) {bad}; development subjects: {SUBJECTS}',
               file=sys.stderr)
         return 2
+    params = {}
+    for item in args.set:
+        name, sep, val = item.partition('=')
+        if not sep or not name:
+            print(f'mocap_db_eval: --set needs NAME=VALUE, got {item!r}', file=sys.stderr)
+            return 2
+        try:
+            params[name] = json.loads(val)
+        except ValueError:
+            params[name] = val
     prog = None if args.quiet else (lambda s, c: print(f'  s{s:02d} {c}', file=sys.stderr))
-    res = evaluate(args.src, folds, args.max_clips, prog)
+    res = evaluate(args.src, folds, args.max_clips, prog, params)
     md = to_markdown(res)
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / 'mocap_db.md').write_text(md + '\n')
