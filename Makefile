@@ -12,6 +12,7 @@ help:
 	@echo "make evaluate   accuracy table of every method on the sensor-model streams"
 	@echo "make bench      end-to-end latency/throughput benchmark"
 	@echo "make soak       10-minute soak of the running graph"
+	@echo "make params     write config/*.yaml and docs/parameters.md from the parameter declarations"
 
 setup:
 	@scripts/setup.sh
@@ -37,4 +38,7 @@ bench:
 soak:
 	@$(RUN) ros2 run kinect_bringup soak $(ARGS)
 
-.PHONY: help setup test lint demo build-db evaluate bench soak
+params:
+	@$(RUN) ros2 run kinect_bringup param_docs $(ARGS)
+
+.PHONY: help setup test lint demo build-db evaluate bench soak params

@@ -15,15 +15,14 @@ from launch_ros.parameter_descriptions import ParameterValue
 
 def generate_launch_description():
     config = os.path.join(get_package_share_directory('kinect_bringup'), 'config', 'driver.yaml')
-    args = [('source', 'synthetic', 'synthetic | replay | live'),
-            ('replay_file', '', 'bag (.mcap) or CSV for source:=replay'),
-            ('scenario', 'b', 'synthetic scenario class a | b | c'),
-            ('num_users', '1', 'synthetic users (1-6)'),
-            ('device_uri', '', 'live: OpenNI2 device URI or .oni file ("" = first device)'),
-            ('nite2_path', '', 'live: NiTE2 Redist directory (libNiTE2.so, NiTE.ini, NiTE2/)')]
-    types = {'num_users': int}
-    overrides = {name: ParameterValue(LaunchConfiguration(name), value_type=types.get(name, str))
-                 for name, _, _ in args}
+    from kinect_driver.driver_node import driver_params
+    specs = {s.name: s for s in driver_params()}
+    # the driver parameters users change most, as launch arguments (default, type and description
+    # from the parameter declarations)
+    names = ('source', 'replay_file', 'scenario', 'num_users', 'device_uri', 'nite2_path')
+    args = [(n, str(specs[n].default), specs[n].description) for n in names]
+    overrides = {n: ParameterValue(LaunchConfiguration(n), value_type=type(specs[n].default))
+                 for n in names}
     return LaunchDescription(
         [DeclareLaunchArgument(n, default_value=d, description=t) for n, d, t in args] + [
             Node(package='kinect_driver', executable='driver', name='driver', output='screen',

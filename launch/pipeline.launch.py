@@ -67,12 +67,13 @@ def _nodes(context):
     db = arg('database')
     db_over = {'database': db} if db else {}
 
+    from kinect_driver.driver_node import driver_params
+    driver_specs = {s.name: s for s in driver_params()}
     driver_over = {}
-    for name, cast in (('source', str), ('scenario', str), ('replay_file', str),
-                       ('device_uri', str), ('nite2_path', str),
-                       ('num_users', int), ('seed', int)):
-        if arg(name):
-            driver_over[name] = cast(arg(name))
+    for name in ('source', 'scenario', 'replay_file', 'device_uri', 'nite2_path', 'num_users',
+                 'seed'):
+        if arg(name):   # typed as declared
+            driver_over[name] = type(driver_specs[name].default)(arg(name))
     opt_over = dict(db_over)
     if method in ('B', 'C'):
         opt_over['method'] = method

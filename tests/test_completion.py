@@ -109,7 +109,7 @@ def reference_complete(c, p, rel, height, orientations=None, bones=None):
     from pose_reconstruction.posture_space import STRICT_ANCESTORS
     from skeleton_core.geometry import normalize, quat_from_yaw, quat_multiply, retarget
     from skeleton_core.model import PARENTS, ROOT
-    missing = ~(rel >= c.reliability_threshold)
+    missing = ~(rel >= c.reliable_threshold)
     norm, tf = normalize(p, np.maximum((~missing).astype(float), 1e-3))
     scale = c.body.height / max(height, 0.5)
     q = retarget(norm, c.body)

@@ -122,7 +122,7 @@ def test_user_leaving_removes_the_character_and_bad_input_is_dropped(graph):
     got = []
     peer.create_subscription(SkeletonArray, '/character/skeletons', got.append, 50)
     pub = peer.create_publisher(SkeletonArray, '/test_physics/in', 10)
-    assert node.set_parameters([Parameter('user_timeout', value=0.2)])[0].successful
+    assert node.set_parameters([Parameter('user_timeout_s', value=0.2)])[0].successful
     deadline = time.time() + 10
     while pub.get_subscription_count() == 0 and time.time() < deadline:
         time.sleep(0.05)

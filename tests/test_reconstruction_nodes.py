@@ -214,7 +214,7 @@ def test_fused_parameters_map_the_three_config_files():
 
     fused = rn.fused_parameters(load_params('reliability'), load_params('completion'),
                                 load_params('optimizer'))
-    specs = {s.name: s for s in rn.SPECS}
+    specs = {s.name: s for s in rn.PARAMS}
     # every prefixed parameter comes from its node's file with that file's value
     prefixed = {k for k in specs if '.' in k}
     assert set(fused) == prefixed | {'qos_depth', 'user_timeout_s', 'time_jump_reset_s',

@@ -21,17 +21,19 @@ def _msg_class(msgtype: str):
     return getattr(importlib.import_module(f'{pkg}.msg'), name)
 
 
+PARAMS = [
+    ParamSpec('output', 'out/recording.mcap', 'MCAP file to write (overwritten)', read_only=True),
+    ParamSpec('topics', list(TOPICS), 'topics to record (types from the graph table)',
+              read_only=True),
+]
+
+
 class RecorderNode(Node):
     """Subscribes to every configured topic and appends each message to one MCAP file."""
 
     def __init__(self, **kwargs):
         super().__init__('recorder', **kwargs)
-        self.params = Parameters(self, [
-            ParamSpec('output', 'out/recording.mcap', 'MCAP file to write (overwritten)',
-                      read_only=True),
-            ParamSpec('topics', list(TOPICS), 'topics to record (types from the graph table)',
-                      read_only=True),
-        ])
+        self.params = Parameters(self, PARAMS)
         from skeleton_core.bagio import BagWriter
         self.health = Health()
         self.path = Path(self.params['output']).expanduser().resolve()

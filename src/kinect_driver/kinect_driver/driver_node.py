@@ -16,6 +16,8 @@ Parameters: config/driver.yaml. Health on ``/diagnostics``.
 """
 from __future__ import annotations
 
+import dataclasses
+from dataclasses import dataclass
 from typing import List
 
 from rclpy.node import Node
@@ -24,9 +26,10 @@ from rclpy.qos import QoSProfile
 from skeleton_core.cdr import frames_to_cdr
 from skeleton_core.conversions import frames_from_array_msg, frames_to_array_msg, ns_to_stamp
 from skeleton_core.health import Health
-from skeleton_core.rosnode import DiagnosticsPublisher, ParamSpec, Parameters, run_node
+from skeleton_core.params import ParamSpec, build, param, specs
+from skeleton_core.rosnode import DiagnosticsPublisher, Parameters, run_node
 
-from .sources import SOURCE_NAMES, SourceError, SourceOutput
+from .sources import SourceError, SourceOutput, source_class, source_names
 from .tf_names import tf_frames
 
 SKELETONS_TOPIC = '/kinect/skeletons'
@@ -38,83 +41,55 @@ def _non_empty(name):
     return lambda v: None if v else f'{name} must not be empty'
 
 
-PARAMS = [
-    ParamSpec('source', 'synthetic', 'skeleton source: synthetic | replay | live',
-              choices=SOURCE_NAMES, read_only=True),
-    ParamSpec('frame_id', 'kinect_link', 'frame of the published skeletons (the sensor frame, '
-              'REP-103)', read_only=True, validator=_non_empty('frame_id')),
-    ParamSpec('publish_tf', False, 'also broadcast one TF frame per NiTE joint and user '
-              '(head_1, neck_1, ...) on /tf'),
-    ParamSpec('tf_prefix', '', 'prefix of the TF joint frame names'),
-    # synthetic
-    ParamSpec('scenario', 'b', 'synthetic: sensor-model scenario class a | b | c',
-              choices=('a', 'b', 'c', 'clean'), read_only=True),
-    ParamSpec('seed', 0, 'synthetic: random seed of the sensor model and motions',
-              range=(0, 2 ** 31 - 1), read_only=True),
-    ParamSpec('num_users', 1, 'synthetic: number of users side by side', range=(1, 6),
-              read_only=True),
-    ParamSpec('clip', '', "synthetic: motion ('' = built-in motions, a built-in name such as "
-              "builtin_wave, or a CMU BVH path)", read_only=True),
-    ParamSpec('user_spacing', 0.8, 'synthetic: lateral distance between users (m)',
-              range=(0.3, 2.0), read_only=True),
-    ParamSpec('sensor_params', '', "synthetic: sensor model YAML ('' = config/sensor_model.yaml "
-              "or the built-in defaults)", read_only=True),
-    ParamSpec('rate_hz', 30.0, 'synthetic: frame rate (Hz)', range=(1.0, 120.0), read_only=True),
-    ParamSpec('publish_ground_truth', False,
-              'synthetic: publish the noise-free skeletons on /kinect/ground_truth'),
-    # replay
-    ParamSpec('replay_file', '', 'replay: bag (.mcap file or rosbag2 directory) or CSV file',
-              read_only=True),
-    ParamSpec('replay_topic', '/kinect/skeletons', "replay: SkeletonArray topic in the bag ('' = "
-              "the bag's only SkeletonArray topic)", read_only=True),
-    ParamSpec('rate', 1.0, 'replay: speed factor (2 = twice as fast)', range=(0.05, 20.0),
-              read_only=True),
-    ParamSpec('loop', False, 'replay: start again after the last message', read_only=True),
-    ParamSpec('restamp', False, 'replay: stamp messages with the current time instead of the '
-              'recorded stamps', read_only=True),
-    # live
-    ParamSpec('device_uri', '', "live: OpenNI2 device URI ('' = first device) or an .oni "
-              "recording path", read_only=True),
-    ParamSpec('nite2_path', '', 'live: NiTE2 Redist directory (holding libNiTE2.so)',
-              read_only=True),
-    ParamSpec('openni2_path', '', "live: directory of libOpenNI2.so ('' = system libraries)",
-              read_only=True),
-    ParamSpec('max_users', 6, 'live: most users published per frame', range=(1, 6),
-              read_only=True),
-    ParamSpec('tracked_confidence', 0.5, 'live: NiTE joint confidence >= this -> TRACKED',
-              range=(0.0, 1.0), read_only=True),
-    ParamSpec('inferred_confidence', 0.0, 'live: NiTE joint confidence > this -> INFERRED '
-              '(else NOT_TRACKED)', range=(0.0, 1.0), read_only=True),
-    ParamSpec('smoothing', 0.0, 'live: NiTE skeleton smoothing factor (0 = off)',
-              range=(0.0, 0.99), read_only=True),
-    ParamSpec('retry_s', 0.0, 'live: when > 0, keep retrying a missing device every retry_s '
-              'seconds instead of exiting (a device lost mid-run is always retried)',
-              range=(0.0, 60.0), read_only=True),
-]
+@dataclass
+class DriverConfig:
+    """The driver node's own parameters (each source adds its ``config_class``'s)."""
+
+    source: str = param('synthetic', 'skeleton source (kinect_driver.sources: synthetic | replay '
+                        '| live, or a registered one)', read_only=True)
+    frame_id: str = param('kinect_link', 'frame of the published skeletons (the sensor frame, '
+                          'REP-103)', read_only=True, validator=_non_empty('frame_id'))
+    publish_tf: bool = param(False, 'also broadcast one TF frame per NiTE joint and user '
+                             '(head_1, neck_1, ...) on /tf')
+    tf_prefix: str = param('', 'prefix of the TF joint frame names')
+    publish_ground_truth: bool = param(
+        True, 'publish the noise-free skeletons of a source that has them (synthetic) on '
+        '/kinect/ground_truth')
+    restamp: bool = param(False, 'stamp messages with the current time instead of the recorded '
+                          'stamps (replay)', read_only=True)
+
+
+def driver_params() -> List[ParamSpec]:
+    """The node's parameters: its own, then every registered source's (read-only, the
+    description prefixed with the source's name). Two sources may share a parameter only if they
+    declare it alike."""
+    out = specs(DriverConfig)
+    names = source_names()
+    out[0] = dataclasses.replace(out[0], choices=tuple(names))
+    seen = {s.name: ('driver', s) for s in out}
+    for name in names:
+        cls = source_class(name)
+        for s in specs(cls.config_class, read_only=True):
+            prev = seen.get(s.name)
+            if prev is not None:
+                if (prev[1].default, prev[1].range, prev[1].choices) != (s.default, s.range, s.choices):
+                    raise RuntimeError(f'source {name!r} declares parameter {s.name!r} unlike '
+                                       f'{prev[0]!r}')
+                continue
+            s = dataclasses.replace(s, description=f'{name}: {s.description}')
+            seen[s.name] = (name, s)
+            out.append(s)
+    return out
+
+
+node_params = driver_params   # what kinect_bringup.param_docs documents (the registry of now)
 
 
 def make_source(v, log=None, clock_ns=None):
     """The source named by the parameter values ``v`` (not opened)."""
-    name = v['source']
-    if name == 'synthetic':
-        from .sources.synthetic import SyntheticSource
-        return SyntheticSource(scenario=v['scenario'], seed=v['seed'], num_users=v['num_users'],
-                               clip=v['clip'], rate_hz=v['rate_hz'], frame_id=v['frame_id'],
-                               user_spacing=v['user_spacing'], sensor_params=v['sensor_params'],
-                               with_truth=True)
-    if name == 'replay':
-        from .sources.replay import ReplaySource
-        return ReplaySource(v['replay_file'], topic=v['replay_topic'], rate=v['rate'],
-                            loop=v['loop'], frame_id=v['frame_id'])
-    if name == 'live':
-        from .sources.openni_live import LiveSource
-        kw = {} if clock_ns is None else {'clock_ns': clock_ns}
-        return LiveSource(device_uri=v['device_uri'], nite2_path=v['nite2_path'],
-                          openni2_path=v['openni2_path'], frame_id=v['frame_id'],
-                          max_users=v['max_users'], tracked_confidence=v['tracked_confidence'],
-                          inferred_confidence=v['inferred_confidence'], retry_s=v['retry_s'],
-                          smoothing=v['smoothing'], log=log, **kw)
-    raise SourceError(f'unknown source {name!r} (use one of {", ".join(SOURCE_NAMES)})')
+    cls = source_class(v['source'])
+    return cls.from_config(build(cls.config_class, v), frame_id=v['frame_id'], log=log,
+                           clock_ns=clock_ns)
 
 
 class DriverNode(Node):
@@ -122,13 +97,13 @@ class DriverNode(Node):
         super().__init__('driver', **kwargs)
         from skeleton_msgs.msg import SkeletonArray
         self._msg_type = SkeletonArray
-        self.params = Parameters(self, PARAMS)
+        self.params = Parameters(self, driver_params())
         v = self.params.values
         self.health = Health()
         qos = QoSProfile(depth=10)
         self.pub = self.create_publisher(SkeletonArray, SKELETONS_TOPIC, qos)
         self.truth_pub = self.create_publisher(SkeletonArray, GROUND_TRUTH_TOPIC, qos) \
-            if v['source'] == 'synthetic' else None
+            if source_class(v['source']).has_truth else None
         self.tf_pub = None
         try:
             from tf2_msgs.msg import TFMessage
@@ -146,9 +121,10 @@ class DriverNode(Node):
             self.source.open()
             self._started()
         except SourceError as e:
-            if v['source'] == 'live' and e.retryable and v['retry_s'] > 0:
-                self.get_logger().warning(f'{e} - retrying every {v["retry_s"]:g} s')
-                self._retry_timer = self.create_timer(v['retry_s'], self._retry_open)
+            retry = self.source.retry_s
+            if e.retryable and retry > 0:
+                self.get_logger().warning(f'{e} - retrying every {retry:g} s')
+                self._retry_timer = self.create_timer(retry, self._retry_open)
             else:
                 raise RuntimeError(str(e)) from None
         self.timer = self.create_timer(self.source.period_s, self._tick)
@@ -166,13 +142,8 @@ class DriverNode(Node):
 
     def _started(self) -> None:
         v = self.params.values
-        extra = ''
-        if v['source'] == 'synthetic':
-            extra = f" scenario {v['scenario']}, {v['num_users']} user(s): " + \
-                self.source.status().get('clips', '')
-        elif v['source'] == 'replay':
-            extra = f" {v['replay_file']} ({self.source.count} frames, rate {v['rate']:g}" + \
-                (', loop)' if v['loop'] else ')')
+        extra = self.source.describe()
+        extra = f' {extra}' if extra else ''
         self.get_logger().info(f"source {v['source']} started at "
                                f'{1.0 / self.source.period_s:.1f} Hz on {SKELETONS_TOPIC};{extra}')
 
@@ -223,7 +194,7 @@ class DriverNode(Node):
     def _publish(self, out: SourceOutput, now: int) -> None:
         v = self.params.values
         self.health.on_receive()
-        live_stamp = v['source'] != 'replay' or v['restamp']
+        live_stamp = not self.source.recorded or v['restamp']
         msg = None
         if out.raw is not None:
             if v['restamp'] or (v['publish_tf'] and self.tf_pub is not None):
@@ -238,7 +209,7 @@ class DriverNode(Node):
                 self.pub.publish(out.raw)
             stamp = now if v['restamp'] else out.stamp_ns
         else:
-            stamp = now if (v['source'] == 'replay' and v['restamp']) else out.stamp_ns
+            stamp = now if (self.source.recorded and v['restamp']) else out.stamp_ns
             frames = [f.copy(stamp_ns=stamp) for f in out.frames] if stamp != out.stamp_ns \
                 else out.frames
             fid = out.frame_id or v['frame_id']

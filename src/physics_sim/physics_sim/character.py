@@ -11,11 +11,11 @@ from typing import Dict
 
 import mujoco
 import numpy as np
-from skeleton_core.model import (FOOT_LEFT, FOOT_RIGHT, JOINT_NAMES, NUM_JOINTS, SEGMENT_CHILDREN,
-                                 SEGMENT_PARENTS, SEGMENTS, Body)
+from skeleton_core.model import (FOOT_LEFT, FOOT_RIGHT, NUM_JOINTS, SEGMENTS, SEGMENT_CHILDREN,
+                                 SEGMENT_CHILD_INDEX, SEGMENT_PARENT_INDEX, Body)
 
 from .controller import ball_qpos, segment_quats_from_positions
-from .mjcf_body import AXES, PIN_JOINTS, ROOT_SEGMENT, joint_anchor
+from .mjcf_body import AXES, PIN_JOINTS, ROOT_SEGMENT, ElementNames, character_prefix, joint_anchor
 
 
 MAX_TARGET_SPEED = 10.0  # m/s: bound on the target velocity p'_target of Eq. 1
@@ -50,7 +50,8 @@ class Character:
 
     def __init__(self, user_id: int, body: Body, slot: int, first: Target):
         self.user_id = int(user_id)
-        self.prefix = f'u{self.user_id}_'
+        self.prefix = character_prefix(self.user_id)
+        self.names = ElementNames(self.prefix)
         self.body = body
         self.slot = slot
         self.prev = first
@@ -67,11 +68,11 @@ class Character:
         # Eq. 3-4 retargeting per joint (skeleton_core.geometry.retarget_by_joint): the length of
         # the segment ending at each joint and the direction a zero-length segment takes
         self.retarget_bone = np.zeros(NUM_JOINTS)
-        self.retarget_bone[list(SEGMENT_CHILDREN)] = body.segment_lengths
+        self.retarget_bone[SEGMENT_CHILD_INDEX] = body.segment_lengths
         self.retarget_dirs = body.rest_offsets / np.maximum(
             np.linalg.norm(body.rest_offsets, axis=1), 1e-12)[:, None]
         # each segment's axis in its body frame (the direction of its child joint)
-        ends = body.rest_offsets[list(SEGMENT_CHILDREN)]
+        ends = body.rest_offsets[SEGMENT_CHILD_INDEX]
         self.segment_axes_local = ends / np.maximum(np.linalg.norm(ends, axis=1), 1e-9)[:, None]
         # twist inertia per segment (capsule axial inertia ~ m r^2 / 2)
         self.axial_inertia = 0.5 * body.segment_masses * body.segment_radii ** 2
@@ -79,50 +80,50 @@ class Character:
     # ------------------------------------------------------------------ model binding
     def bind(self, model: mujoco.MjModel) -> None:
         """Look up this character's ids in a (re)built model."""
-        p = self.prefix
+        n = self.names
         bid = lambda n: mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, n)  # noqa: E731
-        self.seg_body = np.array([bid(f'{p}seg_{JOINT_NAMES[c]}') for c in SEGMENT_CHILDREN])
+        self.seg_body = np.array([bid(n.body(c)) for c in SEGMENT_CHILDREN])
         if np.any(self.seg_body < 0):
             raise RuntimeError(f'character {self.user_id} missing from the model')
         self.joint_body = self.seg_body[self.joint_seg]
-        mids = [bid(f'{p}target_{JOINT_NAMES[j]}') for j in range(NUM_JOINTS)]
+        mids = [bid(n.target(j)) for j in range(NUM_JOINTS)]
         self.mocap_ids = (np.array([model.body_mocapid[m] for m in mids]) if min(mids) >= 0
                           else None)
         aid = lambda n: mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_ACTUATOR, n)  # noqa: E731
-        acts = np.array([[aid(f'{p}pd_{JOINT_NAMES[j]}_{a}') for a in AXES]
+        acts = np.array([[aid(n.pd_actuator(j, a)) for a in AXES]
                          for j in range(NUM_JOINTS)])
         self.actuator_ids = acts if acts.min() >= 0 else None   # (20, 3): actuator_pd only
-        tw = np.array([aid(f'{p}twist_{JOINT_NAMES[c]}') for c in SEGMENT_CHILDREN])
+        tw = np.array([aid(n.twist_actuator(c)) for c in SEGMENT_CHILDREN])
         self.twist_actuator_ids = tw if tw.min() >= 0 else None  # (19,): actuator_pd only
         sid = lambda n: mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, n)  # noqa: E731
-        js = np.array([sid(f'{p}site_{JOINT_NAMES[j]}') for j in range(NUM_JOINTS)])
+        js = np.array([sid(n.joint_site(j)) for j in range(NUM_JOINTS)])
         self.joint_site_ids = js if js.min() >= 0 else None   # (20,)
         if self.joint_site_ids is not None:   # exactly the anchors (the MJCF has 6 digits)
             model.site_pos[js] = self.joint_local
-        ax = np.array([sid(f'{p}axis_{JOINT_NAMES[c]}') for c in SEGMENT_CHILDREN])
+        ax = np.array([sid(n.axis_site(c)) for c in SEGMENT_CHILDREN])
         self.axis_site_ids = ax if ax.min() >= 0 else None   # (19,): site z = segment axis
         eid = lambda n: mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_EQUALITY, n)  # noqa: E731
-        self.pin_eq = {j: eid(f'{p}pin_{JOINT_NAMES[j]}') for j in PIN_JOINTS}
+        self.pin_eq = {j: eid(n.pin(j)) for j in PIN_JOINTS}
         # MuJoCo derives body2's anchor from the compile-time pose; the tracking connects must
         # pull the joint point onto the mocap body's origin, so set both anchors explicitly.
         self.track_eq = {}
         for j in range(NUM_JOINTS):
-            e = eid(f'{p}track_{JOINT_NAMES[j]}')
+            e = eid(n.track(j))
             self.track_eq[j] = e
             if e >= 0:
                 model.eq_data[e, 0:3] = self.joint_local[j]
                 model.eq_data[e, 3:6] = 0.0
         jid = lambda n: mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, n)  # noqa: E731
-        self.root_qadr = model.jnt_qposadr[jid(f'{p}root')]
-        self.root_dadr = model.jnt_dofadr[jid(f'{p}root')]
+        self.root_qadr = model.jnt_qposadr[jid(n.root_joint())]
+        self.root_dadr = model.jnt_dofadr[jid(n.root_joint())]
         self.ball_qadr = {}
         for k, c in enumerate(SEGMENT_CHILDREN):
             if k != ROOT_SEGMENT:
-                self.ball_qadr[k] = model.jnt_qposadr[jid(f'{p}ball_{JOINT_NAMES[c]}')]
+                self.ball_qadr[k] = model.jnt_qposadr[jid(n.ball_joint(c))]
         dofs = [self.root_dadr + i for i in range(6)]
         for k, c in enumerate(SEGMENT_CHILDREN):
             if k != ROOT_SEGMENT:
-                d0 = model.jnt_dofadr[jid(f'{p}ball_{JOINT_NAMES[c]}')]
+                d0 = model.jnt_dofadr[jid(n.ball_joint(c))]
                 dofs += [d0, d0 + 1, d0 + 2]
         self.dofs = np.array(dofs)
         arm = model.dof_armature[self.dofs[6:]].reshape(-1, 3)[:, 0]
@@ -182,7 +183,7 @@ class Character:
         return np.concatenate([q[:, 1:], q[:, :1]], axis=1)
 
     def segment_axes(self, points: np.ndarray) -> np.ndarray:
-        d = points[list(SEGMENT_CHILDREN)] - points[list(SEGMENT_PARENTS)]
+        d = points[SEGMENT_CHILD_INDEX] - points[SEGMENT_PARENT_INDEX]
         return d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-9)
 
     @staticmethod

@@ -21,8 +21,9 @@ from typing import Optional
 
 import numpy as np
 from skeleton_core.geometry import quat_conjugate, quat_multiply, swing_twist
-from skeleton_core.model import (HIP_CENTER, HIP_LEFT, HIP_RIGHT, NUM_JOINTS, SEGMENT_CHILDREN,
-                                 SEGMENT_PARENTS, SEGMENTS, SPINE)
+from skeleton_core.model import (HIP_CENTER, HIP_LEFT, HIP_RIGHT, NUM_JOINTS, SEGMENTS,
+                                 SEGMENT_CHILDREN, SEGMENT_CHILD_INDEX, SEGMENT_PARENTS, SPINE)
+from skeleton_core.params import param
 
 from .mjcf_body import ROOT_SEGMENT, body_order, segment_parent_body
 
@@ -31,12 +32,16 @@ from .mjcf_body import ROOT_SEGMENT, body_order, segment_parent_body
 class Gains:
     """Controller gains and limits (the paper hand-tunes one Ke/Kd pair for all joints)."""
 
-    ke: float = 4000.0          # N/m, Eq. 1 elasticity
-    kd: float = 100.0           # N s/m, Eq. 1 damping
-    max_force: float = 800.0    # N, |F| bound
-    twist_ke: float = 400.0     # 1/s^2: Ke_i = twist_ke * I_i (I_i = axial inertia + armature)
-    twist_kd: float = 40.0      # 1/s:   Kd_i = twist_kd * I_i
-    max_torque: float = 50.0    # N m, |T| bound
+    ke: float = param(4000.0, 'Ke of Eq. 1 (N/m), shared by all joints', range=(0.0, 1e6),
+                      name='kp')
+    kd: float = param(100.0, 'Kd of Eq. 1 (N s/m), shared by all joints', range=(0.0, 1e4))
+    max_force: float = param(800.0, 'bound on |F| of Eq. 1 (N)', range=(0.0, 1e5))
+    twist_ke: float = param(400.0, 'Eq. 2 elasticity per unit axial inertia (1/s^2): Ke_i = '
+                            'twist_kp * I_i (I_i = axial inertia + armature)', range=(0.0, 1e5),
+                            name='twist_kp')
+    twist_kd: float = param(40.0, 'Eq. 2 damping per unit axial inertia (1/s): Kd_i = twist_kd '
+                            '* I_i', range=(0.0, 1e4))
+    max_torque: float = param(50.0, 'bound on |T| of Eq. 2 (N m)', range=(0.0, 1e4))
 
     def validate(self) -> None:
         for name in ('ke', 'kd', 'max_force', 'twist_ke', 'twist_kd', 'max_torque'):
@@ -131,23 +136,6 @@ def _pelvis_quat(p) -> tuple:
     return (q[0] / n, q[1] / n, q[2] / n, q[3] / n)
 
 
-def _qmul(a, b):
-    """Product of two quaternions given as (x, y, z, w) tuples of floats."""
-    ax, ay, az, aw = a
-    bx, by, bz, bw = b
-    return (aw * bx + ax * bw + ay * bz - az * by, aw * by - ax * bz + ay * bw + az * bx,
-            aw * bz + ax * by - ay * bx + az * bw, aw * bw - ax * bx - ay * by - az * bz)
-
-
-def _qrot(q, v):
-    """Vector ``v`` (3 floats) rotated by the unit quaternion ``q`` (x, y, z, w)."""
-    x, y, z, w = q
-    vx, vy, vz = v
-    tx, ty, tz = 2.0 * (y * vz - z * vy), 2.0 * (z * vx - x * vz), 2.0 * (x * vy - y * vx)
-    return (vx + w * tx + y * tz - z * ty, vy + w * ty + z * tx - x * tz,
-            vz + w * tz + x * ty - y * tx)
-
-
 def _arc(a, b):
     """Shortest-arc quaternion turning unit vector ``a`` onto unit vector ``b`` (floats)."""
     d = a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
@@ -230,13 +218,13 @@ def _unit_rest(rest_offsets) -> list:
 
 def joint_quats_to_segment(q_by_joint: np.ndarray) -> np.ndarray:
     """(20, 4) orientations by child joint (Skeleton.orientations) -> (19, 4) by segment."""
-    return np.asarray(q_by_joint, float)[list(SEGMENT_CHILDREN)]
+    return np.asarray(q_by_joint, float)[SEGMENT_CHILD_INDEX]
 
 
 def segment_quats_to_joints(q_seg: np.ndarray) -> np.ndarray:
     """(19, 4) segment orientations -> (20, 4) by child joint; the root joint gets the root body's."""
     out = np.zeros((NUM_JOINTS, 4))
-    out[list(SEGMENT_CHILDREN)] = q_seg
+    out[SEGMENT_CHILD_INDEX] = q_seg
     out[HIP_CENTER] = q_seg[ROOT_SEGMENT]
     return out
 

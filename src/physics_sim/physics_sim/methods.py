@@ -18,8 +18,10 @@ from typing import Optional
 import numpy as np
 from skeleton_core.conversions import SkeletonFrame
 from skeleton_core.model import NOT_TRACKED, NUM_JOINTS, TRACKED
+from skeleton_core.params import build, defaults, split
 
 from .simulation import SimConfig, Simulation
+
 
 class PhysicsMethod:
     """Physics tracking of the frames given by ``upstream`` (a Method; None = the raw input)."""
@@ -68,20 +70,21 @@ class PhysicsMethod:
                              stamp_ns=target.stamp_ns, frame_id=target.frame_id)
 
 
-def make_physics(upstream: Optional[str] = 'C', controller: str = 'explicit_pd',
-                 sensor_height: float = 0.8, sensor_pitch: float = 0.0, auto_floor: bool = False,
-                 kp: Optional[float] = None, kd: Optional[float] = None, **upstream_params
-                 ) -> PhysicsMethod:
+# the evaluation's controller: the papers' external PD forces (the reference the others match)
+EVAL_CONTROLLER = 'explicit_pd'
+# what the evaluation reports with each physics method (read from SimConfig's declarations)
+EVAL_DEFAULTS = {'controller': EVAL_CONTROLLER,
+                 **defaults(SimConfig, only=('sensor_height', 'auto_floor'))}
+
+
+def make_physics(upstream: Optional[str] = 'C', **params) -> PhysicsMethod:
     """Factory for the harness: ``upstream`` is a registered method name ('C' = the full
-    reconstruction; None = physics on the raw stream), its parameters pass through."""
-    from .controller import Gains
-    g = Gains()
-    if kp is not None:
-        g.ke = float(kp)
-    if kd is not None:
-        g.kd = float(kd)
-    cfg = SimConfig(controller=controller, gains=g, sensor_height=sensor_height,
-                    sensor_pitch=sensor_pitch, auto_floor=auto_floor)
+    reconstruction; None = physics on the raw stream). ``params``: physics node parameters
+    (SimConfig's ROS names: ``controller``, ``kp``, ``kd``, ``sensor_height``,
+    ``sensor_pitch_deg``, ``auto_floor``, ...; controller default :data:`EVAL_CONTROLLER`), the
+    others pass through to the upstream method."""
+    sim_values, upstream_params = split(params, SimConfig)
+    cfg = build(SimConfig, {'controller': EVAL_CONTROLLER, **sim_values})
     up = None
     if upstream:
         from skeleton_eval import evaluation
@@ -100,15 +103,14 @@ def register() -> bool:
     except ImportError:
         return False
     import functools
-    defaults = {'controller': 'explicit_pd', 'sensor_height': 0.8, 'auto_floor': False}
     register_method('physics', functools.partial(make_physics, 'C'),
                     'Shum et al. 2013 Sec. VII: method C, then the PD-tracked MuJoCo character',
-                    defaults)
+                    EVAL_DEFAULTS)
     register_method('physics_A', functools.partial(make_physics, 'A'),
                     'Shum & Ho 2012: method A (PCA completion), then the PD-tracked character',
-                    defaults)
+                    EVAL_DEFAULTS)
     register_method('physics_raw', functools.partial(make_physics, None),
-                    'the PD-tracked MuJoCo character on the raw Kinect stream', defaults)
+                    'the PD-tracked MuJoCo character on the raw Kinect stream', EVAL_DEFAULTS)
     return True
 
 

@@ -29,6 +29,56 @@ ROOT_SEGMENT = SEGMENT_OF_JOINT[SPINE]  # the HipCenter-Spine segment is the roo
 PIN_JOINTS = (FOOT_LEFT, FOOT_RIGHT)
 
 
+def character_prefix(user_id: int) -> str:
+    """The name prefix of the character of user ``user_id``."""
+    return f'u{int(user_id)}_'
+
+
+@dataclass(frozen=True)
+class ElementNames:
+    """The MuJoCo element names of one character (module docstring): written by the builders
+    here and mjcf_world, looked up by ``Character.bind`` and the simulation. ``j`` is a joint
+    index; a segment's elements are named by its child joint."""
+
+    prefix: str
+
+    def body(self, j: int) -> str:
+        return f'{self.prefix}seg_{JOINT_NAMES[j]}'
+
+    def root_joint(self) -> str:
+        return f'{self.prefix}root'
+
+    def ball_joint(self, j: int) -> str:
+        return f'{self.prefix}ball_{JOINT_NAMES[j]}'
+
+    def geom(self, j: int) -> str:
+        return f'{self.prefix}geom_{JOINT_NAMES[j]}'
+
+    def axis_site(self, j: int) -> str:
+        return f'{self.prefix}axis_{JOINT_NAMES[j]}'
+
+    def joint_site(self, j: int) -> str:
+        return f'{self.prefix}site_{JOINT_NAMES[j]}'
+
+    def target(self, j: int) -> str:
+        return f'{self.prefix}target_{JOINT_NAMES[j]}'
+
+    def pin(self, j: int) -> str:
+        return f'{self.prefix}pin_{JOINT_NAMES[j]}'
+
+    def track(self, j: int) -> str:
+        return f'{self.prefix}track_{JOINT_NAMES[j]}'
+
+    def twist_actuator(self, j: int) -> str:
+        return f'{self.prefix}twist_{JOINT_NAMES[j]}'
+
+    def pd_actuator(self, j: int, axis: str) -> str:
+        return f'{self.prefix}pd_{JOINT_NAMES[j]}_{axis}'
+
+    def hold(self, object_name: str, hand: int) -> str:
+        return f'{self.prefix}hold_{object_name}_{JOINT_NAMES[hand]}'
+
+
 def fmt(v) -> str:
     """Numbers for MJCF attributes (compact, round-trip enough for metres and kilograms)."""
     return ' '.join(f'{float(x):.6g}' for x in np.atleast_1d(v))
@@ -101,39 +151,39 @@ def character_bodies_xml(prefix: str, body: Body, root_pos, params: CharacterPar
         if pb >= 0:
             children[pb].append(k)
     rgba = fmt(params.rgba)
+    names = ElementNames(prefix)
 
     def emit(k: int, depth: int) -> List[str]:
         ind = '  ' * depth
         child = SEGMENT_CHILDREN[k]
-        name = JOINT_NAMES[child]
         pb = segment_parent_body(k)
         if pb < 0:
-            head = (f'{ind}<body name="{prefix}seg_{name}" pos="{fmt(root_pos)}" '
+            head = (f'{ind}<body name="{names.body(child)}" pos="{fmt(root_pos)}" '
                     f'quat="{fmt(root_quat_wxyz)}">')
-            joint = f'{ind}  <freejoint name="{prefix}root"/>'
+            joint = f'{ind}  <freejoint name="{names.root_joint()}"/>'
         else:
             # this body starts at its parent joint = the child end of the parent body
             pos = segment_local_end(body, pb) if SEGMENTS[k][0] != ROOT else np.zeros(3)
-            head = f'{ind}<body name="{prefix}seg_{name}" pos="{fmt(pos)}">'
-            joint = (f'{ind}  <joint name="{prefix}ball_{name}" type="ball" '
+            head = f'{ind}<body name="{names.body(child)}" pos="{fmt(pos)}">'
+            joint = (f'{ind}  <joint name="{names.ball_joint(child)}" type="ball" '
                      f'damping="{params.joint_damping:.6g}" armature="{params.joint_armature:.6g}"/>')
         end = segment_local_end(body, k)
         r = float(body.segment_radii[k])
-        geom = (f'{ind}  <geom name="{prefix}geom_{name}" type="capsule" fromto="0 0 0 {fmt(end)}" '
+        geom = (f'{ind}  <geom name="{names.geom(child)}" type="capsule" fromto="0 0 0 {fmt(end)}" '
                 f'size="{r:.6g}" mass="{float(body.segment_masses[k]):.6g}" '
                 f'contype="{params.contype}" conaffinity="{params.conaffinity}" '
                 f'friction="{params.friction:.6g} 0.005 0.0001" rgba="{rgba}"/>')
         lines = [head, joint, geom]
         if params.pd_actuators:
             axis = end / max(float(np.linalg.norm(end)), 1e-9)
-            lines.append(f'{ind}  <site name="{prefix}axis_{name}" pos="0 0 0" '
+            lines.append(f'{ind}  <site name="{names.axis_site(child)}" pos="0 0 0" '
                          f'zaxis="{fmt(axis)}" size="0.01"/>')
         # a site at every joint point (the actuators' point, and where MuJoCo computes the joint
         # positions the simulation reads at every step)
         for j in range(NUM_JOINTS):
             seg, local = joint_anchor(body, j)
             if seg == k:
-                lines.append(f'{ind}  <site name="{prefix}site_{JOINT_NAMES[j]}" '
+                lines.append(f'{ind}  <site name="{names.joint_site(j)}" '
                              f'pos="{fmt(local)}" size="0.01"/>')
         for c in children[k]:
             lines += emit(c, depth + 1)
@@ -145,24 +195,26 @@ def character_bodies_xml(prefix: str, body: Body, root_pos, params: CharacterPar
 
 def character_mocap_xml(prefix: str, positions: np.ndarray) -> str:
     """One mocap body per joint (targets of the constraint controller), at ``positions`` (20, 3)."""
-    return '\n'.join(f'    <body name="{prefix}target_{JOINT_NAMES[j]}" mocap="true" '
+    names = ElementNames(prefix)
+    return '\n'.join(f'    <body name="{names.target(j)}" mocap="true" '
                      f'pos="{fmt(positions[j])}"/>' for j in range(NUM_JOINTS))
 
 
 def character_equality_xml(prefix: str, body: Body, params: CharacterParams) -> str:
     """Foot pins (inactive) and, with mocap targets, the soft tracking connects (active)."""
     lines = []
+    names = ElementNames(prefix)
     for j in PIN_JOINTS:
         k, local = joint_anchor(body, j)
-        lines.append(f'    <connect name="{prefix}pin_{JOINT_NAMES[j]}" '
-                     f'body1="{prefix}seg_{JOINT_NAMES[SEGMENT_CHILDREN[k]]}" body2="world" '
+        lines.append(f'    <connect name="{names.pin(j)}" '
+                     f'body1="{names.body(SEGMENT_CHILDREN[k])}" body2="world" '
                      f'anchor="{fmt(local)}" active="false" solref="{fmt(params.pin_solref)}"/>')
     if params.mocap_targets:
         for j in range(NUM_JOINTS):
             k, local = joint_anchor(body, j)
-            lines.append(f'    <connect name="{prefix}track_{JOINT_NAMES[j]}" '
-                         f'body1="{prefix}seg_{JOINT_NAMES[SEGMENT_CHILDREN[k]]}" '
-                         f'body2="{prefix}target_{JOINT_NAMES[j]}" anchor="{fmt(local)}" '
+            lines.append(f'    <connect name="{names.track(j)}" '
+                         f'body1="{names.body(SEGMENT_CHILDREN[k])}" '
+                         f'body2="{names.target(j)}" anchor="{fmt(local)}" '
                          f'solref="{fmt(params.track_solref)}" solimp="{fmt(params.track_solimp)}"/>')
     return '\n'.join(lines)
 
@@ -185,20 +237,22 @@ def character_actuator_xml(prefix: str, params: CharacterParams) -> str:
     lim = float(params.pd_force_limit)
     kp, kv = float(params.pd_kp), float(params.pd_kv)
     lines = []
+    names = ElementNames(prefix)
     for k in range(len(SEGMENTS)):
         # Eq. 2 about the segment's own axis (the site's z): torque = ctrl - Kd_i * twist rate,
         # ctrl = Ke_i * twist error + Kd_i * target twist rate (set by the simulation); the gains
         # and the torque bound are set at run time (per segment inertia, see Simulation)
-        name = JOINT_NAMES[SEGMENT_CHILDREN[k]]
-        lines.append(f'    <general name="{prefix}twist_{name}" site="{prefix}axis_{name}" '
+        child = SEGMENT_CHILDREN[k]
+        lines.append(f'    <general name="{names.twist_actuator(child)}" '
+                     f'site="{names.axis_site(child)}" '
                      f'gear="0 0 0 0 0 1" gainprm="1" biastype="affine" biasprm="0 0 0" '
                      f'forcelimited="true" forcerange="-1 1"/>')
     for j in range(NUM_JOINTS):
         for a, axis in enumerate(AXES):
             gear = ['0'] * 6
             gear[a] = '1'
-            lines.append(f'    <general name="{prefix}pd_{JOINT_NAMES[j]}_{axis}" '
-                         f'site="{prefix}site_{JOINT_NAMES[j]}" refsite="{ORIGIN_SITE}" '
+            lines.append(f'    <general name="{names.pd_actuator(j, axis)}" '
+                         f'site="{names.joint_site(j)}" refsite="{ORIGIN_SITE}" '
                          f'gear="{" ".join(gear)}" dyntype="integrator" gainprm="{kp:.6g}" '
                          f'biastype="affine" biasprm="0 {-kp:.6g} {-kv:.6g}" '
                          f'forcelimited="true" forcerange="{-lim:.6g} {lim:.6g}"/>')
@@ -229,7 +283,8 @@ def standalone_character_xml(body: Body, params: Optional[CharacterParams] = Non
             f'  <actuator>\n{character_actuator_xml(prefix, params)}\n  </actuator>\n</mujoco>')
 
 
-__all__ = ['CharacterParams', 'ROOT_SEGMENT', 'PIN_JOINTS', 'body_order', 'segment_parent_body',
+__all__ = ['CharacterParams', 'ElementNames', 'character_prefix', 'ROOT_SEGMENT', 'PIN_JOINTS',
+           'body_order', 'segment_parent_body',
            'joint_anchor', 'segment_local_end', 'character_bodies_xml', 'character_mocap_xml',
            'character_equality_xml', 'character_xml_parts', 'character_actuator_xml',
            'ORIGIN_SITE', 'AXES', 'standalone_character_xml', 'fmt',

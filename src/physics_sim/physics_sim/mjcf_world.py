@@ -15,8 +15,8 @@ from typing import Optional, Sequence, Tuple
 import numpy as np
 from skeleton_core.model import Body
 
-from .mjcf_body import (ORIGIN_SITE, CharacterParams, character_actuator_xml, character_xml_parts,
-                        fmt)
+from .mjcf_body import (ORIGIN_SITE, CharacterParams, ElementNames, character_actuator_xml,
+                        character_xml_parts, fmt)
 
 ALL_BITS = 0x7FFFFFFF
 OBJECT_KINDS = ('box', 'ball', 'mace')
@@ -64,21 +64,27 @@ class ObjectSpec:
         return np.zeros(3)
 
 
+def object_body(name: str) -> str:
+    """The MuJoCo body name of the object ``name`` (its joint and geoms add a suffix)."""
+    return f'obj_{name}'
+
+
 def object_xml(o: ObjectSpec) -> str:
     rgba = fmt(o.rgba)
-    head = (f'    <body name="obj_{o.name}" pos="{fmt(o.pos)}" quat="{fmt(o.quat_wxyz)}">\n'
-            f'      <freejoint name="obj_{o.name}_free"/>\n')
+    b = object_body(o.name)
+    head = (f'    <body name="{b}" pos="{fmt(o.pos)}" quat="{fmt(o.quat_wxyz)}">\n'
+            f'      <freejoint name="{b}_free"/>\n')
     if o.kind == 'box':
-        geoms = (f'      <geom name="obj_{o.name}_geom" type="box" size="{fmt(o.size)}" '
+        geoms = (f'      <geom name="{b}_geom" type="box" size="{fmt(o.size)}" '
                  f'mass="{o.mass:.6g}" rgba="{rgba}"/>\n')
     elif o.kind == 'ball':
-        geoms = (f'      <geom name="obj_{o.name}_geom" type="sphere" size="{fmt(o.size)}" '
+        geoms = (f'      <geom name="{b}_geom" type="sphere" size="{fmt(o.size)}" '
                  f'mass="{o.mass:.6g}" rgba="{rgba}"/>\n')
     else:  # mace: a handle along local z with a heavy ball at the top
         half, rh = o.size
-        geoms = (f'      <geom name="obj_{o.name}_geom" type="capsule" size="0.015 {half:.6g}" '
+        geoms = (f'      <geom name="{b}_geom" type="capsule" size="0.015 {half:.6g}" '
                  f'mass="{0.25 * o.mass:.6g}" rgba="0.4 0.3 0.2 1"/>\n'
-                 f'      <geom name="obj_{o.name}_head" type="sphere" size="{rh:.6g}" '
+                 f'      <geom name="{b}_head" type="sphere" size="{rh:.6g}" '
                  f'pos="0 0 {half:.6g}" mass="{0.75 * o.mass:.6g}" rgba="{rgba}"/>\n')
     return head + geoms + '    </body>'
 
@@ -108,10 +114,11 @@ class WorldParams:
     character: CharacterParams = field(default_factory=CharacterParams)
 
 
-def hold_equality_xml(prefix: str, hand_body: str, hand_local: np.ndarray, obj: ObjectSpec,
+def hold_equality_xml(prefix: str, hand: int, hand_local: np.ndarray, obj: ObjectSpec,
                       hold_solref) -> str:
-    return (f'    <connect name="{prefix}hold_{obj.name}_{hand_body}" body1="{prefix}seg_{hand_body}" '
-            f'body2="obj_{obj.name}" anchor="{fmt(hand_local)}" active="false" '
+    names = ElementNames(prefix)
+    return (f'    <connect name="{names.hold(obj.name, hand)}" body1="{names.body(hand)}" '
+            f'body2="{object_body(obj.name)}" anchor="{fmt(hand_local)}" active="false" '
             f'solref="{fmt(hold_solref)}"/>')
 
 
@@ -119,7 +126,7 @@ def world_xml(characters: Sequence[CharacterEntry], objects: Sequence[ObjectSpec
               params: Optional[WorldParams] = None) -> str:
     """The complete MJCF (string) of a world with ``characters`` and ``objects``."""
     from dataclasses import replace
-    from skeleton_core.model import HAND_LEFT, HAND_RIGHT, JOINT_NAMES
+    from skeleton_core.model import HAND_LEFT, HAND_RIGHT
     from .mjcf_body import joint_anchor
     params = params or WorldParams()
     integ = {'euler': 'Euler', 'implicitfast': 'implicitfast', 'implicit': 'implicit',
@@ -143,7 +150,7 @@ def world_xml(characters: Sequence[CharacterEntry], objects: Sequence[ObjectSpec
             if o.holdable:
                 for hand in (HAND_LEFT, HAND_RIGHT):
                     k, local = joint_anchor(c.body, hand)
-                    eqs.append(hold_equality_xml(c.prefix, JOINT_NAMES[hand], local, o,
+                    eqs.append(hold_equality_xml(c.prefix, hand, local, o,
                                                  params.hold_solref))
     onames = [o.name for o in objects]
     if len(set(onames)) != len(onames):

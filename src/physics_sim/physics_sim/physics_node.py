@@ -18,12 +18,12 @@ Service
 
 The simulation runs on a timer, independent of input arrival: each tick advances it by
 1/output_rate in ``timestep`` steps; the last target is kept when input stops. A user who is absent
-from incoming arrays for ``user_timeout`` s is removed; a new user spawns a character.
+from incoming arrays for ``user_timeout_s`` s is removed; a new user spawns a character.
 """
 from __future__ import annotations
 
-import math
 import time
+from dataclasses import dataclass
 from typing import Dict, List, Optional
 
 import numpy as np
@@ -33,14 +33,14 @@ from skeleton_core.cdr import CdrError, frames_from_cdr, frames_to_cdr
 from skeleton_core.conversions import SkeletonFormatError, SkeletonFrame, ns_to_stamp
 from skeleton_core.health import Health
 from skeleton_core.model import NUM_JOINTS, TRACKED
-from skeleton_core.rosnode import DiagnosticsPublisher, Parameters, ParamSpec, run_node
+from skeleton_core.params import ParamSpec, assign, build, param, specs
+from skeleton_core.rosnode import DiagnosticsPublisher, Parameters, run_node
 from skeleton_msgs.msg import SkeletonArray
 from skeleton_msgs.srv import ApplyPush
 from visualization_msgs.msg import Marker, MarkerArray
 
-from .controller import Gains
 from .mjcf_world import ObjectSpec
-from .simulation import CONTROLLERS, INTEGRATORS, SOLVERS, SimConfig, Simulation
+from .simulation import SimConfig, Simulation
 
 
 def _tuples(n: int):
@@ -54,158 +54,59 @@ def _tuples(n: int):
     return check
 
 
-def _height(v):
-    return None if v == 0.0 or 1.0 <= v <= 2.3 else 'body_height must be 0 (auto) or in [1.0, 2.3] m'
+def _objects(n: int):
+    def check(v):
+        return None if list(v) == [0.0] else _tuples(n)(v)
+    return check
 
 
-# Parameters: (spec, SimConfig/Gains field it sets or None)
-PARAMS: List[ParamSpec] = [
-    ParamSpec('input_topic', '/posture/reconstructed', 'target postures (SkeletonArray)',
-              read_only=True),
-    ParamSpec('output_topic', '/character/skeletons', 'simulated skeletons (SkeletonArray)',
-              read_only=True),
-    ParamSpec('objects_topic', '/physics/objects',
-              'environment object poses (visualization_msgs/MarkerArray)', read_only=True),
-    ParamSpec('output_rate', 30.0, 'simulation tick and output rate (Hz)', range=(1.0, 240.0),
-              read_only=True),
-    ParamSpec('input_depth', 1,
-              'input queue depth: 1 = the character always tracks the newest target (when ticks '
-              'fall behind the input, stale targets are skipped, not queued); more = every '
-              'target is applied, at the cost of latency under load', range=(1, 100),
-              read_only=True),
-    ParamSpec('timestep', 0.002, 'physics time step (s)', range=(0.0005, 0.01), read_only=True),
-    ParamSpec('sync_to_input', True,
-              'tick as soon as a target arrives (phase-locked to the sensor: the output leaves '
-              'right after its input instead of up to one period later); the timer keeps the '
-              'output rate when input is slower or stops. Each tick simulates the wall time since '
-              'the previous one (0.5 to 1.5 periods)'),
-    ParamSpec('controller', 'auto',
-              'actuator_pd = Eq. 1-2 evaluated by MuJoCo actuators at every step (fast for few '
-              'characters); explicit_pd = the papers\' external PD forces computed in Python at '
-              'every step (reference; faster from ~4 characters); auto = actuator_pd below '
-              'auto_explicit_from characters, explicit_pd from there; mocap_constraints = soft '
-              'connect constraints to mocap targets',
-              choices=CONTROLLERS, read_only=True),
-    ParamSpec('auto_explicit_from', 4,
-              'controller auto: explicit_pd from this many characters on (the same control law; '
-              'actuator_pd grows with the square of the characters)', range=(1, 100),
-              read_only=True),
-    ParamSpec('integrator', 'euler',
-              'MuJoCo integrator: euler = explicit like the paper (fastest; stable up to Kd ~300 '
-              'N s/m, Ke ~40000 N/m at 2 ms); implicitfast treats actuator_pd\'s Kd implicitly '
-              '(stable at any gain, ~35 % slower)',
-              choices=INTEGRATORS, read_only=True),
-    ParamSpec('solver', 'auto',
-              'MuJoCo constraint solver (contacts, foot pins, holds, mocap_constraints); all '
-              'converge to the same forces. auto = pgs for actuator_pd/explicit_pd (few active '
-              'rows: fastest), newton for mocap_constraints (60 stiff rows a character)',
-              choices=SOLVERS, read_only=True),
-    ParamSpec('implicit_joint_damping', False,
-              'euler: integrate the ball joints\' damping implicitly (MuJoCo\'s default, ~6 us more '
-              'a step); false = explicitly like the other forces, used only while timestep * '
-              'joint_damping <= joint_armature / 4 (implicit otherwise)', read_only=True),
-    ParamSpec('slow_control_every', 0,
-              'physics steps between Python control updates (Eq. 2 twist targets, foot pins; '
-              'actuator_pd and mocap_constraints targets); 0 = auto (4 for explicit_pd, one per '
-              'tick otherwise)', range=(0, 50), read_only=True),
-    ParamSpec('kp', 4000.0, 'Ke of Eq. 1 (N/m), shared by all joints', range=(0.0, 1e6)),
-    ParamSpec('kd', 100.0, 'Kd of Eq. 1 (N s/m), shared by all joints', range=(0.0, 1e4)),
-    ParamSpec('velocity_smoothing', 0.7, "exponential smoothing of the target velocity p'_target "
-              '(frame differences) of Eq. 1; 0 = raw differences (more jitter)', range=(0.0, 0.95)),
-    ParamSpec('max_force', 800.0, 'bound on |F| of Eq. 1 (N)', range=(0.0, 1e5)),
-    ParamSpec('twist_kp', 400.0,
-              'Eq. 2 elasticity per unit axial inertia (1/s^2): Ke_i = twist_kp * I_i',
-              range=(0.0, 1e5)),
-    ParamSpec('twist_kd', 40.0, 'Eq. 2 damping per unit axial inertia (1/s): Kd_i = twist_kd * I_i',
-              range=(0.0, 1e4)),
-    ParamSpec('twist_scale', [1.0] * 19,
-              'per-segment factor on the Eq. 2 gains (19 values, skeleton_core.model.SEGMENTS '
-              'order); the gains are Ke_i = twist_kp * scale_i * I_i', read_only=True,
-              validator=lambda v: None if len(v) == 19 and all(
-                  math.isfinite(x) and x >= 0 for x in v) else 'twist_scale needs 19 values >= 0'),
-    ParamSpec('max_torque', 50.0, 'bound on |T| of Eq. 2 (N m)', range=(0.0, 1e4)),
-    ParamSpec('track_timeconst', 0.02, 'mocap_constraints: spring time constant (s)',
-              range=(0.001, 1.0), read_only=True),
-    ParamSpec('track_dampratio', 1.0, 'mocap_constraints: damping ratio', range=(0.1, 10.0),
-              read_only=True),
-    ParamSpec('track_impedance', 0.9, 'mocap_constraints: solimp impedance d (share of the '
-              'constraint force kept; lower = softer, more push response)', range=(0.01, 0.99),
-              read_only=True),
-    ParamSpec('body_height', 0.0, 'character height (m); 0 = estimated from the first target',
-              validator=_height, read_only=True),
-    ParamSpec('body_mass', 75.0, 'character mass at 1.75 m (kg), scaled with height^3',
-              range=(20.0, 200.0), read_only=True),
-    ParamSpec('retarget', True, 'retarget targets to the character (Shum & Ho 2012 Eq. 3-4)'),
-    ParamSpec('joint_damping', 2.0, 'ball joint damping (N m s/rad)', range=(0.0, 100.0),
-              read_only=True),
-    ParamSpec('joint_armature', 0.02, 'ball joint armature (kg m^2)', range=(0.0, 10.0),
-              read_only=True),
-    ParamSpec('sensor_height', 0.8, 'sensor height above the floor (m)', range=(0.0, 3.0),
-              read_only=True),
-    ParamSpec('sensor_pitch_deg', 0.0, 'sensor tilt, positive = down (deg)', range=(-45.0, 45.0),
-              read_only=True),
-    ParamSpec('auto_floor', False, 'put the floor under the lowest foot of the first target '
-              '(overrides sensor_height)', read_only=True),
-    ParamSpec('pin_feet', True, 'virtual joints pinning supporting feet to the floor'),
-    ParamSpec('pin_height', 0.04, 'pin a foot whose target is lower than this above its rest '
-              'height (m)', range=(0.0, 0.5)),
-    ParamSpec('pin_release_height', 0.07, 'release when the target rises above this (m)',
-              range=(0.0, 0.5)),
-    ParamSpec('pin_speed', 0.3, 'pin only if the foot target is slower than this (m/s)',
-              range=(0.0, 10.0)),
-    ParamSpec('pin_release_distance', 0.15, 'release when the target slides this far (m)',
-              range=(0.01, 2.0)),
-    ParamSpec('pin_max_force', 3000.0, 'a foot pin pulling harder than this (N) conflicts with '
-              'the targets and is released (counted)', range=(100.0, 1e5)),
-    ParamSpec('dodge', False, 'raise the forearms when a ball approaches the head'),
-    ParamSpec('dodge_distance', 0.45, 'predicted miss distance that triggers a dodge (m)',
-              range=(0.05, 3.0)),
-    ParamSpec('user_timeout', 1.0, 'remove a character whose user is absent this long (s)',
-              range=(0.05, 60.0)),
-    ParamSpec('max_characters', 6, 'most characters at once', range=(1, 30), read_only=True),
-    ParamSpec('boxes', [0.0], 'boxes: x y z half_x half_y half_z mass per box (world, m, kg); '
-              '[0.0] = none', validator=lambda v: None if list(v) == [0.0] else _tuples(7)(v),
-              read_only=True),
-    ParamSpec('balls', [0.0], 'balls: x y z radius mass per ball (world); [0.0] = none',
-              validator=lambda v: None if list(v) == [0.0] else _tuples(5)(v), read_only=True),
-    ParamSpec('mace', False, 'give the first character a mace (held with a virtual joint)',
-              read_only=True),
-    ParamSpec('mace_hand', 'right', 'hand holding the mace', choices=('left', 'right'),
-              read_only=True),
-    ParamSpec('auto_throw_period', 0.0, 'throw a ball at the first character\'s head every N s '
-              '(0 = off)', range=(0.0, 600.0)),
-    ParamSpec('push_duration', 0.1, 'duration of pushes from the ~/push topic (s)',
-              range=(0.001, 5.0)),
-    ParamSpec('frame_id', 'kinect', 'frame of the outputs until an input arrives', read_only=True),
-]
+@dataclass
+class PhysicsNodeConfig:
+    """The physics node's own parameters (the simulation's are SimConfig's)."""
 
-LIVE_GAINS = {'kp': 'ke', 'kd': 'kd', 'max_force': 'max_force', 'twist_kp': 'twist_ke',
-              'twist_kd': 'twist_kd', 'max_torque': 'max_torque'}
-LIVE_CONFIG = ('velocity_smoothing', 'retarget', 'pin_feet', 'pin_height', 'pin_release_height', 'pin_speed',
-               'pin_release_distance', 'pin_max_force', 'dodge', 'dodge_distance')
+    input_topic: str = param('/posture/reconstructed', 'target postures (SkeletonArray)',
+                             read_only=True)
+    output_topic: str = param('/character/skeletons', 'simulated skeletons (SkeletonArray)',
+                              read_only=True)
+    objects_topic: str = param('/physics/objects', 'environment object poses '
+                               '(visualization_msgs/MarkerArray)', read_only=True)
+    output_rate: float = param(30.0, 'simulation tick and output rate (Hz)', range=(1.0, 240.0),
+                               read_only=True)
+    input_depth: int = param(
+        1, 'input queue depth: 1 = the character always tracks the newest target (when ticks '
+        'fall behind the input, stale targets are skipped, not queued); more = every target is '
+        'applied, at the cost of latency under load', range=(1, 100), read_only=True)
+    sync_to_input: bool = param(
+        True, 'tick as soon as a target arrives (phase-locked to the sensor: the output leaves '
+        'right after its input instead of up to one period later); the timer keeps the output '
+        'rate when input is slower or stops. Each tick simulates the wall time since the '
+        'previous one (0.5 to 1.5 periods)')
+    user_timeout_s: float = param(1.0, 'remove a character whose user is absent this long (s)',
+                                  range=(0.05, 60.0))
+    boxes: List[float] = param([0.0], 'boxes: x y z half_x half_y half_z mass per box (world, '
+                               'm, kg); [0.0] = none', validator=_objects(7), read_only=True)
+    balls: List[float] = param([0.0], 'balls: x y z radius mass per ball (world); [0.0] = none',
+                               validator=_objects(5), read_only=True)
+    mace: bool = param(False, 'give the first character a mace (held with a virtual joint)',
+                       read_only=True)
+    mace_hand: str = param('right', 'hand holding the mace', choices=('left', 'right'),
+                           read_only=True)
+    auto_throw_period: float = param(0.0, "throw a ball at the first character's head every N s "
+                                     '(0 = off)', range=(0.0, 600.0))
+    push_duration: float = param(0.1, 'duration of pushes from the ~/push topic (s)',
+                                 range=(0.001, 5.0))
+    frame_id: str = param('kinect', 'frame of the outputs until an input arrives', read_only=True)
+
+
+# the node's parameters: its own and every SimConfig field (declared there, with its ROS name)
+SIM_PARAMS = specs(SimConfig)
+PARAMS: List[ParamSpec] = specs(PhysicsNodeConfig) + SIM_PARAMS
+# what may change while the simulation runs (the others are read-only: fixed in the built world)
+LIVE_PARAMS = {s.name: s for s in SIM_PARAMS if not s.read_only}
 
 
 def config_from_params(v: Dict) -> SimConfig:
-    gains = Gains(ke=v['kp'], kd=v['kd'], max_force=v['max_force'], twist_ke=v['twist_kp'],
-                  twist_kd=v['twist_kd'], max_torque=v['max_torque'])
-    return SimConfig(timestep=v['timestep'], controller=v['controller'], gains=gains,
-                     integrator=v['integrator'], solver=v['solver'],
-                     implicit_joint_damping=v['implicit_joint_damping'],
-                     slow_control_every=v['slow_control_every'],
-                     auto_explicit_from=v['auto_explicit_from'],
-                     track_timeconst=v['track_timeconst'], track_dampratio=v['track_dampratio'],
-                     track_impedance=v['track_impedance'],
-                     velocity_smoothing=v['velocity_smoothing'],
-                     twist_scale=list(v['twist_scale']),
-                     body_height=v['body_height'], body_mass=v['body_mass'],
-                     retarget=v['retarget'], joint_damping=v['joint_damping'],
-                     joint_armature=v['joint_armature'], sensor_height=v['sensor_height'],
-                     sensor_pitch=math.radians(v['sensor_pitch_deg']), auto_floor=v['auto_floor'],
-                     pin_feet=v['pin_feet'], pin_height=v['pin_height'],
-                     pin_release_height=v['pin_release_height'], pin_speed=v['pin_speed'],
-                     pin_release_distance=v['pin_release_distance'],
-                     pin_max_force=v['pin_max_force'], dodge=v['dodge'],
-                     dodge_distance=v['dodge_distance'], max_characters=v['max_characters'])
+    return build(SimConfig, v)
 
 
 def objects_from_params(v: Dict) -> List[ObjectSpec]:
@@ -269,10 +170,8 @@ class PhysicsNode(Node):
             if hi < lo:
                 return 'pin_release_height must be >= pin_height'
         for k, val in changed.items():
-            if k in LIVE_GAINS:
-                setattr(self.sim.config.gains, LIVE_GAINS[k], float(val))
-            elif k in LIVE_CONFIG:
-                setattr(self.sim.config, k, val)
+            if k in LIVE_PARAMS:
+                assign(self.sim.config, LIVE_PARAMS[k], val)
         return None
 
     def _diag_extra(self) -> Dict:
@@ -367,7 +266,7 @@ class PhysicsNode(Node):
         else:
             dt = period
         self._last_tick = now
-        timeout = self.params['user_timeout']
+        timeout = self.params['user_timeout_s']
         if self._last_msg is not None:
             for uid in list(self.sim.characters):
                 if self._last_msg - self._last_seen.get(uid, self._last_msg) > timeout:

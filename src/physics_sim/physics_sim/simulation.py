@@ -44,7 +44,7 @@ steps (default: once per ``advance``) and let ``mj_step`` run the steps in betwe
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Dict, List, Mapping, Optional, Sequence
 
 import mujoco
@@ -56,6 +56,7 @@ from skeleton_core.model import (ELBOW_LEFT, ELBOW_RIGHT, HAND_LEFT, HAND_RIGHT,
                                  JOINT_INDEX, JOINT_NAMES, NUM_JOINTS, SEGMENT_OF_JOINT,
                                  SEGMENTS, SHOULDER_LEFT, SHOULDER_RIGHT, WRIST_LEFT,
                                  WRIST_RIGHT, Body, estimate_height, standard_body)
+from skeleton_core.params import check, nested, param
 
 from .character import Character, Target
 from .controller import Gains, is_identity, joint_quats_to_segment, segment_quats_to_joints
@@ -148,87 +149,115 @@ class SensorPose:
 # ---------------------------------------------------------------------------------------------
 # Configuration and state
 # ---------------------------------------------------------------------------------------------
+def _body_height_ok(v):
+    return None if v == 0.0 or 1.0 <= v <= 2.3 else 'body_height must be 0 (auto) or in [1.0, 2.3] m'
+
+
+def _twist_scale_ok(v):
+    return None if len(v) == len(SEGMENTS) and all(
+        math.isfinite(x) and x >= 0 for x in v) else f'twist_scale needs {len(SEGMENTS)} values >= 0'
+
+
 @dataclass
 class SimConfig:
-    """Everything tunable about the simulation (the node maps each field to a ROS parameter)."""
+    """Everything tunable about the simulation: each field is a parameter of the physics node
+    (skeleton_core.params; ``read_only``: fixed once the world is built, the others change the
+    running simulation)."""
 
-    timestep: float = 0.002
-    controller: str = 'actuator_pd'
-    # MuJoCo integrator of the world (INTEGRATORS): euler = explicit, as the paper (fastest);
-    # implicitfast also integrates actuator_pd's Kd implicitly (stable at any gain, ~35 % slower)
-    integrator: str = 'euler'
-    # MuJoCo constraint solver (SOLVERS) for contacts, foot pins, holds and mocap_constraints'
-    # connects; all converge to the same constraint forces. auto = pgs for actuator_pd and
-    # explicit_pd (a character has 0-10 active rows: ~7 us a step, where newton factors an
-    # nv x nv Hessian, ~20 us) and newton for mocap_constraints (60 stiff rows a character, which
-    # take pgs many sweeps: 3x slower there)
-    solver: str = 'auto'
-    # euler: integrate the ball joints' damping implicitly (MuJoCo's Euler default; one more
-    # factorisation per step, ~6 us) instead of explicitly like every other force of the paper's
-    # scheme. Explicit is used only while it is stable by a wide margin (timestep * joint_damping
-    # <= joint_armature / 4: the armature bounds every dof's inertia from below)
-    implicit_joint_damping: bool = False
-    gains: Gains = field(default_factory=Gains)
-    # constraint controller (mocap_constraints): soft connect spring = (time constant, damping ratio)
-    track_timeconst: float = 0.02
-    track_dampratio: float = 1.0
-    track_impedance: float = 0.9    # solimp d (dmin = dmax): share of the constraint force kept
+    timestep: float = param(0.002, 'physics time step (s)', range=(0.0005, 0.01), read_only=True)
+    controller: str = param(
+        'auto', 'actuator_pd = Eq. 1-2 evaluated by MuJoCo actuators at every step (fast for few '
+        "characters); explicit_pd = the papers' external PD forces computed in Python at every "
+        'step (reference; faster from ~4 characters); auto = actuator_pd below '
+        'auto_explicit_from characters, explicit_pd from there; mocap_constraints = soft '
+        'connect constraints to mocap targets', choices=CONTROLLERS, read_only=True)
+    integrator: str = param(
+        'euler', 'MuJoCo integrator: euler = explicit like the paper (fastest; stable up to Kd '
+        "~300 N s/m, Ke ~40000 N/m at 2 ms); implicitfast treats actuator_pd's Kd implicitly "
+        '(stable at any gain, ~35 % slower)', choices=INTEGRATORS, read_only=True)
+    solver: str = param(
+        'auto', 'MuJoCo constraint solver (contacts, foot pins, holds, mocap_constraints); all '
+        'converge to the same forces. auto = pgs for actuator_pd/explicit_pd (few active rows: '
+        'fastest), newton for mocap_constraints (60 stiff rows a character)', choices=SOLVERS,
+        read_only=True)
+    implicit_joint_damping: bool = param(
+        False, "euler: integrate the ball joints' damping implicitly (MuJoCo's default, ~6 us "
+        'more a step); false = explicitly like the other forces, used only while timestep * '
+        'joint_damping <= joint_armature / 4 (implicit otherwise)', read_only=True)
+    gains: Gains = nested(Gains)
+    track_timeconst: float = param(0.02, 'mocap_constraints: spring time constant (s)',
+                                   range=(0.001, 1.0), read_only=True)
+    track_dampratio: float = param(1.0, 'mocap_constraints: damping ratio', range=(0.1, 10.0),
+                                   read_only=True)
+    track_impedance: float = param(
+        0.9, 'mocap_constraints: solimp impedance d (share of the constraint force kept; lower = '
+        'softer, more push response)', range=(0.01, 0.99), read_only=True)
     # character model
-    velocity_smoothing: float = 0.7  # p'_target: exponential smoothing of frame differences (0 = raw)
-    body_height: float = 0.0        # m; 0 = estimate from the user's first target
-    body_mass: float = 75.0         # kg at 1.75 m (scaled with height^3)
-    retarget: bool = True           # Eq. 3-4: targets to the character's segment lengths
-    joint_damping: float = 2.0
-    joint_armature: float = 0.02
-    friction: float = 1.0
+    velocity_smoothing: float = param(
+        0.7, "exponential smoothing of the target velocity p'_target (frame differences) of "
+        'Eq. 1; 0 = raw differences (more jitter)', range=(0.0, 0.95))
+    body_height: float = param(0.0, 'character height (m); 0 = estimated from the first target',
+                               validator=_body_height_ok, read_only=True)
+    body_mass: float = param(75.0, 'character mass at 1.75 m (kg), scaled with height^3',
+                             range=(20.0, 200.0), read_only=True)
+    retarget: bool = param(True, 'retarget targets to the character (Shum & Ho 2012 Eq. 3-4)')
+    joint_damping: float = param(2.0, 'ball joint damping (N m s/rad)', range=(0.0, 100.0),
+                                 read_only=True)
+    joint_armature: float = param(0.02, 'ball joint armature (kg m^2)', range=(0.0, 10.0),
+                                  read_only=True)
+    friction: float = param(1.0, 'sliding friction of the character capsules', range=(0.0, 10.0),
+                            read_only=True)
     # frames
-    sensor_height: float = 0.8
-    sensor_pitch: float = 0.0
-    auto_floor: bool = False        # set the sensor height from the first target's lowest foot
-    lift_feet: bool = True          # raise targets by the foot capsule radius
+    sensor_height: float = param(0.8, 'sensor height above the floor (m)', range=(0.0, 3.0),
+                                 read_only=True)
+    sensor_pitch: float = param(0.0, 'sensor tilt, positive = down (deg)', range=(-45.0, 45.0),
+                                read_only=True, name='sensor_pitch_deg', degrees=True)
+    auto_floor: bool = param(False, 'put the floor under the lowest foot of the first target '
+                             '(overrides sensor_height)', read_only=True)
+    lift_feet: bool = param(True, 'raise the targets by the foot capsule radius (the capsules '
+                            'rest on the floor instead of sinking into it)', read_only=True)
     # virtual joints
-    pin_feet: bool = True
-    pin_height: float = 0.04        # m above the standing foot height: pin below this
-    pin_release_height: float = 0.07
-    pin_speed: float = 0.3          # m/s: pin only if the foot target is slower
-    pin_release_distance: float = 0.15  # m: release when the target slides this far from the pin
-    pin_max_force: float = 3000.0   # N: a virtual joint pulling harder conflicts with the targets
-    conflict_tolerance: float = 0.05    # m: a virtual joint stretched more than this = conflict
-    conflict_release: float = 0.3       # m: ... and released if stretched more than this
+    pin_feet: bool = param(True, 'virtual joints pinning supporting feet to the floor')
+    pin_height: float = param(0.04, 'pin a foot whose target is lower than this above its rest '
+                              'height (m)', range=(0.0, 0.5))
+    pin_release_height: float = param(0.07, 'release when the target rises above this (m)',
+                                      range=(0.0, 0.5))
+    pin_speed: float = param(0.3, 'pin only if the foot target is slower than this (m/s)',
+                             range=(0.0, 10.0))
+    pin_release_distance: float = param(0.15, 'release when the target slides this far (m)',
+                                        range=(0.01, 2.0))
+    pin_max_force: float = param(3000.0, 'a foot pin pulling harder than this (N) conflicts with '
+                                 'the targets and is released (counted)', range=(100.0, 1e5))
+    conflict_tolerance: float = param(0.05, 'a virtual joint stretched more than this (m) '
+                                      'conflicts with the targets', range=(0.0, 1.0),
+                                      read_only=True)
+    conflict_release: float = param(0.3, '... and is released when stretched more than this (m)',
+                                    range=(0.0, 2.0), read_only=True)
     # interaction
-    dodge: bool = False
-    dodge_distance: float = 0.45    # m: predicted closest approach to the head
-    dodge_time: float = 0.6         # s: look-ahead
-    dodge_hold: float = 0.5         # s: arms stay up this long after the last threat
-    max_characters: int = 6
-    # steps between Python control updates (Eq. 2 twist targets, foot pins; the chunked
-    # controllers' targets); 0 = auto: 4 for explicit_pd, the whole advance (<= 50) otherwise
-    slow_control_every: int = 0
-    # controller 'auto': explicit_pd from this many characters on, actuator_pd below
-    auto_explicit_from: int = 4
-    twist_scale: Optional[Sequence[float]] = None  # per-segment factor on Eq. 2 gains (19, SEGMENTS)
+    dodge: bool = param(False, 'raise the forearms when a ball approaches the head')
+    dodge_distance: float = param(0.45, 'predicted miss distance that triggers a dodge (m)',
+                                  range=(0.05, 3.0))
+    dodge_time: float = param(0.6, 'dodge: look-ahead of the ball prediction (s)',
+                              range=(0.05, 5.0), read_only=True)
+    dodge_hold: float = param(0.5, 'dodge: the arms stay up this long after the last threat (s)',
+                              range=(0.0, 10.0), read_only=True)
+    max_characters: int = param(6, 'most characters at once', range=(1, 30), read_only=True)
+    slow_control_every: int = param(
+        0, 'physics steps between Python control updates (Eq. 2 twist targets, foot pins; '
+        'actuator_pd and mocap_constraints targets); 0 = auto (4 for explicit_pd, one per tick '
+        'otherwise)', range=(0, 50), read_only=True)
+    auto_explicit_from: int = param(
+        4, 'controller auto: explicit_pd from this many characters on (the same control law; '
+        'actuator_pd grows with the square of the characters)', range=(1, 100), read_only=True)
+    twist_scale: List[float] = param(
+        [1.0] * len(SEGMENTS), 'per-segment factor on the Eq. 2 gains (19 values, '
+        'skeleton_core.model.SEGMENTS order); the gains are Ke_i = twist_kp * scale_i * I_i',
+        validator=_twist_scale_ok, read_only=True)
 
     def validate(self) -> None:
-        if self.controller not in CONTROLLERS:
-            raise ValueError(f'controller must be one of {CONTROLLERS}, got {self.controller!r}')
-        if self.integrator not in INTEGRATORS:
-            raise ValueError(f'integrator must be one of {INTEGRATORS}, got {self.integrator!r}')
-        if self.solver not in SOLVERS:
-            raise ValueError(f'solver must be one of {SOLVERS}, got {self.solver!r}')
-        if not (1e-4 <= self.timestep <= 0.02):
-            raise ValueError(f'timestep must be in [0.0001, 0.02] s, got {self.timestep}')
-        if self.twist_scale is not None:
-            ts = np.asarray(self.twist_scale, float)
-            if ts.shape != (len(SEGMENTS),) or not np.all(np.isfinite(ts)) or np.any(ts < 0):
-                raise ValueError(f'twist_scale needs {len(SEGMENTS)} finite values >= 0')
-        if int(self.auto_explicit_from) < 1:
-            raise ValueError('auto_explicit_from must be >= 1')
-        if not (0 <= int(self.slow_control_every) <= 50):
-            raise ValueError('slow_control_every must be in [0, 50] (0 = auto)')
-        if not (0.0 <= self.velocity_smoothing < 1.0):
-            raise ValueError('velocity_smoothing must be in [0, 1)')
-        if not (0.01 <= self.track_impedance <= 0.99):
-            raise ValueError('track_impedance must be in [0.01, 0.99]')
+        """The declared ranges / choices (the gains: finite and >= 0, Gains.validate) and the
+        cross-field rules."""
+        check(self, nested=False)
         if self.track_timeconst < 2 * self.timestep:
             raise ValueError('track_timeconst must be at least 2 x timestep')
         self.gains.validate()

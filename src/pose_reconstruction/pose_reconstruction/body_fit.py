@@ -16,16 +16,16 @@ Both need at least three reliable joints.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Optional
 
 import numpy as np
 
 from skeleton_core.geometry import facing_yaw
-from skeleton_core.model import (HIP_LEFT, HIP_RIGHT, SEGMENT_CHILDREN, SEGMENT_PARENTS,
+from skeleton_core.model import (HIP_LEFT, HIP_RIGHT, SEGMENT_CHILD_INDEX, SEGMENT_PARENT_INDEX,
                                  SHOULDER_LEFT, SHOULDER_RIGHT)
+from skeleton_core.params import check, param
 
-_SEG_P = np.array(SEGMENT_PARENTS)
-_SEG_C = np.array(SEGMENT_CHILDREN)
 MIN_FIT_JOINTS = 3  # the fewest points that fix a rotation and a scale
 
 
@@ -35,24 +35,41 @@ def torso_weight(w: np.ndarray) -> float:
     return max(min(w[HIP_LEFT], w[HIP_RIGHT]), min(w[SHOULDER_LEFT], w[SHOULDER_RIGHT]))
 
 
+@dataclass
+class BodyFitConfig:
+    """Parameters of :class:`BodyFit` (their reconstruction parameter names)."""
+
+    height_frames: int = param(
+        30, 'no frame with every joint tracked yet: frames of scale-invariant database fits '
+        "whose median is taken as the user's height (query scale, standard-body lengths), then "
+        'kept; 0 = off (standard height)', range=(0, 100000))
+    yaw_rate: float = param(
+        0.5, 'few reliable joints (hips, shoulders and every segment unreliable): fraction per '
+        'frame of the heading correction that best fits the reliable joints to the database; '
+        '0 = keep the last heading', range=(0.0, 1.0))
+    yaw_search: int = param(
+        12, 'few reliable joints from the first frame: headings tried against the database '
+        '(from the one the unreliable torso gives); 0 = take that one', range=(0, 360))
+    yaw_neighbours: int = param(
+        5, 'few reliable joints: database postures whose best rotations (each a weighted 2-D '
+        'Procrustes of the reliable joints) are averaged into the heading correction',
+        range=(1, 1000))
+
+
 class BodyFit:
     """One user's heading and height fits against the database (module docstring)."""
 
-    def __init__(self, search, preparer, reliability, reliable_threshold: float = 0.5,
-                 height_frames: int = 30, yaw_rate: float = 0.5, yaw_search: int = 12,
-                 yaw_neighbours: int = 5):
-        if int(height_frames) < 0 or int(yaw_search) < 0 or not 0.0 <= yaw_rate <= 1.0:
-            raise ValueError('height_frames, yaw_search must be >= 0 and yaw_rate in [0, 1]')
-        if int(yaw_neighbours) < 1:
-            raise ValueError('yaw_neighbours must be >= 1')
+    def __init__(self, search, preparer, reliability, reliable_threshold: float,
+                 config: BodyFitConfig):
+        check(config)
         self.search = search
         self.preparer = preparer
         self.reliability = reliability
         self.reliable_threshold = float(reliable_threshold)
-        self.height_frames = int(height_frames)
-        self.yaw_rate = float(yaw_rate)
-        self.yaw_search = int(yaw_search)
-        self.yaw_neighbours = int(yaw_neighbours)
+        self.height_frames = int(config.height_frames)
+        self.yaw_rate = float(config.yaw_rate)
+        self.yaw_search = int(config.yaw_search)
+        self.yaw_neighbours = int(config.yaw_neighbours)
         self.reset()
 
     def reset(self) -> None:
@@ -69,7 +86,7 @@ class BodyFit:
         about their line and, with the translation free, the scale undetermined)."""
         rel = w >= self.reliable_threshold
         few = (torso_weight(w) < self.reliable_threshold
-               and not (rel[_SEG_P] & rel[_SEG_C]).any())
+               and not (rel[SEGMENT_PARENT_INDEX] & rel[SEGMENT_CHILD_INDEX]).any())
         return few, int(rel.sum()) >= MIN_FIT_JOINTS
 
     def heading_in(self, obs: np.ndarray, w: np.ndarray, height: float,
@@ -135,7 +152,7 @@ class BodyFit:
         reliable ones is retargeted to the standard lengths instead and says nothing about the
         user's size)."""
         rel = w >= self.reliable_threshold
-        if rel.sum() < MIN_FIT_JOINTS or (rel[_SEG_P] & rel[_SEG_C]).any():
+        if rel.sum() < MIN_FIT_JOINTS or (rel[SEGMENT_PARENT_INDEX] & rel[SEGMENT_CHILD_INDEX]).any():
             return
         lo, hi = 1.0, 2.3   # the reliability estimator's height range
         _, dist, s = self.search.knn_scaled(query, np.where(rel, w, 0.0), translate,

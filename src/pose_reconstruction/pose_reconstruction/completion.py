@@ -3,7 +3,7 @@
 Offline: PCA of the database postures (60-D flattened joint positions, default 7 dimensions kept)
 and the projection of every database posture. Per query: the sensor posture is normalised and
 retargeted to the database's standard body, its missing or unreliable joints (reliability below
-``reliability_threshold``) are replaced by the database mean (Sec. 5.2), it is projected, and the
+``reliable_threshold``) are replaced by the database mean (Sec. 5.2), it is projected, and the
 nearest database posture by squared distance in the reduced space is taken. Missing / unreliable
 joints and their rotations (Theta) are then substituted from the match (Sec. 6.1-6.2) and the
 result goes back to the sensor frame.
@@ -17,6 +17,7 @@ result goes back to the sensor frame.
 """
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from typing import Optional
 
@@ -24,9 +25,11 @@ import numpy as np
 
 from skeleton_core.geometry import NormalizeTransform
 from skeleton_core.model import NUM_JOINTS, PARENTS, ROOT
+from skeleton_core.params import check, param
 
-from .posture_space import (PARENT_ROWS, QueryPreparer, as_database_arrays, fast_denormalize,
-                            heading_yaw, joint_set, orientations_to_sensor, rest_directions)
+from .posture_space import (PARENT_ROWS, QueryConfig, QueryPreparer, as_database_arrays,
+                            fast_denormalize, heading_yaw, joint_set, orientations_to_sensor,
+                            rest_directions)
 
 
 def pca_basis(flat: np.ndarray, dims: int):
@@ -46,18 +49,34 @@ class CompletionResult:
     match_distance: float               # squared distance in the reduced space
 
 
-class PCACompletion:
-    """Method A. ``complete(positions, reliability, user_height, ...)`` per frame."""
+SUBSTITUTIONS = ('offset', 'absolute')
 
-    def __init__(self, db, pca_dims: int = 7, reliability_threshold: float = 0.5,
-                 substitution: str = 'offset'):
-        if substitution not in ('offset', 'absolute'):
-            raise ValueError("substitution must be 'offset' or 'absolute'")
+
+@dataclass
+class CompletionConfig(QueryConfig):
+    """Parameters of method A (:class:`PCACompletion`)."""
+
+    pca_dims: int = param(7, 'PCA dimensions of the database search (Shum & Ho: 7 of 60)',
+                          range=(1, 60))
+    substitution: str = param('offset', 'offset: hang substituted joints off their parent with '
+                              "the user's bone length; absolute: the match's position (paper)",
+                              choices=SUBSTITUTIONS)
+
+
+class PCACompletion:
+    """Method A. ``complete(positions, reliability, user_height, ...)`` per frame. Parameters:
+    :class:`CompletionConfig` fields as keywords (or ``config``)."""
+
+    def __init__(self, db, config: Optional[CompletionConfig] = None, **params):
+        cfg = dataclasses.replace(config or CompletionConfig(), **params)
+        check(cfg)
+        self.config = cfg
+        pca_dims, substitution = cfg.pca_dims, cfg.substitution
         self.db = as_database_arrays(db)
         self.body = self.db.body
-        self.reliability_threshold = float(reliability_threshold)
+        self.reliable_threshold = float(cfg.reliable_threshold)
         self.substitution = substitution
-        self.preparer = QueryPreparer(self.body, reliability_threshold)
+        self.preparer = QueryPreparer(self.body, self.reliable_threshold)
         self._rest_dirs = rest_directions(self.body)
         self._standard_bones = self.body.bone_lengths_by_joint()
         self._match_dirs = match_directions(self.db, self._rest_dirs)
@@ -109,7 +128,7 @@ class PCACompletion:
         # with Python floats.
         p = np.asarray(positions, float)
         r = np.asarray(reliability, float)
-        thr = self.reliability_threshold
+        thr = self.reliable_threshold
         bits = 0
         for j, x in enumerate(r.tolist()):
             if not x >= thr:  # NaN counts as missing

@@ -16,6 +16,10 @@ from typing import Callable, Dict, Optional
 
 import numpy as np
 
+from skeleton_core.params import defaults
+
+from .completion import CompletionConfig
+from .optimizer import OptimizerConfig
 from .posture_space import DatabaseArrays, as_database_arrays
 from .reconstructor import Reconstructor
 
@@ -71,11 +75,12 @@ DESCRIPTIONS = {
     'B': 'Shum et al. 2013 natural-posture-space optimizer without reliability',
     'C': 'Shum et al. 2013 reliability-weighted natural-posture-space optimizer',
 }
-_OPT_DEFAULTS = {'k': 30, 'pca_dims': 20, 'steps': 20, 'samples': 100, 'w_control': 1.0,
-                 'w_style': 8.0, 'w_kinematics': 1.5, 'w_continuity': 0.25,
-                 'solver': 'stochastic'}
-DEFAULTS = {'A': {'pca_dims': 7, 'reliable_threshold': 0.5}, 'B': dict(_OPT_DEFAULTS),
-            'C': dict(_OPT_DEFAULTS)}
+# the defaults the evaluation reports with each method, read from the parameter declarations
+_OPT_DEFAULTS = defaults(OptimizerConfig, only=('k', 'pca_dims', 'steps', 'samples', 'w_control',
+                                                'w_style', 'w_kinematics', 'w_continuity',
+                                                'solver'))
+DEFAULTS = {'A': defaults(CompletionConfig, only=('pca_dims', 'reliable_threshold')),
+            'B': dict(_OPT_DEFAULTS), 'C': dict(_OPT_DEFAULTS)}
 
 FACTORIES: Dict[str, Callable[..., Reconstructor]] = {
     'A': make_method_a, 'B': make_method_b, 'C': make_method_c}

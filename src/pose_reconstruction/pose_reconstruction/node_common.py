@@ -21,33 +21,16 @@ from rclpy.qos import QoSProfile
 from skeleton_core.cdr import CdrError, frames_from_cdr, frames_to_cdr
 from skeleton_core.conversions import SkeletonFormatError, frame_from_arrays
 from skeleton_core.health import Health
-from skeleton_core.rosnode import DiagnosticsPublisher, ParamSpec, Parameters
+from skeleton_core.params import ParamSpec, build, specs
+from skeleton_core.rosnode import DiagnosticsPublisher, Parameters
 
-# Reliability parameters (Shum et al. 2013 Sec. IV), shared by every node that may estimate it
-RELIABILITY_SPECS = [
-    ParamSpec('d_min', 0.03, 'Eq. 3: minimum displacement (m) for an angle to count', (0.0, 0.5)),
-    ParamSpec('f_b', 3, 'Eq. 4: frames averaged by the behaviour term', (1, 30)),
-    ParamSpec('theta_floor_deg', 90.0, 'Eq. 4: acceptable angle change (deg)', (0.0, 180.0)),
-    ParamSpec('theta_roof_deg', 135.0, 'Eq. 4: fully unacceptable angle change (deg)',
-              (0.0, 180.0)),
-    ParamSpec('f_total', 6, 'Eq. 8: frames in the Gaussian-weighted window', (1, 60)),
-    ParamSpec('sigma_frames', 2.0, 'Eq. 8: width (frames) of the Gaussian weight', (0.1, 60.0)),
-    ParamSpec('tracked_value', 1.0, 'Eq. 7: R_t of a tracked joint', (0.0, 1.0)),
-    ParamSpec('inferred_value', 0.0, 'Eq. 7: R_t of an inferred joint', (0.0, 1.0)),
-    ParamSpec('not_tracked_value', 0.0, 'Eq. 7: R_t of a not-tracked joint', (0.0, 1.0)),
-    ParamSpec('reference_pose_tolerance_deg', 25.0,
-              'largest segment-direction error (deg) to accept a T-pose / standing reference posture',
-              (1.0, 90.0)),
-    ParamSpec('reference_frames', 15, 'reference segment lengths: median of this many captures',
-              (1, 300)),
-    ParamSpec('reference_mode', 'observed',
-              'reference lengths before a reference posture is captured: observed (running median '
-              'of tracked segments) or standard (the standard body at the user height, paper)',
-              choices=('observed', 'standard')),
-    ParamSpec('observed_window', 90, "reference_mode observed: frames in the running median",
-              (1, 10000)),
-]
+from .reliability import ReliabilityConfig
+
+# Reliability parameters (Shum et al. 2013 Sec. IV, declared on ReliabilityConfig), shared by every
+# node that may estimate it
+RELIABILITY_SPECS = specs(ReliabilityConfig)
 RELIABILITY_NAMES = [s.name for s in RELIABILITY_SPECS]
+DATABASE_SPEC = ParamSpec('database', '', "motion database file ('' = built-in / CMU default)")
 
 
 def common_specs(input_topic: str, output_topic: str) -> List[ParamSpec]:
@@ -65,8 +48,11 @@ def common_specs(input_topic: str, output_topic: str) -> List[ParamSpec]:
 
 
 def check_reliability_params(values: Dict[str, Any]) -> Optional[str]:
-    if values['theta_floor_deg'] >= values['theta_roof_deg']:
-        return 'theta_floor_deg must be below theta_roof_deg'
+    """The cross-parameter checks of ReliabilityConfig (an error text or None)."""
+    try:
+        build(ReliabilityConfig, values).validate()
+    except ValueError as e:
+        return str(e)
     return None
 
 

@@ -25,6 +25,7 @@ All costs are vectorised over samples, joints and neighbours.
 """
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass, field
 from typing import Callable, Dict, Optional, Sequence
@@ -32,13 +33,13 @@ from typing import Callable, Dict, Optional, Sequence
 import numpy as np
 
 from skeleton_core.geometry import quat_average
-from skeleton_core.model import NUM_JOINTS, NUM_SEGMENTS, SEGMENT_CHILDREN, SEGMENT_PARENTS
+from skeleton_core.model import (NUM_JOINTS, NUM_SEGMENTS, SEGMENT_CHILDREN, SEGMENT_CHILD_INDEX,
+                                 SEGMENT_PARENTS, SEGMENT_PARENT_INDEX)
+from skeleton_core.params import check, param
 
 from .posture_space import as_database_arrays
 from .search import KNN_MODES, DatabaseSearch
 
-_SEG_P = np.array(SEGMENT_PARENTS)
-_SEG_C = np.array(SEGMENT_CHILDREN)
 
 SOLVERS = ('stochastic', 'gauss_newton')
 # flat coordinate indices of the segments' child and parent joints, by coordinate (the x of every
@@ -101,48 +102,65 @@ class OptimizerResult:
         return self._terms
 
 
-class NaturalPostureOptimizer:
-    """Methods B/C core. Stateless apart from the RNG: the caller passes the previous solutions."""
+@dataclass
+class OptimizerConfig:
+    """Parameters of methods B / C (:class:`NaturalPostureOptimizer`; Shum et al. 2013 Table V,
+    Eq. 15)."""
 
-    def __init__(self, db, k: int = 30, pca_dims: int = 20, steps: int = 20, samples: int = 100,
-                 w_control: float = 1.0, w_style: float = 8.0, w_kinematics: float = 1.5,
-                 w_continuity: float = 0.25, step_scale: float = 0.5,
-                 solver: str = 'stochastic', gn_iterations: int = 6, seed: int = 0,
-                 knn: str = 'brute', kdtree_dims: int = 12, kdtree_candidates: int = 4):
+    k: int = param(30, 'Table V: neighbours of the KNN search (Eq. 9)', range=(2, 1000))
+    pca_dims: int = param(20, 'Table V: dimensions of the natural posture space', range=(1, 60))
+    steps: int = param(20, 'Table V: maximum optimisation steps', range=(0, 1000))
+    samples: int = param(100, 'Table V: samples per optimisation step', range=(1, 100000))
+    w_control: float = param(1.0, 'Eq. 15: weight of the control term E_c', range=(0.0, 1000.0))
+    w_style: float = param(8.0, 'Eq. 15: weight of the style term E_s (paper 0.5; 8 measured on '
+                           'the sensor-model streams)', range=(0.0, 1000.0))
+    w_kinematics: float = param(1.5, 'Eq. 15: weight of the kinematics term E_k',
+                                range=(0.0, 1000.0))
+    w_continuity: float = param(0.25, 'Eq. 15: weight of the continuity term E_m',
+                                range=(0.0, 1000.0))
+    step_scale: float = param(0.5, 'stochastic search: sample spread in neighbour standard '
+                              'deviations', range=(1e-4, 100.0))
+    solver: str = param('stochastic', 'stochastic (paper) or gauss_newton (deterministic)',
+                        choices=SOLVERS)
+    gn_iterations: int = param(6, 'gauss_newton: maximum iterations', range=(1, 1000))
+    seed: int = param(0, 'random seed of the stochastic search', range=(0, 2 ** 31 - 1))
+    knn: str = param('brute', 'KNN search: brute (exact BLAS) or kdtree (approximate)',
+                     choices=KNN_MODES)
+    kdtree_dims: int = param(12, 'kdtree: global PCA dimensions of the tree', range=(1, 60))
+    kdtree_candidates: int = param(4, 'kdtree: candidates fetched per neighbour', range=(1, 100))
+
+
+_INT_PARAMS = tuple(n for n, t in OptimizerConfig.__annotations__.items() if t == 'int')
+_FLOAT_PARAMS = tuple(n for n, t in OptimizerConfig.__annotations__.items() if t == 'float')
+
+
+class NaturalPostureOptimizer:
+    """Methods B/C core. Stateless apart from the RNG: the caller passes the previous solutions.
+    Parameters: :class:`OptimizerConfig` fields as keywords (or ``config``)."""
+
+    def __init__(self, db, config: Optional[OptimizerConfig] = None, **params):
         self.db = as_database_arrays(db)
         self.body = self.db.body
         self.L = self.body.segment_lengths.copy()  # (19,)
         self._Lcol = self.L[:, None]
         self._X = self.db.flat
-        self.seed = seed
-        self.rng = np.random.default_rng(seed)
         self.search: Optional[DatabaseSearch] = None
-        self.configure(k=k, pca_dims=pca_dims, steps=steps, samples=samples, w_control=w_control,
-                       w_style=w_style, w_kinematics=w_kinematics, w_continuity=w_continuity,
-                       step_scale=step_scale, solver=solver, gn_iterations=gn_iterations,
-                       knn=knn, kdtree_dims=kdtree_dims, kdtree_candidates=kdtree_candidates)
+        self.config = config or OptimizerConfig()
+        self.configure(**params)
+        self.rng = np.random.default_rng(self.seed)
 
     def configure(self, **kw) -> None:
-        """Change parameters (validated)."""
-        for name, value in kw.items():
-            if name in ('k', 'pca_dims', 'steps', 'samples', 'gn_iterations', 'kdtree_dims',
-                        'kdtree_candidates'):
-                value = int(value)
-                if value < (0 if name == 'steps' else 1):
-                    raise ValueError(f'{name} must be positive')
-            elif name == 'solver':
-                if value not in SOLVERS:
-                    raise ValueError(f'solver must be one of {SOLVERS}')
-            elif name == 'knn':
-                if value not in KNN_MODES:
-                    raise ValueError(f'knn must be one of {KNN_MODES}')
-            else:
-                value = float(value)
-                if not np.isfinite(value) or value < 0:
-                    raise ValueError(f'{name} must be finite and >= 0')
-            setattr(self, name, value)
-        if self.k < 2:
-            raise ValueError('k must be >= 2')
+        """Change parameters (validated against :class:`OptimizerConfig`)."""
+        unknown = set(kw) - set(_INT_PARAMS) - set(_FLOAT_PARAMS) - {'solver', 'knn'}
+        if unknown:
+            raise ValueError(f'unknown optimizer parameters: {sorted(unknown)}')
+        kw = {k: (int(v) if k in _INT_PARAMS else float(v) if k in _FLOAT_PARAMS else v)
+              for k, v in kw.items()}
+        cfg = dataclasses.replace(self.config, **kw)
+        check(cfg)
+        self.config = cfg
+        for name in _INT_PARAMS + _FLOAT_PARAMS + ('solver', 'knn'):
+            setattr(self, name, getattr(cfg, name))
         self.k = min(self.k, self.db.size)
         if self.search is None:
             self.search = DatabaseSearch(self.db, self.k, self.knn, self.kdtree_dims,
@@ -313,14 +331,14 @@ class NaturalPostureOptimizer:
         cs = self.w_style / NUM_JOINTS
         ck = self.w_kinematics / NUM_SEGMENTS
         Vr = Vt.reshape(NUM_JOINTS, 3, d)
-        dV = Vr[_SEG_C] - Vr[_SEG_P]                          # (19, 3, d)
+        dV = Vr[SEGMENT_CHILD_INDEX] - Vr[SEGMENT_PARENT_INDEX]                          # (19, 3, d)
         eye = np.eye(d)
         z, e = z0, e0
         it = 0
         for it in range(1, self.gn_iterations + 1):
             n = int(np.argmin(np.sum((S['zn'] - z) ** 2, axis=1)))  # closest neighbour (E_s)
             x = (mu + z @ V).reshape(NUM_JOINTS, 3)
-            seg = x[_SEG_C] - x[_SEG_P]
+            seg = x[SEGMENT_CHILD_INDEX] - x[SEGMENT_PARENT_INDEX]
             ln = np.linalg.norm(seg, axis=1)
             u = seg / np.maximum(ln, 1e-9)[:, None]
             Jk = np.einsum('sk,skd->sd', u, dV)                # (19, d)

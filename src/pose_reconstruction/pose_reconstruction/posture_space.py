@@ -15,14 +15,13 @@ from typing import Dict, List, NamedTuple, Optional
 
 import numpy as np
 
-from skeleton_core.geometry import NormalizeTransform, facing_yaw, retarget_by_joint
+from skeleton_core.geometry import NormalizeTransform, facing_yaw, retarget_by_joint, yaw_matrix
 from skeleton_core.model import (HEADING_JOINTS, NUM_JOINTS, PARENTS, PATH_TO_ROOT, ROOT,
-                                 SEGMENT_CHILDREN, SEGMENT_PARENTS, Body, standard_body)
+                                 SEGMENT_CHILD_INDEX, SEGMENT_PARENT_INDEX, Body, standard_body)
+from skeleton_core.params import param
 
 # each joint's parent (the root's own index for the root)
 PARENT_ROWS = np.array([max(p, 0) for p in PARENTS])
-_SEG_P = np.array(SEGMENT_PARENTS)
-_SEG_C = np.array(SEGMENT_CHILDREN)
 
 # ANCESTORS[j, k] = 1 when k is j or one of its ancestors, excluding the root (the model's tree)
 ANCESTORS = PATH_TO_ROOT
@@ -98,14 +97,6 @@ def heading_yaw(p: np.ndarray, w) -> np.float64:
     lx = wh * (hlx - hrx) + ws * (slx - srx)
     ly = wh * (hly - hry) + ws * (sly - sry)
     return np.arctan2(-lx, ly)
-
-
-def yaw_rotation(yaw: float) -> np.ndarray:
-    """(3, 3) rotation about +z by ``yaw``: ``x @ R.T`` turns rows of ``x`` by ``yaw``, ``x @ R``
-    by ``-yaw`` (the normalisation). Built from a flat list (a nested one costs twice as
-    much)."""
-    c, s = math.cos(yaw), math.sin(yaw)
-    return np.array([c, -s, 0.0, s, c, 0.0, 0.0, 0.0, 1.0]).reshape(3, 3)
 
 
 @dataclass
@@ -197,6 +188,16 @@ class PreparedQuery:
     scale: float                      # standard height / user height
 
 
+@dataclass
+class QueryConfig:
+    """What counts as reliable; shared by every reconstruction method (the completion's and the
+    optimizer's configurations extend it)."""
+
+    reliable_threshold: float = param(
+        0.5, 'a joint at or above this reliability counts as reliable (method A: the joints '
+        'below it are substituted from the database)', range=(0.0, 1.0))
+
+
 class QueryPreparer:
     """Normalise (yaw + translation removed, reliability-weighted heading) and retarget a sensor
     posture to the database's standard body (Shum et al. 2013 Sec. V-B; Shum & Ho Eq. 3-4).
@@ -205,7 +206,7 @@ class QueryPreparer:
     direction is garbage), so it is scaled uniformly by standard/user height instead.
     """
 
-    def __init__(self, body: Body, reliable_threshold: float = 0.5):
+    def __init__(self, body: Body, reliable_threshold: float = QueryConfig.reliable_threshold):
         self.body = body
         self.lengths = bone_lengths(body)
         self.rest_dirs = rest_directions(body)
@@ -234,10 +235,10 @@ class QueryPreparer:
         """:meth:`prepare`'s work for a float (20, 3) posture ``p`` whose heading ``yaw`` is
         known and whose unreliable joints are the bits ``bad`` (``1 << joint``, as
         :func:`joint_set`): ``(query, root translation, rotation, scale)``, the rotation ``R``
-        being :func:`yaw_rotation` (``(x - t) @ R`` is the normalisation, ``x @ R.T`` turns
-        back). Method A's completion calls it directly: it needs the rotation as well, and
+        being ``geometry.yaw_matrix(yaw)`` (``(x - t) @ R`` is the normalisation, ``x @ R.T``
+        turns back). Method A's completion calls it directly: it needs the rotation as well, and
         knows its unreliable joints already."""
-        rot = yaw_rotation(yaw)
+        rot = yaw_matrix(yaw)
         t = p.take(ROOT, 0)  # a copy
         scale = self.body.height / max(user_height, 0.5)
         # fast_normalize + fast_retarget in a few matrix products (the same results to rounding,
@@ -297,7 +298,7 @@ def orientations_to_sensor(quats: np.ndarray, yaw: float) -> np.ndarray:
 def user_bone_lengths(segment_lengths_19: np.ndarray) -> np.ndarray:
     """(19,) segment lengths (SEGMENTS order) -> (20,) by joint."""
     out = np.zeros(NUM_JOINTS)
-    out[_SEG_C] = segment_lengths_19
+    out[SEGMENT_CHILD_INDEX] = segment_lengths_19
     return out
 
 
@@ -306,6 +307,6 @@ def parent_relative_error(a: np.ndarray, b: np.ndarray) -> float:
     joint vectors of two posture sequences (..., 20, 3), metres (the root row is left out)."""
     a = np.asarray(a, float)
     b = np.asarray(b, float)
-    ra = a[..., _SEG_C, :] - a[..., _SEG_P, :]
-    rb = b[..., _SEG_C, :] - b[..., _SEG_P, :]
+    ra = a[..., SEGMENT_CHILD_INDEX, :] - a[..., SEGMENT_PARENT_INDEX, :]
+    rb = b[..., SEGMENT_CHILD_INDEX, :] - b[..., SEGMENT_PARENT_INDEX, :]
     return float(np.mean(np.linalg.norm(ra - rb, axis=-1)))

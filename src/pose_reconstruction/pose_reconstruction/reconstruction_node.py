@@ -13,12 +13,13 @@ files onto them), plus one shared ``database`` and the topics.
 """
 from __future__ import annotations
 
+import dataclasses
 from typing import Any, Dict, Optional
 
 from skeleton_core.rosnode import ParamSpec, run_node
 
 from . import completion_node, optimizer_node
-from .node_common import (RELIABILITY_SPECS, DatabaseNode,
+from .node_common import (DATABASE_SPEC, RELIABILITY_SPECS, DatabaseNode,
                           check_reliability_params, common_specs)
 from .fused import FusedProcessor, section
 
@@ -33,17 +34,16 @@ _SECTIONS = {
 
 
 def _prefixed(section: str, spec: ParamSpec) -> ParamSpec:
-    return ParamSpec(f'{section}.{spec.name}', spec.default, spec.description, spec.range,
-                     spec.choices, spec.read_only, spec.validator)
+    return dataclasses.replace(spec, name=f'{section}.{spec.name}')
 
 
-SPECS = (common_specs('/kinect/skeletons', '/posture/reconstructed') + [
+PARAMS = (common_specs('/kinect/skeletons', '/posture/reconstructed') + [
     ParamSpec('reliability_topic', '/kinect/skeletons_reliability',
               'SkeletonArray with the reliability filled (published while subscribed)',
               read_only=True),
     ParamSpec('completed_topic', '/posture/completed',
               'method A output (computed and published only while subscribed)', read_only=True),
-    ParamSpec('database', '', "motion database file ('' = built-in / CMU default)"),
+    DATABASE_SPEC,
 ] + [_prefixed(sec, s) for sec, specs in _SECTIONS.items() for s in specs])
 _SHARED = ('qos_depth', 'user_timeout_s', 'time_jump_reset_s', 'database')
 
@@ -65,7 +65,7 @@ def fused_parameters(reliability: Dict[str, Any], completion: Dict[str, Any],
 
 class ReconstructionNode(DatabaseNode):
     def __init__(self, database_obj=None, **kwargs):
-        super().__init__('reconstruction', SPECS, database_obj=database_obj,
+        super().__init__('reconstruction', PARAMS, database_obj=database_obj,
                          outputs=('output_topic', 'reliability_topic', 'completed_topic'), **kwargs)
 
     def validate(self, values: Dict[str, Any]) -> Optional[str]:

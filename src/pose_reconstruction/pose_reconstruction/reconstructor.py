@@ -88,121 +88,109 @@ from __future__ import annotations
 
 import time
 from collections import deque
+from dataclasses import dataclass
 from typing import Dict, Optional
 
 import numpy as np
 
 from skeleton_core.conversions import SkeletonFrame
-from skeleton_core.model import NUM_JOINTS, NUM_SEGMENTS, ROOT, SEGMENT_CHILDREN, SEGMENT_PARENTS
+from skeleton_core.geometry import yaw_matrix
+from skeleton_core.model import (NUM_JOINTS, NUM_SEGMENTS, ROOT, SEGMENT_CHILD_INDEX,
+                                 SEGMENT_PARENT_INDEX)
+from skeleton_core.params import build, check, nested, param
+from skeleton_core.params import split as params_split
 
-from .body_fit import BodyFit
-from .completion import PCACompletion
-from .optimizer import NaturalPostureOptimizer
-from .posture_space import (QueryPreparer, as_database_arrays, rest_directions, to_sensor_frame,
-                            user_bone_lengths, yaw_quat_matrix, yaw_rotation)
-from .reliability import ReliabilityEstimator
-from .segment_output import SEG_DIFF, SegmentOutput
-from .trust import TRUST_MODES, SensorTrust
+from .body_fit import BodyFit, BodyFitConfig
+from .completion import CompletionConfig, PCACompletion
+from .optimizer import NaturalPostureOptimizer, OptimizerConfig
+from .posture_space import (QueryConfig, QueryPreparer, as_database_arrays, rest_directions,
+                            to_sensor_frame, user_bone_lengths, yaw_quat_matrix)
+from .reliability import ReliabilityConfig, ReliabilityEstimator
+from .segment_output import SEG_DIFF, SegmentOutput, SegmentOutputConfig
+from .trust import SensorTrust, TrustConfig
 
 METHODS = ('A', 'B', 'C')
 OUTPUT_MODES = ('segments', 'blend')
-_SEG_P = np.array(SEGMENT_PARENTS)
-_SEG_C = np.array(SEGMENT_CHILDREN)
 
 
-RELIABILITY_PARAMS = ('d_min', 'f_b', 'theta_floor_deg', 'theta_roof_deg', 'f_total',
-                      'sigma_frames', 'tracked_value', 'inferred_value', 'not_tracked_value',
-                      'reference_pose_tolerance_deg', 'reference_frames', 'reference_mode',
-                      'observed_window')
-OPTIMIZER_PARAMS = ('k', 'pca_dims', 'steps', 'samples', 'w_control', 'w_style', 'w_kinematics',
-                    'w_continuity', 'step_scale', 'solver', 'gn_iterations', 'seed', 'knn',
-                    'kdtree_dims', 'kdtree_candidates')
-COMPLETION_PARAMS = ('pca_dims', 'reliability_threshold', 'substitution')
-OWN_PARAMS = ('use_reliability', 'use_input_reliability', 'reliable_threshold',
-              'trust_sensor_distance', 'output_scale', 'length_window', 'output_mode',
-              'trust_mode', 'trust_sensor_ratio', 'noise_alpha', 'length_frames',
-              'smooth_min_cutoff', 'smooth_beta', 'smooth_d_cutoff', 'observation_weight',
-              'symmetric_lengths', 'smooth_filled_scale', 'float_root', 'height_frames',
-              'yaw_rate', 'yaw_search', 'yaw_neighbours', 'smooth_filled_speed')
+@dataclass
+class ReconstructorConfig(QueryConfig):
+    """The reconstruction's own parameters (module docstring) and those of its units (the trust
+    in the sensor, the body fit, the segment output); its core's are in
+    :class:`~.optimizer.OptimizerConfig` / :class:`~.completion.CompletionConfig`, the reliability's
+    in :class:`~.reliability.ReliabilityConfig`."""
+
+    use_input_reliability: bool = param(
+        True, 'use the reliability field of the input when it is filled (else estimate it)')
+    output_scale: str = param('user', "user: result retargeted to the user's bone lengths; "
+                              'standard: the database body', choices=('user', 'standard'))
+    output_mode: str = param(
+        'segments', 'segments: blended segment directions, constant user lengths, chained from '
+        'the root, smoothed; blend: solution blended towards the observed joints (paper)',
+        choices=OUTPUT_MODES)
+    length_window: int = param(90, 'blend: frames of observed segment lengths whose median gives '
+                               "the user's lengths", range=(1, 100000))
+    float_root: bool = param(
+        True, 'when the root joint is unreliable, match the database translation-invariantly '
+        'and place the root (and the query) where the neighbours put it')
+    trust: TrustConfig = nested(TrustConfig)
+    segments: SegmentOutputConfig = nested(SegmentOutputConfig)
+    body_fit: BodyFitConfig = nested(BodyFitConfig)
 
 
 def split_params(method: str, params: Dict) -> tuple:
-    rel = {k: v for k, v in params.items() if k in RELIABILITY_PARAMS}
-    if method == 'A':
-        core = {k: v for k, v in params.items() if k in COMPLETION_PARAMS}
-        if 'reliable_threshold' in params and 'reliability_threshold' not in params:
-            core['reliability_threshold'] = params['reliable_threshold']
-    else:
-        core = {k: v for k, v in params.items() if k in OPTIMIZER_PARAMS}
-    own = {k: v for k, v in params.items() if k in OWN_PARAMS}
-    unknown = set(params) - set(rel) - set(core) - set(own) - {'reliable_threshold'}
-    if method == 'A':
-        unknown -= set(OPTIMIZER_PARAMS)  # accepted and ignored, so one config serves all
-    else:
-        unknown -= set(COMPLETION_PARAMS)
+    """``params`` by owner: (:class:`ReliabilityConfig`, the core's config (method A:
+    :class:`CompletionConfig`, else :class:`OptimizerConfig`), :class:`ReconstructorConfig`).
+    The other core's parameters are accepted and ignored (one set of values serves every method);
+    any other name is refused."""
+    core_cls, other_cls = ((CompletionConfig, OptimizerConfig) if method == 'A'
+                           else (OptimizerConfig, CompletionConfig))
+    own, rel, core, _, unknown = params_split(params, ReconstructorConfig, ReliabilityConfig,
+                                              core_cls, other_cls)
     if unknown:
         raise ValueError(f'unknown reconstruction parameters: {sorted(unknown)}')
     return rel, core, own
 
 
 class Reconstructor:
-    """One user's reconstruction pipeline (see module docstring)."""
+    """One user's reconstruction pipeline (see module docstring). Parameters: the fields of
+    :class:`ReconstructorConfig`, :class:`ReliabilityConfig` and the core's config as keywords
+    (their parameter names). ``use_reliability``: weight the query by the reliability (default:
+    method C only)."""
 
-    def __init__(self, db, method: str = 'C', use_reliability: Optional[bool] = None,
-                 use_input_reliability: bool = True, reliable_threshold: float = 0.5,
-                 trust_sensor_distance: float = 0.12, output_scale: str = 'user',
-                 length_window: int = 90, output_mode: str = 'segments',
-                 trust_mode: str = 'noise_ratio', trust_sensor_ratio: float = 8.0,
-                 noise_alpha: float = 0.05, length_frames: int = 15,
-                 symmetric_lengths: bool = True, observation_weight: float = 0.3,
-                 smooth_min_cutoff: float = 3.0, smooth_beta: float = 10.0,
-                 smooth_d_cutoff: float = 1.0, smooth_filled_scale: float = 0.2,
-                 float_root: bool = True, height_frames: int = 30, yaw_rate: float = 0.5,
-                 yaw_search: int = 12, yaw_neighbours: int = 5,
-                 smooth_filled_speed: bool = False, smooth_anchored_speed: bool = True,
-                 **params):
+    def __init__(self, db, method: str = 'C', use_reliability: Optional[bool] = None, **params):
         method = str(method).upper()
         if method not in METHODS:
             raise ValueError(f'method must be one of {METHODS}, got {method!r}')
-        if output_scale not in ('user', 'standard'):
-            raise ValueError("output_scale must be 'user' or 'standard'")
-        if output_mode not in OUTPUT_MODES:
-            raise ValueError(f'output_mode must be one of {OUTPUT_MODES}')
-        if trust_mode not in TRUST_MODES:
-            raise ValueError(f'trust_mode must be one of {TRUST_MODES}')
-        self.output_mode = output_mode
-        self.float_root = bool(float_root)
+        rel, core, own = split_params(method, params)
+        cfg = build(ReconstructorConfig, own)
+        check(cfg)
+        self.config = cfg
+        self.output_mode = cfg.output_mode
+        self.float_root = bool(cfg.float_root)
         self.method = method
         self.name = method
         self.db = as_database_arrays(db)
-        rel, core, _ = split_params(method, params)
         self.reliability = ReliabilityEstimator(**rel)
         self.use_reliability = (method == 'C') if use_reliability is None else bool(use_reliability)
-        self.use_input_reliability = bool(use_input_reliability)
-        self.reliable_threshold = float(reliable_threshold)
-        self.output_scale = output_scale
+        self.use_input_reliability = bool(cfg.use_input_reliability)
+        self.reliable_threshold = float(cfg.reliable_threshold)
+        self.output_scale = cfg.output_scale
         self.preparer = QueryPreparer(self.db.body, self.reliable_threshold)
         self._rest_dirs = rest_directions(self.db.body)
-        self.trust = SensorTrust(trust_mode, trust_sensor_ratio, noise_alpha, trust_sensor_distance,
-                                 self.reliable_threshold)
+        self.trust = SensorTrust(cfg.trust, self.reliable_threshold)
         if method == 'A':
-            core.setdefault('reliability_threshold', self.reliable_threshold)
-            self.core = PCACompletion(self.db, **core)
+            self.core = PCACompletion(self.db, reliable_threshold=self.reliable_threshold, **core)
             self.body_fit = None
         else:
             self.core = NaturalPostureOptimizer(self.db, **core)
             self.body_fit = BodyFit(self.core.search, self.preparer, self.reliability,
-                                    self.reliable_threshold, height_frames, yaw_rate, yaw_search,
-                                    yaw_neighbours)
+                                    self.reliable_threshold, cfg.body_fit)
         self.segment_output = SegmentOutput(
             self.reliability, self.db.body.segment_lengths,
             self.body_fit.height_settled if self.body_fit else (lambda: True),
-            self.reliable_threshold, output_scale, length_frames, symmetric_lengths,
-            observation_weight, smooth_min_cutoff, smooth_beta, smooth_d_cutoff,
-            smooth_filled_scale, smooth_filled_speed, smooth_anchored_speed)
-        self.length_window = int(length_window)
-        if self.length_window < 1:
-            raise ValueError('length_window must be >= 1')
+            self.reliable_threshold, self.output_scale, cfg.segments)
+        self.length_window = int(cfg.length_window)
         self.timings_ms: Dict[str, float] = {}
         self.trust_sensor = 0.0
         self.last_result = None
@@ -253,7 +241,8 @@ class Reconstructor:
 
     def _observe_lengths(self, ln: np.ndarray, R: np.ndarray) -> None:
         """``ln`` (19,) this frame's observed segment lengths, ``R`` (20,) reliabilities."""
-        good = (R[_SEG_P] >= self.reliable_threshold) & (R[_SEG_C] >= self.reliable_threshold)
+        thr = self.reliable_threshold
+        good = (R[SEGMENT_PARENT_INDEX] >= thr) & (R[SEGMENT_CHILD_INDEX] >= thr)
         self._lengths[self._lengths_n % self.length_window] = np.where(good, ln, np.nan)
         self._lengths_n += 1
 
@@ -282,7 +271,7 @@ class Reconstructor:
             yaw = float(prep.transform.yaw)
             prev = []
             for x, y in self._prev:  # bring earlier solutions into this frame's heading
-                prev.append(x @ yaw_rotation(y - yaw).T)
+                prev.append(x @ yaw_matrix(y - yaw).T)
             res = self.core.solve(prep.query, w, prev[::-1], translate=translate)
             self._prev.append((res.positions, yaw))
             self.body_fit.update(prep.query, w, height, yaw, translate)
@@ -295,7 +284,7 @@ class Reconstructor:
             if res.shift is not None and alpha < 1.0:
                 # the root towards where the database neighbours place it, as far as the
                 # database is trusted more than the sensor
-                root = obs[ROOT] - ((1.0 - alpha) / prep.scale) * (yaw_rotation(yaw) @ res.shift)
+                root = obs[ROOT] - ((1.0 - alpha) / prep.scale) * (yaw_matrix(yaw) @ res.shift)
             if segments:
                 positions = self.segment_output.output(frame, res.positions, w, alpha, yaw=yaw,
                                                        seg_obs=seg_obs, len_obs=len_obs,

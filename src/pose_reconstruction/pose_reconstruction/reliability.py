@@ -25,37 +25,39 @@ estimated height.
 from __future__ import annotations
 
 import collections
+import dataclasses
+from dataclasses import dataclass
 from typing import Deque, Optional, Tuple
 
 import numpy as np
 
 from skeleton_core.geometry import normalize
+from skeleton_core.params import check, param
 from skeleton_core.model import (ANKLE_LEFT, ANKLE_RIGHT, ELBOW_LEFT, ELBOW_RIGHT, FOOT_LEFT,
-                                 FOOT_RIGHT, HAND_LEFT, HAND_RIGHT, HEAD, HIP_LEFT,
-                                 HIP_RIGHT, INFERRED, KNEE_LEFT, KNEE_RIGHT, NOT_TRACKED,
-                                 NUM_JOINTS, NUM_SEGMENTS, SEGMENT_CHILDREN, SEGMENT_OF_JOINT,
-                                 SEGMENT_PARENTS, SHOULDER_CENTER, SHOULDER_LEFT, SHOULDER_RIGHT,
-                                 SPINE, STANDARD_HEIGHT, TRACKED, WRIST_LEFT, WRIST_RIGHT,
-                                 estimate_height, segment_lengths, standard_body)
+                                 FOOT_RIGHT, HAND_LEFT, HAND_RIGHT, HEAD, HIP_LEFT, HIP_RIGHT,
+                                 INFERRED, KNEE_LEFT, KNEE_RIGHT, NOT_TRACKED, NUM_JOINTS,
+                                 NUM_SEGMENTS, SEGMENT_CHILDREN, SEGMENT_CHILD_INDEX,
+                                 SEGMENT_OF_JOINT, SEGMENT_PARENT_INDEX, SHOULDER_CENTER,
+                                 SHOULDER_LEFT, SHOULDER_RIGHT, SPINE, STANDARD_HEIGHT, TRACKED,
+                                 WRIST_LEFT, WRIST_RIGHT, estimate_height, segment_lengths,
+                                 standard_body)
 
 from .posture_space import heading_yaw
 
 REFERENCE_MODES = ('observed', 'standard')
 _ONES = [1.0] * NUM_JOINTS   # heading_yaw's weights: the hip and shoulder lines alike
-_SEG_P = np.array(SEGMENT_PARENTS)
-_SEG_C = np.array(SEGMENT_CHILDREN)
 
 # Joint-segment incidence (20, 19): a joint touches the segment ending at it and those leaving it.
 INCIDENCE = np.zeros((NUM_JOINTS, NUM_SEGMENTS))
-INCIDENCE[_SEG_P, np.arange(NUM_SEGMENTS)] = 1.0
-INCIDENCE[_SEG_C, np.arange(NUM_SEGMENTS)] = 1.0
+INCIDENCE[SEGMENT_PARENT_INDEX, np.arange(NUM_SEGMENTS)] = 1.0
+INCIDENCE[SEGMENT_CHILD_INDEX, np.arange(NUM_SEGMENTS)] = 1.0
 _INCIDENCE_COUNT = INCIDENCE.sum(axis=1)
 
 
 def reference_directions() -> dict:
     """Unit segment directions (19, 3) of the two reference postures, facing +x (Fig. 2)."""
     body = standard_body()
-    rest = body.rest_offsets[_SEG_C]
+    rest = body.rest_offsets[SEGMENT_CHILD_INDEX]
     tpose = rest / np.linalg.norm(rest, axis=1, keepdims=True)
     standing = tpose.copy()
     seg_of = {c: k for k, c in enumerate(SEGMENT_CHILDREN)}
@@ -166,7 +168,7 @@ def reference_pose_match(positions: np.ndarray, tolerance_deg: float) -> Optiona
     feet left out: short and noisy on Kinect) must be below ``tolerance_deg``.
     """
     p, _ = normalize(positions)
-    d = p[_SEG_C] - p[_SEG_P]
+    d = p[SEGMENT_CHILD_INDEX] - p[SEGMENT_PARENT_INDEX]
     n = np.linalg.norm(d, axis=1)
     if np.any(n < 1e-6):
         return None
@@ -199,27 +201,62 @@ def _pose_match_segments(p: np.ndarray, seg: np.ndarray, ln: np.ndarray,
     return _REF_NAMES[best] if worst[best] >= cos_tolerance else None
 
 
+@dataclass
+class ReliabilityConfig:
+    """Parameters of :class:`ReliabilityEstimator` (Shum et al. 2013 Sec. IV; the paper's values
+    except ``sigma_frames``, which the paper does not give)."""
+
+    d_min: float = param(0.03, 'Eq. 3: minimum displacement (m) for an angle to count',
+                         range=(0.0, 0.5))
+    f_b: int = param(3, 'Eq. 4: frames averaged by the behaviour term', range=(1, 30))
+    theta_floor_deg: float = param(90.0, 'Eq. 4: acceptable angle change (deg)',
+                                   range=(0.0, 180.0))
+    theta_roof_deg: float = param(135.0, 'Eq. 4: fully unacceptable angle change (deg)',
+                                  range=(0.0, 180.0))
+    f_total: int = param(6, 'Eq. 8: frames in the Gaussian-weighted window', range=(1, 60))
+    sigma_frames: float = param(2.0, 'Eq. 8: width (frames) of the Gaussian weight',
+                                range=(0.1, 60.0))
+    tracked_value: float = param(1.0, 'Eq. 7: R_t of a tracked joint', range=(0.0, 1.0))
+    inferred_value: float = param(0.0, 'Eq. 7: R_t of an inferred joint', range=(0.0, 1.0))
+    not_tracked_value: float = param(0.0, 'Eq. 7: R_t of a not-tracked joint', range=(0.0, 1.0))
+    reference_pose_tolerance_deg: float = param(
+        25.0, 'largest segment-direction error (deg) to accept a T-pose / standing reference '
+        'posture', range=(1.0, 90.0))
+    reference_frames: int = param(15, 'reference segment lengths: median of this many captures',
+                                  range=(1, 300))
+    reference_mode: str = param(
+        'observed', 'reference lengths before a reference posture is captured: observed (running '
+        'median of tracked segments) or standard (the standard body at the user height, paper)',
+        choices=REFERENCE_MODES)
+    observed_window: int = param(90, 'reference_mode observed: frames in the running median',
+                                 range=(1, 10000))
+
+    def validate(self) -> None:
+        check(self)
+        if not self.theta_floor_deg < self.theta_roof_deg:
+            raise ValueError('theta_floor_deg must be below theta_roof_deg')
+
+
 class ReliabilityEstimator:
     """Streaming per-user reliability (Eq. 1-8). Call :meth:`update` once per frame.
 
-    All parameters are the paper's defaults: ``d_min`` 3 cm, ``f_b`` 3 frames, ``theta_floor``
-    90 deg, ``theta_roof`` 135 deg, tracked/inferred/not tracked 1/0/0, ``f_total`` 6 frames.
-    ``sigma_frames`` is the width of the Gaussian weight of Eq. 8 (the paper does not give it).
-    ``reference_mode``: 'observed' or 'standard' lengths before a reference posture is captured
-    (module docstring).
+    Parameters: :class:`ReliabilityConfig` fields as keywords (or ``config``). ``height`` /
+    ``reference_lengths``: a known user height / reference lengths (tests, offline tools).
     """
 
-    def __init__(self, d_min: float = 0.03, f_b: int = 3, theta_floor_deg: float = 90.0,
-                 theta_roof_deg: float = 135.0, f_total: int = 6, sigma_frames: float = 2.0,
-                 tracked_value: float = 1.0, inferred_value: float = 0.0,
-                 not_tracked_value: float = 0.0, reference_pose_tolerance_deg: float = 25.0,
-                 reference_frames: int = 15, reference_mode: str = 'observed',
-                 observed_window: int = 90, height: Optional[float] = None,
-                 reference_lengths: Optional[np.ndarray] = None):
-        if not 0 <= theta_floor_deg < theta_roof_deg <= 180:
-            raise ValueError('need 0 <= theta_floor < theta_roof <= 180 degrees')
-        if f_b < 1 or f_total < 1 or sigma_frames <= 0 or d_min < 0:
-            raise ValueError('f_b, f_total must be >= 1, sigma_frames > 0, d_min >= 0')
+    def __init__(self, config: Optional[ReliabilityConfig] = None, *,
+                 height: Optional[float] = None,
+                 reference_lengths: Optional[np.ndarray] = None, **params):
+        cfg = dataclasses.replace(config or ReliabilityConfig(), **params)
+        cfg.validate()
+        self.config = cfg
+        d_min, f_b, f_total, sigma_frames = cfg.d_min, cfg.f_b, cfg.f_total, cfg.sigma_frames
+        theta_floor_deg, theta_roof_deg = cfg.theta_floor_deg, cfg.theta_roof_deg
+        tracked_value, inferred_value = cfg.tracked_value, cfg.inferred_value
+        not_tracked_value = cfg.not_tracked_value
+        reference_pose_tolerance_deg = cfg.reference_pose_tolerance_deg
+        reference_frames, reference_mode = cfg.reference_frames, cfg.reference_mode
+        observed_window = cfg.observed_window
         self.d_min = float(d_min)
         self.f_b = int(f_b)
         self.theta_floor = np.radians(theta_floor_deg)
@@ -239,12 +276,8 @@ class ReliabilityEstimator:
         self._std_lengths: Optional[np.ndarray] = None
         self._gauss = [None] + [gaussian_weights(n, sigma_frames) for n in range(1, f_total + 1)]
         self.reference_frames = int(reference_frames)
-        if reference_mode not in REFERENCE_MODES:
-            raise ValueError(f'reference_mode must be one of {REFERENCE_MODES}')
         self.reference_mode = reference_mode
         self.observed_window = int(observed_window)
-        if self.observed_window < 1:
-            raise ValueError('observed_window must be >= 1')
         self._fixed_height = height
         self._fixed_reference = None if reference_lengths is None else np.asarray(reference_lengths, float)
         self.reset()
@@ -322,7 +355,7 @@ class ReliabilityEstimator:
         ``tracked`` (20,) bool, ``lengths`` (19,) this frame's segment lengths."""
         if self.reference_mode != 'observed':
             return
-        good = tracked[_SEG_P] & tracked[_SEG_C]
+        good = tracked[SEGMENT_PARENT_INDEX] & tracked[SEGMENT_CHILD_INDEX]
         row = self._observed[self._observed_n % self.observed_window]
         row[:] = lengths
         row[~good] = np.nan
@@ -362,8 +395,8 @@ class ReliabilityEstimator:
         """Add one frame; return the reliability (20,) in [0, 1] (Eq. 8)."""
         p = np.asarray(positions, float)
         ts = np.asarray(tracking_state)
-        seg = p.take(_SEG_C, axis=0)
-        seg -= p.take(_SEG_P, axis=0)
+        seg = p.take(SEGMENT_CHILD_INDEX, axis=0)
+        seg -= p.take(SEGMENT_PARENT_INDEX, axis=0)
         ln = np.sqrt(np.einsum('sk,sk->s', seg, seg))
         tracked = ts == TRACKED
         if tracked.all():

@@ -27,10 +27,12 @@ class _ReliabilityProcessor:
         return frame.copy(reliability=np.asarray(r, np.float32))
 
 
+PARAMS = common_specs('/kinect/skeletons', '/kinect/skeletons_reliability') + RELIABILITY_SPECS
+
+
 class ReliabilityNode(SkeletonArrayNode):
     def __init__(self, **kwargs):
-        specs = common_specs('/kinect/skeletons', '/kinect/skeletons_reliability') + RELIABILITY_SPECS
-        super().__init__('reliability', specs, **kwargs)
+        super().__init__('reliability', PARAMS, **kwargs)
 
     def validate(self, values: Dict[str, Any]) -> Optional[str]:
         return check_reliability_params(values)

@@ -58,10 +58,10 @@ def yaw_arrays(db) -> tuple:
 
 
 class DatabaseSearch:
-    """Searches of one database (shared arrays) with this user's K and KNN mode."""
+    """Searches of one database (shared arrays) with this user's K and KNN mode (the values of
+    :class:`~.optimizer.OptimizerConfig`)."""
 
-    def __init__(self, db, k: int = 30, knn: str = 'brute', kdtree_dims: int = 12,
-                 kdtree_candidates: int = 4):
+    def __init__(self, db, k: int, knn: str, kdtree_dims: int, kdtree_candidates: int):
         self.db = as_database_arrays(db)
         self._X = self.db.flat
         self.arrays = knn_arrays(self.db)

@@ -14,7 +14,7 @@ from typing import Optional, Tuple
 
 import numpy as np
 
-from skeleton_core.geometry import normalize, quat_from_yaw
+from skeleton_core.geometry import normalize
 from skeleton_core.model import (ANKLE_LEFT, ANKLE_RIGHT, ELBOW_LEFT, ELBOW_RIGHT, FOOT_LEFT,
                                  FOOT_RIGHT, HAND_LEFT, HAND_RIGHT, HEAD, HIP_LEFT, HIP_RIGHT,
                                  INFERRED, KNEE_LEFT, KNEE_RIGHT, NUM_JOINTS, PARENTS,
@@ -198,10 +198,6 @@ def corrupt_clip(truth: np.ndarray, seed: int = 2, noise: float = 0.01,
             rng.normal(0.0, noise, (b - a, 3))
         ts[a:b, j] = INFERRED
     return obs, ts
-
-
-def yaw_quaternion(yaw: float) -> np.ndarray:
-    return quat_from_yaw(np.asarray(yaw))
 
 
 def performances(angles: np.ndarray, count: int, seed: int = 7, jitter_deg: float = 8.0

@@ -13,26 +13,42 @@ frame in [0, 1] (:mod:`.reconstructor`, ``trust_mode``):
 from __future__ import annotations
 
 from collections import deque
+from dataclasses import dataclass
 from typing import Optional
 
 import numpy as np
 
+from skeleton_core.params import check, param
+
 TRUST_MODES = ('noise_ratio', 'distance')
+
+
+@dataclass
+class TrustConfig:
+    """Parameters of :class:`SensorTrust` (their reconstruction parameter names)."""
+
+    trust_sensor_distance: float = param(
+        0.12, 'nearest database posture farther than this (RMS m per reliable joint): reliable '
+        'joints blend towards their observed positions (fully at twice it)', range=(0.0, 100.0))
+    trust_mode: str = param(
+        'noise_ratio', "trust in the sensor from noise_ratio (database distance / the sensor's "
+        'measured noise) or distance (trust_sensor_distance, earlier rule)', choices=TRUST_MODES)
+    trust_sensor_ratio: float = param(
+        8.0, 'noise_ratio: database distance / sensor noise at which the trust starts to rise '
+        '(full at twice it)', range=(1e-3, 1e6))
+    noise_alpha: float = param(0.05, 'noise_ratio: exponential-average rate of the noise '
+                               'estimate', range=(1e-4, 1.0))
 
 
 class SensorTrust:
     """One user's trust in the sensor; ``update`` once per frame."""
 
-    def __init__(self, mode: str = 'noise_ratio', ratio: float = 8.0, noise_alpha: float = 0.05,
-                 distance: float = 0.12, reliable_threshold: float = 0.5):
-        if mode not in TRUST_MODES:
-            raise ValueError(f'trust_mode must be one of {TRUST_MODES}')
-        if not ratio > 0 or not 0 < noise_alpha <= 1:
-            raise ValueError('trust_sensor_ratio must be > 0 and noise_alpha in (0, 1]')
-        self.mode = mode
-        self.ratio = float(ratio)
-        self.noise_alpha = float(noise_alpha)
-        self.distance = float(distance)
+    def __init__(self, config: TrustConfig, reliable_threshold: float):
+        check(config)
+        self.mode = config.trust_mode
+        self.ratio = float(config.trust_sensor_ratio)
+        self.noise_alpha = float(config.noise_alpha)
+        self.distance = float(config.trust_sensor_distance)
         self.reliable_threshold = float(reliable_threshold)
         self.reset()
 

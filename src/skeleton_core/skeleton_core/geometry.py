@@ -10,12 +10,13 @@ All functions take (..., 20, 3) arrays in REP-103 (z up) and work on batches.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Optional
 
 import numpy as np
 
-from .model import (HIP_LEFT, HIP_RIGHT, NUM_JOINTS, PARENTS, ROOT, SEGMENT_CHILDREN,
+from .model import (HIP_LEFT, HIP_RIGHT, NUM_JOINTS, PARENTS, ROOT, SEGMENT_CHILD_INDEX,
                     SHOULDER_LEFT, SHOULDER_RIGHT, Body, forward_kinematics)
 
 _PARENT_OR_SELF = [p if p >= 0 else j for j, p in enumerate(PARENTS)]  # the root's own row: d = 0
@@ -29,7 +30,13 @@ class NormalizeTransform:
     translation: np.ndarray  # (..., 3)
 
 
-def _rotz(yaw: np.ndarray) -> np.ndarray:
+def yaw_matrix(yaw) -> np.ndarray:
+    """Rotation matrices about +z by ``yaw`` (rad): (3, 3) for a scalar, (..., 3, 3) for an
+    array. ``x @ R.T`` turns rows of ``x`` by ``yaw``, ``x @ R`` by ``-yaw``. A scalar's is built
+    from a flat list (a nested one, or the batched stacking, costs several times as much)."""
+    if np.ndim(yaw) == 0:
+        c, s = math.cos(yaw), math.sin(yaw)
+        return np.array([c, -s, 0.0, s, c, 0.0, 0.0, 0.0, 1.0]).reshape(3, 3)
     c, s = np.cos(yaw), np.sin(yaw)
     z, o = np.zeros_like(c), np.ones_like(c)
     return np.stack([np.stack([c, -s, z], -1), np.stack([s, c, z], -1),
@@ -65,14 +72,14 @@ def normalize(positions: np.ndarray, weights: Optional[np.ndarray] = None):
     p = np.asarray(positions, dtype=float)
     yaw = facing_yaw(p, weights)
     t = p[..., ROOT, :].copy()
-    r_inv = _rotz(-yaw)  # (..., 3, 3)
+    r_inv = yaw_matrix(-yaw)  # (..., 3, 3)
     out = np.einsum('...ij,...kj->...ki', r_inv, p - t[..., None, :])
     return out, NormalizeTransform(yaw=yaw, translation=t)
 
 
 def denormalize(normalized: np.ndarray, transform: NormalizeTransform) -> np.ndarray:
     """Inverse of :func:`normalize`."""
-    r = _rotz(transform.yaw)
+    r = yaw_matrix(transform.yaw)
     return np.einsum('...ij,...kj->...ki', r, np.asarray(normalized, float)) + \
         transform.translation[..., None, :]
 
@@ -86,7 +93,7 @@ def retarget(positions: np.ndarray, body: Body,
     """
     seg_len = body.segment_lengths if lengths is None else np.asarray(lengths, float)
     bone = np.zeros(NUM_JOINTS)
-    bone[list(SEGMENT_CHILDREN)] = seg_len
+    bone[SEGMENT_CHILD_INDEX] = seg_len
     rest_dir = body.rest_offsets / np.maximum(np.linalg.norm(body.rest_offsets, axis=1), 1e-12)[:, None]
     return retarget_by_joint(positions, bone, rest_dir)
 

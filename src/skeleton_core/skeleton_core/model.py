@@ -70,6 +70,12 @@ SEGMENT_CHILDREN: Tuple[int, ...] = tuple(c for _, c in SEGMENTS)
 SEGMENT_PARENTS: Tuple[int, ...] = tuple(p for p, _ in SEGMENTS)
 SEGMENT_NAMES: Tuple[str, ...] = tuple(
     f'{JOINT_NAMES[p]}-{JOINT_NAMES[c]}' for p, c in SEGMENTS)
+# The same two as read-only index arrays for numpy: the (..., 19, 3) segment vectors of joint
+# positions x (..., 20, 3) are ``x[..., SEGMENT_CHILD_INDEX, :] - x[..., SEGMENT_PARENT_INDEX, :]``
+SEGMENT_PARENT_INDEX = np.array(SEGMENT_PARENTS)
+SEGMENT_CHILD_INDEX = np.array(SEGMENT_CHILDREN)
+SEGMENT_PARENT_INDEX.flags.writeable = False
+SEGMENT_CHILD_INDEX.flags.writeable = False
 # Index of the segment that ends at joint j (-1 for the root)
 SEGMENT_OF_JOINT: Tuple[int, ...] = tuple(
     SEGMENT_CHILDREN.index(j) if j in SEGMENT_CHILDREN else -1 for j in range(NUM_JOINTS))
@@ -224,7 +230,7 @@ class Body:
     def bone_lengths_by_joint(self) -> np.ndarray:
         """(20,) length of the segment ending at each joint (0 for the root)."""
         out = np.zeros(NUM_JOINTS)
-        out[list(SEGMENT_CHILDREN)] = self.segment_lengths
+        out[SEGMENT_CHILD_INDEX] = self.segment_lengths
         return out
 
     def scaled(self, height: float) -> 'Body':
@@ -238,7 +244,7 @@ def standard_body(height: float = STANDARD_HEIGHT, mass: float = STANDARD_MASS) 
     if not np.isfinite(mass) or mass <= 0:
         raise ValueError(f'body mass must be positive, got {mass!r}')
     offsets = _tpose_offsets(height)
-    lengths = np.linalg.norm(offsets[list(SEGMENT_CHILDREN)], axis=1)
+    lengths = np.linalg.norm(offsets[SEGMENT_CHILD_INDEX], axis=1)
     names = [JOINT_NAMES[c] for c in SEGMENT_CHILDREN]
     masses = np.array([SEGMENT_MASS_FRACTION[n] * mass for n in names])
     radii = np.array([SEGMENT_RADIUS_FRACTION[n] * height for n in names])
@@ -275,14 +281,14 @@ def parent_relative(positions: np.ndarray) -> np.ndarray:
     """Offsets of every joint from its parent, (..., 20, 3); the root row holds the root position."""
     positions = np.asarray(positions, dtype=float)
     rel = positions.copy()
-    rel[..., 1:, :] = positions[..., 1:, :] - positions[..., list(PARENTS[1:]), :]
+    rel[..., 1:, :] = positions[..., 1:, :] - positions[..., SEGMENT_PARENT_INDEX, :]
     return rel
 
 
 def segment_lengths(positions: np.ndarray) -> np.ndarray:
     """Segment lengths (..., 19) of joint positions (..., 20, 3), SEGMENTS order."""
     positions = np.asarray(positions, dtype=float)
-    d = positions[..., list(SEGMENT_CHILDREN), :] - positions[..., list(SEGMENT_PARENTS), :]
+    d = positions[..., SEGMENT_CHILD_INDEX, :] - positions[..., SEGMENT_PARENT_INDEX, :]
     return np.linalg.norm(d, axis=-1)
 
 

@@ -5,11 +5,9 @@ This is the only module of ``skeleton_core`` that imports rclpy; library modules
 """
 from __future__ import annotations
 
-import math
 import signal
 import sys
 import time
-from dataclasses import dataclass
 from typing import Any, Callable, Dict, Iterable, Optional, Sequence
 
 import rclpy
@@ -20,47 +18,21 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from .health import Health
+from .params import ParamSpec  # noqa: F401 (declared in params, re-exported for the nodes)
 
 
-@dataclass
-class ParamSpec:
-    """One ROS parameter: default, description, and what is valid."""
-
-    name: str
-    default: Any
-    description: str
-    range: Optional[tuple] = None          # (lo, hi) inclusive, for int/float
-    choices: Optional[Sequence[Any]] = None  # allowed values (strings, ints)
-    read_only: bool = False
-    validator: Optional[Callable[[Any], Optional[str]]] = None  # returns an error text or None
-
-    def check(self, value: Any) -> Optional[str]:
-        if isinstance(self.default, bool) != isinstance(value, bool):
-            return f'{self.name} must be a bool'
-        if isinstance(self.default, float) and isinstance(value, (int, float)):
-            if not math.isfinite(float(value)):
-                return f'{self.name} must be finite'
-        if self.range is not None and isinstance(value, (int, float)) and not isinstance(value, bool):
-            lo, hi = self.range
-            if not (lo <= value <= hi):
-                return f'{self.name}={value} is outside [{lo}, {hi}]'
-        if self.choices is not None and value not in self.choices:
-            return f'{self.name}={value!r} is not one of {list(self.choices)}'
-        if self.validator is not None:
-            return self.validator(value)
-        return None
-
-    def descriptor(self) -> ParameterDescriptor:
-        d = ParameterDescriptor(description=self.description, read_only=self.read_only)
-        if self.choices is not None:
-            d.additional_constraints = f'one of {list(self.choices)}'
-        if self.range is not None and not isinstance(self.default, bool):
-            lo, hi = self.range
-            if isinstance(self.default, float):
-                d.floating_point_range = [FloatingPointRange(from_value=float(lo), to_value=float(hi))]
-            elif isinstance(self.default, int):
-                d.integer_range = [IntegerRange(from_value=int(lo), to_value=int(hi), step=1)]
-        return d
+def descriptor(spec: ParamSpec) -> ParameterDescriptor:
+    """The ROS descriptor of a :class:`~skeleton_core.params.ParamSpec`."""
+    d = ParameterDescriptor(description=spec.description, read_only=spec.read_only)
+    if spec.choices is not None:
+        d.additional_constraints = f'one of {list(spec.choices)}'
+    if spec.range is not None and not isinstance(spec.default, bool):
+        lo, hi = spec.range
+        if isinstance(spec.default, float):
+            d.floating_point_range = [FloatingPointRange(from_value=float(lo), to_value=float(hi))]
+        elif isinstance(spec.default, int):
+            d.integer_range = [IntegerRange(from_value=int(lo), to_value=int(hi), step=1)]
+    return d
 
 
 class Parameters:
@@ -75,7 +47,7 @@ class Parameters:
         self.values: Dict[str, Any] = {}
         self._on_change = on_change
         for s in self.specs.values():
-            p = node.declare_parameter(s.name, s.default, s.descriptor())
+            p = node.declare_parameter(s.name, s.default, descriptor(s))
             value = p.value
             if isinstance(s.default, float) and isinstance(value, int):
                 value = float(value)

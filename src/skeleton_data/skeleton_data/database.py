@@ -47,7 +47,7 @@ from scipy.spatial import cKDTree
 
 from skeleton_core.geometry import normalize, quat_from_yaw, quat_multiply, retarget, swing_twist
 from .mocap import FIVE_CLASSES, MotionClip, rest_directions
-from skeleton_core.model import JOINT_NAMES, NUM_JOINTS, SEGMENT_CHILDREN, SEGMENT_NAMES, Body, standard_body
+from skeleton_core.model import JOINT_NAMES, NUM_JOINTS, SEGMENT_CHILD_INDEX, SEGMENT_NAMES, Body, standard_body
 
 __all__ = ['MotionDatabase', 'DatabaseError', 'build_database', 'load_or_build_default',
            'segment_twists', 'filter_postures', 'DEFAULT_THRESHOLD', 'FORMAT_VERSION',
@@ -173,8 +173,8 @@ def segment_twists(orientations: np.ndarray, body: Optional[Body] = None) -> np.
     direction of the segment (``rest_offsets`` of its child joint); the swing then carries the rest
     axis to the current segment direction. Use the same function on the simulated body.
     """
-    q = np.asarray(orientations, float)[..., list(SEGMENT_CHILDREN), :]
-    axes = rest_directions(body)[list(SEGMENT_CHILDREN)]
+    q = np.asarray(orientations, float)[..., SEGMENT_CHILD_INDEX, :]
+    axes = rest_directions(body)[SEGMENT_CHILD_INDEX]
     _, angle = swing_twist(q, axes)
     return angle
 

@@ -159,17 +159,6 @@ def tracking_failures(clips, fail_rel: float = FAIL_REL) -> Dict:
     return out
 
 
-def _synthetic_streams(ref_clips, seed: int = 0, params=None):
-    """The reference motion of each clip through the sensor model ('clean' scenario)."""
-    from .sensor_model import SensorModel
-    model = SensorModel(params, seed=seed)
-    streams = []
-    for name, ref100 in ref_clips:
-        clip = SimpleNamespace(name=name, positions=ref100, fps=100.0)
-        streams.append(model.corrupt(clip, 'clean'))
-    return model, streams
-
-
 def _reference_clips(with_ref, src, max_clips):
     """(name, rigid reference motion, fps) for the model side: the clip's marker reference with
     constant segment lengths (Shum & Ho Eq. 3-4 retargeting to its median lengths), so the model
@@ -302,11 +291,6 @@ def calibrate(clips, registrations=None, src=None, max_model_clips: int = 60,
         result['model_error'] = f'sensor model not available ({e})'
     result['proposal'] = propose(result)
     return result
-
-
-def _ratio(model, real):
-    with np.errstate(invalid='ignore', divide='ignore'):
-        return np.asarray(model, float) / np.asarray(real, float)
 
 
 def propose(result) -> Dict:

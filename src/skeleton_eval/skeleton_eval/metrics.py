@@ -22,11 +22,8 @@ from typing import Dict, Tuple
 
 import numpy as np
 
-from skeleton_core.model import NUM_JOINTS, PARENTS, SEGMENT_CHILDREN, SEGMENT_PARENTS
+from skeleton_core.model import NUM_JOINTS, SEGMENT_CHILD_INDEX, SEGMENT_PARENT_INDEX
 
-_PAR = np.array(PARENTS[1:])
-_SC = np.array(SEGMENT_CHILDREN)
-_SP = np.array(SEGMENT_PARENTS)
 
 
 def _check(pred, truth=None):
@@ -58,8 +55,8 @@ def _overall(x):
 def eq18_error(pred, truth) -> Tuple[np.ndarray, float]:
     """Shum 2013 Eq. 18 in cm: per joint (20,), root NaN; overall = mean over frames and 19 parts."""
     p, t = _check(pred, truth)
-    rp = p[:, 1:] - p[:, _PAR]
-    rt = t[:, 1:] - t[:, _PAR]
+    rp = p[:, 1:] - p[:, SEGMENT_PARENT_INDEX]
+    rt = t[:, 1:] - t[:, SEGMENT_PARENT_INDEX]
     e = np.linalg.norm(rp - rt, axis=-1) * 100.0  # (T, 19)
     per = np.full(NUM_JOINTS, np.nan)
     per[1:] = _nanmean0(e)
@@ -83,7 +80,7 @@ def jitter(pred, fps: float = 30.0) -> Tuple[np.ndarray, float]:
 
 
 def _lengths(p):
-    return np.linalg.norm(p[:, _SC] - p[:, _SP], axis=-1)
+    return np.linalg.norm(p[:, SEGMENT_CHILD_INDEX] - p[:, SEGMENT_PARENT_INDEX], axis=-1)
 
 
 def bone_length_std(pred) -> Tuple[np.ndarray, float]:
@@ -107,8 +104,8 @@ def bone_length_error(pred, truth) -> Tuple[np.ndarray, float]:
 def bone_direction_error(pred, truth) -> Tuple[np.ndarray, float]:
     """Mean angle (deg) between estimated and true segment directions, (19,) and overall."""
     p, t = _check(pred, truth)
-    a = p[:, _SC] - p[:, _SP]
-    b = t[:, _SC] - t[:, _SP]
+    a = p[:, SEGMENT_CHILD_INDEX] - p[:, SEGMENT_PARENT_INDEX]
+    b = t[:, SEGMENT_CHILD_INDEX] - t[:, SEGMENT_PARENT_INDEX]
     na = np.linalg.norm(a, axis=-1)
     nb = np.linalg.norm(b, axis=-1)
     with np.errstate(invalid='ignore', divide='ignore'):

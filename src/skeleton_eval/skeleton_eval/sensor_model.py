@@ -34,11 +34,12 @@ from typing import Dict, Iterator, List, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
-from skeleton_core.geometry import facing_yaw
-from skeleton_core.model import (CHILDREN, HIP_CENTER, HIP_LEFT, HIP_RIGHT, JOINT_INDEX, JOINT_NAMES, LIMB_JOINTS,
-                    MIRROR, NOT_TRACKED, INFERRED, NUM_JOINTS, PARENTS, SEGMENT_CHILDREN,
-                    SEGMENT_PARENTS, SHOULDER_LEFT, SHOULDER_RIGHT, SPINE, TRACKED, estimate_height,
-                    standard_body, segment_lengths)
+from skeleton_core.geometry import facing_yaw, yaw_matrix
+from skeleton_core.model import (CHILDREN, HIP_CENTER, HIP_LEFT, HIP_RIGHT, INFERRED, JOINT_INDEX,
+                                 JOINT_NAMES, LIMB_JOINTS, MIRROR, NOT_TRACKED, NUM_JOINTS, PARENTS,
+                                 SEGMENT_CHILDREN, SEGMENT_CHILD_INDEX, SEGMENT_PARENTS,
+                                 SEGMENT_PARENT_INDEX, SHOULDER_LEFT, SHOULDER_RIGHT, SPINE,
+                                 TRACKED, estimate_height, segment_lengths, standard_body)
 
 SCENARIOS = ('clean', 'a', 'b', 'c')
 
@@ -167,11 +168,6 @@ class KinectStream:
 
 def _wrap(a):
     return (np.asarray(a) + np.pi) % (2 * np.pi) - np.pi
-
-
-def _rotz(yaw: float) -> np.ndarray:
-    c, s = np.cos(yaw), np.sin(yaw)
-    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
 
 
 def resample(positions: np.ndarray, fps_in: float, fps_out: float) -> np.ndarray:
@@ -319,7 +315,7 @@ class _Corrupter:
             if self.turn['k'] >= len(self.turn['profile']):
                 self.turn = None
             root = truth[HIP_CENTER].copy()
-            truth = (truth - root) @ _rotz(yaw).T + root
+            truth = (truth - root) @ yaw_matrix(yaw).T + root
         body_yaw = float(facing_yaw(truth))
         to_sensor = float(np.arctan2(-truth[HIP_CENTER, 1], -truth[HIP_CENTER, 0]))
         rel = abs(float(_wrap(body_yaw - to_sensor)))
@@ -345,7 +341,7 @@ class _Corrupter:
                 rng.standard_normal((NUM_JOINTS, 3))
         self.e_slow = rs * self.e_slow + np.sqrt(1 - rs ** 2) * self.slow_sigma[:, None] * \
             rng.standard_normal((NUM_JOINTS, 3))
-        pos = truth + self.sys_offset @ _rotz(body_yaw).T + self.e_fast + self.e_slow
+        pos = truth + self.sys_offset @ yaw_matrix(body_yaw).T + self.e_fast + self.e_slow
         state = np.full(NUM_JOINTS, TRACKED, np.uint8)
         if self.hold is None:
             self.hold = pos.copy()
@@ -502,11 +498,11 @@ class _Corrupter:
     def _self_occluded(self, truth: np.ndarray) -> np.ndarray:
         x = np.maximum(truth[:, 0], 1e-3)
         uv = truth[:, 1:] / x[:, None]
-        a = uv[list(SEGMENT_PARENTS)]
-        b = uv[list(SEGMENT_CHILDREN)]
+        a = uv[SEGMENT_PARENT_INDEX]
+        b = uv[SEGMENT_CHILD_INDEX]
         d, t = _point_segment_2d(uv, a, b)                     # (20, 19)
-        xa = truth[list(SEGMENT_PARENTS), 0]
-        xb = truth[list(SEGMENT_CHILDREN), 0]
+        xa = truth[SEGMENT_PARENT_INDEX, 0]
+        xb = truth[SEGMENT_CHILD_INDEX, 0]
         xs = xa[None] + t * (xb - xa)[None]                     # depth of the closest point
         rad = self.radii[None] / np.maximum(xs, 1e-3)           # angular radius
         occ = (d < rad) & (xs + self.radii[None] * 0.5 < x[:, None]) & _OCCLUDABLE
@@ -564,7 +560,7 @@ class SensorModel:
             yaws = facing_yaw(pos)
             mean_yaw = float(np.arctan2(np.mean(np.sin(yaws)), np.mean(np.cos(yaws))))
             # face -x (towards the sensor)
-            pos = pos @ _rotz(np.pi - mean_yaw).T
+            pos = pos @ yaw_matrix(np.pi - mean_yaw).T
         pos = pos + np.array([float(pl['distance_m']), float(pl['lateral_offset_m']),
                               -float(pl['sensor_height_m'])])
         return pos

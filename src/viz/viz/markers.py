@@ -25,8 +25,9 @@ from typing import Dict, Iterable, List, Optional, Sequence, Tuple
 import numpy as np
 
 from skeleton_core.conversions import SkeletonFrame
-from skeleton_core.model import (INFERRED, NOT_TRACKED, NUM_JOINTS, SEGMENT_CHILDREN,
-                                 SEGMENT_PARENTS, SEGMENTS, estimate_height, standard_body)
+from skeleton_core.model import (INFERRED, NOT_TRACKED, NUM_JOINTS, SEGMENTS, SEGMENT_CHILD_INDEX,
+                                 SEGMENT_PARENT_INDEX, estimate_height, standard_body)
+from skeleton_core.params import param
 
 LAYERS: Tuple[str, ...] = ('raw', 'reliability', 'reconstructed', 'completed', 'character')
 
@@ -37,32 +38,74 @@ ADD, DELETE = 'ADD', 'DELETE'
 
 # Capsule radius per metre of body height (standard_body radii are proportional to the height)
 _RADIUS_PER_HEIGHT = standard_body().segment_radii / standard_body().height
-_SEG_P, _SEG_C = list(SEGMENT_PARENTS), list(SEGMENT_CHILDREN)
 
 # Marker ids inside one skeleton namespace
 JOINTS_ID, BONES_ID = 0, 1
 
 
+def _color_ok(v) -> Optional[str]:
+    v = list(v)
+    if len(v) != 4 or not all(isinstance(x, float) and 0.0 <= x <= 1.0 for x in v):
+        return 'a colour must be 4 numbers (r, g, b, a) in [0, 1]'
+    return None
+
+
+def _offset_ok(v) -> Optional[str]:
+    v = list(v)
+    if len(v) != 3 or not all(isinstance(x, float) and abs(x) <= 20.0 for x in v):
+        return 'an offset must be 3 numbers (x, y, z) in metres, |v| <= 20'
+    return None
+
+
+def _color(default, description):
+    return param(list(default), description, validator=_color_ok)
+
+
 @dataclass
 class Style:
-    """Colours (RGBA in [0, 1]) and sizes (m) of every layer. Mirrors the node's parameters."""
+    """Colours (RGBA in [0, 1]) and sizes (m) of every layer: parameters of the viz node."""
 
-    joint_diameter: float = 0.05
-    bone_width: float = 0.015
-    raw_joint_color: Tuple[float, ...] = (0.58, 0.20, 0.80, 1.0)   # purple
-    raw_bone_color: Tuple[float, ...] = (1.0, 0.90, 0.10, 1.0)     # yellow
-    inferred_alpha: float = 0.35
-    not_tracked: str = 'hide'  # 'hide' | 'grey'
-    not_tracked_color: Tuple[float, ...] = (0.5, 0.5, 0.5, 0.5)
-    reliability_color: Tuple[float, ...] = (1.0, 0.0, 0.0, 0.8)    # red
-    reliability_square_max: float = 0.15   # side of the square of a joint with reliability 0
-    reliability_square_min: float = 0.005  # squares smaller than this are not drawn
-    reliability_thickness: float = 0.004
-    reconstructed_color: Tuple[float, ...] = (0.10, 0.85, 0.25, 1.0)  # green
-    completed_color: Tuple[float, ...] = (0.20, 0.55, 1.0, 1.0)       # blue
-    character_color: Tuple[float, ...] = (0.90, 0.72, 0.55, 0.9)
-    character_height: float = 0.0  # m; 0 = estimated from the character's segment lengths
+    joint_diameter: float = param(0.05, 'joint sphere diameter (m)', range=(0.001, 0.5))
+    bone_width: float = param(0.015, 'bone line width (m)', range=(0.001, 0.2))
+    inferred_alpha: float = param(0.35, 'alpha multiplier of INFERRED joints', range=(0.0, 1.0))
+    not_tracked: str = param('hide', 'NOT_TRACKED joints: hide | grey', choices=('hide', 'grey'))
+    reliability_square_max: float = param(0.15, 'side (m) of the square at reliability 0',
+                                          range=(0.005, 1.0))
+    reliability_square_min: float = param(0.005, 'smaller squares are not drawn (m)',
+                                          range=(0.0, 0.5))
+    reliability_thickness: float = param(0.004, 'thickness (m) of the reliability squares',
+                                         range=(0.0005, 0.1))
+    character_height: float = param(
+        0.0, 'character height for capsule radii (m); 0 = estimate from its segments',
+        range=(0.0, 2.6), validator=lambda v: None if v == 0.0 or v > 0.5 else
+        'character_height must be 0 (auto) or in (0.5, 2.6]')
+    raw_joint_color: List[float] = _color((0.58, 0.20, 0.80, 1.0), 'raw joints RGBA (purple)')
+    raw_bone_color: List[float] = _color((1.0, 0.90, 0.10, 1.0), 'raw bones RGBA (yellow)')
+    not_tracked_color: List[float] = _color((0.5, 0.5, 0.5, 0.5),
+                                            'NOT_TRACKED joints RGBA (grey mode)')
+    reliability_color: List[float] = _color((1.0, 0.0, 0.0, 0.8),
+                                            'unreliable-joint squares RGBA (red)')
+    reconstructed_color: List[float] = _color((0.10, 0.85, 0.25, 1.0),
+                                              'reconstructed skeleton RGBA (green)')
+    completed_color: List[float] = _color((0.20, 0.55, 1.0, 1.0), 'completed skeleton RGBA (blue)')
+    character_color: List[float] = _color((0.90, 0.72, 0.55, 0.9), 'character capsules RGBA')
+    reconstructed_offset: List[float] = param(
+        [0.0, 0.0, 0.0], 'shift (m) of the reconstructed/completed layers, e.g. to draw them side '
+        'by side', validator=_offset_ok)
+    character_offset: List[float] = param([0.0, 0.0, 0.0], 'shift (m) of the character layer',
+                                          validator=_offset_ok)
     offsets: Dict[str, Tuple[float, float, float]] = field(default_factory=dict)  # layer -> shift
+
+    def layer_offset(self, layer: str):
+        """The shift of ``layer``: ``offsets[layer]`` if given, else the offset parameters."""
+        off = self.offsets.get(layer)
+        if off is not None:
+            return off
+        if layer in ('reconstructed', 'completed'):
+            off = self.reconstructed_offset
+        elif layer == 'character':
+            off = self.character_offset
+        return None if off is None or not any(off) else off
 
 
 @dataclass
@@ -131,7 +174,7 @@ def _rgba(c: Sequence[float], alpha: Optional[float] = None) -> Tuple[float, flo
 
 
 def _shift(style: Style, layer: str, positions: np.ndarray) -> np.ndarray:
-    off = style.offsets.get(layer)
+    off = style.layer_offset(layer)
     return positions if off is None else positions + np.asarray(off, dtype=float)
 
 
@@ -222,7 +265,7 @@ def capsule_markers(frame: SkeletonFrame, style: Style, layer: str = 'character'
     p = _shift(style, layer, np.asarray(frame.positions, dtype=float))
     radii = (_RADIUS_PER_HEIGHT * character_height(frame, style)).tolist()
     color = _rgba(style.character_color)
-    pa, pb = p[_SEG_P], p[_SEG_C]
+    pa, pb = p[SEGMENT_PARENT_INDEX], p[SEGMENT_CHILD_INDEX]
     d = pb - pa
     lengths = np.maximum(np.linalg.norm(d, axis=1), 1e-4).tolist()
     mids = (0.5 * (pa + pb)).tolist()

@@ -23,7 +23,8 @@ from visualization_msgs.msg import Marker, MarkerArray
 from skeleton_core.cdr import CdrError, frames_from_cdr
 from skeleton_core.conversions import ns_to_stamp
 from skeleton_core.health import Health
-from skeleton_core.rosnode import DiagnosticsPublisher, Parameters, ParamSpec, run_node
+from skeleton_core.params import ParamSpec, build, specs
+from skeleton_core.rosnode import DiagnosticsPublisher, Parameters, run_node
 
 from . import markers as mk
 
@@ -31,29 +32,11 @@ _TYPES = {mk.SPHERE: Marker.SPHERE, mk.CYLINDER: Marker.CYLINDER, mk.CUBE: Marke
           mk.SPHERE_LIST: Marker.SPHERE_LIST, mk.LINE_LIST: Marker.LINE_LIST}
 
 
-def _color_ok(name):
-    def check(v):
-        v = list(v)
-        if len(v) != 4 or not all(isinstance(x, float) and 0.0 <= x <= 1.0 for x in v):
-            return f'{name} must be 4 numbers (r, g, b, a) in [0, 1]'
-        return None
-    return check
-
-
-def _offset_ok(name):
-    def check(v):
-        v = list(v)
-        if len(v) != 3 or not all(isinstance(x, float) and abs(x) <= 20.0 for x in v):
-            return f'{name} must be 3 numbers (x, y, z) in metres, |v| <= 20'
-        return None
-    return check
-
-
 def _topic_ok(v):
     return None if v else 'topic name must not be empty'
 
 
-SPECS = [
+PARAMS = [
     ParamSpec('raw_topic', '/kinect/skeletons', 'raw skeletons (SkeletonArray)', read_only=True,
               validator=_topic_ok),
     ParamSpec('reliability_topic', '/kinect/skeletons_reliability',
@@ -82,39 +65,8 @@ SPECS = [
               range=(0.05, 60.0)),
     ParamSpec('default_frame_id', 'kinect_link', 'frame used when a message has none',
               validator=lambda v: None if v else 'default_frame_id must not be empty'),
-    ParamSpec('joint_diameter', 0.05, 'joint sphere diameter (m)', range=(0.001, 0.5)),
-    ParamSpec('bone_width', 0.015, 'bone line width (m)', range=(0.001, 0.2)),
-    ParamSpec('inferred_alpha', 0.35, 'alpha multiplier of INFERRED joints', range=(0.0, 1.0)),
-    ParamSpec('not_tracked', 'hide', 'NOT_TRACKED joints: hide | grey', choices=('hide', 'grey')),
-    ParamSpec('reliability_square_max', 0.15, 'side (m) of the square at reliability 0',
-              range=(0.005, 1.0)),
-    ParamSpec('reliability_square_min', 0.005, 'smaller squares are not drawn (m)',
-              range=(0.0, 0.5)),
-    ParamSpec('character_height', 0.0,
-              'character height for capsule radii (m); 0 = estimate from its segments',
-              range=(0.0, 2.6),
-              validator=lambda v: None if v == 0.0 or v > 0.5 else
-              'character_height must be 0 (auto) or in (0.5, 2.6]'),
-    ParamSpec('raw_joint_color', [0.58, 0.20, 0.80, 1.0], 'raw joints RGBA',
-              validator=_color_ok('raw_joint_color')),
-    ParamSpec('raw_bone_color', [1.0, 0.90, 0.10, 1.0], 'raw bones RGBA',
-              validator=_color_ok('raw_bone_color')),
-    ParamSpec('not_tracked_color', [0.5, 0.5, 0.5, 0.5], 'NOT_TRACKED joints RGBA (grey mode)',
-              validator=_color_ok('not_tracked_color')),
-    ParamSpec('reliability_color', [1.0, 0.0, 0.0, 0.8], 'unreliable-joint squares RGBA',
-              validator=_color_ok('reliability_color')),
-    ParamSpec('reconstructed_color', [0.10, 0.85, 0.25, 1.0], 'reconstructed skeleton RGBA',
-              validator=_color_ok('reconstructed_color')),
-    ParamSpec('completed_color', [0.20, 0.55, 1.0, 1.0], 'completed skeleton RGBA',
-              validator=_color_ok('completed_color')),
-    ParamSpec('character_color', [0.90, 0.72, 0.55, 0.9], 'character capsules RGBA',
-              validator=_color_ok('character_color')),
-    ParamSpec('reconstructed_offset', [0.0, 0.0, 0.0],
-              'shift (m) of the reconstructed/completed layers, e.g. to draw them side by side',
-              validator=_offset_ok('reconstructed_offset')),
-    ParamSpec('character_offset', [0.0, 0.0, 0.0], 'shift (m) of the character layer',
-              validator=_offset_ok('character_offset')),
-]
+] + specs(mk.Style)   # the style's parameters, declared on viz.markers.Style
+
 
 _LAYER_TOPIC = {'raw': 'raw_topic', 'reliability': 'reliability_topic',
                 'reconstructed': 'reconstructed_topic', 'completed': 'completed_topic',
@@ -122,20 +74,7 @@ _LAYER_TOPIC = {'raw': 'raw_topic', 'reliability': 'reliability_topic',
 
 
 def style_from_params(v: Dict[str, Any]) -> mk.Style:
-    off_r = tuple(float(x) for x in v['reconstructed_offset'])
-    off_c = tuple(float(x) for x in v['character_offset'])
-    return mk.Style(
-        joint_diameter=v['joint_diameter'], bone_width=v['bone_width'],
-        raw_joint_color=tuple(v['raw_joint_color']), raw_bone_color=tuple(v['raw_bone_color']),
-        inferred_alpha=v['inferred_alpha'], not_tracked=v['not_tracked'],
-        not_tracked_color=tuple(v['not_tracked_color']),
-        reliability_color=tuple(v['reliability_color']),
-        reliability_square_max=v['reliability_square_max'],
-        reliability_square_min=v['reliability_square_min'],
-        reconstructed_color=tuple(v['reconstructed_color']),
-        completed_color=tuple(v['completed_color']),
-        character_color=tuple(v['character_color']), character_height=v['character_height'],
-        offsets={'reconstructed': off_r, 'completed': off_r, 'character': off_c})
+    return build(mk.Style, v)
 
 
 class MarkerCache:
@@ -209,7 +148,7 @@ class VizNode(Node):
         super().__init__('viz', **kwargs)
         self.health = Health()
         try:
-            self.params = Parameters(self, SPECS, on_change=self._on_params)
+            self.params = Parameters(self, PARAMS, on_change=self._on_params)
         except InvalidParameterValueException as e:  # out of a descriptor range at start-up
             raise ValueError(f'viz: {e}') from None
         v = self.params.values

@@ -40,6 +40,7 @@ import sys
 import sysconfig
 import threading
 import time
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Callable, List, Optional
 
@@ -50,13 +51,30 @@ from skeleton_core.model import (ANKLE_LEFT, ANKLE_RIGHT, ELBOW_LEFT, ELBOW_RIGH
                                  FOOT_RIGHT, HAND_LEFT, HAND_RIGHT, HIP_CENTER, HIP_LEFT, HIP_RIGHT,
                                  INFERRED, NITE_TO_KINECT, NOT_TRACKED, NUM_JOINTS,
                                  SHOULDER_CENTER, TRACKED, WRIST_LEFT, WRIST_RIGHT, standard_body)
+from skeleton_core.params import param
 
 from .base import Source, SourceError, SourceOutput
 
-TRACKED_CONFIDENCE = 0.5
-INFERRED_CONFIDENCE = 0.0
 MAX_USERS = 6
 APT_HINT = 'install it: sudo apt-get install libopenni2-0'
+
+
+@dataclass
+class LiveConfig:
+    """Parameters of :class:`LiveSource`."""
+
+    device_uri: str = param('', "OpenNI2 device URI ('' = first device) or an .oni recording path")
+    nite2_path: str = param('', 'NiTE2 Redist directory (holding libNiTE2.so)')
+    openni2_path: str = param('', "directory of libOpenNI2.so ('' = system libraries)")
+    max_users: int = param(MAX_USERS, 'most users published per frame', range=(1, MAX_USERS))
+    tracked_confidence: float = param(0.5, 'NiTE joint confidence >= this -> TRACKED',
+                                      range=(0.0, 1.0))
+    inferred_confidence: float = param(0.0, 'NiTE joint confidence > this -> INFERRED (else '
+                                       'NOT_TRACKED)', range=(0.0, 1.0))
+    smoothing: float = param(0.0, 'NiTE skeleton smoothing factor (0 = off)', range=(0.0, 0.99))
+    retry_s: float = param(0.0, 'when > 0, keep retrying a missing device every retry_s seconds '
+                           'instead of exiting (a device lost mid-run is always retried)',
+                           range=(0.0, 60.0))
 
 
 # --------------------------------------------------------------------------------------------
@@ -68,8 +86,8 @@ def camera_mm_to_rep103(points_mm) -> np.ndarray:
     return np.stack([p[..., 2], -p[..., 0], p[..., 1]], axis=-1) / 1000.0
 
 
-def confidence_to_state(conf, tracked: float = TRACKED_CONFIDENCE,
-                        inferred: float = INFERRED_CONFIDENCE) -> np.ndarray:
+def confidence_to_state(conf, tracked: float = LiveConfig.tracked_confidence,
+                        inferred: float = LiveConfig.inferred_confidence) -> np.ndarray:
     c = np.asarray(conf, dtype=float)
     out = np.full(c.shape, NOT_TRACKED, np.uint8)
     out[c > inferred] = INFERRED
@@ -83,8 +101,8 @@ def _unit(v: np.ndarray) -> Optional[np.ndarray]:
 
 
 def nite_to_frame(points_mm, confidences, user_id: int, stamp_ns: int, frame_id: str,
-                  tracked: float = TRACKED_CONFIDENCE,
-                  inferred: float = INFERRED_CONFIDENCE) -> SkeletonFrame:
+                  tracked: float = LiveConfig.tracked_confidence,
+                  inferred: float = LiveConfig.inferred_confidence) -> SkeletonFrame:
     """15 NiTE joints (nite::JointType order, camera mm) -> a 20-joint :class:`SkeletonFrame`."""
     nite = camera_mm_to_rep103(points_mm)
     if nite.shape != (len(NITE_TO_KINECT), 3):
@@ -221,22 +239,22 @@ def load_nite2(nite2_path: str):
 # --------------------------------------------------------------------------------------------
 class LiveSource(Source):
     name = 'live'
+    config_class = LiveConfig
 
-    def __init__(self, device_uri: str = '', nite2_path: str = '', openni2_path: str = '',
-                 frame_id: str = 'kinect_link', max_users: int = MAX_USERS,
-                 tracked_confidence: float = TRACKED_CONFIDENCE,
-                 inferred_confidence: float = INFERRED_CONFIDENCE, retry_s: float = 0.0,
-                 smoothing: float = 0.0, clock_ns: Callable[[], int] = time.time_ns,
-                 log: Optional[Callable[[str], None]] = None):
-        self.device_uri = device_uri
-        self.nite2_path = nite2_path
-        self.openni2_path = openni2_path
+    def __init__(self, config: Optional[LiveConfig] = None, frame_id: str = 'kinect_link',
+                 clock_ns: Callable[[], int] = time.time_ns,
+                 log: Optional[Callable[[str], None]] = None, **params):
+        cfg = replace(config or LiveConfig(), **params)
+        self.config = cfg
+        self.device_uri = cfg.device_uri
+        self.nite2_path = cfg.nite2_path
+        self.openni2_path = cfg.openni2_path
         self.frame_id = frame_id
-        self.max_users = int(max_users)
-        self.tracked_confidence = float(tracked_confidence)
-        self.inferred_confidence = float(inferred_confidence)
-        self.retry_s = float(retry_s)
-        self.smoothing = float(smoothing)
+        self.max_users = int(cfg.max_users)
+        self.tracked_confidence = float(cfg.tracked_confidence)
+        self.inferred_confidence = float(cfg.inferred_confidence)
+        self.retry_s = float(cfg.retry_s)
+        self.smoothing = float(cfg.smoothing)
         self.clock_ns = clock_ns
         self.log = log or (lambda m: print(f'[WARN] {m}', file=sys.stderr))
         self._queue: collections.deque = collections.deque(maxlen=10)
@@ -248,6 +266,11 @@ class LiveSource(Source):
         self.reconnects = 0
         self.frames_read = 0
         self.last_frame_ns = 0
+
+    @classmethod
+    def from_config(cls, config, frame_id, log=None, clock_ns=None) -> 'LiveSource':
+        kw = {} if clock_ns is None else {'clock_ns': clock_ns}
+        return cls(config=config, frame_id=frame_id, log=log, **kw)
 
     # -- connection -----------------------------------------------------------------------
     def connect(self) -> None:

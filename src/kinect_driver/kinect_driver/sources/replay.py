@@ -15,6 +15,7 @@ elapsed since the first poll; a poll releases everything due up to half a period
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 from typing import List, Optional, Tuple
 
@@ -22,6 +23,7 @@ import numpy as np
 
 from skeleton_core.bagio import BagError, bag_topics, read_messages
 from skeleton_core.conversions import stamp_to_ns
+from skeleton_core.params import param
 
 from ..csv_format import CsvFormatError, read_csv
 from .base import Source, SourceError, SourceOutput
@@ -29,15 +31,31 @@ from .base import Source, SourceError, SourceOutput
 SKELETON_ARRAY = 'skeleton_msgs/msg/SkeletonArray'
 
 
+@dataclass
+class ReplayConfig:
+    """Parameters of :class:`ReplaySource`."""
+
+    replay_file: str = param('', 'bag (.mcap file or rosbag2 directory) or CSV file')
+    replay_topic: str = param('/kinect/skeletons', "SkeletonArray topic in the bag ('' = the "
+                              "bag's only SkeletonArray topic)")
+    rate: float = param(1.0, 'speed factor (2 = twice as fast)', range=(0.05, 20.0))
+    loop: bool = param(False, 'start again after the last message')
+
+
 class ReplaySource(Source):
     name = 'replay'
+    config_class = ReplayConfig
+    recorded = True
 
-    def __init__(self, path: str, topic: str = '/kinect/skeletons', rate: float = 1.0,
-                 loop: bool = False, frame_id: str = 'kinect_link'):
-        self.path = str(path)
-        self.topic = topic
-        self.rate = float(rate)
-        self.loop = bool(loop)
+    def __init__(self, path: Optional[str] = None, config: Optional[ReplayConfig] = None,
+                 frame_id: str = 'kinect_link', topic: Optional[str] = None,
+                 rate: Optional[float] = None, loop: Optional[bool] = None):
+        cfg = config or ReplayConfig()
+        self.config = cfg
+        self.path = str(cfg.replay_file if path is None else path)
+        self.topic = cfg.replay_topic if topic is None else topic
+        self.rate = float(cfg.rate if rate is None else rate)
+        self.loop = bool(cfg.loop if loop is None else loop)
         self.frame_id = frame_id
         self._items: List[Tuple[int, SourceOutput]] = []   # (recorded time ns, output)
         self._next = 0
@@ -137,6 +155,10 @@ class ReplaySource(Source):
     @property
     def count(self) -> int:
         return len(self._items)
+
+    def describe(self) -> str:
+        return f'{self.path} ({self.count} frames, rate {self.rate:g}' + \
+            (', loop)' if self.loop else ')')
 
     def status(self) -> dict:
         return {'replay_file': self.path, 'messages': len(self._items), 'lap': self._lap,

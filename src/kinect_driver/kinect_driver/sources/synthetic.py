@@ -20,14 +20,15 @@ are stamped and the latency measured downstream is the graph's own. When more th
 from __future__ import annotations
 
 import copy
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import List
+from typing import List, Optional
 
 import numpy as np
 
 from skeleton_core.conversions import SkeletonFrame
 from skeleton_core.model import NUM_JOINTS, TRACKED
+from skeleton_core.params import check, param
 
 from .base import Source, SourceError, SourceOutput
 
@@ -55,24 +56,44 @@ def _load_motion(clip: str, seed: int):
         raise SourceError(f'cannot load motion clip {p}: {e}') from None
 
 
+@dataclass
+class SyntheticConfig:
+    """Parameters of :class:`SyntheticSource`."""
+
+    scenario: str = param('b', 'sensor-model scenario class a | b | c (clean: noise only)',
+                          choices=('a', 'b', 'c', 'clean'))
+    seed: int = param(0, 'random seed of the sensor model and motions', range=(0, 2 ** 31 - 1))
+    num_users: int = param(1, 'number of users side by side', range=(1, MAX_USERS))
+    clip: str = param('', "motion ('' = built-in motions, a built-in name such as builtin_wave, "
+                      'or a CMU BVH path)')
+    user_spacing: float = param(0.8, 'lateral distance between users (m)', range=(0.3, 2.0))
+    sensor_params: str = param('', "sensor model YAML ('' = config/sensor_model.yaml or the "
+                               'built-in defaults)')
+    rate_hz: float = param(30.0, 'frame rate (Hz)', range=(1.0, 120.0))
+
+
 class SyntheticSource(Source):
     name = 'synthetic'
+    config_class = SyntheticConfig
+    has_truth = True
 
-    def __init__(self, scenario: str = 'b', seed: int = 0, num_users: int = 1, clip: str = '',
-                 rate_hz: float = 30.0, frame_id: str = 'kinect_link', user_spacing: float = 0.8,
-                 sensor_params: str = '', with_truth: bool = True):
-        if not 1 <= int(num_users) <= MAX_USERS:
-            raise SourceError(f'num_users must be 1-{MAX_USERS}, got {num_users}')
-        if scenario not in ('clean', 'a', 'b', 'c'):
-            raise SourceError(f"scenario must be one of a, b, c (or 'clean'), got {scenario!r}")
-        self.scenario = scenario
-        self.seed = int(seed)
-        self.num_users = int(num_users)
-        self.clip = clip
+    def __init__(self, config: Optional[SyntheticConfig] = None, frame_id: str = 'kinect_link',
+                 with_truth: bool = True, **params):
+        cfg = replace(config or SyntheticConfig(), **params)
+        try:
+            check(cfg)
+        except ValueError as e:
+            raise SourceError(str(e)) from None
+        self.config = cfg
+        self.scenario = cfg.scenario
+        self.seed = int(cfg.seed)
+        self.num_users = int(cfg.num_users)
+        self.clip = cfg.clip
+        rate_hz = cfg.rate_hz
         self.period_s = 1.0 / float(rate_hz)
         self.frame_id = frame_id
-        self.user_spacing = float(user_spacing)
-        self.sensor_params = sensor_params
+        self.user_spacing = float(cfg.user_spacing)
+        self.sensor_params = cfg.sensor_params
         self.with_truth = with_truth
         self._streams: List = []
         self.frames_out = 0
@@ -152,6 +173,10 @@ class SyntheticSource(Source):
 
     def close(self) -> None:
         self._streams = []
+
+    def describe(self) -> str:
+        return (f'scenario {self.scenario}, {self.num_users} user(s): '
+                + ','.join(self.clip_names))
 
     def status(self) -> dict:
         return {'scenario': self.scenario, 'users': self.num_users,
