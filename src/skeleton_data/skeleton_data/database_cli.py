@@ -162,7 +162,10 @@ def main(argv=None) -> int:
                 sel += [mocap.mirror_clip(c) for c in sel]
             t_load = time.perf_counter() - t0
             db, st = database.build_database(sel, threshold=threshold, progress=progress,
-                                             meta={'source': source, 'skipped': skipped})
+                                             meta={'source': '+'.join(
+                                                 [source] * (source != 'none')
+                                                 + [m.joint_map.stem for m in mapped]),
+                                                 'skipped': skipped})
             out = args.out or (database.default_cache_dir() / f'motion_db_{source}_custom.npz')
             db.save(out)
             st.update(cache_hit=False, path=str(out), skipped=skipped, load_seconds=t_load)
