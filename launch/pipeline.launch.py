@@ -3,6 +3,7 @@
     ros2 launch kinect_bringup pipeline.launch.py                      # synthetic source, method C
     ros2 launch kinect_bringup pipeline.launch.py source:=replay replay_file:=out/demo.mcap
     ros2 launch kinect_bringup pipeline.launch.py source:=live method:=A physics:=false rviz:=true
+    ros2 launch kinect_bringup pipeline.launch.py control:=true world:=playground   # Ishigaki 2009
 
 The reconstruction is one node (`reconstruction`: reliability, completion and optimizer without DDS
 hops between them) or, with reconstruction:=split, the three nodes `reliability`, `completion` and
@@ -34,6 +35,11 @@ ARGS = [
     ('reconstruction', 'fused', 'fused: one reconstruction node; split: reliability, completion and '
      'optimizer nodes (same topics)'),
     ('physics', 'true', 'run the MuJoCo physics character'),
+    ('control', 'false', 'performance-based control (Ishigaki 2009) between the reconstruction '
+     'and the physics: the physics character tracks /control/target'),
+    ('world', 'playground', 'control:=true: feature world (name in performance_control/config/'
+     'worlds or a YAML path)'),
+    ('start_feature', '', 'control:=true: feature a new character starts on ("" = the spawn)'),
     ('viz', 'true', 'run the RViz marker node'),
     ('rviz', 'false', 'start RViz with the bundled config'),
     ('record', '', 'record every pipeline topic to this MCAP file ("" = no recording)'),
@@ -97,10 +103,22 @@ def _nodes(context):
         ]
     else:
         raise RuntimeError(f'reconstruction:={mode} is not one of fused, split')
+    posture_topic = ''
+    if method:
+        posture_topic = '/posture/completed' if method == 'A' else '/posture/reconstructed'
+    control = arg('control').lower() in ('true', '1', 'yes')
+    if control:
+        ctl_over = {'world': arg('world'), 'start_feature': arg('start_feature')}
+        if posture_topic:
+            ctl_over['input_topic'] = posture_topic
+        nodes.append(Node(package='performance_control', executable='control', name='control',
+                          parameters=params('control', **ctl_over), **common))
     if arg('physics').lower() in ('true', '1', 'yes'):
         phys_over = {}
-        if method:
-            phys_over['input_topic'] = '/posture/completed' if method == 'A' else '/posture/reconstructed'
+        if control:
+            phys_over['input_topic'] = '/control/target'
+        elif posture_topic:
+            phys_over['input_topic'] = posture_topic
         nodes.append(Node(package='physics_sim', executable='physics', name='physics',
                           parameters=params('physics', **phys_over), **common))
     if arg('viz').lower() in ('true', '1', 'yes'):

@@ -12,8 +12,10 @@ from xml.dom import minidom
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
+# performance_control sits between the reconstruction and the physics in the graph but builds its
+# feature world with physics_sim's MJCF helpers and frames, so it ranks above physics_sim
 LAYERS = ['skeleton_core', 'skeleton_data', 'skeleton_eval', 'kinect_driver', 'pose_reconstruction',
-          'physics_sim', 'viz', 'kinect_bringup']
+          'physics_sim', 'performance_control', 'viz', 'kinect_bringup']
 RANK = {p: i for i, p in enumerate(LAYERS)}
 PYTHON_PACKAGES = sorted(p.parent.name for p in (ROOT / 'src').glob('*/setup.py'))
 

@@ -32,6 +32,7 @@ NODES: Dict[str, NodeInfo] = {n.name: n for n in (
     NodeInfo('optimizer', 'pose_reconstruction', 'optimizer', 'pose_reconstruction.optimizer_node'),
     NodeInfo('reconstruction', 'pose_reconstruction', 'reconstruction',
              'pose_reconstruction.reconstruction_node'),
+    NodeInfo('control', 'performance_control', 'control', 'performance_control.control_node'),
     NodeInfo('physics', 'physics_sim', 'physics', 'physics_sim.physics_node'),
     NodeInfo('viz', 'viz', 'viz', 'viz.viz_node'),
     NodeInfo('recorder', 'kinect_bringup', 'recorder', 'kinect_bringup.recorder'),

@@ -1,0 +1,366 @@
+"""One user's performance controller (Ishigaki et al. 2009, Fig. 3): feature identification and
+intention recognition, the dynamic process, kinematic composition and motion integration, per
+sensor frame. No ROS: the node (``control_node``) only adapts messages and parameters.
+
+    ctrl = PerformanceController(load_world('playground'), ControlParams())
+    out = ctrl.step(positions_sensor_20x3, t_seconds)     # -> ControlOutput
+    out.positions_sensor    # the pose the physics character tracks (sensor frame)
+
+Frames: input and output in the sensor frame (REP-103); the world is the physics world
+(:class:`physics_sim.simulation.SensorPose`: floor at z = 0). The character starts at the world's
+``spawn`` (or a feature's ``start``), facing +x; it turns with the user (yaw relative to the user's
+first frame). The user's floor is the lowest foot of the first frames.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from typing import Dict, Optional
+
+import numpy as np
+from physics_sim.simulation import SensorPose
+from skeleton_core.geometry import facing_yaw
+from skeleton_core.params import check, nested, param
+from skeleton_core.model import (FOOT_LEFT, FOOT_RIGHT, JOINT_INDEX, estimate_height)
+
+from .composition import Obstacles, PoseComposer, integrate_motion, integrate_rule
+from .dynamics import DynamicProcess
+from .examples import example_motion
+from .features import EFFECTORS, Feature, World
+from .intention import (ExampleModel, IntentionRecognizer, Recognition, RecognizerParams,
+                        center_of_mass, yaw_rotation)
+
+HANDS = ('HandLeft', 'HandRight')
+FEET = ('FootLeft', 'FootRight')
+
+
+@dataclass
+class ControlParams:
+    """The controller; every field is a node parameter (skeleton_core.params)."""
+
+    recognizer: RecognizerParams = nested(RecognizerParams)
+    free_gain: float = param(1500.0, 'N/m (N/rad): gain of effectors without a contact',
+                             range=(10.0, 1e5))
+    release_after: float = param(1.0, 's without imitation before hands on a feature with an '
+                                 'example let go (the character falls when the user stops; '
+                                 '0 = never)', range=(0.0, 60.0))
+    hand_release_margin: float = param(0.05, "m: a held hand lets go when the user's hand drops "
+                                       "this far below the feature's engage joint",
+                                       range=(0.0, 1.0))
+    regrab_speed: float = param(0.5, 'm/s: on a feature with engage.regrab (the rope) a held hand '
+                                'the user raises faster lets go to grab higher (hand over hand)',
+                                range=(0.05, 10.0))
+    foot_down_height: float = param(0.06, "m: the user's foot this close to their floor is "
+                                    'constrained (may hold the floor / trampoline)',
+                                    range=(0.005, 0.5))
+    blend_time: float = param(0.3, 's: transition in/out of the composed pose (Sec. 6.2)',
+                              range=(0.01, 5.0))
+    compose_components: int = param(6, 'pose PCA size m of Eq. 7', range=(1, 30), read_only=True)
+    compose_k: int = param(4, 'nearest example frames in q_rep (Eq. 10)', range=(1, 50),
+                           read_only=True)
+    w_e: float = param(0.05, 'Eq. 8 weight of G_E (example similarity; w_P = 1)',
+                       range=(0.0, 100.0))
+    w_s: float = param(0.2, 'Eq. 8 weight of G_S (smoothness)', range=(0.0, 100.0))
+    sensor_height: float = param(0.8, 'm above the floor (the same world as the physics node)',
+                                 range=(0.0, 5.0), read_only=True)
+    sensor_pitch: float = param(0.0, 'sensor tilt down (deg)', range=(-45.0, 45.0),
+                                read_only=True, name='sensor_pitch_deg', degrees=True)
+    body_mass: float = param(75.0, 'kg at 1.75 m (scaled with height^3)', range=(20.0, 300.0),
+                             read_only=True)
+    compute_penetration: bool = param(True, 'measure the deepest penetration of the body into '
+                                      'the features every frame (diagnostics, the benchmark)')
+
+    def validate(self) -> None:
+        check(self, nested=False)
+        self.recognizer.validate()
+        for k in ('free_gain', 'blend_time', 'body_mass', 'foot_down_height'):
+            if not getattr(self, k) > 0:
+                raise ValueError(f'{k} must be positive')
+        if self.release_after < 0:
+            raise ValueError('release_after must be >= 0')
+        if not 1 <= self.compose_components <= 30 or not 1 <= self.compose_k <= 50:
+            raise ValueError('compose_components in [1, 30], compose_k in [1, 50]')
+
+
+def build_models(world: World, params: RecognizerParams) -> Dict[str, ExampleModel]:
+    """The PCA model of every feature's example motion."""
+    return {f.name: ExampleModel(f.name, example_motion(f.example, fps=params.fps),
+                                 f.example.effectors, f.example.components, params)
+            for f in world.with_example()}
+
+
+@dataclass
+class ControlOutput:
+    positions_world: np.ndarray      # (20, 3) the composed, integrated pose
+    positions_sensor: np.ndarray     # (20, 3) the same in the sensor frame
+    feature: str                     # engaged feature (or the imitated one), '' = none
+    recognition: Optional[Recognition]
+    imitating: bool
+    contacts: Dict[str, str]         # effector -> feature
+    contact_points: Dict[str, np.ndarray]
+    com: np.ndarray
+    penetration: float
+    compute_ms: float
+    blend: float
+
+
+def _rotz(yaw: float) -> np.ndarray:
+    return yaw_rotation(-yaw)   # body -> world
+
+
+class PerformanceController:
+    """Per user (see module docstring)."""
+
+    def __init__(self, world: World, params: Optional[ControlParams] = None,
+                 models: Optional[Dict[str, ExampleModel]] = None, start: str = ''):
+        self.world = world
+        self.params = params or ControlParams()
+        self.params.validate()
+        if start and start not in world.features:
+            raise ValueError(f'start feature {start!r} is not in world {world.name} '
+                             f'({sorted(world.features)})')
+        self.start = start
+        self.models = models if models is not None else build_models(world, self.params.recognizer)
+        self.recognizer = IntentionRecognizer(list(self.models.values()), self.params.recognizer)
+        self.composers = {n: PoseComposer(m, self.params.compose_components, self.params.compose_k,
+                                          1.0, self.params.w_e, self.params.w_s)
+                          for n, m in self.models.items()}
+        self.sensor = SensorPose(self.params.sensor_height, self.params.sensor_pitch)
+        self.dp: Optional[DynamicProcess] = None
+        self.height = 1.75
+        self.user_floor = 0.0
+        self.yaw0 = 0.0
+        self.t_last: Optional[float] = None
+        self.last_imitation: Dict[str, float] = {}
+        self.blend = 0.0
+        self.blend_feature = ''
+        self.obstacles = Obstacles()
+        self.frames = 0
+        self._hand_z: Dict[str, float] = {}
+        self._hand_vz: Dict[str, float] = {e: 0.0 for e in HANDS}
+
+    # ------------------------------------------------------------------ set-up
+    def _offsets(self, rel_world: np.ndarray) -> Dict[str, np.ndarray]:
+        return {e: rel_world[JOINT_INDEX[e]] for e in EFFECTORS}
+
+    def _start_com(self, rel_world: np.ndarray) -> np.ndarray:
+        """Where the COM starts: the world's spawn on the floor, or the start feature's pose."""
+        feet_z = min(rel_world[FOOT_LEFT, 2], rel_world[FOOT_RIGHT, 2])
+        stand = np.array([*self.world.spawn, -feet_z + 0.04])
+        if not self.start:
+            return stand
+        f = self.world.features[self.start]
+        st = f.start or {}
+        kind = f.kind
+        if kind == 'bars':
+            xy = np.asarray(st.get('com_xy', self.world.spawn), float)
+            caps = [g for g in f.geoms if g.type == 'capsule']
+            bar = min(caps, key=lambda g: np.linalg.norm(
+                0.5 * (g.vec('from') + g.vec('to'))[:2] - xy))
+            mid = 0.5 * (bar.vec('from') + bar.vec('to'))
+            hands = 0.5 * (rel_world[JOINT_INDEX['HandLeft']] + rel_world[JOINT_INDEX['HandRight']])
+            return np.array([mid[0], mid[1], mid[2]]) - np.array([hands[0], hands[1], hands[2]])
+        if kind == 'rope':
+            g = next(g for g in f.geoms if g.type == 'rope')
+            top = g.vec('top')
+            z = float(st.get('height', top[2] - 2.0))
+            hands = 0.5 * (rel_world[JOINT_INDEX['HandLeft']] + rel_world[JOINT_INDEX['HandRight']])
+            return np.array([top[0] - hands[0], top[1] - hands[1], z - hands[2]])
+        if kind == 'water':
+            g = next(g for g in f.geoms if g.type == 'volume')
+            c = g.vec('center')
+            xy = np.asarray(st.get('com_xy', c[:2]), float)
+            return np.array([xy[0], xy[1], float(st.get('com_z', c[2]))])
+        if kind == 'trampoline':
+            g = next(g for g in f.geoms if g.type == 'box')
+            c, hf = g.vec('center'), g.vec('half')
+            return np.array([c[0], c[1], c[2] + hf[2] - feet_z + 0.04])
+        return stand
+
+    def _init(self, p: np.ndarray) -> None:
+        h = estimate_height(p)
+        self.height = float(np.clip(h, 1.0, 2.3)) if np.isfinite(h) else 1.75
+        self.recognizer.height = self.height
+        self.user_floor = float(min(p[FOOT_LEFT, 2], p[FOOT_RIGHT, 2]))
+        self.yaw0 = float(facing_yaw(p))
+        rel = self._char_rel(p)
+        mass = self.params.body_mass * (self.height / 1.75) ** 3
+        com = self._start_com(rel)
+        self.dp = DynamicProcess(self.world, mass, com, self._offsets(rel), self.params.free_gain)
+        if self.start:
+            f = self.world.features[self.start]
+            for e in f.engage.effectors:
+                dist, body, pt = self.dp.feature_distance(e, f)
+                if body is not None and dist < 3 * f.engage.distance:
+                    self.dp.move_effector(e, pt)     # already holding: no jump at the start
+                    self.dp.engage(e, f, body, pt)
+        self._refresh_obstacles()
+
+    def _char_rel(self, p: np.ndarray) -> np.ndarray:
+        """The user's joints relative to their COM, turned by the character's yaw offset
+        (world axes of the character)."""
+        rel = p - center_of_mass(p)
+        return rel @ _rotz(-self.yaw0).T
+
+    # ------------------------------------------------------------------ obstacles
+    def _refresh_obstacles(self) -> None:
+        import mujoco
+        ob = Obstacles()
+        d, m = self.dp.data, self.dp.model
+        for f in self.world.features.values():
+            for i, g in enumerate(f.geoms):
+                n = f'f_{f.name}_{i}'
+                if g.type == 'plane':
+                    ob.floor = f.name
+                elif g.type == 'capsule':
+                    ob.capsules.append((g.vec('from'), g.vec('to'), g.num('radius'), f.name))
+                elif g.type == 'box':
+                    if 'stiffness' in g.data:
+                        b = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, n)
+                        ob.boxes.append((d.xpos[b].copy(), g.vec('half'), f.name))
+                    else:
+                        ob.boxes.append((g.vec('center'), g.vec('half'), f.name))
+                elif g.type == 'rope':
+                    seg, r = g.num('length'), g.num('radius')
+                    for s in range(int(g.data['segments'])):
+                        b = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, f'{n}_seg{s}')
+                        a0 = d.xpos[b].copy()
+                        ob.capsules.append((a0, a0 + d.xmat[b].reshape(3, 3) @ [0, 0, -seg], r,
+                                            f.name))
+        self.obstacles = ob.freeze()
+
+    # ------------------------------------------------------------------ rules
+    def _user_hand_raised(self, p: np.ndarray, e: str, f: Feature, margin: float = 0.0) -> bool:
+        if f.engage.hand_above is None:
+            return True
+        return bool(p[JOINT_INDEX[e], 2] > p[JOINT_INDEX[f.engage.hand_above], 2] - margin)
+
+    def _user_foot_down(self, p: np.ndarray, e: str) -> bool:
+        return bool(p[JOINT_INDEX[e], 2] - self.user_floor < self.params.foot_down_height)
+
+    def _track_hands(self, p: np.ndarray, dt: float) -> None:
+        """Smoothed vertical speed (0.1 s) of the user's hands relative to their COM."""
+        com_z = float(center_of_mass(p)[2])
+        g = 1.0 - math.exp(-dt / 0.1)
+        for e in HANDS:
+            z = float(p[JOINT_INDEX[e], 2]) - com_z
+            if e in self._hand_z:
+                self._hand_vz[e] += g * ((z - self._hand_z[e]) / dt - self._hand_vz[e])
+            self._hand_z[e] = z
+
+    def _update_contacts(self, p: np.ndarray, recs: Dict[str, Recognition], t: float) -> None:
+        dp, prm = self.dp, self.params
+        vel = dp.effector_velocities()
+        for k, e in enumerate(EFFECTORS):
+            c = dp.contacts.get(e)
+            if c is not None:
+                f = self.world.features[c.feature]
+                if e in HANDS:
+                    lost = (f.name in self.models and prm.release_after > 0
+                            and t - max(self.last_imitation.get(f.name, c.since_wall),
+                                        c.since_wall) > prm.release_after)
+                    other = HANDS[1 - HANDS.index(e)]
+                    regrab = (f.engage.regrab and other in dp.contacts
+                              and self._hand_vz[e] > prm.regrab_speed)
+                    if lost or regrab or not self._user_hand_raised(p, e, f,
+                                                                    prm.hand_release_margin):
+                        dp.release(e)
+                elif not self._user_foot_down(p, e):
+                    dp.release(e)
+                continue
+            for f in self.world.features.values():
+                if e not in f.engage.effectors:
+                    continue
+                if e in HANDS and not self._user_hand_raised(p, e, f):
+                    continue
+                if e in HANDS and f.engage.regrab and self._hand_vz[e] > 0.1:
+                    continue      # climbing: grab at the top of the reach, not on the way up
+                if e in FEET and not self._user_foot_down(p, e):
+                    continue
+                if float(np.linalg.norm(vel[k])) > f.engage.max_speed:
+                    continue
+                dist, body, pt = dp.feature_distance(e, f)
+                if body is not None and dist < f.engage.distance:
+                    dp.engage(e, f, body, pt)
+                    dp.contacts[e].since_wall = t
+                    break
+
+    # ------------------------------------------------------------------ step
+    def step(self, positions_sensor: np.ndarray, t: float) -> ControlOutput:
+        """One sensor frame (20, 3) at time ``t`` (s)."""
+        t_start = time.perf_counter()
+        p = self.sensor.to_world(np.asarray(positions_sensor, float))
+        if p.shape != (20, 3) or not np.all(np.isfinite(p)):
+            raise ValueError('positions must be 20 x 3 finite numbers')
+        if self.dp is None:
+            self._init(p)
+            for c in self.dp.contacts.values():
+                c.since_wall = t
+        dt = 1.0 / 30.0 if self.t_last is None else min(max(t - self.t_last, 1.0 / 240), 0.1)
+        self.t_last = t
+        self.frames += 1
+        recs = self.recognizer.update(p, t)
+        self._track_hands(p, dt)
+        for n, r in recs.items():
+            if r.imitating:
+                self.last_imitation[n] = t
+        dp = self.dp
+        # ---- feature identification: engage / release by rule (Sec. 4, 5)
+        self._update_contacts(p, recs, t)
+        held = {e: c.feature for e, c in dp.contacts.items()}
+        water = dp.in_water or next((f.name for f in self.world.features.values()
+                                     if f.engage.com_inside and dp.com_inside(f)), None)
+        feature = next((held[e] for e in HANDS if e in held), '') or (water or '')
+        # ---- kinematic composition (Sec. 6.2)
+        user_yaw = float(facing_yaw(p))
+        char_yaw = user_yaw - self.yaw0
+        body_rel = (p - center_of_mass(p)) @ yaw_rotation(user_yaw).T   # body frame
+        rec = recs.get(feature)
+        compose = feature in self.composers and rec is not None and rec.imitating
+        target_blend = 1.0 if compose else 0.0
+        if compose:
+            self.blend_feature = feature
+        step_b = dt / self.params.blend_time
+        if self.blend < target_blend:
+            self.blend = min(target_blend, self.blend + step_b)
+        else:
+            self.blend = max(target_blend, self.blend - step_b)
+        q = body_rel
+        bf = self.blend_feature
+        if self.blend > 0 and bf in self.composers:
+            r_bf = recs[bf]
+            m = self.models[bf]
+            comp = self.composers[bf].compose({j: body_rel[j] for j in m.effectors}, r_bf.w,
+                                              self.height)
+            replace = [e for e in FEET if self._user_foot_down(p, e) and e not in held]
+            mixed = integrate_rule(body_rel, comp, replace)
+            q = (1.0 - self.blend) * body_rel + self.blend * mixed
+        if water:
+            pitch = math.radians(self.world.features[water].dynamics.get('body_pitch_deg', 0.0))
+            c, s = math.cos(pitch), math.sin(pitch)
+            q = q @ np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]]).T
+        q = q - center_of_mass(q)
+        q_world_rel = q @ _rotz(char_yaw).T
+        # ---- dynamic process (Sec. 5)
+        dp.set_targets(np.array([q_world_rel[JOINT_INDEX[e]] for e in EFFECTORS]), char_yaw, dt)
+        dp.step(dt)
+        # ---- motion integration (Sec. 7)
+        self._refresh_obstacles()
+        eff = dp.effectors()
+        contacts = {e: eff[EFFECTORS.index(e)] for e in dp.contacts}
+        held = {e: c.feature for e, c in dp.contacts.items()}
+        out_w = integrate_motion(q_world_rel, dp.com, contacts, self.obstacles, held, self.height)
+        pen = (self.obstacles.penetration(out_w, self.height, held)
+               if self.params.compute_penetration else float('nan'))
+        ms = (time.perf_counter() - t_start) * 1e3
+        shown = rec if rec is not None else self.recognizer.best(recs)
+        return ControlOutput(
+            positions_world=out_w, positions_sensor=self.sensor.to_sensor(out_w),
+            feature=feature or (shown.feature if shown is not None and shown.imitating else ''),
+            recognition=shown, imitating=bool(shown is not None and shown.imitating),
+            contacts=held, contact_points=contacts, com=dp.com, penetration=pen, compute_ms=ms,
+            blend=self.blend)
+
+
+__all__ = ['PerformanceController', 'ControlParams', 'ControlOutput', 'build_models']

@@ -1,0 +1,264 @@
+"""Intention recognition (Ishigaki et al. 2009, Sec. 6.1).
+
+The unconstrained end-effectors' positions and velocities relative to the centre of mass, with the
+body's yaw removed, form the feature vector ``w = [r_j, tau * r'_j]`` (positions divided by the
+body height, so users of other sizes compare; ``tau`` (s) puts velocities in the units of
+positions). PCA of the example motion's vectors gives the basis ``A`` (first m components);
+
+    e1 = || w - A A^T w ||^2                 (Eq. 5, with w centred on the example's mean)
+    e2 = || dw - A A^T dw ||^2,  dw = w_t - w_{t-lag}      (Eq. 6)
+
+A user imitates when both errors (exponentially averaged over ``smoothing`` s) are below their
+thresholds and the effectors move at least ``min_activity`` times the example's RMS speed (a
+still pose has dw = 0: without this gate standing still would be a perfect "consistency").
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Dict, Optional, Sequence
+
+import numpy as np
+from skeleton_core.geometry import facing_yaw
+from skeleton_core.params import check, param
+from skeleton_core.model import (JOINT_INDEX, SEGMENT_CHILDREN, SEGMENT_MASS_FRACTION,
+                                 SEGMENT_PARENTS, JOINT_NAMES, estimate_height)
+
+_SEG_W = np.array([SEGMENT_MASS_FRACTION[JOINT_NAMES[c]] for c in SEGMENT_CHILDREN])
+_SEG_W = _SEG_W / _SEG_W.sum()
+
+
+def center_of_mass(positions: np.ndarray) -> np.ndarray:
+    """Whole-body COM (..., 3) of joint positions (..., 20, 3): segment midpoints weighted by
+    the standard body's mass fractions (Winter 2009)."""
+    p = np.asarray(positions, float)
+    mid = 0.5 * (p[..., list(SEGMENT_PARENTS), :] + p[..., list(SEGMENT_CHILDREN), :])
+    return np.einsum('k,...kd->...d', _SEG_W, mid)
+
+
+def yaw_rotation(yaw) -> np.ndarray:
+    """Rotation matrices (..., 3, 3) taking world vectors to the yaw-removed body frame."""
+    yaw = np.asarray(yaw, float)
+    c, s = np.cos(yaw), np.sin(yaw)
+    r = np.zeros(yaw.shape + (3, 3))
+    r[..., 0, 0], r[..., 0, 1], r[..., 1, 0], r[..., 1, 1] = c, s, -s, c
+    r[..., 2, 2] = 1.0
+    return r
+
+
+def relative_effectors(positions: np.ndarray, effectors: Sequence[int],
+                       yaw: Optional[np.ndarray] = None) -> np.ndarray:
+    """r_j = d_j - COM in the yaw-removed body frame, (..., len(effectors), 3)."""
+    p = np.asarray(positions, float)
+    if yaw is None:
+        yaw = facing_yaw(p)
+    rel = p[..., list(effectors), :] - center_of_mass(p)[..., None, :]
+    return np.einsum('...ij,...kj->...ki', yaw_rotation(yaw), rel)
+
+
+def pca_basis(w: np.ndarray, m: int, center: bool = True):
+    """(mean (D,), A (D, m) orthonormal columns, eigenvalues (m,)) of the rows of ``w`` (N, D)."""
+    w = np.asarray(w, float)
+    mean = w.mean(axis=0) if center else np.zeros(w.shape[1])
+    x = w - mean
+    _, s, vt = np.linalg.svd(x, full_matrices=False)
+    m = min(m, vt.shape[0])
+    lam = s[:m] ** 2 / max(len(w) - 1, 1)
+    return mean, vt[:m].T.copy(), lam
+
+
+def reconstruction_error(v: np.ndarray, a: np.ndarray) -> np.ndarray:
+    """|| v - A A^T v ||^2 for v (..., D): Eq. 5 and 6."""
+    v = np.asarray(v, float)
+    r = v - (v @ a) @ a.T
+    return np.sum(r * r, axis=-1)
+
+
+@dataclass
+class RecognizerParams:
+    """Intention recognition (Sec. 6.1); every field is a node parameter (skeleton_core.params)."""
+
+    e1_threshold: float = param(0.03, "Eq. 5 threshold (squared error, body-height units): the "
+                                "user's pose near the example's PCA subspace", range=(1e-5, 10.0))
+    e2_threshold: float = param(0.03, "Eq. 6 threshold: consistency of the user's change over "
+                                "lag frames with the example", range=(1e-5, 10.0))
+    tau: float = param(0.25, 'weight (s) of the effector velocities against positions in w',
+                       range=(0.0, 2.0))
+    lag: int = param(2, 'frames of the velocity and of dw in Eq. 6', range=(1, 30), read_only=True)
+    smoothing: float = param(0.03, 'time constant (s) of the e1/e2 averages', range=(0.0, 5.0))
+    min_activity: float = param(0.3, "share of the example's RMS effector speed the user must "
+                                "reach to be imitating (a still pose has dw = 0)",
+                                range=(0.0, 10.0))
+    activity_window: float = param(0.3, 'time constant (s) of the speed average of the activity '
+                                   'gate', range=(0.0, 10.0))
+    activity_lag: int = param(9, "frames of the activity gate's displacement", range=(1, 60),
+                              read_only=True)
+    prefilter: float = param(0.03, 'time constant (s) of the low-pass on the relative joint '
+                             'positions before the features (sensor noise)', range=(0.0, 1.0))
+    combine: str = param('and', "and: e1 and e2 under their thresholds; or: either (the paper's "
+                         "consistency read as an alternative to similarity)",
+                         choices=('and', 'or'))
+    normalise: bool = param(False, "e1/e2 in units of each example's own spread (total "
+                            "variance of w, mean |dw|^2); the thresholds are then in those units")
+    fps: float = 30.0
+
+    def validate(self) -> None:
+        check(self)
+        for k in ('e1_threshold', 'e2_threshold', 'tau', 'fps'):
+            if not getattr(self, k) > 0:
+                raise ValueError(f'{k} must be positive')
+        if self.combine not in ('and', 'or'):
+            raise ValueError("combine must be 'and' or 'or'")
+        if not 1 <= int(self.lag) <= 30 or not 1 <= int(self.activity_lag) <= 60:
+            raise ValueError('lag must be in [1, 30] frames, activity_lag in [1, 60]')
+        if not (self.smoothing >= 0 and self.min_activity >= 0 and self.activity_window >= 0):
+            raise ValueError('smoothing, activity_window and min_activity must be >= 0')
+
+
+def feature_vectors(positions: np.ndarray, effectors: Sequence[int], height: float,
+                    params: RecognizerParams) -> np.ndarray:
+    """w for every frame of a clip (T, 20, 3) -> (T, 6 * len(effectors)); the first ``lag``
+    frames get the velocity of frame ``lag``."""
+    r = relative_effectors(positions, effectors) / height
+    lag = int(params.lag)
+    v = np.zeros_like(r)
+    if len(r) > lag:
+        v[lag:] = (r[lag:] - r[:-lag]) * (params.fps / lag)
+        v[:lag] = v[lag]
+    return np.concatenate([r.reshape(len(r), -1), params.tau * v.reshape(len(v), -1)], axis=1)
+
+
+class ExampleModel:
+    """The PCA of one feature's example motion (Eq. 5-6), from its positions (T, 20, 3)."""
+
+    def __init__(self, name: str, positions: np.ndarray, effectors: Sequence[str],
+                 components: int, params: RecognizerParams, height: Optional[float] = None):
+        self.name = name
+        self.effectors = tuple(JOINT_INDEX[e] for e in effectors)
+        self.params = params
+        self.positions = np.asarray(positions, float)
+        self.height = float(height or estimate_height(self.positions[0]))
+        w = feature_vectors(self.positions, self.effectors, self.height, params)
+        self.w = w
+        self.mean, self.A, self.eigenvalues = pca_basis(w, components)
+        # the example's own spread: total variance of w and of dw over ``lag`` frames (the units
+        # of the normalised errors)
+        lag = min(int(params.lag), len(w) - 1)
+        self.var_w = float(np.sum(np.var(w, axis=0)))
+        self.var_dw = float(np.mean(np.sum((w[lag:] - w[:-lag]) ** 2, axis=1)))
+        # the activity gate's normaliser: the example's RMS effector speed measured as the gate
+        # measures it (displacement over activity_lag frames)
+        r = relative_effectors(self.positions, self.effectors) / self.height
+        k = min(int(params.activity_lag), len(r) - 1)
+        v = (r[k:] - r[:-k]).reshape(len(r) - k, -1) * (params.fps / k)
+        self.rms_speed = float(np.sqrt(np.mean(np.sum(v * v, axis=1))))
+
+    def errors(self, w: np.ndarray, dw: np.ndarray):
+        """(e1, e2) of Eq. 5-6; divided by the example's total variance of w and mean |dw|^2
+        when ``params.normalise``."""
+        e1 = float(reconstruction_error(w - self.mean, self.A))
+        e2 = float(reconstruction_error(dw, self.A))
+        if getattr(getattr(self, 'params', None), 'normalise', False):
+            return e1 / max(self.var_w, 1e-12), e2 / max(self.var_dw, 1e-12)
+        return e1, e2
+
+
+@dataclass
+class Recognition:
+    feature: str
+    imitating: bool
+    confidence: float
+    e1: float
+    e2: float
+    activity: float
+    w: Optional[np.ndarray] = None   # the user's feature vector for this feature's effectors
+
+
+class IntentionRecognizer:
+    """Per user: feeds on poses (20, 3) at the sensor rate; :meth:`update` returns a
+    :class:`Recognition` per feature with an example motion."""
+
+    def __init__(self, models: Sequence[ExampleModel], params: RecognizerParams):
+        params.validate()
+        self.models = list(models)
+        self.params = params
+        self.height: Optional[float] = None
+        self._hist = []      # the last lag + 1 relative joint arrays
+        self._whist: Dict[str, list] = {}   # the last lag + 1 feature vectors per model
+        self._avg: Dict[str, list] = {}
+        self._last_t: Optional[float] = None
+
+    def reset(self) -> None:
+        self._hist = []
+        self._whist = {}
+        self._avg = {}
+        self._last_t = None
+
+    def update(self, positions: np.ndarray, t: float) -> Dict[str, Recognition]:
+        p = np.asarray(positions, float)
+        if self.height is None:
+            h = estimate_height(p)
+            self.height = float(np.clip(h, 1.0, 2.3)) if np.isfinite(h) else 1.75
+        prm = self.params
+        yaw = facing_yaw(p)
+        com = center_of_mass(p)
+        rot = yaw_rotation(yaw)
+        rel = (p - com) @ rot.T / self.height          # every joint, body frame, height units
+        if self._hist and prm.prefilter > 0:
+            dt_f = 1.0 / prm.fps if self._last_t is None else max(t - self._last_t, 1e-3)
+            g = 1.0 - math.exp(-dt_f / prm.prefilter)
+            rel = self._hist[-1] + g * (rel - self._hist[-1])
+        self._hist.append(rel)
+        lag = int(prm.lag)
+        keep = max(lag, int(prm.activity_lag)) + 1
+        if len(self._hist) > keep:
+            self._hist.pop(0)
+        dt = 1.0 / prm.fps if self._last_t is None else max(t - self._last_t, 1e-3)
+        self._last_t = t
+        alpha = 1.0 if prm.smoothing <= 0 else 1.0 - math.exp(-dt / prm.smoothing)
+        beta = 1.0 if prm.activity_window <= 0 else 1.0 - math.exp(-dt / prm.activity_window)
+        out = {}
+        k = min(len(self._hist) - 1, lag)
+        old = self._hist[-1 - k]
+        ka = min(len(self._hist) - 1, int(prm.activity_lag))
+        old_a = self._hist[-1 - ka]
+        for m in self.models:
+            idx = list(m.effectors)
+            r = rel[idx].reshape(-1)
+            v = (r - old[idx].reshape(-1)) * (prm.fps / k) if k else np.zeros_like(r)
+            w = np.concatenate([r, prm.tau * v])
+            wh = self._whist.setdefault(m.name, [])
+            wh.append(w)
+            if len(wh) > lag + 1:
+                wh.pop(0)
+            dw = w - wh[0]
+            e1, e2 = m.errors(w, dw)
+            va = (r - old_a[idx].reshape(-1)) * (prm.fps / ka) if ka else np.zeros_like(r)
+            sp2 = float(np.sum(va * va)) / max(m.rms_speed, 1e-9) ** 2
+            a = self._avg.get(m.name)
+            if a is None:
+                a = self._avg[m.name] = [e1, e2, sp2]
+            else:
+                a[0] += alpha * (e1 - a[0])
+                a[1] += alpha * (e2 - a[1])
+                a[2] += beta * (sp2 - a[2])
+            act = math.sqrt(max(a[2], 0.0))
+            r1, r2 = a[0] / prm.e1_threshold, a[1] / prm.e2_threshold
+            ratio = max(r1, r2) if prm.combine == 'and' else min(r1, r2)
+            imitating = bool(ratio < 1.0 and act >= prm.min_activity and k >= lag)
+            conf = 1.0 / (1.0 + ratio * ratio)
+            if act < prm.min_activity:
+                conf *= act / max(prm.min_activity, 1e-9)
+            out[m.name] = Recognition(m.name, imitating, float(conf), float(a[0]), float(a[1]),
+                                      act, w)
+        return out
+
+    def best(self, recs: Dict[str, Recognition]) -> Optional[Recognition]:
+        """The imitated feature with the highest confidence (None if none is imitated)."""
+        cands = [r for r in recs.values() if r.imitating]
+        return max(cands, key=lambda r: r.confidence) if cands else None
+
+
+__all__ = ['ExampleModel', 'IntentionRecognizer', 'RecognizerParams', 'Recognition',
+           'center_of_mass', 'relative_effectors', 'pca_basis', 'reconstruction_error',
+           'feature_vectors', 'yaw_rotation']

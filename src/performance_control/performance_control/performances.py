@@ -1,0 +1,124 @@
+"""Scripted performances for the tests, the benchmark and the demo: what a user in the real space
+does, optionally through the Kinect sensor model.
+
+* :func:`imitation_stream` -- stand, imitate a feature's example, stand, imitate again (another
+  body size, style, period and amplitude than the example; fades of ``fade`` s).
+* :func:`jump_stream` -- jumping in place (crouch, take-off, flight, landing) for the trampoline.
+* :func:`non_imitation_clips` -- walking, boxing (punches, kicks) and standing: must not engage.
+* :func:`to_sensor` -- a clip (T, 20, 3, world: floor z = 0) through the sensor model (sensor
+  frame, noise, occlusions) or just placed in front of the sensor.
+"""
+from __future__ import annotations
+
+from types import SimpleNamespace
+from typing import Dict, List, Optional, Tuple
+
+import numpy as np
+from skeleton_core.model import Body, standard_body
+from skeleton_data.motions import builtin_clips, pose_from_rotations
+
+from .examples import FPS, _legs, imitation, random_style
+
+
+def performer(rng: np.random.Generator) -> Tuple[Body, Dict, float]:
+    """(body, style, scale): another body size (1.5-1.95 m), style and tempo than the example."""
+    body = standard_body(float(rng.uniform(1.5, 1.95)))
+    return body, random_style(rng), float(rng.uniform(0.75, 1.3))
+
+
+def _envelope(n: int, windows: List[Tuple[float, float]], fade: float, fps: float) -> np.ndarray:
+    t = np.arange(n) / fps
+    env = np.zeros(n)
+    for a, b in windows:
+        up = np.clip((t - a) / fade, 0, 1) * np.clip((b - t) / fade, 0, 1)
+        env = np.maximum(env, 0.5 - 0.5 * np.cos(np.pi * up))
+    return env
+
+
+def imitation_stream(feature, rng: np.random.Generator, fps: float = FPS,
+                     pattern=((2.0, 6.0), (8.0, 12.0)), total: float = 13.0, fade: float = 0.2):
+    """(positions (T, 20, 3) world, windows [(start, end) s]) of a user imitating ``feature``'s
+    example during ``pattern``."""
+    body, style, tempo = performer(rng)
+    params = dict(feature.example.params)
+    params['period'] = float(params.get('period', 1.5)) * tempo
+    for k in ('amplitude_deg', 'reach'):
+        if k in params:
+            params[k] = float(params[k]) * float(rng.uniform(0.8, 1.2))
+    n = int(round(total * fps))
+    env = _envelope(n, list(pattern), fade, fps)
+    p = imitation(feature.example.generator, params, body, n, fps, style,
+                  phase0=float(rng.uniform()), active=env)
+    return p, list(pattern)
+
+
+def jump_stream(rng: np.random.Generator, n_jumps: int = 4, fps: float = FPS,
+                body: Optional[Body] = None, lead: float = 1.0) -> np.ndarray:
+    """Jumping in place: per jump a 0.3 s crouch, a 0.15 s push-off (the legs extend while the
+    feet are still on the floor), ``flight`` s in the air, a 0.3 s landing crouch."""
+    body = body or standard_body(float(rng.uniform(1.6, 1.85)))
+    cycle = 1.4
+    total = lead + n_jumps * cycle + 1.0
+    n = int(round(total * fps))
+    t = np.arange(n) / fps
+    crouch = np.zeros(n)
+    lift = np.zeros(n)
+    g = 9.81
+    for k in range(n_jumps):
+        t0 = lead + k * cycle
+        flight = float(rng.uniform(0.3, 0.4))
+        x = (t - t0) / 0.3                     # down
+        crouch += np.where((x >= 0) & (x < 1), 0.5 - 0.5 * np.cos(np.pi * x), 0.0)
+        x = (t - t0 - 0.3) / 0.15              # push-off
+        crouch += np.where((x >= 0) & (x < 1), 0.5 + 0.5 * np.cos(np.pi * x), 0.0)
+        tf = t - (t0 + 0.45)
+        inair = (tf >= 0) & (tf < flight)
+        lift += np.where(inair, 0.5 * g * tf * (flight - tf), 0.0)
+        xl = (tf - flight) / 0.3
+        crouch += np.where((xl >= 0) & (xl < 1), 0.5 * np.sin(np.pi * xl), 0.0)
+    d = np.radians(45) * crouch
+    local: Dict = {}
+    _legs(local, d, 2 * d, d, 2 * d, n)
+    p, _, _ = pose_from_rotations(body, local, n, {})
+    p[..., 2] += lift[:, None]
+    return p
+
+
+def non_imitation_clips(seed: int) -> List[Tuple[str, np.ndarray]]:
+    """Walking, boxing (punch, kick) and standing clips (name, (T, 20, 3) world)."""
+    out = []
+    for c in builtin_clips(seed):
+        base = c.name.replace('builtin_', '')
+        if base in ('walk', 'punch', 'kick'):
+            out.append((base, np.asarray(c.positions, float)))
+    rng = np.random.default_rng(seed)
+    body = standard_body(float(rng.uniform(1.55, 1.9)))
+    n = int(6 * FPS)
+    stand = imitation('monkey_swing', {}, body, n, active=np.zeros(n))
+    stand = stand + np.cumsum(rng.normal(0, 0.0015, (n, 1, 3)), axis=0) * [1, 1, 0]
+    out.append(('stand', stand))
+    return out
+
+
+# The play space of a performance: the whole body with the hands raised above the head must be in
+# the 43 deg vertical field of view; at the default 2.5 m / 0.8 m (sensor_model.yaml) raised hands
+# leave it (NOT_TRACKED). 3.5 m away with the sensor 1.2 m up sees 2.4 m high hands and the feet.
+PERFORMANCE_PLACEMENT = {'placement': {'distance_m': 3.5, 'sensor_height_m': 1.2}}
+SENSOR_HEIGHT = 1.2
+
+
+def to_sensor(positions: np.ndarray, name: str, seed: int, noise: bool = True,
+              sensor_params=None) -> np.ndarray:
+    """A world clip as the sensor reports it (sensor frame): the sensor model's stream (placement,
+    noise, dropouts; scenario a) or, with ``noise=False``, just placed 2.5 m ahead facing it."""
+    from skeleton_eval.sensor_model import SensorModel
+    sm = SensorModel(PERFORMANCE_PLACEMENT if sensor_params is None else sensor_params, seed=seed)
+    clip = SimpleNamespace(name=name, positions=positions, fps=FPS)
+    if not noise:
+        return sm.place(clip)
+    s = sm.corrupt(clip, 'a')
+    return np.asarray(s.positions, float)
+
+
+__all__ = ['PERFORMANCE_PLACEMENT', 'SENSOR_HEIGHT', 'imitation_stream', 'jump_stream',
+           'non_imitation_clips', 'to_sensor', 'performer']

@@ -1,0 +1,117 @@
+"""Intentional contacts (Ishigaki 2009, Sec. 5): equality constraints switched at run time, the
+COM moved by the contact springs (Eq. 1-4), release by rule, feature dynamics."""
+import numpy as np
+import pytest
+
+from performance_control.controller import ControlParams, PerformanceController
+from performance_control.dynamics import DynamicProcess
+from performance_control.examples import imitation
+from performance_control.features import EFFECTORS, WorldError, load_world, parse_world
+from skeleton_core.model import standard_body
+
+WORLD = load_world('playground')
+BAR_Z = WORLD.features['monkey_bars'].geoms[0].vec('from')[2]
+UP = {'HandLeft': np.array([0.0, 0.2, 1.1]), 'HandRight': np.array([0.0, -0.2, 1.1]),
+      'FootLeft': np.array([0.0, 0.1, -0.95]), 'FootRight': np.array([0.0, -0.1, -0.95])}
+
+
+def _hold(dp, seconds, rel=None):
+    rel = np.array([(rel or UP)[e] for e in EFFECTORS])
+    for _ in range(int(round(seconds * 30))):
+        dp.set_targets(rel, 0.0, 1 / 30)
+        dp.step(1 / 30)
+
+
+def test_engage_holds_the_character_and_release_drops_it():
+    bars = WORLD.features['monkey_bars']
+    dp = DynamicProcess(WORLD, 75.0, [3.0, 0.0, BAR_Z - 1.1], UP)
+    for e in ('HandLeft', 'HandRight'):
+        dist, body, pt = dp.feature_distance(e, bars)
+        assert body == 'world' and dist < bars.engage.distance
+        dp.engage(e, bars, body, pt)
+        assert dp.data.eq_active[dp.eq_ids[(e, 'world')]] == 1
+    _hold(dp, 1.0)
+    # hanging: the hands stay on the bar, the COM hangs below it at |r^| minus the spring's sag
+    # (m g / 2 ks per arm = 75 * 9.81 / 18000 = 4 cm)
+    assert dp.constraint_gap() < 0.005
+    assert dp.effectors()[0] == pytest.approx([3.0, 0.2, BAR_Z], abs=0.01)
+    assert BAR_Z - 1.1 - 0.08 < dp.com[2] < BAR_Z - 1.1 + 0.01
+    z_hang = dp.com[2]
+    dp.release_all()
+    assert not dp.contacts and not dp.data.eq_active.any()
+    _hold(dp, 0.4)
+    assert dp.com[2] < z_hang - 0.4      # free fall: 0.5 g t^2 = 0.78 m in 0.4 s
+
+
+def test_user_swinging_the_arms_swings_the_character_about_the_bar():
+    """Fig. 4: the pitch PD through the contact turns the user's arm swing into a COM swing."""
+    bars = WORLD.features['monkey_bars']
+    dp = DynamicProcess(WORLD, 75.0, [3.0, 0.0, BAR_Z - 1.1], UP)
+    for e in ('HandLeft', 'HandRight'):
+        _, body, pt = dp.feature_distance(e, bars)
+        dp.engage(e, bars, body, pt)
+    xs = []
+    for k in range(90):
+        a = 0.5 * np.sin(2 * np.pi * k / 30 / 1.6)
+        rel = dict(UP)
+        for e in ('HandLeft', 'HandRight'):
+            rel[e] = np.array([1.1 * np.sin(a), UP[e][1], 1.1 * np.cos(a)])
+        _hold(dp, 1 / 30, rel)
+        xs.append(dp.com[0])
+    assert max(xs) - min(xs) > 0.5
+    assert dp.constraint_gap() < 0.01
+
+
+def test_rope_swings_under_the_characters_weight_and_the_trampoline_gives():
+    rope = WORLD.features['rope']
+    dp = DynamicProcess(WORLD, 75.0, [-2.5 - 0.0, 0.0, 2.6 - 1.1], UP)
+    top = rope.geoms[0].vec('top')
+    for e in ('HandLeft', 'HandRight'):
+        dist, body, pt = dp.feature_distance(e, rope)
+        assert body.startswith('f_rope_0_seg')
+        dp.engage(e, rope, body, pt)
+    lean = dict(UP)
+    for e in ('HandLeft', 'HandRight'):
+        lean[e] = UP[e] + np.array([0.4, 0.0, -0.1])   # the user pulls the COM behind the hands
+    _hold(dp, 1.0, lean)
+    seg = dp.data.xpos[dp.model.body(dp.contacts['HandLeft'].body).id]
+    assert dp.constraint_gap() < 0.01
+    assert not np.allclose(seg[:2], top[:2], atol=0.02) or dp.contacts['HandLeft'].body.endswith('seg0')
+    # trampoline: standing on it compresses the spring by about m g / k = 3 cm
+    tr = WORLD.features['trampoline']
+    c, h = tr.geoms[0].vec('center'), tr.geoms[0].vec('half')
+    dp = DynamicProcess(WORLD, 75.0, [c[0], c[1], c[2] + h[2] + 0.99], UP)
+    _hold(dp, 0.3)
+    for e in ('FootLeft', 'FootRight'):
+        dist, body, pt = dp.feature_distance(e, tr)
+        assert dist < 0.1 and body == 'f_trampoline_0'
+        dp.engage(e, tr, body, pt)
+    _hold(dp, 1.5)
+    z = dp.data.xpos[dp.model.body('f_trampoline_0').id][2]
+    assert c[2] - 0.06 < z < c[2] - 0.015
+
+
+def test_user_lowering_the_arms_releases_the_bars_and_the_character_lands():
+    ctl = PerformanceController(WORLD, ControlParams(), start='monkey_bars')
+    f = WORLD.features['monkey_bars']
+    n = 150
+    act = np.r_[np.ones(60), np.zeros(n - 60)]
+    p = imitation(f.example.generator, f.example.params, standard_body(1.7), n,
+                  active=act) + [2.5, 0, -0.8]
+    outs = [ctl.step(p[i], i / 30.0) for i in range(n)]
+    assert {'HandLeft', 'HandRight'} <= set(outs[50].contacts)
+    assert not any(e.startswith('Hand') for e in outs[80].contacts)
+    assert outs[-1].com[2] < outs[50].com[2] - 0.3
+    assert {'FootLeft', 'FootRight'} & set(outs[-1].contacts)     # landed on the floor
+    assert max(o.penetration for o in outs) < 0.02
+
+
+def test_world_files_are_validated_with_clear_errors():
+    with pytest.raises(WorldError, match="feature 'bar'.*radius"):
+        parse_world({'features': {'bar': {'geometry': [
+            {'type': 'capsule', 'from': [0, 0, 2], 'to': [1, 0, 2], 'radius': -1}]}}}, 'w.yaml')
+    with pytest.raises(WorldError, match='effector'):
+        parse_world({'features': {'f': {'geometry': [{'type': 'plane'}],
+                                        'engage': {'effectors': ['Nose']}}}}, 'w.yaml')
+    with pytest.raises(FileNotFoundError, match='available'):
+        load_world('no_such_world')
