@@ -86,7 +86,8 @@ class ControlParams:
 def build_models(world: World, params: RecognizerParams) -> Dict[str, ExampleModel]:
     """The PCA model of every feature's example motion."""
     return {f.name: ExampleModel(f.name, example_motion(f.example, fps=params.fps),
-                                 f.example.effectors, f.example.components, params)
+                                 f.example.effectors, f.example.components, params,
+                                 max_change_share=f.example.max_change_share)
             for f in world.with_example()}
 
 
