@@ -115,3 +115,27 @@ def test_world_files_are_validated_with_clear_errors():
                                         'engage': {'effectors': ['Nose']}}}}, 'w.yaml')
     with pytest.raises(FileNotFoundError, match='available'):
         load_world('no_such_world')
+
+
+def test_a_rope_crossing_a_free_forearm_is_cleared_and_a_held_hand_stays():
+    """Eq. 12's p_pen <= p for segment capsules: a rope segment through the middle of a forearm
+    (both joints outside it, so pushing joints out does nothing) is cleared by moving the wrist
+    and hand; a held hand (skip) does not move."""
+    from performance_control.composition import Obstacles
+    from performance_control.examples import imitation
+    from skeleton_core.model import ELBOW_LEFT, HAND_RIGHT, WRIST_LEFT, standard_body
+    p = imitation('rope_climb', {'period': 1.4}, standard_body(1.75), 1)[0]
+    mid = 0.5 * (p[ELBOW_LEFT] + p[WRIST_LEFT])
+    obs = Obstacles()
+    obs.capsules.append((mid + [0.0, 0.0, -0.5], mid + [0.0, 0.0, 0.5], 0.02, 'rope'))
+    obs.freeze()
+    before = obs.penetration(p, 1.75)
+    assert before > 0.03
+    q = p.copy()
+    obs.push_out(q, set(), 1.75)
+    assert obs.penetration(q, 1.75) > 0.03       # pushing the joints out is not enough
+    skip = {HAND_RIGHT}                                          # the right hand is held
+    obs.clear_segments(q, skip, 1.75)
+    assert obs.penetration(q, 1.75) < 1e-3
+    assert q[HAND_RIGHT] == pytest.approx(p[HAND_RIGHT])
+    assert np.linalg.norm(q[WRIST_LEFT] - p[WRIST_LEFT]) < 0.2      # a local correction
