@@ -139,3 +139,23 @@ def test_a_rope_crossing_a_free_forearm_is_cleared_and_a_held_hand_stays():
     assert obs.penetration(q, 1.75) < 1e-3
     assert q[HAND_RIGHT] == pytest.approx(p[HAND_RIGHT])
     assert np.linalg.norm(q[WRIST_LEFT] - p[WRIST_LEFT]) < 0.2      # a local correction
+
+
+def test_climbing_hand_over_hand_regrabs_the_swinging_rope():
+    """The free hand at the top of its reach grabs the rope within regrab_reach: the character
+    never lets go of the rope with both hands while the user climbs, and grabs again and again."""
+    from performance_control.controller import ControlParams, PerformanceController
+    from performance_control.performances import SENSOR_HEIGHT, imitation_stream, to_sensor
+    f = WORLD.features['rope']
+    rng = np.random.default_rng(31)
+    p, _ = imitation_stream(f, rng, pattern=((-1.0, 9.0),), total=4.0, fade=0.2)
+    s = to_sensor(p, 'climb', 31, noise=False)
+    ctl = PerformanceController(WORLD, ControlParams(sensor_height=SENSOR_HEIGHT), start='rope')
+    held = []
+    for i in range(len(s)):
+        o = ctl.step(s[i], i / 30.0)
+        held.append(sum(e.startswith('Hand') for e in o.contacts))
+    held = np.array(held)
+    assert np.all(held >= 1)
+    regrabs = np.sum((held[1:] == 2) & (held[:-1] == 1))
+    assert regrabs >= 3, held
