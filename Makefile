@@ -9,6 +9,7 @@ help:
 	@echo "make lint       only the linter (ruff, configured in ruff.toml)"
 	@echo "make setup      only bootstrap (venv / ROS 2, launch tooling, colcon build)"
 	@echo "make build-db   build the motion database from ../shared/mocap/cmu (or built-in motions)"
+	@echo "make build-correction  learn the sensor correction from ../shared/kinect/ui-prmd (or ARGS=\"--src DIR\")"
 	@echo "make evaluate   accuracy table of every method on the sensor-model streams"
 	@echo "make bench      end-to-end latency/throughput benchmark"
 	@echo "make soak       10-minute soak of the running graph"
@@ -29,6 +30,9 @@ demo:
 build-db:
 	@$(RUN) ros2 run skeleton_data build_db $(ARGS)
 
+build-correction:
+	@$(RUN) ros2 run pose_reconstruction build_correction $(ARGS)
+
 evaluate:
 	@$(RUN) ros2 run kinect_bringup evaluate $(ARGS)
 
@@ -41,4 +45,4 @@ soak:
 params:
 	@$(RUN) ros2 run kinect_bringup param_docs $(ARGS)
 
-.PHONY: help setup test lint demo build-db evaluate bench soak params
+.PHONY: help setup test lint demo build-db build-correction evaluate bench soak params

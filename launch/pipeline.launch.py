@@ -34,6 +34,10 @@ ARGS = [
      'default: optimizer.yaml'),
     ('reconstruction', 'fused', 'fused: one reconstruction node; split: reliability, completion and '
      'optimizer nodes (same topics)'),
+    ('input_tracker', '', 'skeleton tracker of the input: kinect_v2_sdk (e.g. replayed UI-PRMD bags: '
+     'the learned sensor correction applies) | nite2 | kinect_v1_sdk | sensor_model; default: '
+     'nite2 for source:=live, sensor_model for source:=synthetic, else optimizer.yaml'),
+    ('user_profile', '', 'user profile name (cache/profiles/<name>.json, from build_profile)'),
     ('physics', 'true', 'run the MuJoCo physics character'),
     ('control', 'false', 'performance-based control (Ishigaki 2009) between the reconstruction '
      'and the physics: the physics character tracks /control/target'),
@@ -81,6 +85,12 @@ def _nodes(context):
         if arg(name):   # typed as declared
             driver_over[name] = type(driver_specs[name].default)(arg(name))
     opt_over = dict(db_over)
+    tracker = arg('input_tracker') or {'live': 'nite2', 'synthetic': 'sensor_model'}.get(
+        arg('source'), '')
+    if tracker:
+        opt_over['input_tracker'] = tracker
+    if arg('user_profile'):
+        opt_over['user_profile'] = arg('user_profile')
     if method in ('B', 'C'):
         opt_over['method'] = method
     nodes = [Node(package='kinect_driver', executable='driver', name='driver',

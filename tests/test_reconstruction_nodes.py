@@ -199,7 +199,7 @@ def test_config_files_hold_every_parameter_with_its_default():
                         ('completion', common + completion_node.SPECS
                          + node_common.RELIABILITY_SPECS),
                         ('optimizer', common + optimizer_node.SPECS
-                         + node_common.RELIABILITY_SPECS)):
+                         + node_common.RELIABILITY_SPECS + node_common.CORRECTION_SPECS)):
         values = yaml.safe_load((ROOT / 'config' / f'{name}.yaml').read_text())
         values = values['/**']['ros__parameters']
         assert set(values) == {s.name for s in specs}, name
@@ -211,6 +211,7 @@ def test_config_files_hold_every_parameter_with_its_default():
 def test_fused_parameters_map_the_three_config_files():
     from kinect_bringup.graph import load_params
     from pose_reconstruction import reconstruction_node as rn
+    from pose_reconstruction import node_common
 
     fused = rn.fused_parameters(load_params('reliability'), load_params('completion'),
                                 load_params('optimizer'))
@@ -218,7 +219,7 @@ def test_fused_parameters_map_the_three_config_files():
     # every prefixed parameter comes from its node's file with that file's value
     prefixed = {k for k in specs if '.' in k}
     assert set(fused) == prefixed | {'qos_depth', 'user_timeout_s', 'time_jump_reset_s',
-                                     'database'}
+                                     'database'} | set(node_common.CORRECTION_NAMES)
     assert fused['optimizer.k'] == load_params('optimizer')['k']
     assert fused['completion.pca_dims'] == load_params('completion')['pca_dims'] != \
         fused['optimizer.pca_dims']

@@ -76,3 +76,23 @@ def test_register_session_recovers_transform_and_lags():
 def test_kabsch_needs_three_points():
     with pytest.raises(ValueError):
         R.kabsch(np.zeros((2, 3)), np.zeros((2, 3)))
+
+
+def test_split_setups_groups_movements_with_the_same_transform():
+    """Four movements: three share the session's transform, one was recorded with the lab origin
+    moved by 0.7 m: it gets a setup of its own."""
+    rot = _rot((0, 0, 1), np.pi)
+    kin, ref, groups = [], [], []
+    for m in range(4):
+        idx = []
+        for rep in range(2):
+            r = _motion(2.0, 100.0, 10 * m + rep)
+            k = R.resample(r, np.arange(len(r)) / 100.0, np.arange(45) / 30.0 + 0.3)
+            trans = np.array([3.4, -0.1, 0.0]) + (np.array([-0.7, 0.1, 0.0]) if m == 2 else 0)
+            kin.append(k @ rot.T + trans)
+            ref.append(r)
+            idx.append(len(kin) - 1)
+        groups.append(idx)
+    setups = R.split_setups(groups, kin, ref)
+    assert sorted(map(sorted, setups)) == [[0, 1, 2, 3, 6, 7], [4, 5]]
+    assert len(setups[0]) == 6  # the consensus first

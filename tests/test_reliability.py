@@ -105,7 +105,8 @@ def test_gaussian_weighted_minimum():
 
 
 def test_reference_lengths_captured_from_tpose_and_scaled_default():
-    est = ReliabilityEstimator(reference_mode='standard')  # the paper's default lengths
+    # the paper's default lengths and Eq. 1-8 alone (no plausibility term)
+    est = ReliabilityEstimator(reference_mode='standard', plausibility=False)
     short = standard_body(1.5)
     # before any reference pose: the standard body scaled to the estimated height
     p = short.rest_positions()
@@ -180,7 +181,7 @@ def test_streamed_update_equals_the_equations_on_a_random_stream():
     pos[::3, WRIST_LEFT] += 0.06  # vibration
     states = rng.choice([TRACKED, TRACKED, TRACKED, INFERRED, NOT_TRACKED], (T, NUM_JOINTS))
     states[:10] = TRACKED
-    est = ReliabilityEstimator(reference_mode='standard')
+    est = ReliabilityEstimator(reference_mode='standard', plausibility=False)  # Eq. 1-8 alone
     minima = []
     for t in range(T):
         ts = states[t].astype(np.uint8)

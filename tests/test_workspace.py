@@ -32,3 +32,14 @@ def test_every_ros_entry_point_exports_loopback_discovery():
     for script in ('scripts/env.sh', 'scripts/run-tests.sh', '.ci/run'):
         assert 'ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST' in (ROOT / script).read_text(), script
     assert os.environ.get('ROS_AUTOMATIC_DISCOVERY_RANGE') == 'LOCALHOST'
+
+
+def test_no_build_product_or_environment_is_tracked():
+    """The venv (a directory or a worktree's symlink to one), build products and caches are never
+    committed: a tracked `.venv` link replaced the real venv on every merge."""
+    import subprocess
+    if not (ROOT / '.git').exists():
+        pytest.skip('not a git checkout')
+    tracked = subprocess.run(['git', 'ls-files', '--', '.venv', 'build', 'install', 'log', 'cache', 'out'],
+                             cwd=ROOT, capture_output=True, text=True, check=True).stdout.split()
+    assert not tracked, tracked

@@ -6,12 +6,14 @@ the sensor model's noise statistics. No ROS graph is started (the methods are ru
 
 Examples::
 
-    evaluate                                   # table4: all methods, classes a-c, dev clips
+    evaluate                                   # table4: all methods, classes a-d, dev clips
     evaluate --methods raw,holt,one_euro --source builtin --max-frames 300
     evaluate --experiment table3 --methods raw,C                     # calibrated user (T-pose)
     evaluate --experiment table3 --methods raw,C --calibration none  # no calibration segment
     evaluate --experiment fig5
     evaluate --experiment fig8 --methods C --params k,steps
+    evaluate --perturb                         # raw and C, classes a-d, seeds 0-2, sensor model
+                                               # noise/offset/occlusion/failure groups 0.5x, 1.5x
 """
 from __future__ import annotations
 
@@ -28,7 +30,8 @@ def _parser():
                    help='comma-separated method names (default: every registered method)')
     p.add_argument('--source', default='auto', choices=('auto', 'cmu', 'builtin'),
                    help='clips: CMU dev split from ../shared (auto falls back to built-ins)')
-    p.add_argument('--scenarios', default='a,b,c', help='sensor-model scenario classes')
+    p.add_argument('--scenarios', default='a,b,c,d',
+                   help='sensor-model scenario classes (d: confident failures)')
     p.add_argument('--seed', type=int, default=0)
     p.add_argument('--max-frames', type=int, default=300,
                    help='frames (30 Hz) per clip; 0 = whole clips (default 300 = 10 s)')
@@ -51,28 +54,102 @@ def _parser():
                         'hidden from the first frame')
     p.add_argument('--calibration-seconds', type=float, default=1.0,
                    help='table3: length of the calibration segment (s, at 30 Hz; default 1)')
+    p.add_argument('--perturb', action='store_true',
+                   help='robustness to the sensor model: the table (default methods raw,C, classes '
+                        'a-d) for the nominal model and each parameter group scaled by each '
+                        '--perturb-factors, for each --perturb-seeds (skeleton_eval.perturb)')
+    p.add_argument('--perturb-seeds', default='0,1,2',
+                   help='--perturb: sensor seeds (parameters were tuned on seed 0 only)')
+    p.add_argument('--perturb-factors', default='0.5,1.5', help='--perturb: scale factors')
+    p.add_argument('--perturb-groups', default='noise,offset,occlusion,failure',
+                   help='--perturb: parameter groups (noise, offset, occlusion, failure)')
+    p.add_argument('--method-params', default='', metavar='JSON',
+                   help='table4 / --perturb: parameter overrides per method, e.g. '
+                        '\'{"C": {"plausibility": false, "smooth_lead": 0}}\'')
     p.add_argument('--quiet', action='store_true', help='no progress lines')
     p.add_argument('--real', nargs='?', const='auto', default=None, metavar='UIPRMD_DIR',
-                   help='real-data mode: score the methods on the UI-PRMD Kinect recordings '
-                        'against the Vicon marker reference (default dir ../shared/kinect/ui-prmd)')
-    p.add_argument('--max-clips', type=int, default=4,
+                   help='real-data mode: raw, holt, one_euro, C and C with the learned sensor '
+                        'correction and user profiles on UI-PRMD-layout Kinect recordings against '
+                        'their Vicon marker reference. Default dir ../shared/kinect/ui-prmd: '
+                        'leave-one-subject-out; another dir (other subjects): the correction '
+                        'learned from all development subjects (--methods: variants of '
+                        'kinect_bringup.real_loso)')
+    p.add_argument('--max-clips', type=int, default=0,
                    help='--real: clips per movement row, 0 = all')
     return p
 
 
 def run_real(args) -> int:
-    from skeleton_eval import real_eval
+    """``--real``: the development subjects (default folder) leave-one-subject-out; another
+    folder (other subjects, same layout) with the correction learned from every development
+    subject (kinect_bringup.real_loso)."""
+    from . import real_loso
     from .graph import repo_root
     src = args.real
+    shared = os.environ.get('KP_SHARED') or str((repo_root() or Path.cwd()).parent / 'shared')
+    dev = Path(shared) / 'kinect' / 'ui-prmd'
     if src == 'auto':
-        shared = os.environ.get('KP_SHARED') or str((repo_root() or Path.cwd()).parent / 'shared')
-        src = str(Path(shared) / 'kinect' / 'ui-prmd')
+        src = str(dev)
     argv = ['--src', src, '--out', args.out, '--max-clips', str(args.max_clips)]
     if args.methods:
-        argv += ['--methods', args.methods]
+        argv += ['--variants', args.methods]
     if args.quiet:
         argv.append('--quiet')
-    return real_eval.main(argv)
+    same = dev.is_dir() and Path(src).resolve() == dev.resolve()
+    if not same:
+        argv.append('--no-loso')  # other subjects: the correction from all development ones
+    return real_loso.main(argv)
+
+
+def _with_params(methods, text):
+    """``methods`` with the ``--method-params`` overrides: (name, params, name) for those named."""
+    import json
+    over = json.loads(text) if text else {}
+    if not isinstance(over, dict) or not all(isinstance(v, dict) for v in over.values()):
+        raise ValueError('--method-params must be a JSON object of objects')
+    unknown = set(over) - set(methods)
+    if unknown:
+        raise ValueError(f'--method-params names methods not run: {sorted(unknown)}')
+    return [(m, over[m], m) if m in over else m for m in methods]
+
+
+def run_perturb(args, dev_clips, source) -> int:
+    from skeleton_eval import perturb as P
+    from skeleton_eval.evaluation import to_json
+    try:
+        seeds = [int(v) for v in args.perturb_seeds.split(',') if v]
+        factors = [float(v) for v in args.perturb_factors.split(',') if v]
+        groups = [g for g in args.perturb_groups.split(',') if g]
+        bad = [g for g in groups if g not in P.GROUPS]
+        if bad or not seeds or not factors or any(not f > 0 for f in factors):
+            raise ValueError(f'unknown group(s) {bad}' if bad else 'need seeds and factors > 0')
+    except ValueError as exc:
+        print(f'evaluate: --perturb: {exc}', file=sys.stderr)
+        return 2
+    methods = [m for m in args.methods.split(',') if m] or ['raw', 'C']
+    scenarios = [s for s in args.scenarios.split(',') if s]
+    max_frames = args.max_frames if args.max_frames and args.max_frames > 0 else None
+
+    def progress(label, seed):
+        if not args.quiet:
+            print(f'[evaluate] perturb {label} seed {seed}', file=sys.stderr)
+    try:
+        run_methods = _with_params(methods, args.method_params)
+    except ValueError as exc:
+        print(f'evaluate: {exc}', file=sys.stderr)
+        return 2
+    res = P.run(run_methods, dev_clips, scenarios, seeds, factors, groups, max_frames,
+                args.sensor_params, source, progress)
+    res['method_params'] = args.method_params
+    method = 'C' if 'C' in methods else methods[-1]
+    md = P.to_markdown(res, method=method, reference='raw' if 'raw' in methods else methods[0])
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / 'perturb.md').write_text(md)
+    to_json(res, out / 'perturb.json')
+    print(md)
+    print(f'[evaluate] wrote {out / "perturb.md"} and {out / "perturb.json"}', file=sys.stderr)
+    return 0
 
 
 def run(argv=None) -> int:
@@ -106,7 +183,14 @@ def run(argv=None) -> int:
             print(f'[evaluate] {method} {key} {clip}', file=sys.stderr)
 
     exp = args.experiment
+    if args.perturb:
+        return run_perturb(args, dev_clips, source)
     if exp == 'table4':
+        try:
+            methods = _with_params(methods, args.method_params)
+        except ValueError as exc:
+            print(f'evaluate: {exc}', file=sys.stderr)
+            return 2
         res = E.evaluate(methods, dev_clips, scenarios, seed=args.seed, max_frames=max_frames,
                          sensor_params=args.sensor_params, data_source=source, progress=progress,
                          repeats=args.repeats)

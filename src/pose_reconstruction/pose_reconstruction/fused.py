@@ -24,13 +24,14 @@ class FusedProcessor:
     ``process(frame, wanted) -> (reconstructed, with reliability or None, completed or None)``;
     ``wanted`` = (True, reliability wanted, completion wanted)."""
 
-    def __init__(self, db, values: Dict[str, Any]):
+    def __init__(self, db, values: Dict[str, Any], user_terms: Optional[Dict[str, Any]] = None):
         self._db = db
         rel = section(values, 'reliability')
+        terms = dict(user_terms or {})  # correction, correction_stage, input_tracker, profile
         self.rec = Reconstructor(db, use_input_reliability=False,
-                                 **section(values, 'optimizer'), **rel)
+                                 **section(values, 'optimizer'), **rel, **terms)
         self._comp_args = dict(method='A', use_input_reliability=True,
-                               **section(values, 'completion'), **rel)
+                               **section(values, 'completion'), **rel, **terms)
         self.comp: Optional[Reconstructor] = None  # built when first wanted
 
     def reset(self) -> None:

@@ -52,7 +52,18 @@ def subset(db, size: int):
 def make_method(method: str, db=None, database: str = '', db_size: Optional[int] = None,
                 **overrides) -> Reconstructor:
     """A method-``method`` reconstructor. ``db``: a database object; ``database``: a database file
-    ('' = default); ``db_size``: use only that many postures of it."""
+    ('' = default); ``db_size``: use only that many postures of it. ``correction`` may be a
+    :class:`~.correction.SensorCorrection` or a file name, ``profile`` a
+    :class:`~.profile.UserProfile` or a profile file name."""
+    from pathlib import Path
+    corr = overrides.get('correction')
+    if isinstance(corr, (str, Path)):
+        from .correction import load as load_correction
+        overrides['correction'] = load_correction(corr) if str(corr) else None
+    prof = overrides.get('profile')
+    if isinstance(prof, (str, Path)):
+        from .profile import load as load_profile
+        overrides['profile'] = load_profile(prof) if str(prof) else None
     if db is None:
         if database:
             from .node_common import load_database

@@ -24,6 +24,7 @@ from skeleton_core.health import Health
 from skeleton_core.params import ParamSpec, build, specs
 from skeleton_core.rosnode import DiagnosticsPublisher, Parameters
 
+from .correction import CorrectionConfig
 from .reliability import ReliabilityConfig
 
 # Reliability parameters (Shum et al. 2013 Sec. IV, declared on ReliabilityConfig), shared by every
@@ -31,6 +32,10 @@ from .reliability import ReliabilityConfig
 RELIABILITY_SPECS = specs(ReliabilityConfig)
 RELIABILITY_NAMES = [s.name for s in RELIABILITY_SPECS]
 DATABASE_SPEC = ParamSpec('database', '', "motion database file ('' = built-in / CMU default)")
+
+# Learned sensor correction and user profile (pose_reconstruction.correction / .profile)
+CORRECTION_SPECS = specs(CorrectionConfig)
+CORRECTION_NAMES = [s.name for s in CORRECTION_SPECS]
 
 
 def common_specs(input_topic: str, output_topic: str) -> List[ParamSpec]:
@@ -203,6 +208,9 @@ class DatabaseNode(SkeletonArrayNode):
 
     def setup(self) -> None:
         self._load(self.params['database'])
+        self.user_terms: Dict[str, Any] = {}
+        if 'sensor_correction' in self.params.values:
+            self.user_terms = load_user_terms(dict(self.params.values), self.get_logger())
 
     def _load(self, path: str) -> None:
         from .posture_space import as_database_arrays
@@ -217,7 +225,54 @@ class DatabaseNode(SkeletonArrayNode):
                 self._load(changed['database'])
             except (FileNotFoundError, ValueError, RuntimeError) as e:
                 return str(e)
+        if any(k in changed for k in CORRECTION_NAMES):
+            try:
+                self.user_terms = load_user_terms(values, self.get_logger())
+            except (FileNotFoundError, ValueError, RuntimeError) as e:
+                return str(e)
         return None
+
+
+def load_user_terms(values: Dict[str, Any], logger=None) -> Dict[str, Any]:
+    """The Reconstructor keywords of the correction / profile parameters: ``correction`` (None
+    when off or refused: another or an undeclared tracker, logged in one line),
+    ``correction_stage``, ``input_tracker``, ``profile``. A named file that is missing or
+    malformed raises ValueError with one line."""
+    from . import correction as C
+    from . import profile as P
+    info = logger.info if logger is not None else (lambda m: None)
+    warn = logger.warning if logger is not None else (lambda m: None)
+    name = values.get('sensor_correction', '')
+    tracker = values.get('input_tracker', '')
+    corr = None
+    if name == 'auto':
+        if tracker != C.UIPRMD_TRACKER:
+            info(f'sensor correction off: the default correction is learned from '
+                 f'{C.UIPRMD_TRACKER} skeletons and the input tracker is '
+                 f'{tracker or "not declared"} (input_tracker)')
+        else:
+            try:
+                corr = C.load_or_build_default(log=info)
+            except (ValueError, OSError) as e:
+                warn(f'sensor correction off: cannot build the default one ({e})')
+            if corr is None:
+                info('sensor correction off: no paired recordings under <shared>/kinect/ui-prmd '
+                     f'and no {C.default_path()}')
+    elif name:
+        corr = C.load(name)  # CorrectionFileError (a ValueError): one line
+    if corr is not None:
+        try:
+            C.check_tracker(corr, tracker)
+            info(f'{C.describe_file(corr)}: applied at stage {values.get("correction_stage")}')
+        except C.TrackerMismatch as e:
+            warn(str(e))
+            corr = None
+    prof = None
+    if values.get('user_profile'):
+        prof = P.load_by_name(values['user_profile'], values.get('profiles_dir') or None)
+        info(f'user profile {prof.name!r}: segment lengths from {prof.frames} frames')
+    return {'correction': corr, 'correction_stage': values.get('correction_stage', 'input'),
+            'input_tracker': tracker, 'profile': prof}
 
 
 def load_database(path: str, loader: Optional[Callable[[], Any]] = None):

@@ -8,8 +8,8 @@ from typing import Any, Dict, Optional
 from skeleton_core.params import ParamSpec, specs
 from skeleton_core.rosnode import run_node
 
-from .node_common import (DATABASE_SPEC, RELIABILITY_NAMES, RELIABILITY_SPECS, DatabaseNode,
-                          check_reliability_params, common_specs)
+from .node_common import (CORRECTION_SPECS, DATABASE_SPEC, RELIABILITY_NAMES, RELIABILITY_SPECS,
+                          DatabaseNode, check_reliability_params, common_specs)
 from .optimizer import OptimizerConfig
 from .reconstructor import Reconstructor, ReconstructorConfig
 
@@ -19,7 +19,7 @@ SPECS = ([DATABASE_SPEC,
          + specs(OptimizerConfig) + specs(ReconstructorConfig))
 CORE_NAMES = [s.name for s in SPECS if s.name not in ('database', 'method')]
 PARAMS = (common_specs('/kinect/skeletons_reliability', '/posture/reconstructed') + SPECS
-          + RELIABILITY_SPECS)
+          + RELIABILITY_SPECS + CORRECTION_SPECS)
 
 
 class OptimizerNode(DatabaseNode):
@@ -31,7 +31,7 @@ class OptimizerNode(DatabaseNode):
 
     def make_processor(self, values: Dict[str, Any]):
         params = {k: values[k] for k in RELIABILITY_NAMES + CORE_NAMES}
-        return Reconstructor(self.db, method=values['method'], **params)
+        return Reconstructor(self.db, method=values['method'], **params, **self.user_terms)
 
 
 def main(args=None) -> int:

@@ -19,7 +19,7 @@ from typing import Any, Dict, Optional
 from skeleton_core.rosnode import ParamSpec, run_node
 
 from . import completion_node, optimizer_node
-from .node_common import (DATABASE_SPEC, RELIABILITY_SPECS, DatabaseNode,
+from .node_common import (CORRECTION_SPECS, DATABASE_SPEC, RELIABILITY_SPECS, DatabaseNode,
                           check_reliability_params, common_specs)
 from .fused import FusedProcessor, section
 
@@ -44,8 +44,9 @@ PARAMS = (common_specs('/kinect/skeletons', '/posture/reconstructed') + [
     ParamSpec('completed_topic', '/posture/completed',
               'method A output (computed and published only while subscribed)', read_only=True),
     DATABASE_SPEC,
-] + [_prefixed(sec, s) for sec, specs in _SECTIONS.items() for s in specs])
-_SHARED = ('qos_depth', 'user_timeout_s', 'time_jump_reset_s', 'database')
+] + CORRECTION_SPECS + [_prefixed(sec, s) for sec, specs in _SECTIONS.items() for s in specs])
+_SHARED = ('qos_depth', 'user_timeout_s', 'time_jump_reset_s', 'database') + tuple(
+    s.name for s in CORRECTION_SPECS)
 
 
 def fused_parameters(reliability: Dict[str, Any], completion: Dict[str, Any],
@@ -72,7 +73,7 @@ class ReconstructionNode(DatabaseNode):
         return check_reliability_params(section(values, 'reliability'))
 
     def make_processor(self, values: Dict[str, Any]):
-        return FusedProcessor(self.db, values)
+        return FusedProcessor(self.db, values, self.user_terms)
 
     def diagnostics_extra(self) -> Dict[str, Any]:
         extra = super().diagnostics_extra()

@@ -79,6 +79,16 @@ Trust in the sensor (graceful degradation), ``trust_mode``:
 * ``'distance'`` — the earlier rule: linear from 0 at ``trust_sensor_distance`` (RMS m per
   reliable joint, standard body) to 1 at twice it.
 
+Learned sensor correction (``correction``, a :class:`~.correction.SensorCorrection`, default
+None = off): the tracker's posture-dependent offset from the anatomical joint centres is removed
+from each input frame, ``correction_stage`` ``'input'`` (default: before the reliability, every
+joint) or ``'reliable'`` (after it, only the joints at or above ``reliable_threshold``, with the
+posture features of the reliable bones). The correction is refused (``TrackerMismatch``) unless
+``input_tracker`` names the tracker it was learned from. ``profile`` (a
+:class:`~.profile.UserProfile` or (19,) lengths): the user's segment lengths, used from the first
+frame instead of the mean of the first ``length_frames`` observations. (Their node parameters:
+:class:`~.correction.CorrectionConfig`.)
+
 ``trust_sensor`` holds the last trust factor. The paper's behaviour: ``output_mode='blend'``,
 ``trust_mode='distance'``, ``reference_mode='standard'``, ``w_style=0.5`` (the default 8 weights
 the closest-neighbour style term 16x higher: measured on the sensor-model dev streams, Eq. 18 a/b/c
@@ -103,8 +113,12 @@ from skeleton_core.params import split as params_split
 from .body_fit import BodyFit, BodyFitConfig
 from .completion import CompletionConfig, PCACompletion
 from .optimizer import NaturalPostureOptimizer, OptimizerConfig
+from .plausibility import unswap_permutation
 from .posture_space import (QueryConfig, QueryPreparer, as_database_arrays, rest_directions,
                             to_sensor_frame, user_bone_lengths, yaw_quat_matrix)
+from .correction import STAGES as CORRECTION_STAGES
+from .correction import CorrectionConfig, check_tracker
+from .profile import from_optional as profile_lengths
 from .reliability import ReliabilityConfig, ReliabilityEstimator
 from .segment_output import SEG_DIFF, SegmentOutput, SegmentOutputConfig
 from .trust import SensorTrust, TrustConfig
@@ -158,7 +172,9 @@ class Reconstructor:
     (their parameter names). ``use_reliability``: weight the query by the reliability (default:
     method C only)."""
 
-    def __init__(self, db, method: str = 'C', use_reliability: Optional[bool] = None, **params):
+    def __init__(self, db, method: str = 'C', use_reliability: Optional[bool] = None,
+                 correction=None, correction_stage: str = CorrectionConfig.correction_stage,
+                 input_tracker: str = '', profile=None, **params):
         method = str(method).upper()
         if method not in METHODS:
             raise ValueError(f'method must be one of {METHODS}, got {method!r}')
@@ -170,6 +186,12 @@ class Reconstructor:
         self.float_root = bool(cfg.float_root)
         self.method = method
         self.name = method
+        if correction_stage not in CORRECTION_STAGES:
+            raise ValueError(f'correction_stage must be one of {CORRECTION_STAGES}')
+        if correction is not None:
+            check_tracker(correction, input_tracker)  # never applied to another tracker
+        self.correction = correction
+        self.correction_stage = correction_stage
         self.db = as_database_arrays(db)
         self.reliability = ReliabilityEstimator(**rel)
         self.use_reliability = (method == 'C') if use_reliability is None else bool(use_reliability)
@@ -190,6 +212,7 @@ class Reconstructor:
             self.reliability, self.db.body.segment_lengths,
             self.body_fit.height_settled if self.body_fit else (lambda: True),
             self.reliable_threshold, self.output_scale, cfg.segments)
+        self.segment_output.profile_lengths = profile_lengths(profile)
         self.length_window = int(cfg.length_window)
         self.timings_ms: Dict[str, float] = {}
         self.trust_sensor = 0.0
@@ -203,6 +226,7 @@ class Reconstructor:
 
     def reset(self) -> None:
         self.reliability.reset()
+        self._last_output: Optional[SkeletonFrame] = None
         self._prev = deque(maxlen=2)  # (normalised solution (20, 3), yaw)
         self._lengths = np.full((self.length_window, NUM_SEGMENTS), np.nan)
         self._lengths_n = 0
@@ -213,6 +237,11 @@ class Reconstructor:
             self.body_fit.reset()
         if isinstance(self.core, NaturalPostureOptimizer):
             self.core.reset_rng()
+
+    def set_profile(self, profile) -> None:
+        """Use another user profile (UserProfile, (19,) lengths or None) and forget the user."""
+        self.segment_output.profile_lengths = profile_lengths(profile)
+        self.reset()
 
     def _reliability_for(self, frame: SkeletonFrame) -> np.ndarray:
         est = self.reliability.update(frame.positions, frame.tracking_state)
@@ -226,6 +255,8 @@ class Reconstructor:
         segments whose two joints were reliable over the last ``length_window`` frames, where
         there are at least 5 such frames; else the reliability reference (captured T-pose /
         standing lengths, or the standard body at the user's height)."""
+        if self.segment_output.profile_lengths is not None:
+            return self.segment_output.profile_lengths
         ref = self.reliability.reference_lengths
         if self.reliability.reference_source != 'standard':
             return ref  # lengths captured in a reference posture (Sec. IV-B)
@@ -248,8 +279,27 @@ class Reconstructor:
 
     def process(self, frame: SkeletonFrame) -> SkeletonFrame:
         t0 = time.perf_counter()
-        obs = np.asarray(frame.positions, float)
+        corr = self.correction
+        if corr is not None and self.correction_stage == 'input':
+            frame = frame.copy(positions=corr.apply(frame.positions))
         R = np.asarray(self._reliability_for(frame), float)
+        plaus = self.reliability.plausibility
+        if plaus.skeleton_outlier and self._last_output is not None:
+            # the whole skeleton jumped (another person / a chair): nothing of this frame is
+            # the user; the last output is held until the skeleton is back (plausibility.py)
+            self.timings_ms = {'reliability': 1e3 * (time.perf_counter() - t0)}
+            return self._last_output.copy(stamp_ns=frame.stamp_ns,
+                                          reliability=R.astype(np.float32))
+        perm = unswap_permutation(plaus.swapped) if plaus.lr_unswap else None
+        if perm is not None:
+            # the sensor swapped left and right limbs (plausibility.py): swap them back, each
+            # joint with its own reliability
+            frame = frame.copy(positions=np.asarray(frame.positions, float)[perm],
+                               tracking_state=frame.tracking_state[perm])
+            R = R[perm]
+        if corr is not None and self.correction_stage == 'reliable':
+            frame = frame.copy(positions=corr.apply(frame.positions, R, self.reliable_threshold))
+        obs = np.asarray(frame.positions, float)
         seg_obs = SEG_DIFF @ obs
         len_obs = np.sqrt(np.einsum('sk,sk->s', seg_obs, seg_obs))
         segments = self.method != 'A' and self.output_mode == 'segments'
@@ -308,6 +358,8 @@ class Reconstructor:
                                **res.timings_ms,
                                'output': 1e3 * (time.perf_counter() - t2)}
         self.last_result = res
-        return frame.copy(positions=np.asarray(positions, float),
-                          reliability=R.astype(np.float32),
-                          orientations=None if ori is None else np.asarray(ori, float))
+        out = frame.copy(positions=np.asarray(positions, float),
+                         reliability=R.astype(np.float32),
+                         orientations=None if ori is None else np.asarray(ori, float))
+        self._last_output = out
+        return out

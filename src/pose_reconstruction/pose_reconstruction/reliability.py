@@ -12,6 +12,12 @@ For every joint ``i`` and frame ``f`` three terms in [0, 1] are computed:
 and the reliability is the Gaussian-weighted sum, over the last ``f_total`` frames, of the
 per-frame minimum of the three (Eq. 8), the most recent frame weighted most.
 
+Beyond the paper (``plausibility``, default on): the Kinect's confident failures — joints reported
+TRACKED at a wrong place — are caught by :mod:`.plausibility` (bone lengths against the user's
+profile, segment speed, left/right against the heading, floor penetration, whole-skeleton jumps);
+the reliability is ``min(Eq. 8, R_p)``, so an implausible joint is unreliable from the frame it
+becomes implausible, and the length profile learns only from plausible segments.
+
 Reference segment lengths (Sec. IV-B) are captured automatically whenever every joint is tracked
 and the posture is close to one of the two reference postures (T-pose, standing with arms down),
 and refreshed the same way later. Until the first capture, ``reference_mode='observed'`` (default)
@@ -32,7 +38,7 @@ from typing import Deque, Optional, Tuple
 import numpy as np
 
 from skeleton_core.geometry import normalize
-from skeleton_core.params import check, param
+from skeleton_core.params import check, nested, param
 from skeleton_core.model import (ANKLE_LEFT, ANKLE_RIGHT, ELBOW_LEFT, ELBOW_RIGHT, FOOT_LEFT,
                                  FOOT_RIGHT, HAND_LEFT, HAND_RIGHT, HEAD, HIP_LEFT, HIP_RIGHT,
                                  INFERRED, KNEE_LEFT, KNEE_RIGHT, NOT_TRACKED, NUM_JOINTS,
@@ -42,6 +48,7 @@ from skeleton_core.model import (ANKLE_LEFT, ANKLE_RIGHT, ELBOW_LEFT, ELBOW_RIGH
                                  WRIST_LEFT, WRIST_RIGHT, estimate_height, segment_lengths,
                                  standard_body)
 
+from .plausibility import PLAUSIBILITY_PARAMS, PlausibilityCheck, PlausibilityConfig
 from .posture_space import heading_yaw
 
 REFERENCE_MODES = ('observed', 'standard')
@@ -230,11 +237,13 @@ class ReliabilityConfig:
         choices=REFERENCE_MODES)
     observed_window: int = param(90, 'reference_mode observed: frames in the running median',
                                  range=(1, 10000))
+    plausibility: PlausibilityConfig = nested(PlausibilityConfig)
 
     def validate(self) -> None:
         check(self)
         if not self.theta_floor_deg < self.theta_roof_deg:
             raise ValueError('theta_floor_deg must be below theta_roof_deg')
+        self.plausibility.validate()
 
 
 class ReliabilityEstimator:
@@ -247,9 +256,14 @@ class ReliabilityEstimator:
     def __init__(self, config: Optional[ReliabilityConfig] = None, *,
                  height: Optional[float] = None,
                  reference_lengths: Optional[np.ndarray] = None, **params):
+        pl = {k: params.pop(k) for k in list(params) if k in PLAUSIBILITY_PARAMS}
         cfg = dataclasses.replace(config or ReliabilityConfig(), **params)
+        if pl:
+            cfg = dataclasses.replace(cfg, plausibility=dataclasses.replace(cfg.plausibility, **pl))
         cfg.validate()
         self.config = cfg
+        # the confident-failure term (plausibility.py); min(Eq. 8, R_p)
+        self.plausibility = PlausibilityCheck(cfg.plausibility)
         d_min, f_b, f_total, sigma_frames = cfg.d_min, cfg.f_b, cfg.f_total, cfg.sigma_frames
         theta_floor_deg, theta_roof_deg = cfg.theta_floor_deg, cfg.theta_roof_deg
         tracked_value, inferred_value = cfg.tracked_value, cfg.inferred_value
@@ -300,6 +314,7 @@ class ReliabilityEstimator:
         self._observed_median: Optional[np.ndarray] = None
         self.last_terms: Optional[Tuple[np.ndarray, np.ndarray, np.ndarray]] = None
         self.reliability = np.ones(NUM_JOINTS)
+        self.plausibility.reset()
 
     # -- reference lengths ---------------------------------------------------------------------
     @property
@@ -341,6 +356,18 @@ class ReliabilityEstimator:
                 med = self._observed_median
                 self._reference = std if med is None else np.where(np.isfinite(med), med, std)
         return self._reference
+
+    @property
+    def profile_lengths(self) -> np.ndarray:
+        """(19,) the user's own segment lengths for the plausibility term: fixed or captured in a
+        reference posture, else (reference_mode 'observed') the running median of the tracked
+        lengths, NaN for a segment not observed yet (never the standard body, whose layout may
+        differ from the sensor's); reference_mode 'standard': the reference lengths."""
+        if (self._fixed_reference is not None or self._captured
+                or self.reference_mode == 'standard'):
+            return self.reference_lengths
+        med = self._observed_median
+        return np.full(NUM_SEGMENTS, np.nan) if med is None else med
 
     def _standard_lengths(self, height: float) -> np.ndarray:
         """``standard_body(height).segment_lengths``, kept for the last height asked for (the
@@ -399,9 +426,17 @@ class ReliabilityEstimator:
         seg -= p.take(SEGMENT_PARENT_INDEX, axis=0)
         ln = np.sqrt(np.einsum('sk,sk->s', seg, seg))
         tracked = ts == TRACKED
-        if tracked.all():
+        profile = tracked
+        rp = None
+        if self.plausibility.enabled:
+            # confident failures (plausibility.py) against the profile so far; the profile
+            # learns only from plausible joints: a hand snapped to a table for a second must not
+            # become the user's forearm
+            rp = self.plausibility.update(p, ts, self.profile_lengths, seg, ln)
+            profile = tracked & self.plausibility.lengths_plausible()
+        if profile.all():
             self._observe_reference(p, seg, ln)
-        self._observe_lengths(tracked, ln)
+        self._observe_lengths(profile, ln)
         # Eq. 1-4, one new angle per frame (as behaviour_term on the last f_b + 2 positions)
         if self._last_p is not None:
             d = p - self._last_p
@@ -440,6 +475,9 @@ class ReliabilityEstimator:
         self._minima.append(m)
         w = self._gauss[len(self._minima)]
         r = w @ np.asarray(self._minima)
+        if rp is not None:
+            # confident failures: implausible now is unreliable now (not Gaussian-delayed)
+            np.minimum(r, rp, out=r)
         np.maximum(r, 0.0, out=r)
         np.minimum(r, 1.0, out=r)
         self.reliability = r

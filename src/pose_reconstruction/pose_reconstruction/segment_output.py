@@ -11,7 +11,11 @@ vectors and the root are smoothed by a One Euro filter (``smooth_min_cutoff`` Hz
 s/m, ``smooth_d_cutoff`` Hz; ``smooth_min_cutoff`` 0 = off); a segment the database fills in (an
 end with reliability 0) gets ``smooth_filled_scale`` times the cutoff (1 at or above
 ``reliable_threshold``, linear between). ``smooth_filled_speed`` and ``smooth_anchored_speed``:
-see :mod:`.reconstructor`.
+see :mod:`.reconstructor`. ``smooth_lead`` (prediction correction, default 1): on the reliable
+segments (in proportion to ``min(1, reliability / reliable_threshold)`` of the less reliable
+end) and the root, the low-pass lag is added back along the smoothed velocity
+(``OneEuroFilter`` ``lead``): no lag on a ramp, so the light smoothing of what the sensor gives
+reliably adds no latency, and the heavy smoothing stays on the filled segments.
 """
 from __future__ import annotations
 
@@ -54,12 +58,16 @@ class SegmentOutputConfig:
     symmetric_lengths: bool = param(True, 'segments: left and right limbs share their mean '
                                     'lengths')
     smooth_min_cutoff: float = param(
-        3.0, 'segments: One Euro minimum cutoff (Hz) of segment and root smoothing, 0 = off',
+        1.3, 'segments: One Euro minimum cutoff (Hz) of segment and root smoothing, 0 = off',
         range=(0.0, 1000.0))
-    smooth_beta: float = param(10.0, 'segments: One Euro speed coefficient (s/m)',
+    smooth_beta: float = param(5.0, 'segments: One Euro speed coefficient (s/m)',
                                range=(0.0, 1e6))
-    smooth_d_cutoff: float = param(1.0, 'segments: One Euro speed cutoff (Hz)',
+    smooth_d_cutoff: float = param(2.0, 'segments: One Euro speed cutoff (Hz)',
                                    range=(1e-3, 1000.0))
+    smooth_lead: float = param(
+        1.0, 'segments: prediction correction of the smoothing on reliable segments and the root '
+        '(fraction of the low-pass lag added back along the smoothed velocity; 1 = no lag on a '
+        'ramp, 0 = plain One Euro); filled segments keep the plain low-pass', range=(0.0, 1.0))
     smooth_filled_scale: float = param(
         0.2, 'segments: cutoff factor of a segment the database fills in (an end with '
         'reliability 0; 1 at or above reliable_threshold, linear between), 1 = same smoothing '
@@ -95,6 +103,9 @@ class SegmentOutput:
         self.smooth_filled_scale = float(config.smooth_filled_scale)
         self.smooth_filled_speed = bool(config.smooth_filled_speed)
         self.smooth_anchored_speed = bool(config.smooth_anchored_speed)
+        self.smooth_lead = float(config.smooth_lead)
+        # the user's profile lengths (19,), used from the first frame when set (Reconstructor)
+        self.profile_lengths: Optional[np.ndarray] = None
         self.reset()
 
     def reset(self) -> None:
@@ -117,6 +128,10 @@ class SegmentOutput:
         reliability reference length it had when first needed. ``lengths`` (19,): the observed
         segment lengths of ``positions`` when already known."""
         if self._frozen_lengths is not None:
+            return self._frozen_lengths
+        if self.profile_lengths is not None and self.output_scale == 'user':
+            L = self.profile_lengths
+            self._frozen_lengths = 0.5 * (L + L[_MIRROR_SEG]) if self.symmetric_lengths else L
             return self._frozen_lengths
         if self.output_scale == 'standard':
             self._frozen_lengths = self._standard_lengths
@@ -212,7 +227,15 @@ class SegmentOutput:
                     if anchored.any():
                         speed = scale.copy()
                         speed[:NUM_SEGMENTS] += anchored * (1.0 - scale[:NUM_SEGMENTS])
-            vr = self._seg_filter.update(vr, None, self._filter_clock_ns, scale, speed)
+            lead = None
+            if self.smooth_lead > 0.0:
+                # prediction correction on what the sensor gives reliably and on the root
+                # (filters.OneEuroFilter lead): no lag there; the database-filled segments keep
+                # the plain low-pass
+                lead = np.empty(NUM_SEGMENTS + 1)
+                lead[:NUM_SEGMENTS] = self.smooth_lead * rel_frac
+                lead[NUM_SEGMENTS] = self.smooth_lead  # the root is never heavily smoothed
+            vr = self._seg_filter.update(vr, None, self._filter_clock_ns, scale, speed, lead)
             v = vr[:NUM_SEGMENTS]
             nv = np.sqrt(np.einsum('sk,sk->s', v, v))
             keep = nv > 1e-9

@@ -136,6 +136,7 @@ class OneEuroFilter:
         self.x = np.zeros((self.n, 3))
         self.raw = np.zeros((self.n, 3))
         self.dx = np.zeros((self.n, 3))
+        self.fdx = np.zeros((self.n, 3))
         self.t_ns: Optional[int] = None
 
     @staticmethod
@@ -154,12 +155,20 @@ class OneEuroFilter:
     def update(self, positions: np.ndarray, tracking_state: Optional[np.ndarray] = None,
                stamp_ns: Optional[int] = None,
                cutoff_scale: Optional[np.ndarray] = None,
-               speed_scale: Optional[np.ndarray] = None) -> np.ndarray:
+               speed_scale: Optional[np.ndarray] = None,
+               lead: Optional[np.ndarray] = None) -> np.ndarray:
         """Filter one frame. ``cutoff_scale`` (n,) > 0 optionally multiplies each row's cutoff
         (lower = smoother for that row); with ``speed_scale`` (n,) as well, ``cutoff_scale``
         multiplies the minimum cutoff only and ``speed_scale`` the speed term: the cutoff is
         ``min_cutoff * cutoff_scale + beta * |speed| * speed_scale`` (1 keeps the speed term:
-        smooth at rest, no extra lag in motion)."""
+        smooth at rest, no extra lag in motion).
+
+        ``lead`` (n,) in [0, 1] (prediction correction): the low-pass output of a row moving at a
+        steady velocity ``v`` trails it by ``(1 - a) / a`` samples (``a`` the row's smoothing
+        factor); ``lead`` times that lag is added back along the velocity of the low-pass output
+        (smoothed with ``d_cutoff``), so a row with ``lead`` 1 has no lag on a ramp and keeps most
+        of the smoothing at rest (the velocity of the smoothed signal is smooth; that of the raw
+        input would bring its noise back). The filter's state stays the uncorrected low-pass."""
         x = np.asarray(positions, float)
         dt = self.default_dt
         if stamp_ns is not None and self.t_ns is not None and stamp_ns > self.t_ns:
@@ -174,9 +183,12 @@ class OneEuroFilter:
             cutoff = self._cutoff(speed, cutoff_scale, speed_scale)
             a = (1.0 / (1.0 + (1.0 / (2 * np.pi * cutoff)) / dt))[:, None]
             out = a * x + (1 - a) * self.x
+            self.fdx = ad * ((out - self.x) / dt) + (1 - ad) * self.fdx
             self.dx = edx
             self.x = out.copy()
             self.raw = x.copy()
+            if lead is not None:
+                out += (np.asarray(lead, float)[:, None] * ((1 - a) / a) * dt) * self.fdx
             return out
         st = _states(tracking_state, self.n)
         valid = st != NOT_TRACKED
@@ -193,10 +205,15 @@ class OneEuroFilter:
             a = self._alpha(cutoff, dt)
             out[cont] = a * x[cont] + (1 - a) * self.x[cont]
             self.dx[cont] = edx
+            self.fdx[cont] = ad * ((out[cont] - self.x[cont]) / dt) + (1 - ad) * self.fdx[cont]
         start = valid & ~self.has
         self.dx[start] = 0.0
+        self.fdx[start] = 0.0
         self.x[valid] = out[valid]
         self.raw[valid] = x[valid]
         self.has = valid.copy()
         self.all_started = bool(valid.all())
+        if lead is not None and cont.any():
+            out[cont] += (np.asarray(lead, float)[cont][:, None] * ((1 - a) / a) * dt) * \
+                self.fdx[cont]
         return out

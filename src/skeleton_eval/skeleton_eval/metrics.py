@@ -15,6 +15,7 @@ where either input is NaN are skipped (per joint); a quantity with no valid fram
   :func:`bone_length_error` — mean |length - true length|, cm.
 * :func:`bone_direction_error` — mean angle between estimated and true segment directions, deg
   (length-free).
+* :func:`added_latency_ms` — the delay of an output behind its input (the best-fitting shift).
 """
 from __future__ import annotations
 
@@ -113,6 +114,45 @@ def bone_direction_error(pred, truth) -> Tuple[np.ndarray, float]:
     cos = np.where((na > 1e-9) & (nb > 1e-9), cos, np.nan)
     ang = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
     return _nanmean0(ang), _overall(ang)
+
+
+MAX_LATENCY_FRAMES = 10
+
+
+def latency_curve(out: np.ndarray, raw: np.ndarray, max_frames: int = MAX_LATENCY_FRAMES):
+    """``(sums, counts)`` (max_frames + 1,): per shift k >= 0 the sum and number of the finite
+    distances |out(t) - raw(t-k)| (several streams pool by adding them)."""
+    sums = np.zeros(max_frames + 1)
+    counts = np.zeros(max_frames + 1)
+    for k in range(0, min(max_frames, len(raw) - 1) + 1):
+        d = np.linalg.norm(out[k:] - raw[:len(raw) - k], axis=-1)
+        ok = np.isfinite(d)
+        sums[k] = d[ok].sum()
+        counts[k] = ok.sum()
+    return sums, counts
+
+
+def latency_from_curve(sums, counts, fps: float = 30.0) -> float:
+    """The delay (ms) of a :func:`latency_curve`: the shift of the smallest mean distance,
+    refined to sub-frame by a parabola through the minimum."""
+    with np.errstate(invalid='ignore', divide='ignore'):
+        errs = np.where(np.asarray(counts) > 0, np.asarray(sums) / np.asarray(counts), np.inf)
+    if not np.isfinite(errs).any():
+        return float('nan')
+    k = int(np.argmin(errs))
+    frac = 0.0
+    if 0 < k < len(errs) - 1 and np.isfinite(errs[k - 1:k + 2]).all():
+        den = errs[k - 1] - 2 * errs[k] + errs[k + 1]
+        if den > 1e-12:
+            frac = 0.5 * (errs[k - 1] - errs[k + 1]) / den
+    return float((k + frac) * 1000.0 / fps)
+
+
+def added_latency_ms(out: np.ndarray, raw: np.ndarray, fps: float = 30.0,
+                     max_frames: int = MAX_LATENCY_FRAMES) -> float:
+    """Delay of ``out`` behind ``raw`` (ms): the shift k >= 0 minimising mean |out(t) - raw(t-k)|,
+    refined to sub-frame by a parabola through the minimum."""
+    return latency_from_curve(*latency_curve(out, raw, max_frames), fps)
 
 
 METRICS = ('eq18_cm', 'mpjpe_cm', 'jitter_ms2', 'bone_std_cm', 'bone_err_cm', 'bone_dir_deg')

@@ -25,6 +25,7 @@ class RealClip:
     kinect: KinectClip
     reference: Optional[np.ndarray] = None  # (N, 20, 3) m, NaN where the reference has no data
     lag: Optional[float] = None             # s, reference time = Kinect time + lag
+    setup: Optional[str] = None             # the registration (session or 'sNN/k' setup) used
 
     @property
     def clip(self) -> ClipId:
@@ -55,7 +56,9 @@ def load_dataset(src, subjects=None, movements=None, repetitions=None, with_refe
 
     Returns ``(clips, skipped, registrations)``: ``clips`` a list of :class:`RealClip`,
     ``skipped`` a list of ``(path, reason)`` for files that could not be used (the rest continue),
-    ``registrations`` ``{session: registration.SessionRegistration}``. ``progress`` wraps an
+    ``registrations`` ``{setup: registration.SessionRegistration}``: one rigid transform per
+    subject session, or per setup where a session's movements were not one rigid setup
+    (:func:`registration.split_setups`; the extra setups are named ``sNN/2``, ...). ``progress`` wraps an
     iterable (e.g. ``tqdm``). ``sensor_height`` (m) moves the origin up from the floor to a
     nominal sensor height (z of the floor = -sensor_height); 0 keeps the floor at z = 0.
     """
@@ -90,24 +93,39 @@ def load_dataset(src, subjects=None, movements=None, repetitions=None, with_refe
             skipped.append((str(e.path), e.reason + ' (reference only; Kinect clip kept)'))
     registrations = {}
     for session, items in sorted(refs.items()):
-        # the tracking-failure clips take no part in the fit
+        # the tracking-failure clips take no part in any fit; they join the largest setup
         fit = [(rc, r) for rc, r in items if not rc.clip.is_tracking_failure] or items
-        try:
-            sr = reg.register_session([rc.kinect.positions for rc, _ in fit],
-                                      [r for _, r in fit])
-        except (ValueError, np.linalg.LinAlgError) as e:
-            for rc, _ in items:
-                skipped.append((rc.clip.name, f'reference not registered ({e}); Kinect clip kept'))
-            continue
-        for rc, r in items:
-            k = rc.kinect.positions
-            if any(rc is f for f, _ in fit):
-                lag = sr.lags[[id(f) for f, _ in fit].index(id(rc))]
-            else:
-                lag = reg.estimate_lag(k, reg.apply_transform(sr.rotation, sr.translation, r))
-            rc.lag = lag
-            rc.reference = sr.to_kinect(reg.paired_reference(r, len(k), lag))
-        registrations[session] = sr
+        by_movement: Dict[int, List[int]] = {}
+        for i, (rc, _) in enumerate(fit):
+            by_movement.setdefault(rc.clip.movement, []).append(i)
+        setups = (reg.split_setups(list(by_movement.values()),
+                                   [rc.kinect.positions for rc, _ in fit], [r for _, r in fit])
+                  if len(by_movement) > 1 else [list(range(len(fit)))])
+        rest = [(rc, r) for rc, r in items if not any(rc is f for f, _ in fit)]
+        for n, idx in enumerate(setups):
+            members = [fit[i] for i in idx]
+            name = session if n == 0 else f'{session}/{n + 1}'
+            try:
+                sr = reg.register_session([rc.kinect.positions for rc, _ in members],
+                                          [r for _, r in members])
+            except (ValueError, np.linalg.LinAlgError) as e:
+                for rc, _ in members + (rest if n == 0 else []):
+                    skipped.append((rc.clip.name,
+                                    f'reference not registered ({e}); Kinect clip kept'))
+                continue
+            for (rc, r), lag in zip(members, sr.lags):
+                rc.lag = lag
+                rc.reference = sr.to_kinect(reg.paired_reference(r, len(rc.kinect.positions),
+                                                                 lag))
+                rc.setup = name
+            if n == 0:
+                for rc, r in rest:
+                    k = rc.kinect.positions
+                    rc.lag = reg.estimate_lag(k, reg.apply_transform(sr.rotation, sr.translation,
+                                                                     r))
+                    rc.reference = sr.to_kinect(reg.paired_reference(r, len(k), rc.lag))
+                    rc.setup = name
+            registrations[name] = sr
     return clips, skipped, registrations
 
 

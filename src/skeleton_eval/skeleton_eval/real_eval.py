@@ -6,7 +6,8 @@ the output against the Vicon-derived joint centres registered into the sensor fr
 (:func:`skeleton_eval.paired.load_dataset`), with the same metrics as the synthetic table
 (:func:`skeleton_eval.metrics.compute_all`: Eq. 18, MPJPE after the per-session rigid registration,
 bone-direction error (length-free), bone-length std and error, jitter) plus the latency the method
-adds (the shift of its output against the raw input that fits best, ms) and the processing time.
+adds (the shift of its output against the raw input that fits best, on the joints the sensor
+reports TRACKED, ms) and the processing time.
 
 Rows: per movement (m01-m10, subjects with the reference), ``overall``, and ``m03_s01`` (the real
 tracking failure: no marker reference exists for subject 1, so only the reference-free metrics —
@@ -31,35 +32,23 @@ from typing import Dict, Optional, Sequence
 import numpy as np
 
 from .evaluation import json_safe
+from .metrics import MAX_LATENCY_FRAMES, added_latency_ms  # noqa: F401 (public here too)
 from skeleton_core.model import HAND_LEFT, HAND_RIGHT, NUM_JOINTS
 
 DEFAULT_METHODS = ('raw', 'holt', 'one_euro', 'A', 'B', 'C')
-MAX_LATENCY_FRAMES = 10
 TABLE_METRICS = (('eq18_cm', 'Eq.18 (cm)'), ('mpjpe_cm', 'MPJPE (cm)'),
                  ('bone_dir_deg', 'bone dir (deg)'), ('bone_std_cm', 'bone-length std (cm)'),
                  ('bone_err_cm', 'bone-length err (cm)'), ('jitter_ms2', 'jitter (m/s^2)'))
 
 
-def added_latency_ms(out: np.ndarray, raw: np.ndarray, fps: float = 30.0,
-                     max_frames: int = MAX_LATENCY_FRAMES) -> float:
-    """Delay of ``out`` behind ``raw`` (ms): the shift k >= 0 minimising mean |out(t) - raw(t-k)|,
-    refined to sub-frame by a parabola through the minimum."""
-    errs = []
-    for k in range(0, max_frames + 1):
-        a = out[k:]
-        b = raw[:len(raw) - k]
-        d = np.linalg.norm(a - b, axis=-1)
-        errs.append(np.nanmean(d) if np.isfinite(d).any() else np.inf)
-    errs = np.asarray(errs)
-    if not np.isfinite(errs).any():
-        return float('nan')
-    k = int(np.argmin(errs))
-    frac = 0.0
-    if 0 < k < len(errs) - 1 and np.isfinite(errs[k - 1:k + 2]).all():
-        den = errs[k - 1] - 2 * errs[k] + errs[k + 1]
-        if den > 1e-12:
-            frac = 0.5 * (errs[k - 1] - errs[k + 1]) / den
-    return float((k + frac) * 1000.0 / fps)
+def tracked_only(stream) -> np.ndarray:
+    """The raw positions with every joint the sensor did not report TRACKED set to NaN: the
+    latency is measured on the joints the sensor gives (the hands, not recorded and
+    extrapolated NOT_TRACKED, are left out as from every other score)."""
+    from skeleton_core.model import TRACKED
+    raw = np.array(stream.positions, float)
+    raw[np.asarray(stream.tracking_state) != TRACKED] = np.nan
+    return raw
 
 
 def make_streams(clips, fps: float = 30.0) -> Dict[str, list]:
@@ -134,7 +123,7 @@ def evaluate_real(src, methods: Optional[Sequence[str]] = None, subjects=None, m
                 out, t = E.run_method(method, s)
                 parts.append(M.compute_all(out, s.truth, s.fps))
                 weights.append(len(s))
-                lats.append(added_latency_ms(out, s.positions, s.fps))
+                lats.append(added_latency_ms(out, tracked_only(s), s.fps))
                 times.append(t)
                 if progress:
                     progress(name, row, s.clip_name)
@@ -171,8 +160,9 @@ def to_markdown(res: Dict) -> str:
              + (f' (not available: {", ".join(res["methods_unavailable"])})'
                 if res['methods_unavailable'] else '') + '.',
              'Reference: Plug-in-Gait joint-centre estimates, one rigid registration per subject '
-             'session (Kabsch, no scaling), lag per clip. Hands excluded (not recorded). '
-             'm03_s01 has no reference: reference-free metrics only. Latency = shift of the '
+             'session, or per rigid setup where a session\'s movements were recorded in several '
+             '(Kabsch, no scaling), lag per clip. Hands excluded (not recorded). m03_s01: the '
+             'tracking failure, reported apart. Latency = shift of the '
              'output against the raw input. Time = processing per frame (machine shared, '
              'loaded).', '']
     clip_info = ', '.join(f'{k}: {v}' for k, v in sorted(res['clips_per_row'].items()))

@@ -10,6 +10,12 @@
 * :func:`register_session` — one rigid transform per subject session (all clips of one subject
   share the sensor and the lab) and a lag per clip: coarse lags, Kabsch on all paired frames, then
   each lag refined by the residual under that transform and Kabsch refitted.
+* :func:`split_setups` — a subject's recordings are not always one rigid setup: in UI-PRMD the
+  Vicon of s05's m07 and m09 sits 0.77 m away from the rest of that subject's movements (a moved
+  lab origin; a single session transform leaves 65 cm on those clips and 15-18 cm on the
+  others). Each movement's clips get their own fit first; movements whose fits agree (translation
+  within ``tol_m``, heading within ``tol_deg``) are grouped into one setup, which then gets one
+  transform (:func:`register_session`). A movement that agrees with no other is its own setup.
 
 Convention: ``lag`` (s) means Kinect frame at time t pairs with the reference at time t + lag;
 the transform maps the reference into the Kinect frame: ``kinect ~= ref @ R.T + t``.
@@ -182,3 +188,41 @@ def register_session(kinect_clips: Sequence[np.ndarray], reference_clips: Sequen
         off = np.nanmean(diffs, axis=0)
     return SessionRegistration(rotation=rot, translation=tr, lags=lags,
                                residual_per_joint=res, mean_offset=off)
+
+
+def _heading_deg(rot: np.ndarray) -> float:
+    return float(np.degrees(np.arctan2(rot[1, 0], rot[0, 0])))
+
+
+def split_setups(groups: Sequence[Sequence[int]], kinect_clips: Sequence[np.ndarray],
+                 reference_clips: Sequence[np.ndarray], tol_m: float = 0.10,
+                 tol_deg: float = 10.0) -> List[List[int]]:
+    """Group clip indices into rigid setups (module docstring). ``groups``: clip indices per
+    movement (the unit that was recorded in one go); returns lists of clip indices, one per
+    setup, largest first. Grouping is greedy, largest movement group first, each joining the
+    first setup whose first member's transform agrees within ``tol_m`` / ``tol_deg``."""
+    fits = []
+    for g in groups:
+        try:
+            sr = register_session([kinect_clips[i] for i in g], [reference_clips[i] for i in g])
+            fits.append((list(g), sr.translation, _heading_deg(sr.rotation)))
+        except (ValueError, np.linalg.LinAlgError):
+            fits.append((list(g), None, None))
+    def agree(a, b):
+        if a[1] is None or b[1] is None:
+            return False
+        dyaw = abs((a[2] - b[2] + 180.0) % 360.0 - 180.0)
+        return np.linalg.norm(a[1] - b[1]) <= tol_m and dyaw <= tol_deg
+
+    # the movement that agrees with most others anchors the first setup (the consensus)
+    support = [sum(agree(f, o) for o in fits) for f in fits]
+    order = sorted(range(len(fits)), key=lambda i: (-support[i], -len(fits[i][0])))
+    setups: List[tuple] = []
+    for g, t, yaw in (fits[i] for i in order):
+        for s in setups:
+            if agree((g, t, yaw), s):
+                s[0].extend(g)
+                break
+        else:
+            setups.append((list(g), t, yaw))
+    return sorted((s[0] for s in setups), key=len, reverse=True)

@@ -35,13 +35,15 @@ from typing import Dict, Iterator, List, Optional, Sequence, Tuple, Union
 import numpy as np
 
 from skeleton_core.geometry import facing_yaw, yaw_matrix
-from skeleton_core.model import (CHILDREN, HIP_CENTER, HIP_LEFT, HIP_RIGHT, INFERRED, JOINT_INDEX,
+from skeleton_core.model import (CHILDREN, FOOT_LEFT, FOOT_RIGHT, HAND_LEFT, HAND_RIGHT, HIP_CENTER,
+                                 HIP_LEFT, HIP_RIGHT, INFERRED, JOINT_INDEX,
                                  JOINT_NAMES, LIMB_JOINTS, MIRROR, NOT_TRACKED, NUM_JOINTS, PARENTS,
                                  SEGMENT_CHILDREN, SEGMENT_CHILD_INDEX, SEGMENT_PARENTS,
                                  SEGMENT_PARENT_INDEX, SHOULDER_LEFT, SHOULDER_RIGHT, SPINE,
                                  TRACKED, estimate_height, segment_lengths, standard_body)
 
-SCENARIOS = ('clean', 'a', 'b', 'c')
+SCENARIOS = ('clean', 'a', 'b', 'c', 'd')
+CONFIDENT_FAILURES = ('hand_snap', 'limb_swap', 'foot_slide', 'person_jump')
 
 # Joint -> group used by the per-group noise tables
 JOINT_GROUP: Tuple[str, ...] = tuple(
@@ -72,6 +74,16 @@ DEFAULT_PARAMS: Dict = {
                        'parent_probability': 0.5, 'proximity_m': 0.15, 'proximity_per_s': 1.0},
     'turn': {'duration_s': [2.0, 5.0], 'peak_deg': [40.0, 160.0], 'degrade_deg': 65.0,
              'confusion_deg': 120.0, 'hysteresis_deg': 10.0, 'jitter_gain': 2.0},
+    'confident_failure': {
+        'hand_snap': {'enabled': True, 'duration_s': [0.3, 1.5], 'surface_reach_m': 0.4,
+                      'other_hand_m': 0.5, 'surface_offset_m': [0.15, 0.35],
+                      'wrist_probability': 0.5},
+        'limb_swap': {'enabled': True, 'side_on_deg': 45.0, 'duration_s': [0.3, 1.5],
+                      'legs_probability': 0.5},
+        'foot_slide': {'enabled': True, 'duration_s': [0.5, 2.0], 'speed_m_s': [0.1, 0.4],
+                       'sink_m': [0.0, 0.15], 'ankle_probability': 0.5},
+        'person_jump': {'enabled': True, 'duration_frames': [2, 8], 'distance_m': [0.6, 1.5]},
+    },
     'scenarios': {
         'clean': {'description': 'sensor noise only (no occlusion, false positives or turning)',
                   'self_occlusion': False, 'occlusion_per_min': 0.0,
@@ -100,6 +112,17 @@ DEFAULT_PARAMS: Dict = {
               'fp_joints': ['HandLeft', 'HandRight', 'WristLeft', 'WristRight'],
               'object': {'gap_m': [0.35, 0.55], 'depth_m': 0.4, 'width_m': [0.5, 0.8],
                          'top_m': [0.8, 1.05], 'lateral_m': [-0.3, 0.3], 'proximity_fp': True}},
+        'd': {'description': 'confident failures: joints reported TRACKED at a wrong place '
+                             '(hand snaps, left/right limb swaps, foot slides, jumps to another '
+                             'person), beside a table',
+              'self_occlusion': True, 'occlusion_per_min': 2.0, 'false_positive_per_min': 0.5,
+              'turn_per_min': 4.0, 'limb_weights': [1, 1, 0.5, 0.5],
+              'not_tracked_fraction': 0.2, 'collapse_fraction': 0.5,
+              'fp_joints': ['HandLeft', 'HandRight', 'FootLeft', 'FootRight'],
+              'hand_snap_per_min': 10.0, 'limb_swap_per_min': 30.0, 'foot_slide_per_min': 6.0,
+              'person_jump_per_min': 4.0,
+              'object': {'gap_m': [0.0, 0.2], 'depth_m': 0.4, 'width_m': [0.4, 0.6],
+                         'top_m': [0.7, 0.9], 'lateral_m': [0.45, 0.7], 'proximity_fp': False}},
     },
 }
 
@@ -281,6 +304,8 @@ class _Corrupter:
         self.fps_eps: List[Dict] = []  # active false positives
         self.turn = None               # active turn episode
         self.mirrored = False
+        self.cf: Dict[str, Optional[Dict]] = {k: None for k in CONFIDENT_FAILURES}
+        self.floor = -float(self.p['placement']['sensor_height_m'])
         self.events: List[Dict] = []
         self.frame_index = 0
         self.fp_joints = [JOINT_INDEX[n] for n in self.sc.get('fp_joints', [])]
@@ -467,11 +492,161 @@ class _Corrupter:
             state = state[list(MIRROR)]
             clean[:] = False
 
+        # --- confident failures (class d): wrong places reported TRACKED ---------------------
+        self._confident_failures(fi, i, truth, pos, state, clean, rel_deg)
+
         tracked = state == TRACKED
         self.hold[tracked] = pos[tracked]
         self.last = pos.copy()
         self.frame_index += 1
         return pos, state, truth, clean
+
+    def _confident_failures(self, fi, i, truth, pos, state, clean, rel_deg):
+        """Class d (``confident_failure`` parameters; rates in the scenario, per minute; the limb
+        swap's per minute of side-on time): every mode keeps the joints TRACKED.
+
+        * hand_snap — a hand (with ``wrist_probability`` its wrist too) snaps to the nearest point
+          of the scenario's object when within ``surface_reach_m``, else to the other hand when
+          within ``other_hand_m`` (and follows it), else to a static surface point
+          ``surface_offset_m`` away, and stays there with the ordinary sensor noise (no
+          vibration, so the behaviour term of Eq. 1-4 does not see it);
+        * limb_swap — while the user is turned at least ``side_on_deg`` from the sensor, the two
+          arms (or, with ``legs_probability``, the two legs), girdle joints included, swap;
+        * foot_slide — a foot (with ``ankle_probability`` its ankle too) slides along the floor at
+          ``speed_m_s`` from where it was reported and sinks up to ``sink_m`` into it;
+        * person_jump — for ``duration_frames`` the whole skeleton is another person: the clip's
+          posture of another moment, turned and placed ``distance_m`` to the side."""
+        cfp = self.p.get('confident_failure') or {}
+        sc, rng = self.sc, self.rng
+
+        def rate(mode):
+            if not (cfp.get(mode) or {}).get('enabled', False):
+                return 0.0
+            return self._per_frame(sc.get(f'{mode}_per_min', 0.0))
+
+        def begin(mode, joints, n, cause, **extra):
+            self.events.append({'type': mode, 'cause': cause, 'frame': fi, 'joints': list(joints),
+                                'duration': int(n), **extra})
+            return {'joints': list(joints), 'left': int(n), 'k': 0, 'cause': cause, **extra}
+
+        # hand snap
+        hs = cfp.get('hand_snap') or {}
+        if self.cf['hand_snap'] is None and self._onset(rate('hand_snap')):
+            hand = HAND_LEFT if rng.random() < 0.5 else HAND_RIGHT
+            other = HAND_RIGHT if hand == HAND_LEFT else HAND_LEFT
+            joints = [hand] + ([PARENTS[hand]] if rng.random() < float(hs['wrist_probability'])
+                               else [])
+            n = self._duration(hs['duration_s'])
+            target, cause = None, 'surface'
+            if self.box is not None:
+                d, closest = _box_distance(pos[[hand]], *self.box)
+                if d[0] < float(hs['surface_reach_m']):
+                    target, cause = closest[0], 'object'
+            if target is None and np.linalg.norm(pos[other] - pos[hand]) < float(hs['other_hand_m']):
+                cause = 'other_hand'
+            elif target is None:
+                d = rng.standard_normal(3)
+                d[2] *= 0.5
+                d /= np.linalg.norm(d)
+                target = pos[hand] + d * rng.uniform(*hs['surface_offset_m'])
+            rel = pos[joints] - pos[hand]
+            self.cf['hand_snap'] = begin('hand_snap', joints, n, cause, other=int(other),
+                                         target=target, rel=rel)
+        e = self.cf['hand_snap']
+        if e is not None:
+            j = e['joints']
+            hand = j[0]
+            # the ordinary noise of the joint (its fast and slow error) rides on the wrong point
+            noise = self.e_fast[j] + self.e_slow[j]
+            if e['cause'] == 'other_hand':
+                anchor = pos[e['other']] + 0.03 * np.array([0.0, 1.0 if hand == HAND_RIGHT else
+                                                             -1.0, 0.0])
+            else:
+                anchor = e['target']
+            pos[j] = anchor + e['rel'] + noise
+            state[j] = TRACKED
+            clean[j] = False
+            self._tick('hand_snap')
+
+        # left/right limb swap while side-on
+        ls = cfp.get('limb_swap') or {}
+        side_on = rel_deg >= float(ls.get('side_on_deg', 45.0))
+        if self.cf['limb_swap'] is None and side_on and self._onset(rate('limb_swap')):
+            legs = rng.random() < float(ls['legs_probability'])
+            a, b = (('left_leg', 'right_leg') if legs else ('left_arm', 'right_arm'))
+            joints = list(LIMB_JOINTS[a]) + list(LIMB_JOINTS[b])
+            self.cf['limb_swap'] = begin('limb_swap', joints, self._duration(ls['duration_s']),
+                                         'side_on', limbs='legs' if legs else 'arms')
+        e = self.cf['limb_swap']
+        if e is not None:
+            j = e['joints']
+            h = len(j) // 2
+            sw = j[h:] + j[:h]
+            pos[j] = pos[sw]
+            state[j] = state[sw]
+            clean[j] = False
+            self._tick('limb_swap')
+
+        # foot slide
+        fs = cfp.get('foot_slide') or {}
+        if self.cf['foot_slide'] is None and self._onset(rate('foot_slide')):
+            foot = FOOT_LEFT if rng.random() < 0.5 else FOOT_RIGHT
+            joints = [foot] + ([PARENTS[foot]] if rng.random() < float(fs['ankle_probability'])
+                               else [])
+            ang = rng.uniform(0, 2 * np.pi)
+            vel = rng.uniform(*fs['speed_m_s']) / self.fps * np.array([np.cos(ang), np.sin(ang),
+                                                                         0.0])
+            self.cf['foot_slide'] = begin('foot_slide', joints, self._duration(fs['duration_s']),
+                                          'random', start=pos[joints].copy(), vel=vel,
+                                          sink=float(rng.uniform(*fs['sink_m'])))
+        e = self.cf['foot_slide']
+        if e is not None:
+            j = e['joints']
+            e['k'] += 1
+            p_new = e['start'] + e['k'] * e['vel']
+            sink = e['sink'] * min(1.0, e['k'] / 5.0)
+            foot_z = self.floor - sink
+            p_new[0, 2] = foot_z
+            if len(j) > 1:
+                p_new[1, 2] = min(p_new[1, 2], foot_z + 0.05)
+            pos[j] = p_new + self.e_fast[j]
+            state[j] = TRACKED
+            clean[j] = False
+            self._tick('foot_slide', count=False)
+
+        # the whole skeleton jumps to another person
+        pj = cfp.get('person_jump') or {}
+        if self.cf['person_jump'] is None and self._onset(rate('person_jump')):
+            lo, hi = (int(v) for v in pj['duration_frames'])
+            n = int(rng.integers(lo, hi + 1))
+            other = self.truth_all[int(rng.integers(0, self.T))]
+            root = other[HIP_CENTER]
+            yaw = rng.uniform(-np.pi, np.pi)
+            shift = np.array([rng.uniform(-0.3, 0.3),
+                              rng.choice([-1.0, 1.0]) * rng.uniform(*pj['distance_m']), 0.0])
+            ghost = (other - root) @ yaw_matrix(yaw).T + root + shift
+            ghost[:, 2] += truth[:, 2].min() - ghost[:, 2].min()
+            self.cf['person_jump'] = begin('person_jump', range(NUM_JOINTS), n, 'random',
+                                           ghost=ghost)
+        e = self.cf['person_jump']
+        if e is not None:
+            pos[:] = e['ghost'] + self.e_fast + self.e_slow
+            state[:] = TRACKED
+            clean[:] = False
+            self._tick('person_jump')
+
+    def _onset(self, p: float) -> bool:
+        """A Bernoulli draw with probability ``p``; no draw at all when ``p`` is 0, so classes
+        without confident failures keep the random sequence (and streams) they had before."""
+        return p > 0.0 and self.rng.random() < p
+
+    def _tick(self, mode, count=True):
+        e = self.cf[mode]
+        if count:
+            e['k'] += 1
+        e['left'] -= 1
+        if e['left'] <= 0:
+            self.cf[mode] = None
 
     def _collapse_targets(self, truth, limb, joints):
         """Where the SDK puts a collapsed limb: an arm folded onto the side of the trunk (joints

@@ -60,8 +60,8 @@ def _load_motion(clip: str, seed: int):
 class SyntheticConfig:
     """Parameters of :class:`SyntheticSource`."""
 
-    scenario: str = param('b', 'sensor-model scenario class a | b | c (clean: noise only)',
-                          choices=('a', 'b', 'c', 'clean'))
+    scenario: str = param('b', 'sensor-model scenario class a | b | c | d (d: confident '
+                          'failures; clean: noise only)', choices=('a', 'b', 'c', 'd', 'clean'))
     seed: int = param(0, 'random seed of the sensor model and motions', range=(0, 2 ** 31 - 1))
     num_users: int = param(1, 'number of users side by side', range=(1, MAX_USERS))
     clip: str = param('', "motion ('' = built-in motions, a built-in name such as builtin_wave, "

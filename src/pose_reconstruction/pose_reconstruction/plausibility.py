@@ -1,0 +1,346 @@
+"""Plausibility of a skeleton the sensor reports as TRACKED: a reliability term for confident failures.
+
+Shum et al. 2013's reliability (Eq. 1-8, :mod:`.reliability`) trusts the tracking state (Eq. 7)
+and looks for vibration (Eq. 1-4) and stretched segments (Eq. 5-6, averaged over a joint's
+segments). A Kinect that is confidently wrong — a hand snapped to a table or to the other hand, the
+left and right limbs swapped when the user is side-on, a foot slid into the floor, the whole
+skeleton on a second person for a few frames — reports TRACKED joints that do not vibrate. This
+module gives each joint a plausibility ``R_p`` in [0, 1] per frame from what a body cannot do;
+:class:`~.reliability.ReliabilityEstimator` takes ``min(Eq. 8, R_p)``, so an implausible joint is
+unreliable from the frame it becomes implausible and the optimizer fills it from the database.
+
+Terms (each 1 = plausible):
+
+* **bone length against the user's profile** — segment ``s`` with both ends TRACKED:
+  ``excess = |l_s - L_s| - (bone_tolerance L_s + bone_tolerance_m)``, score
+  ``1 - excess / (bone_reject L_s)`` clipped to [0, 1]. Blame goes to the segment's child and, for
+  a limb segment, to every joint below it (a snapped wrist drags its hand); a girdle or trunk
+  segment blames its child only. ``L`` is the profile
+  (:attr:`~.reliability.ReliabilityEstimator.profile_lengths`: captured in a reference posture,
+  else the running median of the plausible tracked lengths; a segment not observed yet is not
+  judged).
+* **segment speed** — a segment's child moving faster than ``max_segment_speed_m_s`` relative to
+  its parent between two frames (a snap onset) blames it and what hangs from it, latched until
+  it jumps again (the snap ends) or ``latch_frames`` pass: a wrist and hand snapped together
+  onto a point their own lengths allow keeps every bone length.
+* **left/right against the heading** — the shoulder and the hip lines each give a heading; the
+  body heading follows the girdles that agree with it at ``heading_rate`` per frame. A girdle
+  more than ``lr_flip_deg`` off the body heading while the other girdle agrees with it has its
+  left and right swapped (:attr:`PlausibilityCheck.swapped`): with ``lr_unswap`` the
+  reconstructor swaps the two limbs back (:func:`unswap`) and keeps them, else both limbs
+  (girdle joints included) get 0. (Both girdles off at once is a fast turn or a whole-body
+  mirror: the heading is taken over.)
+* **floor penetration** — the floor height is the median, over the last ``floor_window`` frames,
+  of the lowest TRACKED foot; a joint ``floor_tolerance_m`` below it starts losing plausibility,
+  ``floor_reject_m`` below it has none.
+* **whole-skeleton jump** — the TRACKED joints moving, in the median, more than ``jump_m`` from
+  where each was last plausibly makes every joint 0 (:attr:`PlausibilityCheck.skeleton_outlier`
+  True) until they are back within ``jump_m``, for at most ``jump_frames`` frames (then the new
+  place is accepted: a real re-acquisition).
+
+``plausibility=False`` turns the whole term off (R_p = 1: the paper's reliability).
+"""
+from __future__ import annotations
+
+import collections
+import dataclasses
+from dataclasses import dataclass
+from typing import Dict, Optional
+
+import numpy as np
+
+from skeleton_core.params import check, defaults, names, param
+from skeleton_core.model import (FOOT_LEFT, FOOT_RIGHT, HIP_LEFT, HIP_RIGHT, LIMB_JOINTS,
+                                 NUM_JOINTS, NUM_SEGMENTS, PARENTS, ROOT, SEGMENT_CHILDREN,
+                                 SEGMENT_PARENTS, SHOULDER_LEFT, SHOULDER_RIGHT, TRACKED)
+
+@dataclass
+class PlausibilityConfig:
+    """Parameters of :class:`PlausibilityCheck` (nested in the reliability's configuration; our
+    values, tuned on the dev clips with sensor seed 0: docs/robustness.md)."""
+
+    plausibility: bool = param(
+        True, 'confident failures: lower the reliability of TRACKED joints a body cannot have '
+        '(bone lengths against the profile, segment speed, left/right against the heading, '
+        'floor, whole-skeleton jump); false = Eq. 1-8 only (paper)')
+    bone_tolerance: float = param(
+        0.4, 'plausibility: relative segment-length deviation from the user profile tolerated',
+        range=(0.0, 10.0))
+    bone_tolerance_m: float = param(
+        0.03, 'plausibility: absolute segment-length deviation (m) tolerated on top',
+        range=(0.0, 1.0))
+    bone_reject: float = param(
+        1.0, 'plausibility: relative deviation beyond the tolerance at which a segment (and what '
+        'hangs from it) has no plausibility left', range=(0.01, 100.0))
+    max_segment_speed_m_s: float = param(
+        8.0, 'plausibility: fastest a segment end moves relative to its parent (m/s); faster is '
+        'a snap onset', range=(0.1, 1000.0))
+    latch_frames: int = param(
+        45, 'plausibility: frames a segment stays implausible after a snap onset unless it jumps '
+        'back first; 0 = the onset frame only', range=(0, 100000))
+    lr_flip_deg: float = param(
+        110.0, 'plausibility: a girdle (shoulders or hips) this far (deg) off the body heading, '
+        'the other girdle agreeing with it, has its left and right swapped', range=(1.0, 180.0))
+    lr_unswap: bool = param(
+        True, 'plausibility: swap detected left/right limbs back (true) or make both limbs '
+        'unreliable (false)')
+    heading_rate: float = param(
+        0.3, 'plausibility: per-frame rate at which the body heading follows the girdles that '
+        'agree with it', range=(0.001, 1.0))
+    floor_tolerance_m: float = param(
+        0.05, 'plausibility: depth (m) below the estimated floor a joint may reach unpunished',
+        range=(0.0, 2.0))
+    floor_reject_m: float = param(
+        0.12, 'plausibility: depth (m) below the floor at which a joint has no plausibility '
+        'left', range=(0.001, 5.0))
+    floor_window: int = param(
+        150, 'plausibility: frames whose lowest TRACKED foot gives the floor (median)',
+        range=(1, 100000))
+    jump_m: float = param(
+        0.35, 'plausibility: median distance (m) of the TRACKED joints from their last plausible '
+        'place that makes the whole skeleton another person (last output held)',
+        range=(0.01, 100.0))
+    jump_frames: int = param(
+        15, 'plausibility: frames a whole-skeleton jump is rejected before the new place is '
+        'accepted (re-acquisition)', range=(1, 10000))
+
+    def validate(self) -> None:
+        check(self)
+        if not self.floor_reject_m > self.floor_tolerance_m:
+            raise ValueError('floor_tolerance_m must be below floor_reject_m')
+
+
+PLAUSIBILITY_PARAMS = tuple(names(PlausibilityConfig))
+PLAUSIBILITY_DEFAULTS: Dict = defaults(PlausibilityConfig)
+
+_SEG_P = np.array(SEGMENT_PARENTS)
+_SEG_C = np.array(SEGMENT_CHILDREN)
+_LIMB = set(LIMB_JOINTS['left_arm'][1:] + LIMB_JOINTS['right_arm'][1:]
+            + LIMB_JOINTS['left_leg'][1:] + LIMB_JOINTS['right_leg'][1:])
+
+
+def _below(j: int) -> np.ndarray:
+    """(20,) bool: ``j`` and every joint below it."""
+    out = np.zeros(NUM_JOINTS, bool)
+    for k in range(NUM_JOINTS):
+        a = k
+        while a >= 0:
+            if a == j:
+                out[k] = True
+                break
+            a = PARENTS[a] if a != ROOT else -1
+    return out
+
+
+# (19, 20): the joints a segment's implausibility is blamed on
+BLAME = np.zeros((NUM_SEGMENTS, NUM_JOINTS), bool)
+for _s, _c in enumerate(SEGMENT_CHILDREN):
+    if _c in _LIMB:
+        BLAME[_s] = _below(_c)
+    else:
+        BLAME[_s, _c] = True
+_ARMS = np.zeros(NUM_JOINTS, bool)
+_ARMS[list(LIMB_JOINTS['left_arm'] + LIMB_JOINTS['right_arm'])] = True
+_LEGS = np.zeros(NUM_JOINTS, bool)
+_LEGS[list(LIMB_JOINTS['left_leg'] + LIMB_JOINTS['right_leg'])] = True
+
+
+def _wrap(a: float) -> float:
+    return (a + np.pi) % (2.0 * np.pi) - np.pi
+
+
+def girdle_yaw(p: np.ndarray, left: int, right: int) -> float:
+    """Heading (rad, 0 facing +x) of a girdle: its right-to-left line turned by -90 deg."""
+    d = p[left] - p[right]
+    return float(np.arctan2(-d[0], d[1]))
+
+
+_PERM = {'arms': np.arange(NUM_JOINTS), 'legs': np.arange(NUM_JOINTS)}
+for _g, _limbs in (('arms', ('left_arm', 'right_arm')), ('legs', ('left_leg', 'right_leg'))):
+    _a, _b = LIMB_JOINTS[_limbs[0]], LIMB_JOINTS[_limbs[1]]
+    _PERM[_g][list(_a)] = _b
+    _PERM[_g][list(_b)] = _a
+
+
+def unswap_permutation(swapped: Dict[str, bool]) -> Optional[np.ndarray]:
+    """(20,) joint index array that swaps back the girdles flagged in ``swapped`` (None: none)."""
+    perm = None
+    for g in ('arms', 'legs'):
+        if swapped.get(g):
+            perm = _PERM[g].copy() if perm is None else perm[_PERM[g]]
+    return perm
+
+
+def validate(values: Dict) -> Optional[str]:
+    """Why a set of plausibility parameters is unusable, or None."""
+    try:
+        dataclasses.replace(PlausibilityConfig(), **{k: v for k, v in values.items()
+                                                     if k in PLAUSIBILITY_PARAMS}).validate()
+    except ValueError as exc:
+        return str(exc)
+    return None
+
+
+class PlausibilityCheck:
+    """Streaming per-user plausibility (module docstring); :meth:`update` once per frame."""
+
+    def __init__(self, config: Optional[PlausibilityConfig] = None, fps: float = 30.0,
+                 **params):
+        cfg = dataclasses.replace(config or PlausibilityConfig(), **params)
+        cfg.validate()
+        self.config = cfg
+        self.enabled = bool(cfg.plausibility)
+        self.bone_tolerance = float(cfg.bone_tolerance)
+        self.bone_tolerance_m = float(cfg.bone_tolerance_m)
+        self.bone_reject = float(cfg.bone_reject)
+        self.max_step = float(cfg.max_segment_speed_m_s) / float(fps)
+        self.latch_frames = int(cfg.latch_frames)
+        self.lr_flip = np.radians(float(cfg.lr_flip_deg))
+        self.lr_unswap = bool(cfg.lr_unswap)
+        self.heading_rate = float(cfg.heading_rate)
+        self.floor_tolerance = float(cfg.floor_tolerance_m)
+        self.floor_reject = float(cfg.floor_reject_m)
+        self.floor_window = int(cfg.floor_window)
+        self.jump_m = float(cfg.jump_m)
+        self.jump_frames = int(cfg.jump_frames)
+        self.reset()
+
+    def reset(self) -> None:
+        self.heading: Optional[float] = None
+        self._floor_z: collections.deque = collections.deque(maxlen=self.floor_window)
+        self.floor: Optional[float] = None
+        self._last_rel: Optional[np.ndarray] = None
+        self._latch = np.zeros(NUM_SEGMENTS, int)
+        self._last_both = np.zeros(NUM_SEGMENTS, bool)
+        self._anchor: Optional[np.ndarray] = None
+        self._jumped = 0
+        self.skeleton_outlier = False
+        self.swapped = {'arms': False, 'legs': False}
+        self.terms: Dict[str, np.ndarray] = {}
+        self.value = np.ones(NUM_JOINTS)
+
+    def lengths_plausible(self) -> np.ndarray:
+        """(20,) bool: the joints whose segments were plausible in the last frame (length and
+        speed; not on another person): what the user's length profile may learn from. The
+        floor and left/right terms say where a joint is, not how long a segment is."""
+        if not self.enabled:
+            return np.ones(NUM_JOINTS, bool)
+        if self.skeleton_outlier:
+            return np.zeros(NUM_JOINTS, bool)
+        seg = self.terms.get('segments')
+        return np.ones(NUM_JOINTS, bool) if seg is None else seg >= 0.5
+
+    # ------------------------------------------------------------------------------------
+    def _jump(self, p: np.ndarray, tracked: np.ndarray) -> bool:
+        """Whole-skeleton jump: the median distance of the joints TRACKED now and when last
+        plausible from where they were then (a held INFERRED root snapping back is not a jump;
+        fewer than 3 such joints: no judgement)."""
+        if self._anchor is None:
+            self._anchor = p.copy()
+            self._anchor_ok = tracked.copy()
+            return False
+        both = tracked & self._anchor_ok
+        if both.sum() >= 3:
+            d = float(np.median(np.linalg.norm(p[both] - self._anchor[both], axis=1)))
+            if d > self.jump_m and self._jumped < self.jump_frames:
+                self._jumped += 1
+                return True
+        self._jumped = 0
+        self._anchor[tracked] = p[tracked]
+        self._anchor_ok |= tracked
+        return False
+
+    def _bones(self, seg_len, both, ref) -> np.ndarray:
+        with np.errstate(invalid='ignore'):
+            excess = np.abs(seg_len - ref) - (self.bone_tolerance * ref + self.bone_tolerance_m)
+            score = 1.0 - np.maximum(excess, 0.0) / np.maximum(self.bone_reject * ref, 1e-6)
+        # a segment without a profile length yet (NaN) is not judged
+        return np.where(both & np.isfinite(score), np.clip(score, 0.0, 1.0), 1.0)
+
+    def _speed(self, rel, both) -> np.ndarray:
+        """A segment whose child jumps faster than ``max_segment_speed_m_s`` relative to its parent
+        is latched implausible until it jumps again (the snap ends) or ``latch_frames`` pass."""
+        score = np.ones(NUM_SEGMENTS)
+        if self._last_rel is not None:
+            step = np.linalg.norm(rel - self._last_rel, axis=1)
+            # TRACKED in both frames: a joint re-acquired after an occlusion may jump
+            jump = both & self._last_both & (step > self.max_step)
+            ended = jump & (self._latch > 0)          # the jump back
+            self._latch[jump & ~ended] = 1
+            self._latch[ended] = 0
+            on = self._latch > 0
+            self._latch[on] += 1
+            self._latch[self._latch > self.latch_frames] = 0
+            score[(self._latch > 0) | jump] = 0.0
+        self._last_rel = rel
+        self._last_both = both
+        return score
+
+    def _left_right(self, p) -> np.ndarray:
+        out = np.ones(NUM_JOINTS)
+        hs = girdle_yaw(p, SHOULDER_LEFT, SHOULDER_RIGHT)
+        hh = girdle_yaw(p, HIP_LEFT, HIP_RIGHT)
+        if self.heading is None:
+            self.heading = float(np.arctan2(np.sin(hs) + np.sin(hh), np.cos(hs) + np.cos(hh)))
+            return out
+        ds, dh = abs(_wrap(hs - self.heading)), abs(_wrap(hh - self.heading))
+        apart = abs(_wrap(hs - hh)) > self.lr_flip
+        arms = apart and ds > self.lr_flip and dh <= self.lr_flip
+        legs = apart and dh > self.lr_flip and ds <= self.lr_flip
+        self.swapped = {'arms': bool(arms), 'legs': bool(legs)}
+        if arms:
+            if not self.lr_unswap:
+                out[_ARMS] = 0.0
+            target = hh
+        elif legs:
+            if not self.lr_unswap:
+                out[_LEGS] = 0.0
+            target = hs
+        else:
+            target = float(np.arctan2(np.sin(hs) + np.sin(hh), np.cos(hs) + np.cos(hh)))
+            if ds > self.lr_flip and dh > self.lr_flip:   # both off: a fast turn or a mirror
+                self.heading = target
+                return out
+        self.heading = _wrap(self.heading + self.heading_rate * _wrap(target - self.heading))
+        return out
+
+    def _floor(self, p, tracked) -> np.ndarray:
+        feet = [j for j in (FOOT_LEFT, FOOT_RIGHT) if tracked[j]]
+        if feet:
+            self._floor_z.append(float(min(p[j, 2] for j in feet)))
+            if len(self._floor_z) >= 5:
+                self.floor = float(np.median(self._floor_z))
+        if self.floor is None:
+            return np.ones(NUM_JOINTS)
+        depth = self.floor - p[:, 2]
+        score = 1.0 - (depth - self.floor_tolerance) / (self.floor_reject - self.floor_tolerance)
+        return np.clip(score, 0.0, 1.0)
+
+    def update(self, positions: np.ndarray, tracking_state: np.ndarray,
+               reference_lengths: np.ndarray, seg: Optional[np.ndarray] = None,
+               seg_len: Optional[np.ndarray] = None) -> np.ndarray:
+        """``R_p`` (20,) for one frame. ``reference_lengths`` (19,): the user's profile;
+        ``seg`` (19, 3) / ``seg_len`` (19,): this frame's segment vectors and lengths if known."""
+        if not self.enabled:
+            return self.value
+        p = np.asarray(positions, float)
+        tracked = np.asarray(tracking_state) == TRACKED
+        if seg is None:
+            seg = p[_SEG_C] - p[_SEG_P]
+            seg_len = np.linalg.norm(seg, axis=1)
+        both = tracked[_SEG_P] & tracked[_SEG_C]
+        jump = self._jump(p, tracked)
+        self.skeleton_outlier = jump
+        if jump:
+            self.value = np.zeros(NUM_JOINTS)
+            self.terms = {'jump': self.value}
+            return self.value
+        seg_score = np.minimum(self._bones(seg_len, both, np.asarray(reference_lengths, float)),
+                               self._speed(seg, both))
+        blamed = np.where(BLAME, seg_score[:, None], 1.0).min(axis=0)
+        lr = self._left_right(p)
+        fl = self._floor(p, tracked)
+        self.terms = {'segments': blamed, 'left_right': lr, 'floor': fl}
+        v = np.minimum(np.minimum(blamed, lr), fl)
+        self.value = v
+        return v

@@ -1,0 +1,214 @@
+"""Issue 21: the sensor model's confident failures (class d), the plausibility term that catches
+them, the prediction-corrected smoother, and the perturbed sensor models of `evaluate --perturb`."""
+import numpy as np
+import pytest
+
+from pose_reconstruction.plausibility import PlausibilityCheck, unswap_permutation
+from pose_reconstruction.reliability import ReliabilityEstimator
+from skeleton_core.filters import OneEuroFilter
+from skeleton_core.geometry import facing_yaw
+from skeleton_core.model import (ELBOW_LEFT, FOOT_LEFT, HAND_LEFT, HAND_RIGHT, HIP_CENTER,
+                                 LIMB_JOINTS, MIRROR, NUM_JOINTS, SHOULDER_LEFT, TRACKED,
+                                 WRIST_LEFT, standard_body)
+from skeleton_eval import perturb as P
+from skeleton_eval.evaluation import toy_clip
+from skeleton_eval.metrics import added_latency_ms
+from skeleton_eval.sensor_model import CONFIDENT_FAILURES, DEFAULT_PARAMS, SensorModel
+
+FPS = 30.0
+ONLY = {'occlusion_per_min': 0.0, 'false_positive_per_min': 0.0, 'turn_per_min': 0.0,
+        'self_occlusion': False, **{f'{m}_per_min': 0.0 for m in CONFIDENT_FAILURES}}
+
+
+def _stream(mode, rate, seconds=120.0, seed=3, **extra):
+    over = {'scenarios': {'d': {**ONLY, f'{mode}_per_min': rate, **extra}}}
+    return SensorModel(over, seed=seed).corrupt(toy_clip(seconds), 'd')
+
+
+def _check_rate(s, mode, rate, eligible=None):
+    """Onsets against the configured rate over the frames free for a new onset (not inside an
+    episode of the same mode, and ``eligible``)."""
+    ev = [e for e in s.events if e['type'] == mode]
+    busy = np.zeros(len(s), bool)
+    for e in ev:
+        busy[e['frame']:e['frame'] + e['duration']] = True
+    free = ~busy if eligible is None else (~busy & eligible)
+    expected = rate * free.sum() / FPS / 60.0
+    assert expected > 8, expected
+    assert abs(len(ev) - expected) < 3.5 * np.sqrt(expected) + 1, (mode, len(ev), expected)
+    return ev
+
+
+@pytest.mark.parametrize('mode,rate', [('hand_snap', 20.0), ('foot_slide', 15.0),
+                                       ('person_jump', 15.0)])
+def test_each_confident_failure_at_its_configured_rate_and_tracked(mode, rate):
+    s = _stream(mode, rate)
+    ev = _check_rate(s, mode, rate)
+    for e in ev:
+        f = e['frame'] + 1
+        if f < len(s):
+            j = e['joints']
+            assert np.all(s.tracking_state[f, j] == TRACKED)    # confidently wrong
+            assert not s.clean[f, j].any()
+    # reported away from the truth on the affected joints
+    wrong = np.linalg.norm(s.positions - s.truth, axis=-1)[~s.clean]
+    assert np.median(wrong) > 0.08
+    # the switch turns the mode off
+    off = {'confident_failure': {mode: {'enabled': False}},
+           'scenarios': {'d': {**ONLY, f'{mode}_per_min': rate}}}
+    assert not [e for e in SensorModel(off, seed=3).corrupt(toy_clip(30.0), 'd').events
+                if e['type'] == mode]
+
+
+def test_limb_swap_at_its_rate_per_side_on_minute():
+    rate = 30.0
+    s = _stream('limb_swap', rate, seconds=240.0, turn_per_min=12.0)
+    yaw = facing_yaw(s.truth)
+    to_sensor = np.arctan2(-s.truth[:, HIP_CENTER, 1], -s.truth[:, HIP_CENTER, 0])
+    rel = np.degrees(np.abs((yaw - to_sensor + np.pi) % (2 * np.pi) - np.pi))
+    side_on = rel >= DEFAULT_PARAMS['confident_failure']['limb_swap']['side_on_deg']
+    ev = _check_rate(s, 'limb_swap', rate, eligible=side_on)
+    assert all(side_on[e['frame']] for e in ev)
+    e = ev[0]
+    f = e['frame'] + 1
+    j = np.array(e['joints'])
+    # the two limbs' positions exchanged (the noise rides along)
+    assert np.linalg.norm(s.positions[f, j] - s.truth[f, np.array(MIRROR)[j]], axis=1).max() < 0.2
+
+
+def test_classes_a_to_c_unchanged_by_the_failure_code():
+    # no random number is drawn for a mode whose rate is 0: the old streams are reproduced
+    over = {'confident_failure': {m: {'enabled': False} for m in CONFIDENT_FAILURES}}
+    for sc in ('a', 'c'):
+        a = SensorModel(seed=0).corrupt(toy_clip(20.0), sc)
+        b = SensorModel(over, seed=0).corrupt(toy_clip(20.0), sc)
+        assert np.array_equal(a.positions, b.positions)
+
+
+def _standing(n=120, seed=0):
+    rng = np.random.default_rng(seed)
+    # the standard body (facing +x, feet on z = 0) turned to face the sensor, 2.5 m in front of
+    # it, the floor 0.8 m below it
+    rest = standard_body().rest_positions() @ np.diag([-1.0, -1.0, 1.0]).T
+    rest += np.array([2.5, 0.0, -0.8])
+    pos = np.repeat(rest[None], n, axis=0) + rng.normal(0, 0.004, (n, NUM_JOINTS, 3))
+    return pos, np.full((n, NUM_JOINTS), TRACKED, np.uint8)
+
+
+@pytest.mark.parametrize('joints', [[HAND_LEFT], [HAND_LEFT, WRIST_LEFT]])
+def test_tracked_joint_snapped_away_is_unreliable_within_3_frames(joints):
+    pos, st = _standing()
+    onset = 90
+    offset = np.array([0.0, 0.0, 0.3])   # a static surface 30 cm away, reported TRACKED
+    for f in range(onset, len(pos)):
+        pos[f, joints] = pos[onset - 1, joints] + offset
+    r = ReliabilityEstimator()
+    R = np.array([r.update(p, s) for p, s in zip(pos, st)])
+    assert R[:onset, joints].min() > 0.8                     # before: reliable
+    assert R[onset:onset + 3, joints].min(axis=1)[-1] < 0.5  # within 3 frames
+    assert R[onset + 3:, joints].max() < 0.5                 # and stays unreliable
+    assert R[onset:, ELBOW_LEFT].min() > 0.5                 # the elbow keeps its reliability
+    # without the plausibility term (the paper's Eq. 1-8) the wrist+hand snap is missed
+    if len(joints) == 2:
+        r0 = ReliabilityEstimator(plausibility=False)
+        R0 = np.array([r0.update(p, s) for p, s in zip(pos, st)])
+        assert R0[onset + 3:, HAND_LEFT].mean() > 0.5
+
+
+def test_swapped_arms_detected_and_swapped_back():
+    pos, st = _standing()
+    onset = 90
+    perm = np.array(MIRROR)
+    arms = list(LIMB_JOINTS['left_arm'] + LIMB_JOINTS['right_arm'])
+    pos[onset:, arms] = pos[onset:, perm[arms]]
+    c = PlausibilityCheck()
+    ref = standard_body().segment_lengths
+    flags = []
+    for p, s in zip(pos, st):
+        c.update(p, s, ref)
+        flags.append(c.swapped['arms'])
+    assert not any(flags[:onset]) and all(flags[onset:])
+    back = unswap_permutation(c.swapped)
+    assert np.allclose(pos[-1][back][SHOULDER_LEFT], pos[-1][perm[SHOULDER_LEFT]])
+    assert unswap_permutation({'arms': False, 'legs': False}) is None
+
+
+def test_foot_in_the_floor_and_whole_skeleton_jump():
+    pos, st = _standing()
+    pos[100:, FOOT_LEFT, 2] -= 0.2
+    pos[80:84] += np.array([0.0, 1.0, 0.0])       # 4 frames on another person 1 m aside
+    c = PlausibilityCheck()
+    ref = standard_body().segment_lengths
+    vals, outlier = [], []
+    for p, s in zip(pos, st):
+        vals.append(c.update(p, s, ref).copy())
+        outlier.append(c.skeleton_outlier)
+    vals = np.array(vals)
+    assert outlier[80:84] == [True] * 4 and not any(outlier[:80]) and not any(outlier[84:])
+    assert vals[80:84].max() == 0.0
+    assert vals[105:, FOOT_LEFT].max() == 0.0 and vals[105:, HAND_RIGHT].min() == 1.0
+
+
+def test_invalid_plausibility_parameters_refused():
+    with pytest.raises(ValueError):
+        PlausibilityCheck(floor_tolerance_m=0.2, floor_reject_m=0.1)
+    with pytest.raises(TypeError):
+        ReliabilityEstimator(no_such_term=1.0)
+
+
+def test_prediction_corrected_smoother_lag_on_a_ramp_within_5_ms():
+    n = 240
+    t = np.arange(n) / FPS
+    ramp = np.zeros((n, 1, 3))
+    ramp[:, 0, 0] = 0.5 * t            # 0.5 m/s
+    stamps = (t * 1e9).astype(np.int64)
+
+    def run(lead):
+        f = OneEuroFilter(1.3, 5.0, 2.0, num_joints=1)
+        return np.array([f.update(x, None, int(s), lead=lead) for x, s in zip(ramp, stamps)])
+    plain = run(None)
+    led = run(np.ones(1))
+    assert added_latency_ms(plain[30:], ramp[30:]) > 20.0   # the plain One Euro trails
+    assert added_latency_ms(led[30:], ramp[30:]) <= 5.0
+    assert np.abs(led[60:] - ramp[60:]).max() < 0.002       # and sits on it
+    # at rest it still smooths
+    rng = np.random.default_rng(1)
+    noise = rng.normal(0, 0.01, (n, 1, 3))
+    f = OneEuroFilter(1.3, 5.0, 2.0, num_joints=1)
+    out = np.array([f.update(x, None, int(s), lead=np.ones(1)) for x, s in zip(noise, stamps)])
+    acc = lambda p: np.linalg.norm(p[2:] - 2 * p[1:-1] + p[:-2], axis=-1).mean()  # noqa: E731
+    assert acc(out[10:]) < 0.5 * acc(noise[10:])
+
+
+def test_perturbed_params_scale_one_group():
+    base = P.load_params(None)
+    noise = P.perturbed_params('noise', 1.5)
+    assert noise['jitter']['base_mm']['hand'] == pytest.approx(1.5 * base['jitter']['base_mm']['hand'])
+    assert noise['slow_drift']['sigma_mm']['knee'] == pytest.approx(
+        1.5 * base['slow_drift']['sigma_mm']['knee'])
+    assert noise['systematic'] == base['systematic']
+    off = P.perturbed_params('offset', 0.5)
+    assert off['systematic']['sigma_mm']['hip'] == pytest.approx(0.5 * base['systematic']['sigma_mm']['hip'])
+    occ = P.perturbed_params('occlusion', 0.5)
+    assert occ['scenarios']['b']['occlusion_per_min'] == pytest.approx(
+        0.5 * base['scenarios']['b']['occlusion_per_min'])
+    assert occ['episodes']['duration_s'][1] == pytest.approx(0.5 * base['episodes']['duration_s'][1])
+    fail = P.perturbed_params('failure', 1.5)
+    assert fail['scenarios']['d']['hand_snap_per_min'] == pytest.approx(
+        1.5 * base['scenarios']['d']['hand_snap_per_min'])
+    with pytest.raises(ValueError):
+        P.perturbed_params('colour', 2.0)
+    assert [v[0] for v in P.variants((0.5,), ('noise',))] == ['nominal', 'noise x0.5']
+
+
+def test_perturb_targets_checked_per_class():
+    def cls(eq, d):
+        return {'eq18_cm': eq, 'bone_dir_deg': d, 'mpjpe_cm': 1, 'jitter_ms2': 1,
+                'latency_ms': 0, 'frames': 10}
+    res = {'rows': [{'variant': 'nominal', 'seed': 1, 'results': {
+        'raw': {'a': cls(10, 20), 'd': cls(10, 20)},
+        'C': {'a': cls(6, 10), 'd': cls(9, 16)}}}]}
+    t = {(x['class'], x['target']): x['met'] for x in P.targets(res)}
+    assert t[('a', 'Eq.18 >= 35% below raw')] and t[('a', 'direction below raw')]
+    assert t[('d', 'Eq.18 below raw')] and not t[('d', 'direction >= 25% below raw')]
+    assert 'not met: nominal, seed 1, class d' in P.to_markdown({**res, 'scenarios': ['a', 'd']})
