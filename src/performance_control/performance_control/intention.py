@@ -97,7 +97,7 @@ class RecognizerParams:
 
     e1_threshold: float = param(0.03, "Eq. 5 threshold (squared error, body-height units): the "
                                 "user's pose near the example's PCA subspace", range=(1e-5, 10.0))
-    e2_threshold: float = param(0.03, "Eq. 6 threshold: consistency of the user's change over "
+    e2_threshold: float = param(0.04, "Eq. 6 threshold: consistency of the user's change over "
                                 "lag frames with the example", range=(1e-5, 10.0))
     tau: float = param(0.25, 'weight (s) of the effector velocities against positions in w',
                        range=(0.0, 2.0))
@@ -117,9 +117,10 @@ class RecognizerParams:
                          choices=('and', 'or'))
     normalise: bool = param(False, "e1/e2 in units of each example's own spread (total "
                             "variance of w, mean |dw|^2); the thresholds are then in those units")
-    max_change_share: float = param(1.0, "(all features; each example has its own too) largest share of the user's effector displacement over "
-                                    "share_lag frames outside the example's position "
-                                    "subspace (1 = off): a change the example never makes, e.g. "
+    max_change_share: float = param(1.0, "largest share of the user's effector displacement "
+                                    "over share_lag frames outside the example's position "
+                                    "subspace, for all features (each example has its own "
+                                    "too; 1 = off): a change the example never makes, e.g. "
                                     "one hand punching against a two-handed stroke",
                                     range=(0.0, 1.0))
     share_lag: int = param(4, "frames of the change-share gate's displacement", range=(1, 60),
