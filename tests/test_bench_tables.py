@@ -1,5 +1,6 @@
-"""kinect_bringup.bench: the nodes' /diagnostics become the 'where the time goes' table."""
-from kinect_bringup.bench import NODE_LATENCY, _node_latencies, to_markdown
+"""kinect_bringup.bench: the nodes' /diagnostics become the 'where the time goes' table; the
+pass-through floor beside every row and issue 23's targets judged against it."""
+from kinect_bringup.bench import NODE_LATENCY, _node_latencies, targets, to_markdown
 
 
 def test_node_latencies_parse_diagnostics_and_fill_the_table():
@@ -16,6 +17,37 @@ def test_node_latencies_parse_diagnostics_and_fill_the_table():
     md = to_markdown([result], {}, 'abc1234')
     row = next(line for line in md.splitlines()
                if line.startswith('| processes (fused) | 2 | 1.5 / 5.9'))
-    # input, then the nodes in NODE_LATENCY order; a node without figures is a dash
-    assert row.split(' | ')[3:] == ['0.2 / 0.8', '6.1 / 8.8', '- |']
+    # input, the floor (none measured: a dash), then the nodes in NODE_LATENCY order; a node
+    # without figures is a dash
+    assert row.split(' | ')[3:] == ['-', '0.2 / 0.8', '6.1 / 8.8', '- |']
     assert list(NODE_LATENCY) == ['driver', 'reconstruction', 'physics']
+
+
+def _case(users, rec_p95, char_p95, floor_p95, dropped=0, cpu=(60.0, 50.0)):
+    out = {'skeletons': 100, 'rate_hz': 30.0 * users, 'p50_ms': 1.0, 'p99_ms': 40.0,
+           'dropped': dropped, 'dropped_fraction': 0.0}
+    return {'mode': 'processes', 'reconstruction': 'fused', 'users': users, 'nan_outputs': 0,
+            'processes': {f'p{i}': {'cpu_percent': c, 'rss_mb': 100.0} for i, c in enumerate(cpu)},
+            'nodes': {}, 'input': {}, 'physics': {'real_time_factor': 9.0, 'characters': users},
+            'floor': {'skeletons': 100, 'p50_ms': 2.0, 'p95_ms': floor_p95},
+            'reconstructed': {**out, 'p95_ms': rec_p95}, 'character': {**out, 'p95_ms': char_p95}}
+
+
+def test_targets_are_judged_against_the_floor_of_the_same_run():
+    res = [_case(2, rec_p95=8.0, char_p95=16.0, floor_p95=4.0),      # +4 ok, +12 ok
+           _case(6, rec_p95=20.0, char_p95=34.0, floor_p95=4.0, dropped=3, cpu=(100.0, 60.0))]
+    bag = {'physics': {'x_real_time_loop': 12.0}}
+    checks = {(c['case'], c['what']): c['met'] for c in targets(res, bag)}
+    assert checks[('processes (fused)', '2 users reconstructed p95 <= floor p95 + 5 ms')]
+    assert checks[('processes (fused)', '2 users character p95 <= floor p95 + 12 ms')]
+    assert checks[('processes (fused)', '6 users reconstructed p95 <= 33 ms')]
+    assert not checks[('processes (fused)', '6 users character p95 <= 33 ms')]
+    assert not checks[('processes (fused)', '6 users character dropped = 0')]
+    assert not checks[('processes (fused)', '6 users graph CPU <= 150 %')]       # 160 %
+    assert checks[('process_bag', 'process_bag --physics >= 10x real time (loop)')]
+    res[0]['character']['p95_ms'] = 16.5                                       # +12.5: too slow
+    assert not next(c['met'] for c in targets(res, bag) if c['what'].startswith('2 users char'))
+    md = to_markdown(res, {}, 'abc1234')
+    row = next(line for line in md.splitlines() if line.startswith('| processes (fused) | 2 | character'))
+    assert '| 2.0 / 4.0 | +12.5 |' in row
+    assert '| **no** |' in md and '| processes (fused) | 6 | **graph** | 160 | |' in md

@@ -542,3 +542,48 @@ def test_anchored_filled_segments_keep_the_speed_term():
             assert np.array_equal(a.process(f.copy()).positions, b.process(f.copy()).positions)
     with pytest.raises(ValueError):
         Reconstructor(db, method='C', smooth_anchored_speed='yes')
+
+
+def test_large_database_screened_knn_equals_the_exact_search():
+    """From SCREEN_FROM postures on, Eq. 9 is screened in single precision and the best
+    candidates re-ranked in double: the same neighbours and distances as the exact double
+    search, with and without the translation-invariant variant."""
+    from pose_reconstruction.search import SCREEN_FROM, DatabaseSearch
+    db = random_database(SCREEN_FROM + 500, seed=11)
+    opt = DatabaseSearch(db, k=30, knn='brute', kdtree_dims=12, kdtree_candidates=4)
+    assert opt._screen is not None
+    exact = DatabaseSearch(db, k=30, knn='brute', kdtree_dims=12, kdtree_candidates=4)
+    exact._screen = None
+    rng = np.random.default_rng(2)
+    for i in range(20):
+        q = np.asarray(db.positions[rng.integers(len(db.positions))], float)
+        q = q + rng.normal(0.0, 0.03, q.shape) + (0.4 if i % 2 else 0.0)
+        w = rng.uniform(0.0, 1.0, NUM_JOINTS)
+        for translate in (False, True):
+            a, b = opt.knn_search(q, w, translate), exact.knn_search(q, w, translate)
+            assert list(a[0]) == list(b[0])
+            for x, y in zip(a[1:], b[1:]):
+                np.testing.assert_allclose(x, y, rtol=1e-9, atol=1e-9)
+
+
+def test_energy_kernel_numba_and_numpy_agree(small_db):
+    """Eq. 15 of a batch of samples from the energy matrix product: the numba kernel gives the
+    numpy formulation's energies (and both the sum of energy_terms)."""
+    pytest.importorskip('numba')
+    from pose_reconstruction import kernels
+    opt = NaturalPostureOptimizer(small_db, k=30)
+    q = np.asarray(small_db.positions[7], float) + 0.02
+    w = np.linspace(0.2, 1.0, NUM_JOINTS)
+    idx, _ = opt.search.knn_search(q, w)
+    S = opt._setup(opt._X.take(idx, axis=0), q, w, q + 0.01)
+    rng = np.random.default_rng(1)
+    Z = rng.normal(0.0, 0.2, (64, S['d']))
+    ZT = np.vstack([Z.T, np.ones(64)])
+    P = S['WT'] @ ZT
+    args = (P, ZT, S['d'], S['const'], opt.L, opt.w_kinematics, opt.w_style)
+    a, b = kernels._energy_numba(*args), kernels._energy_numpy(*args)
+    np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-12)
+    terms = opt.energy_terms(Z, S)
+    ref = (opt.w_control * terms['control'] + opt.w_style * terms['style']
+           + opt.w_kinematics * terms['kinematics'] + opt.w_continuity * terms['continuity'])
+    np.testing.assert_allclose(a, ref, rtol=1e-9, atol=1e-9)

@@ -128,14 +128,14 @@ def test_held_mace_follows_the_hand():
     run(sim, tpose_sensor(), 0.1)
     sim.hold(1, 'mace', 'right')
     run(sim, tpose_sensor(), 0.5)
-    grip = sim.data.xpos[sim._obj_id('mace')] + \
-        sim.data.xmat[sim._obj_id('mace')].reshape(3, 3) @ np.array([0, 0, -0.3])
+    grip = sim.data.xpos[sim.obj_id('mace')] + \
+        sim.data.xmat[sim.obj_id('mace')].reshape(3, 3) @ np.array([0, 0, -0.3])
     hand = sim.characters[1].joint_points(sim.data)[HAND_RIGHT]
     assert np.linalg.norm(grip - hand) < 0.01
-    held_z = sim.data.xpos[sim._obj_id('mace')][2]
+    held_z = sim.data.xpos[sim.obj_id('mace')][2]
     sim.release('mace')
     run(sim, tpose_sensor(), 0.5)
-    assert sim.data.xpos[sim._obj_id('mace')][2] < held_z - 0.2  # no longer held: it drops
+    assert sim.data.xpos[sim.obj_id('mace')][2] < held_z - 0.2  # no longer held: it drops
 
 
 def test_conflicting_virtual_joints_stay_finite_and_are_reported():
@@ -205,7 +205,7 @@ def test_twist_torque_turns_a_segment_about_its_axis():
     """Eq. 2: a target twisted about the forearm axis turns the simulated forearm that way;
     with the per-segment gain scaled to 0 it does not."""
     from skeleton_core.model import SEGMENT_OF_JOINT, SEGMENTS, WRIST_LEFT
-    from physics_sim.controller import segment_quats_from_positions
+    from physics_sim.posture import segment_quats_from_positions
     k = SEGMENT_OF_JOINT[WRIST_LEFT]
     twists = {}
     for scale in (1.0, 0.0):
@@ -252,7 +252,7 @@ def test_actuator_pd_applies_eq1_and_eq2_at_every_step():
     pts = ch.joint_points(d)
     p_t = pts + rng.normal(0.0, 0.05, (20, 3))
     v_t = rng.normal(0.0, 0.5, (20, 3))
-    d.act[sim._act_adr] = p_t + g.kd / g.ke * v_t      # what the simulation sets
+    d.act[sim.world.controller.act_adr] = p_t + g.kd / g.ke * v_t      # what the simulation sets
     tw_ctrl = rng.normal(0.0, 20.0, 19)
     d.ctrl[ch.twist_actuator_ids] = tw_ctrl
     mujoco.mj_forward(m, d)
@@ -329,8 +329,8 @@ def test_joint_points_from_the_joint_sites_are_the_anchors(controller):
     for p in _walk_targets(10):
         sim.step({1: p})
     ch = sim.characters[1]
-    assert sim._js is not None
-    np.testing.assert_allclose(sim._joint_points(), ch.joint_points(sim.data), rtol=0, atol=1e-12)
+    assert sim.world.ix.js is not None
+    np.testing.assert_allclose(sim.world.joint_points(), ch.joint_points(sim.data), rtol=0, atol=1e-12)
     st = sim.states()[1]
     np.testing.assert_allclose(st.positions, ch.joint_points(sim.data), rtol=0, atol=1e-12)
     np.testing.assert_allclose(st.orientations[1:], sim.state(1).orientations[1:], atol=0)
@@ -349,10 +349,11 @@ def test_twist_error_is_the_reference_twist_angle(controller):
         # orientations given: random twists/swings (up to ~0.6 rad) away from the simulated ones
         q[1:] = rng.normal(0.0, 0.3, (19, 4)) + [0.0, 0.0, 0.0, 1.0]
         sim.step({1: (p, q / np.linalg.norm(q, axis=1, keepdims=True))})
-    sim._pack_targets()
+    w = sim.world
+    w.pack_targets()
     t = sim.time + 0.01
-    pts = sim._joint_points()
-    tau = sim._twist_torques(t, sim._tg, pts, damped=(controller != 'actuator_pd'))
+    pts = sim.world.joint_points()
+    tau = w.twist_torques(t, w.tg, pts, damped=(controller != 'actuator_pd'))
     ch = sim.characters[1]
     q0, q1 = ch.prev.seg_quats, ch.cur.seg_quats
     q1 = q1 * np.sign(np.sum(q0 * q1, axis=1))[:, None]
@@ -360,9 +361,9 @@ def test_twist_error_is_the_reference_twist_angle(controller):
     q_t = (1 - s) * q0 + s * q1
     q_t /= np.linalg.norm(q_t, axis=1, keepdims=True)
     axes = ch.segment_axes(ch.joint_points(sim.data))
-    ref = g.twist_ke * sim._tw_i * twist_error(q_t, ch.segment_quats(sim.data), axes)
+    ref = g.twist_ke * w.ix.tw_i * twist_error(q_t, ch.segment_quats(sim.data), axes)
     if controller == 'actuator_pd':
-        assert np.abs(ref).max() > 0.05 * g.twist_ke * sim._tw_i.max()   # not all ~0
+        assert np.abs(ref).max() > 0.05 * g.twist_ke * w.ix.tw_i.max()   # not all ~0
         np.testing.assert_allclose(tau, ref, rtol=1e-5, atol=1e-9)
     else:   # the damped torque vector: |tau| = min(|ref - Kd_i rate|, max) along the axis; Kd_i = 0
         ref = np.clip(ref, -g.max_torque, g.max_torque)
@@ -412,17 +413,17 @@ def test_pin_forces_match_the_constraint_rows():
     sim = Simulation(SimConfig(body_height=1.75))
     run(sim, tpose_sensor(), 1.0)
     d = sim.data
-    assert any(p.active for _, _, p in sim._feet)
+    assert any(p.active for _, _, p in sim.world.pins.feet)
     rows = np.flatnonzero(d.efc_type[:d.nefc] == mujoco.mjtConstraint.mjCNSTR_EQUALITY)
     ref = []
-    for _, j, pin in sim._feet:
-        sel = rows[d.efc_id[rows] == sim._chars[0].pin_eq[j]]
+    for _, j, pin in sim.world.pins.feet:
+        sel = rows[d.efc_id[rows] == sim.world.chars[0].pin_eq[j]]
         ref.append(np.linalg.norm(d.efc_force[sel]) if pin.active else 0.0)
-    f = sim._pin_forces()
+    f = sim.world.pins.forces()
     assert max(ref) > 10.0    # a standing character leans on its pins
     np.testing.assert_allclose(f, ref, rtol=1e-12, atol=1e-12)
-    np.testing.assert_allclose(sim._pin_forces(below=0.5 * max(ref)), ref, rtol=1e-12, atol=1e-12)
-    assert not sim._pin_forces(below=10.0 * max(ref)).any()
+    np.testing.assert_allclose(sim.world.pins.forces(below=0.5 * max(ref)), ref, rtol=1e-12, atol=1e-12)
+    assert not sim.world.pins.forces(below=10.0 * max(ref)).any()
 
 
 def test_bench_rtf_reports_every_run():
@@ -439,7 +440,8 @@ def test_auto_controller_switches_with_the_number_of_characters():
     """controller 'auto': actuator_pd for few characters, explicit_pd from auto_explicit_from on
     (decided when the world is recompiled for a character coming or going); the characters keep
     tracking across the switch."""
-    sim = Simulation(SimConfig(controller='auto', auto_explicit_from=3, body_height=1.75))
+    sim = Simulation(SimConfig(controller='auto', auto_explicit_from=3, body_height=1.75,
+                               world_split='shared'))
     ys = (-2.4, -0.8, 0.8, 2.4)
 
     def targets(uids):
@@ -451,11 +453,11 @@ def test_auto_controller_switches_with_the_number_of_characters():
 
     for _ in range(20):
         states = sim.step(targets((1, 2)))
-    assert sim.controller == 'actuator_pd' and sim._act is not None
+    assert sim.controller == 'actuator_pd' and sim.model.nu > 0
     assert tracking(states) < 0.03
     for _ in range(20):
         states = sim.step(targets((1, 2, 3)))
-    assert sim.controller == 'explicit_pd' and sim._act is None and sim.model.nu == 0
+    assert sim.controller == 'explicit_pd' and sim.model.nu == 0
     assert tracking(states) < 0.03
     sim.remove_character(3)
     for _ in range(20):

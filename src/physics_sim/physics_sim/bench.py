@@ -68,11 +68,45 @@ def synthetic(n: int) -> np.ndarray:
     return seq
 
 
+# real-time factor only: the alternatives side by side with the defaults. *_split = characters that
+# cannot touch each other in separate MuJoCo models (world_split contact; the default is one model);
+# explicit_pd_numpy = explicit_pd with the numpy formulation of its per-step Eq. 1 instead of the
+# numba kernel; auto = the node's default (controller auto, Euler)
+RTF_VARIANTS = {'actuator_pd_split': ('actuator_pd', dict(world_split='contact')),
+                'actuator_pd_implicit_split': ('actuator_pd', dict(integrator='implicitfast',
+                                                                   world_split='contact')),
+                'explicit_pd_split': ('explicit_pd', dict(world_split='contact')),
+                'explicit_pd_numpy': ('explicit_pd', {}),
+                'auto': ('auto', dict(integrator='euler')),
+                'auto_split': ('auto', dict(integrator='euler', world_split='contact'))}
+
+
 def config(variant: str, **kw) -> SimConfig:
-    """The SimConfig of a VARIANTS name (or a plain controller name)."""
+    """The SimConfig of a VARIANTS or RTF_VARIANTS name (or a plain controller name)."""
+    if variant in RTF_VARIANTS:
+        variant, extra = RTF_VARIANTS[variant]
+        kw = {**extra, **kw}
     ctrl, integ = next(((c, i) for n, c, i in VARIANTS if n == variant), (variant, 'implicitfast'))
     kw.setdefault('integrator', integ)
     return SimConfig(controller=ctrl, body_height=1.75, **kw)
+
+
+class _numpy_kernel:
+    """Within: explicit_pd steps with the numpy twin of its compiled Eq. 1 kernel."""
+
+    def __init__(self, on: bool):
+        self.on = on
+
+    def __enter__(self):
+        from .controllers import explicit_pd as mod
+        self.saved = mod.explicit_pd_wrenches
+        if self.on:
+            from .controller import _explicit_pd_numpy
+            mod.explicit_pd_wrenches = _explicit_pd_numpy
+
+    def __exit__(self, *exc):
+        from .controllers import explicit_pd as mod
+        mod.explicit_pd_wrenches = self.saved
 
 
 def run_clip(controller: str, seq: np.ndarray, ori=None, noise: float = 0.0, seed: int = 0,
@@ -145,7 +179,7 @@ def stable_run(cfg: SimConfig, seconds: float = 1.5) -> bool:
             if i == 6:
                 sim.apply_push(0, 'ShoulderCenter', (300.0, 0.0, 0.0), 0.1)
             st = sim.step({0: tp})[0]
-            v = sim.data.qvel[sim.characters[0].dofs[:3]]
+            v = sim.world_of(0).data.qvel[sim.characters[0].dofs[:3]]
             if sim.counters['nan_reset'] or not np.all(np.isfinite(st.positions)) \
                     or np.linalg.norm(v) > 20.0:
                 return False
@@ -234,17 +268,18 @@ def rtf(quick: bool, variants=None, counts=(1, 2, 6), chunk: int = 10) -> Dict:
             sim = Simulation(config(ctrl, max_characters=n))
             offs = [np.array([0.0, 1.6 * (k - (n - 1) / 2), 0.0]) for k in range(n)]
             sim.step({k: seq[0] + offs[k] for k in range(n)})
-            runs[f'{ctrl}_{n}char'] = [sim, offs, 1, [], [], []]
+            runs[f'{ctrl}_{n}char'] = [sim, offs, 1, [], [], [], ctrl]
         for _ in range(n_chunks):
             for r in runs.values():
                 sim, offs, i = r[0], r[1], r[2]
                 s0 = sim.time
-                t0, c0 = time.perf_counter(), time.process_time()
-                for _ in range(chunk):
-                    sim.step({k: seq[i % len(seq)] + offs[k] for k in range(len(offs))})
-                    i += 1
-                r[3].append(time.perf_counter() - t0)
-                r[4].append(time.process_time() - c0)
+                with _numpy_kernel(r[6].endswith('_numpy')):
+                    t0, c0 = time.perf_counter(), time.process_time()
+                    for _ in range(chunk):
+                        sim.step({k: seq[i % len(seq)] + offs[k] for k in range(len(offs))})
+                        i += 1
+                    r[3].append(time.perf_counter() - t0)
+                    r[4].append(time.process_time() - c0)
                 r[5].append(sim.time - s0)   # simulated: whole 2 ms steps (34 ms a 1/30 s frame)
                 r[2] = i
         for key, r in runs.items():
@@ -281,17 +316,25 @@ def main(argv=None) -> int:
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument('--quick', action='store_true', help='fewer clips and sweep points')
     ap.add_argument('--long', action='store_true', help='10 min noisy run instead of 60 s')
+    ap.add_argument('--rtf-only', action='store_true',
+                    help='only the real-time factors (every controller, and the alternatives beside '
+                         'the defaults: one model per group that can touch, the numpy Eq. 1)')
     ap.add_argument('--out', default='out/bench_physics.json')
     args = ap.parse_args(argv if argv is not None else sys.argv[1:])
     load = os.getloadavg()[0] if hasattr(os, 'getloadavg') else float('nan')
     res = {'cpu_count': os.cpu_count(), 'load_avg_1min': load}
     t0 = time.perf_counter()
     print(f'bench_physics (2 ms step; load average {load:.1f} on {os.cpu_count()} cores)', flush=True)
-    res['real_time_factor'] = rtf(args.quick)
+    res['real_time_factor'] = rtf(args.quick, [v for v, _, _ in VARIANTS] + list(RTF_VARIANTS))
     r = res['real_time_factor']
     for k in [k for k in r if not k.endswith('_cpu')]:
         print(f'  RTF {k:28s} wall {r[k]:6.2f}   CPU-time {r[k + "_cpu"]:6.2f} '
               '(sim s per s of this process\'s CPU: the figure on an idle core)', flush=True)
+    if args.rtf_only:
+        out = Path(args.out)
+        out.parent.mkdir(parents=True, exist_ok=True)
+        out.write_text(json.dumps(res, indent=1, default=float))
+        return 0
     res['tracking'] = tracking(args.quick)
     for ctrl, r in res['tracking'].items():
         print(f'  [{ctrl}] static T-pose error mean {r["static_tpose_err_mean_cm"]:.2f} cm '

@@ -14,7 +14,7 @@ import numpy as np
 from skeleton_core.model import (FOOT_LEFT, FOOT_RIGHT, NUM_JOINTS, SEGMENTS, SEGMENT_CHILDREN,
                                  SEGMENT_CHILD_INDEX, SEGMENT_PARENT_INDEX, Body)
 
-from .controller import ball_qpos, segment_quats_from_positions
+from .posture import ball_qpos, segment_quats_from_positions
 from .mjcf_body import AXES, PIN_JOINTS, ROOT_SEGMENT, ElementNames, character_prefix, joint_anchor
 
 

@@ -9,23 +9,19 @@ as plain numpy (no MuJoCo), so the equations can be tested by hand.
   ``max_torque``. ``theta_t - theta`` is the twist (about the current segment axis) of the rotation
   from the current to the target segment orientation.
 
-Also here: target segment orientations derived from joint positions when the input has none
-(minimal-twist frames hanging from a pelvis frame), and the conversion of a posture into the ball
-joint quaternions of the character.
+These functions are what the controllers (:mod:`physics_sim.controllers`) apply: ``explicit_pd``
+calls :func:`point_wrenches` (Eq. 1 at every joint point as a wrench on its body, compiled with
+numba where available, :func:`pd_force` + :func:`apply_at_points` otherwise) at every step, and
+every controller takes Eq. 2 from :func:`twist_angle` and :func:`pd_twist_torque`.
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
-from typing import Optional
 
 import numpy as np
+from skeleton_core import jit
 from skeleton_core.geometry import quat_conjugate, quat_multiply, swing_twist
-from skeleton_core.model import (HIP_CENTER, HIP_LEFT, HIP_RIGHT, NUM_JOINTS, SEGMENTS,
-                                 SEGMENT_CHILDREN, SEGMENT_CHILD_INDEX, SEGMENT_PARENTS, SPINE)
 from skeleton_core.params import param
-
-from .mjcf_body import ROOT_SEGMENT, body_order, segment_parent_body
 
 
 @dataclass
@@ -78,176 +74,119 @@ def pd_twist_torque(angle_err, rate_target, rate, ke_i, kd_i, max_torque: float)
     return np.clip(t, -max_torque, max_torque)
 
 
+def twist_drive(angle_err, rate_target, twist_ke: float, twist_kd: float, inertia) -> np.ndarray:
+    """Eq. 2 without the measured rate: ``Ke_i dtheta + Kd_i theta'_t`` with ``Ke_i, Kd_i`` = gain
+    per unit inertia times ``inertia`` -- the drive of a twist actuator, which subtracts
+    ``Kd_i theta'`` and applies the bound at every step itself (``actuator_pd``)."""
+    return (twist_ke * angle_err + twist_kd * rate_target) * inertia
+
+
+def twist_angle(q_current, axis_forms, q_target) -> np.ndarray:
+    """Eq. 2's error ``theta_t - theta`` (rad, shortest way round) of every segment from its current
+    and target orientations (N, 4, w x y z; the target need not be unit) in one bilinear form:
+    with ``rel = conj(q) * q_t``, its w part is ``q . q_t`` and its vector part along the
+    segment's body-frame axis ``u`` is ``q^T M_u q_t`` (``axis_forms`` (N, 4, 4), from
+    :func:`twist_forms`); the twist of ``q_t * conj(q)`` about the world axis ``R u`` is the same
+    angle (:func:`twist_error` computes it the long way)."""
+    rw = np.einsum('ij,ij->i', q_current, q_target)
+    proj = np.einsum('ni,nij,nj->n', q_current, axis_forms, q_target)
+    return 2.0 * np.arctan2(proj * np.copysign(1.0, rw), np.abs(rw))
+
+
+def twist_forms(axes_local: np.ndarray) -> np.ndarray:
+    """The (N, 4, 4) matrices ``M_u`` of :func:`twist_angle` for body-frame unit axes (N, 3):
+    ``u . vec(conj(q) * q_t) = q^T M_u q_t`` (w x y z): M[0, 1:] = u, M[1:, 0] = -u,
+    M[1:, 1:] = [u]x."""
+    u = np.asarray(axes_local, float).reshape(-1, 3)
+    m4 = np.zeros((len(u), 4, 4))
+    m4[:, 0, 1:], m4[:, 1:, 0] = u, -u
+    m4[:, 1, 2], m4[:, 1, 3] = -u[:, 2], u[:, 1]
+    m4[:, 2, 1], m4[:, 2, 3] = u[:, 2], -u[:, 0]
+    m4[:, 3, 1], m4[:, 3, 2] = -u[:, 1], u[:, 0]
+    return m4
+
+
+def cross_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Row-wise cross product of (N, 3) arrays (np.cross is slow for small arrays)."""
+    out = np.empty_like(a)
+    out[:, 0] = a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1]
+    out[:, 1] = a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2]
+    out[:, 2] = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
+    return out
+
+
 def apply_at_points(forces, points, com) -> np.ndarray:
     """Wrench (6,) per body at its centre of mass for forces (N, 3) applied at points (N, 3):
     MuJoCo's ``xfrc_applied`` layout [force, torque]."""
-    forces = np.asarray(forces, float)
-    out = np.zeros(forces.shape[:-1] + (6,))
-    out[..., :3] = forces
-    out[..., 3:] = np.cross(np.asarray(points) - com, forces)
-    return out
+    forces = np.asarray(forces, float).reshape(-1, 3)
+    arm = np.asarray(points, float).reshape(-1, 3) - com
+    return np.concatenate([forces, cross_rows(arm, forces)], axis=1)
 
 
-# -------------------------------------------------------------------------------------------
-# Orientations
-# -------------------------------------------------------------------------------------------
-def quat_between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Shortest-arc rotation (x, y, z, w) taking unit vector ``a`` to unit vector ``b`` (rows)."""
-    a = np.asarray(a, float)
-    b = np.asarray(b, float)
-    c = np.cross(a, b)
-    d = np.sum(a * b, axis=-1, keepdims=True)
-    q = np.concatenate([c, 1.0 + d], axis=-1)
-    # opposite vectors: rotate pi about any axis orthogonal to a
-    opp = (1.0 + d[..., 0]) < 1e-9
-    if np.any(opp):
-        ortho = np.cross(a, np.array([1.0, 0.0, 0.0]))
-        small = np.linalg.norm(ortho, axis=-1) < 1e-6
-        ortho = np.where(small[..., None], np.cross(a, np.array([0.0, 1.0, 0.0])), ortho)
-        q = np.where(opp[..., None], np.concatenate([ortho, np.zeros_like(d)], -1), q)
-    return q / np.linalg.norm(q, axis=-1, keepdims=True)
+def point_velocity(cvel: np.ndarray, points: np.ndarray, root_com: np.ndarray) -> np.ndarray:
+    """World linear velocity (N, 3) of points fixed on bodies with MuJoCo's com-based velocities
+    ``cvel`` (N, 6: angular, linear at the subtree centre of mass ``root_com``)."""
+    return cvel[:, 3:] + cross_rows(cvel[:, :3], points - root_com)
 
 
-def _pelvis_quat(p) -> tuple:
-    """Pelvis frame (x forward, y left, z up the spine) of a posture given as nested lists of
-    floats, as a rest-relative quaternion (x, y, z, w tuple)."""
-    hl, hr, sp, hc = p[HIP_LEFT], p[HIP_RIGHT], p[SPINE], p[HIP_CENTER]
-    y = _unit3((hl[0] - hr[0], hl[1] - hr[1], hl[2] - hr[2]), (0.0, 1.0, 0.0))
-    z = (sp[0] - hc[0], sp[1] - hc[1], sp[2] - hc[2])
-    dz = z[0] * y[0] + z[1] * y[1] + z[2] * y[2]
-    z = _unit3((z[0] - dz * y[0], z[1] - dz * y[1], z[2] - dz * y[2]), (0.0, 0.0, 1.0))
-    x = (y[1] * z[2] - y[2] * z[1], y[2] * z[0] - y[0] * z[2], y[0] * z[1] - y[1] * z[0])
-    # rotation matrix with columns x, y, z -> quaternion (the larger-diagonal branch is stable)
-    r00, r11, r22 = x[0], y[1], z[2]
-    tr = r00 + r11 + r22
-    if tr > 0.0:
-        s = 2.0 * math.sqrt(tr + 1.0)
-        q = ((y[2] - z[1]) / s, (z[0] - x[2]) / s, (x[1] - y[0]) / s, 0.25 * s)
-    elif r00 >= r11 and r00 >= r22:
-        s = 2.0 * math.sqrt(max(1.0 + r00 - r11 - r22, 1e-300))
-        q = (0.25 * s, (y[0] + x[1]) / s, (z[0] + x[2]) / s, (y[2] - z[1]) / s)
-    elif r11 >= r22:
-        s = 2.0 * math.sqrt(max(1.0 + r11 - r00 - r22, 1e-300))
-        q = ((y[0] + x[1]) / s, 0.25 * s, (z[1] + y[2]) / s, (z[0] - x[2]) / s)
-    else:
-        s = 2.0 * math.sqrt(max(1.0 + r22 - r00 - r11, 1e-300))
-        q = ((z[0] + x[2]) / s, (z[1] + y[2]) / s, 0.25 * s, (x[1] - y[0]) / s)
-    n = math.sqrt(sum(c * c for c in q)) * (-1.0 if q[3] < 0 else 1.0)
-    return (q[0] / n, q[1] / n, q[2] / n, q[3] / n)
+# ---------------------------------------------------------------------------------------------
+# explicit_pd's step: Eq. 1 at every joint point, as wrenches on the bodies (numba / numpy twins)
+# ---------------------------------------------------------------------------------------------
+def _explicit_pd_numpy(xfrc, site_xpos, js, cvel, subtree_com, xipos, jb, jroot, p0, dp, v,
+                       share, jchar, ke, kd, max_force, ub, sum_rows):
+    sj = share[jchar][:, None]
+    p_t, v_t = p0 + sj * dp, v * (sj < 1.0)
+    pts = site_xpos[js]
+    vel = point_velocity(cvel[jb], pts, subtree_com[jroot])
+    with np.errstate(over='ignore', invalid='ignore', divide='ignore'):
+        f = pd_force(p_t, pts, v_t, vel, ke, kd, max_force)
+    xfrc[ub] += sum_rows @ apply_at_points(f, pts, xipos[jb])  # several joints share a body
 
 
-def _arc(a, b):
-    """Shortest-arc quaternion turning unit vector ``a`` onto unit vector ``b`` (floats)."""
-    d = a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-    if 1.0 + d < 1e-9:  # opposite: half a turn about any axis orthogonal to a
-        return tuple(float(c) for c in quat_between(np.array(a), np.array(b)))
-    q = (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0], 1.0 + d)
-    n = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
-    return (q[0] / n, q[1] / n, q[2] / n, q[3] / n)
+def _explicit_pd_kernel(xfrc, site_xpos, js, cvel, subtree_com, xipos, jb, jroot, p0, dp, v,
+                        share, jchar, ke, kd, max_force, ub, sum_rows):
+    for n in range(js.shape[0]):
+        s = share[jchar[n]]
+        moving = 1.0 if s < 1.0 else 0.0
+        site, b, r = js[n], jb[n], jroot[n]
+        px, py, pz = site_xpos[site, 0], site_xpos[site, 1], site_xpos[site, 2]
+        # point velocity: v_com + w x (p - subtree com)
+        ax, ay, az = px - subtree_com[r, 0], py - subtree_com[r, 1], pz - subtree_com[r, 2]
+        wx, wy, wz = cvel[b, 0], cvel[b, 1], cvel[b, 2]
+        vx = cvel[b, 3] + (wy * az - wz * ay)
+        vy = cvel[b, 4] + (wz * ax - wx * az)
+        vz = cvel[b, 5] + (wx * ay - wy * ax)
+        # Eq. 1
+        fx = ke * (p0[n, 0] + s * dp[n, 0] - px) + kd * (v[n, 0] * moving - vx)
+        fy = ke * (p0[n, 1] + s * dp[n, 1] - py) + kd * (v[n, 1] * moving - vy)
+        fz = ke * (p0[n, 2] + s * dp[n, 2] - pz) + kd * (v[n, 2] * moving - vz)
+        nrm = np.sqrt(fx * fx + fy * fy + fz * fz)
+        if nrm > max_force:
+            k = max_force / nrm
+            fx, fy, fz = fx * k, fy * k, fz * k
+        # as a wrench at the body's centre of mass
+        cx, cy, cz = px - xipos[b, 0], py - xipos[b, 1], pz - xipos[b, 2]
+        xfrc[b, 0] += fx
+        xfrc[b, 1] += fy
+        xfrc[b, 2] += fz
+        xfrc[b, 3] += cy * fz - cz * fy
+        xfrc[b, 4] += cz * fx - cx * fz
+        xfrc[b, 5] += cx * fy - cy * fx
 
 
-def _unit3(v, fallback):
-    n = math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
-    return (v[0] / n, v[1] / n, v[2] / n) if n > 1e-9 else fallback
+# explicit_pd_wrenches(xfrc, site_xpos, js, cvel, subtree_com, xipos, jb, jroot, p0, dp, v, share,
+#                      jchar, ke, kd, max_force, ub, sum_rows):
+# adds Eq. 1's force at every joint point, as a wrench on its body, to ``xfrc`` (MuJoCo's
+# xfrc_applied). The targets are interpolated first: p_t = p0 + s dp, p'_t = v while s < 1 (0 after),
+# s = share[jchar] per joint; the joint points are the sites ``js`` of ``site_xpos``, on bodies ``jb``
+# whose kinematic roots are ``jroot``; ``ub`` / ``sum_rows`` (the distinct bodies and the rows that
+# sum joints onto them) serve the numpy twin. Compiled by numba when available (skeleton_core.jit),
+# else pd_force + apply_at_points in numpy: both give the same numbers (tests/test_physics_controller).
+_explicit_pd_numba = jit.njit(_explicit_pd_kernel)
+explicit_pd_wrenches = jit.pick(_explicit_pd_numba, _explicit_pd_numpy)
 
 
-_TREE = None   # (segment, parent body, parent joint, child joint) in body order, root first
 
-
-def segment_quats_from_positions(positions: np.ndarray, rest_offsets: np.ndarray) -> np.ndarray:
-    """World orientation (x, y, z, w) of every segment (19, SEGMENTS order) from joint positions
-    (20, 3): the root segment follows the pelvis frame; every other segment is its parent body's
-    orientation followed by the shortest arc turning the parent-carried rest direction onto the
-    segment's direction (no twist added). Scalar code: one posture per target frame, where numpy's
-    per-call cost on 3-vectors would dominate."""
-    global _TREE
-    if _TREE is None:
-        _TREE = [(k, segment_parent_body(k), SEGMENT_PARENTS[k], SEGMENT_CHILDREN[k])
-                 for k in body_order()]
-    p = np.asarray(positions, float).tolist()
-    rest = _unit_rest(rest_offsets)
-    q = [None] * len(SEGMENTS)
-    sqrt = math.sqrt
-    for k, pb, pj, cj in _TREE:
-        if pb < 0:
-            q[k] = _pelvis_quat(p)
-            continue
-        # inlined (hot loop): rd = rotate(base, unit rest[cj]) (a unit vector); td = unit(p[cj] -
-        # p[pj]) (rd if degenerate); q[k] = arc(rd, td) * base
-        base = q[pb]
-        x, y, z, w = base
-        vx, vy, vz = rest[cj]
-        tx, ty, tz = 2.0 * (y * vz - z * vy), 2.0 * (z * vx - x * vz), 2.0 * (x * vy - y * vx)
-        rx = vx + w * tx + y * tz - z * ty
-        ry = vy + w * ty + z * tx - x * tz
-        rz = vz + w * tz + x * ty - y * tx
-        a, b = p[cj], p[pj]
-        dx, dy, dz = a[0] - b[0], a[1] - b[1], a[2] - b[2]
-        n = sqrt(dx * dx + dy * dy + dz * dz)
-        if n > 1e-9:
-            dx, dy, dz = dx / n, dy / n, dz / n
-        else:
-            dx, dy, dz = rx, ry, rz
-        dot = rx * dx + ry * dy + rz * dz
-        if 1.0 + dot < 1e-9:
-            ax, ay, az, aw = _arc((rx, ry, rz), (dx, dy, dz))
-        else:
-            ax, ay, az, aw = (ry * dz - rz * dy, rz * dx - rx * dz, rx * dy - ry * dx, 1.0 + dot)
-            n = 1.0 / sqrt(ax * ax + ay * ay + az * az + aw * aw)
-            ax, ay, az, aw = ax * n, ay * n, az * n, aw * n
-        q[k] = (aw * x + ax * w + ay * z - az * y, aw * y - ax * z + ay * w + az * x,
-                aw * z + ax * y - ay * x + az * w, aw * w - ax * x - ay * y - az * z)
-    return np.array(q)
-
-
-_REST_UNIT = (None, None)   # (rest offsets array, their unit directions as lists)
-
-
-def _unit_rest(rest_offsets) -> list:
-    """Unit rest directions (lists) of a body's rest offsets ((1, 0, 0) for a zero offset),
-    remembered for the last array seen (one body per character, the same every frame)."""
-    global _REST_UNIT
-    if _REST_UNIT[0] is not rest_offsets:
-        out = []
-        for v in np.asarray(rest_offsets, float).tolist():
-            n = math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
-            out.append((v[0] / n, v[1] / n, v[2] / n) if n > 1e-9 else (1.0, 0.0, 0.0))
-        _REST_UNIT = (rest_offsets, out)
-    return _REST_UNIT[1]
-
-
-def joint_quats_to_segment(q_by_joint: np.ndarray) -> np.ndarray:
-    """(20, 4) orientations by child joint (Skeleton.orientations) -> (19, 4) by segment."""
-    return np.asarray(q_by_joint, float)[SEGMENT_CHILD_INDEX]
-
-
-def segment_quats_to_joints(q_seg: np.ndarray) -> np.ndarray:
-    """(19, 4) segment orientations -> (20, 4) by child joint; the root joint gets the root body's."""
-    out = np.zeros((NUM_JOINTS, 4))
-    out[SEGMENT_CHILD_INDEX] = q_seg
-    out[HIP_CENTER] = q_seg[ROOT_SEGMENT]
-    return out
-
-
-def is_identity(q: Optional[np.ndarray]) -> bool:
-    """True when every quaternion is (+/-) identity: Skeleton's "orientations unknown"."""
-    if q is None:
-        return True
-    q = np.asarray(q, float)
-    return bool(np.all(np.abs(np.abs(q[..., 3]) - 1.0) < 1e-9))
-
-
-def ball_qpos(q_seg: np.ndarray) -> np.ndarray:
-    """Ball joint quaternions (w, x, y, z; MuJoCo order) for segment world orientations (19, 4):
-    ``q_local = q_parent^-1 q_child`` (body frames are world-aligned in the rest pose)."""
-    out = np.zeros((len(SEGMENTS), 4))
-    for k in range(len(SEGMENTS)):
-        pb = segment_parent_body(k)
-        loc = q_seg[k] if pb < 0 else quat_multiply(quat_conjugate(q_seg[pb]), q_seg[k])
-        out[k] = (loc[3], loc[0], loc[1], loc[2])
-    return out
-
-
-__all__ = ['Gains', 'clamp_norm', 'pd_force', 'twist_error', 'pd_twist_torque', 'apply_at_points',
-           'quat_between', 'segment_quats_from_positions',
-           'joint_quats_to_segment', 'segment_quats_to_joints', 'is_identity', 'ball_qpos']
+__all__ = ['Gains', 'clamp_norm', 'pd_force', 'twist_error', 'pd_twist_torque', 'twist_drive',
+           'twist_angle', 'twist_forms', 'cross_rows', 'apply_at_points', 'point_velocity',
+           'explicit_pd_wrenches']

@@ -40,7 +40,7 @@ from skeleton_msgs.srv import ApplyPush
 from visualization_msgs.msg import Marker, MarkerArray
 
 from .mjcf_world import ObjectSpec
-from .simulation import SimConfig, Simulation
+from .simulation import SimConfig, Simulation, warm_up
 
 
 def _tuples(n: int):
@@ -79,8 +79,10 @@ class PhysicsNodeConfig:
     sync_to_input: bool = param(
         True, 'tick as soon as a target arrives (phase-locked to the sensor: the output leaves '
         'right after its input instead of up to one period later); the timer keeps the output '
-        'rate when input is slower or stops. Each tick simulates the wall time since the '
-        'previous one (0.5 to 1.5 periods)')
+        'rate when input is slower or stops. An input tick simulates the frame time since the '
+        'previous one (capture stamps; 0.5 to 1.5 periods), a timer tick the wall time: frames '
+        'delivered together after a delay tick each; a target sooner than 0.75 period after '
+        'the last by its stamp is simulated 0.75 period after it')
     user_timeout_s: float = param(1.0, 'remove a character whose user is absent this long (s)',
                                   range=(0.05, 60.0))
     boxes: List[float] = param([0.0], 'boxes: x y z half_x half_y half_z mass per box (world, '
@@ -138,6 +140,9 @@ class PhysicsNode(Node):
             self.sim = Simulation(config_from_params(v), objects_from_params(v))
         except ValueError as e:
             raise ValueError(f'physics: {e}') from e
+        warm_s = warm_up()   # compiled kernels now, not on the first frame
+        if warm_s > 0.5:
+            self.get_logger().info(f'compiled kernels ready in {warm_s:.1f} s (cached from now on)')
         self.frame_id = v['frame_id']
         self._last_seen: Dict[int, float] = {}
         self._last_msg = None
@@ -148,6 +153,9 @@ class PhysicsNode(Node):
         self._sim_in_step = 0.0
         self._last_tick: Optional[float] = None
         self._last_input_tick: Optional[float] = None
+        self._last_input_stamp: Optional[float] = None   # capture stamp (s) of the last input tick
+        self._pending_stamp: Optional[float] = None      # ... of the newest deferred target
+        self._deferred = None   # one-shot timer of a frame that arrived too soon after a tick
         self._time_debt = 0.0
         self.pub = self.create_publisher(SkeletonArray, v['output_topic'], 10)
         self.obj_pub = self.create_publisher(MarkerArray, v['objects_topic'], 10)
@@ -178,6 +186,7 @@ class PhysicsNode(Node):
         out = {f'sim_{k}': v for k, v in self.sim.counters.items()}
         out['characters'] = len(self.sim.characters)
         out['objects'] = len(self.sim.objects)
+        out['worlds'] = len(self.sim.worlds)
         if self._wall_in_step > 0:
             out['real_time_factor'] = self._sim_in_step / self._wall_in_step
         return out
@@ -214,13 +223,45 @@ class PhysicsNode(Node):
             self.sim.hold(uid, 'mace', self.params['mace_hand'])
             self._mace_given = True
         if self.params['sync_to_input'] and frames:
-            # phase-lock to the sensor: tick now unless the last input tick was recent (input
-            # faster than the output rate: that frame rides on the next tick); the timer only
-            # ticks when no input ticked for a period (see _on_timer)
+            # phase-lock to the sensor: tick now unless the last input tick was less than 0.75
+            # period ago *by the capture stamps* (input faster than the output rate: tick 0.75
+            # period after the last one instead, taking the newest target then). Judged by the
+            # stamps, frames delivered in a burst after a delay (a loaded machine) are each
+            # simulated for their own frame time and published at once; the timer only ticks
+            # when no input ticked for a period (see _on_timer)
             period = 1.0 / self.params['output_rate']
-            if self._last_input_tick is None or now - self._last_input_tick >= 0.75 * period:
+            stamp = max((f.stamp_ns or header_stamp) for f in frames) * 1e-9
+            last = self._last_input_stamp
+            if last is None or stamp - last >= 0.75 * period or stamp < last - 1.0:
+                self._cancel_deferred()
                 self._last_input_tick = now
-                self._tick()
+                # the simulated time of this tick: the frame time since the last input tick
+                dt = None if last is None else min(max(stamp - last, 0.5 * period), 1.5 * period)
+                self._last_input_stamp = stamp
+                self._tick(dt)
+            else:
+                self._pending_stamp = max(self._pending_stamp or stamp, stamp)
+                if self._deferred is None:
+                    delay = max(0.75 * period - (now - self._last_input_tick), 1e-4)
+                    self._deferred = self.create_timer(delay, self._on_deferred)
+
+    def _on_deferred(self) -> None:
+        self._cancel_deferred()
+        self._last_input_tick = time.monotonic()
+        period = 1.0 / self.params['output_rate']
+        stamp, self._pending_stamp = self._pending_stamp, None
+        dt = None
+        if stamp is not None and self._last_input_stamp is not None:
+            dt = min(max(stamp - self._last_input_stamp, 0.5 * period), 1.5 * period)
+            self._last_input_stamp = stamp
+        self._tick(dt)
+
+    def _cancel_deferred(self) -> None:
+        self._pending_stamp = None
+        if self._deferred is not None:
+            self._deferred.cancel()
+            self.destroy_timer(self._deferred)
+            self._deferred = None
 
     def _push(self, user_id: int, segment: str, force, duration: float) -> str:
         try:
@@ -256,14 +297,16 @@ class PhysicsNode(Node):
             return   # input is flowing and ticking: the timer is the fallback when it stops
         self._tick()
 
-    def _tick(self) -> None:
+    def _tick(self, dt: Optional[float] = None) -> None:
+        """Advance and publish; ``dt``: the simulated time (s), else the wall time since the last
+        tick (bounded) or, without sync_to_input, one period."""
         now = time.monotonic()
         period = 1.0 / self.params['output_rate']
-        if self.params['sync_to_input'] and self._last_tick is not None:
+        if dt is None and self.params['sync_to_input'] and self._last_tick is not None:
             # the wall time since the last tick, bounded: an overloaded machine gets a slower
             # simulation at a kept output rate, not ever longer (costlier) ticks
             dt = min(max(now - self._last_tick, 0.5 * period), 1.5 * period)
-        else:
+        elif dt is None:
             dt = period
         self._last_tick = now
         timeout = self.params['user_timeout_s']

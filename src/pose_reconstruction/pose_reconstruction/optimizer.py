@@ -37,6 +37,7 @@ from skeleton_core.model import (NUM_JOINTS, NUM_SEGMENTS, SEGMENT_CHILDREN, SEG
                                  SEGMENT_PARENTS, SEGMENT_PARENT_INDEX)
 from skeleton_core.params import check, param
 
+from .kernels import energy_from_products, warm_up
 from .posture_space import as_database_arrays
 from .search import KNN_MODES, DatabaseSearch
 
@@ -139,6 +140,7 @@ class NaturalPostureOptimizer:
     Parameters: :class:`OptimizerConfig` fields as keywords (or ``config``)."""
 
     def __init__(self, db, config: Optional[OptimizerConfig] = None, **params):
+        warm_up()   # the compiled kernels, once per process: not on a user's first frame
         self.db = as_database_arrays(db)
         self.body = self.db.body
         self.L = self.body.segment_lengths.copy()  # (19,)
@@ -244,25 +246,9 @@ class NaturalPostureOptimizer:
                   sq: Optional[np.ndarray] = None) -> np.ndarray:
         """Eq. 15 for samples stored as the columns of ``ZT`` (d + 1, M), last row 1 -> (M,).
         ``P`` (d + 57 + K, M) and ``sq`` (57, M): optional work arrays (reused across steps)."""
-        d = S['d']
         P = np.matmul(S['WT'], ZT, out=P)
-        e = np.einsum('dm,dm->m', P[:d], ZT[:d])
-        e += S['const']
-        n = NUM_SEGMENTS
-        Ps = P[d:d + 3 * n]
-        sq = np.multiply(Ps, Ps, out=sq)                      # x^2, y^2, z^2 blocks
-        ln = sq[:n]
-        ln += sq[n:2 * n]
-        ln += sq[2 * n:]
-        np.sqrt(ln, out=ln)
-        ln -= self._Lcol
-        ek = np.einsum('sm,sm->m', ln, ln)
-        ek *= self.w_kinematics / NUM_SEGMENTS
-        e += ek
-        es = P[d + 3 * n:].min(axis=0)
-        es *= self.w_style / NUM_JOINTS
-        e += es
-        return e
+        return energy_from_products(P, ZT, S['d'], S['const'], self.L, self.w_kinematics,
+                                    self.w_style, sq)
 
     def energy(self, Z: np.ndarray, S: dict) -> np.ndarray:
         """Eq. 15 for a batch of latent samples ``Z`` (M, d) -> (M,): the weighted sum of

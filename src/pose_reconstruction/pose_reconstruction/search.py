@@ -23,6 +23,12 @@ from skeleton_core.model import NUM_JOINTS
 from .posture_space import as_database_arrays
 
 KNN_MODES = ('brute', 'kdtree')
+# From this many postures on, the brute-force KNN screens the database in single precision (half
+# the memory traffic of the matrix-vector product that dominates a large database's frame) and
+# ranks the best SCREEN_FACTOR * K candidates exactly in double precision: the same neighbours
+# unless a true neighbour falls out of a candidate list many times longer than K.
+SCREEN_FROM = 8192
+SCREEN_FACTOR = 4
 
 
 def knn_arrays(db) -> tuple:
@@ -40,6 +46,22 @@ def knn_arrays(db) -> tuple:
         for a in (sq, XA, coord):
             a.setflags(write=False)
         arrays = db.derived['knn'] = (sq, XA, coord)
+    return arrays
+
+
+def screen_arrays(db):
+    """Single-precision copies of the KNN matrices (``XA``, ``coord``) for a large database,
+    computed once per database and shared; None below SCREEN_FROM postures."""
+    if db.size < SCREEN_FROM:
+        return None
+    arrays = db.derived.get('knn32')
+    if arrays is None:
+        _, XA, coord = knn_arrays(db)
+        arrays = (np.ascontiguousarray(XA, dtype=np.float32),
+                  np.ascontiguousarray(coord, dtype=np.float32))
+        for a in arrays:
+            a.setflags(write=False)
+        db.derived['knn32'] = arrays
     return arrays
 
 
@@ -66,6 +88,7 @@ class DatabaseSearch:
         self._X = self.db.flat
         self.arrays = knn_arrays(self.db)
         self._Xsq_joint, self._XA, self._Xcoord = self.arrays
+        self._screen = screen_arrays(self.db)
         self._kdtree = None
         self.k = 0
         self.knn = knn
@@ -100,7 +123,8 @@ class DatabaseSearch:
         whose root, and so its origin, is unreliable): ``sum_i w_i |x_i - q_i - t|^2`` at the best
         ``t`` = weighted centroid of x - that of q. Returns ``(idx, distances, t (K, 3))`` then.
 
-        ``knn='brute'``: exact, two BLAS matrix-vector products over the whole database.
+        ``knn='brute'``: exact, two BLAS matrix-vector products over the whole database (from
+        SCREEN_FROM postures on in single precision, the best candidates re-ranked in double).
         ``knn='kdtree'``: approximate; a cKDTree in a global PCA space proposes
         ``kdtree_candidates * K`` postures (unreliable joints filled from the database mean),
         which are re-ranked exactly by Eq. 9.
@@ -118,6 +142,8 @@ class DatabaseSearch:
             return cand[order], d[order]
         wq = w[:, None] * q
         v = np.concatenate((w, -2.0 * wq.ravel()))
+        if self._screen is not None and SCREEN_FACTOR * self.k < self.db.size:
+            return self._knn_screened(v, w, wq, q, translate)
         d = self._XA @ v
         d += float(np.einsum('jd,jd->', wq, q))
         if translate:
@@ -135,6 +161,32 @@ class DatabaseSearch:
         idx = idx[order]
         if translate:
             return idx, dk, shift[idx]
+        return idx, dk
+
+    def _knn_screened(self, v, w, wq, q, translate: bool):
+        """:meth:`knn_search` (brute) of a large database: Eq. 9 screened in single precision,
+        the best ``SCREEN_FACTOR * k`` re-ranked exactly."""
+        XA32, coord32 = self._screen
+        d32 = XA32 @ v.astype(np.float32)
+        ws = max(float(w.sum()), 1e-12)
+        if translate:
+            shift32 = (coord32 @ w.astype(np.float32)).reshape(-1, 3)
+            shift32 -= wq.sum(axis=0).astype(np.float32)
+            shift32 *= np.float32(1.0 / ws)
+            d32 -= np.float32(ws) * np.einsum('nd,nd->n', shift32, shift32)
+        m = SCREEN_FACTOR * self.k
+        cand = np.argpartition(d32, m - 1)[:m]
+        d = self._XA[cand] @ v
+        d += float(np.einsum('jd,jd->', wq, q))
+        if translate:
+            shift = self._Xcoord.reshape(-1, 3, NUM_JOINTS)[cand] @ w
+            shift -= wq.sum(axis=0)
+            shift *= 1.0 / ws
+            d -= ws * np.einsum('nd,nd->n', shift, shift)
+        order = np.argsort(d)[:self.k]
+        idx, dk = cand[order], np.maximum(d[order], 0.0)
+        if translate:
+            return idx, dk, shift[order]
         return idx, dk
 
     def knn_scaled(self, query: np.ndarray, weights: np.ndarray, translate: bool = False,

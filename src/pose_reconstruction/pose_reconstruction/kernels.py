@@ -1,0 +1,84 @@
+"""Compiled kernels of the reconstruction's hot loops (numba where available, :mod:`skeleton_core.jit`;
+``KINECT_NUMBA=0`` runs the numpy twins). Each kernel has a numpy twin computing the same numbers
+(tests/test_optimizer.py compares them).
+
+* :func:`energy_from_products` -- Eq. 15 of every stochastic sample from the one matrix product
+  ``P = WT [z; 1]`` of :meth:`NaturalPostureOptimizer._energy_t` (the quadratic and linear part,
+  the segment lengths of E_k, the closest neighbour of E_s): one pass over ``P`` instead of about
+  ten numpy calls per optimisation step.
+"""
+from __future__ import annotations
+
+import numpy as np
+from skeleton_core import jit
+from skeleton_core.model import NUM_JOINTS, NUM_SEGMENTS
+
+
+def _energy_numpy(P, ZT, d, const, L, w_k, w_s, sq=None):
+    n = NUM_SEGMENTS
+    e = np.einsum('dm,dm->m', P[:d], ZT[:d])
+    e += const
+    Ps = P[d:d + 3 * n]
+    sq = np.multiply(Ps, Ps, out=sq)                      # x^2, y^2, z^2 blocks
+    ln = sq[:n]
+    ln += sq[n:2 * n]
+    ln += sq[2 * n:]
+    np.sqrt(ln, out=ln)
+    ln -= L[:, None]
+    ek = np.einsum('sm,sm->m', ln, ln)
+    ek *= w_k / NUM_SEGMENTS
+    e += ek
+    es = P[d + 3 * n:].min(axis=0)
+    es *= w_s / NUM_JOINTS
+    e += es
+    return e
+
+
+def _energy_kernel(P, ZT, d, const, L, w_k, w_s, sq=None):
+    n = L.shape[0]
+    m = P.shape[1]
+    K = P.shape[0] - d - 3 * n
+    ck, cs = w_k / n, w_s / NUM_JOINTS
+    e = np.empty(m)
+    for j in range(m):
+        acc = 0.0
+        for i in range(d):
+            acc += P[i, j] * ZT[i, j]
+        ek = 0.0
+        for s in range(n):
+            x, y, z = P[d + s, j], P[d + n + s, j], P[d + 2 * n + s, j]
+            r = np.sqrt(x * x + y * y + z * z) - L[s]
+            ek += r * r
+        best = P[d + 3 * n, j]
+        for k in range(1, K):
+            v = P[d + 3 * n + k, j]
+            if v < best:
+                best = v
+        e[j] = acc + const + ek * ck + best * cs
+    return e
+
+
+_energy_numba = jit.njit(_energy_kernel)
+# energy_from_products(P, ZT, d, const, L, w_k, w_s, sq=None) -> (M,): Eq. 15 of the M samples
+# (columns of ZT, (d + 1, M), last row 1) from P = WT ZT ((d + 57 + K, M): the quadratic form's
+# rows, the 57 segment coordinates by axis block, the K style rows); ``sq`` a (57, M) work array
+# for the numpy twin
+energy_from_products = jit.pick(_energy_numba, _energy_numpy)
+
+_warm = [False]
+
+
+def warm_up() -> None:
+    """Compile (or load from numba's cache) the kernels now, with the argument types of the real
+    calls, rather than on a user's first frame; once per process, nothing without numba."""
+    if _warm[0] or energy_from_products is not _energy_numba:
+        return
+    _warm[0] = True
+    d, m, k = 2, 4, 3
+    P, ZT = np.ones((d + 3 * NUM_SEGMENTS + k, m)), np.ones((d + 1, m))
+    L, sq = np.ones(NUM_SEGMENTS), np.empty((3 * NUM_SEGMENTS, m))
+    for work in (None, sq):   # energy() passes no work array, the stochastic search one
+        _energy_numba(P, ZT, d, 0.0, L, 1.0, 1.0, work)
+
+
+__all__ = ['energy_from_products', 'warm_up']
