@@ -35,7 +35,7 @@ from typing import Dict, Optional, Tuple
 import mujoco
 import numpy as np
 
-from . import _jit
+from skeleton_core import jit as _jit
 
 from .features import EFFECTORS, Feature, World
 from .world_mjcf import EFFECTOR_RADIUS, world_model_xml
