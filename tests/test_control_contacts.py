@@ -159,3 +159,20 @@ def test_climbing_hand_over_hand_regrabs_the_swinging_rope():
     assert np.all(held >= 1)
     regrabs = np.sum((held[1:] == 2) & (held[:-1] == 1))
     assert regrabs >= 3, held
+
+
+def test_a_rope_crossing_a_thigh_is_cleared():
+    """The same for a leg: a rope through the middle of a free thigh (a body falling past it)."""
+    from performance_control.composition import Obstacles
+    from performance_control.examples import imitation
+    from skeleton_core.model import HIP_RIGHT, KNEE_RIGHT, standard_body
+    p = imitation('rope_climb', {'period': 1.4}, standard_body(1.75), 1)[0]
+    mid = 0.5 * (p[HIP_RIGHT] + p[KNEE_RIGHT])
+    obs = Obstacles()
+    obs.capsules.append((mid + [0.0, -0.5, 0.0], mid + [0.0, 0.5, 0.0], 0.02, 'rope'))
+    obs.freeze()
+    q = p.copy()
+    obs.push_out(q, set(), 1.75)
+    assert obs.penetration(q, 1.75) > 0.03
+    obs.clear_segments(q, set(), 1.75)
+    assert obs.penetration(q, 1.75) < 1e-3

@@ -45,9 +45,10 @@ _SEG_R = np.array([SEGMENT_RADIUS_FRACTION[JOINT_NAMES[c]] for c in SEGMENT_CHIL
 # the arms from the shoulder joint on)
 _BODY_SEGS = [(a, b) for a, b in zip(SEGMENT_PARENTS, SEGMENT_CHILDREN)
               if b not in subtree(ELBOW_LEFT) + subtree(ELBOW_RIGHT)]
-# the arms' segments from the shoulder joint on (parent, child)
-_ARM_SEGS = [(a, b) for a, b in zip(SEGMENT_PARENTS, SEGMENT_CHILDREN)
-             if b in subtree(ELBOW_LEFT) + subtree(ELBOW_RIGHT)]
+# the limbs' segments from the shoulder and hip joints on (parent, child)
+_LIMB_SEGS = [(a, b) for a, b in zip(SEGMENT_PARENTS, SEGMENT_CHILDREN)
+              if b in subtree(ELBOW_LEFT) + subtree(ELBOW_RIGHT) + subtree(KNEE_LEFT)
+              + subtree(KNEE_RIGHT)]
 # radius (fraction of height) of the thickest segment capsule meeting at each joint
 _JOINT_R = np.zeros(NUM_JOINTS)
 for _k, (_a, _b) in enumerate(zip(SEGMENT_PARENTS, SEGMENT_CHILDREN)):
@@ -339,9 +340,9 @@ class Obstacles:
                     rc[k] + r_joint[j])
 
     def clear_segments(self, p: np.ndarray, skip, height: float, iters: int = 4) -> None:
-        """Move the arms' segment capsules (not only their joints) out of the capsule obstacles,
-        in place: a forearm or a free hand crossing the rope between two joints that are both
-        outside it. Per segment whose child joint is free (not in ``skip``), its deepest sample
+        """Move the limbs' segment capsules (not only their joints) out of the capsule obstacles,
+        in place: a forearm, a free hand or a thigh crossing the rope between two joints that are
+        both outside it. Per segment whose child joint is free (not in ``skip``), its deepest sample
         is moved out along the normal from the obstacle's axis, by moving the child joint and its
         free descendants (a sample at fraction t of the segment needs the child moved depth / t).
         """
@@ -351,7 +352,7 @@ class Obstacles:
         ts = np.linspace(0.0, 1.0, 9)
         for _ in range(iters):
             moved = False
-            for i, j in _ARM_SEGS:
+            for i, j in _LIMB_SEGS:
                 if j in skip:
                     continue
                 pts = p[i] + ts[:, None] * (p[j] - p[i])
