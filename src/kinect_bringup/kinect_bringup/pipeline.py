@@ -124,6 +124,9 @@ def main(argv=None) -> int:
     # Ctrl-C raises KeyboardInterrupt here; the executor is stopped and waited for before the
     # nodes are destroyed (rclpy's own handler would shut the context down under running callbacks).
     rclpy.init(args=None, signal_handler_options=SignalHandlerOptions.NO)
+    # a process started in the background by a shell inherits SIGINT ignored: Ctrl-C, the
+    # --duration timer and a supervisor's SIGINT must still stop the graph cleanly
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     nodes = []
     try:
         over = node_overrides(args)
