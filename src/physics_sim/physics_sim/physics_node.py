@@ -33,13 +33,13 @@ from typing import Dict, List, Optional
 import numpy as np
 from geometry_msgs.msg import WrenchStamped
 from rclpy.node import Node
-from skeleton_core.cdr import CdrError, frames_from_cdr, frames_to_cdr
+from skeleton_core.cdr import frames_to_cdr
 from skeleton_core.conversions import SkeletonFormatError, SkeletonFrame, ns_to_stamp
 from skeleton_core.health import Health
 from skeleton_core.model import NUM_JOINTS, TRACKED
 from skeleton_core.params import ParamSpec, assign, build, param, specs
 from skeleton_core.presence import Presence
-from skeleton_core.rosnode import DiagnosticsPublisher, Parameters, run_node
+from skeleton_core.rosnode import DiagnosticsPublisher, InputDrops, Parameters, run_node
 from skeleton_msgs.msg import SkeletonArray
 from skeleton_msgs.srv import ApplyPush
 from visualization_msgs.msg import Marker, MarkerArray
@@ -140,6 +140,7 @@ class PhysicsNode(Node):
     def __init__(self, **kwargs):
         super().__init__('physics', **kwargs)
         self.health = Health()
+        self._drop = InputDrops(self.health, self.get_logger())
         self.params = Parameters(self, PARAMS, on_change=self._on_params)
         v = self.params.values
         try:
@@ -198,21 +199,12 @@ class PhysicsNode(Node):
         return out
 
     # ------------------------------------------------------------------ input
-    def _drop(self, cause: str, detail: str) -> None:
-        if self.health.on_drop(cause):
-            self.get_logger().warning(f'dropping input ({cause}): {detail} (logged once per cause)')
-
     def _on_input(self, data: bytes) -> None:
         self.health.on_receive()
-        errors: list = []
-        try:
-            header_stamp, header_frame, frames = frames_from_cdr(data, errors)
-        except CdrError as e:
-            self._drop('malformed message', str(e))
+        decoded = self._drop.decode(data)
+        if decoded is None:
             return
-        for e in errors:
-            cause = getattr(e, 'cause', 'malformed')
-            self._drop(cause, str(e))
+        header_stamp, header_frame, frames = decoded
         now = time.monotonic()
         if header_frame:
             self.frame_id = header_frame
