@@ -93,6 +93,14 @@ def _nodes(context):
         opt_over['user_profile'] = arg('user_profile')
     if method in ('B', 'C'):
         opt_over['method'] = method
+    # a replay holds its first frame until every node reading /kinect/skeletons is there
+    from kinect_bringup.graph import skeleton_subscribers
+    readers = ['reconstruction' if arg('reconstruction') == 'fused' else 'reliability']
+    if arg('viz').lower() in ('true', '1', 'yes'):
+        readers.append('viz')
+    if arg('record'):
+        readers.append('recorder')
+    driver_over['wait_for_subscribers'] = skeleton_subscribers(readers, config_dir)
     nodes = [Node(package='kinect_driver', executable='driver', name='driver',
                   parameters=params('driver', **driver_over), **common)]
     mode = arg('reconstruction')

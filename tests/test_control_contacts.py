@@ -115,3 +115,64 @@ def test_world_files_are_validated_with_clear_errors():
                                         'engage': {'effectors': ['Nose']}}}}, 'w.yaml')
     with pytest.raises(FileNotFoundError, match='available'):
         load_world('no_such_world')
+
+
+def test_a_rope_crossing_a_free_forearm_is_cleared_and_a_held_hand_stays():
+    """Eq. 12's p_pen <= p for segment capsules: a rope segment through the middle of a forearm
+    (both joints outside it, so pushing joints out does nothing) is cleared by moving the wrist
+    and hand; a held hand (skip) does not move."""
+    from performance_control.composition import Obstacles
+    from performance_control.examples import imitation
+    from skeleton_core.model import ELBOW_LEFT, HAND_RIGHT, WRIST_LEFT, standard_body
+    p = imitation('rope_climb', {'period': 1.4}, standard_body(1.75), 1)[0]
+    mid = 0.5 * (p[ELBOW_LEFT] + p[WRIST_LEFT])
+    obs = Obstacles()
+    obs.capsules.append((mid + [0.0, 0.0, -0.5], mid + [0.0, 0.0, 0.5], 0.02, 'rope'))
+    obs.freeze()
+    before = obs.penetration(p, 1.75)
+    assert before > 0.03
+    q = p.copy()
+    obs.push_out(q, set(), 1.75)
+    assert obs.penetration(q, 1.75) > 0.03       # pushing the joints out is not enough
+    skip = {HAND_RIGHT}                                          # the right hand is held
+    obs.clear_segments(q, skip, 1.75)
+    assert obs.penetration(q, 1.75) < 1e-3
+    assert q[HAND_RIGHT] == pytest.approx(p[HAND_RIGHT])
+    assert np.linalg.norm(q[WRIST_LEFT] - p[WRIST_LEFT]) < 0.2      # a local correction
+
+
+def test_climbing_hand_over_hand_regrabs_the_swinging_rope():
+    """The free hand at the top of its reach grabs the rope within regrab_reach: the character
+    never lets go of the rope with both hands while the user climbs, and grabs again and again."""
+    from performance_control.controller import ControlParams, PerformanceController
+    from performance_control.performances import SENSOR_HEIGHT, imitation_stream, to_sensor
+    f = WORLD.features['rope']
+    rng = np.random.default_rng(31)
+    p, _ = imitation_stream(f, rng, pattern=((-1.0, 9.0),), total=4.0, fade=0.2)
+    s = to_sensor(p, 'climb', 31, noise=False)
+    ctl = PerformanceController(WORLD, ControlParams(sensor_height=SENSOR_HEIGHT), start='rope')
+    held = []
+    for i in range(len(s)):
+        o = ctl.step(s[i], i / 30.0)
+        held.append(sum(e.startswith('Hand') for e in o.contacts))
+    held = np.array(held)
+    assert np.all(held >= 1)
+    regrabs = np.sum((held[1:] == 2) & (held[:-1] == 1))
+    assert regrabs >= 3, held
+
+
+def test_a_rope_crossing_a_thigh_is_cleared():
+    """The same for a leg: a rope through the middle of a free thigh (a body falling past it)."""
+    from performance_control.composition import Obstacles
+    from performance_control.examples import imitation
+    from skeleton_core.model import HIP_RIGHT, KNEE_RIGHT, standard_body
+    p = imitation('rope_climb', {'period': 1.4}, standard_body(1.75), 1)[0]
+    mid = 0.5 * (p[HIP_RIGHT] + p[KNEE_RIGHT])
+    obs = Obstacles()
+    obs.capsules.append((mid + [0.0, -0.5, 0.0], mid + [0.0, 0.5, 0.0], 0.02, 'rope'))
+    obs.freeze()
+    q = p.copy()
+    obs.push_out(q, set(), 1.75)
+    assert obs.penetration(q, 1.75) > 0.03
+    obs.clear_segments(q, set(), 1.75)
+    assert obs.penetration(q, 1.75) < 1e-3

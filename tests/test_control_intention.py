@@ -75,14 +75,40 @@ def test_scripted_imitation_is_recognised_and_only_as_its_feature(feature):
     assert others.mean() < 0.05
 
 
-def test_scripted_walk_kick_and_standing_are_not_imitations():
-    """(Punches are not here: the breaststroke recognizer takes a share of their frames for
-    strokes -- a known confusion, measured by bench_control and documented in docs/control.md.)"""
+def test_change_share_subspace_of_a_two_handed_stroke_rejects_one_hand():
+    """The breaststroke moves both hands mirror-symmetrically, so every direction its positions
+    move in is symmetric: a one-handed change has at least half of its energy outside (share >=
+    0.5) while the example's own changes lie inside."""
+    prm = RecognizerParams()
+    m = build_models(WORLD, prm)['water']
+    a = m.A_pos                                   # (6, k): [left xyz, right xyz]
+    mirror = np.array([1.0, -1.0, 1.0])
+    assert a[3:] == pytest.approx(a[:3] * mirror[:, None], abs=1e-6)   # symmetric directions
+    rng = np.random.default_rng(2)
+    for _ in range(20):
+        d = np.concatenate([rng.normal(size=3), np.zeros(3)])
+        assert reconstruction_error(d, a) / (d @ d) >= 0.5 - 1e-9
+    npos = a.shape[0]
+    own = m.w[4:, :npos] - m.w[:-4, :npos]
+    share = reconstruction_error(own, a).sum() / np.sum(own * own)
+    assert share < 0.01
+
+
+def test_example_change_share_gate_is_validated():
+    from performance_control.features import WorldError, parse_world
+    doc = {'features': {'w': {'geometry': [{'type': 'volume', 'center': [0, 0, 1],
+                                            'half': [1, 1, 1]}],
+                              'example': {'generator': 'breaststroke', 'max_change_share': 1.5}}}}
+    with pytest.raises(WorldError, match="feature 'w'.*max_change_share"):
+        parse_world(doc)
+
+
+def test_scripted_walk_boxing_and_standing_are_not_imitations():
+    """Punches included: the breaststroke recognizer's change-share gate rejects one-handed
+    changes its two-handed example never makes."""
     prm = RecognizerParams()
     models = build_models(WORLD, prm)
     for name, clip in non_imitation_clips(4242):
-        if name == 'punch':
-            continue
         rows = _run(models, clip, prm)
         bad = np.mean([any(x.imitating for x in r.values()) for r in rows])
         assert bad <= 0.02, (name, bad)

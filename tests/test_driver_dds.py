@@ -234,3 +234,61 @@ def test_live_retry_keeps_running_without_sensor():
     out = _stop(proc)
     assert alive, out
     assert 'no device' in out and 'retrying every 0.5 s' in out and 'Traceback' not in out
+
+
+def _array(stamp, users):
+    body = standard_body().rest_positions()
+    frames = [SkeletonFrame(positions=body + [2.5, 0.8 * u, -0.8], user_id=u, stamp_ns=stamp,
+                            tracking_state=np.full(20, 2, np.uint8), frame_id='kinect_link')
+              for u in users]
+    return frames_to_array_msg(frames, stamp, 'kinect_link')
+
+
+def test_replay_waits_for_its_subscribers_and_plays_the_other_topics(tmp_path, dds):
+    """wait_for_subscribers=2: nothing is published while one subscriber is there; once the
+    second comes, every recorded frame arrives, and so does the bag's ground truth (another
+    topic), while a topic the graph produces itself (/posture/reconstructed) is not replayed."""
+    from std_msgs.msg import String
+    bag = tmp_path / 'gt.mcap'
+    n = 45
+    with BagWriter(bag) as w:
+        for k in range(n):
+            stamp = 5_000_000_000 + k * 33_333_333
+            w.write('/kinect/skeletons', _array(stamp, (1,)), stamp)
+            w.write('/kinect/ground_truth', _array(stamp, (1,)), stamp)
+            w.write('/posture/reconstructed', _array(stamp, (1,)), stamp)
+            if k % 10 == 0:
+                w.write('/notes', String(data=f'note {k}'), stamp)
+    proc = _start('source:=replay', f'replay_file:={bag}', 'wait_for_subscribers:=2',
+                  'wait_timeout_s:=60.0')
+    node = rclpy.create_node('replay_probe', context=dds)
+    got = {'/kinect/skeletons': [], '/kinect/ground_truth': [], '/posture/reconstructed': [],
+           '/notes': []}
+    for topic in got:
+        cls = String if topic == '/notes' else SkeletonArray
+        node.create_subscription(cls, topic, got[topic].append, 200)
+    ex = SingleThreadedExecutor(context=dds)
+    ex.add_node(node)
+    second = None
+    try:
+        end = time.monotonic() + 3.0          # one subscriber (this probe): the replay waits
+        while time.monotonic() < end:
+            ex.spin_once(timeout_sec=0.05)
+        assert not got['/kinect/skeletons'], 'played before its subscribers were there'
+        second = rclpy.create_node('replay_probe2', context=dds)
+        second.create_subscription(SkeletonArray, '/kinect/skeletons', lambda m: None, 10)
+        ex.add_node(second)
+        deadline = time.monotonic() + 30
+        while len(got['/kinect/skeletons']) < n and time.monotonic() < deadline:
+            ex.spin_once(timeout_sec=0.05)
+        end = time.monotonic() + 0.5
+        while time.monotonic() < end:
+            ex.spin_once(timeout_sec=0.05)
+    finally:
+        ex.shutdown()
+        out = _stop(proc)
+    assert len(got['/kinect/skeletons']) == n, out
+    assert len(got['/kinect/ground_truth']) == n, out
+    assert [m.data for m in got['/notes']] == [f'note {k}' for k in range(0, n, 10)]
+    assert not got['/posture/reconstructed']
+    assert 'waiting for 2 subscriber(s)' in out and 'also replaying' in out

@@ -78,7 +78,8 @@ def test_yaml_parameters_are_set_on_the_running_nodes(probe):
         expected = load_params(node)
         assert expected, f'config/{node}.yaml has no parameters'
         got = probe.get_parameters(f'/{node}', list(expected))
-        overridden = {'driver': {'num_users', 'scenario', 'source', 'seed', 'replay_file'},
+        overridden = {'driver': {'num_users', 'scenario', 'source', 'seed', 'replay_file',
+                                 'wait_for_subscribers'},
                       'reconstruction': {'optimizer.method'},
                       'physics': {'input_topic'}}.get(node, set())
         for k, v in expected.items():

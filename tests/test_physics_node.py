@@ -152,6 +152,40 @@ def test_user_leaving_removes_the_character_and_bad_input_is_dropped(graph):
     assert sum(node.health.dropped.values()) >= 1
 
 
+def test_characters_leave_when_the_input_stops_altogether(graph):
+    """No message arrives any more (driver killed, a gap in a bag): the input's clock runs on with
+    the wall clock, the users age out after user_timeout_s and the node stops publishing them."""
+    node, peer = graph
+    got = []
+    peer.create_subscription(SkeletonArray, '/character/skeletons', got.append, 100)
+    pub = peer.create_publisher(SkeletonArray, '/test_physics/in', 10)
+    assert node.set_parameters([Parameter('user_timeout_s', value=0.3)])[0].successful
+    deadline = time.time() + 10
+    while pub.get_subscription_count() == 0 and time.time() < deadline:
+        time.sleep(0.05)
+    for i, p in enumerate(clip(10)):
+        pub.publish(_msg(p, 11_000_000_000 + i * 33_333_333, uid=3))
+        time.sleep(1 / 30)
+    assert _wait(lambda: 3 in node.sim.characters, 10)
+    # the last target again, and an older one: dropped where they arrive, counted
+    # (input_depth 1 may skip stale messages: one at a time, each waited for)
+    time.sleep(0.2)
+    last = node._user_stamp[3]
+    pub.publish(_msg(clip(10)[-1], last, uid=3))
+    assert _wait(lambda: node.health.dropped.get('duplicate stamp') == 1, 5), node.health.dropped
+    pub.publish(_msg(clip(10)[0], last - 100_000_000, uid=3))
+    assert _wait(lambda: node.health.dropped.get('out-of-order stamp') == 1, 5), \
+        node.health.dropped
+    stopped = time.monotonic()
+    assert _wait(lambda: not node.sim.characters, 5), 'the character outlived its input'
+    gone_after = time.monotonic() - stopped
+    assert 0.2 <= gone_after < 2.0, gone_after
+    assert _wait(lambda: got and len(got[-1].skeletons) == 0, 5)   # one empty array: it left
+    n = len(got)
+    time.sleep(0.3)
+    assert len(got) == n, 'still publishing after every user left'
+
+
 class _Clock:
     def __init__(self):
         self.t = 1000.0
@@ -203,7 +237,7 @@ def test_ticks_follow_the_input_but_keep_the_output_rate(graph, monkeypatch):
     del ticks[:]
     for i in range(10):     # frames 30 Hz apart by their stamps delivered in pairs (a delay):
         clock.t += period * (2 if i % 2 == 0 else 0.05)      # each ticks, at once
-        send(200 + i)
+        send(61 + i)   # stamps go on from the 60 Hz ones (seconds ahead = a user gone that long)
         assert ticks[-1] == clock.t
     assert len(ticks) == 10
 

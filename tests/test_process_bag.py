@@ -52,3 +52,94 @@ def test_process_bag_reconstructs_scores_and_skips_a_corrupt_message(tmp_path):
     acc = summary['accuracy']
     assert acc['C']['frames'] == n - 1
     assert acc['C']['eq18_cm'] < acc['raw']['eq18_cm']
+
+
+def _users_bag(path, schedule, seconds=1.0, seed=5):
+    """A bag of users coming and going: ``schedule`` = [(first frame, user ids)] — from that frame
+    on, those users are in view (empty arrays when nobody is, as a live Kinect publishes)."""
+    clip = SensorModel(seed=seed).corrupt(toy_clip(seconds=seconds), 'a', seed=seed)
+    n = len(clip)
+    end = max(start for start, _ in schedule) + n
+    t0 = 1_700_000_000_000_000_000
+    with BagWriter(path) as bag:
+        for i in range(end):
+            stamp = t0 + i * 33_333_333
+            frames = []
+            for start, uids in schedule:
+                k = i - start
+                if not 0 <= k < n:
+                    continue
+                for j, uid in enumerate(uids):
+                    p = clip.positions[k].copy()
+                    p[:, 1] += 0.8 * (j - (len(uids) - 1) / 2)   # side by side
+                    frames.append(SkeletonFrame(positions=p, tracking_state=clip.tracking_state[k],
+                                                user_id=uid, stamp_ns=stamp,
+                                                frame_id='kinect_link'))
+            bag.write_raw('/kinect/skeletons', frames_to_cdr(frames, stamp, 'kinect_link'), stamp,
+                          SKELETON_ARRAY)
+    return n
+
+
+def _character_users(path):
+    from skeleton_core.cdr import frames_from_cdr
+    per_user = {}
+    for m in read_messages(str(path), topics=['/character/skeletons'], decode=False):
+        for f in frames_from_cdr(m.data)[2]:
+            per_user[f.user_id] = per_user.get(f.user_id, 0) + 1
+    return per_user
+
+
+def test_users_in_sequence_each_get_a_character_offline(tmp_path):
+    """20 users one after another (each 1 s in view, 2.5 s gaps: longer than the 2 s user
+    timeout in the bag's time): 20 characters, a character on >= 99 % of user frames."""
+    schedule = [(k * 105, (10 + k,)) for k in range(20)]
+    n = _users_bag(tmp_path / 'seq.mcap', schedule)
+    warned = []
+    s = process(tmp_path / 'seq.mcap', tmp_path / 'out.mcap', 'A', physics=True, progress=False,
+                warn=warned.append)
+    assert s['users'] == 20 and s['user_arrivals'] == 20 and s['user_frames'] == 20 * n
+    assert s['characters'] == 20 and s['refused'] == {} and not warned
+    assert s['character_frame_share'] >= 0.99, s
+    per_user = _character_users(tmp_path / 'out.mcap')
+    assert sorted(per_user) == list(range(10, 30))
+    # a character leaves with its user: none outlives the user by more than the timeout
+    assert max(per_user.values()) <= n
+
+
+def test_seven_users_at_once_give_six_characters_and_counted_refusals(tmp_path):
+    n = _users_bag(tmp_path / 'seven.mcap', [(0, (1, 2, 3, 4, 5, 6, 7))])
+    warned = []
+    s = process(tmp_path / 'seven.mcap', tmp_path / 'out.mcap', 'A', physics=True,
+                progress=False, warn=warned.append)
+    assert s['users'] == 7 and s['characters'] == 6
+    (reason, refused), = s['refused'].items()
+    assert reason == 'too many users (max_characters 6)'
+    assert refused == {'frames': n, 'users': [7]}
+    assert len(warned) == 1 and 'max_characters 6' in warned[0]   # warned once, not per frame
+    assert sorted(_character_users(tmp_path / 'out.mcap')) == [1, 2, 3, 4, 5, 6]
+
+
+def test_a_user_who_returns_after_the_timeout_is_a_new_arrival(tmp_path):
+    # user 3 leaves for 1 s (< 2 s timeout: the same visit), then for 3 s (a new arrival)
+    _users_bag(tmp_path / 'back.mcap', [(0, (3,)), (60, (3,)), (180, (3,))], seconds=1.0)
+    s = process(tmp_path / 'back.mcap', tmp_path / 'out.mcap', 'A', physics=True, progress=False,
+                warn=lambda t: None)
+    assert s['users'] == 1 and s['user_arrivals'] == 2 and s['characters'] == 1
+
+
+def test_duplicate_and_out_of_order_stamps_are_skipped_where_they_arrive(tmp_path):
+    n = _bag(tmp_path / 'in.mcap', frames=30, corrupt_at=-1)
+    from skeleton_core.cdr import frames_from_cdr
+    msgs = [m for m in read_messages(str(tmp_path / 'in.mcap'), topics=['/kinect/skeletons'],
+                                     decode=False)]
+    with BagWriter(tmp_path / 'dup.mcap') as bag:
+        for k, m in enumerate(msgs):
+            bag.write_raw(m.topic, m.data, m.stamp_ns, SKELETON_ARRAY)
+            if k == 10:
+                bag.write_raw(m.topic, m.data, m.stamp_ns + 1, SKELETON_ARRAY)       # repeated
+            if k == 20:
+                bag.write_raw(m.topic, msgs[15].data, m.stamp_ns + 1, SKELETON_ARRAY)  # late
+    s = process(tmp_path / 'dup.mcap', tmp_path / 'out.mcap', 'C', progress=False)
+    assert s['skipped_messages'] == {'duplicate stamp': 1, 'out-of-order stamp': 1}
+    assert bag_topics(str(tmp_path / 'out.mcap'))['/posture/reconstructed'][1] == n
+    assert frames_from_cdr(msgs[0].data)[2][0].user_id == 1

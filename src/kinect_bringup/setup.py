@@ -28,6 +28,7 @@ setup(
             'soak = kinect_bringup.soak:main',
             'evaluate = kinect_bringup.evaluate:main',
             'recorder = kinect_bringup.recorder:main',
+            'recover_bag = kinect_bringup.recover_bag:main',
             'passthrough = kinect_bringup.passthrough:main',
             'param_docs = kinect_bringup.param_docs:main',
             'process_bag = kinect_bringup.process_bag:main',

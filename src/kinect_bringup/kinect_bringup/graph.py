@@ -113,6 +113,23 @@ def node_class(name: str):
     return found[0]
 
 
+def skeleton_subscribers(names: List[str], directory: Optional[Path] = None,
+                         recorded_topics: Optional[List[str]] = None) -> int:
+    """How many of the graph's nodes ``names`` subscribe to /kinect/skeletons: the driver's replay
+    waits for that many before its first frame (nothing lost while the graph comes up)."""
+    n = 0
+    for name in names:
+        if name in ('reconstruction', 'reliability'):
+            n += 1
+        elif name == 'viz':
+            n += bool(load_params('viz', directory).get('show_raw', True))
+        elif name == 'recorder':
+            topics = recorded_topics if recorded_topics is not None else \
+                load_params('recorder', directory).get('topics', list(TOPICS))
+            n += '/kinect/skeletons' in topics
+    return n
+
+
 RECONSTRUCTION = {'fused': ['reconstruction'],
                   'split': ['reliability', 'completion', 'optimizer']}
 

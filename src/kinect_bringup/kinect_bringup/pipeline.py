@@ -14,7 +14,8 @@ import threading
 from pathlib import Path
 from typing import Dict, List, Optional
 
-from .graph import RECONSTRUCTION, config_dir, graph_nodes, load_params, node_class, params_file
+from .graph import (RECONSTRUCTION, config_dir, graph_nodes, load_params, node_class, params_file,
+                    skeleton_subscribers)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -123,9 +124,15 @@ def main(argv=None) -> int:
     # Ctrl-C raises KeyboardInterrupt here; the executor is stopped and waited for before the
     # nodes are destroyed (rclpy's own handler would shut the context down under running callbacks).
     rclpy.init(args=None, signal_handler_options=SignalHandlerOptions.NO)
+    # a process started in the background by a shell inherits SIGINT ignored: Ctrl-C, the
+    # --duration timer and a supervisor's SIGINT must still stop the graph cleanly
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     nodes = []
     try:
-        nodes = create_nodes(names, node_overrides(args), directory)
+        over = node_overrides(args)
+        # a replay holds its first frame until every node reading /kinect/skeletons is there
+        over['driver'].setdefault('wait_for_subscribers', skeleton_subscribers(names, directory))
+        nodes = create_nodes(names, over, directory)
         executor = make_executor(args.executor, args.threads)
     except (ValueError, FileNotFoundError, RuntimeError, OSError, ImportError) as e:
         print(f'[pipeline] ERROR: {e}', file=sys.stderr)

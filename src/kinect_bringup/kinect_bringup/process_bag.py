@@ -38,14 +38,30 @@ def _progress(total: int, enabled: bool):
 
 
 def process(bag: Path, out: Path, method: str = 'C', database: str = '', physics: bool = False,
-            input_topic: str = '/kinect/skeletons', user_timeout_frames: int = 30,
-            progress: bool = True, params: Optional[Dict] = None) -> Dict:
-    """Process ``bag`` into ``out``; returns a summary (frames, wall time, accuracy)."""
+            input_topic: str = '/kinect/skeletons', user_timeout_s: float = 2.0,
+            time_jump_reset_s: float = 1.0, progress: bool = True,
+            params: Optional[Dict] = None, warn=None) -> Dict:
+    """Process ``bag`` into ``out``; returns a summary (frames, wall time, users, refusals,
+    accuracy).
+
+    Users come and go as they do live, in the bag's time (the messages' header stamps, the log
+    time when unstamped): a user unseen for ``user_timeout_s`` (the reconstruction node's
+    ``user_timeout_s``) leaves, and its reconstruction state and character go with it; a later
+    sighting is a new arrival. A message whose stamp repeats the previous one or goes back less
+    than ``time_jump_reset_s`` is skipped like the live node does (counted in
+    ``skipped_messages``); a bigger step back (a concatenated or looped recording) restarts every
+    user. Frames the physics world refuses (a 7th simultaneous user, an invalid target) are
+    counted per reason in ``refused`` and warned once per reason (``warn(text)``, default
+    stderr)."""
     from skeleton_core.bagio import BagWriter, bag_topics, read_messages
     from skeleton_core.cdr import SKELETON_ARRAY, CdrError, frames_from_cdr, frames_to_cdr
+    from skeleton_core.presence import Presence
     from pose_reconstruction.node_common import load_database
     from pose_reconstruction.reconstructor import Reconstructor
 
+    if warn is None:
+        def warn(text):
+            print(f'process_bag: warning: {text}', file=sys.stderr, flush=True)
     topics = bag_topics(str(bag))
     if input_topic not in topics:
         raise ValueError(f'{bag}: no {input_topic} in the bag (topics: {sorted(topics)})')
@@ -53,7 +69,7 @@ def process(bag: Path, out: Path, method: str = 'C', database: str = '', physics
     db = load_database(database)
     out_topic = '/posture/completed' if method == 'A' else '/posture/reconstructed'
     users: Dict[int, object] = {}
-    last_seen: Dict[int, int] = {}
+    presence = Presence(user_timeout_s)
     sim = None
     if physics:
         from physics_sim.methods import PhysicsMethod
@@ -63,10 +79,24 @@ def process(bag: Path, out: Path, method: str = 'C', database: str = '', physics
     rec: Dict[tuple, np.ndarray] = {}
     char: Dict[tuple, np.ndarray] = {}
     errors: List = []
+    skipped: Dict[str, int] = {}
+    warned: set = set()
+    seen_users: set = set()
+    char_users: set = set()
+    user_frames = 0
+    char_frames = 0
+    arrivals = 0
     bar = _progress(n_in, progress)
     t0, c0 = time.perf_counter(), time.process_time()
     frame_no = 0
     corrupt = 0
+    last_stamp: Optional[int] = None
+
+    def leave(uid: int) -> None:
+        users.pop(uid, None)
+        if sim is not None:
+            sim.remove(uid)
+
     out.parent.mkdir(parents=True, exist_ok=True)
     with BagWriter(str(out)) as writer:
         # SkeletonArray bytes are decoded and encoded by skeleton_core.cdr (numpy), not through
@@ -91,24 +121,46 @@ def process(bag: Path, out: Path, method: str = 'C', database: str = '', physics
             except CdrError:   # a corrupt message: skipped and counted, the rest goes on
                 corrupt += 1
                 continue
+            t = stamp or m.stamp_ns
+            if last_stamp is not None and t <= last_stamp:
+                back = (last_stamp - t) * 1e-9
+                cause = ('duplicate stamp' if t == last_stamp else 'out-of-order stamp'
+                         if back <= time_jump_reset_s else None)
+                if cause is not None:   # as the live node: dropped where it arrives
+                    skipped[cause] = skipped.get(cause, 0) + 1
+                    continue
+                for uid in list(users) + (list(sim.sim.characters) if sim else []):
+                    leave(uid)   # time jumped back: every user starts again
+                presence.clear()
+            last_stamp = t
+            presence.observe(t, ())            # the bag's clock moves on: who has left?
+            for uid in presence.expired():
+                leave(uid)
+            presence.observe(t, [f.user_id for f in frames])
             outs = []
             for f in frames:
                 r = users.get(f.user_id)
                 if r is None:
                     r = users[f.user_id] = Reconstructor(db, method=method, **(params or {}))
-                last_seen[f.user_id] = frame_no
+                    arrivals += 1
+                seen_users.add(f.user_id)
                 raw[(f.user_id, f.stamp_ns)] = f.positions
                 o = r.process(f)
                 rec[(f.user_id, f.stamp_ns)] = o.positions
                 outs.append(o)
-            for uid in [u for u, k in last_seen.items() if frame_no - k > user_timeout_frames]:
-                users.pop(uid, None)
-                last_seen.pop(uid, None)
+            user_frames += len(outs)
             writer.write_raw(out_topic, frames_to_cdr(outs, stamp, frame_id), m.stamp_ns, SKELETONS)
             if sim is not None:
-                sims = [s for s in (sim.process(o) for o in outs) if s is not None]
-                for s in sims:
-                    char[(s.user_id, s.stamp_ns)] = s.positions
+                sims = sim.process_frames(outs, t)
+                for reason, uids in sim.refused_users.items():
+                    if reason not in warned:
+                        warned.add(reason)
+                        warn(f'user {min(uids)} refused a character: {reason} (warned once per '
+                             f'reason; every refusal is counted in the summary)')
+                for s_ in sims:
+                    char[(s_.user_id, s_.stamp_ns)] = s_.positions
+                    char_users.add(s_.user_id)
+                char_frames += len(sims)
                 writer.write_raw('/character/skeletons', frames_to_cdr(sims, stamp, frame_id),
                                  m.stamp_ns, SKELETONS)
     bar.close()
@@ -118,7 +170,16 @@ def process(bag: Path, out: Path, method: str = 'C', database: str = '', physics
                'wall_s': wall, 'recorded_s': frame_no / 30.0,
                'x_real_time': (frame_no / 30.0) / wall if wall > 0 else float('nan'),
                'cpu_s': cpu, 'x_real_time_cpu': (frame_no / 30.0) / cpu if cpu > 0 else float('nan'),
-               'dropped_skeletons': len(errors), 'corrupt_messages': corrupt, 'physics': physics}
+               'dropped_skeletons': len(errors), 'corrupt_messages': corrupt,
+               'skipped_messages': skipped, 'physics': physics,
+               'users': len(seen_users), 'user_arrivals': arrivals, 'user_frames': user_frames,
+               'user_timeout_s': user_timeout_s}
+    if sim is not None:
+        summary.update({
+            'characters': len(char_users), 'character_frames': char_frames,
+            'character_frame_share': char_frames / user_frames if user_frames else float('nan'),
+            'refused': {reason: {'frames': int(n), 'users': sorted(sim.refused_users[reason])}
+                        for reason, n in sorted(sim.refused.items())}})
     if truth:
         summary['accuracy'] = accuracy(truth, {'raw': raw, method: rec, **({'physics': char} if char else {})})
     return summary
@@ -148,6 +209,9 @@ def main(argv=None) -> int:
     p.add_argument('--database', default='', help='database file ("" = default)')
     p.add_argument('--physics', action='store_true', help='also run the physics character')
     p.add_argument('--topic', default='/kinect/skeletons')
+    p.add_argument('--user-timeout', type=float, default=2.0,
+                   help='a user unseen this long in the bag\'s time leaves, with its character '
+                        '(s; default 2.0 = the reconstruction node\'s user_timeout_s)')
     p.add_argument('--report', default=None, help='write the summary JSON here')
     p.add_argument('--no-progress', action='store_true')
     args = p.parse_args(argv)
@@ -155,7 +219,7 @@ def main(argv=None) -> int:
     out = Path(args.out) if args.out else bag.with_name(bag.stem + '_processed.mcap')
     try:
         summary = process(bag, out, args.method, args.database, args.physics, args.topic,
-                          progress=not args.no_progress)
+                          user_timeout_s=args.user_timeout, progress=not args.no_progress)
     except (ValueError, FileNotFoundError, OSError, RuntimeError) as e:
         print(f'process_bag: error: {e}', file=sys.stderr)
         return 1
@@ -164,6 +228,13 @@ def main(argv=None) -> int:
     print(f"process_bag: {summary['frames']} frames in {summary['wall_s']:.2f} s = "
           f"{summary['x_real_time']:.1f}x real time (method {args.method}"
           f"{', physics' if args.physics else ''}) -> {out}")
+    if args.physics:
+        refused = ', '.join(f"{r}: {v['frames']} frames of users {v['users']}"
+                            for r, v in summary['refused'].items()) or 'none'
+        print(f"  users: {summary['users']} ({summary['user_arrivals']} arrivals), characters: "
+              f"{summary['characters']}, frames with a character: "
+              f"{summary['character_frame_share']:.1%} of {summary['user_frames']}; refused: "
+              f"{refused}")
     for name, acc in summary.get('accuracy', {}).items():
         print(f"  {name:>8}: MPJPE {acc['mpjpe_cm']:.2f} cm, Eq.18 {acc['eq18_cm']:.2f} cm "
               f"over {acc['frames']} frames")

@@ -20,9 +20,10 @@ Rows of the table (``VARIANTS``):
 * ``C+profile``, ``C+corr+profile`` — with the user's profile (segment lengths), for each clip
   measured on the same subject's *other* clips (never the clip scored; tracking-failure clips
   not used), after the correction for the ``+corr`` row;
-* ``C+corr+labdb`` — ``C+corr`` with a motion database of the default (CMU) postures plus the
-  training subjects' marker-derived postures (every ``LAB_DB_STEP``-th frame, normalised and
-  retargeted to the standard body like the database): a lab that records its exercises once.
+* ``C+labdb``, ``C+corr+labdb`` — ``C`` / ``C+corr`` with the motion database of the default
+  (CMU) clips plus the training subjects' Vicon postures, imported through the Plug-in-Gait joint
+  map and filtered like the database (:func:`lab_database`, built once per fold into ``cache/``):
+  a lab that records its exercises once.
 
 Rows per movement, ``overall`` (all movements with a reference, m03_s01 excluded) and
 ``m03_s01`` apart (the real tracking failure). Per-clip results are cached in
@@ -40,10 +41,9 @@ from typing import Dict, List, Optional, Sequence
 import numpy as np
 
 VARIANTS = ('raw', 'holt', 'one_euro', 'C', 'raw+corr', 'C+corr', 'C+corr@reliable',
-            'C+profile', 'C+corr+profile', 'C+corr+labdb')
+            'C+profile', 'C+corr+profile', 'C+labdb', 'C+corr+labdb')
 DEFAULT_VARIANTS = ('raw', 'holt', 'one_euro', 'C', 'raw+corr', 'C+corr', 'C+corr+profile')
 TRACKER = 'kinect_v2_sdk'
-LAB_DB_STEP = 3
 
 
 def _subject(name: str) -> int:
@@ -114,17 +114,13 @@ def training_clips(clips, held_out: int) -> list:
     return [c for c in clips if c.clip.subject != held_out and c.reference is not None]
 
 
-def lab_database(db, clips, step: int = LAB_DB_STEP):
-    """The motion database ``db`` plus the reference postures of ``clips`` (every ``step``-th
-    complete frame), normalised and retargeted to the database's body; no orientations."""
-    from pose_reconstruction.posture_space import as_database_arrays
-    from skeleton_core.geometry import normalize, retarget
-    base = as_database_arrays(db)
-    refs = [c.reference[::step] for c in clips if c.reference is not None]
-    P = np.concatenate(refs) if refs else np.zeros((0, 20, 3))
-    P = P[np.isfinite(P).all(axis=(1, 2))]
-    extra = retarget(normalize(P)[0], base.body) if len(P) else P
-    return as_database_arrays(np.concatenate([base.positions, extra]), base.body)
+def lab_database(src, held_out: int, clips):
+    """The default database plus the Vicon postures of the training subjects of ``clips`` (those
+    with a reference, never ``held_out``), through ``config/joint_maps/plug_in_gait.yaml``
+    (:func:`kinect_bringup.mocap_db_eval.fold_database`; cached in ``cache/``)."""
+    from .mocap_db_eval import fold_database
+    train = sorted({c.clip.subject for c in training_clips(clips, held_out)})
+    return fold_database(src, held_out, subjects=train)
 
 
 def _make(variant: str, correction, db):
@@ -302,8 +298,8 @@ def evaluate(src, variants: Sequence[str] = DEFAULT_VARIANTS, loso: bool = True,
                    'height': height}
             vdb = db
             if v.endswith('labdb'):
-                vdb = lab_database(db, training_clips(clips, subj))
-                key['database'] = int(len(vdb.positions))
+                vdb = lab_database(src, subj, clips)
+                key['database'] = vdb.meta.get('cache_key')
             res = _cached(cache, key, lambda v=v, prof=prof, corr=corr, fs=fold_streams, vdb=vdb:
                           run_variant(v, fs, corr, prof, vdb, progress, setup_of))
             per_clip[v].update(res)

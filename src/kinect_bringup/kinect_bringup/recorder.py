@@ -1,10 +1,16 @@
 """``recorder`` node: records the pipeline's topics to an MCAP bag that ``ros2 bag play`` and Foxglove
 open (rosbag2 itself is not available from the pip wheels). Messages are written as received (log
-time = receive time, publish time = the message's header stamp when it has one)."""
+time = receive time, publish time = the message's header stamp when it has one).
+
+Crash-safe: what was received is in the file within ``flush_period`` s (a timer flushes the chunk
+being filled even when the input pauses), so a recorder killed with SIGKILL, by the OOM killer or
+a power cut (``fsync``) leaves a bag that every reader reads up to its last complete message and
+``ros2 run kinect_bringup recover_bag`` rewrites into a complete, indexed one (docs/recovery.md)."""
 from __future__ import annotations
 
 import importlib
 import threading
+import time
 from pathlib import Path
 
 from rclpy.node import Node
@@ -22,8 +28,16 @@ def _msg_class(msgtype: str):
 
 
 PARAMS = [
-    ParamSpec('output', 'out/recording.mcap', 'MCAP file to write (overwritten)', read_only=True),
+    ParamSpec('output', 'out/recording.mcap',
+              'MCAP file to write (a finished bag there is overwritten; an unfinished one, left by '
+              'a killed recorder, is moved aside)', read_only=True),
     ParamSpec('topics', list(TOPICS), 'topics to record (types from the graph table)',
+              read_only=True),
+    ParamSpec('flush_period', 0.25,
+              'write what was received to the file at least this often (s): a killed recorder '
+              'loses at most this much; 0 = only full 1 MiB chunks', range=(0.0, 60.0),
+              read_only=True),
+    ParamSpec('fsync', True, 'also force each flush onto the disk (survives a power cut)',
               read_only=True),
 ]
 
@@ -39,8 +53,11 @@ class RecorderNode(Node):
         self.path = Path(self.params['output']).expanduser().resolve()
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._lock = threading.Lock()
-        self._writer = BagWriter(str(self.path))
-        self._writer.__enter__()
+        self._keep_unfinished()
+        self._writer = BagWriter(str(self.path), flush_period_s=self.params['flush_period'],
+                                 fsync=self.params['fsync'])
+        if self.params['flush_period'] > 0:
+            self.create_timer(min(0.5, self.params['flush_period']), self._poll)
         self.counts = {}
         qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
         for topic in self.params['topics']:
@@ -64,6 +81,29 @@ class RecorderNode(Node):
             self._writer.write_raw(topic, msg, now, msgtype=msgtype)  # CDR bytes as received
             self.counts[topic] += 1
         self.health.on_publish()
+
+    def _keep_unfinished(self):
+        """An unfinished bag at the output path is the recording of a recorder that was killed
+        (a restarted node, a respawn): moved aside, never overwritten."""
+        from skeleton_core.bagio import BagError, finished
+        if not self.path.is_file():
+            return
+        try:
+            if finished(self.path):
+                return
+        except BagError:
+            return   # not a bag at all: overwritten as documented
+        stamp = time.strftime('%Y%m%d-%H%M%S')
+        aside = self.path.with_name(f'{self.path.stem}.unfinished-{stamp}{self.path.suffix}')
+        self.path.rename(aside)
+        self.get_logger().warning(
+            f'{self.path.name} is an unfinished recording (a killed recorder\'s): kept as '
+            f'{aside} (ros2 run kinect_bringup recover_bag {aside})')
+
+    def _poll(self):
+        with self._lock:
+            if self._writer is not None:
+                self._writer.poll()
 
     def close(self):
         with self._lock:

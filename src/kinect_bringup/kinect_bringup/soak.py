@@ -5,10 +5,16 @@
 
 While the synthetic driver streams one user, an injector publishes on /kinect/skeletons: visitors
 appearing and vanishing, bursts and gaps, and malformed messages of every kind (fuzz.MUTATIONS);
-parameters are changed at run time; one node at a time is killed (SIGKILL) and restarted. It ends
+parameters are changed at run time; one node at a time is killed (SIGKILL) and restarted. Before
+that abuse, users come and go (issue 22): 20 users one after another (each must get a
+character) and 7 at once (6 characters, the 7th refused and counted in the physics node's
+diagnostics). After it, the faults that must lose nothing: the recorder (recording from the
+start) is killed with SIGKILL and its bag recovered (>= 95 % of the frames it received back), the
+physics node is killed and restarted (the driver's user gets its character back), and the
+recording cut at a random byte is replayed by the replay source (every complete frame). It ends
 with a report: crashes, NaN outputs, RSS growth after warm-up per process, recovery times, and
 exits non-zero when a target is missed (no crash, no NaN, RSS growth < 5 %, every restart recovers,
-every parameter change accepted).
+every parameter change accepted, every fault above recovered).
 
 RSS growth is judged per OS process, never across a restart: for each node the longest-lived of
 its processes (the first one, or the one started by a restart), from 25 % of that process's life
@@ -59,6 +65,11 @@ KILL_ORDER = {'fused': ['reconstruction', 'physics'],
 OUTPUT_TOPIC = {'reliability': '/kinect/skeletons_reliability', 'completion': '/posture/completed',
                 'optimizer': '/posture/reconstructed', 'reconstruction': '/posture/reconstructed',
                 'physics': '/character/skeletons'}
+SEQUENCE_USERS = list(range(100, 120))   # 20 users one after another
+SEQUENCE_S = 0.8                         # each in view this long
+CROWD_USERS = list(range(130, 137))      # 7 at once (with the driver's user: 8)
+CROWD_S = 3.0
+MAX_CHARACTERS = 6                       # physics.yaml max_characters (default)
 # a killed process's last messages are delivered within this; a new process cannot publish
 # sooner (interpreter start + imports take seconds), so output later than this is the new one's
 IN_FLIGHT_S = 0.3
@@ -98,15 +109,27 @@ def main(argv=None) -> int:
     outputs = {'/posture/reconstructed': [], '/character/skeletons': [], '/posture/completed': [],
                '/kinect/skeletons_reliability': []}
     nan_outputs = {t: 0 for t in outputs}
+    characters: List = []    # (monotonic time, user ids) of every /character/skeletons message
+    refusals: Dict[str, int] = {}   # physics diagnostics: dropped[too many users ...]
 
     def on_out(topic, msg):
         outputs[topic].append(time.monotonic())
+        if topic == '/character/skeletons':
+            characters.append((time.monotonic(), [sk.user_id for sk in msg.skeletons]))
         for sk in msg.skeletons:
             if not all(np.isfinite([p.x + p.y + p.z for p in sk.positions])):
                 nan_outputs[topic] += 1
 
     for t in outputs:
         node.create_subscription(SkeletonArray, t, lambda m, t=t: on_out(t, m), 50)
+    from diagnostic_msgs.msg import DiagnosticArray
+
+    def on_diag(msg):
+        for st in msg.status:
+            for kv in st.values:
+                if kv.key.startswith('dropped[too many users'):
+                    refusals[kv.key] = max(refusals.get(kv.key, 0), int(kv.value))
+    node.create_subscription(DiagnosticArray, '/diagnostics', on_diag, 50)
     ex = SingleThreadedExecutor(context=ctx)
     ex.add_node(node)
 
@@ -115,9 +138,12 @@ def main(argv=None) -> int:
         while time.monotonic() < end:
             ex.spin_once(timeout_sec=min(0.01, max(0.0, end - time.monotonic())))
 
-    nodes = NODES[args.reconstruction]
-    graph = Graph('processes', nodes=nodes, overrides={'driver': {'num_users': 1}},
-                  log_dir=out / 'logs')
+    nodes = NODES[args.reconstruction] + ['recorder']
+    recording = out / 'soak_recording.mcap'
+    recording.unlink(missing_ok=True)
+    graph = Graph('processes', nodes=nodes, log_dir=out / 'logs', overrides={
+        'driver': {'num_users': 1},
+        'recorder': {'output': str(recording), 'topics': ['/kinect/skeletons']}})
     report: Dict = {'duration_s': args.duration, 'malformed_sent': {}, 'param_changes': [],
                     'kills': [], 'crashes': [], 'rss_mb': {}}
     rss: Dict[str, List] = {n: [] for n in nodes}
@@ -132,6 +158,7 @@ def main(argv=None) -> int:
             print('[soak] the graph never produced /posture/reconstructed', file=sys.stderr)
             report['crashes'].append('no output at start')
             return 1
+        report['users'] = _users_phase(pub, spin_for, characters, refusals)
         t0 = time.monotonic()
         n_kills = args.kills if args.kills is not None else max(1, int(args.duration // 150))
         kill_times = [t0 + args.duration * (i + 1) / (n_kills + 1) for i in range(n_kills)]
@@ -206,6 +233,8 @@ def main(argv=None) -> int:
                     except psutil.NoSuchProcess:
                         pass
             spin_for(1 / 30)
+        report['faults'] = _faults(graph, recording, out, spin_for, characters, rnd,
+                                   expected_dead)
         # recovery after each kill: the restarted node's own output, then the end of the graph
         for k in report['kills']:
             own = [t for t in outputs[OUTPUT_TOPIC[k['node']]] if t > k['_t'] + IN_FLIGHT_S]
@@ -221,6 +250,8 @@ def main(argv=None) -> int:
         rclpy.try_shutdown(context=ctx)
     report['exit_codes'] = codes
     for n, code in codes.items():
+        if n == 'recorder' and code == -9:
+            continue   # killed on purpose (the recorder fault), not restarted
         if code != 0 and f'{n} exited' not in ' '.join(report['crashes']):
             report['crashes'].append(f'{n} exited with {code} when stopped (SIGINT)')
     for log in sorted((out / 'logs').glob('*.log')):
@@ -268,18 +299,136 @@ def main(argv=None) -> int:
     # (a node busy or being restarted on a loaded machine)
     refused = [c for c in report['param_changes']
                if c['result'].startswith('refused') or c['result'] == 'unknown parameter']
+    users_ok = bool(report.get('users', {}).get('ok'))
+    faults_ok = bool(report.get('faults')) and all(f.get('ok') for f in report['faults'].values())
     ok = (not report['crashes'] and sum(nan_outputs.values()) == 0 and growth_ok and recovered
-          and not refused)
+          and not refused and users_ok and faults_ok)
     report['ok'] = ok
     (out / 'soak.json').write_text(json.dumps(report, indent=2, default=str))
     print(json.dumps(report, indent=2, default=str))
     print(f'[soak] {"PASSED" if ok else "FAILED"} after {time.monotonic() - t_start:.0f} s; '
           f'crashes {len(report["crashes"])}, NaN outputs {sum(nan_outputs.values())}, '
           f'restarts recovered {sum(k.get("recovered_after_s") is not None for k in report["kills"])}'
-          f'/{len(report["kills"])}, refused parameter changes {len(refused)}, '
+          f'/{len(report["kills"])}, refused parameter changes {len(refused)}, users '
+          f'{"ok" if users_ok else "FAILED"}, faults '
+          + ', '.join(f'{k} {"ok" if f.get("ok") else "FAILED"}'
+                      for k, f in report.get('faults', {}).items()) + ', '
           f'RSS {report["rss_verdict"]}' + ('' if growth_ok else ' (growth >= 5 %)'))
     print(f'[soak] report {out / "soak.json"}, node logs {out / "logs"}')
     return 0 if ok else 1
+
+
+def _users_phase(pub, spin_for, characters, refusals) -> Dict:
+    """20 users one after another, then 7 at once, published at 30 Hz beside the driver's user.
+    Each of the 20 must get a character; of the 7, MAX_CHARACTERS minus the driver's user do and
+    the rest is refused and counted by the physics node (diagnostics ``dropped[too many
+    users ...]``), and no message ever holds more than MAX_CHARACTERS characters."""
+    from .fuzz import valid_array
+
+    def crowd_msg(ns, uids):
+        msg = None
+        for j, u in enumerate(uids):   # side by side, 0.7 m apart, 3 m ahead
+            m = valid_array(ns, (u,), offset=(3.0, 0.7 * (j - len(uids) / 2) - 0.6 * (u % 5),
+                                              -0.8), rng=np.random.default_rng(u))
+            if msg is None:
+                msg = m
+            else:
+                msg.skeletons.extend(m.skeletons)
+        return msg
+
+    def play(uids, seconds):
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            pub.publish(crowd_msg(time.time_ns(), uids))
+            spin_for(1 / 30)
+
+    start = time.monotonic()
+    for u in SEQUENCE_USERS:
+        play((u,), SEQUENCE_S)
+    spin_for(1.5)   # the last ones leave (physics user_timeout_s 1)
+    seq_end = time.monotonic()
+    got_seq = sorted({u for t, us in characters if start <= t for u in us} & set(SEQUENCE_USERS))
+    refused_before = sum(refusals.values())
+    crowd_start = time.monotonic()
+    play(CROWD_USERS, CROWD_S)
+    spin_for(1.5)   # diagnostics are published once a second
+    crowd = [us for t, us in characters if t >= crowd_start]
+    most = max((len(us) for us in crowd), default=0)
+    got_crowd = sorted({u for us in crowd for u in us} & set(CROWD_USERS))
+    refused = sum(refusals.values()) - refused_before
+    out = {'sequence_users': len(SEQUENCE_USERS), 'sequence_characters': len(got_seq),
+           'sequence_s': round(seq_end - start, 1), 'crowd_users': len(CROWD_USERS),
+           'crowd_characters_at_most': most, 'crowd_users_with_a_character': len(got_crowd),
+           'crowd_refusals_counted': refused}
+    out['ok'] = (len(got_seq) == len(SEQUENCE_USERS) and most == MAX_CHARACTERS
+                 and refused > 0)
+    print(f'[soak] users: {len(got_seq)}/{len(SEQUENCE_USERS)} in sequence got a character; '
+          f'{len(CROWD_USERS)} at once: at most {most} characters, {refused} refusals counted',
+          flush=True)
+    return out
+
+
+def _faults(graph, recording: Path, out: Path, spin_for, characters, rnd, expected_dead) -> Dict:
+    """The recorder killed with SIGKILL and its bag recovered; the physics node killed and
+    restarted (the driver's user gets its character back); the recording cut at a random byte
+    and replayed by the replay source."""
+    from skeleton_core.bagio import BagError, read_messages, recover, truncation
+    res: Dict = {}
+    # 1. recorder: SIGKILL, then what the file holds against what it had received
+    expected_dead.add('recorder')
+    t_kill = time.time_ns()
+    graph.kill('recorder')
+    try:
+        stamps = [m.stamp_ns for m in read_messages(recording, topics=['/kinect/skeletons'],
+                                                    decode=False, warn=lambda s: None)]
+        fixed = out / 'soak_recording_recovered.mcap'
+        n, cut = recover(recording, fixed, warn=lambda s: None)
+        rate = (len(stamps) - 1) / ((stamps[-1] - stamps[0]) * 1e-9) if len(stamps) > 1 else 0
+        lost = max(0.0, (t_kill - stamps[-1]) * 1e-9 * rate) if stamps else float('inf')
+        kept = len(stamps) / (len(stamps) + lost) if stamps else 0.0
+        res['recorder_sigkill'] = {
+            'frames_kept': len(stamps), 'frames_lost_estimate': round(lost, 1),
+            'kept_share': round(kept, 4), 'recording_s': round((t_kill - stamps[0]) * 1e-9, 1)
+            if stamps else 0, 'truncated_at_byte': cut.offset if cut else None,
+            'recovered_messages': n, 'recovered_complete': truncation(fixed) is None,
+            'ok': kept >= 0.95 and truncation(fixed) is None}
+    except BagError as e:
+        res['recorder_sigkill'] = {'error': str(e), 'ok': False}
+    # 2. physics: SIGKILL and restart; the driver's user 1 must get a character again
+    t = time.monotonic()
+    graph.restart('physics')
+    back = None
+    deadline = t + 90
+    while back is None and time.monotonic() < deadline:
+        spin_for(0.2)
+        back = next((tc - t for tc, us in characters if tc > t + IN_FLIGHT_S and 1 in us), None)
+    res['physics_restart'] = {'character_back_after_s': None if back is None else round(back, 2),
+                              'ok': back is not None}
+    # 3. the recording cut at a random byte, replayed (every complete frame played)
+    try:
+        from kinect_driver.sources.replay import ReplaySource
+        data = recording.read_bytes()
+        at = rnd.randrange(len(data) // 4, len(data))
+        cut_path = out / 'soak_cut.mcap'
+        cut_path.write_bytes(data[:at])
+        complete = sum(1 for _ in read_messages(cut_path, topics=['/kinect/skeletons'],
+                                                decode=False, warn=lambda s: None))
+        warnings: List[str] = []
+        src = ReplaySource(str(cut_path), rate=20.0, warn=warnings.append)
+        src.open()
+        played, now = 0, 0
+        while not src.finished and now < 3600 * 10 ** 9:
+            played += sum(1 for o in src.poll(now) if not o.topic)
+            now += 10 ** 7
+        res['cut_bag_replay'] = {'cut_at_byte': at, 'of_bytes': len(data),
+                                 'complete_frames': complete, 'frames_replayed': played,
+                                 'warning': warnings[0] if warnings else None,
+                                 'ok': played == complete > 0 and len(warnings) == 1}
+    except Exception as e:  # noqa: BLE001 - a fault the soak reports, not a crash of the soak
+        res['cut_bag_replay'] = {'error': f'{type(e).__name__}: {e}', 'ok': False}
+    for k, v in res.items():
+        print(f'[soak] fault {k}: {json.dumps(v)}', flush=True)
+    return res
 
 
 def _set_param(node, ex, nname, pname, values, rnd) -> Dict:

@@ -4,7 +4,12 @@
 * ``synthetic`` (default): built-in or CMU motion through the Kinect sensor model
   (:mod:`kinect_driver.sources.synthetic`); optionally the ground truth on ``/kinect/ground_truth``.
 * ``replay``: a recorded bag (MCAP) or CSV file (:mod:`kinect_driver.sources.replay`); bag messages
-  are republished byte for byte unless ``restamp`` is set.
+  are republished byte for byte unless ``restamp`` is set, and so is every other topic of the bag
+  that the graph does not produce itself (``/kinect/ground_truth`` included). With
+  ``wait_for_subscribers`` > 0 (the launch file and ``pipeline`` set the graph's count) the replay
+  waits before its first frame until ``/kinect/skeletons`` has that many subscribers, and after
+  it until they acknowledged it (at most ``wait_timeout_s``): nothing is lost while the graph
+  comes up.
 * ``live``: an OpenNI2 sensor or ``.oni`` recording with the NiTE2 user tracker
   (:mod:`kinect_driver.sources.openni_live`, docs/live_kinect.md).
 
@@ -117,8 +122,13 @@ class DriverNode(Node):
         self._finished_logged = False
         self._stalled = False
         self._retry_timer = None
+        self._other_pubs = {}
+        self._waiting_since = None   # replay: monotonic time the wait for subscribers began
+        self._ack_since = None       # replay: monotonic time the first frame was published
+        self._waited = not self.source.recorded or v['wait_for_subscribers'] == 0
         try:
             self.source.open()
+            self._open_other_topics()
             self._started()
         except SourceError as e:
             retry = self.source.retry_s
@@ -147,6 +157,74 @@ class DriverNode(Node):
         self.get_logger().info(f"source {v['source']} started at "
                                f'{1.0 / self.source.period_s:.1f} Hz on {SKELETONS_TOPIC};{extra}')
 
+    def _open_other_topics(self) -> None:
+        """Publishers for the replayed bag's other topics (types from the installed packages)."""
+        import importlib
+        for topic, msgtype in getattr(self.source, 'other_topics', {}).items():
+            try:
+                pkg, kind, name = msgtype.split('/')
+                cls = getattr(importlib.import_module(f'{pkg}.{kind}'), name)
+            except (ImportError, AttributeError, ValueError):
+                self._warn_once(f'replay: {topic} ({msgtype}) is not replayed: the message type '
+                                f'is not installed')
+                continue
+            self._other_pubs[topic] = self.create_publisher(cls, topic, QoSProfile(depth=100))
+
+    def _subscribers_ready(self) -> bool:
+        """Replay: hold the first frame until /kinect/skeletons has the expected subscribers
+        (and, for at most half a second more, until every other replayed topic has one)."""
+        import time
+        now = time.monotonic()
+        v = self.params.values
+        want = v['wait_for_subscribers']
+        if self._waiting_since is None:
+            self._waiting_since = now
+            self._main_ready_at = None
+            self.get_logger().info(f'replay: waiting for {want} subscriber(s) on '
+                                   f'{SKELETONS_TOPIC} before the first frame')
+        have = self.pub.get_subscription_count()
+        if have >= want:
+            if self._main_ready_at is None:
+                self._main_ready_at = now
+            others = [t for t, p in self._other_pubs.items() if p.get_subscription_count() == 0]
+            if others and now - self._main_ready_at < 0.5:
+                return False
+            self.get_logger().info(f'replay: {have} subscriber(s) after '
+                                   f'{now - self._waiting_since:.1f} s: playing')
+            return True
+        if now - self._waiting_since >= v['wait_timeout_s']:
+            self.get_logger().warning(
+                f'replay: only {have} of {want} subscriber(s) on {SKELETONS_TOPIC} after '
+                f'{v["wait_timeout_s"]:g} s: playing anyway (frames may be lost)')
+            return True
+        return False
+
+    def _acks_pending(self) -> bool:
+        """Replay: a subscription counted by the publisher may not have discovered the publisher
+        yet (discovery is two-way; on a loaded machine one direction lagged 2.4 s, and the frames
+        sent meanwhile were lost beyond the queue depth). After the first frame the replay's
+        clock is therefore held (without blocking the node) until every reliable subscriber has
+        acknowledged it (1-3 s: acknowledgements follow DDS heartbeats), at most
+        ``wait_timeout_s``; nothing is released in a burst afterwards. True while holding."""
+        import time
+        from rclpy.duration import Duration
+        now = time.monotonic()
+        zero = Duration(seconds=0)
+        acked = all(p.wait_for_all_acked(zero) for p in [self.pub, *self._other_pubs.values()])
+        held = now - self._ack_since
+        if not acked and held < self.params['wait_timeout_s']:
+            return True
+        self._ack_since = None
+        if hasattr(self.source, 'delay'):
+            self.source.delay(int(held * 1e9))
+        if acked:
+            self.get_logger().info(f'replay: the first frame acknowledged by every subscriber '
+                                   f'after {held:.2f} s: playing on')
+        else:
+            self.get_logger().warning(f'replay: the first frame not acknowledged by every '
+                                      f'subscriber after {held:.1f} s: playing on')
+        return False
+
     def _retry_open(self) -> None:
         try:
             self.source.open()
@@ -159,6 +237,13 @@ class DriverNode(Node):
         self._started()
 
     def _tick(self) -> None:
+        first = False
+        if not self._waited:
+            if not self._subscribers_ready():
+                return
+            self._waited = first = True
+        elif self._ack_since is not None and self._acks_pending():
+            return
         now = self._now_ns()
         try:
             outputs = self.source.poll(now)
@@ -173,6 +258,9 @@ class DriverNode(Node):
             if not self.context.ok():  # shutting down (Ctrl-C / SIGTERM) mid-callback
                 return
             raise
+        if first and outputs:
+            import time
+            self._ack_since = time.monotonic()
         try:
             self.source.prepare()
         except Exception as e:  # noqa: BLE001 - as poll(): counted and logged, never fatal
@@ -191,7 +279,24 @@ class DriverNode(Node):
             self._finished_logged = True
             self.get_logger().info('replay finished (set loop:=true to repeat)')
 
+    def _publish_other(self, out: SourceOutput, now: int) -> None:
+        """A replayed message of another topic: as recorded (restamped like the skeletons)."""
+        pub = self._other_pubs.get(out.topic)
+        if pub is None:
+            return
+        data = out.raw
+        if self.params['restamp'] and out.msgtype == 'skeleton_msgs/msg/SkeletonArray':
+            from rclpy.serialization import deserialize_message
+            data = deserialize_message(out.raw, self._msg_type)
+            ns_to_stamp(now, data.header.stamp)
+            for sk in data.skeletons:
+                ns_to_stamp(now, sk.header.stamp)
+        pub.publish(data)
+
     def _publish(self, out: SourceOutput, now: int) -> None:
+        if out.topic:
+            self._publish_other(out, now)
+            return
         v = self.params.values
         self.health.on_receive()
         live_stamp = not self.source.recorded or v['restamp']

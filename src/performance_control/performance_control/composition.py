@@ -45,6 +45,10 @@ _SEG_R = np.array([SEGMENT_RADIUS_FRACTION[JOINT_NAMES[c]] for c in SEGMENT_CHIL
 # the arms from the shoulder joint on)
 _BODY_SEGS = [(a, b) for a, b in zip(SEGMENT_PARENTS, SEGMENT_CHILDREN)
               if b not in subtree(ELBOW_LEFT) + subtree(ELBOW_RIGHT)]
+# the limbs' segments from the shoulder and hip joints on (parent, child)
+_LIMB_SEGS = [(a, b) for a, b in zip(SEGMENT_PARENTS, SEGMENT_CHILDREN)
+              if b in subtree(ELBOW_LEFT) + subtree(ELBOW_RIGHT) + subtree(KNEE_LEFT)
+              + subtree(KNEE_RIGHT)]
 # radius (fraction of height) of the thickest segment capsule meeting at each joint
 _JOINT_R = np.zeros(NUM_JOINTS)
 for _k, (_a, _b) in enumerate(zip(SEGMENT_PARENTS, SEGMENT_CHILDREN)):
@@ -232,6 +236,7 @@ def integrate_motion(pose: np.ndarray, com_target: np.ndarray,
         for e in (contacts or {}):
             skip |= set(CHAINS[e][2:])
         obstacles.push_out(p, skip, height)
+        obstacles.clear_segments(p, skip, height)
     return p
 
 
@@ -333,6 +338,45 @@ class Obstacles:
                 nn = np.linalg.norm(n)
                 p[j] = cp[j, k] + (n / nn if nn > 1e-9 else np.array([0.0, 0.0, -1.0])) * (
                     rc[k] + r_joint[j])
+
+    def clear_segments(self, p: np.ndarray, skip, height: float, iters: int = 4) -> None:
+        """Move the limbs' segment capsules (not only their joints) out of the capsule obstacles,
+        in place: a forearm, a free hand or a thigh crossing the rope between two joints that are
+        both outside it. Per segment whose child joint is free (not in ``skip``), its deepest sample
+        is moved out along the normal from the obstacle's axis, by moving the child joint and its
+        free descendants (a sample at fraction t of the segment needs the child moved depth / t).
+        """
+        a, b, rc, _ = self._caps()
+        if not len(rc):
+            return
+        ts = np.linspace(0.0, 1.0, 9)
+        for _ in range(iters):
+            moved = False
+            for i, j in _LIMB_SEGS:
+                if j in skip:
+                    continue
+                pts = p[i] + ts[:, None] * (p[j] - p[i])
+                rad = _SEG_R[SEGMENT_CHILDREN.index(j)] * height
+                d, cp = self._dist(pts, a, b)
+                depth = rad + rc[None] - d
+                q, k = np.unravel_index(np.argmax(depth), depth.shape)
+                if depth[q, k] <= 0 or ts[q] < 1e-6:
+                    continue
+                n = pts[q] - cp[q, k]
+                nn = np.linalg.norm(n)
+                if nn < 1e-9:          # on the axis: sideways, horizontally
+                    ab = b[k] - a[k]
+                    n = np.cross(ab, [0.0, 0.0, 1.0])
+                    nn = np.linalg.norm(n)
+                    if nn < 1e-9:
+                        n, nn = np.array([1.0, 0.0, 0.0]), 1.0
+                step = n / nn * (depth[q, k] + 1e-3) / max(ts[q], 0.25)
+                for jj in subtree(j):
+                    if jj not in skip:
+                        p[jj] += step
+                moved = True
+            if not moved:
+                return
 
     def penetration(self, p: np.ndarray, height: float,
                     engaged: Optional[Dict[str, str]] = None) -> float:

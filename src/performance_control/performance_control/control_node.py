@@ -25,12 +25,12 @@ from typing import Dict, List, Optional
 
 import numpy as np
 from rclpy.node import Node
-from skeleton_core.cdr import CdrError, frames_from_cdr, frames_to_cdr
+from skeleton_core.cdr import frames_to_cdr
 from skeleton_core.conversions import SkeletonFrame, ns_to_stamp
 from skeleton_core.health import Health
 from skeleton_core.model import NUM_JOINTS, TRACKED
 from skeleton_core.params import ParamSpec, assign, build, param, specs
-from skeleton_core.rosnode import DiagnosticsPublisher, Parameters, run_node
+from skeleton_core.rosnode import DiagnosticsPublisher, InputDrops, Parameters, run_node
 from skeleton_msgs.msg import Intention, SkeletonArray
 from visualization_msgs.msg import MarkerArray
 
@@ -73,6 +73,7 @@ class ControlNode(Node):
     def __init__(self, **kwargs):
         super().__init__('control', **kwargs)
         self.health = Health()
+        self._drop = InputDrops(self.health, self.get_logger())
         self.params = Parameters(self, PARAMS, on_change=self._on_params)
         v = self.params.values
         try:
@@ -112,20 +113,12 @@ class ControlNode(Node):
             out['control_ms_median'] = float(np.median(self.ms[-300:]))
         return out
 
-    def _drop(self, cause: str, detail: str) -> None:
-        if self.health.on_drop(cause):
-            self.get_logger().warning(f'dropping input ({cause}): {detail} (logged once per cause)')
-
     def _on_input(self, data: bytes) -> None:
         self.health.on_receive()
-        errors: list = []
-        try:
-            stamp, frame, frames = frames_from_cdr(data, errors)
-        except CdrError as e:
-            self._drop('malformed message', str(e))
+        decoded = self._drop.decode(data)
+        if decoded is None:
             return
-        for e in errors:
-            self._drop(getattr(e, 'cause', 'malformed'), str(e))
+        stamp, frame, frames = decoded
         if frame:
             self.frame_id = frame
         now = time.monotonic()

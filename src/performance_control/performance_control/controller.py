@@ -51,6 +51,10 @@ class ControlParams:
     regrab_speed: float = param(0.5, 'm/s: on a feature with engage.regrab (the rope) a held hand '
                                 'the user raises faster lets go to grab higher (hand over hand)',
                                 range=(0.05, 10.0))
+    regrab_reach: float = param(0.2, "body heights: climbing hand over hand, the free hand at the "
+                                "top of its reach grabs the rope where it passes this close (an "
+                                "arm's length: the arm reaches for the swinging rope; 0 = only "
+                                "within the feature's engage distance)", range=(0.0, 1.0))
     foot_down_height: float = param(0.06, "m: the user's foot this close to their floor is "
                                     'constrained (may hold the floor / trampoline)',
                                     range=(0.005, 0.5))
@@ -86,7 +90,8 @@ class ControlParams:
 def build_models(world: World, params: RecognizerParams) -> Dict[str, ExampleModel]:
     """The PCA model of every feature's example motion."""
     return {f.name: ExampleModel(f.name, example_motion(f.example, fps=params.fps),
-                                 f.example.effectors, f.example.components, params)
+                                 f.example.effectors, f.example.components, params,
+                                 max_change_share=f.example.max_change_share)
             for f in world.with_example()}
 
 
@@ -278,10 +283,20 @@ class PerformanceController:
                     continue      # climbing: grab at the top of the reach, not on the way up
                 if e in FEET and not self._user_foot_down(p, e):
                     continue
-                if float(np.linalg.norm(vel[k])) > f.engage.max_speed:
+                # hand over hand: the other hand holds the rope, this one is at the top of its
+                # reach -- it reaches for the rope where it is now (an arm's length), whatever
+                # its speed (the rope and the body swing)
+                climbing = (e in HANDS and f.engage.regrab
+                            and HANDS[1 - HANDS.index(e)] in dp.contacts
+                            and dp.contacts[HANDS[1 - HANDS.index(e)]].feature == f.name)
+                if not climbing and float(np.linalg.norm(vel[k])) > f.engage.max_speed:
                     continue
                 dist, body, pt = dp.feature_distance(e, f)
-                if body is not None and dist < f.engage.distance:
+                reach = max(f.engage.distance, prm.regrab_reach * self.height) if climbing \
+                    else f.engage.distance
+                if body is not None and dist < reach:
+                    if dist > f.engage.distance:
+                        dp.move_effector(e, pt)      # the hand reaches the rope
                     dp.engage(e, f, body, pt)
                     dp.contacts[e].since_wall = t
                     break

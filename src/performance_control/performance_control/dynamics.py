@@ -34,7 +34,8 @@ from typing import Dict, Optional, Tuple
 
 import mujoco
 import numpy as np
-from numba import njit
+
+from skeleton_core import jit as _jit
 
 from .features import EFFECTORS, Feature, World
 from .world_mjcf import EFFECTOR_RADIUS, world_model_xml
@@ -303,8 +304,8 @@ class DynamicProcess:
         return gap
 
 
-@njit(cache=True)
-def _contact_forces(x, v, pe, ve, rh_w, rhd_w, g, yaw):  # pragma: no cover - numba
+@_jit.njit
+def _contact_forces_jit(x, v, pe, ve, rh_w, rhd_w, g, yaw):  # pragma: no cover - numba
     """Eq. 2-4 (see the module docstring) for the 4 effectors: forces (4, 3) in world axes.
     ``x, v``: COM position and velocity; ``pe, ve`` (4, 3): effector positions and velocities;
     ``rh_w, rhd_w`` (4, 3): the targets r^ and their rates; ``g`` (4, 6): GAIN_KEYS gains."""
@@ -341,9 +342,9 @@ def _contact_forces(x, v, pe, ve, rh_w, rhd_w, g, yaw):  # pragma: no cover - nu
     return out
 
 
-@njit(cache=True)
-def _apply_forces(xpos, qvel, xfrc, com_body, com_dof, eff_body, eff_dof, r0, r1, t, t0, period,
-                  gains, yaw, buoy):  # pragma: no cover - numba
+@_jit.njit
+def _apply_forces_jit(xpos, qvel, xfrc, com_body, com_dof, eff_body, eff_dof, r0, r1, t, t0,
+                      period, gains, yaw, buoy):  # pragma: no cover - numba
     """One step's forces into ``xfrc`` (MuJoCo's xfrc_applied): Eq. 2-4 on the effectors at
     time ``t`` (targets interpolated from ``r0`` to ``r1`` over ``period`` from ``t0``), their
     sum reversed on the COM (Eq. 1) with the buoyancy ``buoy`` (N, up)."""
@@ -358,7 +359,7 @@ def _apply_forces(xpos, qvel, xfrc, com_body, com_dof, eff_body, eff_dof, r0, r1
             ve[k, a] = qvel[eff_dof[k] + a]
     x = xpos[com_body].copy()
     v = qvel[com_dof:com_dof + 3].copy()
-    f = _contact_forces(x, v, pe, ve, rh, rhd, gains, yaw)
+    f = _contact_forces_jit(x, v, pe, ve, rh, rhd, gains, yaw)
     for a in range(3):
         tot = 0.0
         for k in range(4):
@@ -366,6 +367,56 @@ def _apply_forces(xpos, qvel, xfrc, com_body, com_dof, eff_body, eff_dof, r0, r1
             tot += f[k, a]
         xfrc[com_body, a] = -tot
     xfrc[com_body, 2] += buoy
+
+
+
+def _contact_forces_np(x, v, pe, ve, rh_w, rhd_w, g, yaw):
+    """The numpy twin of :func:`_contact_forces_jit` (same numbers, the 4 effectors at once)."""
+    c, s = math.cos(yaw), math.sin(yaw)
+    rot = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])   # world -> body (yaw removed)
+    r = (np.asarray(pe, float) - x) @ rot.T
+    rd = (np.asarray(ve, float) - v) @ rot.T
+    rh = np.asarray(rh_w, float) @ rot.T
+    rhd = np.asarray(rhd_w, float) @ rot.T
+    g = np.asarray(g, float)
+    ln = np.maximum(np.linalg.norm(r, axis=1), 1e-6)
+    lnh = np.maximum(np.linalg.norm(rh, axis=1), 1e-6)
+    lrate = np.sum(r * rd, axis=1) / ln
+    lrateh = np.sum(rh * rhd, axis=1) / lnh
+    fl = g[:, 0] * (lnh - ln) + g[:, 1] * (lrateh - lrate)
+    f = fl[:, None] * r / ln[:, None]
+    for i, kk in ((0, 2), (1, 4)):           # pitch: x-z plane, roll: y-z plane
+        rho2 = np.maximum(r[:, i] ** 2 + r[:, 2] ** 2, 1e-8)
+        rho2h = np.maximum(rh[:, i] ** 2 + rh[:, 2] ** 2, 1e-8)
+        ang = np.arctan2(r[:, i], r[:, 2])
+        angh = np.arctan2(rh[:, i], rh[:, 2])
+        err = np.mod(angh - ang + math.pi, 2.0 * math.pi) - math.pi
+        rate = (rd[:, i] * r[:, 2] - r[:, i] * rd[:, 2]) / rho2
+        rateh = (rhd[:, i] * rh[:, 2] - rh[:, i] * rhd[:, 2]) / rho2h
+        mag = g[:, kk] * err + g[:, kk + 1] * (rateh - rate)
+        f[:, i] += mag * np.cos(ang)
+        f[:, 2] -= mag * np.sin(ang)
+    return f @ rot                            # body -> world
+
+
+def _apply_forces_np(xpos, qvel, xfrc, com_body, com_dof, eff_body, eff_dof, r0, r1, t, t0,
+                     period, gains, yaw, buoy):
+    """The numpy twin of :func:`_apply_forces_jit`."""
+    s = min(max((t - t0) / period, 0.0), 1.0)
+    rh = r0 + s * (r1 - r0)
+    rhd = (r1 - r0) / period if s < 1.0 else np.zeros_like(r0)
+    eff_body = np.asarray(eff_body)
+    dofs = np.asarray(eff_dof)[:, None] + np.arange(3)
+    f = _contact_forces_np(xpos[com_body].copy(), qvel[com_dof:com_dof + 3].copy(),
+                           xpos[eff_body], qvel[dofs], rh, rhd, gains, yaw)
+    xfrc[eff_body, :3] = f
+    xfrc[com_body, :3] = -f.sum(axis=0)
+    xfrc[com_body, 2] += buoy
+
+
+# numba when installed and not switched off (KINECT_NUMBA=0), the numpy twins otherwise
+_contact_forces = _jit.pick(_contact_forces_jit, _contact_forces_np)
+_apply_forces = _jit.pick(_apply_forces_jit, _apply_forces_np)
 
 
 __all__ = ['DynamicProcess', 'Contact', 'GAIN_KEYS']

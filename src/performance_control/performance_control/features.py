@@ -68,13 +68,16 @@ class Engage:
 @dataclass
 class Example:
     """Example motion Q: a generator in :mod:`performance_control.examples` (with its params) or
-    a BVH file; ``effectors``: the unconstrained end-effectors compared (Sec. 6.1)."""
+    a BVH file; ``effectors``: the unconstrained end-effectors compared (Sec. 6.1);
+    ``max_change_share``: the largest share of the user's recent hand displacement outside the
+    directions the example moves in (a one-handed punch against a two-handed stroke; 1 = off)."""
 
     generator: str = ''
     params: Dict = field(default_factory=dict)
     effectors: Tuple[str, ...] = ('HandLeft', 'HandRight')
     components: int = 3
     bvh: str = ''
+    max_change_share: float = 1.0   # the recognizer's change-share gate for this feature (1 = off)
 
 
 @dataclass
@@ -198,12 +201,15 @@ def parse_world(doc: Dict, path: str = '<dict>') -> World:
                 xd = dict(fd['example'])
                 ex = Example(str(xd.get('generator', '')), dict(xd.get('params') or {}),
                              tuple(xd.get('effectors', ('HandLeft', 'HandRight'))),
-                             int(xd.get('components', 3)), str(xd.get('bvh', '')))
+                             int(xd.get('components', 3)), str(xd.get('bvh', '')),
+                             float(xd.get('max_change_share', 1.0)))
                 if not ex.generator and not ex.bvh:
                     raise ValueError('example needs a generator or a bvh file')
                 for e in ex.effectors:
                     if e not in JOINT_INDEX:
                         raise ValueError(f'example effector {e!r} is not a joint name')
+                if not 0.0 < ex.max_change_share <= 1.0:
+                    raise ValueError('example.max_change_share must be in (0, 1]')
                 if not 1 <= ex.components <= 12:
                     raise ValueError('example.components must be in [1, 12]')
             dyn = dict(DYNAMICS_DEFAULTS)

@@ -46,13 +46,30 @@ def yaw_rotation(yaw) -> np.ndarray:
     return r
 
 
+REFERENCES = ('com', 'shoulders')
+
+
+def reference_point(positions: np.ndarray, reference: str = 'com') -> np.ndarray:
+    """The origin of the relative effector positions (..., 3): the whole-body COM (the paper's)
+    or the ShoulderCenter joint (``shoulders``: the arms' own root, independent of what the legs
+    do -- a user imitating a frog kick or a swing with the arms only, standing, has another COM
+    than the example)."""
+    p = np.asarray(positions, float)
+    if reference == 'shoulders':
+        return p[..., JOINT_INDEX['ShoulderCenter'], :]
+    if reference != 'com':
+        raise ValueError(f'reference must be one of {REFERENCES}, got {reference!r}')
+    return center_of_mass(p)
+
+
 def relative_effectors(positions: np.ndarray, effectors: Sequence[int],
-                       yaw: Optional[np.ndarray] = None) -> np.ndarray:
-    """r_j = d_j - COM in the yaw-removed body frame, (..., len(effectors), 3)."""
+                       yaw: Optional[np.ndarray] = None, reference: str = 'com') -> np.ndarray:
+    """r_j = d_j - COM (or another :func:`reference_point`) in the yaw-removed body frame,
+    (..., len(effectors), 3)."""
     p = np.asarray(positions, float)
     if yaw is None:
         yaw = facing_yaw(p)
-    rel = p[..., list(effectors), :] - center_of_mass(p)[..., None, :]
+    rel = p[..., list(effectors), :] - reference_point(p, reference)[..., None, :]
     return np.einsum('...ij,...kj->...ki', yaw_rotation(yaw), rel)
 
 
@@ -80,7 +97,7 @@ class RecognizerParams:
 
     e1_threshold: float = param(0.03, "Eq. 5 threshold (squared error, body-height units): the "
                                 "user's pose near the example's PCA subspace", range=(1e-5, 10.0))
-    e2_threshold: float = param(0.03, "Eq. 6 threshold: consistency of the user's change over "
+    e2_threshold: float = param(0.04, "Eq. 6 threshold: consistency of the user's change over "
                                 "lag frames with the example", range=(1e-5, 10.0))
     tau: float = param(0.25, 'weight (s) of the effector velocities against positions in w',
                        range=(0.0, 2.0))
@@ -100,6 +117,19 @@ class RecognizerParams:
                          choices=('and', 'or'))
     normalise: bool = param(False, "e1/e2 in units of each example's own spread (total "
                             "variance of w, mean |dw|^2); the thresholds are then in those units")
+    max_change_share: float = param(1.0, "largest share of the user's effector displacement "
+                                    "over share_lag frames outside the example's position "
+                                    "subspace, for all features (each example has its own "
+                                    "too; 1 = off): a change the example never makes, e.g. "
+                                    "one hand punching against a two-handed stroke",
+                                    range=(0.0, 1.0))
+    share_lag: int = param(4, "frames of the change-share gate's displacement", range=(1, 60),
+                           read_only=True)
+    share_window: float = param(0.1, 'time constant (s) of the change-share averages',
+                                range=(0.0, 10.0))
+    reference: str = param('com', "origin of the relative effector positions: com (the paper's "
+                           "whole-body COM) or shoulders (ShoulderCenter: independent of the legs)",
+                           choices=REFERENCES)
     fps: float = 30.0
 
     def validate(self) -> None:
@@ -119,7 +149,7 @@ def feature_vectors(positions: np.ndarray, effectors: Sequence[int], height: flo
                     params: RecognizerParams) -> np.ndarray:
     """w for every frame of a clip (T, 20, 3) -> (T, 6 * len(effectors)); the first ``lag``
     frames get the velocity of frame ``lag``."""
-    r = relative_effectors(positions, effectors) / height
+    r = relative_effectors(positions, effectors, reference=params.reference) / height
     lag = int(params.lag)
     v = np.zeros_like(r)
     if len(r) > lag:
@@ -132,8 +162,10 @@ class ExampleModel:
     """The PCA of one feature's example motion (Eq. 5-6), from its positions (T, 20, 3)."""
 
     def __init__(self, name: str, positions: np.ndarray, effectors: Sequence[str],
-                 components: int, params: RecognizerParams, height: Optional[float] = None):
+                 components: int, params: RecognizerParams, height: Optional[float] = None,
+                 max_change_share: float = 1.0):
         self.name = name
+        self.max_change_share = float(max_change_share)
         self.effectors = tuple(JOINT_INDEX[e] for e in effectors)
         self.params = params
         self.positions = np.asarray(positions, float)
@@ -141,6 +173,12 @@ class ExampleModel:
         w = feature_vectors(self.positions, self.effectors, self.height, params)
         self.w = w
         self.mean, self.A, self.eigenvalues = pca_basis(w, components)
+        # the change-share gate's subspace: every direction in which the example's relative
+        # positions move (the principal components up to 99 % of their variance)
+        npos = 3 * len(self.effectors)
+        _, a_pos, lam_pos = pca_basis(w[:, :npos], npos)
+        keep = int(np.searchsorted(np.cumsum(lam_pos) / max(lam_pos.sum(), 1e-12), 0.99)) + 1
+        self.A_pos = a_pos[:, :min(keep, npos)]
         # the example's own spread: total variance of w and of dw over ``lag`` frames (the units
         # of the normalised errors)
         lag = min(int(params.lag), len(w) - 1)
@@ -148,7 +186,8 @@ class ExampleModel:
         self.var_dw = float(np.mean(np.sum((w[lag:] - w[:-lag]) ** 2, axis=1)))
         # the activity gate's normaliser: the example's RMS effector speed measured as the gate
         # measures it (displacement over activity_lag frames)
-        r = relative_effectors(self.positions, self.effectors) / self.height
+        r = relative_effectors(self.positions, self.effectors,
+                               reference=params.reference) / self.height
         k = min(int(params.activity_lag), len(r) - 1)
         v = (r[k:] - r[:-k]).reshape(len(r) - k, -1) * (params.fps / k)
         self.rms_speed = float(np.sqrt(np.mean(np.sum(v * v, axis=1))))
@@ -172,6 +211,7 @@ class Recognition:
     e2: float
     activity: float
     w: Optional[np.ndarray] = None   # the user's feature vector for this feature's effectors
+    change_share: float = 0.0        # share of the recent displacement outside the example's
 
 
 class IntentionRecognizer:
@@ -201,7 +241,7 @@ class IntentionRecognizer:
             self.height = float(np.clip(h, 1.0, 2.3)) if np.isfinite(h) else 1.75
         prm = self.params
         yaw = facing_yaw(p)
-        com = center_of_mass(p)
+        com = reference_point(p, prm.reference)
         rot = yaw_rotation(yaw)
         rel = (p - com) @ rot.T / self.height          # every joint, body frame, height units
         if self._hist and prm.prefilter > 0:
@@ -210,7 +250,7 @@ class IntentionRecognizer:
             rel = self._hist[-1] + g * (rel - self._hist[-1])
         self._hist.append(rel)
         lag = int(prm.lag)
-        keep = max(lag, int(prm.activity_lag)) + 1
+        keep = max(lag, int(prm.activity_lag), int(prm.share_lag)) + 1
         if len(self._hist) > keep:
             self._hist.pop(0)
         dt = 1.0 / prm.fps if self._last_t is None else max(t - self._last_t, 1e-3)
@@ -222,6 +262,9 @@ class IntentionRecognizer:
         old = self._hist[-1 - k]
         ka = min(len(self._hist) - 1, int(prm.activity_lag))
         old_a = self._hist[-1 - ka]
+        ks = min(len(self._hist) - 1, int(prm.share_lag))
+        old_s = self._hist[-1 - ks]
+        gam = 1.0 if prm.share_window <= 0 else 1.0 - math.exp(-dt / prm.share_window)
         for m in self.models:
             idx = list(m.effectors)
             r = rel[idx].reshape(-1)
@@ -235,22 +278,30 @@ class IntentionRecognizer:
             e1, e2 = m.errors(w, dw)
             va = (r - old_a[idx].reshape(-1)) * (prm.fps / ka) if ka else np.zeros_like(r)
             sp2 = float(np.sum(va * va)) / max(m.rms_speed, 1e-9) ** 2
+            # the share of the displacement over share_lag frames outside the example's
+            # position subspace (energies averaged over share_window, then divided)
+            vs = r - old_s[idx].reshape(-1)
+            out2, all2 = float(reconstruction_error(vs, m.A_pos)), float(np.sum(vs * vs))
             a = self._avg.get(m.name)
             if a is None:
-                a = self._avg[m.name] = [e1, e2, sp2]
+                a = self._avg[m.name] = [e1, e2, sp2, out2, all2]
             else:
                 a[0] += alpha * (e1 - a[0])
                 a[1] += alpha * (e2 - a[1])
                 a[2] += beta * (sp2 - a[2])
+                a[3] += gam * (out2 - a[3])
+                a[4] += gam * (all2 - a[4])
+            share = a[3] / max(a[4], 1e-12)
             act = math.sqrt(max(a[2], 0.0))
             r1, r2 = a[0] / prm.e1_threshold, a[1] / prm.e2_threshold
             ratio = max(r1, r2) if prm.combine == 'and' else min(r1, r2)
-            imitating = bool(ratio < 1.0 and act >= prm.min_activity and k >= lag)
+            imitating = bool(ratio < 1.0 and act >= prm.min_activity and k >= lag
+                             and share <= min(prm.max_change_share, m.max_change_share))
             conf = 1.0 / (1.0 + ratio * ratio)
             if act < prm.min_activity:
                 conf *= act / max(prm.min_activity, 1e-9)
             out[m.name] = Recognition(m.name, imitating, float(conf), float(a[0]), float(a[1]),
-                                      act, w)
+                                      act, w, float(share))
         return out
 
     def best(self, recs: Dict[str, Recognition]) -> Optional[Recognition]:

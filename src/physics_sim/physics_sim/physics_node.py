@@ -18,7 +18,11 @@ Service
 
 The simulation runs on a timer, independent of input arrival: each tick advances it by
 1/output_rate in ``timestep`` steps; the last target is kept when input stops. A user who is absent
-from incoming arrays for ``user_timeout_s`` s is removed; a new user spawns a character.
+from incoming arrays for ``user_timeout_s`` s of the input's time is removed (its character too);
+a new user spawns a character. The input's time (:class:`skeleton_core.presence.Presence`, the
+same mechanism as ``process_bag``) is the newest header stamp, running on with the wall clock
+while nothing arrives: when the input stops altogether (driver killed, a gap in a bag) the
+characters leave ``user_timeout_s`` later instead of being published forever.
 """
 from __future__ import annotations
 
@@ -29,12 +33,13 @@ from typing import Dict, List, Optional
 import numpy as np
 from geometry_msgs.msg import WrenchStamped
 from rclpy.node import Node
-from skeleton_core.cdr import CdrError, frames_from_cdr, frames_to_cdr
+from skeleton_core.cdr import frames_to_cdr
 from skeleton_core.conversions import SkeletonFormatError, SkeletonFrame, ns_to_stamp
 from skeleton_core.health import Health
 from skeleton_core.model import NUM_JOINTS, TRACKED
 from skeleton_core.params import ParamSpec, assign, build, param, specs
-from skeleton_core.rosnode import DiagnosticsPublisher, Parameters, run_node
+from skeleton_core.presence import Presence
+from skeleton_core.rosnode import DiagnosticsPublisher, InputDrops, Parameters, run_node
 from skeleton_msgs.msg import SkeletonArray
 from skeleton_msgs.srv import ApplyPush
 from visualization_msgs.msg import Marker, MarkerArray
@@ -83,7 +88,8 @@ class PhysicsNodeConfig:
         'previous one (capture stamps; 0.5 to 1.5 periods), a timer tick the wall time: frames '
         'delivered together after a delay tick each; a target sooner than 0.75 period after '
         'the last by its stamp is simulated 0.75 period after it')
-    user_timeout_s: float = param(1.0, 'remove a character whose user is absent this long (s)',
+    user_timeout_s: float = param(1.0, "remove a character whose user is absent this long (s) "
+                                  "of the input's time (running on while nothing arrives)",
                                   range=(0.05, 60.0))
     boxes: List[float] = param([0.0], 'boxes: x y z half_x half_y half_z mass per box (world, '
                                'm, kg); [0.0] = none', validator=_objects(7), read_only=True)
@@ -134,6 +140,7 @@ class PhysicsNode(Node):
     def __init__(self, **kwargs):
         super().__init__('physics', **kwargs)
         self.health = Health()
+        self._drop = InputDrops(self.health, self.get_logger())
         self.params = Parameters(self, PARAMS, on_change=self._on_params)
         v = self.params.values
         try:
@@ -144,8 +151,8 @@ class PhysicsNode(Node):
         if warm_s > 0.5:
             self.get_logger().info(f'compiled kernels ready in {warm_s:.1f} s (cached from now on)')
         self.frame_id = v['frame_id']
-        self._last_seen: Dict[int, float] = {}
-        self._last_msg = None
+        self.presence = Presence(v['user_timeout_s'])
+        self._user_stamp: Dict[int, int] = {}   # stamp of each user's newest target
         self._published_empty = True
         self._mace_given = False
         self._next_throw = None
@@ -192,32 +199,37 @@ class PhysicsNode(Node):
         return out
 
     # ------------------------------------------------------------------ input
-    def _drop(self, cause: str, detail: str) -> None:
-        if self.health.on_drop(cause):
-            self.get_logger().warning(f'dropping input ({cause}): {detail} (logged once per cause)')
-
     def _on_input(self, data: bytes) -> None:
         self.health.on_receive()
-        errors: list = []
-        try:
-            header_stamp, header_frame, frames = frames_from_cdr(data, errors)
-        except CdrError as e:
-            self._drop('malformed message', str(e))
+        decoded = self._drop.decode(data)
+        if decoded is None:
             return
-        for e in errors:
-            cause = getattr(e, 'cause', 'malformed')
-            self._drop(cause, str(e))
+        header_stamp, header_frame, frames = decoded
         now = time.monotonic()
-        self._last_msg = now
         if header_frame:
             self.frame_id = header_frame
+        self.presence.observe(header_stamp, (), wall=now)   # the input's clock moves on:
+        self._expire(now)                                   # who left before this message?
         for f in frames:
+            stamp = f.stamp_ns or header_stamp
+            last = self._user_stamp.get(f.user_id)
+            if stamp and last is not None and last - 1_000_000_000 <= stamp <= last:
+                # a target already applied, or an older one (a bigger step back is a bag loop or
+                # a restarted sensor: taken)
+                self._drop('duplicate stamp' if stamp == last else 'out-of-order stamp',
+                           f'user {f.user_id}: {(last - stamp) * 1e-6:.1f} ms back')
+                continue
             try:
-                stamp = f.stamp_ns or header_stamp
                 self.sim.set_target(f.user_id, f.positions, f.orientations, stamp)
-                self._last_seen[f.user_id] = now
+                self._user_stamp[f.user_id] = stamp
             except (SkeletonFormatError, ValueError) as e:
-                self._drop('bad target', str(e))
+                if 'max_characters' in str(e):   # counted per reason, logged once
+                    self._drop(f'too many users (max_characters '
+                               f'{self.sim.config.max_characters})',
+                               f'user {f.user_id} gets no character while {e}')
+                else:
+                    self._drop('bad target', str(e))
+        self.presence.observe(header_stamp, [f.user_id for f in frames], wall=now)
         if self.params['mace'] and not self._mace_given and self.sim.characters:
             uid = next(iter(self.sim.characters))
             self.sim.hold(uid, 'mace', self.params['mace_hand'])
@@ -262,6 +274,14 @@ class PhysicsNode(Node):
             self._deferred.cancel()
             self.destroy_timer(self._deferred)
             self._deferred = None
+
+    def _expire(self, wall: float) -> None:
+        """Remove the characters of users unseen for ``user_timeout_s`` of the input's time."""
+        self.presence.timeout_s = self.params['user_timeout_s']
+        for uid in self.presence.expired(wall=wall):
+            self._user_stamp.pop(uid, None)
+            if self.sim.remove_character(uid):
+                self.get_logger().info(f'user {uid} left: character removed')
 
     def _push(self, user_id: int, segment: str, force, duration: float) -> str:
         try:
@@ -309,13 +329,7 @@ class PhysicsNode(Node):
         elif dt is None:
             dt = period
         self._last_tick = now
-        timeout = self.params['user_timeout_s']
-        if self._last_msg is not None:
-            for uid in list(self.sim.characters):
-                if self._last_msg - self._last_seen.get(uid, self._last_msg) > timeout:
-                    self.sim.remove_character(uid)
-                    self._last_seen.pop(uid, None)
-                    self.get_logger().info(f'user {uid} left: character removed')
+        self._expire(now)
         throw = self.params['auto_throw_period']
         if throw > 0 and self.sim.characters:
             if self._next_throw is None or now >= self._next_throw:

@@ -22,7 +22,7 @@ from skeleton_core.cdr import CdrError, frames_from_cdr, frames_to_cdr
 from skeleton_core.conversions import SkeletonFormatError, frame_from_arrays
 from skeleton_core.health import Health
 from skeleton_core.params import ParamSpec, build, specs
-from skeleton_core.rosnode import DiagnosticsPublisher, Parameters
+from skeleton_core.rosnode import DiagnosticsPublisher, InputDrops, Parameters
 
 from .correction import CorrectionConfig
 from .reliability import ReliabilityConfig
@@ -69,6 +69,7 @@ class SkeletonArrayNode(Node):
         super().__init__(name, **kwargs)
         self._lock = threading.RLock()
         self.health = Health()
+        self._drop = InputDrops(self.health, self.get_logger())
         self._users: Dict[int, Any] = {}
         self._last_seen: Dict[int, float] = {}
         self._last_stamp_ns: Optional[int] = None
@@ -126,11 +127,6 @@ class SkeletonArrayNode(Node):
                 return str(e)
             self._users.clear()  # rebuilt with the new values on the next message
         return None
-
-    def _drop(self, cause: str, detail: str = '') -> None:
-        if self.health.on_drop(cause):
-            self.get_logger().warning(f'dropping input ({cause}){": " + detail if detail else ""}'
-                                      ' (logged once per cause)')
 
     def _purge(self) -> None:
         now = time.monotonic()

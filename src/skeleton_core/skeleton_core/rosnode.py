@@ -17,6 +17,7 @@ from rclpy.exceptions import ParameterException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
+from .cdr import CdrError, frames_from_cdr
 from .health import Health
 from .params import ParamSpec  # noqa: F401 (declared in params, re-exported for the nodes)
 
@@ -86,6 +87,35 @@ class Parameters:
             self._node.get_logger().info(
                 'parameters set: ' + ', '.join(f'{k}={v!r}' for k, v in changed.items()))
         return SetParametersResult(successful=True)
+
+
+class InputDrops:
+    """What a node does with input it cannot use: counts the drop per cause in its :class:`Health`
+    (reported on /diagnostics) and logs the first drop of each cause, with the detail, once.
+    ``drops(cause, detail)`` drops one input; :meth:`decode` reads a SkeletonArray message."""
+
+    def __init__(self, health: Health, logger):
+        self.health = health
+        self.logger = logger
+
+    def __call__(self, cause: str, detail: str = '') -> None:
+        if self.health.on_drop(cause):
+            self.logger.warning(f'dropping input ({cause}){": " + detail if detail else ""}'
+                                ' (logged once per cause)')
+
+    def decode(self, data: bytes) -> Optional[tuple]:
+        """``(stamp_ns, frame_id, frames)`` of a serialized SkeletonArray, the malformed skeletons
+        in it dropped by their cause; None (dropped as 'malformed message') when it cannot be
+        decoded at all."""
+        errors: list = []
+        try:
+            decoded = frames_from_cdr(data, errors)
+        except CdrError as e:  # undecodable: a dropped message, not a crash
+            self('malformed message', str(e))
+            return None
+        for e in errors:
+            self(getattr(e, 'cause', 'malformed'), str(e))
+        return decoded
 
 
 class DiagnosticsPublisher:

@@ -40,7 +40,7 @@ import time
 import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Dict, List, Optional, Sequence
+from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -51,7 +51,8 @@ from skeleton_core.model import JOINT_NAMES, NUM_JOINTS, SEGMENT_CHILD_INDEX, SE
 
 __all__ = ['MotionDatabase', 'DatabaseError', 'build_database', 'load_or_build_default',
            'segment_twists', 'filter_postures', 'DEFAULT_THRESHOLD', 'FORMAT_VERSION',
-           'default_cache_dir', 'default_shared_dir', 'repo_root', 'class_statistics']
+           'default_cache_dir', 'default_shared_dir', 'repo_root', 'class_statistics',
+           'MappedSource', 'uiprmd_vicon_source']
 
 log = logging.getLogger(__name__)
 
@@ -358,11 +359,15 @@ def _code_digest() -> str:
     """Hash of the modules whose code decides the database content (so edits invalidate it)."""
     h = hashlib.sha256()
     here = Path(__file__).resolve().parent
-    for name in ('database.py', 'mocap.py', 'motions.py', 'bvh.py', 'geometry.py', 'model.py'):
+    from skeleton_core import geometry, model
+    from .joint_map import maps_dir
+    for path in [here / n for n in ('database.py', 'mocap.py', 'motions.py', 'bvh.py',
+                                     'joint_map.py', 'vicon.py')] \
+            + [Path(geometry.__file__), Path(model.__file__), maps_dir() / 'cmu_bvh.yaml']:
         try:
-            h.update((here / name).read_bytes())
+            h.update(path.read_bytes())
         except OSError:  # pragma: no cover
-            h.update(name.encode())
+            h.update(path.name.encode())
     return h.hexdigest()[:16]
 
 
@@ -374,26 +379,79 @@ def _files_digest(files: Sequence[Path]) -> str:
     return h.hexdigest()
 
 
+@dataclass(frozen=True)
+class MappedSource:
+    """A folder of mocap clips in another convention, read through a joint map
+    (:mod:`skeleton_data.joint_map`): files whose name matches one of ``include`` (if any) and
+    none of ``exclude`` (shell patterns)."""
+
+    folder: Path
+    joint_map: Path
+    include: Tuple[str, ...] = ()
+    exclude: Tuple[str, ...] = ()
+
+    def files(self) -> List[Path]:
+        from .joint_map import load_joint_map
+        from .mocap import mapped_files
+        return mapped_files(self.folder, load_joint_map(self.joint_map), self.include,
+                            self.exclude)
+
+    def key(self) -> dict:
+        """Cache-key part: the map's content, the selection and the selected files."""
+        return {'map': hashlib.sha256(Path(self.joint_map).read_bytes()).hexdigest()[:16],
+                'include': list(self.include), 'exclude': list(self.exclude),
+                'files': _files_digest(self.files())}
+
+
+def uiprmd_vicon_source(src, subjects: Optional[Sequence[int]] = None,
+                        exclude_subjects: Sequence[int] = (), joint_map=None) -> MappedSource:
+    """The Vicon marker files of a UI-PRMD folder (``<src>/Vicon/Positions``) through the
+    Plug-in-Gait map: the repetitions of ``subjects`` (None: all) except ``exclude_subjects``
+    (e.g. the subject a leave-one-subject-out fold scores)."""
+    from .joint_map import maps_dir
+    inc = tuple(f'm*_s{int(s):02d}_*' for s in subjects) if subjects else ()
+    exc = tuple(f'm*_s{int(s):02d}_*' for s in exclude_subjects)
+    return MappedSource(Path(src) / 'Vicon' / 'Positions',
+                        Path(joint_map) if joint_map else maps_dir() / 'plug_in_gait.yaml',
+                        inc, exc)
+
+
+def load_mapped_sources(sources: Sequence[MappedSource], skipped: Optional[list] = None) -> list:
+    """The clips of every mapped source (see :func:`skeleton_data.mocap.load_mapped_clips`)."""
+    from .joint_map import load_joint_map
+    from .mocap import load_mapped_clips
+    clips = []
+    for ms in sources:
+        clips += load_mapped_clips(ms.folder, load_joint_map(ms.joint_map), ms.include, ms.exclude,
+                                   skipped=skipped)
+    return clips
+
+
 def load_or_build_default(source: str = 'auto', cache_dir=None, shared_dir=None,
                           threshold: Optional[float] = None, classes: Sequence[str] = FIVE_CLASSES,
                           split: str = 'database', mirror: bool = False,
                           progress: bool = False, rebuild: bool = False,
-                          stats: Optional[dict] = None) -> MotionDatabase:
+                          stats: Optional[dict] = None,
+                          mapped: Sequence[MappedSource] = ()) -> MotionDatabase:
     """The default motion database, from the cache when its inputs have not changed.
 
     ``source``: ``'cmu'`` (``<shared>/mocap/cmu``), ``'builtin'`` (:mod:`motions`) or ``'auto'``
     (CMU when the shared folder exists: ``shared_dir``, else ``$KP_SHARED``, else ``../shared``
     of the repository). ``split``: ``'database'`` (the database part of the split, default) or
     ``'all'`` (database and dev clips). ``classes`` None: all CMU clips including 'other'.
-    ``mirror`` adds left-right mirrored copies. The cache file name is a hash of the inputs
+    ``mirror`` adds left-right mirrored copies. ``mapped``: clips in other conventions added
+    beside (all their frames: a lab's own mocap is not split); with ``source='none'`` only
+    those. The cache file name is a hash of the inputs
     (file names, sizes, mtimes), every parameter and the code of the modules that build it.
     ``stats`` (dict) receives build statistics
     plus ``cache_hit`` and ``path``.
     """
     from . import mocap, motions  # local: keeps import of this module light
     thr = DEFAULT_THRESHOLD if threshold is None else float(threshold)
-    if source not in ('auto', 'cmu', 'builtin'):
-        raise ValueError(f"source must be 'auto', 'cmu' or 'builtin', got {source!r}")
+    if source not in ('auto', 'cmu', 'builtin', 'none'):
+        raise ValueError(f"source must be 'auto', 'cmu', 'builtin' or 'none', got {source!r}")
+    if source == 'none' and not mapped:
+        raise ValueError("source 'none' needs mapped mocap sources")
     if split not in ('database', 'all'):
         raise ValueError(f"split must be 'database' or 'all', got {split!r}")
     if shared_dir is None:
@@ -411,11 +469,14 @@ def load_or_build_default(source: str = 'auto', cache_dir=None, shared_dir=None,
         key['classes'] = sorted(classes) if classes is not None else None
         key['files'] = _files_digest(sorted(cmu_dir.glob('*.bvh')) +
                                      [p for p in [cmu_dir / 'index.csv'] if p.is_file()])
-    else:
+    elif source == 'builtin':
         key['seed'] = 0
+    if mapped:
+        key['mapped'] = [m.key() for m in mapped]
     digest = hashlib.sha256(json.dumps(key, sort_keys=True).encode()).hexdigest()[:16]
     cache_dir = Path(cache_dir) if cache_dir is not None else default_cache_dir()
-    path = cache_dir / f'motion_db_{source}_{digest}.npz'
+    label = '+'.join([source] * (source != 'none') + [Path(m.joint_map).stem for m in mapped])
+    path = cache_dir / f'motion_db_{label}_{digest}.npz'
     out_stats = stats if stats is not None else {}
     if path.is_file() and not rebuild:
         try:
@@ -432,13 +493,18 @@ def load_or_build_default(source: str = 'auto', cache_dir=None, shared_dir=None,
     if source == 'cmu':
         db_clips, dev_clips = mocap.cmu_split(cmu_dir, classes, skipped=skipped) if classes \
             is not None else mocap.split_clips(mocap.load_cmu_clips(cmu_dir, None, skipped=skipped))
-    else:
+    elif source == 'builtin':
         db_clips, dev_clips = motions.builtin_split()
+    else:
+        db_clips, dev_clips = [], []
     clips = list(db_clips) + (list(dev_clips) if split == 'all' else [])
+    clips += load_mapped_sources(mapped, skipped)
+    if not clips:
+        raise DatabaseError('no usable clips in the mapped mocap sources')
     if mirror:
         clips = clips + [mocap.mirror_clip(c) for c in clips]
     db, st = build_database(clips, threshold=thr, progress=progress,
-                            meta={'source': source, 'cache_key': key, 'skipped': skipped})
+                            meta={'source': label, 'cache_key': key, 'skipped': skipped})
     db.save(path)
     log.info('motion database built: %d -> %d postures from %d clips in %.1f s, saved %s',
              st['frames_before'], st['frames_after'], st['clips'], st['seconds'], path)

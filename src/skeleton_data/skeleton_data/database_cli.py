@@ -6,6 +6,9 @@ Examples::
     build_db                                   # default: CMU five-class database clips, cached
     build_db --source builtin                  # the built-in motions (no ../shared needed)
     build_db --all-clips --mirror --no-filter --out out/big_db.npz   # 53k postures, scale tests
+    build_db --bvh-dir DIR --joint-map config/joint_maps/generic_bvh.yaml   # CMU + a lab's BVH
+    build_db --marker-dir ../shared/kinect/ui-prmd/Vicon/Positions --exclude 'm*_s05_*'
+                                               # CMU + Plug-in-Gait marker clips of s01-s04
 """
 from __future__ import annotations
 
@@ -16,14 +19,16 @@ import time
 from pathlib import Path
 
 from . import database, mocap, motions
+from .joint_map import JointMapError, load_joint_map, maps_dir
 
 
 def _parser():
     p = argparse.ArgumentParser(
         prog='build_db', description='Build the motion database (Shum et al. 2013 Sec. V-A): '
         'normalise, retarget to the standard body, filter near-duplicate postures.')
-    p.add_argument('--source', choices=('auto', 'cmu', 'builtin'), default='auto',
-                   help='auto: CMU when the shared data folder exists, else built-in motions')
+    p.add_argument('--source', choices=('auto', 'cmu', 'builtin', 'none'), default='auto',
+                   help='auto: CMU when the shared data folder exists, else built-in motions; '
+                        'none: only the clips of --bvh-dir / --marker-dir')
     p.add_argument('--cmu-dir', type=Path, default=None,
                    help='folder of CMU cgspeed BVH files with index.csv '
                         '(default: <shared>/mocap/cmu; implies --source cmu)')
@@ -37,6 +42,18 @@ def _parser():
                    help=f'filter threshold, m^2 summed over joints (default '
                         f'{database.DEFAULT_THRESHOLD})')
     p.add_argument('--no-filter', action='store_true', help='keep every posture')
+    g = p.add_argument_group('clips in other conventions, through a joint map (added beside '
+                             '--source; every frame, no dev split)')
+    g.add_argument('--bvh-dir', type=Path, default=None,
+                   help='folder of BVH files (default map: config/joint_maps/generic_bvh.yaml)')
+    g.add_argument('--marker-dir', type=Path, default=None,
+                   help='folder of marker files (default map: config/joint_maps/plug_in_gait.yaml)')
+    g.add_argument('--joint-map', type=Path, default=None,
+                   help='joint-map YAML for --bvh-dir or --marker-dir')
+    g.add_argument('--include', action='append', default=[], metavar='PATTERN',
+                   help='only files whose name matches this shell pattern (repeatable)')
+    g.add_argument('--exclude', action='append', default=[], metavar='PATTERN',
+                   help="skip files whose name matches, e.g. 'm*_s05_*' (repeatable)")
     p.add_argument('--out', type=Path, default=None,
                    help='write the database here (default: the cache, keyed by the inputs)')
     p.add_argument('--cache-dir', type=Path, default=None,
@@ -74,12 +91,45 @@ def main(argv=None) -> int:
                   f'{", ".join(mocap.MOTION_CLASSES)}', file=sys.stderr)
             return 2
     split = 'all' if args.all_clips else 'database'
+    mapped = []
+    if args.bvh_dir is not None and args.marker_dir is not None:
+        print('build_db: give --bvh-dir or --marker-dir, not both (one joint map)', file=sys.stderr)
+        return 2
+    folder = args.bvh_dir or args.marker_dir
+    if folder is None and (args.joint_map or args.include or args.exclude):
+        print('build_db: --joint-map/--include/--exclude need --bvh-dir or --marker-dir',
+              file=sys.stderr)
+        return 2
+    if folder is not None:
+        jm_path = args.joint_map or maps_dir() / (
+            'generic_bvh.yaml' if args.bvh_dir is not None else 'plug_in_gait.yaml')
+        try:
+            jm = load_joint_map(jm_path)
+        except JointMapError as e:
+            print(f'build_db: {e}', file=sys.stderr)
+            return 2
+        want = 'bvh' if args.bvh_dir is not None else 'markers'
+        if jm.format != want:
+            print(f'build_db: {jm_path} is a {jm.format} map; --{want.replace("markers", "marker")}'
+                  f'-dir needs a {want} map', file=sys.stderr)
+            return 2
+        if not folder.is_dir():
+            print(f'build_db: folder {folder} not found', file=sys.stderr)
+            return 1
+        mapped = [database.MappedSource(folder, Path(jm_path), tuple(args.include),
+                                        tuple(args.exclude))]
+        if not mapped[0].files():
+            print(f'build_db: no {want} files selected in {folder}', file=sys.stderr)
+            return 1
+    if args.source == 'none' and not mapped:
+        print('build_db: --source none needs --bvh-dir or --marker-dir', file=sys.stderr)
+        return 2
     try:
         if args.cmu_dir is not None or args.out is not None:
             # explicit build (not the cached default)
             source = args.source
             cmu_dir = args.cmu_dir
-            if cmu_dir is None and source != 'builtin':
+            if cmu_dir is None and source not in ('builtin', 'none'):
                 shared = database.default_shared_dir()
                 cmu_dir = shared / 'mocap' / 'cmu' if shared is not None else None
                 if source == 'auto':
@@ -99,14 +149,23 @@ def main(argv=None) -> int:
                 if bar is not None:
                     bar.close()
                 db_clips, dev_clips = mocap.split_clips(clips)
-            else:
+            elif source == 'builtin':
                 db_clips, dev_clips = motions.builtin_split()
+            else:
+                db_clips, dev_clips = [], []
             sel = list(db_clips) + (list(dev_clips) if split == 'all' else [])
+            sel += database.load_mapped_sources(mapped, skipped)
+            if not sel:
+                print('build_db: no usable clips', file=sys.stderr)
+                return 1
             if args.mirror:
                 sel += [mocap.mirror_clip(c) for c in sel]
             t_load = time.perf_counter() - t0
             db, st = database.build_database(sel, threshold=threshold, progress=progress,
-                                             meta={'source': source, 'skipped': skipped})
+                                             meta={'source': '+'.join(
+                                                 [source] * (source != 'none')
+                                                 + [m.joint_map.stem for m in mapped]),
+                                                 'skipped': skipped})
             out = args.out or (database.default_cache_dir() / f'motion_db_{source}_custom.npz')
             db.save(out)
             st.update(cache_hit=False, path=str(out), skipped=skipped, load_seconds=t_load)
@@ -115,7 +174,7 @@ def main(argv=None) -> int:
             db = database.load_or_build_default(
                 args.source, cache_dir=args.cache_dir, threshold=threshold, classes=classes,
                 split=split, mirror=args.mirror, progress=progress, rebuild=args.rebuild,
-                stats=st)
+                stats=st, mapped=mapped)
     except (database.DatabaseError, FileNotFoundError, ValueError) as e:
         print(f'build_db: {e}', file=sys.stderr)
         return 1

@@ -10,8 +10,11 @@ Orientation convention (shared with :mod:`skeleton_data.motions` and the databas
 ``quat_rotate(orientations[t, j], unit(standard_body().rest_offsets[j]))`` is the direction of the
 segment from ``PARENTS[j]`` to j (exactly, for built-in motions and mocap alike).
 
-CMU -> Kinect mapping (the one table: :data:`CMU_TO_KINECT`)
------------------------------------------------------------
+CMU -> Kinect mapping (the one table: ``config/joint_maps/cmu_bvh.yaml``)
+-----------------------------------------------------------------------
+The map is read through :mod:`skeleton_data.joint_map` (:data:`CMU_TO_KINECT` and
+:data:`CMU_ORIENTATION_SOURCE` are views of it); other conventions (a generic BVH, Plug-in-Gait
+markers) come in through their own maps with :func:`load_mapped_clip`.
 Kinect joints are points on the mocap skeleton; segment orientations are the global rotation of one
 mocap bone (:data:`CMU_ORIENTATION_SOURCE`), composed with a constant per-subject correction that
 turns the standard body's rest direction into the mocap bone's rest direction; for segments that
@@ -48,17 +51,18 @@ from pathlib import Path
 from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
-from .bvh import Bvh, BvhError, load_bvh
-from skeleton_core.geometry import quat_multiply, quat_rotate
-from skeleton_core.model import (JOINT_NAMES, MIRROR, NUM_JOINTS, PARENTS, SEGMENT_PARENT_INDEX,
-                                 standard_body)
+from skeleton_core.model import MIRROR, NUM_JOINTS
+
+from .bvh import BvhError, load_bvh
+from .joint_map import (JointMap, JointMapError, builtin_map, bvh_frames, marker_joint_centres,
+                        orientations_from_positions, read_markers, rest_directions)
 
 __all__ = [
     'MotionClip', 'MocapError', 'CMU_TO_KINECT', 'CMU_ORIENTATION_SOURCE', 'CMU_UNIT',
     'BVH_TO_REP103', 'FIVE_CLASSES', 'MOTION_CLASSES', 'load_cmu_clip', 'load_cmu_index',
-    'load_cmu_clips', 'cmu_split', 'split_clips', 'mirror_clip', 'rest_directions',
+    'load_cmu_clips', 'cmu_split', 'split_clips', 'mirror_clip', 'rest_directions', 'CMU_MAP',
+    'load_mapped_clip', 'load_mapped_clips', 'mapped_files', 'JointMapError',
 ]
 
 log = logging.getLogger(__name__)
@@ -68,47 +72,19 @@ FIVE_CLASSES: Tuple[str, ...] = ('locomotion', 'object_handling', 'upper_body', 
                                  'sword_fighting')
 MOTION_CLASSES: Tuple[str, ...] = FIVE_CLASSES + ('other',)
 
-CMU_UNIT = 0.056444  # metres per CMU ASF length unit (1/0.45 inch)
+# THE CMU mapping is config/joint_maps/cmu_bvh.yaml (skeleton_data.joint_map); these names are views
+# of it for the code that reads them.
+CMU_MAP: JointMap = builtin_map('cmu_bvh')
+CMU_UNIT = CMU_MAP.scale  # metres per CMU ASF length unit (1/0.45 inch)
 # rep = BVH_TO_REP103 @ bvh: x_rep = Z_bvh (forward), y_rep = X_bvh (left), z_rep = Y_bvh (up)
-BVH_TO_REP103 = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
-
+BVH_TO_REP103 = CMU_MAP.rotation
 # Kinect joint -> weighted mocap points ('Joint' or 'Joint/End' for that joint's End Site)
 CMU_TO_KINECT: Dict[str, Tuple[Tuple[str, float], ...]] = {
-    'HipCenter': (('Hips', 1.0),),
-    'Spine': (('Spine', 1.0),),
-    'ShoulderCenter': (('LeftArm', 0.5), ('RightArm', 0.5)),
-    'Head': (('Head', 0.5), ('Head/End', 0.5)),
-    'ShoulderLeft': (('LeftArm', 1.0),),
-    'ElbowLeft': (('LeftForeArm', 1.0),),
-    'WristLeft': (('LeftHand', 1.0),),
-    'HandLeft': (('LeftHandIndex1', 1.0),),
-    'ShoulderRight': (('RightArm', 1.0),),
-    'ElbowRight': (('RightForeArm', 1.0),),
-    'WristRight': (('RightHand', 1.0),),
-    'HandRight': (('RightHandIndex1', 1.0),),
-    'HipLeft': (('LeftUpLeg', 1.0),),
-    'KneeLeft': (('LeftLeg', 1.0),),
-    'AnkleLeft': (('LeftFoot', 1.0),),
-    'FootLeft': (('LeftToeBase', 1.0),),
-    'HipRight': (('RightUpLeg', 1.0),),
-    'KneeRight': (('RightLeg', 1.0),),
-    'AnkleRight': (('RightFoot', 1.0),),
-    'FootRight': (('RightToeBase', 1.0),),
-}
+    name: alts[0] for name, alts in CMU_MAP.joints.items()}
 # Kinect joint -> mocap bone whose global rotation orients the segment ending at that joint
-CMU_ORIENTATION_SOURCE: Dict[str, str] = {
-    'HipCenter': 'Hips', 'Spine': 'LowerBack', 'ShoulderCenter': 'Spine1', 'Head': 'Head',
-    'ShoulderLeft': 'LeftShoulder', 'ElbowLeft': 'LeftArm', 'WristLeft': 'LeftForeArm',
-    'HandLeft': 'LeftHand',
-    'ShoulderRight': 'RightShoulder', 'ElbowRight': 'RightArm', 'WristRight': 'RightForeArm',
-    'HandRight': 'RightHand',
-    'HipLeft': 'Hips', 'KneeLeft': 'LeftUpLeg', 'AnkleLeft': 'LeftLeg', 'FootLeft': 'LeftFoot',
-    'HipRight': 'Hips', 'KneeRight': 'RightUpLeg', 'AnkleRight': 'RightLeg',
-    'FootRight': 'RightFoot',
-}
+CMU_ORIENTATION_SOURCE: Dict[str, str] = dict(CMU_MAP.orientation)
 # Channels CMU says were not captured (set to zero)
-CMU_IGNORED_JOINTS = ('LeftFingerBase', 'LeftHandIndex1', 'LThumb',
-                      'RightFingerBase', 'RightHandIndex1', 'RThumb')
+CMU_IGNORED_JOINTS = CMU_MAP.zero_rotations
 
 
 class MocapError(ValueError):
@@ -148,52 +124,6 @@ class MotionClip:
     def slice(self, start: int, stop: Optional[int] = None, suffix: str = '') -> 'MotionClip':
         return replace(self, name=self.name + suffix, positions=self.positions[start:stop].copy(),
                        orientations=self.orientations[start:stop].copy())
-
-
-def rest_directions(body=None) -> np.ndarray:
-    """(20, 3) unit direction of every segment in the standard T-pose (row 0: zeros)."""
-    body = standard_body() if body is None else body
-    off = body.rest_offsets.copy()
-    n = np.linalg.norm(off, axis=1, keepdims=True)
-    return np.where(n > 0, off / np.maximum(n, 1e-12), 0.0)
-
-
-def _min_rotation(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Quaternion (xyzw) of the smallest rotation taking unit vector a to unit vector b."""
-    c = np.cross(a, b)
-    d = float(np.dot(a, b))
-    if d < -1.0 + 1e-9:  # opposite: any perpendicular axis
-        axis = np.cross(a, [1.0, 0.0, 0.0])
-        if np.linalg.norm(axis) < 1e-6:
-            axis = np.cross(a, [0.0, 1.0, 0.0])
-        axis /= np.linalg.norm(axis)
-        return np.array([*axis, 0.0])
-    q = np.array([c[0], c[1], c[2], 1.0 + d])
-    return q / np.linalg.norm(q)
-
-
-def _min_rotation_batch(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Batched smallest rotations taking unit vectors a to b (..., 3) -> (..., 4); for (near)
-    opposite vectors, which cannot occur for the small residuals this is used on, identity."""
-    c = np.cross(a, b)
-    w = 1.0 + np.sum(a * b, -1, keepdims=True)
-    q = np.concatenate([c, w], -1)
-    n = np.linalg.norm(q, axis=-1, keepdims=True)
-    ident = np.zeros_like(q)
-    ident[..., 3] = 1.0
-    return np.where(n > 1e-9, q / np.maximum(n, 1e-12), ident)
-
-
-def _kinect_points(bvh: Bvh, pos: np.ndarray, ends: np.ndarray) -> np.ndarray:
-    """Kinect joint positions (F, 20, 3) in BVH axes from mocap joint / End Site positions."""
-    out = np.zeros(pos.shape[:1] + (NUM_JOINTS, 3))
-    for j, name in enumerate(JOINT_NAMES):
-        for src, w in CMU_TO_KINECT[name]:
-            if src.endswith('/End'):
-                out[:, j] += w * ends[:, bvh.end_site_of(src[:-4])]
-            else:
-                out[:, j] += w * pos[:, bvh.index(src)]
-    return out
 
 
 _INDEX_CACHE: Dict[str, Dict[str, dict]] = {}
@@ -237,44 +167,10 @@ def load_cmu_clip(path, motion_class: Optional[str] = None, drop_first: bool = T
     if missing:
         raise MocapError(f'{path}: not a CMU cgspeed skeleton '
                          f'(missing joints {", ".join(missing)})')
-    motion = bvh.motion[1:] if drop_first else bvh.motion
-    if motion.shape[0] < 2:
+    jm = CMU_MAP if drop_first else replace(CMU_MAP, drop_first_frame=False)
+    if bvh.num_frames - int(jm.drop_first_frame) < 2:
         raise MocapError(f'{path}: fewer than 2 frames of motion')
-    motion = motion.copy()
-    for nm in CMU_IGNORED_JOINTS:
-        if nm in bvh.names:
-            j = bvh.index(nm)
-            s = bvh.channel_start[j]
-            for k, c in enumerate(bvh.channels[j]):
-                if c.endswith('rotation'):
-                    motion[:, s + k] = 0.0
-
-    c = BVH_TO_REP103
-    pos, rot, ends = bvh.forward_kinematics(motion, scale=CMU_UNIT)
-    kin = _kinect_points(bvh, pos, ends) @ c.T
-    # rest (all-zero rotations) pose of this subject, for the orientation corrections
-    zero = np.zeros((1, bvh.motion.shape[1]))
-    pos0, _, ends0 = bvh.forward_kinematics(zero, scale=CMU_UNIT)
-    kin0 = (_kinect_points(bvh, pos0, ends0) @ c.T)[0]
-    a_std = rest_directions()
-    src = [bvh.index(CMU_ORIENTATION_SOURCE[n]) for n in JOINT_NAMES]
-    r_rep = np.einsum('ij,fkjl,ml->fkim', c, rot[:, src], c)
-    q = Rotation.from_matrix(r_rep.reshape(-1, 3, 3)).as_quat().reshape(-1, NUM_JOINTS, 4)
-    corr = np.zeros((NUM_JOINTS, 4))
-    corr[:, 3] = 1.0
-    for j in range(1, NUM_JOINTS):
-        d = kin0[j] - kin0[PARENTS[j]]
-        corr[j] = _min_rotation(a_std[j], d / np.linalg.norm(d))
-    q = quat_multiply(q, corr)
-    # Segments spanning several mocap bones (trunk, neck) are not rigid with their source bone:
-    # swing the orientation by the small residual so it points exactly along the segment (the
-    # twist still comes from the source bone).
-    seg = kin[:, 1:] - kin[:, SEGMENT_PARENT_INDEX]
-    seg /= np.maximum(np.linalg.norm(seg, axis=-1, keepdims=True), 1e-12)
-    pred = quat_rotate(q[:, 1:], np.broadcast_to(a_std[1:], seg.shape))
-    q[:, 1:] = quat_multiply(_min_rotation_batch(pred, seg), q[:, 1:])
-    q /= np.linalg.norm(q, axis=-1, keepdims=True)
-    q *= np.where(q[..., 3:4] < 0, -1.0, 1.0)
+    kin, q = bvh_frames(bvh, jm)
     if not (np.all(np.isfinite(kin)) and np.all(np.isfinite(q))):
         raise MocapError(f'{path}: non-finite values after forward kinematics')
 
@@ -377,3 +273,74 @@ def mirror_clip(clip: MotionClip, suffix: str = ':mirror') -> MotionClip:
     q[..., 2] *= -1.0
     return replace(clip, name=clip.name + suffix, positions=p, orientations=q,
                    source=clip.source + suffix)
+
+
+# ------------------------------------------------------------------------------------------
+# Clips in other conventions through a joint map
+# ------------------------------------------------------------------------------------------
+def load_mapped_clip(path, jmap: JointMap, motion_class: Optional[str] = None,
+                     name: Optional[str] = None) -> MotionClip:
+    """One BVH or marker file as a :class:`MotionClip` through ``jmap``
+    (:mod:`skeleton_data.joint_map`). Marker frames where a joint centre is undefined (a marker
+    gap) are dropped. Raises :class:`MocapError` (file unusable: names it and why) or
+    :class:`JointMapError` (the map does not fit the file)."""
+    path = Path(path)
+    stem = name or path.name.split('.')[0]
+    if jmap.format == 'bvh':
+        try:
+            bvh = load_bvh(path)
+        except BvhError as e:
+            raise MocapError(str(e)) from None
+        pos, q = bvh_frames(bvh, jmap)
+        fps = bvh.fps
+    else:
+        try:
+            markers = read_markers(path, jmap)
+        except ValueError as e:
+            raise MocapError(str(e)) from None
+        pos = marker_joint_centres(markers, jmap)
+        ok = np.all(np.isfinite(pos), axis=(1, 2))
+        pos = pos[ok]
+        q = orientations_from_positions(pos) if len(pos) else np.zeros((0, NUM_JOINTS, 4))
+        fps = jmap.frame_rate
+    if len(pos) < 2:
+        raise MocapError(f'{path}: fewer than 2 usable frames')
+    if not (np.all(np.isfinite(pos)) and np.all(np.isfinite(q))):
+        raise MocapError(f'{path}: non-finite values after the joint map')
+    return MotionClip(name=stem, motion_class=motion_class or jmap.motion_class, fps=fps,
+                      positions=pos, orientations=q, source=f'{jmap.name}:{path.name}')
+
+
+def mapped_files(folder, jmap: JointMap, include: Sequence[str] = (),
+                 exclude: Sequence[str] = ()) -> List[Path]:
+    """The files of ``folder`` a map reads (``*.bvh`` for BVH maps; ``*.txt``, ``*.txt.gz``,
+    ``*.csv``, ``*.csv.gz`` for marker maps), sorted, filtered by shell patterns on the file name:
+    kept when it matches one of ``include`` (if any) and none of ``exclude``."""
+    from fnmatch import fnmatch
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise FileNotFoundError(f'mocap folder {folder} does not exist')
+    pats = ('*.bvh',) if jmap.format == 'bvh' else ('*.txt', '*.txt.gz', '*.csv', '*.csv.gz')
+    files = sorted({f for p in pats for f in folder.glob(p)})
+    return [f for f in files
+            if (not include or any(fnmatch(f.name, p) for p in include))
+            and not any(fnmatch(f.name, p) for p in exclude)]
+
+
+def load_mapped_clips(folder, jmap: JointMap, include: Sequence[str] = (),
+                      exclude: Sequence[str] = (), skipped: Optional[list] = None,
+                      progress=None) -> List[MotionClip]:
+    """Every file of :func:`mapped_files` as a clip; unusable files are skipped (``(name,
+    reason)`` appended to ``skipped`` and logged). A map that does not fit a file
+    (:class:`JointMapError`) is raised: it would not fit the others either."""
+    clips = []
+    for f in mapped_files(folder, jmap, include, exclude):
+        try:
+            clips.append(load_mapped_clip(f, jmap))
+        except (MocapError, OSError) as e:
+            log.warning('skipping %s: %s', f.name, e)
+            if skipped is not None:
+                skipped.append((f.name, str(e)))
+        if progress is not None:
+            progress(f.name)
+    return clips

@@ -188,8 +188,7 @@ def joint_centres(markers: np.ndarray, params: SubjectParams = SubjectParams()) 
         out[:, hd] = 0.5 * (wjc + g[s + 'FIN'])
 
     head = 0.25 * (g['LFHD'] + g['RFHD'] + g['LBHD'] + g['RBHD'])
-    hz = _unit(0.5 * (g['LFHD'] + g['RFHD'] + g['LBHD'] + g['RBHD'])
-               - 0.5 * (g['C7'] + g['CLAV']))
+    hz = _unit(head - 0.5 * (g['C7'] + g['CLAV']))  # neck base -> head marker centroid
     out[:, HEAD] = head - params.head_drop * hz
     return out
 

@@ -68,9 +68,11 @@ def jitter(series: SkeletonSeries, max_gap_s: float = 0.2) -> float:
     ok = (dt[:-1] > 0) & (dt[1:] > 0) & (dt[:-1] <= max_gap_s) & (dt[1:] <= max_gap_s)
     if not ok.any():
         return float('nan')
-    v = (p[1:] - p[:-1]) / dt[:, None, None]
-    a = (v[1:] - v[:-1]) / (0.5 * (dt[:-1] + dt[1:]))[:, None, None]
-    return float(np.linalg.norm(a[ok], axis=-1).mean())
+    i = np.flatnonzero(ok)   # only triples of frames with two positive, short steps
+    v0 = (p[i + 1] - p[i]) / dt[i, None, None]
+    v1 = (p[i + 2] - p[i + 1]) / dt[i + 1, None, None]
+    a = (v1 - v0) / (0.5 * (dt[i] + dt[i + 1]))[:, None, None]
+    return float(np.linalg.norm(a, axis=-1).mean())
 
 
 def _f(x) -> Optional[float]:
@@ -91,6 +93,9 @@ def summarize(data: BagData, user: Optional[int], tolerance_s: float = DEFAULT_T
                          'frames': len(s) if s is not None else 0}
                   for role, s in series.items()},
         'dropped_skeletons': dict(data.dropped),
+        # frames of this user with the stamp of a later frame (the later one is used)
+        'duplicate_stamps': {role: s.duplicates for role, s in series.items()
+                             if s is not None and s.duplicates},
     }
     if any(s is not None for s in series.values()):
         stamps = [s.stamps_ns for s in series.values() if s is not None and len(s)]

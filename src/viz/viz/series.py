@@ -33,6 +33,7 @@ class SkeletonSeries:
     reliability: np.ndarray     # (N, 20) float32, NaN = unknown
     user_id: int = 0
     frame_id: str = ''
+    duplicates: int = 0         # frames dropped because a later one had the same stamp
 
     def __len__(self) -> int:
         return int(self.stamps_ns.shape[0])
@@ -44,7 +45,10 @@ class SkeletonSeries:
     @classmethod
     def from_arrays(cls, positions, stamps_ns=None, tracking_state=None, reliability=None,
                     fps: float = 30.0, user_id: int = 0, frame_id: str = '') -> 'SkeletonSeries':
-        """From arrays; without stamps the frames are ``1/fps`` apart starting at 0."""
+        """From arrays; without stamps the frames are ``1/fps`` apart starting at 0. Frames are
+        ordered by stamp; of frames with the same stamp only the last one given is kept (a
+        physics character published twice for one target: its newer state), counted in
+        ``duplicates``."""
         p = np.asarray(positions, dtype=float)
         if p.ndim != 3 or p.shape[1:] != (NUM_JOINTS, 3):
             raise ValueError(f'positions must be (N, {NUM_JOINTS}, 3), got {p.shape}')
@@ -59,7 +63,12 @@ class SkeletonSeries:
         r = (np.full((n, NUM_JOINTS), np.nan, np.float32) if reliability is None
              else np.asarray(reliability, dtype=np.float32).reshape(n, NUM_JOINTS))
         order = np.argsort(s, kind='stable')
-        return cls(s[order], p[order], t[order], r[order], user_id, frame_id)
+        s = s[order]
+        keep = np.ones(n, bool)
+        keep[:-1] = s[1:] != s[:-1]          # the last of every run of equal stamps
+        order = order[keep]
+        return cls(s[keep], p[order], t[order], r[order], user_id, frame_id,
+                   duplicates=int(n - keep.sum()))
 
     @classmethod
     def from_frames(cls, frames: Sequence[SkeletonFrame]) -> 'SkeletonSeries':

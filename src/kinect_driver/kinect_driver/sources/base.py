@@ -25,6 +25,9 @@ class SourceOutput:
     truth: Optional[List[SkeletonFrame]] = None   # ground truth (synthetic source only)
     raw: Optional[bytes] = None                   # recorded CDR bytes of the SkeletonArray (replay)
     frame_id: str = ''
+    # replay of another topic of the bag (ground truth, ...): published as recorded on ``topic``
+    topic: str = ''
+    msgtype: str = ''
 
 
 @dataclass

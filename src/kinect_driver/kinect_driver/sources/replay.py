@@ -8,6 +8,13 @@
   with ``ros2 bag convert`` to MCAP.
 * **CSV** (``.csv``): the format of :mod:`kinect_driver.csv_format`; timing follows ``stamp_ns``.
 
+Every other topic of the bag is replayed too, as ``ros2 bag play`` would (ground truth on
+``/kinect/ground_truth`` included), at its recorded time among the skeletons, except the topics
+in ``replay_skip_topics`` (by default those the node graph produces itself from the skeletons:
+replaying a recorded reconstruction beside the live one would mix the two).
+``replay_other_topics=False`` replays only the skeleton topic. ``wait_for_subscribers`` and
+``wait_timeout_s`` are applied by the driver node (nothing lost while the graph comes up).
+
 ``rate`` scales the speed (2.0 = twice as fast); ``loop`` starts again after the last message (one
 median message interval after it). Outputs are due when ``(t_recorded - t_first) / rate`` has
 elapsed since the first poll; a poll releases everything due up to half a period ahead, so a
@@ -17,7 +24,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import List, Optional, Tuple
+from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -29,6 +36,10 @@ from ..csv_format import CsvFormatError, read_csv
 from .base import Source, SourceError, SourceOutput
 
 SKELETON_ARRAY = 'skeleton_msgs/msg/SkeletonArray'
+# topics the node graph produces itself (and the ROS infrastructure's): not replayed by default
+GRAPH_OUTPUTS = ('/kinect/skeletons_reliability', '/posture/completed', '/posture/reconstructed',
+                 '/character/skeletons', '/viz/markers', '/physics/objects', '/diagnostics',
+                 '/rosout', '/parameter_events', '/tf', '/tf_static')
 
 
 @dataclass
@@ -40,6 +51,17 @@ class ReplayConfig:
                               "bag's only SkeletonArray topic)")
     rate: float = param(1.0, 'speed factor (2 = twice as fast)', range=(0.05, 20.0))
     loop: bool = param(False, 'start again after the last message')
+    replay_other_topics: bool = param(
+        True, "also play the bag's other topics (ground truth, ...) as recorded, except "
+        'replay_skip_topics')
+    replay_skip_topics: list = param(list(GRAPH_OUTPUTS), 'topics not replayed (by default '
+                                     'those the node graph produces itself)')
+    wait_for_subscribers: int = param(
+        0, 'before the first frame, wait until /kinect/skeletons has this many subscribers, and '
+        'after it until they acknowledged it (the launch file and pipeline set the graph\'s '
+        'count; 0 = start at once, like ros2 bag play)', range=(0, 100))
+    wait_timeout_s: float = param(30.0, 'play anyway (with a warning) after waiting this long '
+                                  'for subscribers (s)', range=(0.0, 3600.0))
 
 
 class ReplaySource(Source):
@@ -49,9 +71,17 @@ class ReplaySource(Source):
 
     def __init__(self, path: Optional[str] = None, config: Optional[ReplayConfig] = None,
                  frame_id: str = 'kinect_link', topic: Optional[str] = None,
-                 rate: Optional[float] = None, loop: Optional[bool] = None):
+                 rate: Optional[float] = None, loop: Optional[bool] = None,
+                 play_other_topics: Optional[bool] = None,
+                 skip_topics: Optional[Sequence[str]] = None, warn=None):
         cfg = config or ReplayConfig()
         self.config = cfg
+        self.play_other_topics = bool(cfg.replay_other_topics if play_other_topics is None
+                                      else play_other_topics)
+        self.skip_topics = set(cfg.replay_skip_topics if skip_topics is None else skip_topics)
+        self.other_topics: Dict[str, str] = {}   # replayed besides ``topic``: name -> type
+        self.frames = 0                          # skeleton messages
+        self._warn = warn
         self.path = str(cfg.replay_file if path is None else path)
         self.topic = cfg.replay_topic if topic is None else topic
         self.rate = float(cfg.rate if rate is None else rate)
@@ -84,7 +114,7 @@ class ReplaySource(Source):
             raise SourceError(f'replay file {p} holds no skeleton frames'
                               + (f' on {self.topic}' if self.kind == 'bag' else ''))
         t = np.array([t for t, _ in self._items], dtype=np.int64)
-        dt = np.diff(t)
+        dt = np.diff(np.array([t for t, o in self._items if not o.topic], dtype=np.int64))
         dt = dt[dt > 0]
         median = float(np.median(dt)) if dt.size else 1e9 / 30.0
         self.period_s = median / 1e9 / self.rate
@@ -95,7 +125,7 @@ class ReplaySource(Source):
     def _open_bag(self, p: Path) -> None:
         self.kind = 'bag'
         try:
-            topics = bag_topics(p)
+            topics = bag_topics(p, warn=self._warn)
         except BagError as e:
             raise SourceError(str(e)) from None
         arrays = sorted(t for t, (ty, _) in topics.items() if ty == SKELETON_ARRAY)
@@ -109,15 +139,26 @@ class ReplaySource(Source):
             raise SourceError(f'replay bag {p}: {topic} holds {topics[topic][0]}, not '
                               f'{SKELETON_ARRAY}')
         self.topic = topic
+        if self.play_other_topics:
+            self.other_topics = {t: ty for t, (ty, n) in sorted(topics.items())
+                                 if t != topic and t not in self.skip_topics and n > 0 and ty}
         items = []
         try:
-            for m in read_messages(p, topics=[topic]):
-                items.append((m.stamp_ns, SourceOutput(
-                    stamp_ns=stamp_to_ns(m.msg.header.stamp), raw=m.data,
-                    frame_id=m.msg.header.frame_id)))
+            for m in read_messages(p, topics=[topic, *self.other_topics], decode=[topic],
+                                   warn=self._warn):
+                if m.topic == topic:
+                    items.append((m.stamp_ns, SourceOutput(
+                        stamp_ns=stamp_to_ns(m.msg.header.stamp), raw=m.data,
+                        frame_id=m.msg.header.frame_id)))
+                else:
+                    items.append((m.stamp_ns, SourceOutput(stamp_ns=m.stamp_ns, raw=m.data,
+                                                           topic=m.topic, msgtype=m.msgtype)))
         except BagError as e:
             raise SourceError(str(e)) from None
         self._items = items
+        self.frames = sum(1 for _, o in items if not o.topic)
+        if not self.frames:
+            self._items = []
 
     def _open_csv(self, p: Path) -> None:
         self.kind = 'csv'
@@ -127,6 +168,7 @@ class ReplaySource(Source):
             raise SourceError(str(e)) from None
         self._items = [(stamp, SourceOutput(stamp_ns=stamp, frames=frames, frame_id=self.frame_id))
                        for stamp, frames in rows]
+        self.frames = len(self._items)
 
     # ------------------------------------------------------------------------------------
     def poll(self, now_ns: int) -> List[SourceOutput]:
@@ -152,14 +194,27 @@ class ReplaySource(Source):
             self._next += 1
         return out
 
+    @classmethod
+    def from_config(cls, config, frame_id: str, log=None, clock_ns=None) -> 'ReplaySource':
+        return cls(config=config, frame_id=frame_id, warn=log)
+
+    def delay(self, ns: int) -> None:
+        """Hold the replay's clock by ``ns`` (the node waited that long after the first frame):
+        what follows keeps its recorded spacing instead of coming out in a burst."""
+        if self._start_ns is not None:
+            self._start_ns += int(ns)
+
     @property
     def count(self) -> int:
-        return len(self._items)
+        """Skeleton frames (messages of ``topic``)."""
+        return self.frames
 
     def describe(self) -> str:
         return f'{self.path} ({self.count} frames, rate {self.rate:g}' + \
-            (', loop)' if self.loop else ')')
+            (', loop)' if self.loop else ')') + \
+            (f'; also replaying {", ".join(self.other_topics)}' if self.other_topics else '')
 
     def status(self) -> dict:
-        return {'replay_file': self.path, 'messages': len(self._items), 'lap': self._lap,
+        return {'replay_file': self.path, 'messages': len(self._items), 'frames': self.frames,
+                'other_topics': ', '.join(self.other_topics), 'lap': self._lap,
                 'position': self._next}

@@ -1,0 +1,64 @@
+"""The dynamics kernel (Eq. 2-4 and Eq. 1): numba and the numpy twin give the same forces, and
+KINECT_NUMBA=0 selects the numpy twin (the package runs without numba)."""
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from performance_control import dynamics
+
+
+def _inputs(rng):
+    x = rng.normal(0, 0.3, 3) + [0, 0, 1.0]
+    v = rng.normal(0, 0.5, 3)
+    pe = x + rng.normal(0, 0.6, (4, 3))
+    ve = rng.normal(0, 1.0, (4, 3))
+    rh = rng.normal(0, 0.6, (4, 3))
+    rhd = rng.normal(0, 1.0, (4, 3))
+    g = rng.uniform(0, 9000, (4, 6))
+    return x, v, pe, ve, rh, rhd, g, float(rng.uniform(-np.pi, np.pi))
+
+
+def test_numpy_twin_equals_numba_contact_forces():
+    pytest.importorskip('numba')
+    rng = np.random.default_rng(3)
+    for _ in range(50):
+        args = _inputs(rng)
+        a = dynamics._contact_forces_jit(*args)
+        b = dynamics._contact_forces_np(*args)
+        assert np.abs(b).max() > 1.0            # not trivially zero
+        np.testing.assert_allclose(b, a, rtol=1e-9, atol=1e-7)
+
+
+def test_numpy_twin_equals_numba_applied_forces():
+    pytest.importorskip('numba')
+    rng = np.random.default_rng(4)
+    nb = 7
+    xpos = rng.normal(0, 1, (nb, 3))
+    qvel = rng.normal(0, 1, 15)
+    eff_body = np.array([2, 3, 4, 5])
+    eff_dof = np.array([3, 6, 9, 12])
+    r0, r1 = rng.normal(0, 0.5, (4, 3)), rng.normal(0, 0.5, (4, 3))
+    g = rng.uniform(0, 9000, (4, 6))
+    for t in (0.0, 0.01, 0.05):           # inside and after the interpolation period
+        outs = []
+        for fn in (dynamics._apply_forces_jit, dynamics._apply_forces_np):
+            xfrc = np.zeros((nb, 6))
+            fn(xpos, qvel, xfrc, 1, 0, eff_body, eff_dof, r0, r1, t, 0.0, 1 / 30, g, 0.7, 123.0)
+            outs.append(xfrc)
+        np.testing.assert_allclose(outs[1], outs[0], rtol=1e-9, atol=1e-7)
+        # Eq. 1: the COM gets the effectors' sum reversed plus the buoyancy
+        np.testing.assert_allclose(outs[1][1, :3] + outs[1][eff_body, :3].sum(axis=0),
+                                   [0, 0, 123.0], atol=1e-6)
+
+
+def test_kinect_numba_0_selects_numpy_twin():
+    code = ('from performance_control import dynamics as d; '
+            'print(d._apply_forces is d._apply_forces_np, d._contact_forces is d._contact_forces_np)')
+    env = dict(os.environ, KINECT_NUMBA='0')
+    out = subprocess.run([sys.executable, '-c', code], env=env, capture_output=True, text=True,
+                         timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split() == ['True', 'True']
