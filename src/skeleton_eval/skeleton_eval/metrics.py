@@ -132,6 +132,18 @@ def latency_curve(out: np.ndarray, raw: np.ndarray, max_frames: int = MAX_LATENC
     return sums, counts
 
 
+def _argmin_subframe(errs: np.ndarray) -> float:
+    """The index of the smallest of ``errs``, refined to a fraction by a parabola through it and
+    its two neighbours (where they are finite and the parabola opens upwards)."""
+    k = int(np.argmin(errs))
+    frac = 0.0
+    if 0 < k < len(errs) - 1 and np.isfinite(errs[k - 1:k + 2]).all():
+        den = errs[k - 1] - 2 * errs[k] + errs[k + 1]
+        if den > 1e-12:
+            frac = 0.5 * (errs[k - 1] - errs[k + 1]) / den
+    return k + frac
+
+
 def latency_from_curve(sums, counts, fps: float = 30.0) -> float:
     """The delay (ms) of a :func:`latency_curve`: the shift of the smallest mean distance,
     refined to sub-frame by a parabola through the minimum."""
@@ -139,13 +151,7 @@ def latency_from_curve(sums, counts, fps: float = 30.0) -> float:
         errs = np.where(np.asarray(counts) > 0, np.asarray(sums) / np.asarray(counts), np.inf)
     if not np.isfinite(errs).any():
         return float('nan')
-    k = int(np.argmin(errs))
-    frac = 0.0
-    if 0 < k < len(errs) - 1 and np.isfinite(errs[k - 1:k + 2]).all():
-        den = errs[k - 1] - 2 * errs[k] + errs[k + 1]
-        if den > 1e-12:
-            frac = 0.5 * (errs[k - 1] - errs[k + 1]) / den
-    return float((k + frac) * 1000.0 / fps)
+    return float(_argmin_subframe(errs) * 1000.0 / fps)
 
 
 def signed_latency_from_curves(behind, ahead, fps: float = 30.0) -> float:
@@ -164,13 +170,7 @@ def signed_latency_from_curves(behind, ahead, fps: float = 30.0) -> float:
     errs = np.concatenate([e[1][:0:-1], e[0]])   # shifts -K .. K
     if not np.isfinite(errs).any():
         return float('nan')
-    k = int(np.argmin(errs))
-    frac = 0.0
-    if 0 < k < len(errs) - 1 and np.isfinite(errs[k - 1:k + 2]).all():
-        den = errs[k - 1] - 2 * errs[k] + errs[k + 1]
-        if den > 1e-12:
-            frac = 0.5 * (errs[k - 1] - errs[k + 1]) / den
-    return float((k - K + frac) * 1000.0 / fps)
+    return float((_argmin_subframe(errs) - K) * 1000.0 / fps)
 
 
 def added_latency_ms(out: np.ndarray, raw: np.ndarray, fps: float = 30.0,
