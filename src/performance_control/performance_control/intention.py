@@ -130,6 +130,11 @@ class RecognizerParams:
     reference: str = param('com', "origin of the relative effector positions: com (the paper's "
                            "whole-body COM) or shoulders (ShoulderCenter: independent of the legs)",
                            choices=REFERENCES)
+    segment_frames: int = param(0, "frames of the user's recent motion matched against the "
+                                "example at its best phase for e1 (Sec. 6.1 compares a short "
+                                "segment: e1 = min over the example's phase of the mean "
+                                "squared distance of the segment's w to the example's; 0 = "
+                                "Eq. 5 on the current frame)", range=(0, 60), read_only=True)
     fps: float = 30.0
 
     def validate(self) -> None:
@@ -192,6 +197,21 @@ class ExampleModel:
         v = (r[k:] - r[:-k]).reshape(len(r) - k, -1) * (params.fps / k)
         self.rms_speed = float(np.sqrt(np.mean(np.sum(v * v, axis=1))))
 
+    def segment_error(self, seg: np.ndarray) -> float:
+        """min over the example's phase phi (cyclic) of the mean over the segment's frames j of
+        |u_j - w_ex(phi - (L-1) + j)|^2, for the user's last L feature vectors ``seg`` (L, D),
+        oldest first."""
+        seg = np.asarray(seg, float)
+        n = len(seg)
+        cache = getattr(self, '_seg_norm', None)
+        if cache is None or cache[0] != n:
+            wn = np.sum(self.w * self.w, axis=1)
+            cache = self._seg_norm = (n, sum(np.roll(wn, n - 1 - j) for j in range(n)))
+        g = seg @ self.w.T                                     # (L, T)
+        cross = sum(np.roll(g[j], n - 1 - j) for j in range(n))
+        d = float(np.sum(seg * seg)) - 2.0 * cross + cache[1]
+        return float(max(np.min(d), 0.0) / n)
+
     def errors(self, w: np.ndarray, dw: np.ndarray):
         """(e1, e2) of Eq. 5-6; divided by the example's total variance of w and mean |dw|^2
         when ``params.normalise``."""
@@ -226,11 +246,13 @@ class IntentionRecognizer:
         self._hist = []      # the last lag + 1 relative joint arrays
         self._whist: Dict[str, list] = {}   # the last lag + 1 feature vectors per model
         self._avg: Dict[str, list] = {}
+        self._shist: Dict[str, list] = {}   # the last segment_frames feature vectors per model
         self._last_t: Optional[float] = None
 
     def reset(self) -> None:
         self._hist = []
         self._whist = {}
+        self._shist = {}
         self._avg = {}
         self._last_t = None
 
@@ -276,6 +298,13 @@ class IntentionRecognizer:
                 wh.pop(0)
             dw = w - wh[0]
             e1, e2 = m.errors(w, dw)
+            nseg = int(prm.segment_frames)
+            if nseg > 0:
+                sh = self._shist.setdefault(m.name, [])
+                sh.append(w)
+                if len(sh) > nseg:
+                    sh.pop(0)
+                e1 = m.segment_error(np.array(sh))
             va = (r - old_a[idx].reshape(-1)) * (prm.fps / ka) if ka else np.zeros_like(r)
             sp2 = float(np.sum(va * va)) / max(m.rms_speed, 1e-9) ** 2
             # the share of the displacement over share_lag frames outside the example's
