@@ -123,7 +123,7 @@ def lab_database(src, held_out: int, clips):
     return fold_database(src, held_out, subjects=train)
 
 
-def _make(variant: str, correction, db):
+def _make(variant: str, correction, db, method_params: Optional[Dict] = None):
     from skeleton_eval import evaluation as E
     if variant == 'raw+corr':
         return _Corrected(correction)
@@ -134,7 +134,7 @@ def _make(variant: str, correction, db):
     if '+corr' in variant:
         kw.update(correction=correction, input_tracker=TRACKER,
                   correction_stage='reliable' if variant.endswith('@reliable') else 'input')
-    return E.make_method('C', db=db, **kw)
+    return E.make_method('C', db=db, **kw, **(method_params or {}))
 
 
 def session_registered_mpjpe(outputs: Dict[str, np.ndarray], truths: Dict[str, np.ndarray],
@@ -163,13 +163,14 @@ def session_registered_mpjpe(outputs: Dict[str, np.ndarray], truths: Dict[str, n
 
 
 def run_variant(variant: str, streams: Sequence, correction=None, profiles=None, db=None,
-                progress=None, setup_of: Optional[Dict[str, str]] = None) -> Dict[str, Dict]:
+                progress=None, setup_of: Optional[Dict[str, str]] = None,
+                method_params: Optional[Dict] = None) -> Dict[str, Dict]:
     """{clip: {'metrics', 'latency_ms', 'times', 'frames'}} of one variant on some streams;
     the metrics include ``mpjpe_reg_cm`` (:func:`session_registered_mpjpe`)."""
     from skeleton_eval import evaluation as E
     from skeleton_eval import metrics as M
     from skeleton_eval.real_eval import added_latency_ms, tracked_xcorr
-    method = _make(variant, correction, db)
+    method = _make(variant, correction, db, method_params)
     out = {}
     outputs, truths = {}, {}
     for s in streams:
@@ -232,11 +233,13 @@ def _nan(d):
 
 def evaluate(src, variants: Sequence[str] = DEFAULT_VARIANTS, loso: bool = True,
              correction=None, subjects=None, movements=None, max_clips: Optional[int] = None,
-             cache: Optional[Path] = None, progress=None) -> Dict:
+             cache: Optional[Path] = None, progress=None,
+             method_params: Optional[Dict] = None) -> Dict:
     """Score ``variants`` on the clips under ``src`` (module docstring). ``loso``: corrections
     learned per held-out subject from the other subjects of ``src``; else ``correction`` (learned
     elsewhere) for every clip. Returns a dict :func:`skeleton_eval.real_eval.to_markdown` prints,
-    plus ``protocol``, ``folds`` and ``correction_ms``."""
+    plus ``protocol``, ``folds`` and ``correction_ms``. ``method_params``: parameter overrides of
+    method C in the ``C...`` variants (e.g. earlier defaults, for a before/after table)."""
     from pose_reconstruction.correction import build_from_clips
     from pose_reconstruction.methods import default_database
     from skeleton_eval import evaluation as E
@@ -309,12 +312,15 @@ def evaluate(src, variants: Sequence[str] = DEFAULT_VARIANTS, loso: bool = True,
             key = {'variant': v, 'code': code, 'correction': cdig if 'corr' in v else None,
                    'clips': [s.clip_name for s in fold_streams], 'src': src_res,
                    'height': height}
+            if method_params and v.startswith('C'):
+                key['method_params'] = method_params
             vdb = db
             if v.endswith('labdb'):
                 vdb = lab_database(src, subj, clips)
                 key['database'] = vdb.meta.get('cache_key')
             res = _cached(cache, key, lambda v=v, prof=prof, corr=corr, fs=fold_streams, vdb=vdb:
-                          run_variant(v, fs, corr, prof, vdb, progress, setup_of))
+                          run_variant(v, fs, corr, prof, vdb, progress, setup_of,
+                                      method_params if v.startswith('C') else None))
             per_clip[v].update(res)
     # tables in real_eval's format
     results: Dict[str, Dict] = {}
@@ -425,6 +431,9 @@ def main(argv=None) -> int:
     ap.add_argument('--subjects', default='', help='comma-separated subject numbers')
     ap.add_argument('--movements', default='', help='comma-separated movement numbers')
     ap.add_argument('--max-clips', type=int, default=0, help='clips per movement row, 0 = all')
+    ap.add_argument('--method-params', default='',
+                    help='JSON parameter overrides of method C in the C variants, e.g. '
+                    '\'{"position_fit": 0}\'')
     ap.add_argument('--no-cache', action='store_true')
     ap.add_argument('--quiet', action='store_true')
     args = ap.parse_args(argv)
@@ -452,12 +461,15 @@ def main(argv=None) -> int:
                       f'{", ".join(dropped)} not scored', file=sys.stderr)
             else:
                 print(f'[real_loso] {C.describe_file(corr)}', file=sys.stderr)
+        over = json.loads(args.method_params) if args.method_params else None
+        if over is not None and not isinstance(over, dict):
+            raise ValueError('--method-params: a JSON object of C parameters')
         prog = None if args.quiet else (lambda v, c: print(f'  {v:15s} {c}', file=sys.stderr))
         res = evaluate(src, variants,
                        loso=not args.no_loso, correction=corr, subjects=ints(args.subjects),
                        movements=ints(args.movements), max_clips=args.max_clips or None,
                        cache=None if args.no_cache else default_cache_dir() / 'real_eval',
-                       progress=prog)
+                       progress=prog, method_params=over)
     except (ValueError, FileNotFoundError) as e:
         print(f'real_loso: {e}', file=sys.stderr)
         return 1

@@ -6,7 +6,14 @@ are reliable, at or above ``reliable_threshold``; 0 otherwise) and the *trust in
 (:mod:`.trust`) times min(1, reliability of the less reliable end / ``reliable_threshold``). The
 segments get constant user lengths (the mean observed length over the first ``length_frames``
 reliable observations of each segment, then frozen; with ``symmetric_lengths`` the left and right
-limbs share the mean of their two lengths) and are chained from the observed root. The segment
+limbs share the mean of their two lengths) and are chained from the observed root. Chaining adds
+every segment's length and direction error down the chain (a spine 1 cm longer than the sensor's
+moves the head and both arms by 1 cm), so where the sensor is trusted ``position_fit`` places the
+constant-length skeleton nearest the observed joints instead: each joint pulled towards its
+observation by ``position_fit`` times the trust times min(1, reliability / ``reliable_threshold``),
+the lengths then restored by moving both ends of each segment, the result's directions kept
+(on the UI-PRMD recordings, where the sensor is trusted, this is what the constant lengths cost in
+MPJPE; docs/real_recordings.md). The segment
 vectors and the root are smoothed by a One Euro filter (``smooth_min_cutoff`` Hz, ``smooth_beta``
 s/m, ``smooth_d_cutoff`` Hz; ``smooth_min_cutoff`` 0 = off); a segment the database fills in (an
 end with reliability 0) gets ``smooth_filled_scale`` times the cutoff (1 at or above
@@ -15,7 +22,10 @@ see :mod:`.reconstructor`. ``smooth_lead`` (prediction correction, default 1): o
 segments (in proportion to ``min(1, reliability / reliable_threshold)`` of the less reliable
 end) and the root, the low-pass lag is added back along the smoothed velocity
 (``OneEuroFilter`` ``lead``): no lag on a ramp, so the light smoothing of what the sensor gives
-reliably adds no latency, and the heavy smoothing stays on the filled segments.
+reliably adds no latency, and the heavy smoothing stays on the filled segments. The velocity it
+leads along trails the motion by its own low-pass lag; ``smooth_lead_accel`` extrapolates it
+along the smoothed acceleration over that lag and the low-pass lag (no lag when the motion
+accelerates either), ``smooth_lead_cutoff`` sets its cutoff.
 """
 from __future__ import annotations
 
@@ -227,7 +237,7 @@ class SegmentOutput:
         if self.position_fit > 0.0 and trust > 0.0:
             pull = (self.position_fit * trust) * np.minimum(w * (1.0 / max(thr, 1e-6)), 1.0)
             if pull.any():
-                self._fit_positions(vr, obs, pull, L)
+                self._fit_positions(vr, obs, pull, L, rel_frac)
         if self._seg_filter is not None:
             # filter clock: the stamps' steps where plausible (1 ms - 0.5 s), else 30 Hz
             stamp = int(frame.stamp_ns or 0)
@@ -277,12 +287,15 @@ class SegmentOutput:
         return vr[NUM_SEGMENTS] + _SEG_CHAIN @ v
 
     def _fit_positions(self, vr: np.ndarray, obs: np.ndarray, pull: np.ndarray,
-                       L: np.ndarray) -> None:
+                       L: np.ndarray, seg_rel: Optional[np.ndarray] = None) -> None:
         """``position_fit`` (in place on ``vr``: 19 segment vectors of lengths ``L`` and the
         root): the chained skeleton's joints pulled towards the observed ones by ``pull`` (20,),
         then its segment lengths restored by ``position_fit_iterations`` simultaneous passes
         (each segment's length error shared by its two ends, a joint's corrections averaged over
-        its segments), the result's segment directions with lengths ``L`` and its root."""
+        its segments). A segment takes the fitted direction in proportion to ``seg_rel`` (19,)
+        (default 1: the reliability fraction of its less reliable end; a segment the database
+        fills keeps its direction), with lengths ``L``; the root goes where the chained result
+        fits the pulled joints best (a translation, weighted by ``pull``)."""
         p = vr[NUM_SEGMENTS] + _SEG_CHAIN @ vr[:NUM_SEGMENTS]
         ok = np.isfinite(obs).all(axis=1) & (pull > 0)
         p[ok] += pull[ok, None] * (obs[ok] - p[ok])
@@ -294,6 +307,17 @@ class SegmentOutput:
         d = SEG_DIFF @ p
         n = np.sqrt(np.einsum('sk,sk->s', d, d))
         good = n > 1e-9
-        vr[:NUM_SEGMENTS][good] = d[good] * (L[good] / n[good])[:, None]
-        # the root where the chained result fits the fitted joints best (a translation)
-        vr[NUM_SEGMENTS] = (p - _SEG_CHAIN @ vr[:NUM_SEGMENTS]).mean(axis=0)
+        fit = np.zeros_like(d)
+        fit[good] = d[good] * (L[good] / n[good])[:, None]
+        v = vr[:NUM_SEGMENTS]
+        if seg_rel is not None:
+            b = np.where(good, seg_rel, 0.0)[:, None]
+            u = v + b * (fit - v)
+            nu = np.sqrt(np.einsum('sk,sk->s', u, u))
+            okv = nu > 1e-9
+            v[okv] = u[okv] * (L[okv] / nu[okv])[:, None]
+        else:
+            v[good] = fit[good]
+        wt = np.where(ok, pull, 0.0)
+        q = p - _SEG_CHAIN @ v
+        vr[NUM_SEGMENTS] = (wt @ q) / wt.sum() if wt.sum() > 0 else q.mean(axis=0)
