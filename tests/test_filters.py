@@ -116,7 +116,8 @@ def _lead_filter(accel, num_joints=1):
     return OneEuroFilter(1.3, 3.0, 2.0, num_joints=num_joints, lead_accel=accel)
 
 
-def _run(f, xs, lead=np.ones(1)):
+def _run(f, xs, lead=None):
+    lead = np.ones(1) if lead is None else lead
     return np.array([f.update(x, None, int(i * 1e9 / 30), lead=lead) for i, x in enumerate(xs)])
 
 

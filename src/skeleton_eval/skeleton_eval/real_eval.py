@@ -178,7 +178,8 @@ def to_markdown(res: Dict) -> str:
              '(Kabsch, no scaling), lag per clip. Hands excluded (not recorded). m03_s01: the '
              'tracking failure, reported apart. Latency = delay the method adds: peak shift of the '
              'velocity cross-correlation of its output with the reference minus the raw '
-             'input\'s, on the joints the sensor reports TRACKED (sub-frame, negative = leads). Time = processing per frame (machine shared, '
+             'input\'s, on the joints the sensor reports TRACKED (sub-frame, negative = leads). '
+             'Time = processing per frame (machine shared, '
              'loaded).', '']
     clip_info = ', '.join(f'{k}: {v}' for k, v in sorted(res['clips_per_row'].items()))
     lines += [f'Clips per row: {clip_info}.', '']
