@@ -57,12 +57,13 @@ def recognition(world, params: RecognizerParams, seed0: int, performers: int,
             seed = seed0 + 100 * fi + k
             rng = np.random.default_rng(seed)
             p, windows = imitation_stream(f, rng)
-            s = _sensor_world(to_sensor(p, f'{f.name}_{k}', seed, noise))
+            s, st = to_sensor(p, f'{f.name}_{k}', seed, noise, states=True)
+            s = _sensor_world(s)
             rec = IntentionRecognizer(list(models.values()), params)
             flags = np.zeros(len(s), bool)
             other = np.zeros(len(s), bool)
             for i in range(len(s)):
-                r = rec.update(s[i], i / FPS)
+                r = rec.update(s[i], i / FPS, st[i])
                 flags[i] = r[f.name].imitating
                 other[i] = any(x.imitating for n, x in r.items() if n != f.name)
             t = np.arange(len(s)) / FPS
@@ -83,11 +84,12 @@ def recognition(world, params: RecognizerParams, seed0: int, performers: int,
     for k in range(max(1, performers // 2)):
         seed = seed0 + 5000 + k
         for name, clip in non_imitation_clips(seed):
-            s = _sensor_world(to_sensor(clip, f'{name}_{seed}', seed, noise))
+            s, st = to_sensor(clip, f'{name}_{seed}', seed, noise, states=True)
+            s = _sensor_world(s)
             rec = IntentionRecognizer(list(models.values()), params)
             n_bad = 0
             for i in range(len(s)):
-                r = rec.update(s[i], i / FPS)
+                r = rec.update(s[i], i / FPS, st[i])
                 n_bad += any(x.imitating for x in r.values())
             fe_frames += n_bad
             fe_total += len(s)
@@ -101,11 +103,11 @@ def physics(world, params: ControlParams, seed0: int, noise: bool = True) -> Dic
     models = build_models(world, params.recognizer)
     res: Dict = {'ms': [], 'pen': 0.0, 'pen_by': {}}
 
-    def run(start: str, s: np.ndarray):
+    def run(start: str, s: np.ndarray, st: np.ndarray):
         ctl = PerformanceController(world, params, models, start=start)
         rows = []
         for i in range(len(s)):
-            o = ctl.step(s[i], i / FPS)
+            o = ctl.step(s[i], i / FPS, st[i])
             if i > 0:
                 res['ms'].append(o.compute_ms)
             res['pen'] = max(res['pen'], o.penetration)
@@ -121,8 +123,7 @@ def physics(world, params: ControlParams, seed0: int, noise: bool = True) -> Dic
             rng = np.random.default_rng(seed)
             p, windows = imitation_stream(f, rng, pattern=((-1.0, 6.0),), total=9.0, fade=0.2)
             # the user imitates from the first frame with the hands up, then stops (arms down)
-            s = to_sensor(p, f'phys_{name}_{k}', seed, noise)
-            rows = run(name, s)
+            rows = run(name, *to_sensor(p, f'phys_{name}_{k}', seed, noise, states=True))
             t = np.arange(len(rows)) / FPS
             held = np.array([sum(e.startswith('Hand') for e in o.contacts) for o in rows])
             z = np.array([o.com[2] for o in rows])
@@ -133,16 +134,14 @@ def physics(world, params: ControlParams, seed0: int, noise: bool = True) -> Dic
         res[name] = (stays, falls, trials)
     # trampoline: jumping in place
     rng = np.random.default_rng(seed0 + 8000)
-    s = to_sensor(jump_stream(rng), 'jumps', seed0 + 8000, noise)
-    rows = run('trampoline', s)
+    rows = run('trampoline', *to_sensor(jump_stream(rng), 'jumps', seed0 + 8000, noise, states=True))
     z = np.array([o.com[2] for o in rows])
     res['trampoline_rise'] = float(z.max() - z[:20].mean())
     # water: breaststroke imitation
     f = world.features['water']
     rng = np.random.default_rng(seed0 + 9000)
     p, _ = imitation_stream(f, rng, pattern=((-1.0, 9.0),), total=8.0, fade=0.2)
-    s = to_sensor(p, 'swim', seed0 + 9000, noise)
-    rows = run('water', s)
+    rows = run('water', *to_sensor(p, 'swim', seed0 + 9000, noise, states=True))
     xy = np.array([o.com[:2] for o in rows])
     res['swim_speed'] = float(np.linalg.norm(xy[-1] - xy[30]) / ((len(rows) - 31) / FPS))
     res['swim_depth_drift'] = float(rows[-1].com[2] - rows[0].com[2])
