@@ -9,8 +9,9 @@ from performance_control.controller import ControlParams, PerformanceController,
 from performance_control.examples import imitation, random_style
 from performance_control.features import load_world
 from performance_control.intention import (ExampleModel, IntentionRecognizer, RecognizerParams,
-                                           feature_vectors, partial_reconstruction_error,
-                                           pca_basis, reconstruction_error)
+                                           approach_discount, feature_vectors,
+                                           partial_reconstruction_error, pca_basis,
+                                           reconstruction_error, residual)
 from performance_control.performances import non_imitation_clips
 from skeleton_core.model import (ELBOW_RIGHT, HAND_LEFT, HAND_RIGHT, INFERRED, TRACKED,
                                  WRIST_RIGHT, standard_body)
@@ -165,6 +166,25 @@ def test_missing_effector_error_against_a_hand_computed_fit():
     assert partial_reconstruction_error(v, a, [True, False, True]) == pytest.approx(32.0)
     with pytest.raises(ValueError, match='cannot test'):
         partial_reconstruction_error(v, a, [True, False, False])
+    # with the Gaussian prior sigma^2 / lambda = 1: c = (a_o . v_o) / (|a_o|^2 + 1) = sqrt2,
+    # fitted (1, 1), residual (2, 0) -> 4 x 2 = 8
+    r, scale = residual(v, a, [True, True, False], prior=np.array([1.0]))
+    assert r == pytest.approx([2.0, 0.0])
+    assert float(r @ r) * scale == pytest.approx(8.0)
+
+
+def test_e2_approach_discounts_only_the_change_back_into_the_subspace():
+    r_old = np.array([0.0, 0.0, 2.0])          # 2 out of the subspace, lag frames ago
+    # heading straight back by 1.5: no e2; sideways 1 kept whole
+    assert approach_discount(r_old + [0, 0, -1.5], np.array([0, 0, -1.5])) == pytest.approx(0)
+    dr = np.array([1.0, 0.0, -1.5])
+    assert approach_discount(r_old + dr, dr) == pytest.approx([1.0, 0.0, 0.0])
+    # overshooting past the subspace: only |r_old| = 2 is credited
+    dr = np.array([0.0, 0.0, -3.0])
+    assert approach_discount(r_old + dr, dr) == pytest.approx([0.0, 0.0, -1.0])
+    # moving away is all error
+    dr = np.array([0.0, 0.5, 0.5])
+    assert approach_discount(r_old + dr, dr) == pytest.approx(dr)
 
 
 def _frozen_right_arm(feature, seed=5, onset=1.0, n=75):

@@ -103,21 +103,55 @@ def reconstruction_error(v: np.ndarray, a: np.ndarray) -> np.ndarray:
     return np.sum(r * r, axis=-1)
 
 
-def partial_reconstruction_error(v: np.ndarray, a: np.ndarray, observed: np.ndarray) -> float:
-    """Eq. 5/6 on the observed coordinates only (PCA with missing data):
-    (D - m) / (D_o - m) * min_c || v_o - A_o c ||^2, where v_o, A_o are the rows of v (D,) and
-    A (D, m) with ``observed`` (D,) bool true and D_o their number. With every coordinate
-    observed it is :func:`reconstruction_error` (A orthonormal); D_o must exceed m."""
+def residual(v: np.ndarray, a: np.ndarray, observed: Optional[np.ndarray] = None,
+             prior: Optional[np.ndarray] = None):
+    """(r, scale): the residual of v (D,) out of span(A) (D, m) -- ``v - A A^T v``, scale 1 --
+    or, with ``observed`` (D,) bool, of the observed coordinates only: ``v_o - A_o c`` with c
+    the least-squares fit to them, scale (D - m) / (D_o - m) (PCA with missing data; D_o, the
+    number of observed coordinates, must exceed m). ``scale * |r|^2`` is the error of Eq. 5/6.
+    ``prior`` (m,) = sigma^2 / lambda_i: the fit ``min |v_o - A_o c|^2 + sum prior_i c_i^2``
+    (probabilistic PCA: the coefficients a Gaussian of the example's variances lambda_i, the
+    residual of variance sigma^2 per coordinate), which keeps a few observed coordinates from
+    being explained by coefficients far outside the example's range."""
     v = np.asarray(v, float)
+    if observed is None:
+        return v - a @ (a.T @ v), 1.0
     obs = np.asarray(observed, bool)
     d, m = a.shape
     d_o = int(obs.sum())
     if d_o <= m:
         raise ValueError(f'{d_o} observed coordinates cannot test a {m}-dimensional subspace')
     ao, vo = a[obs], v[obs]
-    c = np.linalg.lstsq(ao, vo, rcond=None)[0]
-    r = vo - ao @ c
-    return float(r @ r) * (d - m) / (d_o - m)
+    if prior is None:
+        c = np.linalg.lstsq(ao, vo, rcond=None)[0]
+    else:
+        c = np.linalg.solve(ao.T @ ao + np.diag(prior), ao.T @ vo)
+    return vo - ao @ c, (d - m) / (d_o - m)
+
+
+def partial_reconstruction_error(v: np.ndarray, a: np.ndarray, observed: np.ndarray) -> float:
+    """Eq. 5/6 on the observed coordinates only (PCA with missing data):
+    (D - m) / (D_o - m) * min_c || v_o - A_o c ||^2, where v_o, A_o are the rows of v (D,) and
+    A (D, m) with ``observed`` (D,) bool true and D_o their number. With every coordinate
+    observed it is :func:`reconstruction_error` (A orthonormal); D_o must exceed m."""
+    r, scale = residual(v, a, observed)
+    return float(r @ r) * scale
+
+
+def approach_discount(r: np.ndarray, dr: np.ndarray) -> np.ndarray:
+    """The change ``dr`` of the residual out of the example's subspace without its part that
+    heads back into the subspace: with ``r_old = r - dr`` (the residual ``lag`` frames ago),
+    the component of dr along ``-r_old`` (at most |r_old|: no credit for overshooting) is
+    removed; a change away from the subspace or sideways is kept whole."""
+    r_old = np.asarray(r, float) - np.asarray(dr, float)
+    n = float(np.linalg.norm(r_old))
+    if n <= 0.0:
+        return np.asarray(dr, float)
+    u = r_old / n
+    along = float(dr @ u)
+    if along >= 0.0:
+        return np.asarray(dr, float)
+    return dr - max(along, -n) * u
 
 
 @dataclass
@@ -169,6 +203,14 @@ class RecognizerParams:
                                     "collapsed or dropped): e1/e2 of the observed coordinates "
                                     "with the PCA coefficients fitted to them; false = every "
                                     "effector as reported")
+    e2_approach: bool = param(True, "e2 leaves out the part of the change that heads back "
+                              "into the example's subspace (the residual shrinking: a user "
+                              "moving into the example's range at the onset of an imitation)")
+    missing_prior: float = param(0.1, "the missing-data fit's residual variance sigma^2 (D - m) "
+                                 "(body-height^2 units) against the example's variance along "
+                                 "each component: c = argmin |v_o - A_o c|^2 + sigma^2 sum "
+                                 "c_i^2 / lambda_i (0 = plain least squares)",
+                                 range=(0.0, 10.0))
     track_settle: int = param(3, "TRACKED frames in a row before an effector counts as observed "
                               "again (its velocity over lag frames and the low-pass settle)",
                               range=(1, 30), read_only=True)
@@ -226,6 +268,8 @@ class ExampleModel:
         lag = min(int(params.lag), len(w) - 1)
         self.var_w = float(np.sum(np.var(w, axis=0)))
         self.var_dw = float(np.mean(np.sum((w[lag:] - w[:-lag]) ** 2, axis=1)))
+        # the variance of dw's coefficients (the missing-data fit's prior for e2)
+        self.eigenvalues_dw = np.var((w[lag:] - w[:-lag]) @ self.A, axis=0)
         # the activity gate's normaliser: the example's RMS effector speed measured as the gate
         # measures it (displacement over activity_lag frames)
         r = relative_effectors(self.positions, self.effectors,
@@ -255,13 +299,19 @@ class ExampleModel:
         """(e1, e2) of Eq. 5-6 (on the ``observed`` coordinates (D,) bool only, when given:
         :func:`partial_reconstruction_error`); divided by the example's total variance of w and
         mean |dw|^2 when ``params.normalise``."""
-        if observed is None:
-            e1 = float(reconstruction_error(w - self.mean, self.A))
-            e2 = float(reconstruction_error(dw, self.A))
-        else:
-            e1 = partial_reconstruction_error(w - self.mean, self.A, observed)
-            e2 = partial_reconstruction_error(dw, self.A, observed)
-        if getattr(getattr(self, 'params', None), 'normalise', False):
+        prm = getattr(self, 'params', None)
+        p1 = p2 = None
+        pf = float(getattr(prm, 'missing_prior', 0.0))
+        if pf > 0 and observed is not None:
+            sig = pf / (self.A.shape[0] - self.A.shape[1])     # residual variance per coordinate
+            p1 = sig / np.maximum(self.eigenvalues, 1e-12)
+            p2 = sig / np.maximum(self.eigenvalues_dw, 1e-12)
+        r, scale = residual(w - self.mean, self.A, observed, p1)
+        dr, _ = residual(dw, self.A, observed, p2)
+        if getattr(prm, 'e2_approach', False):
+            dr = approach_discount(r, dr)
+        e1, e2 = float(r @ r) * scale, float(dr @ dr) * scale
+        if getattr(prm, 'normalise', False):
             return e1 / max(self.var_w, 1e-12), e2 / max(self.var_dw, 1e-12)
         return e1, e2
 
@@ -410,5 +460,5 @@ class IntentionRecognizer:
 
 __all__ = ['ExampleModel', 'IntentionRecognizer', 'RecognizerParams', 'Recognition',
            'center_of_mass', 'relative_effectors', 'pca_basis', 'reconstruction_error',
-           'partial_reconstruction_error',
+           'partial_reconstruction_error', 'residual', 'approach_discount',
            'feature_vectors', 'yaw_rotation']
