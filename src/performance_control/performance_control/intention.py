@@ -22,7 +22,13 @@ the subspace coefficients fitted to them (PCA with missing data):
 and likewise e2; (D - m) / (D_o - m) keeps the expected residual of isotropic noise the same as
 with every coordinate observed (D coordinates, D_o observed, m components; used only while
 D_o > m). An effector counts as observed after ``track_settle`` TRACKED frames in a row (its
-velocity over ``lag`` frames and the low-pass have left the jump from the held position).
+velocity over ``lag`` frames and the low-pass have left the jump from the held position). The
+fit has a Gaussian prior on the coefficients (``missing_prior``: probabilistic PCA), so that one
+observed hand is not explained by coefficients far outside the example's range.
+
+Onset (``e2_approach``): e2 leaves out the part of the residual's change that heads back into
+the example's subspace (:func:`approach_discount`): a user moving into the example's range is
+not inconsistent with it.
 """
 from __future__ import annotations
 
