@@ -25,7 +25,10 @@ end) and the root, the low-pass lag is added back along the smoothed velocity
 reliably adds no latency, and the heavy smoothing stays on the filled segments. The velocity it
 leads along trails the motion by its own low-pass lag; ``smooth_lead_accel`` extrapolates it
 along the smoothed acceleration over that lag and the low-pass lag (no lag when the motion
-accelerates either), ``smooth_lead_cutoff`` sets its cutoff.
+accelerates either), ``smooth_lead_cutoff`` sets its cutoff. That acceleration is where the
+noise is (it made the lead's jitter): it passes a second low-pass whose cutoff rises with its own
+magnitude (``smooth_accel_cutoff`` + ``smooth_accel_beta`` |acceleration|, a One Euro filter on
+the acceleration): heavily smoothed where it is at its noise level, followed where it is large.
 """
 from __future__ import annotations
 
@@ -85,9 +88,19 @@ class SegmentOutputConfig:
         'smoothed output\'s velocity); higher = less delay in that velocity, less lag when the '
         'motion accelerates, more jitter; 0 = smooth_d_cutoff', range=(0.0, 1000.0))
     smooth_lead_accel: float = param(
-        0.75, 'segments: gain of the acceleration term of the prediction correction (the lead '
+        1.0, 'segments: gain of the acceleration term of the prediction correction (the lead '
         'velocity extrapolated over its own and the low-pass lag; 1 = exact to first order on a '
         'constant acceleration, 0 = off)', range=(0.0, 2.0))
+    smooth_accel_cutoff: float = param(
+        0.25, 'segments: minimum cutoff (Hz) of a second low-pass stage on the acceleration the '
+        'prediction correction extrapolates along (the acceleration is where the noise is; a '
+        'trailing acceleration costs lag only where the acceleration changes); 0 = no stage',
+        range=(0.0, 1000.0))
+    smooth_accel_beta: float = param(
+        3.0, 'segments: the cutoff of that acceleration stage rises by this times the '
+        'acceleration magnitude (Hz per m/s2; a One Euro filter on the acceleration: heavy '
+        'smoothing where the acceleration is at its noise level, light in real accelerations)',
+        range=(0.0, 1e6))
     position_fit: float = param(
         1.0, 'segments: where the sensor is trusted, place the constant-length skeleton nearest '
         'the observed joints rather than chain it from the observed root (pull of each joint '
@@ -138,6 +151,8 @@ class SegmentOutput:
         self.position_fit = float(config.position_fit)
         self.position_fit_iterations = int(config.position_fit_iterations)
         self.smooth_lead_accel = float(config.smooth_lead_accel)
+        self.smooth_accel_cutoff = float(config.smooth_accel_cutoff)
+        self.smooth_accel_beta = float(config.smooth_accel_beta)
         # the user's profile lengths (19,), used from the first frame when set (Reconstructor)
         self.profile_lengths: Optional[np.ndarray] = None
         self.reset()
@@ -154,7 +169,9 @@ class SegmentOutput:
         # One Euro filter as two separate ones, in one call
         self._seg_filter = OneEuroFilter(
             mc, b, dc, num_joints=NUM_SEGMENTS + 1, lead_cutoff=self.smooth_lead_cutoff,
-            lead_accel=self.smooth_lead_accel) if mc > 0 else None
+            lead_accel=self.smooth_lead_accel,
+            accel_cutoff=self.smooth_accel_cutoff,
+            accel_beta=self.smooth_accel_beta) if mc > 0 else None
 
     def lengths(self, positions: np.ndarray, R: np.ndarray,
                 lengths: Optional[np.ndarray] = None) -> np.ndarray:

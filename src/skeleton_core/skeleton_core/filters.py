@@ -123,16 +123,20 @@ class OneEuroFilter:
 
     def __init__(self, min_cutoff: float = 1.0, beta: float = 3.0, d_cutoff: float = 1.0,
                  num_joints: int = NUM_JOINTS, default_rate: float = 30.0,
-                 lead_cutoff: float = 0.0, lead_accel: float = 0.0):
+                 lead_cutoff: float = 0.0, lead_accel: float = 0.0,
+                 accel_cutoff: float = 0.0, accel_beta: float = 0.0):
         if min_cutoff <= 0 or d_cutoff <= 0 or beta < 0:
             raise ValueError('cutoffs must be > 0 and beta >= 0')
-        if lead_cutoff < 0 or lead_accel < 0:
-            raise ValueError('lead_cutoff and lead_accel must be >= 0')
+        if lead_cutoff < 0 or lead_accel < 0 or accel_cutoff < 0 or accel_beta < 0:
+            raise ValueError('lead_cutoff, lead_accel, accel_cutoff and accel_beta must be >= 0')
         self.min_cutoff, self.beta, self.d_cutoff = min_cutoff, beta, d_cutoff
         # the lead's velocity: the low-pass output's, smoothed at lead_cutoff (0: d_cutoff);
         # lead_accel: gain of the acceleration term of the lead (see update)
         self.lead_cutoff = float(lead_cutoff) if lead_cutoff > 0 else float(d_cutoff)
         self.lead_accel = float(lead_accel)
+        # accel_cutoff > 0: a second low-pass stage (Hz) on that acceleration (0 = none)
+        self.accel_cutoff = float(accel_cutoff)
+        self.accel_beta = float(accel_beta)
         self.n = num_joints
         self.default_dt = 1.0 / default_rate
         self.reset()
@@ -145,6 +149,7 @@ class OneEuroFilter:
         self.dx = np.zeros((self.n, 3))
         self.fdx = np.zeros((self.n, 3))
         self.fdd = np.zeros((self.n, 3))
+        self.fdd2 = np.zeros((self.n, 3))
         self.t_ns: Optional[int] = None
 
     @staticmethod
@@ -181,8 +186,12 @@ class OneEuroFilter:
         ``tau_v``, so when the motion accelerates the lead falls short; ``lead_accel`` g > 0 adds
         ``g (tau + tau_v)`` times the acceleration (the velocity's derivative smoothed at
         ``lead_cutoff``) to the velocity the lag is multiplied by: with g = 1 the lead is exact
-        to first order on a constant acceleration too. The filter's state stays the uncorrected
-        low-pass."""
+        to first order on a constant acceleration too. That acceleration (a second derivative)
+        carries most of the noise the lead adds: ``accel_cutoff`` > 0 passes it through a second
+        low-pass at ``accel_cutoff + accel_beta |acceleration|`` Hz (a One Euro filter on the
+        acceleration): at rest and in slow motion it is smoothed heavily (little jitter), in a
+        large acceleration it follows (little lag); on a constant acceleration the stage changes
+        nothing. The filter's state stays the uncorrected low-pass."""
         x = np.asarray(positions, float)
         dt = self.default_dt
         if stamp_ns is not None and self.t_ns is not None and stamp_ns > self.t_ns:
@@ -201,6 +210,9 @@ class OneEuroFilter:
             fdx = al * ((out - self.x) / dt) + (1 - al) * self.fdx
             if self.lead_accel > 0.0:
                 self.fdd = al * ((fdx - self.fdx) / dt) + (1 - al) * self.fdd
+                if self.accel_cutoff > 0.0:
+                    aa = self._accel_alpha(self.fdd, dt)
+                    self.fdd2 = aa * self.fdd + (1 - aa) * self.fdd2
             self.fdx = fdx
             self.dx = edx
             self.x = out.copy()
@@ -228,11 +240,15 @@ class OneEuroFilter:
             fdx = al * ((out[cont] - self.x[cont]) / dt) + (1 - al) * self.fdx[cont]
             if self.lead_accel > 0.0:
                 self.fdd[cont] = al * ((fdx - self.fdx[cont]) / dt) + (1 - al) * self.fdd[cont]
+                if self.accel_cutoff > 0.0:
+                    aa = self._accel_alpha(self.fdd[cont], dt)
+                    self.fdd2[cont] = aa * self.fdd[cont] + (1 - aa) * self.fdd2[cont]
             self.fdx[cont] = fdx
         start = valid & ~self.has
         self.dx[start] = 0.0
         self.fdx[start] = 0.0
         self.fdd[start] = 0.0
+        self.fdd2[start] = 0.0
         self.x[valid] = out[valid]
         self.raw[valid] = x[valid]
         self.has = valid.copy()
@@ -242,9 +258,18 @@ class OneEuroFilter:
                 self._lead_velocity(a, al, dt, cont)
         return out
 
+    def _accel_alpha(self, fdd, dt):
+        """Smoothing factor of the acceleration's second stage: cutoff ``accel_cutoff +
+        accel_beta |acceleration|`` (a One Euro filter on the acceleration)."""
+        if self.accel_beta <= 0.0:
+            return self._alpha(self.accel_cutoff, dt)
+        mag = np.sqrt(np.einsum('jk,jk->j', fdd, fdd))
+        return self._alpha(self.accel_cutoff + self.accel_beta * mag, dt)[:, None]
+
     def _lead_velocity(self, a, al, dt, rows=slice(None)):
         """The velocity the lead multiplies the low-pass lag by (see :meth:`update`)."""
         if self.lead_accel <= 0.0:
             return self.fdx[rows]
         lag = ((1 - a) / a + (1 - al) / al) * dt
-        return self.fdx[rows] + (self.lead_accel * lag) * self.fdd[rows]
+        fdd = self.fdd2 if self.accel_cutoff > 0.0 else self.fdd
+        return self.fdx[rows] + (self.lead_accel * lag) * fdd[rows]
