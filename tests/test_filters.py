@@ -159,8 +159,55 @@ def test_acceleration_term_removes_the_lag_when_the_motion_accelerates():
     assert np.allclose(a, b)
 
 
+def test_acceleration_stage_keeps_the_rest_quiet_and_the_swing_on_time():
+    # the lead's acceleration (a second derivative) is where its noise is: at rest the lead with
+    # the full acceleration term nearly doubles the jitter of the plain low-pass; the acceleration
+    # passed through its own One Euro stage (segment_output defaults: gain 1, 0.25 Hz + 3 Hz per
+    # m/s^2) keeps the rest as quiet as the plain low-pass and the 1 Hz swing not behind
+    from skeleton_eval.metrics import velocity_xcorr, xcorr_latency_ms
+    rng = np.random.default_rng(0)
+    rest = rng.normal(0.0, 0.004, (300, 1, 3))                 # 4 mm sensor noise, no motion
+    t = np.arange(300) / 30.0
+    sw = np.zeros((300, 1, 3))
+    sw[:, 0, 0] = 0.2 * np.sin(2 * np.pi * 1.0 * t)
+
+    def jitter(p):
+        return np.linalg.norm(p[2:] - 2 * p[1:-1] + p[:-2], axis=-1).mean() * 30.0 ** 2
+
+    def make(num_joints=1, **kw):
+        return OneEuroFilter(1.3, 3.0, 2.0, num_joints=num_joints, lead_accel=1.0, **kw)
+
+    plain = jitter(_run(OneEuroFilter(1.3, 3.0, 2.0, num_joints=1), rest)[30:])
+    bare = jitter(_run(make(), rest)[30:])
+    staged = make(accel_cutoff=0.25, accel_beta=3.0)
+    assert bare > 1.6 * plain
+    assert jitter(_run(staged, rest)[30:]) <= 1.15 * plain
+    staged.reset()
+    lag = xcorr_latency_ms(velocity_xcorr(_run(staged, sw)[60:], sw[60:]))
+    assert -10.0 <= lag <= 5.0
+    # a fixed heavy cutoff (no acceleration-dependent term) would give the lag back
+    fixed = _run(make(accel_cutoff=0.25), sw)
+    assert xcorr_latency_ms(velocity_xcorr(fixed[60:], sw[60:])) > 8.0
+    # the ramp (no acceleration) is untouched by the stage
+    ramp = np.zeros((150, 1, 3))
+    ramp[:, 0, 0] = 0.5 * np.arange(150) / 30.0
+    out = _run(make(accel_cutoff=0.25, accel_beta=3.0), ramp)
+    assert abs(xcorr_latency_ms(velocity_xcorr(out[30:], ramp[30:]))) <= 5.0
+    # the numpy fast path (every row valid) and the masked path agree
+    f1, f2 = (make(accel_cutoff=0.25, accel_beta=3.0, num_joints=2) for _ in range(2))
+    xs = np.repeat(sw + rng.normal(0.0, 0.004, sw.shape), 2, axis=1)
+    a = np.array([f1.update(x, None, int(i * 1e9 / 30), lead=np.ones(2)) for i, x in enumerate(xs)])
+    st = np.full(2, TRACKED)
+    b = np.array([f2.update(x, st, int(i * 1e9 / 30), lead=np.ones(2)) for i, x in enumerate(xs)])
+    assert np.allclose(a, b)
+
+
 def test_lead_parameters_are_validated():
     with pytest.raises(ValueError):
         OneEuroFilter(lead_cutoff=-1.0)
     with pytest.raises(ValueError):
         OneEuroFilter(lead_accel=-0.5)
+    with pytest.raises(ValueError):
+        OneEuroFilter(accel_cutoff=-1.0)
+    with pytest.raises(ValueError):
+        OneEuroFilter(accel_beta=-1.0)
