@@ -99,6 +99,7 @@ class DynamicProcess:
         self._rd = np.zeros((4, 3))
         self._t0, self._period = 0.0, 1.0 / 30.0
         self.in_water: Optional[str] = None
+        self.unstable_steps = 0   # physics steps MuJoCo found unstable (bad QACC: it reset the data)
         self._buoy = 0.0
         # MuJoCo's buoyancy volume: the inertia boxes of the character's bodies
         self._mj_volume = 0.0
@@ -156,10 +157,12 @@ class DynamicProcess:
         return self._r0 + s * (self._r1 - self._r0)
 
     # ------------------------------------------------------------------ contacts
-    def feature_distance(self, effector: str, feature: Feature):
+    def feature_distance(self, effector: str, feature: Feature, max_arc: Optional[float] = None):
         """(distance to the feature's surface, anchor body, contact point in the world) for an
         effector; the contact point is where the effector's centre is held (on a bar's axis for a
-        hand, one effector radius above a surface for a foot). (inf, None, None) if nothing."""
+        hand, one effector radius above a surface for a foot). (inf, None, None) if nothing.
+        ``max_arc``: on a rope, only the part within this length (m) along the rope from its top
+        (the part above a hand that holds it, see :meth:`rope_arc`)."""
         d = self.data
         p = self.data.xpos[self.eff_body[EFFECTORS.index(effector)]]
         rad = EFFECTOR_RADIUS[effector]
@@ -187,9 +190,12 @@ class DynamicProcess:
                 cand = []
                 seg, r = g.num('length'), g.num('radius')
                 for s in range(int(g.data['segments'])):
+                    top = max_arc - s * seg if max_arc is not None else seg
+                    if top <= 0.0:
+                        break                 # this segment and the ones below: out of range
                     b = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_BODY, f'{n}_seg{s}')
                     a0 = d.xpos[b]
-                    a1 = a0 + d.xmat[b].reshape(3, 3) @ np.array([0.0, 0.0, -seg])
+                    a1 = a0 + d.xmat[b].reshape(3, 3) @ np.array([0.0, 0.0, -min(seg, top)])
                     c = _closest_on_segment(p, a0, a1)
                     cand.append((float(np.linalg.norm(p - c)) - r, f'{n}_seg{s}', c))
             else:
@@ -198,6 +204,17 @@ class DynamicProcess:
                 if x[0] < best[0]:
                     best = x
         return best
+
+    def rope_arc(self, effector: str) -> Optional[float]:
+        """Where a held effector holds a rope: its anchor's length (m) along the rope from the
+        rope's top; None if it does not hold a rope segment."""
+        c = self.contacts.get(effector)
+        if c is None or '_seg' not in c.body:
+            return None
+        f = self.world.features[c.feature]
+        g = next(g for g in f.geoms if g.type == 'rope')
+        k = int(c.body.rsplit('_seg', 1)[1])
+        return k * g.num('length') - float(self.model.eq_data[c.eq, 5])
 
     def com_inside(self, feature: Feature) -> bool:
         x = self.com
@@ -289,6 +306,12 @@ class DynamicProcess:
                           self._gains, self._yaw, self._buoy)
             mujoco.mj_step(m, d)
             self.time = float(d.time)
+        bad = int(d.warning[mujoco.mjtWarning.mjWARN_BADQACC].number)
+        if bad > self.unstable_steps:
+            # MuJoCo reset the data (the start pose, every equality off): no phantom contacts
+            self.unstable_steps = bad
+            self.contacts.clear()
+            self._gains[:] = self._free
         if not (np.all(np.isfinite(d.qpos)) and np.all(np.isfinite(d.qvel))):
             raise FloatingPointError('dynamic process diverged')
 
