@@ -75,9 +75,12 @@ class DynamicProcess:
         bid = lambda n: mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, n)  # noqa: E731
         self.com_body = bid('com')
         self.eff_body = np.array([bid(f'eff_{e}') for e in EFFECTORS])
-        jadr = lambda n: int(m.jnt_dofadr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, n)])  # noqa: E731
-        self.com_dof = jadr('com_x')
-        self.eff_dof = np.array([jadr(f'{e}_x') for e in EFFECTORS])
+        jid = lambda n: mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, n)  # noqa: E731
+        self.com_dof = int(m.jnt_dofadr[jid('com_x')])
+        self.eff_dof = np.array([int(m.jnt_dofadr[jid(f'{e}_x')]) for e in EFFECTORS])
+        # qpos addresses differ from dof addresses after the rope's ball joints (4 vs 3 each)
+        self.com_qpos = int(m.jnt_qposadr[jid('com_x')])
+        self.eff_qpos = np.array([int(m.jnt_qposadr[jid(f'{e}_x')]) for e in EFFECTORS])
         self.eq_ids: Dict[Tuple[str, str], int] = {}
         for e in EFFECTORS:
             for a in self.anchors:
@@ -132,10 +135,10 @@ class DynamicProcess:
         """Teleport the character (COM and effectors), at rest."""
         d = self.data
         com = np.asarray(com, float)
-        d.qpos[self.com_dof:self.com_dof + 3] += com - self.com
+        d.qpos[self.com_qpos:self.com_qpos + 3] += com - self.com
         pos = self.effectors()
         for k, e in enumerate(EFFECTORS):
-            a = self.eff_dof[k]
+            a = self.eff_qpos[k]
             d.qpos[a:a + 3] += com + offsets[e] - pos[k]
         d.qvel[:] = 0.0
         mujoco.mj_forward(self.model, d)
@@ -226,10 +229,10 @@ class DynamicProcess:
     def move_effector(self, effector: str, point) -> None:
         """Teleport one effector body to ``point`` (world), at rest."""
         k = EFFECTORS.index(effector)
-        a = self.eff_dof[k]
+        a, v = self.eff_qpos[k], self.eff_dof[k]
         d = self.data
         d.qpos[a:a + 3] += np.asarray(point, float) - d.xpos[self.eff_body[k]]
-        d.qvel[a:a + 3] = 0.0
+        d.qvel[v:v + 3] = 0.0
         mujoco.mj_forward(self.model, d)
 
     def engage(self, effector: str, feature: Feature, body: str, point) -> None:

@@ -163,8 +163,6 @@ def _check_geom(g: Geom) -> None:
         for k in ('length', 'radius', 'segment_mass'):
             g.num(k)
         g.num('joint_damping', 0.1, positive=False)
-        if g.num('joint_armature', 0.01, positive=False) < 0:
-            raise ValueError('rope.joint_armature must be >= 0')
         n = int(g.data.get('segments', 0))
         if not 1 <= n <= 50:
             raise ValueError('rope.segments must be in [1, 50]')

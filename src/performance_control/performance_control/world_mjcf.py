@@ -10,7 +10,7 @@ inactive in the model and switched on at run time (``eq_active``) with its ancho
 contact point.
 
 Features: static capsules/boxes/planes in the world body; a rope as a chain of capsule bodies with
-passive damped ball joints (with a rotor inertia ``joint_armature``: see ``ROPE_ARMATURE``); a trampoline as a box on a vertical slide joint with a spring
+passive damped ball joints; a trampoline as a box on a vertical slide joint with a spring
 (``stiffness``, ``damping``); a water volume as a non-colliding box (the fluid forces are MuJoCo's
 ``density``/``viscosity``, switched on while the COM is inside it).
 
@@ -33,11 +33,6 @@ EFFECTOR_MASS = {'HandLeft': 2.5, 'HandRight': 2.5, 'FootLeft': 5.0, 'FootRight'
 # the COM body's inertia box (m): a torso-sized box, whose volume gives MuJoCo's buoyancy
 TORSO_BOX = (0.35, 0.25, 0.8)
 PADDLE_BOX = (0.15, 0.15, 0.15)   # effectors' inertia boxes (the hands' paddles in water)
-# default rotor inertia (kg m^2) of the rope's ball joints: a capsule segment's inertia about its
-# own axis (0.5 m r^2 ~ 1e-4) is ~1e5 times smaller than the character's mass; with one hand on
-# the rope, the free segments below it whipped up to thousands of rad/s until MuJoCo found a bad
-# QACC and reset the simulation (the character teleported to its start, its contacts off)
-ROPE_ARMATURE = 0.01
 
 
 @dataclass
@@ -97,14 +92,13 @@ def feature_xml(f: Feature) -> Tuple[List[str], List[Anchor]]:
             r = g.num('radius')
             m = g.num('segment_mass')
             damp = g.num('joint_damping', 0.1, positive=False)
-            arm = g.num('joint_armature', ROPE_ARMATURE, positive=False)
             k = int(g.data['segments'])
             open_tags = []
             for s in range(k):
                 pos = fmt(g.vec('top')) if s == 0 else f'0 0 {-seg:.6g}'
                 open_tags.append(
                     f'<body name="{n}_seg{s}" pos="{pos}"><joint name="{n}_ball{s}" type="ball" '
-                    f'damping="{damp:.6g}" armature="{arm:.6g}"/><geom name="{n}_geom{s}" type="capsule" '
+                    f'damping="{damp:.6g}"/><geom name="{n}_geom{s}" type="capsule" '
                     f'fromto="0 0 0 0 0 {-seg:.6g}" size="{r:.6g}" mass="{m:.6g}" {col} '
                     f'rgba="0.7 0.55 0.3 1"/>')
                 anchors.append(Anchor(f'{n}_seg{s}', f.name))
@@ -156,4 +150,4 @@ def world_model_xml(world: World, spawn_com, total_mass: float,
 
 
 __all__ = ['world_model_xml', 'feature_xml', 'Anchor', 'EFFECTOR_MASS', 'EFFECTOR_RADIUS',
-           'TORSO_BOX', 'PADDLE_BOX', 'ROPE_ARMATURE']
+           'TORSO_BOX', 'PADDLE_BOX']
