@@ -106,6 +106,9 @@ class SegmentOutput:
         self.smooth_lead = float(config.smooth_lead)
         # the user's profile lengths (19,), used from the first frame when set (Reconstructor)
         self.profile_lengths: Optional[np.ndarray] = None
+        # (observed lengths (19,), reliable observation counts (19,)) -> lengths: the length
+        # prior (length_prior.py), set by the Reconstructor; None = observed lengths only
+        self.length_prior: Optional[Callable[[np.ndarray, np.ndarray], np.ndarray]] = None
         self.reset()
 
     def reset(self) -> None:
@@ -155,6 +158,10 @@ class SegmentOutput:
         L = np.where(none, self._seg_fallback, self._seg_sum / np.maximum(self._seg_count, 1))
         if self.symmetric_lengths:
             L = 0.5 * (L + L[_MIRROR_SEG])
+        if self.length_prior is not None:
+            n = self._seg_count
+            L = self.length_prior(L, np.maximum(n, n[_MIRROR_SEG]) if self.symmetric_lengths
+                                  else n)
         if self._seg_count.min() >= self.length_frames:
             self._frozen_lengths = L  # every segment complete: constant from now on
         return L
