@@ -49,21 +49,40 @@ def test_unobserved_segment_takes_the_prior_and_few_observations_change_nothing(
     assert np.array_equal(p.fuse(L, few), L)
 
 
-def test_online_offset_scale_follows_the_spread_of_the_observed_lengths():
-    # lengths that agree with the proportions: no offset is measured and the observed lengths
-    # stay; with a spread of +-4 cm the measured offset scale is the method-of-moments one
-    p = _prior(online=True, sigma=0.05)
+def test_offset_scale_is_measured_from_left_right_differences():
+    # mirrored pairs observed 4 cm apart (left +2 cm, right -2 cm): var(L_l - L_r) = 4 sigma^2
+    # -> sigma = 0.04 / 2 = 2 cm, whatever length_offset_sigma says; the shared (symmetric)
+    # lengths are equal on both sides
+    from pose_reconstruction.length_prior import _MIRROR_SEG, _MIRRORED
     L = np.full(NUM_SEGMENTS, 0.36)
+    left = _MIRRORED & (np.arange(NUM_SEGMENTS) < _MIRROR_SEG)
+    L[left] += 0.02
+    L[_MIRROR_SEG[left]] -= 0.02
+    counts = np.full(NUM_SEGMENTS, 15)
+    p = _prior(online=True, sigma=0.05)
+    p.fuse(L, counts)
+    assert p.offset_sigma == pytest.approx(0.02, abs=1e-12)
+    sym = LengthPrior(LengthPriorConfig(length_offset_sigma=0.05), np.full(NUM_SEGMENTS, 0.2),
+                      np.full(NUM_SEGMENTS, 0.01), symmetric=True)
+    out = sym.fuse(L, counts)
+    assert np.allclose(out, out[_MIRROR_SEG])
+    assert np.allclose(out, 0.36)  # the shared lengths agree with the prior: nothing moves
+    off = _prior(online=False, sigma=0.05)
+    off.fuse(L, counts)
+    assert off.offset_sigma == pytest.approx(0.05)
+
+
+def test_segment_far_outside_the_prior_keeps_its_observed_length():
+    # a sensor that places a joint elsewhere on one segment (20 cm longer): more than 3 standard
+    # deviations off, so that segment keeps its observation and the others fit the size alone
+    p = _prior()
+    L = np.full(NUM_SEGMENTS, 0.36)
+    L[0] = 0.56
     out = p.fuse(L, np.full(NUM_SEGMENTS, 15))
-    assert p.offset_sigma == 0.0
-    assert np.allclose(out, L)
-    L = 0.36 + 0.04 * np.where(np.arange(NUM_SEGMENTS) % 2 == 0, 1.0, -1.0)
-    L[-1] = 0.36  # 9 x +4 cm, 9 x -4 cm, one 0: mean 0.36, h = 1.8
-    p.fuse(L, np.full(NUM_SEGMENTS, 15))
-    var_h = (2 * 0.05 ** 2 + (0.36 * 0.05) ** 2) / (19 * 0.04)  # the first pass, sigma = 0.05
-    var_prior = (0.36 * 0.05) ** 2 + 0.04 * var_h
-    s2 = (18 * 0.04 ** 2 - 19 * var_prior) / (19 * 2.0)
-    assert p.offset_sigma == pytest.approx(np.sqrt(s2), rel=1e-6)
+    assert out[0] == 0.56
+    assert p.outliers[0] and p.outliers.sum() == 1
+    assert p.height == pytest.approx(1.8, abs=1e-9)
+    assert np.allclose(out[1:], 0.36)
 
 
 def test_length_ratios_are_scale_free_and_reach_the_reconstructor():

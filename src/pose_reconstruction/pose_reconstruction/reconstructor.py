@@ -18,8 +18,10 @@ Output stage of B/C, ``output_mode``:
   *trust in the sensor* times min(1, reliability of the less reliable end / ``reliable_threshold``);
   the segments get constant user lengths (the mean observed length over the first
   ``length_frames`` reliable observations of each segment, then frozen; with
-  ``symmetric_lengths`` the left and right limbs share the mean of their two lengths) and are
-  chained from the observed root; the segment
+  ``symmetric_lengths`` the left and right limbs share the mean of their two lengths; with
+  ``length_prior`` and a database that stores its bodies' proportions, combined with those
+  proportions at the user's fitted size, each weighted by its expected error:
+  :mod:`.length_prior`) and are chained from the observed root; the segment
   vectors and the root are smoothed by a One Euro filter (``smooth_min_cutoff`` Hz,
   ``smooth_beta`` s/m, ``smooth_d_cutoff`` Hz; ``smooth_min_cutoff`` 0 = off); a segment the
   database fills in (an end with reliability 0) gets ``smooth_filled_scale`` times the cutoff (1 at
