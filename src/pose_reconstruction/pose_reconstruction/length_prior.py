@@ -124,9 +124,6 @@ class LengthPrior:
         d = sides[pair] - sides[_MIRROR_SEG][pair]
         return float(np.mean(d * d)) / 4.0
 
-    def __call__(self, sides: np.ndarray, counts: np.ndarray) -> np.ndarray:
-        return self.fuse(sides, counts)
-
     def fuse(self, sides: np.ndarray, counts: np.ndarray) -> np.ndarray:
         """(19,) the output lengths from ``sides`` (19,) the mean observed length of each segment
         (any value where ``counts`` is 0) and ``counts`` (19,) the reliable observations behind
