@@ -196,15 +196,17 @@ def test_signed_latency_reads_a_lead_and_a_delay_the_one_sided_one_clamps():
 
 
 def test_latency_check_velocity_peak_reads_a_delay_and_refuses_bad_variants():
-    from skeleton_eval.latency_check import _peak_ms, main
+    from skeleton_eval.latency_check import main
+    from skeleton_eval.metrics import velocity_xcorr, xcorr_latency_ms
     t = np.arange(300) / FPS
     x = np.stack([0.3 * np.sin(2 * np.pi * 0.7 * t), 0.2 * np.sin(2 * np.pi * 0.3 * t + 1.0),
-                  np.zeros_like(t)], axis=-1)
-    vo, vt = np.diff(x[:-2], axis=0), np.diff(x[2:], axis=0)    # output 2 frames behind
-    K = 10
-    xc = np.array([np.sum(vo[k:] * vt[:len(vt) - k]) if k >= 0 else np.sum(vo[:k] * vt[-k:])
-                   for k in range(-K, K + 1)])
-    assert abs(_peak_ms(xc, K) - 2000.0 / FPS) < 12.0   # parabola on a short window: ~10 ms low
+                  np.zeros_like(t)], axis=-1)[:, None]
+    # output 2 frames behind: ~67 ms (parabola on a short window: ~10 ms low); 2 ahead: negative
+    assert abs(xcorr_latency_ms(velocity_xcorr(x[:-2], x[2:])) - 2000.0 / FPS) < 12.0
+    assert abs(xcorr_latency_ms(velocity_xcorr(x[2:], x[:-2])) + 2000.0 / FPS) < 12.0
+    # a mask leaves joint-frames out; an offset between output and reference does not matter
+    assert abs(xcorr_latency_ms(velocity_xcorr(x[:-2] + 0.1, x[2:])) - 2000.0 / FPS) < 12.0
+    assert np.isnan(xcorr_latency_ms(velocity_xcorr(x, x, mask=np.zeros((300, 1), bool))))
     assert main(['--variants', 'nosuch:0.5']) == 2
 
 

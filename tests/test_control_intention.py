@@ -9,9 +9,12 @@ from performance_control.controller import ControlParams, PerformanceController,
 from performance_control.examples import imitation, random_style
 from performance_control.features import load_world
 from performance_control.intention import (ExampleModel, IntentionRecognizer, RecognizerParams,
-                                           feature_vectors, pca_basis, reconstruction_error)
+                                           approach_discount, feature_vectors,
+                                           partial_reconstruction_error, pca_basis,
+                                           reconstruction_error, residual)
 from performance_control.performances import non_imitation_clips
-from skeleton_core.model import HAND_LEFT, HAND_RIGHT, standard_body
+from skeleton_core.model import (ELBOW_RIGHT, HAND_LEFT, HAND_RIGHT, INFERRED, TRACKED,
+                                 WRIST_RIGHT, standard_body)
 
 WORLD = load_world('playground')
 
@@ -148,3 +151,86 @@ def test_segment_error_is_the_best_phase_mean_distance():
     # wrap-around: a segment over the example's end and start matches as well as inside
     wrap = m.w[[22, 0, 1]]
     assert m.segment_error(wrap) == pytest.approx(0.0, abs=1e-9)
+
+
+def test_missing_effector_error_against_a_hand_computed_fit():
+    """Eq. 5 on the observed coordinates: the subspace coefficient fitted to them, the residual
+    scaled by (D - m) / (D_o - m)."""
+    a = np.array([[1.0], [1.0], [0.0]]) / math.sqrt(2)       # D = 3, m = 1
+    v = np.array([3.0, 1.0, 4.0])
+    # all observed: Eq. 5 (projection (2, 2, 0), residual (1, -1, 4))
+    assert partial_reconstruction_error(v, a, [True] * 3) == pytest.approx(18.0)
+    # z missing: c / sqrt2 = 2 fits (3, 1) with residual (1, -1) -> 2, x (3 - 1) / (2 - 1) = 4
+    assert partial_reconstruction_error(v, a, [True, True, False]) == pytest.approx(4.0)
+    # y missing: c / sqrt2 = 3 fits x exactly, z's 4 remains -> 16 x 2 = 32
+    assert partial_reconstruction_error(v, a, [True, False, True]) == pytest.approx(32.0)
+    with pytest.raises(ValueError, match='cannot test'):
+        partial_reconstruction_error(v, a, [True, False, False])
+    # with the Gaussian prior sigma^2 / lambda = 1: c = (a_o . v_o) / (|a_o|^2 + 1) = sqrt2,
+    # fitted (1, 1), residual (2, 0) -> 4 x 2 = 8
+    r, scale = residual(v, a, [True, True, False], prior=np.array([1.0]))
+    assert r == pytest.approx([2.0, 0.0])
+    assert float(r @ r) * scale == pytest.approx(8.0)
+
+
+def test_e2_approach_discounts_only_the_change_back_into_the_subspace():
+    r_old = np.array([0.0, 0.0, 2.0])          # 2 out of the subspace, lag frames ago
+    # heading straight back by 1.5: no e2; sideways 1 kept whole
+    assert approach_discount(r_old + [0, 0, -1.5], np.array([0, 0, -1.5])) == pytest.approx(0)
+    dr = np.array([1.0, 0.0, -1.5])
+    assert approach_discount(r_old + dr, dr) == pytest.approx([1.0, 0.0, 0.0])
+    # overshooting past the subspace: only |r_old| = 2 is credited
+    dr = np.array([0.0, 0.0, -3.0])
+    assert approach_discount(r_old + dr, dr) == pytest.approx([0.0, 0.0, -1.0])
+    # moving away is all error
+    dr = np.array([0.0, 0.5, 0.5])
+    assert approach_discount(r_old + dr, dr) == pytest.approx(dr)
+
+
+def _frozen_right_arm(feature, seed=5, onset=1.0, n=75):
+    """A user imitating ``feature`` from ``onset`` s whose right arm the sensor froze at rest
+    (INFERRED): the Kinect's occlusion at the movement's onset."""
+    f = WORLD.features[feature]
+    t = np.arange(n) / 30.0
+    env = np.clip((t - onset) / 0.2, 0, 1)
+    p = imitation(f.example.generator, dict(f.example.params), standard_body(1.62), n,
+                  style=random_style(np.random.default_rng(seed), 0.5), active=env)
+    st = np.full(p.shape[:2], TRACKED, np.uint8)
+    arm = [ELBOW_RIGHT, WRIST_RIGHT, HAND_RIGHT]
+    p[:, arm] = p[0, arm]
+    st[:, arm] = INFERRED
+    return p, st, t
+
+
+@pytest.mark.parametrize('feature', ['monkey_bars', 'rope'])
+def test_an_imitation_with_an_occluded_arm_is_recognised_from_the_tracked_one(feature):
+    p, st, t = _frozen_right_arm(feature)
+    flags = {}
+    for missing in (True, False):
+        prm = RecognizerParams(missing_effectors=missing)
+        rec = IntentionRecognizer(list(build_models(WORLD, prm).values()), prm)
+        flags[missing] = np.array([rec.update(p[i], t[i], st[i])[feature].imitating
+                                   for i in range(len(p))])
+    early = (t >= 1.0) & (t <= 1.5)
+    assert not flags[True][t < 1.0].any()                  # standing still: nothing
+    assert flags[True][early].any()                        # the tracked arm recognised in 0.5 s
+    assert flags[True][t >= 1.5].mean() > 0.8
+    assert not flags[False].any()                          # the frozen arm as reported: never
+
+
+def test_an_untestable_change_share_gate_does_not_pass():
+    """The breaststroke's gate needs both hands (its directions are mirror-symmetric): with one
+    hand occluded it cannot tell a stroke from a punch, so the water recognizer stays off."""
+    p, st, t = _frozen_right_arm('water')
+    prm = RecognizerParams()
+    rec = IntentionRecognizer(list(build_models(WORLD, prm).values()), prm)
+    recs = [rec.update(p[i], t[i], st[i])['water'] for i in range(len(p))]
+    assert not any(r.imitating for r in recs)
+    assert all(r.change_share == pytest.approx(1.0) for r in recs[40:])
+    # the same stroke with both arms tracked is recognised
+    f = WORLD.features['water']
+    q = imitation(f.example.generator, dict(f.example.params), standard_body(1.62), 75,
+                  style=random_style(np.random.default_rng(5), 0.5),
+                  active=np.clip((t - 1.0) / 0.2, 0, 1))
+    rec = IntentionRecognizer(list(build_models(WORLD, prm).values()), prm)
+    assert any(rec.update(q[i], t[i])['water'].imitating for i in range(len(q)))

@@ -109,3 +109,58 @@ def test_one_euro_speed_scale_scales_the_minimum_cutoff_only():
         stamp = t * 33_333_333
         assert np.allclose(a.update(x, None, stamp, scale, np.ones(4)), b.update(x, None, stamp),
                            atol=1e-12)
+
+
+def _lead_filter(accel, num_joints=1):
+    # the segment output's smoothing defaults (pose_reconstruction.segment_output)
+    return OneEuroFilter(1.3, 3.0, 2.0, num_joints=num_joints, lead_accel=accel)
+
+
+def _run(f, xs, lead=None):
+    lead = np.ones(1) if lead is None else lead
+    return np.array([f.update(x, None, int(i * 1e9 / 30), lead=lead) for i, x in enumerate(xs)])
+
+
+def test_lead_with_acceleration_term_has_no_lag_on_a_ramp():
+    from skeleton_eval.metrics import added_latency_ms, velocity_xcorr, xcorr_latency_ms
+    t = np.arange(150) / 30.0
+    ramp = np.zeros((150, 1, 3))
+    ramp[:, 0, 0] = 0.5 * t                    # 0.5 m/s
+    out = _run(_lead_filter(0.75), ramp)
+    assert added_latency_ms(out[30:], ramp[30:]) <= 5.0
+    assert abs(xcorr_latency_ms(velocity_xcorr(out[30:], ramp[30:]))) <= 5.0
+    assert np.abs(out[60:] - ramp[60:]).max() < 0.002
+
+
+def test_acceleration_term_removes_the_lag_when_the_motion_accelerates():
+    from skeleton_eval.metrics import velocity_xcorr, xcorr_latency_ms
+    # constant acceleration x = a t^2 / 2 from rest: the delay at the end (error / speed) is small
+    t = np.arange(90) / 30.0
+    acc = np.zeros((90, 1, 3))
+    acc[:, 0, 0] = 0.5 * 0.05 * t ** 2          # 0.05 m/s^2
+    lag_ms = lambda out: (acc[-1, 0, 0] - out[-1, 0, 0]) / (0.05 * t[-1]) * 1000.0  # noqa: E731
+    assert abs(lag_ms(_run(_lead_filter(0.75), acc))) <= 5.0
+    # a 1 Hz swing (the acceleration changes all the time): the velocity the lead uses trails by
+    # its own low-pass lag, so the lead alone falls short; the acceleration term adds it back
+    t = np.arange(300) / 30.0
+    sw = np.zeros((300, 1, 3))
+    sw[:, 0, 0] = 0.2 * np.sin(2 * np.pi * 1.0 * t)
+    plain = _run(_lead_filter(0.0), sw)
+    led = _run(_lead_filter(0.75), sw)
+    assert xcorr_latency_ms(velocity_xcorr(plain[60:], sw[60:])) > 8.0
+    assert abs(xcorr_latency_ms(velocity_xcorr(led[60:], sw[60:]))) <= 5.0
+    assert np.abs(led[60:] - sw[60:]).max() < 0.5 * np.abs(plain[60:] - sw[60:]).max()
+    # the numpy fast path (every row valid) and the masked path agree
+    f1, f2 = _lead_filter(0.75, 2), _lead_filter(0.75, 2)
+    xs = np.repeat(sw, 2, axis=1)
+    a = np.array([f1.update(x, None, int(i * 1e9 / 30), lead=np.ones(2)) for i, x in enumerate(xs)])
+    st = np.full(2, TRACKED)
+    b = np.array([f2.update(x, st, int(i * 1e9 / 30), lead=np.ones(2)) for i, x in enumerate(xs)])
+    assert np.allclose(a, b)
+
+
+def test_lead_parameters_are_validated():
+    with pytest.raises(ValueError):
+        OneEuroFilter(lead_cutoff=-1.0)
+    with pytest.raises(ValueError):
+        OneEuroFilter(lead_accel=-0.5)

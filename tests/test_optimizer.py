@@ -314,12 +314,23 @@ def test_translation_invariant_knn_and_floating_root(small_db):
                       parent_relative_error(out.positions[None], p[None]))
     assert errs[True][0] < 0.03 < 0.1 < errs[False][0]
     assert errs[True][1] < errs[False][1]
-    # a trusted sensor (trust 1) keeps its own root
+    # a trusted sensor (trust 1) keeps its own root when the skeleton is chained from it
     r = Reconstructor(small_db, method='C', output_scale='standard', trust_mode='distance',
-                      trust_sensor_distance=1e-6)
+                      trust_sensor_distance=1e-6, position_fit=0.0)
     for i in range(20):
         out = r.process(SkeletonFrame(positions=bad, tracking_state=ts, stamp_ns=i * 33_333_333))
     assert r.trust_sensor == 1.0 and np.allclose(out.positions[ROOT], bad[ROOT], atol=1e-9)
+    # with position_fit (default) the trusted *tracked* joints place the skeleton: the untracked
+    # root, reported 15 cm off, no longer drags it
+    r = Reconstructor(small_db, method='C', output_scale='standard', trust_mode='distance',
+                      trust_sensor_distance=1e-6)
+    for i in range(20):
+        fit = r.process(SkeletonFrame(positions=bad, tracking_state=ts, stamp_ns=i * 33_333_333))
+    assert r.trust_sensor == 1.0
+    tracked = ts == TRACKED
+    err = lambda q: np.linalg.norm(q[tracked] - p[tracked], axis=1).mean()  # noqa: E731
+    assert err(fit.positions) < err(out.positions)
+    assert np.linalg.norm(fit.positions[ROOT] - p[ROOT]) < 0.1
 
 
 def test_scale_invariant_knn_matches_brute_force(small_db):
@@ -526,7 +537,7 @@ def test_anchored_filled_segments_keep_the_speed_term():
     new, old = segs(), segs(smooth_anchored_speed=False)
     lag_new = np.linalg.norm(new - raw, axis=-1)[10:].mean()
     lag_old = np.linalg.norm(old - raw, axis=-1)[10:].mean()
-    assert lag_new < 0.85 * lag_old
+    assert lag_new < 0.9 * lag_old    # 0.88 at the defaults (beta 3; 0.82 at beta 5)
     # outside the few-reliable-joints regime the filled segments are smoothed as before: a
     # reliable torso with one forearm hidden, or the torso hidden with one forearm tracked
     ts = np.full(NUM_JOINTS, TRACKED, np.uint8)

@@ -64,7 +64,7 @@ def _parser():
     p.add_argument('--perturb-groups', default='noise,offset,occlusion,failure',
                    help='--perturb: parameter groups (noise, offset, occlusion, failure)')
     p.add_argument('--method-params', default='', metavar='JSON',
-                   help='table4 / --perturb: parameter overrides per method, e.g. '
+                   help='table4 / --perturb / --real (C rows): parameter overrides per method, e.g. '
                         '\'{"C": {"plausibility": false, "smooth_lead": 0}}\'')
     p.add_argument('--quiet', action='store_true', help='no progress lines')
     p.add_argument('--real', nargs='?', const='auto', default=None, metavar='UIPRMD_DIR',
@@ -95,6 +95,15 @@ def run_real(args) -> int:
         argv += ['--variants', args.methods]
     if args.quiet:
         argv.append('--quiet')
+    if getattr(args, 'method_params', ''):
+        import json
+        over = json.loads(args.method_params)
+        if not isinstance(over, dict) or set(over) - {'C'}:
+            print('evaluate --real: --method-params takes {"C": {...}} (overrides of method C in '
+                  'the C rows)', file=sys.stderr)
+            return 2
+        if over.get('C'):
+            argv += ['--method-params', json.dumps(over['C'])]
     same = dev.is_dir() and Path(src).resolve() == dev.resolve()
     if not same:
         argv.append('--no-loso')  # other subjects: the correction from all development ones

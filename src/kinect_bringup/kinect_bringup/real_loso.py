@@ -123,7 +123,7 @@ def lab_database(src, held_out: int, clips):
     return fold_database(src, held_out, subjects=train)
 
 
-def _make(variant: str, correction, db):
+def _make(variant: str, correction, db, method_params: Optional[Dict] = None):
     from skeleton_eval import evaluation as E
     if variant == 'raw+corr':
         return _Corrected(correction)
@@ -134,7 +134,7 @@ def _make(variant: str, correction, db):
     if '+corr' in variant:
         kw.update(correction=correction, input_tracker=TRACKER,
                   correction_stage='reliable' if variant.endswith('@reliable') else 'input')
-    return E.make_method('C', db=db, **kw)
+    return E.make_method('C', db=db, **kw, **(method_params or {}))
 
 
 def session_registered_mpjpe(outputs: Dict[str, np.ndarray], truths: Dict[str, np.ndarray],
@@ -163,13 +163,14 @@ def session_registered_mpjpe(outputs: Dict[str, np.ndarray], truths: Dict[str, n
 
 
 def run_variant(variant: str, streams: Sequence, correction=None, profiles=None, db=None,
-                progress=None, setup_of: Optional[Dict[str, str]] = None) -> Dict[str, Dict]:
+                progress=None, setup_of: Optional[Dict[str, str]] = None,
+                method_params: Optional[Dict] = None) -> Dict[str, Dict]:
     """{clip: {'metrics', 'latency_ms', 'times', 'frames'}} of one variant on some streams;
     the metrics include ``mpjpe_reg_cm`` (:func:`session_registered_mpjpe`)."""
     from skeleton_eval import evaluation as E
     from skeleton_eval import metrics as M
-    from skeleton_eval.real_eval import added_latency_ms
-    method = _make(variant, correction, db)
+    from skeleton_eval.real_eval import added_latency_ms, tracked_xcorr
+    method = _make(variant, correction, db, method_params)
     out = {}
     outputs, truths = {}, {}
     for s in streams:
@@ -180,7 +181,9 @@ def run_variant(variant: str, streams: Sequence, correction=None, profiles=None,
         pos, t = E.run_method(method, s)
         outputs[s.clip_name], truths[s.clip_name] = pos, s.truth
         out[s.clip_name] = {'metrics': M.compute_all(pos, s.truth, s.fps),
-                            'latency_ms': added_latency_ms(pos, s.positions, s.fps),
+                            'latency_one_sided_ms': added_latency_ms(pos, s.positions, s.fps),
+                            'xcorr': tracked_xcorr(pos, s).tolist(),
+                            'xcorr_raw': tracked_xcorr(s.positions, s).tolist(),
                             'times': t.tolist(), 'frames': len(s)}
         if progress:
             progress(variant, s.clip_name)
@@ -191,6 +194,17 @@ def run_variant(variant: str, streams: Sequence, correction=None, profiles=None,
     for name, r in out.items():
         r['metrics']['mpjpe_reg_cm'] = reg.get(name, nan)
     return out
+
+
+def added_xcorr_latency(clip_results: Sequence[Dict]) -> float:
+    """The latency (ms) a variant adds over some clips: the peak of its velocity
+    cross-correlation with the marker reference (TRACKED joints, curves of the clips added)
+    minus the raw Kinect's own (:func:`skeleton_eval.real_eval.tracked_xcorr`); resolves less
+    than a frame, negative when the output leads the raw input."""
+    from skeleton_eval import metrics as M
+    xc = sum(np.asarray(r['xcorr'], float) for r in clip_results)
+    xr = sum(np.asarray(r['xcorr_raw'], float) for r in clip_results)
+    return M.xcorr_latency_ms(xc) - M.xcorr_latency_ms(xr)
 
 
 def _cached(cache: Optional[Path], key: Dict, compute):
@@ -219,11 +233,13 @@ def _nan(d):
 
 def evaluate(src, variants: Sequence[str] = DEFAULT_VARIANTS, loso: bool = True,
              correction=None, subjects=None, movements=None, max_clips: Optional[int] = None,
-             cache: Optional[Path] = None, progress=None) -> Dict:
+             cache: Optional[Path] = None, progress=None,
+             method_params: Optional[Dict] = None) -> Dict:
     """Score ``variants`` on the clips under ``src`` (module docstring). ``loso``: corrections
     learned per held-out subject from the other subjects of ``src``; else ``correction`` (learned
     elsewhere) for every clip. Returns a dict :func:`skeleton_eval.real_eval.to_markdown` prints,
-    plus ``protocol``, ``folds`` and ``correction_ms``."""
+    plus ``protocol``, ``folds`` and ``correction_ms``. ``method_params``: parameter overrides of
+    method C in the ``C...`` variants (e.g. earlier defaults, for a before/after table)."""
     from pose_reconstruction.correction import build_from_clips
     from pose_reconstruction.methods import default_database
     from skeleton_eval import evaluation as E
@@ -296,12 +312,15 @@ def evaluate(src, variants: Sequence[str] = DEFAULT_VARIANTS, loso: bool = True,
             key = {'variant': v, 'code': code, 'correction': cdig if 'corr' in v else None,
                    'clips': [s.clip_name for s in fold_streams], 'src': src_res,
                    'height': height}
+            if method_params and v.startswith('C'):
+                key['method_params'] = method_params
             vdb = db
             if v.endswith('labdb'):
                 vdb = lab_database(src, subj, clips)
                 key['database'] = vdb.meta.get('cache_key')
             res = _cached(cache, key, lambda v=v, prof=prof, corr=corr, fs=fold_streams, vdb=vdb:
-                          run_variant(v, fs, corr, prof, vdb, progress, setup_of))
+                          run_variant(v, fs, corr, prof, vdb, progress, setup_of,
+                                      method_params if v.startswith('C') else None))
             per_clip[v].update(res)
     # tables in real_eval's format
     results: Dict[str, Dict] = {}
@@ -315,20 +334,20 @@ def evaluate(src, variants: Sequence[str] = DEFAULT_VARIANTS, loso: bool = True,
             lst = acc[row]
             parts = [_nan(r['metrics']) for r in lst]
             w = [r['frames'] for r in lst]
-            lat = [np.nan if r['latency_ms'] is None else r['latency_ms'] for r in lst]
+            lat = added_xcorr_latency(lst)
             t = np.concatenate([np.asarray(r['times'], float) for r in lst])
             results[v][row] = {'clips': len(lst), 'frames': int(sum(w)),
                                'metrics': E._combine(parts, w),
-                               'latency_ms': float(np.nanmean(lat)), 'time': E._time_summary(t)}
+                               'latency_ms': lat, 'time': E._time_summary(t)}
             if row != 'm03_s01':
                 allp += parts
                 allw += w
-                alll += lat
+                alll += lst
                 allt.append(t)
         if allp:
             results[v]['overall'] = {'clips': len(allp), 'frames': int(sum(allw)),
                                      'metrics': E._combine(allp, allw),
-                                     'latency_ms': float(np.nanmean(alll)),
+                                     'latency_ms': added_xcorr_latency(alll),
                                      'time': E._time_summary(np.concatenate(allt))}
     protocol = ('leave-one-subject-out: each subject scored with a correction learned on the '
                 'other subjects only' if loso else
@@ -412,6 +431,9 @@ def main(argv=None) -> int:
     ap.add_argument('--subjects', default='', help='comma-separated subject numbers')
     ap.add_argument('--movements', default='', help='comma-separated movement numbers')
     ap.add_argument('--max-clips', type=int, default=0, help='clips per movement row, 0 = all')
+    ap.add_argument('--method-params', default='',
+                    help='JSON parameter overrides of method C in the C variants, e.g. '
+                    '\'{"position_fit": 0}\'')
     ap.add_argument('--no-cache', action='store_true')
     ap.add_argument('--quiet', action='store_true')
     args = ap.parse_args(argv)
@@ -439,12 +461,15 @@ def main(argv=None) -> int:
                       f'{", ".join(dropped)} not scored', file=sys.stderr)
             else:
                 print(f'[real_loso] {C.describe_file(corr)}', file=sys.stderr)
+        over = json.loads(args.method_params) if args.method_params else None
+        if over is not None and not isinstance(over, dict):
+            raise ValueError('--method-params: a JSON object of C parameters')
         prog = None if args.quiet else (lambda v, c: print(f'  {v:15s} {c}', file=sys.stderr))
         res = evaluate(src, variants,
                        loso=not args.no_loso, correction=corr, subjects=ints(args.subjects),
                        movements=ints(args.movements), max_clips=args.max_clips or None,
                        cache=None if args.no_cache else default_cache_dir() / 'real_eval',
-                       progress=prog)
+                       progress=prog, method_params=over)
     except (ValueError, FileNotFoundError) as e:
         print(f'real_loso: {e}', file=sys.stderr)
         return 1

@@ -135,7 +135,7 @@ class ControlNode(Node):
                 self.get_logger().info(f'user {uid}: controller started')
             st = f.stamp_ns or stamp
             try:
-                o = ctl.step(f.positions, st * 1e-9)
+                o = ctl.step(f.positions, st * 1e-9, f.tracking_state)
             except (ValueError, FloatingPointError) as e:
                 self._drop('bad input', str(e))
                 self.users.pop(uid, None)

@@ -302,8 +302,10 @@ class PerformanceController:
                     break
 
     # ------------------------------------------------------------------ step
-    def step(self, positions_sensor: np.ndarray, t: float) -> ControlOutput:
-        """One sensor frame (20, 3) at time ``t`` (s)."""
+    def step(self, positions_sensor: np.ndarray, t: float,
+             tracking_state: Optional[np.ndarray] = None) -> ControlOutput:
+        """One sensor frame (20, 3) at time ``t`` (s); ``tracking_state`` (20,) the sensor's
+        per-joint states (None: all TRACKED), used by the recognizer for occluded effectors."""
         t_start = time.perf_counter()
         p = self.sensor.to_world(np.asarray(positions_sensor, float))
         if p.shape != (20, 3) or not np.all(np.isfinite(p)):
@@ -315,7 +317,7 @@ class PerformanceController:
         dt = 1.0 / 30.0 if self.t_last is None else min(max(t - self.t_last, 1.0 / 240), 0.1)
         self.t_last = t
         self.frames += 1
-        recs = self.recognizer.update(p, t)
+        recs = self.recognizer.update(p, t, tracking_state)
         self._track_hands(p, dt)
         for n, r in recs.items():
             if r.imitating:

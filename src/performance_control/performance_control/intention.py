@@ -11,6 +11,24 @@ positions). PCA of the example motion's vectors gives the basis ``A`` (first m c
 A user imitates when both errors (exponentially averaged over ``smoothing`` s) are below their
 thresholds and the effectors move at least ``min_activity`` times the example's RMS speed (a
 still pose has dw = 0: without this gate standing still would be a perfect "consistency").
+
+Missing effectors (``missing_effectors``): when the sensor reports an effector INFERRED or
+NOT_TRACKED (an occlusion: the Kinect freezes it, collapses it onto the body or drops it), its
+coordinates are not evidence. The errors are then those of the observed coordinates o only, with
+the subspace coefficients fitted to them (PCA with missing data):
+
+    e1 = (D - m) / (D_o - m) * min_c || P_o (w - mean - A c) ||^2
+
+and likewise e2; (D - m) / (D_o - m) keeps the expected residual of isotropic noise the same as
+with every coordinate observed (D coordinates, D_o observed, m components; used only while
+D_o > m). An effector counts as observed after ``track_settle`` TRACKED frames in a row (its
+velocity over ``lag`` frames and the low-pass have left the jump from the held position). The
+fit has a Gaussian prior on the coefficients (``missing_prior``: probabilistic PCA), so that one
+observed hand is not explained by coefficients far outside the example's range.
+
+Onset (``e2_approach``): e2 leaves out the part of the residual's change that heads back into
+the example's subspace (:func:`approach_discount`): a user moving into the example's range is
+not inconsistent with it.
 """
 from __future__ import annotations
 
@@ -22,7 +40,7 @@ import numpy as np
 from skeleton_core.geometry import facing_yaw
 from skeleton_core.params import check, param
 from skeleton_core.model import (JOINT_INDEX, SEGMENT_CHILDREN, SEGMENT_MASS_FRACTION,
-                                 SEGMENT_PARENTS, JOINT_NAMES, estimate_height)
+                                 SEGMENT_PARENTS, JOINT_NAMES, TRACKED, estimate_height)
 
 _SEG_W = np.array([SEGMENT_MASS_FRACTION[JOINT_NAMES[c]] for c in SEGMENT_CHILDREN])
 _SEG_W = _SEG_W / _SEG_W.sum()
@@ -91,6 +109,57 @@ def reconstruction_error(v: np.ndarray, a: np.ndarray) -> np.ndarray:
     return np.sum(r * r, axis=-1)
 
 
+def residual(v: np.ndarray, a: np.ndarray, observed: Optional[np.ndarray] = None,
+             prior: Optional[np.ndarray] = None):
+    """(r, scale): the residual of v (D,) out of span(A) (D, m) -- ``v - A A^T v``, scale 1 --
+    or, with ``observed`` (D,) bool, of the observed coordinates only: ``v_o - A_o c`` with c
+    the least-squares fit to them, scale (D - m) / (D_o - m) (PCA with missing data; D_o, the
+    number of observed coordinates, must exceed m). ``scale * |r|^2`` is the error of Eq. 5/6.
+    ``prior`` (m,) = sigma^2 / lambda_i: the fit ``min |v_o - A_o c|^2 + sum prior_i c_i^2``
+    (probabilistic PCA: the coefficients a Gaussian of the example's variances lambda_i, the
+    residual of variance sigma^2 per coordinate), which keeps a few observed coordinates from
+    being explained by coefficients far outside the example's range."""
+    v = np.asarray(v, float)
+    if observed is None:
+        return v - a @ (a.T @ v), 1.0
+    obs = np.asarray(observed, bool)
+    d, m = a.shape
+    d_o = int(obs.sum())
+    if d_o <= m:
+        raise ValueError(f'{d_o} observed coordinates cannot test a {m}-dimensional subspace')
+    ao, vo = a[obs], v[obs]
+    if prior is None:
+        c = np.linalg.lstsq(ao, vo, rcond=None)[0]
+    else:
+        c = np.linalg.solve(ao.T @ ao + np.diag(prior), ao.T @ vo)
+    return vo - ao @ c, (d - m) / (d_o - m)
+
+
+def partial_reconstruction_error(v: np.ndarray, a: np.ndarray, observed: np.ndarray) -> float:
+    """Eq. 5/6 on the observed coordinates only (PCA with missing data):
+    (D - m) / (D_o - m) * min_c || v_o - A_o c ||^2, where v_o, A_o are the rows of v (D,) and
+    A (D, m) with ``observed`` (D,) bool true and D_o their number. With every coordinate
+    observed it is :func:`reconstruction_error` (A orthonormal); D_o must exceed m."""
+    r, scale = residual(v, a, observed)
+    return float(r @ r) * scale
+
+
+def approach_discount(r: np.ndarray, dr: np.ndarray) -> np.ndarray:
+    """The change ``dr`` of the residual out of the example's subspace without its part that
+    heads back into the subspace: with ``r_old = r - dr`` (the residual ``lag`` frames ago),
+    the component of dr along ``-r_old`` (at most |r_old|: no credit for overshooting) is
+    removed; a change away from the subspace or sideways is kept whole."""
+    r_old = np.asarray(r, float) - np.asarray(dr, float)
+    n = float(np.linalg.norm(r_old))
+    if n <= 0.0:
+        return np.asarray(dr, float)
+    u = r_old / n
+    along = float(dr @ u)
+    if along >= 0.0:
+        return np.asarray(dr, float)
+    return dr - max(along, -n) * u
+
+
 @dataclass
 class RecognizerParams:
     """Intention recognition (Sec. 6.1); every field is a node parameter (skeleton_core.params)."""
@@ -135,6 +204,22 @@ class RecognizerParams:
                                 "segment: e1 = min over the example's phase of the mean "
                                 "squared distance of the segment's w to the example's; 0 = "
                                 "Eq. 5 on the current frame)", range=(0, 60), read_only=True)
+    missing_effectors: bool = param(True, "compare only the effectors the sensor TRACKS when "
+                                    "others are INFERRED or NOT_TRACKED (occluded: frozen, "
+                                    "collapsed or dropped): e1/e2 of the observed coordinates "
+                                    "with the PCA coefficients fitted to them; false = every "
+                                    "effector as reported")
+    e2_approach: bool = param(True, "e2 leaves out the part of the change that heads back "
+                              "into the example's subspace (the residual shrinking: a user "
+                              "moving into the example's range at the onset of an imitation)")
+    missing_prior: float = param(0.1, "the missing-data fit's residual variance sigma^2 (D - m) "
+                                 "(body-height^2 units) against the example's variance along "
+                                 "each component: c = argmin |v_o - A_o c|^2 + sigma^2 sum "
+                                 "c_i^2 / lambda_i (0 = plain least squares)",
+                                 range=(0.0, 10.0))
+    track_settle: int = param(3, "TRACKED frames in a row before an effector counts as observed "
+                              "again (its velocity over lag frames and the low-pass settle)",
+                              range=(1, 30), read_only=True)
     fps: float = 30.0
 
     def validate(self) -> None:
@@ -189,6 +274,8 @@ class ExampleModel:
         lag = min(int(params.lag), len(w) - 1)
         self.var_w = float(np.sum(np.var(w, axis=0)))
         self.var_dw = float(np.mean(np.sum((w[lag:] - w[:-lag]) ** 2, axis=1)))
+        # the variance of dw's coefficients (the missing-data fit's prior for e2)
+        self.eigenvalues_dw = np.var((w[lag:] - w[:-lag]) @ self.A, axis=0)
         # the activity gate's normaliser: the example's RMS effector speed measured as the gate
         # measures it (displacement over activity_lag frames)
         r = relative_effectors(self.positions, self.effectors,
@@ -196,6 +283,8 @@ class ExampleModel:
         k = min(int(params.activity_lag), len(r) - 1)
         v = (r[k:] - r[:-k]).reshape(len(r) - k, -1) * (params.fps / k)
         self.rms_speed = float(np.sqrt(np.mean(np.sum(v * v, axis=1))))
+        # per effector: its share of the mean square speed (the gate over observed effectors)
+        self.ms_speed = np.mean(v * v, axis=0).reshape(len(self.effectors), 3).sum(axis=1)
 
     def segment_error(self, seg: np.ndarray) -> float:
         """min over the example's phase phi (cyclic) of the mean over the segment's frames j of
@@ -212,12 +301,23 @@ class ExampleModel:
         d = float(np.sum(seg * seg)) - 2.0 * cross + cache[1]
         return float(max(np.min(d), 0.0) / n)
 
-    def errors(self, w: np.ndarray, dw: np.ndarray):
-        """(e1, e2) of Eq. 5-6; divided by the example's total variance of w and mean |dw|^2
-        when ``params.normalise``."""
-        e1 = float(reconstruction_error(w - self.mean, self.A))
-        e2 = float(reconstruction_error(dw, self.A))
-        if getattr(getattr(self, 'params', None), 'normalise', False):
+    def errors(self, w: np.ndarray, dw: np.ndarray, observed: Optional[np.ndarray] = None):
+        """(e1, e2) of Eq. 5-6 (on the ``observed`` coordinates (D,) bool only, when given:
+        :func:`partial_reconstruction_error`); divided by the example's total variance of w and
+        mean |dw|^2 when ``params.normalise``."""
+        prm = getattr(self, 'params', None)
+        p1 = p2 = None
+        pf = float(getattr(prm, 'missing_prior', 0.0))
+        if pf > 0 and observed is not None:
+            sig = pf / (self.A.shape[0] - self.A.shape[1])     # residual variance per coordinate
+            p1 = sig / np.maximum(self.eigenvalues, 1e-12)
+            p2 = sig / np.maximum(self.eigenvalues_dw, 1e-12)
+        r, scale = residual(w - self.mean, self.A, observed, p1)
+        dr, _ = residual(dw, self.A, observed, p2)
+        if getattr(prm, 'e2_approach', False):
+            dr = approach_discount(r, dr)
+        e1, e2 = float(r @ r) * scale, float(dr @ dr) * scale
+        if getattr(prm, 'normalise', False):
             return e1 / max(self.var_w, 1e-12), e2 / max(self.var_dw, 1e-12)
         return e1, e2
 
@@ -248,20 +348,31 @@ class IntentionRecognizer:
         self._avg: Dict[str, list] = {}
         self._shist: Dict[str, list] = {}   # the last segment_frames feature vectors per model
         self._last_t: Optional[float] = None
+        self._tracked_run: Optional[np.ndarray] = None   # TRACKED frames in a row per joint
 
     def reset(self) -> None:
+        self._tracked_run = None
         self._hist = []
         self._whist = {}
         self._shist = {}
         self._avg = {}
         self._last_t = None
 
-    def update(self, positions: np.ndarray, t: float) -> Dict[str, Recognition]:
+    def update(self, positions: np.ndarray, t: float,
+               tracking_state: Optional[np.ndarray] = None) -> Dict[str, Recognition]:
+        """One pose (20, 3) at ``t`` s; ``tracking_state`` (20,) the sensor's per-joint state
+        (TRACKED = 2; None: every joint tracked)."""
         p = np.asarray(positions, float)
         if self.height is None:
             h = estimate_height(p)
             self.height = float(np.clip(h, 1.0, 2.3)) if np.isfinite(h) else 1.75
         prm = self.params
+        if tracking_state is None or not prm.missing_effectors:
+            self._tracked_run = None
+        else:
+            tr = np.asarray(tracking_state).reshape(-1) == TRACKED
+            run = self._tracked_run if self._tracked_run is not None else np.full(len(tr), 10 ** 6)
+            self._tracked_run = np.where(tr, run + 1, 0)
         yaw = facing_yaw(p)
         com = reference_point(p, prm.reference)
         rot = yaw_rotation(yaw)
@@ -289,6 +400,11 @@ class IntentionRecognizer:
         gam = 1.0 if prm.share_window <= 0 else 1.0 - math.exp(-dt / prm.share_window)
         for m in self.models:
             idx = list(m.effectors)
+            obs_e = None
+            if self._tracked_run is not None:
+                obs_e = self._tracked_run[idx] >= int(prm.track_settle)
+                if obs_e.all() or 6 * int(obs_e.sum()) <= m.A.shape[1]:
+                    obs_e = None      # all observed, or too few to test the subspace
             r = rel[idx].reshape(-1)
             v = (r - old[idx].reshape(-1)) * (prm.fps / k) if k else np.zeros_like(r)
             w = np.concatenate([r, prm.tau * v])
@@ -297,7 +413,8 @@ class IntentionRecognizer:
             if len(wh) > lag + 1:
                 wh.pop(0)
             dw = w - wh[0]
-            e1, e2 = m.errors(w, dw)
+            obs_w = None if obs_e is None else np.tile(np.repeat(obs_e, 3), 2)
+            e1, e2 = m.errors(w, dw, obs_w)
             nseg = int(prm.segment_frames)
             if nseg > 0:
                 sh = self._shist.setdefault(m.name, [])
@@ -306,11 +423,19 @@ class IntentionRecognizer:
                     sh.pop(0)
                 e1 = m.segment_error(np.array(sh))
             va = (r - old_a[idx].reshape(-1)) * (prm.fps / ka) if ka else np.zeros_like(r)
-            sp2 = float(np.sum(va * va)) / max(m.rms_speed, 1e-9) ** 2
             # the share of the displacement over share_lag frames outside the example's
             # position subspace (energies averaged over share_window, then divided)
             vs = r - old_s[idx].reshape(-1)
-            out2, all2 = float(reconstruction_error(vs, m.A_pos)), float(np.sum(vs * vs))
+            if obs_e is None:
+                sp2 = float(np.sum(va * va)) / max(m.rms_speed, 1e-9) ** 2
+                out2, all2 = float(reconstruction_error(vs, m.A_pos)), float(np.sum(vs * vs))
+            else:     # the observed effectors against the example's speed of the same ones
+                obs_p = np.repeat(obs_e, 3)
+                sp2 = float(np.sum(va[obs_p] ** 2)) / max(float(m.ms_speed[obs_e].sum()), 1e-18)
+                all2 = float(np.sum(vs[obs_p] ** 2))
+                out2 = (partial_reconstruction_error(vs, m.A_pos, obs_p)
+                        * (int(obs_p.sum()) - m.A_pos.shape[1]) / (len(obs_p) - m.A_pos.shape[1])
+                        if int(obs_p.sum()) > m.A_pos.shape[1] else all2)
             a = self._avg.get(m.name)
             if a is None:
                 a = self._avg[m.name] = [e1, e2, sp2, out2, all2]
@@ -341,4 +466,5 @@ class IntentionRecognizer:
 
 __all__ = ['ExampleModel', 'IntentionRecognizer', 'RecognizerParams', 'Recognition',
            'center_of_mass', 'relative_effectors', 'pca_basis', 'reconstruction_error',
+           'partial_reconstruction_error', 'residual', 'approach_discount',
            'feature_vectors', 'yaw_rotation']

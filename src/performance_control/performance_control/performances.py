@@ -14,7 +14,7 @@ from types import SimpleNamespace
 from typing import Dict, List, Optional, Tuple
 
 import numpy as np
-from skeleton_core.model import Body, standard_body
+from skeleton_core.model import TRACKED, Body, standard_body
 from skeleton_data.motions import builtin_clips, pose_from_rotations
 
 from .examples import FPS, _legs, imitation, random_style
@@ -108,16 +108,19 @@ SENSOR_HEIGHT = 1.2
 
 
 def to_sensor(positions: np.ndarray, name: str, seed: int, noise: bool = True,
-              sensor_params=None) -> np.ndarray:
+              sensor_params=None, states: bool = False):
     """A world clip as the sensor reports it (sensor frame): the sensor model's stream (placement,
-    noise, dropouts; scenario a) or, with ``noise=False``, just placed 2.5 m ahead facing it."""
+    noise, dropouts; scenario a) or, with ``noise=False``, just placed 2.5 m ahead facing it.
+    With ``states``: (positions, tracking states (T, 20) uint8; all TRACKED without noise)."""
     from skeleton_eval.sensor_model import SensorModel
     sm = SensorModel(PERFORMANCE_PLACEMENT if sensor_params is None else sensor_params, seed=seed)
     clip = SimpleNamespace(name=name, positions=positions, fps=FPS)
     if not noise:
-        return sm.place(clip)
+        pos = sm.place(clip)
+        return (pos, np.full(pos.shape[:2], TRACKED, np.uint8)) if states else pos
     s = sm.corrupt(clip, 'a')
-    return np.asarray(s.positions, float)
+    pos = np.asarray(s.positions, float)
+    return (pos, np.asarray(s.tracking_state, np.uint8)) if states else pos
 
 
 __all__ = ['PERFORMANCE_PLACEMENT', 'SENSOR_HEIGHT', 'imitation_stream', 'jump_stream',

@@ -6,7 +6,14 @@ are reliable, at or above ``reliable_threshold``; 0 otherwise) and the *trust in
 (:mod:`.trust`) times min(1, reliability of the less reliable end / ``reliable_threshold``). The
 segments get constant user lengths (the mean observed length over the first ``length_frames``
 reliable observations of each segment, then frozen; with ``symmetric_lengths`` the left and right
-limbs share the mean of their two lengths) and are chained from the observed root. The segment
+limbs share the mean of their two lengths) and are chained from the observed root. Chaining adds
+every segment's length and direction error down the chain (a spine 1 cm longer than the sensor's
+moves the head and both arms by 1 cm), so where the sensor is trusted ``position_fit`` places the
+constant-length skeleton nearest the observed joints instead: each joint pulled towards its
+observation by ``position_fit`` times the trust times min(1, reliability / ``reliable_threshold``),
+the lengths then restored by moving both ends of each segment, the result's directions kept
+(on the UI-PRMD recordings, where the sensor is trusted, this is what the constant lengths cost in
+MPJPE; docs/real_recordings.md). The segment
 vectors and the root are smoothed by a One Euro filter (``smooth_min_cutoff`` Hz, ``smooth_beta``
 s/m, ``smooth_d_cutoff`` Hz; ``smooth_min_cutoff`` 0 = off); a segment the database fills in (an
 end with reliability 0) gets ``smooth_filled_scale`` times the cutoff (1 at or above
@@ -15,7 +22,10 @@ see :mod:`.reconstructor`. ``smooth_lead`` (prediction correction, default 1): o
 segments (in proportion to ``min(1, reliability / reliable_threshold)`` of the less reliable
 end) and the root, the low-pass lag is added back along the smoothed velocity
 (``OneEuroFilter`` ``lead``): no lag on a ramp, so the light smoothing of what the sensor gives
-reliably adds no latency, and the heavy smoothing stays on the filled segments.
+reliably adds no latency, and the heavy smoothing stays on the filled segments. The velocity it
+leads along trails the motion by its own low-pass lag; ``smooth_lead_accel`` extrapolates it
+along the smoothed acceleration over that lag and the low-pass lag (no lag when the motion
+accelerates either), ``smooth_lead_cutoff`` sets its cutoff.
 """
 from __future__ import annotations
 
@@ -43,6 +53,8 @@ SEG_DIFF[np.arange(NUM_SEGMENTS), SEGMENT_PARENT_INDEX] -= 1.0
 _SEG_CHAIN = ANCESTORS[:, SEGMENT_CHILD_INDEX]
 # (19, 20): 1 for the joints at and below each segment's child (what hangs from the segment)
 _SEG_BELOW = np.ascontiguousarray(_SEG_CHAIN.T)
+# (20,) 1 / number of segments at each joint (position_fit's averaged corrections)
+_INV_DEGREE = 1.0 / np.abs(SEG_DIFF).sum(axis=0)
 
 
 @dataclass
@@ -60,7 +72,7 @@ class SegmentOutputConfig:
     smooth_min_cutoff: float = param(
         1.3, 'segments: One Euro minimum cutoff (Hz) of segment and root smoothing, 0 = off',
         range=(0.0, 1000.0))
-    smooth_beta: float = param(5.0, 'segments: One Euro speed coefficient (s/m)',
+    smooth_beta: float = param(3.0, 'segments: One Euro speed coefficient (s/m)',
                                range=(0.0, 1e6))
     smooth_d_cutoff: float = param(2.0, 'segments: One Euro speed cutoff (Hz)',
                                    range=(1e-3, 1000.0))
@@ -68,6 +80,24 @@ class SegmentOutputConfig:
         1.0, 'segments: prediction correction of the smoothing on reliable segments and the root '
         '(fraction of the low-pass lag added back along the smoothed velocity; 1 = no lag on a '
         'ramp, 0 = plain One Euro); filled segments keep the plain low-pass', range=(0.0, 1.0))
+    smooth_lead_cutoff: float = param(
+        0.0, 'segments: cutoff (Hz) of the velocity the prediction correction leads along (the '
+        'smoothed output\'s velocity); higher = less delay in that velocity, less lag when the '
+        'motion accelerates, more jitter; 0 = smooth_d_cutoff', range=(0.0, 1000.0))
+    smooth_lead_accel: float = param(
+        0.75, 'segments: gain of the acceleration term of the prediction correction (the lead '
+        'velocity extrapolated over its own and the low-pass lag; 1 = exact to first order on a '
+        'constant acceleration, 0 = off)', range=(0.0, 2.0))
+    position_fit: float = param(
+        1.0, 'segments: where the sensor is trusted, place the constant-length skeleton nearest '
+        'the observed joints rather than chain it from the observed root (pull of each joint '
+        'towards its observation: this times the trust times min(1, reliability / '
+        'reliable_threshold), then the lengths restored by moving both ends of each segment); '
+        'chaining adds every segment\'s length and direction error down the chain; 0 = off',
+        range=(0.0, 1.0))
+    position_fit_iterations: int = param(
+        8, 'segments: length-restoring passes of position_fit (all segments at once, each end '
+        'half of the length error)', range=(1, 100))
     smooth_filled_scale: float = param(
         0.2, 'segments: cutoff factor of a segment the database fills in (an end with '
         'reliability 0; 1 at or above reliable_threshold, linear between), 1 = same smoothing '
@@ -104,6 +134,10 @@ class SegmentOutput:
         self.smooth_filled_speed = bool(config.smooth_filled_speed)
         self.smooth_anchored_speed = bool(config.smooth_anchored_speed)
         self.smooth_lead = float(config.smooth_lead)
+        self.smooth_lead_cutoff = float(config.smooth_lead_cutoff)
+        self.position_fit = float(config.position_fit)
+        self.position_fit_iterations = int(config.position_fit_iterations)
+        self.smooth_lead_accel = float(config.smooth_lead_accel)
         # the user's profile lengths (19,), used from the first frame when set (Reconstructor)
         self.profile_lengths: Optional[np.ndarray] = None
         # (observed lengths of each side (19,), reliable observation counts (19,)) -> lengths:
@@ -122,7 +156,9 @@ class SegmentOutput:
         self._filter_clock_ns = 0
         # one filter for the 19 segment vectors and the root (rows 0-18, 19): the same per-row
         # One Euro filter as two separate ones, in one call
-        self._seg_filter = OneEuroFilter(mc, b, dc, num_joints=NUM_SEGMENTS + 1) if mc > 0 else None
+        self._seg_filter = OneEuroFilter(
+            mc, b, dc, num_joints=NUM_SEGMENTS + 1, lead_cutoff=self.smooth_lead_cutoff,
+            lead_accel=self.smooth_lead_accel) if mc > 0 else None
 
     def lengths(self, positions: np.ndarray, R: np.ndarray,
                 lengths: Optional[np.ndarray] = None) -> np.ndarray:
@@ -206,6 +242,10 @@ class SegmentOutput:
         vr[:NUM_SEGMENTS] = u
         vr[:NUM_SEGMENTS] *= L[:, None]
         vr[NUM_SEGMENTS] = obs[ROOT] if root is None else root
+        if self.position_fit > 0.0 and trust > 0.0:
+            pull = (self.position_fit * trust) * np.minimum(w * (1.0 / max(thr, 1e-6)), 1.0)
+            if pull.any():
+                self._fit_positions(vr, obs, pull, L, rel_frac)
         if self._seg_filter is not None:
             # filter clock: the stamps' steps where plausible (1 ms - 0.5 s), else 30 Hz
             stamp = int(frame.stamp_ns or 0)
@@ -253,3 +293,39 @@ class SegmentOutput:
         else:
             v = vr[:NUM_SEGMENTS]
         return vr[NUM_SEGMENTS] + _SEG_CHAIN @ v
+
+    def _fit_positions(self, vr: np.ndarray, obs: np.ndarray, pull: np.ndarray,
+                       L: np.ndarray, seg_rel: Optional[np.ndarray] = None) -> None:
+        """``position_fit`` (in place on ``vr``: 19 segment vectors of lengths ``L`` and the
+        root): the chained skeleton's joints pulled towards the observed ones by ``pull`` (20,),
+        then its segment lengths restored by ``position_fit_iterations`` simultaneous passes
+        (each segment's length error shared by its two ends, a joint's corrections averaged over
+        its segments). A segment takes the fitted direction in proportion to ``seg_rel`` (19,)
+        (default 1: the reliability fraction of its less reliable end; a segment the database
+        fills keeps its direction), with lengths ``L``; the root goes where the chained result
+        fits the pulled joints best (a translation, weighted by ``pull``)."""
+        p = vr[NUM_SEGMENTS] + _SEG_CHAIN @ vr[:NUM_SEGMENTS]
+        ok = np.isfinite(obs).all(axis=1) & (pull > 0)
+        p[ok] += pull[ok, None] * (obs[ok] - p[ok])
+        for _ in range(self.position_fit_iterations):
+            d = SEG_DIFF @ p
+            n = np.sqrt(np.einsum('sk,sk->s', d, d))
+            e = ((n - L) / np.maximum(n, 1e-9))[:, None] * d   # (19, 3) length error vectors
+            p -= (0.5 * _INV_DEGREE)[:, None] * (SEG_DIFF.T @ e)
+        d = SEG_DIFF @ p
+        n = np.sqrt(np.einsum('sk,sk->s', d, d))
+        good = n > 1e-9
+        fit = np.zeros_like(d)
+        fit[good] = d[good] * (L[good] / n[good])[:, None]
+        v = vr[:NUM_SEGMENTS]
+        if seg_rel is not None:
+            b = np.where(good, seg_rel, 0.0)[:, None]
+            u = v + b * (fit - v)
+            nu = np.sqrt(np.einsum('sk,sk->s', u, u))
+            okv = nu > 1e-9
+            v[okv] = u[okv] * (L[okv] / nu[okv])[:, None]
+        else:
+            v[good] = fit[good]
+        wt = np.where(ok, pull, 0.0)
+        q = p - _SEG_CHAIN @ v
+        vr[NUM_SEGMENTS] = (wt @ q) / wt.sum() if wt.sum() > 0 else q.mean(axis=0)

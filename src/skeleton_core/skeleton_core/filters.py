@@ -122,10 +122,17 @@ class OneEuroFilter:
     """One Euro filter on joint positions (see module docstring)."""
 
     def __init__(self, min_cutoff: float = 1.0, beta: float = 3.0, d_cutoff: float = 1.0,
-                 num_joints: int = NUM_JOINTS, default_rate: float = 30.0):
+                 num_joints: int = NUM_JOINTS, default_rate: float = 30.0,
+                 lead_cutoff: float = 0.0, lead_accel: float = 0.0):
         if min_cutoff <= 0 or d_cutoff <= 0 or beta < 0:
             raise ValueError('cutoffs must be > 0 and beta >= 0')
+        if lead_cutoff < 0 or lead_accel < 0:
+            raise ValueError('lead_cutoff and lead_accel must be >= 0')
         self.min_cutoff, self.beta, self.d_cutoff = min_cutoff, beta, d_cutoff
+        # the lead's velocity: the low-pass output's, smoothed at lead_cutoff (0: d_cutoff);
+        # lead_accel: gain of the acceleration term of the lead (see update)
+        self.lead_cutoff = float(lead_cutoff) if lead_cutoff > 0 else float(d_cutoff)
+        self.lead_accel = float(lead_accel)
         self.n = num_joints
         self.default_dt = 1.0 / default_rate
         self.reset()
@@ -137,6 +144,7 @@ class OneEuroFilter:
         self.raw = np.zeros((self.n, 3))
         self.dx = np.zeros((self.n, 3))
         self.fdx = np.zeros((self.n, 3))
+        self.fdd = np.zeros((self.n, 3))
         self.t_ns: Optional[int] = None
 
     @staticmethod
@@ -168,7 +176,13 @@ class OneEuroFilter:
         factor); ``lead`` times that lag is added back along the velocity of the low-pass output
         (smoothed with ``d_cutoff``), so a row with ``lead`` 1 has no lag on a ramp and keeps most
         of the smoothing at rest (the velocity of the smoothed signal is smooth; that of the raw
-        input would bring its noise back). The filter's state stays the uncorrected low-pass."""
+        input would bring its noise back). That velocity is the low-pass output's, smoothed at
+        ``lead_cutoff`` Hz (default ``d_cutoff``): it trails the motion by its own low-pass lag
+        ``tau_v``, so when the motion accelerates the lead falls short; ``lead_accel`` g > 0 adds
+        ``g (tau + tau_v)`` times the acceleration (the velocity's derivative smoothed at
+        ``lead_cutoff``) to the velocity the lag is multiplied by: with g = 1 the lead is exact
+        to first order on a constant acceleration too. The filter's state stays the uncorrected
+        low-pass."""
         x = np.asarray(positions, float)
         dt = self.default_dt
         if stamp_ns is not None and self.t_ns is not None and stamp_ns > self.t_ns:
@@ -183,12 +197,17 @@ class OneEuroFilter:
             cutoff = self._cutoff(speed, cutoff_scale, speed_scale)
             a = (1.0 / (1.0 + (1.0 / (2 * np.pi * cutoff)) / dt))[:, None]
             out = a * x + (1 - a) * self.x
-            self.fdx = ad * ((out - self.x) / dt) + (1 - ad) * self.fdx
+            al = ad if self.lead_cutoff == self.d_cutoff else self._alpha(self.lead_cutoff, dt)
+            fdx = al * ((out - self.x) / dt) + (1 - al) * self.fdx
+            if self.lead_accel > 0.0:
+                self.fdd = al * ((fdx - self.fdx) / dt) + (1 - al) * self.fdd
+            self.fdx = fdx
             self.dx = edx
             self.x = out.copy()
             self.raw = x.copy()
             if lead is not None:
-                out += (np.asarray(lead, float)[:, None] * ((1 - a) / a) * dt) * self.fdx
+                out += (np.asarray(lead, float)[:, None] * ((1 - a) / a) * dt) * \
+                    self._lead_velocity(a, al, dt)
             return out
         st = _states(tracking_state, self.n)
         valid = st != NOT_TRACKED
@@ -205,15 +224,27 @@ class OneEuroFilter:
             a = self._alpha(cutoff, dt)
             out[cont] = a * x[cont] + (1 - a) * self.x[cont]
             self.dx[cont] = edx
-            self.fdx[cont] = ad * ((out[cont] - self.x[cont]) / dt) + (1 - ad) * self.fdx[cont]
+            al = ad if self.lead_cutoff == self.d_cutoff else self._alpha(self.lead_cutoff, dt)
+            fdx = al * ((out[cont] - self.x[cont]) / dt) + (1 - al) * self.fdx[cont]
+            if self.lead_accel > 0.0:
+                self.fdd[cont] = al * ((fdx - self.fdx[cont]) / dt) + (1 - al) * self.fdd[cont]
+            self.fdx[cont] = fdx
         start = valid & ~self.has
         self.dx[start] = 0.0
         self.fdx[start] = 0.0
+        self.fdd[start] = 0.0
         self.x[valid] = out[valid]
         self.raw[valid] = x[valid]
         self.has = valid.copy()
         self.all_started = bool(valid.all())
         if lead is not None and cont.any():
             out[cont] += (np.asarray(lead, float)[cont][:, None] * ((1 - a) / a) * dt) * \
-                self.fdx[cont]
+                self._lead_velocity(a, al, dt, cont)
         return out
+
+    def _lead_velocity(self, a, al, dt, rows=slice(None)):
+        """The velocity the lead multiplies the low-pass lag by (see :meth:`update`)."""
+        if self.lead_accel <= 0.0:
+            return self.fdx[rows]
+        lag = ((1 - a) / a + (1 - al) / al) * dt
+        return self.fdx[rows] + (self.lead_accel * lag) * self.fdd[rows]

@@ -319,6 +319,22 @@ def reliable_latency_curve(out: np.ndarray, stream: KinectStream):
     return M.latency_curve(rel, raw)
 
 
+def reliable_xcorr(out: np.ndarray, stream: KinectStream) -> np.ndarray:
+    """:func:`metrics.velocity_xcorr` of ``out`` against the true motion on the joint-frames the
+    sensor model marks clean (root-relative, as :func:`reliable_latency_curve`): the delay read
+    from it (:func:`metrics.xcorr_latency_ms`) resolves less than a frame and is signed, and is
+    blind to the offsets between output and input that flatten the one-sided curve."""
+    raw = np.array(stream.positions, float)
+    raw -= raw[:, :1]
+    mask = np.isfinite(raw).all(-1)
+    if stream.clean is not None:
+        mask &= stream.clean & stream.clean[:, :1]
+    rel = np.asarray(out, float) - np.asarray(out, float)[:, :1]
+    tru = np.array(stream.truth, float)
+    tru -= tru[:, :1]
+    return M.velocity_xcorr(rel, tru, M.MAX_LATENCY_FRAMES, mask)
+
+
 def evaluate_streams(methods, streams: Dict[str, List[KinectStream]],
                      frame_transform: Optional[Callable] = None, progress=None,
                      warmup: Optional[Callable] = None) -> Dict:
@@ -333,6 +349,8 @@ def evaluate_streams(methods, streams: Dict[str, List[KinectStream]],
         results[label] = {}
         for sc, lst in streams.items():
             parts, weights, times, missing, lats = [], [], [], 0, []
+            xc = np.zeros(2 * M.MAX_LATENCY_FRAMES + 1)
+            xc_raw = np.zeros(2 * M.MAX_LATENCY_FRAMES + 1)
             for s in lst:
                 frames = None if frame_transform is None else frame_transform(s)
                 out, t = run_method(method, s, frames,
@@ -340,13 +358,18 @@ def evaluate_streams(methods, streams: Dict[str, List[KinectStream]],
                 missing += int(np.isnan(out).any(axis=(1, 2)).sum())
                 parts.append(M.compute_all(out, s.truth, s.fps))
                 lats.append(reliable_latency_curve(out, s))
+                xc += reliable_xcorr(out, s)
+                xc_raw += reliable_xcorr(s.positions, s)
                 weights.append(len(s))
                 times.append(t)
                 if progress:
                     progress(label, sc, s.clip_name)
             results[label][sc] = {'frames': int(sum(weights)), 'missing_frames': missing,
                                   'metrics': _combine(parts, weights),
-                                  'latency_ms': M.latency_from_curve(
+                                  'latency_ms': (M.xcorr_latency_ms(xc, lst[0].fps)
+                                                 - M.xcorr_latency_ms(xc_raw, lst[0].fps))
+                                  if lats else float('nan'),
+                                  'latency_one_sided_ms': M.latency_from_curve(
                                       sum(c[0] for c in lats), sum(c[1] for c in lats),
                                       lst[0].fps) if lats else float('nan'),
                                   'time': _time_summary(np.concatenate(times) if times else

@@ -26,17 +26,6 @@ from . import perturb as P
 from .sensor_model import SensorModel
 
 
-def _peak_ms(xc: np.ndarray, K: int, fps: float = 30.0) -> float:
-    """The shift (ms, -K..K, parabola-refined) of the largest velocity cross-correlation."""
-    k = int(np.argmax(xc))
-    frac = 0.0
-    if 0 < k < len(xc) - 1:
-        den = xc[k - 1] - 2 * xc[k] + xc[k + 1]
-        if den < -1e-12:
-            frac = 0.5 * (xc[k - 1] - xc[k + 1]) / den
-    return float((k - K + frac) * 1000.0 / fps)
-
-
 def check(method, clips, group, factor, seed, scenarios='abcd', max_frames=300) -> Dict:
     """Per class: frames, one-sided and signed delay (ms), distance at shift 0 and the change
     from shift 0 to 1 (mm); and their frame-weighted means (key ``'all'``)."""
@@ -47,6 +36,7 @@ def check(method, clips, group, factor, seed, scenarios='abcd', max_frames=300) 
         behind = [np.zeros(M.MAX_LATENCY_FRAMES + 1), np.zeros(M.MAX_LATENCY_FRAMES + 1)]
         ahead = [np.zeros(M.MAX_LATENCY_FRAMES + 1), np.zeros(M.MAX_LATENCY_FRAMES + 1)]
         frames = 0
+        jit = 0.0
         K = M.MAX_LATENCY_FRAMES
         xc = np.zeros(2 * K + 1)
         for s in E.make_streams(clips, (sc,), seed, max_frames, sensor)[sc]:
@@ -58,13 +48,9 @@ def check(method, clips, group, factor, seed, scenarios='abcd', max_frames=300) 
             rel = pred - pred[:, :1]
             tru = np.array(s.truth, float)
             tru -= tru[:, :1]
-            vo, vt = np.diff(rel, axis=0), np.diff(tru, axis=0)
-            ok = np.isfinite(raw[1:]).all(-1) & np.isfinite(raw[:-1]).all(-1)
-            vo[~ok] = 0.0
-            for i, k in enumerate(range(-K, K + 1)):
-                # sum of v_out(t) . v_truth(t - k) over the clean joint-frames
-                a, b = (vo[k:], vt[:len(vt) - k]) if k >= 0 else (vo[:k], vt[-k:])
-                xc[i] += np.nansum(a * b)
+            # v_out(t) . v_truth(t - k) over the clean joint-frames
+            xc += M.velocity_xcorr(rel, tru, K, np.isfinite(raw).all(-1))
+            jit += M.jitter(pred, s.fps)[1] * len(s)
             for acc, c in ((behind, M.latency_curve(rel, raw)), (ahead, M.latency_curve(raw, rel))):
                 acc[0] += c[0]
                 acc[1] += c[1]
@@ -74,10 +60,11 @@ def check(method, clips, group, factor, seed, scenarios='abcd', max_frames=300) 
                    'one_sided_ms': M.latency_from_curve(*behind, 30.0),
                    'signed_ms': M.signed_latency_from_curves(behind, ahead, 30.0),
                    'dist0_mm': float(d[0]), 'step_mm': float(d[1] - d[0]),
-                   'xcorr_ms': _peak_ms(xc, K)}
+                   'xcorr_ms': M.xcorr_latency_ms(xc), 'jitter_ms2': jit / max(frames, 1)}
     w = np.array([v['frames'] for v in out.values()], float)
     out['all'] = {k: float(np.dot(w, [v[k] for v in out.values()]) / w.sum())
-                  for k in ('one_sided_ms', 'signed_ms', 'dist0_mm', 'step_mm', 'xcorr_ms')}
+                  for k in ('one_sided_ms', 'signed_ms', 'dist0_mm', 'step_mm', 'xcorr_ms',
+                            'jitter_ms2')}
     return out
 
 
@@ -121,7 +108,8 @@ def main(argv=None) -> int:
             al = r['all']
             print(f'{label:12s} seed {seed}: one-sided {al["one_sided_ms"]:5.1f} ms, signed '
                   f'{al["signed_ms"]:6.1f} ms, distance at 0 {al["dist0_mm"]:5.1f} mm, '
-                  f'+1 frame {al["step_mm"]:+5.2f} mm, velocity x-corr vs truth {al["xcorr_ms"]:5.1f} ms | ' + ' '.join(
+                  f'+1 frame {al["step_mm"]:+5.2f} mm, velocity x-corr vs truth {al["xcorr_ms"]:5.1f} ms, jitter '
+                  f'{al["jitter_ms2"]:5.2f} m/s2 | ' + ' '.join(
                       f'{sc}: {v["one_sided_ms"]:.1f}/{v["signed_ms"]:.1f}/{v["xcorr_ms"]:.1f}'
                       for sc, v in r.items() if sc != 'all'), flush=True)
     if a.json:

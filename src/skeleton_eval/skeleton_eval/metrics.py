@@ -16,6 +16,8 @@ where either input is NaN are skipped (per joint); a quantity with no valid fram
 * :func:`bone_direction_error` — mean angle between estimated and true segment directions, deg
   (length-free).
 * :func:`added_latency_ms` — the delay of an output behind its input (the best-fitting shift).
+* :func:`velocity_xcorr` / :func:`xcorr_latency_ms` — the delay of an output behind a reference
+  motion from the peak of the cross-correlation of their joint velocities (signed, sub-frame).
 """
 from __future__ import annotations
 
@@ -178,6 +180,47 @@ def added_latency_ms(out: np.ndarray, raw: np.ndarray, fps: float = 30.0,
     """Delay of ``out`` behind ``raw`` (ms): the shift k >= 0 minimising mean |out(t) - raw(t-k)|,
     refined to sub-frame by a parabola through the minimum."""
     return latency_from_curve(*latency_curve(out, raw, max_frames), fps)
+
+
+def velocity_xcorr(out: np.ndarray, ref: np.ndarray, max_frames: int = MAX_LATENCY_FRAMES,
+                   mask=None) -> np.ndarray:
+    """(2 max_frames + 1,): for each shift k in -K..K the sum of ``v_out(t) . v_ref(t - k)`` over
+    the joint-frames where both velocities (first differences) are finite (and ``mask`` (T, J),
+    if given, holds at both frames of the difference). Curves of several streams pool by adding
+    them; :func:`xcorr_latency_ms` reads the delay. Blind to constant offsets between ``out`` and
+    ``ref`` and, where ``ref`` is a true motion, to the sensor's noise."""
+    o = np.asarray(out, float)
+    r = np.asarray(ref, float)
+    vo, vr = np.diff(o, axis=0), np.diff(r, axis=0)
+    ok = np.isfinite(vo).all(-1)
+    if mask is not None:
+        m = np.asarray(mask, bool)
+        ok &= m[1:] & m[:-1]
+    vo = np.where(ok[..., None], vo, 0.0)
+    vr = np.where(np.isfinite(vr), vr, 0.0)
+    K = max_frames
+    xc = np.zeros(2 * K + 1)
+    for i, k in enumerate(range(-K, K + 1)):
+        a, b = (vo[k:], vr[:len(vr) - k]) if k >= 0 else (vo[:k], vr[-k:])
+        if len(a):
+            xc[i] = float(np.einsum('tjk,tjk->', a, b))
+    return xc
+
+
+def xcorr_latency_ms(xc, fps: float = 30.0) -> float:
+    """The delay (ms) of a :func:`velocity_xcorr` curve: the shift of its peak (-K..K frames),
+    refined to sub-frame by a parabola; negative when the output leads. NaN for an empty curve."""
+    xc = np.asarray(xc, float)
+    if not np.isfinite(xc).all() or not np.any(xc):
+        return float('nan')
+    K = (len(xc) - 1) // 2
+    k = int(np.argmax(xc))
+    frac = 0.0
+    if 0 < k < len(xc) - 1:
+        den = xc[k - 1] - 2 * xc[k] + xc[k + 1]
+        if den < -1e-12:
+            frac = 0.5 * (xc[k - 1] - xc[k + 1]) / den
+    return float((k - K + frac) * 1000.0 / fps)
 
 
 METRICS = ('eq18_cm', 'mpjpe_cm', 'jitter_ms2', 'bone_std_cm', 'bone_err_cm', 'bone_dir_deg')

@@ -145,8 +145,10 @@ def to_markdown(res: Dict, method: str = 'C', reference: str = 'raw') -> str:
     scs = res['scenarios']
     lines = [f'## {method} against {reference} under perturbed sensor models', '',
              'Per class: Eq. 18 cm (gain over raw) / bone direction deg (gain over raw). '
-             'Jitter m/s² and added latency ms on the joints the sensor reported correctly, '
-             'frame-weighted over the classes.', '']
+             'Jitter m/s² frame-weighted over the classes; added latency ms: the delay behind the '
+             'true motion (peak of the velocity cross-correlation, root-relative, on the '
+             'joint-frames the sensor reported correctly, sub-frame, negative = leads) less the '
+             'raw input\'s, frame-weighted over the classes.', '']
     head = '| variant | seed | ' + ' | '.join(f'{sc} Eq.18' for sc in scs) + ' | ' + \
         ' | '.join(f'{sc} dir' for sc in scs) + ' | jitter raw / C | latency C ms |'
     lines += [head, '|' + '---|' * (head.count('|') - 1)]
