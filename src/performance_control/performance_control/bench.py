@@ -102,7 +102,7 @@ def recognition(world, params: RecognizerParams, seed0: int, performers: int,
 def physics(world, params: ControlParams, seed0: int, noise: bool = True,
             sensor: Optional[Dict] = None) -> Dict:
     models = build_models(world, params.recognizer)
-    res: Dict = {'ms': [], 'pen': 0.0, 'pen_by': {}}
+    res: Dict = {'ms': [], 'pen': 0.0, 'pen_by': {}, 'unstable': {}}
 
     def run(start: str, s: np.ndarray, st: np.ndarray):
         ctl = PerformanceController(world, params, models, start=start)
@@ -114,6 +114,7 @@ def physics(world, params: ControlParams, seed0: int, noise: bool = True,
             res['pen'] = max(res['pen'], o.penetration)
             res['pen_by'][start] = max(res['pen_by'].get(start, 0.0), o.penetration)
             rows.append(o)
+        res['unstable'][start] = res['unstable'].get(start, 0) + ctl.dp.unstable_steps
         return rows
 
     for name in ('monkey_bars', 'rope'):
@@ -238,6 +239,8 @@ def main(argv=None) -> int:
         print(f'penetration max: {100 * pen:.1f} cm (target <= 2 cm) -> '
               f'{"met" if pen <= 0.02 else "NOT met"}  ' + ', '.join(
                   f'{k} {100 * v:.1f}' for k, v in ph['pen_by'].items()))
+        print('unstable physics steps (MuJoCo bad QACC): ' + ', '.join(
+            f'{k} {v}' for k, v in ph['unstable'].items()))
         ms = np.array(ph['ms'])
         print(f'control step per user: median {np.median(ms):.2f} ms, p95 '
               f'{np.percentile(ms, 95):.2f} ms (target <= 5 ms median) -> '
