@@ -3,12 +3,12 @@
     ros2 run performance_control bench_control                 # test seeds (the reported figures)
     ros2 run performance_control bench_control --dev           # dev seeds (used for tuning)
     ros2 run performance_control bench_control --performers 2 --skip-physics   # quick
-    ros2 run performance_control bench_control --performers 30 --skip-physics  # larger set
+    ros2 run performance_control bench_control --performers 6    # the first, smaller set
 
-The default (6 performers per feature: 36 imitation windows, one window = 2.8 %) is the original
-set; ``--performers 30`` (180 windows, 15 seeds of non-imitation clips; its first 6 performers are
-the default's) is the larger set the figures are also reported on (chosen before looking at test
-results; dev and test seeds stay disjoint: dev 0..., test 1000...).
+The default, 30 performers per feature (180 imitation windows, 15 seeds of non-imitation clips),
+was fixed before any test run of it; ``--performers 6`` is the first set (36 windows, one window =
+2.8 %: too coarse for a 90 % target), whose performers are the default's first six. Dev and test
+seeds stay disjoint (dev 0..., test 1000...).
 
 1. Intention recognition on sensor-model streams (scenario a): per feature with an example
    motion, ``--performers`` users of another body size (1.5-1.95 m), style, tempo and amplitude
@@ -102,7 +102,7 @@ def recognition(world, params: RecognizerParams, seed0: int, performers: int,
 def physics(world, params: ControlParams, seed0: int, noise: bool = True,
             sensor: Optional[Dict] = None) -> Dict:
     models = build_models(world, params.recognizer)
-    res: Dict = {'ms': [], 'pen': 0.0, 'pen_by': {}}
+    res: Dict = {'ms': [], 'pen': 0.0, 'pen_by': {}, 'unstable': {}}
 
     def run(start: str, s: np.ndarray, st: np.ndarray):
         ctl = PerformanceController(world, params, models, start=start)
@@ -114,6 +114,7 @@ def physics(world, params: ControlParams, seed0: int, noise: bool = True,
             res['pen'] = max(res['pen'], o.penetration)
             res['pen_by'][start] = max(res['pen_by'].get(start, 0.0), o.penetration)
             rows.append(o)
+        res['unstable'][start] = res['unstable'].get(start, 0) + ctl.dp.unstable_steps
         return rows
 
     for name in ('monkey_bars', 'rope'):
@@ -154,7 +155,7 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     ap.add_argument('--world', default='playground')
     ap.add_argument('--dev', action='store_true', help='dev seeds (tuning), not the test seeds')
-    ap.add_argument('--performers', type=int, default=6, help='imitating users per feature')
+    ap.add_argument('--performers', type=int, default=30, help='imitating users per feature')
     ap.add_argument('--no-noise', action='store_true', help='sensor placement only, no noise')
     ap.add_argument('--skip-physics', action='store_true')
     ap.add_argument('--e1', type=float, default=None, help='e1 threshold (default: node default)')
@@ -238,6 +239,8 @@ def main(argv=None) -> int:
         print(f'penetration max: {100 * pen:.1f} cm (target <= 2 cm) -> '
               f'{"met" if pen <= 0.02 else "NOT met"}  ' + ', '.join(
                   f'{k} {100 * v:.1f}' for k, v in ph['pen_by'].items()))
+        print('unstable physics steps (MuJoCo bad QACC): ' + ', '.join(
+            f'{k} {v}' for k, v in ph['unstable'].items()))
         ms = np.array(ph['ms'])
         print(f'control step per user: median {np.median(ms):.2f} ms, p95 '
               f'{np.percentile(ms, 95):.2f} ms (target <= 5 ms median) -> '

@@ -42,9 +42,11 @@ class ControlParams:
     recognizer: RecognizerParams = nested(RecognizerParams)
     free_gain: float = param(1500.0, 'N/m (N/rad): gain of effectors without a contact',
                              range=(10.0, 1e5))
-    release_after: float = param(1.0, 's without imitation before hands on a feature with an '
+    release_after: float = param(2.0, 's without imitation before hands on a feature with an '
                                  'example let go (the character falls when the user stops; '
-                                 '0 = never)', range=(0.0, 60.0))
+                                 'longer than a hand the sensor reports TRACKED at a wrong place, '
+                                 'up to 1.5 s, plus the errors\' smoothing; 0 = never)',
+                                 range=(0.0, 60.0))
     hand_release_margin: float = param(0.05, "m: a held hand lets go when the user's hand drops "
                                        "this far below the feature's engage joint",
                                        range=(0.0, 1.0))
@@ -254,6 +256,12 @@ class PerformanceController:
                 self._hand_vz[e] += g * ((z - self._hand_z[e]) / dt - self._hand_vz[e])
             self._hand_z[e] = z
 
+    def _above_other(self, e: str) -> bool:
+        """The hand ``e`` holds the rope above the other hand (nearer the top)."""
+        a = self.dp.rope_arc(e)
+        b = self.dp.rope_arc(HANDS[1 - HANDS.index(e)])
+        return a is not None and b is not None and a < b
+
     def _update_contacts(self, p: np.ndarray, recs: Dict[str, Recognition], t: float) -> None:
         dp, prm = self.dp, self.params
         vel = dp.effector_velocities()
@@ -266,8 +274,11 @@ class PerformanceController:
                             and t - max(self.last_imitation.get(f.name, c.since_wall),
                                         c.since_wall) > prm.release_after)
                     other = HANDS[1 - HANDS.index(e)]
+                    # hand over hand: only the lower hand lets go to grab higher (the rope
+                    # below the upper hand carries no load: hanging from it drops the body)
                     regrab = (f.engage.regrab and other in dp.contacts
-                              and self._hand_vz[e] > prm.regrab_speed)
+                              and self._hand_vz[e] > prm.regrab_speed
+                              and not self._above_other(e))
                     if lost or regrab or not self._user_hand_raised(p, e, f,
                                                                     prm.hand_release_margin):
                         dp.release(e)
@@ -291,7 +302,9 @@ class PerformanceController:
                             and dp.contacts[HANDS[1 - HANDS.index(e)]].feature == f.name)
                 if not climbing and float(np.linalg.norm(vel[k])) > f.engage.max_speed:
                     continue
-                dist, body, pt = dp.feature_distance(e, f)
+                # climbing, the free hand grabs above the held one (along the rope)
+                above = dp.rope_arc(HANDS[1 - HANDS.index(e)]) if climbing else None
+                dist, body, pt = dp.feature_distance(e, f, above)
                 reach = max(f.engage.distance, prm.regrab_reach * self.height) if climbing \
                     else f.engage.distance
                 if body is not None and dist < reach:

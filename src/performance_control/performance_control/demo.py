@@ -153,7 +153,7 @@ def plot(result: Dict, world, path: Path) -> None:
                 ax.plot(q[0], q[2], 'o', color='red', ms=6)
         com = np.array([r[0].com for r in rr])
         ax.set_xlim(com[:, 0].mean() - 1.6, com[:, 0].mean() + 1.6)
-        ax.set_ylim(-0.1, 3.8)
+        ax.set_ylim(-0.1, max(3.8, float(com[:, 2].max()) + 1.4))   # a climber stays in view
         ax.set_aspect('equal')
         ax.set_title(f'{name}: character at 25/50/85 % (side view)')
         ax.set_xlabel('x (m)')

@@ -75,9 +75,12 @@ class DynamicProcess:
         bid = lambda n: mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, n)  # noqa: E731
         self.com_body = bid('com')
         self.eff_body = np.array([bid(f'eff_{e}') for e in EFFECTORS])
-        jadr = lambda n: int(m.jnt_dofadr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, n)])  # noqa: E731
-        self.com_dof = jadr('com_x')
-        self.eff_dof = np.array([jadr(f'{e}_x') for e in EFFECTORS])
+        jid = lambda n: mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, n)  # noqa: E731
+        self.com_dof = int(m.jnt_dofadr[jid('com_x')])
+        self.eff_dof = np.array([int(m.jnt_dofadr[jid(f'{e}_x')]) for e in EFFECTORS])
+        # qpos addresses differ from dof addresses after the rope's ball joints (4 vs 3 each)
+        self.com_qpos = int(m.jnt_qposadr[jid('com_x')])
+        self.eff_qpos = np.array([int(m.jnt_qposadr[jid(f'{e}_x')]) for e in EFFECTORS])
         self.eq_ids: Dict[Tuple[str, str], int] = {}
         for e in EFFECTORS:
             for a in self.anchors:
@@ -99,6 +102,7 @@ class DynamicProcess:
         self._rd = np.zeros((4, 3))
         self._t0, self._period = 0.0, 1.0 / 30.0
         self.in_water: Optional[str] = None
+        self.unstable_steps = 0   # physics steps MuJoCo found unstable (bad QACC: it reset the data)
         self._buoy = 0.0
         # MuJoCo's buoyancy volume: the inertia boxes of the character's bodies
         self._mj_volume = 0.0
@@ -131,10 +135,10 @@ class DynamicProcess:
         """Teleport the character (COM and effectors), at rest."""
         d = self.data
         com = np.asarray(com, float)
-        d.qpos[self.com_dof:self.com_dof + 3] += com - self.com
+        d.qpos[self.com_qpos:self.com_qpos + 3] += com - self.com
         pos = self.effectors()
         for k, e in enumerate(EFFECTORS):
-            a = self.eff_dof[k]
+            a = self.eff_qpos[k]
             d.qpos[a:a + 3] += com + offsets[e] - pos[k]
         d.qvel[:] = 0.0
         mujoco.mj_forward(self.model, d)
@@ -156,10 +160,12 @@ class DynamicProcess:
         return self._r0 + s * (self._r1 - self._r0)
 
     # ------------------------------------------------------------------ contacts
-    def feature_distance(self, effector: str, feature: Feature):
+    def feature_distance(self, effector: str, feature: Feature, max_arc: Optional[float] = None):
         """(distance to the feature's surface, anchor body, contact point in the world) for an
         effector; the contact point is where the effector's centre is held (on a bar's axis for a
-        hand, one effector radius above a surface for a foot). (inf, None, None) if nothing."""
+        hand, one effector radius above a surface for a foot). (inf, None, None) if nothing.
+        ``max_arc``: on a rope, only the part within this length (m) along the rope from its top
+        (the part above a hand that holds it, see :meth:`rope_arc`)."""
         d = self.data
         p = self.data.xpos[self.eff_body[EFFECTORS.index(effector)]]
         rad = EFFECTOR_RADIUS[effector]
@@ -187,9 +193,12 @@ class DynamicProcess:
                 cand = []
                 seg, r = g.num('length'), g.num('radius')
                 for s in range(int(g.data['segments'])):
+                    top = max_arc - s * seg if max_arc is not None else seg
+                    if top <= 0.0:
+                        break                 # this segment and the ones below: out of range
                     b = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_BODY, f'{n}_seg{s}')
                     a0 = d.xpos[b]
-                    a1 = a0 + d.xmat[b].reshape(3, 3) @ np.array([0.0, 0.0, -seg])
+                    a1 = a0 + d.xmat[b].reshape(3, 3) @ np.array([0.0, 0.0, -min(seg, top)])
                     c = _closest_on_segment(p, a0, a1)
                     cand.append((float(np.linalg.norm(p - c)) - r, f'{n}_seg{s}', c))
             else:
@@ -198,6 +207,17 @@ class DynamicProcess:
                 if x[0] < best[0]:
                     best = x
         return best
+
+    def rope_arc(self, effector: str) -> Optional[float]:
+        """Where a held effector holds a rope: its anchor's length (m) along the rope from the
+        rope's top; None if it does not hold a rope segment."""
+        c = self.contacts.get(effector)
+        if c is None or '_seg' not in c.body:
+            return None
+        f = self.world.features[c.feature]
+        g = next(g for g in f.geoms if g.type == 'rope')
+        k = int(c.body.rsplit('_seg', 1)[1])
+        return k * g.num('length') - float(self.model.eq_data[c.eq, 5])
 
     def com_inside(self, feature: Feature) -> bool:
         x = self.com
@@ -209,10 +229,10 @@ class DynamicProcess:
     def move_effector(self, effector: str, point) -> None:
         """Teleport one effector body to ``point`` (world), at rest."""
         k = EFFECTORS.index(effector)
-        a = self.eff_dof[k]
+        a, v = self.eff_qpos[k], self.eff_dof[k]
         d = self.data
         d.qpos[a:a + 3] += np.asarray(point, float) - d.xpos[self.eff_body[k]]
-        d.qvel[a:a + 3] = 0.0
+        d.qvel[v:v + 3] = 0.0
         mujoco.mj_forward(self.model, d)
 
     def engage(self, effector: str, feature: Feature, body: str, point) -> None:
@@ -289,6 +309,12 @@ class DynamicProcess:
                           self._gains, self._yaw, self._buoy)
             mujoco.mj_step(m, d)
             self.time = float(d.time)
+        bad = int(d.warning[mujoco.mjtWarning.mjWARN_BADQACC].number)
+        if bad > self.unstable_steps:
+            # MuJoCo reset the data (the start pose, every equality off): no phantom contacts
+            self.unstable_steps = bad
+            self.contacts.clear()
+            self._gains[:] = self._free
         if not (np.all(np.isfinite(d.qpos)) and np.all(np.isfinite(d.qvel))):
             raise FloatingPointError('dynamic process diverged')
 
