@@ -24,8 +24,10 @@ from .character import Character
 from .config import CharacterState, SimConfig
 from .controller import pd_twist_torque, twist_angle, twist_drive, twist_forms
 from .controllers import make_controller
+from .feature_holds import grip_changes
 from .frames import SensorPose
 from .mjcf_body import ROOT_SEGMENT, CharacterParams, joint_anchor
+from .mjcf_features import grip_name
 from .mjcf_world import ALL_BITS, CharacterEntry, ObjectSpec, WorldParams, character_bits, world_xml
 from .pins import FootPins
 
@@ -51,6 +53,8 @@ class Shared:
     holds: Dict[str, tuple] = field(default_factory=dict)   # object name -> (user_id, hand joint)
     pushes: List[tuple] = field(default_factory=list)  # (user_id, segment, force (3,), end time)
     sensor: Optional[SensorPose] = None
+    features: Dict[str, list] = field(default_factory=dict)   # feature_world geometry (or none)
+    grips: Dict[int, Dict[int, tuple]] = field(default_factory=dict)  # uid -> hand -> (feature, point)
 
 
 def controller_for(config: SimConfig, n_characters: int) -> str:
@@ -117,7 +121,8 @@ class World:
             self.controller = make_controller(self.controller_name)
             entries = [CharacterEntry(ch.prefix, ch.body, tuple(ch.cur.positions[0]), ch.slot,
                                       ch.cur.positions) for ch in self.chars]
-            xml = world_xml(entries, self.objects, self._world_params())
+            xml = world_xml(entries, self.objects, self._world_params(),
+                            self.shared.features or None, self.floor)
             m = mujoco.MjModel.from_xml_string(xml)
             d = mujoco.MjData(m)
             self.xml = xml
@@ -147,6 +152,7 @@ class World:
             for j, pin in ch.pins.items():
                 if pin.active:
                     self.pins.set(ch, j, True, pin.point)
+        self._restore_grips()
         mujoco.mj_forward(m, d)
         self._pack_indices()
         self.controller.bind(self)
@@ -363,6 +369,7 @@ class World:
         for name, (uid, hand) in list(self.shared.holds.items()):
             if self.with_objects and self.character(uid) is not None:
                 self._activate_hold(name, uid, hand, teleport=True)
+        self._restore_grips()
         d.time = t
         mujoco.mj_forward(m, d)
         self._pts = None
@@ -412,6 +419,49 @@ class World:
             dadr = m.jnt_dofadr[m.body_jntadr[oid]]
             d.qvel[dadr:dadr + 6] = 0.0
             mujoco.mj_forward(m, d)
+
+    # ------------------------------------------------------------------ feature grips
+    def set_grip(self, ch: Character, hand: int, point=None) -> None:
+        """Connect ``ch``'s hand joint point to the world ``point`` (None: let go)."""
+        e = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_EQUALITY, grip_name(ch.prefix, hand))
+        if e < 0:
+            return
+        if point is not None:
+            _, local = joint_anchor(ch.body, hand)
+            self.model.eq_data[e, 0:3] = local
+            self.model.eq_data[e, 3:6] = point
+        self.data.eq_active[e] = 0 if point is None else 1
+
+    def _restore_grips(self) -> None:
+        for ch in self.chars:
+            for hand, (_, point) in self.shared.grips.get(ch.user_id, {}).items():
+                self.set_grip(ch, hand, point)
+
+    def update_grips(self, engaged: Dict[int, Dict[int, str]]) -> None:
+        """Grip and release the characters' hands to follow ``engaged`` ({uid: {hand:
+        feature}}, :func:`physics_sim.feature_holds.grip_changes`)."""
+        if not self.shared.features:
+            return
+        grips = self.shared.grips
+        for ch in self.chars:
+            want = engaged.get(ch.user_id, {})
+            held = grips.get(ch.user_id, {})
+            if not want and not held:
+                continue
+            pts = ch.joint_points(self.data)
+            grab, release = grip_changes(want, held, {h: pts[h] for h in want},
+                                         self.shared.features, self.floor, self.config.grip_reach)
+            for h in release:
+                self.set_grip(ch, h, None)
+                held.pop(h, None)
+            for h, (f, point) in grab.items():
+                self.set_grip(ch, h, point)
+                held[h] = (f, point)
+                self.counters['grips'] += 1
+            if held:
+                grips[ch.user_id] = held
+            else:
+                grips.pop(ch.user_id, None)
 
     # ------------------------------------------------------------------ dodge (Fig. 4)
     def _update_dodge(self) -> None:
