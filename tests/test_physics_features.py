@@ -46,9 +46,13 @@ def test_builder_adds_the_world_files_geometry():
         np.testing.assert_allclose(d.geom_xpos[g], (a + c) / 2 + [0, 0, lift], atol=1e-6)
         assert m.geom_size[g, 1] == pytest.approx(np.linalg.norm(c - a) / 2)
     rope = doc['features']['rope']['geometry'][0]
-    for s in range(rope['segments']):
-        g = _geom(m, f'feat_rope_0_seg{s}')
+    for s in range(rope['segments']):   # a chain of capsule bodies on ball joints, at rest
+        g = _geom(m, f'feat_rope_0_seg{s}_geom')
         assert m.geom_size[g, 0] == pytest.approx(rope['radius'])
+        assert m.body_mass[m.geom_bodyid[g]] == pytest.approx(rope['segment_mass'])
+        j = m.body_jntadr[m.geom_bodyid[g]]
+        assert m.jnt_type[j] == mujoco.mjtJoint.mjJNT_BALL
+        assert m.dof_damping[m.jnt_dofadr[j]] == pytest.approx(rope['joint_damping'])
         mid = np.array(rope['top']) - [0, 0, (s + 0.5) * rope['length'] - lift]
         np.testing.assert_allclose(d.geom_xpos[g], mid, atol=1e-6)
     tr = doc['features']['trampoline']['geometry'][0]
@@ -58,10 +62,11 @@ def test_builder_adds_the_world_files_geometry():
     # water (a volume) and the floor plane add no geometry: one floor, no water body
     assert sum(m.geom_type == mujoco.mjtGeom.mjGEOM_PLANE) == 1
     assert mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, 'feat_water') < 0
-    # a grip per hand, inactive
+    # a grip per hand and holdable body (the world for the bars, each rope segment), inactive
     for h in (HAND_LEFT, HAND_RIGHT):
-        e = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_EQUALITY, f'u1_grip_{JOINT_NAMES[h]}')
-        assert e >= 0 and not m.eq_active0[e]
+        for b in ['world'] + [f'feat_rope_0_seg{s}' for s in range(rope['segments'])]:
+            e = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_EQUALITY, f'u1_grip_{JOINT_NAMES[h]}_{b}')
+            assert e >= 0 and not m.eq_active0[e]
 
 
 def test_without_feature_world_the_model_is_unchanged():
@@ -81,21 +86,31 @@ def test_bad_world_geometry_names_file_and_feature():
 
 
 def test_grip_changes_rules():
-    feats = load_geometry(str(PLAYGROUND))
-    bar_hand = np.array([2.62, 0.2, 2.80])       # 5 cm from the first bar's axis (lift 0.04)
+    axes = {'monkey_bars': [(np.array([2.6, -0.5, 2.79]), np.array([2.6, 0.5, 2.79]), 'world')],
+            'rope': [(np.array([0.0, 0.0, 3.0]), np.array([0.0, 0.0, 2.6]), 'seg0'),
+                     (np.array([0.0, 0.0, 2.6]), np.array([0.1, 0.0, 2.2]), 'seg1')]}
+    bar_hand = np.array([2.62, 0.2, 2.84])       # 5.4 cm from the bar's axis
     far_hand = np.array([2.8, 0.2, 2.3])
     grab, rel = grip_changes({HAND_LEFT: 'monkey_bars', HAND_RIGHT: 'monkey_bars'}, {},
-                             {HAND_LEFT: bar_hand, HAND_RIGHT: far_hand}, feats, 0.04, 0.15)
+                             {HAND_LEFT: bar_hand, HAND_RIGHT: far_hand}, axes, 0.15)
     assert rel == [] and list(grab) == [HAND_LEFT]
-    np.testing.assert_allclose(grab[HAND_LEFT][1], [2.6, 0.2, 2.79])   # on the axis
+    assert grab[HAND_LEFT][:2] == ('monkey_bars', 'world')
+    np.testing.assert_allclose(grab[HAND_LEFT][2], [2.6, 0.2, 2.79])   # on the axis
+    # the rope: the closest segment, where it is now
+    grab, _ = grip_changes({HAND_RIGHT: 'rope'}, {}, {HAND_RIGHT: np.array([0.15, 0.0, 2.4])},
+                           axes, 0.15)
+    assert grab[HAND_RIGHT][1] == 'seg1'
+    np.testing.assert_allclose(grab[HAND_RIGHT][2], [0.0559, 0.0, 2.3765], atol=1e-4)
     # released when no longer engaged, or engaged with another feature
-    held = {HAND_LEFT: grab[HAND_LEFT], HAND_RIGHT: ('rope', np.zeros(3))}
-    grab, rel = grip_changes({HAND_RIGHT: 'monkey_bars'}, held, {HAND_RIGHT: bar_hand}, feats,
-                             0.04, 0.15)
+    held = {HAND_LEFT: ('monkey_bars', 'world', np.zeros(3)),
+            HAND_RIGHT: ('rope', 'seg0', np.zeros(3))}
+    grab, rel = grip_changes({HAND_RIGHT: 'monkey_bars'}, held, {HAND_RIGHT: bar_hand}, axes, 0.15)
     assert sorted(rel) == [HAND_LEFT, HAND_RIGHT] and list(grab) == [HAND_RIGHT]
-    # water / unknown features have nothing to hold
+    # held hands stay as they are; water / unknown features have nothing to hold
+    assert grip_changes({HAND_LEFT: 'monkey_bars'}, {HAND_LEFT: held[HAND_LEFT]},
+                        {HAND_LEFT: far_hand}, axes, 0.15) == ({}, [])
     assert grip_changes({HAND_LEFT: 'water', HAND_RIGHT: 'nope'}, {},
-                        {HAND_LEFT: bar_hand, HAND_RIGHT: bar_hand}, feats, 0.0, 1.0) == ({}, [])
+                        {HAND_LEFT: bar_hand, HAND_RIGHT: bar_hand}, axes, 1.0) == ({}, [])
     assert engaged_hands(['HandLeft', 'FootLeft'], ['rope', 'floor']) == {HAND_LEFT: 'rope'}
     with pytest.raises(ValueError):
         engaged_hands(['HandLeft'], [])
@@ -156,3 +171,26 @@ def test_the_grip_carries_the_body():
     hang_z = hanging_pose()[0, 2]
     assert held_z[-1] > hang_z - 0.25          # the weak arms sag 0.19 m, but it hangs
     assert free_z[-1] < hang_z - 1.0           # on the floor
+
+
+def test_hanging_on_the_rope_swings_it():
+    """Both hands on the rope (a chain of bodies): they stay on it, the physics stays stable, and
+    the character swaying forwards and back swings the rope with it."""
+    sim = Simulation(SimConfig(body_height=1.75, feature_world=str(PLAYGROUND)))
+    target = hanging_pose(bar=(-2.65, 0.0, 3.6)) - [0, 0, SENSOR_H]   # the body behind the rope
+    target[HAND_LEFT, :2], target[HAND_RIGHT, :2] = [-2.5, 0.03], [-2.5, -0.03]
+    target[WRIST_LEFT, :2], target[WRIST_RIGHT, :2] = [-2.55, 0.08], [-2.55, -0.08]
+    sim.step({1: target})
+    sim.set_engaged(1, ['HandLeft', 'HandRight'], ['rope', 'rope'])
+    sim.step({1: target})
+    rest = sim.grip_points(1)[HAND_LEFT].copy()
+    assert {g[1] for g in sim.grips[1].values()} <= {f'feat_rope_0_seg{s}' for s in range(10)}
+    gaps, swing = [], []
+    for i in range(60):
+        st = sim.step({1: target + [0.3 * np.sin(i / 10), 0, 0]})[1]
+        held = sim.grip_points(1)
+        gaps += [np.linalg.norm(st.positions[h] - held[h]) for h in (HAND_LEFT, HAND_RIGHT)]
+        swing.append(held[HAND_LEFT][0] - rest[0])
+    assert max(gaps) < 0.03
+    assert max(swing) > 0.15 and min(swing) < -0.15       # the rope swings with the body
+    assert sim.counters['nan_reset'] == 0

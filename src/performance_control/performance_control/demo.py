@@ -108,7 +108,7 @@ def run(world, out_dir: Path, seconds: float = 8.0, physics: bool = True) -> Dic
                     w.write('/control/intention', m, st)
                 rows[name].append((o, phys, ctl.obstacles))
                 if sim is not None:   # the physics hands gripping a feature: {hand joint: point}
-                    grips[name].append({h: pt for h, (_, pt) in sim.grips.get(uid, {}).items()})
+                    grips[name].append(sim.grip_points(uid))
     return {'bag': bag, 'rows': rows, 'params': cp, 'grips': grips}
 
 

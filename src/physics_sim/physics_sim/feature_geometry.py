@@ -20,8 +20,6 @@ from typing import Dict, List, Optional
 import numpy as np
 
 GEOM_TYPES = ('plane', 'capsule', 'box', 'rope', 'volume')
-# primitives a hand can hold (the physics character connects a hand to their axis)
-HOLDABLE_TYPES = ('capsule', 'rope')
 
 
 @dataclass
@@ -45,16 +43,6 @@ class Geom:
         if not np.isfinite(v) or (positive and v <= 0):
             raise ValueError(f'{self.type}.{key} must be a positive number, got {v}')
         return v
-
-    def axis(self) -> Optional[tuple]:
-        """(from, to) of the axis a hand holds (capsule; rope at rest: hanging straight down),
-        None for the other primitives."""
-        if self.type == 'capsule':
-            return self.vec('from'), self.vec('to')
-        if self.type == 'rope':
-            top = self.vec('top')
-            return top, top - np.array([0.0, 0.0, self.num('length') * int(self.data['segments'])])
-        return None
 
 
 def check_geom(g: Geom) -> None:
@@ -124,22 +112,5 @@ def closest_on_segment(p, a, b) -> np.ndarray:
     return a + t * ab
 
 
-def closest_hold_point(geoms: List[Geom], p, lift: float = 0.0):
-    """(distance, point): the point of the holdable axes of ``geoms`` (raised by ``lift``)
-    closest to ``p``; (inf, None) when the feature has nothing to hold."""
-    p = np.asarray(p, float)
-    best = (float('inf'), None)
-    up = np.array([0.0, 0.0, lift])
-    for g in geoms:
-        ax = g.axis()
-        if ax is None:
-            continue
-        c = closest_on_segment(p, ax[0] + up, ax[1] + up)
-        dist = float(np.linalg.norm(p - c))
-        if dist < best[0]:
-            best = (dist, c)
-    return best
-
-
-__all__ = ['Geom', 'GEOM_TYPES', 'HOLDABLE_TYPES', 'check_geom', 'parse_geometry', 'load_geometry',
-           'closest_hold_point', 'closest_on_segment']
+__all__ = ['Geom', 'GEOM_TYPES', 'check_geom', 'parse_geometry', 'load_geometry',
+           'closest_on_segment']

@@ -10,12 +10,12 @@ foot pins (:mod:`physics_sim.pins`); water has no geometry to hold.
 """
 from __future__ import annotations
 
-from typing import Dict, List, Mapping, Tuple
+from typing import Dict, List, Mapping
 
 import numpy as np
 from skeleton_core.model import HAND_LEFT, HAND_RIGHT, JOINT_INDEX
 
-from .feature_geometry import Geom, closest_hold_point
+from .feature_geometry import closest_on_segment
 
 GRIP_HANDS = (HAND_LEFT, HAND_RIGHT)
 
@@ -30,28 +30,39 @@ def engaged_hands(effectors, features) -> Dict[int, str]:
             if JOINT_INDEX.get(e) in GRIP_HANDS}
 
 
-def grip_changes(engaged: Mapping[int, str], held: Mapping[int, Tuple[str, np.ndarray]],
-                 hand_points: Mapping[int, np.ndarray], features: Mapping[str, List[Geom]],
-                 lift: float, reach: float):
-    """What to change so the held hands follow ``engaged`` ({hand: feature}).
+def closest_axis_point(axes, p):
+    """(distance, point, body) of the point of ``axes`` [(a, b, body)] closest to ``p``
+    ((inf, None, None) for no axes)."""
+    p = np.asarray(p, float)
+    best = (float('inf'), None, None)
+    for a, b, body in axes:
+        c = closest_on_segment(p, np.asarray(a, float), np.asarray(b, float))
+        dist = float(np.linalg.norm(p - c))
+        if dist < best[0]:
+            best = (dist, c, body)
+    return best
 
-    ``held``: {hand: (feature, world point)} now; ``hand_points``: the simulated hands' joint
-    points; ``features``: the world's geometry, raised by ``lift``. Returns ``(grab, release)``:
-    ``grab`` {hand: (feature, point)} -- the closest point of the feature's holdable axes, only
+
+def grip_changes(engaged: Mapping[int, str], held: Mapping[int, tuple],
+                 hand_points: Mapping[int, np.ndarray], axes: Mapping[str, List[tuple]],
+                 reach: float):
+    """What to change so the gripping hands follow ``engaged`` ({hand: feature}).
+
+    ``held``: {hand: (feature, ...)} now; ``hand_points``: the simulated hands' joint points;
+    ``axes``: {feature: [(a, b, body)]}, the axes a hand holds now in the world (bars; rope
+    segments where they swung to) and the body each belongs to. Returns ``(grab, release)``:
+    ``grab`` {hand: (feature, body, world point)} -- the closest point of the feature's axes, only
     when the hand is within ``reach`` of it (otherwise it is tried again next time) --, and
     ``release`` the held hands no longer engaged (or engaged with another feature)."""
-    release = [h for h, (f, _) in held.items() if engaged.get(h) != f]
+    release = [h for h, x in held.items() if engaged.get(h) != x[0]]
     grab = {}
     for h, f in engaged.items():
         if h not in GRIP_HANDS or (h in held and held[h][0] == f):
             continue
-        geoms = features.get(f)
-        if not geoms:
-            continue                      # an unknown feature, or one without geometry (water)
-        dist, point = closest_hold_point(geoms, hand_points[h], lift)
-        if point is not None and dist <= reach:
-            grab[h] = (f, point)
+        dist, point, body = closest_axis_point(axes.get(f, ()), hand_points[h])
+        if point is not None and dist <= reach:   # nothing for water or an unknown feature
+            grab[h] = (f, body, point)
     return grab, release
 
 
-__all__ = ['grip_changes', 'engaged_hands', 'GRIP_HANDS']
+__all__ = ['grip_changes', 'closest_axis_point', 'engaged_hands', 'GRIP_HANDS']

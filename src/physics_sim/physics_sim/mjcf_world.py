@@ -17,7 +17,8 @@ from skeleton_core.model import Body
 
 from .mjcf_body import (ORIGIN_SITE, CharacterParams, ElementNames, character_actuator_xml,
                         character_xml_parts, fmt)
-from .mjcf_features import features_xml, grip_equality_xml, hand_excludes_xml
+from .mjcf_features import (features_xml, grip_equality_xml, hand_excludes_xml,
+                            holdable_bodies)
 
 ALL_BITS = 0x7FFFFFFF
 OBJECT_KINDS = ('box', 'ball', 'mace')
@@ -158,7 +159,8 @@ def world_xml(characters: Sequence[CharacterEntry], objects: Sequence[ObjectSpec
                 k, local = joint_anchor(c.body, hand)
                 body = cn.body(SEGMENT_CHILDREN[k])
                 hand_bodies.append(body)
-                eqs.append(grip_equality_xml(c.prefix, hand, body, local, params.hold_solref))
+                eqs += [grip_equality_xml(c.prefix, hand, body, local, params.hold_solref, t)
+                        for t in holdable_bodies(features)]
         for o in objects:
             if o.holdable:
                 for hand in (HAND_LEFT, HAND_RIGHT):

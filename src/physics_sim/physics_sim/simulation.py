@@ -448,8 +448,12 @@ class Simulation:
 
     @property
     def grips(self) -> Dict[int, Dict[int, tuple]]:
-        """{uid: {hand joint: (feature, world point)}} of the hands gripping a feature now."""
+        """{uid: {hand joint: (feature, body, anchor in the body)}} of the gripping hands."""
         return self.shared.grips
+
+    def grip_points(self, user_id: int) -> Dict[int, np.ndarray]:
+        """{hand joint: world point} of a user's grips now (a rope's where it swung to)."""
+        return self.world_of(user_id).grip_points(int(user_id))
 
     # ------------------------------------------------------------------ pushes
     def apply_push(self, user_id: int, segment, force, duration: float) -> None:

@@ -27,7 +27,7 @@ from .controllers import make_controller
 from .feature_holds import grip_changes
 from .frames import SensorPose
 from .mjcf_body import ROOT_SEGMENT, CharacterParams, joint_anchor
-from .mjcf_features import grip_name
+from .mjcf_features import grip_name, rope_segment
 from .mjcf_world import ALL_BITS, CharacterEntry, ObjectSpec, WorldParams, character_bits, world_xml
 from .pins import FootPins
 
@@ -421,21 +421,59 @@ class World:
             mujoco.mj_forward(m, d)
 
     # ------------------------------------------------------------------ feature grips
-    def set_grip(self, ch: Character, hand: int, point=None) -> None:
-        """Connect ``ch``'s hand joint point to the world ``point`` (None: let go)."""
-        e = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_EQUALITY, grip_name(ch.prefix, hand))
+    def _grip_eq(self, ch: Character, hand: int, body: str) -> int:
+        return mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_EQUALITY,
+                                 grip_name(ch.prefix, hand, body))
+
+    def set_grip(self, ch: Character, hand: int, body: str, local=None) -> None:
+        """Connect ``ch``'s hand joint point to ``local`` in ``body`` ('world' or a rope
+        segment); None: let go."""
+        e = self._grip_eq(ch, hand, body)
         if e < 0:
             return
-        if point is not None:
-            _, local = joint_anchor(ch.body, hand)
-            self.model.eq_data[e, 0:3] = local
-            self.model.eq_data[e, 3:6] = point
-        self.data.eq_active[e] = 0 if point is None else 1
+        if local is not None:
+            self.model.eq_data[e, 0:3] = joint_anchor(ch.body, hand)[1]
+            self.model.eq_data[e, 3:6] = local
+        self.data.eq_active[e] = 0 if local is None else 1
 
     def _restore_grips(self) -> None:
         for ch in self.chars:
-            for hand, (_, point) in self.shared.grips.get(ch.user_id, {}).items():
-                self.set_grip(ch, hand, point)
+            for hand, (_, body, local) in self.shared.grips.get(ch.user_id, {}).items():
+                self.set_grip(ch, hand, body, local)
+
+    def _body_frame(self, body: str):
+        if body == 'world':
+            return np.zeros(3), np.eye(3)
+        b = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_BODY, body)
+        return self.data.xpos[b], self.data.xmat[b].reshape(3, 3)
+
+    def feature_axes(self) -> Dict[str, list]:
+        """{feature: [(a, b, body)]}: the axes a hand can hold now (bars raised by the lift, rope
+        segments where they are)."""
+        up = np.array([0.0, 0.0, self.floor])
+        out = {}
+        for name, geoms in self.shared.features.items():
+            ax = []
+            for i, g in enumerate(geoms):
+                if g.type == 'capsule':
+                    ax.append((g.vec('from') + up, g.vec('to') + up, 'world'))
+                elif g.type == 'rope':
+                    seg = g.num('length')
+                    for s in range(int(g.data['segments'])):
+                        body = rope_segment(name, i, s)
+                        p, r = self._body_frame(body)
+                        ax.append((p.copy(), p - seg * r[:, 2], body))
+            if ax:
+                out[name] = ax
+        return out
+
+    def grip_points(self, user_id: int) -> Dict[int, np.ndarray]:
+        """{hand: world point} of a character's grips now (where the anchors have moved to)."""
+        out = {}
+        for hand, (_, body, local) in self.shared.grips.get(user_id, {}).items():
+            p, r = self._body_frame(body)
+            out[hand] = p + r @ local
+        return out
 
     def update_grips(self, engaged: Dict[int, Dict[int, str]]) -> None:
         """Grip and release the characters' hands to follow ``engaged`` ({uid: {hand:
@@ -443,20 +481,24 @@ class World:
         if not self.shared.features:
             return
         grips = self.shared.grips
+        axes = None
         for ch in self.chars:
             want = engaged.get(ch.user_id, {})
             held = grips.get(ch.user_id, {})
             if not want and not held:
                 continue
+            if axes is None:
+                axes = self.feature_axes()
             pts = ch.joint_points(self.data)
-            grab, release = grip_changes(want, held, {h: pts[h] for h in want},
-                                         self.shared.features, self.floor, self.config.grip_reach)
+            grab, release = grip_changes(want, held, {h: pts[h] for h in want}, axes,
+                                         self.config.grip_reach)
             for h in release:
-                self.set_grip(ch, h, None)
-                held.pop(h, None)
-            for h, (f, point) in grab.items():
-                self.set_grip(ch, h, point)
-                held[h] = (f, point)
+                self.set_grip(ch, h, held.pop(h)[1], None)
+            for h, (f, body, point) in grab.items():
+                p, r = self._body_frame(body)
+                local = r.T @ (point - p)
+                self.set_grip(ch, h, body, local)
+                held[h] = (f, body, local)
                 self.counters['grips'] += 1
             if held:
                 grips[ch.user_id] = held
