@@ -18,8 +18,10 @@ Output stage of B/C, ``output_mode``:
   *trust in the sensor* times min(1, reliability of the less reliable end / ``reliable_threshold``);
   the segments get constant user lengths (the mean observed length over the first
   ``length_frames`` reliable observations of each segment, then frozen; with
-  ``symmetric_lengths`` the left and right limbs share the mean of their two lengths) and are
-  chained from the observed root; the segment
+  ``symmetric_lengths`` the left and right limbs share the mean of their two lengths; with
+  ``length_prior`` and a database that stores its bodies' proportions, combined with those
+  proportions at the user's fitted size, each weighted by its expected error:
+  :mod:`.length_prior`) and are chained from the observed root; the segment
   vectors and the root are smoothed by a One Euro filter (``smooth_min_cutoff`` Hz,
   ``smooth_beta`` s/m, ``smooth_d_cutoff`` Hz; ``smooth_min_cutoff`` 0 = off); a segment the
   database fills in (an end with reliability 0) gets ``smooth_filled_scale`` times the cutoff (1 at
@@ -119,6 +121,7 @@ from .posture_space import (QueryConfig, QueryPreparer, as_database_arrays, rest
 from .correction import STAGES as CORRECTION_STAGES
 from .correction import CorrectionConfig, check_tracker
 from .profile import from_optional as profile_lengths
+from .length_prior import LengthPrior, LengthPriorConfig
 from .reliability import ReliabilityConfig, ReliabilityEstimator
 from .segment_output import SEG_DIFF, SegmentOutput, SegmentOutputConfig
 from .trust import SensorTrust, TrustConfig
@@ -148,6 +151,7 @@ class ReconstructorConfig(QueryConfig):
         True, 'when the root joint is unreliable, match the database translation-invariantly '
         'and place the root (and the query) where the neighbours put it')
     trust: TrustConfig = nested(TrustConfig)
+    lengths: LengthPriorConfig = nested(LengthPriorConfig)
     segments: SegmentOutputConfig = nested(SegmentOutputConfig)
     body_fit: BodyFitConfig = nested(BodyFitConfig)
 
@@ -213,6 +217,10 @@ class Reconstructor:
             self.body_fit.height_settled if self.body_fit else (lambda: True),
             self.reliable_threshold, self.output_scale, cfg.segments)
         self.segment_output.profile_lengths = profile_lengths(profile)
+        self.length_prior = LengthPrior.from_meta(cfg.lengths, getattr(db, 'meta', None),
+                                                  cfg.segments.symmetric_lengths)
+        if self.length_prior is not None:
+            self.segment_output.length_prior = self.length_prior.fuse
         self.length_window = int(cfg.length_window)
         self.timings_ms: Dict[str, float] = {}
         self.trust_sensor = 0.0

@@ -140,6 +140,10 @@ class SegmentOutput:
         self.smooth_lead_accel = float(config.smooth_lead_accel)
         # the user's profile lengths (19,), used from the first frame when set (Reconstructor)
         self.profile_lengths: Optional[np.ndarray] = None
+        # (observed lengths of each side (19,), reliable observation counts (19,)) -> lengths:
+        # the length prior (length_prior.py), set by the Reconstructor; None = observed lengths
+        # only
+        self.length_prior: Optional[Callable[[np.ndarray, np.ndarray], np.ndarray]] = None
         self.reset()
 
     def reset(self) -> None:
@@ -189,7 +193,11 @@ class SegmentOutput:
             if unset.any():
                 self._seg_fallback[unset] = self.reliability.reference_lengths[unset]
         L = np.where(none, self._seg_fallback, self._seg_sum / np.maximum(self._seg_count, 1))
-        if self.symmetric_lengths:
+        if self.length_prior is not None:
+            # the observed lengths of each side and the length prior (it shares the sides'
+            # lengths itself when symmetric_lengths)
+            L = self.length_prior(L, self._seg_count)
+        elif self.symmetric_lengths:
             L = 0.5 * (L + L[_MIRROR_SEG])
         if self._seg_count.min() >= self.length_frames:
             self._frozen_lengths = L  # every segment complete: constant from now on

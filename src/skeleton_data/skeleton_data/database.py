@@ -47,7 +47,8 @@ from scipy.spatial import cKDTree
 
 from skeleton_core.geometry import normalize, quat_from_yaw, quat_multiply, retarget, swing_twist
 from .mocap import FIVE_CLASSES, MotionClip, rest_directions
-from skeleton_core.model import JOINT_NAMES, NUM_JOINTS, SEGMENT_CHILD_INDEX, SEGMENT_NAMES, Body, standard_body
+from skeleton_core.model import (JOINT_NAMES, NUM_JOINTS, SEGMENT_CHILD_INDEX, SEGMENT_NAMES,
+                                 SEGMENT_PARENT_INDEX, Body, estimate_height, standard_body)
 
 __all__ = ['MotionDatabase', 'DatabaseError', 'build_database', 'load_or_build_default',
            'segment_twists', 'filter_postures', 'DEFAULT_THRESHOLD', 'FORMAT_VERSION',
@@ -266,6 +267,25 @@ def _maybe_tqdm(total, desc, enabled):
     return tqdm(total=total, desc=desc, unit='frame', leave=False)
 
 
+def length_ratios(clips: Sequence[MotionClip], frames: int = 30) -> Tuple[np.ndarray, np.ndarray]:
+    """The bodies of ``clips`` before retargeting: per segment the mean and the standard deviation
+    over the clips of (the clip's median segment length / its median standing height,
+    :func:`~skeleton_core.model.estimate_height` every ``frames`` frames), (19,) each. The
+    reconstruction's length prior (``pose_reconstruction.length_prior``)."""
+    ratios = []
+    for c in clips:
+        p = np.asarray(c.positions, float)
+        ln = np.median(np.linalg.norm(p[:, SEGMENT_CHILD_INDEX] - p[:, SEGMENT_PARENT_INDEX],
+                                      axis=-1), axis=0)
+        h = float(np.median([estimate_height(x) for x in p[::max(1, int(frames))]]))
+        if np.isfinite(h) and h > 0 and np.all(np.isfinite(ln)):
+            ratios.append(ln / h)
+    if not ratios:
+        return np.full(len(SEGMENT_NAMES), np.nan), np.full(len(SEGMENT_NAMES), np.nan)
+    r = np.asarray(ratios)
+    return r.mean(axis=0), r.std(axis=0)
+
+
 def build_database(clips: Sequence[MotionClip], body: Optional[Body] = None,
                    threshold: Optional[float] = DEFAULT_THRESHOLD, progress: bool = True,
                    meta: Optional[dict] = None):
@@ -303,6 +323,7 @@ def build_database(clips: Sequence[MotionClip], body: Optional[Body] = None,
     t_norm = time.perf_counter() - t0
     keep = filter_postures(pos.reshape(len(pos), -1), thr)
     twists = segment_twists(ori[keep], body)
+    ratio_mean, ratio_std = length_ratios(clips)
     m = {
         'joint_names': list(JOINT_NAMES),
         'segment_names': list(SEGMENT_NAMES),
@@ -311,6 +332,9 @@ def build_database(clips: Sequence[MotionClip], body: Optional[Body] = None,
         'body_height': float(body.height),
         'body_mass': float(body.mass),
         'segment_lengths': [float(x) for x in body.segment_lengths],
+        # the clips' own bodies (before retargeting): segment length / standing height
+        'length_ratio_mean': [float(x) for x in ratio_mean],
+        'length_ratio_std': [float(x) for x in ratio_std],
         'frames_before': int(total),
         'frames_after': int(len(keep)),
         'clips': [c.name for c in clips],
