@@ -134,7 +134,11 @@ def _nodes(context):
     if arg('physics').lower() in ('true', '1', 'yes'):
         phys_over = {}
         if control:
+            # the physics character gets the same world's features (static geometry) and grips
+            # what the control node engages (/control/intention): one world file for both
+            from performance_control.features import world_path
             phys_over['input_topic'] = '/control/target'
+            phys_over['feature_world'] = str(world_path(arg('world')))
         elif posture_topic:
             phys_over['input_topic'] = posture_topic
         nodes.append(Node(package='physics_sim', executable='physics', name='physics',

@@ -47,7 +47,9 @@ def probe():
 @pytest.mark.launch(fixture=control_launch)
 def test_control_graph_flows_into_the_physics(probe):
     assert probe.wait_for(TOPICS, count=5, timeout=90), f'not every topic flows: {probe.counts()}'
-    assert probe.get_parameters('/physics', ['input_topic'])['input_topic'] == '/control/target'
+    phys = probe.get_parameters('/physics', ['input_topic', 'feature_world'])
+    assert phys['input_topic'] == '/control/target'
+    assert phys['feature_world'].endswith('worlds/playground.yaml')   # the same world file
     got = probe.get_parameters('/control', ['world', 'input_topic'])
     assert got == {'world': 'playground', 'input_topic': '/posture/reconstructed'}
     intent = probe.last('/control/intention')

@@ -301,3 +301,44 @@ def test_a_frame_arriving_in_a_burst_is_simulated_not_dropped(graph, monkeypatch
     assert ticks[2] - ticks[1] >= 0.7 / 30
     assert _wait(lambda: 9_043_333_333 in got, 5.0)
     assert {9_000_000_000, 9_033_333_333} <= set(got)
+
+
+def test_intention_over_dds_makes_the_hands_grip_the_bars(rclpy_context):
+    """With feature_world the node subscribes to /control/intention: hands reported engaged with
+    the monkey bars grip them, and let go when the message no longer lists them."""
+    from pathlib import Path
+    from skeleton_core.model import HAND_LEFT, HAND_RIGHT
+    from skeleton_msgs.msg import Intention
+    from test_physics_features import PLAYGROUND, SENSOR_H, hanging_pose
+    assert Path(PLAYGROUND).is_file()
+    node = PhysicsNode(context=rclpy_context, parameter_overrides=[
+        Parameter('input_topic', value='/test_grip/in'), Parameter('body_height', value=1.75),
+        Parameter('feature_world', value=str(PLAYGROUND)),
+        Parameter('intention_topic', value='/test_grip/intention')])
+    peer = rclpy.create_node('grip_test_peer', context=rclpy_context)
+    spinner = Spinner(rclpy_context, node, peer)
+    try:
+        pub = peer.create_publisher(SkeletonArray, '/test_grip/in', 10)
+        ipub = peer.create_publisher(Intention, '/test_grip/intention', 10)
+        _wait(lambda: pub.get_subscription_count() and ipub.get_subscription_count(), 10)
+        target = hanging_pose() - [0, 0, SENSOR_H]
+
+        def send(i, hands):
+            m = Intention()
+            m.user_id, m.feature = 4, 'monkey_bars'
+            m.engaged_effectors = hands
+            m.engaged_features = ['monkey_bars'] * len(hands)
+            ipub.publish(m)
+            pub.publish(_msg(target, 9_000_000_000 + i * 33_333_333))
+            time.sleep(1 / 30)
+        for i in range(20):
+            send(i, ['HandLeft', 'HandRight'])
+        assert _wait(lambda: set(node.sim.grips.get(4, {})) == {HAND_LEFT, HAND_RIGHT}, 5)
+        for i in range(20, 30):
+            send(i, [])
+        assert _wait(lambda: node.sim.grips == {}, 5)
+        assert node.sim.counters['grips'] == 2
+    finally:
+        spinner.stop()
+        node.destroy_node()
+        peer.destroy_node()

@@ -54,6 +54,7 @@ def run(world, out_dir: Path, seconds: float = 8.0, physics: bool = True) -> Dic
     out_dir.mkdir(parents=True, exist_ok=True)
     bag = out_dir / 'control_demo.mcap'
     rows: Dict[str, List] = {}
+    grips: Dict[str, List] = {}
     t_base = 1_000_000_000
     try:
         from skeleton_msgs.msg import Intention
@@ -73,8 +74,9 @@ def run(world, out_dir: Path, seconds: float = 8.0, physics: bool = True) -> Dic
             if physics:
                 from physics_sim.simulation import SimConfig, Simulation
                 sim = Simulation(SimConfig(sensor_height=SENSOR_HEIGHT, pin_feet=False,
-                                           lift_feet=False))
+                                           lift_feet=False, feature_world=world.path))
             rows[name] = []
+            grips[name] = []
             for i in range(len(s)):
                 st = t_base + int(round((k * seconds + i / FPS) * 1e9))
                 o = ctl.step(s[i], i / FPS)
@@ -82,7 +84,8 @@ def run(world, out_dir: Path, seconds: float = 8.0, physics: bool = True) -> Dic
                 w.write_raw('/control/target',
                             frames_to_cdr([frame(o.positions_sensor, uid, st)], st, 'kinect'), st)
                 phys = None
-                if sim is not None:
+                if sim is not None:   # as the physics node does with /control/intention
+                    sim.set_engaged(uid, list(o.contacts), list(o.contacts.values()))
                     sim.set_target(uid, o.positions_sensor, stamp_ns=st)
                     sim.advance(1.0 / FPS)
                     stt = sim.state(uid)
@@ -104,7 +107,9 @@ def run(world, out_dir: Path, seconds: float = 8.0, physics: bool = True) -> Dic
                     m.engaged_features = list(o.contacts.values())
                     w.write('/control/intention', m, st)
                 rows[name].append((o, phys, ctl.obstacles))
-    return {'bag': bag, 'rows': rows, 'params': cp}
+                if sim is not None:   # the physics hands gripping a feature: {hand joint: point}
+                    grips[name].append(sim.grip_points(uid))
+    return {'bag': bag, 'rows': rows, 'params': cp, 'grips': grips}
 
 
 def _draw_world(ax, world, obstacles, scene: str) -> None:

@@ -13,9 +13,10 @@ from typing import Dict, List, Optional, Tuple
 
 import numpy as np
 import yaml
+from physics_sim.feature_geometry import GEOM_TYPES, Geom  # noqa: F401 -- re-exported
+from physics_sim.feature_geometry import check_geom as _check_geom
 from skeleton_core.model import JOINT_INDEX
 
-GEOM_TYPES = ('plane', 'capsule', 'box', 'rope', 'volume')
 EFFECTORS = ('HandLeft', 'HandRight', 'FootLeft', 'FootRight')
 DYNAMICS_DEFAULTS = {'ks': 9000.0, 'kd': 900.0, 'ka': 3000.0, 'kad': 600.0, 'kb': 0.0,
                      'kbd': 80.0}
@@ -23,29 +24,6 @@ DYNAMICS_DEFAULTS = {'ks': 9000.0, 'kd': 900.0, 'ka': 3000.0, 'kad': 600.0, 'kb'
 
 class WorldError(ValueError):
     """A world file that cannot be used (the message names the file and the feature)."""
-
-
-@dataclass
-class Geom:
-    """One primitive of a feature's geometry (world frame)."""
-
-    type: str
-    data: Dict
-
-    def vec(self, key: str, n: int = 3) -> np.ndarray:
-        v = np.asarray(self.data[key], float)
-        if v.shape != (n,) or not np.all(np.isfinite(v)):
-            raise ValueError(f'{self.type}.{key} must be {n} finite numbers')
-        return v
-
-    def num(self, key: str, default: Optional[float] = None, positive: bool = True) -> float:
-        v = self.data.get(key, default)
-        if v is None:
-            raise ValueError(f'{self.type} needs {key}')
-        v = float(v)
-        if not np.isfinite(v) or (positive and v <= 0):
-            raise ValueError(f'{self.type}.{key} must be a positive number, got {v}')
-        return v
 
 
 @dataclass
@@ -141,31 +119,6 @@ def world_path(name_or_path: str) -> Path:
         names = sorted(x.stem for x in worlds_dir().glob('*.yaml'))
         raise FileNotFoundError(f'no world {name_or_path!r} (available: {names})')
     return p
-
-
-def _check_geom(g: Geom) -> None:
-    if g.type not in GEOM_TYPES:
-        raise ValueError(f'geometry type must be one of {GEOM_TYPES}, got {g.type!r}')
-    if g.type == 'capsule':
-        a, b = g.vec('from'), g.vec('to')
-        g.num('radius')
-        if np.linalg.norm(b - a) < 1e-6:
-            raise ValueError('capsule from and to coincide')
-    elif g.type in ('box', 'volume'):
-        g.vec('center')
-        if np.any(g.vec('half') <= 0):
-            raise ValueError(f'{g.type}.half must be positive')
-        if 'stiffness' in g.data:
-            for k in ('stiffness', 'damping', 'mass', 'travel'):
-                g.num(k)
-    elif g.type == 'rope':
-        g.vec('top')
-        for k in ('length', 'radius', 'segment_mass'):
-            g.num(k)
-        g.num('joint_damping', 0.1, positive=False)
-        n = int(g.data.get('segments', 0))
-        if not 1 <= n <= 50:
-            raise ValueError('rope.segments must be in [1, 50]')
 
 
 def parse_world(doc: Dict, path: str = '<dict>') -> World:

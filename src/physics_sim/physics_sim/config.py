@@ -115,6 +115,14 @@ class SimConfig:
                                       read_only=True)
     conflict_release: float = param(0.3, '... and is released when stretched more than this (m)',
                                     range=(0.0, 2.0), read_only=True)
+    # virtual features (Ishigaki et al. 2009; docs/control.md)
+    feature_world: str = param(
+        '', "path of a performance_control world YAML: its features' static geometry (bars, "
+        'rope at rest, trampoline surface) is added to the world and hands the control node '
+        'reports engaged (intention_topic) grip them; empty = no features', read_only=True)
+    grip_reach: float = param(0.15, 'an engaged hand grips the feature when its axis is within '
+                              'this distance (m); farther, it is tried again every frame',
+                              range=(0.01, 1.0))
     # interaction
     dodge: bool = param(False, 'raise the forearms when a ball approaches the head')
     dodge_distance: float = param(0.45, 'predicted miss distance that triggers a dodge (m)',

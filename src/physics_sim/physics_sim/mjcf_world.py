@@ -10,13 +10,15 @@ every other bit as conaffinity; the floor and objects use all bits.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Optional, Sequence, Tuple
+from typing import Dict, Optional, Sequence, Tuple
 
 import numpy as np
 from skeleton_core.model import Body
 
 from .mjcf_body import (ORIGIN_SITE, CharacterParams, ElementNames, character_actuator_xml,
                         character_xml_parts, fmt)
+from .mjcf_features import (features_xml, grip_equality_xml, hand_excludes_xml,
+                            holdable_bodies)
 
 ALL_BITS = 0x7FFFFFFF
 OBJECT_KINDS = ('box', 'ball', 'mace')
@@ -123,16 +125,21 @@ def hold_equality_xml(prefix: str, hand: int, hand_local: np.ndarray, obj: Objec
 
 
 def world_xml(characters: Sequence[CharacterEntry], objects: Sequence[ObjectSpec] = (),
-              params: Optional[WorldParams] = None) -> str:
-    """The complete MJCF (string) of a world with ``characters`` and ``objects``."""
+              params: Optional[WorldParams] = None, features: Optional[Dict] = None,
+              feature_lift: float = 0.0) -> str:
+    """The complete MJCF (string) of a world with ``characters`` and ``objects``; with
+    ``features`` ({name: [Geom]}, :mod:`physics_sim.feature_geometry`) their static geometry
+    (raised by ``feature_lift``), the hands' grips and contact excludes
+    (:mod:`physics_sim.mjcf_features`); without, the model is exactly as before."""
     from dataclasses import replace
-    from skeleton_core.model import HAND_LEFT, HAND_RIGHT
+    from skeleton_core.model import HAND_LEFT, HAND_RIGHT, SEGMENT_CHILDREN
     from .mjcf_body import joint_anchor
     params = params or WorldParams()
     integ = {'euler': 'Euler', 'implicitfast': 'implicitfast', 'implicit': 'implicit',
              'rk4': 'RK4'}[params.integrator]
     solver = {'pgs': 'PGS', 'cg': 'CG', 'newton': 'Newton'}[params.solver]
     bodies, mocaps, eqs, acts = [], [], [], []
+    hand_bodies = []
     names = set()
     for c in characters:
         if c.prefix in names:
@@ -146,6 +153,14 @@ def world_xml(characters: Sequence[CharacterEntry], objects: Sequence[ObjectSpec
             mocaps.append(m)
         eqs.append(e)
         acts.append(character_actuator_xml(c.prefix, cp))
+        if features:
+            cn = ElementNames(c.prefix)
+            for hand in (HAND_LEFT, HAND_RIGHT):
+                k, local = joint_anchor(c.body, hand)
+                body = cn.body(SEGMENT_CHILDREN[k])
+                hand_bodies.append(body)
+                eqs += [grip_equality_xml(c.prefix, hand, body, local, params.hold_solref, t)
+                        for t in holdable_bodies(features)]
         for o in objects:
             if o.holdable:
                 for hand in (HAND_LEFT, HAND_RIGHT):
@@ -158,6 +173,8 @@ def world_xml(characters: Sequence[CharacterEntry], objects: Sequence[ObjectSpec
     objs = [object_xml(o) for o in objects]
     eq_block = '\n'.join(x for x in eqs if x)
     act_block = '\n'.join(x for x in acts if x)
+    feat_block = features_xml(features, feature_lift) if features else ''
+    excl_block = hand_excludes_xml(features, hand_bodies) if features else ''
     return '\n'.join([
         '<mujoco model="kinect_physics">',
         f'  <option timestep="{params.timestep:.6g}" integrator="{integ}" '
@@ -169,8 +186,9 @@ def world_xml(characters: Sequence[CharacterEntry], objects: Sequence[ObjectSpec
         f'    <geom name="floor" type="plane" size="0 0 0.05" friction="{params.floor_friction:.6g} '
         f'0.005 0.0001" rgba="0.8 0.8 0.8 1"/>',
         f'    <site name="{ORIGIN_SITE}" size="0.01"/>',
-        *bodies, *mocaps, *objs,
+        *bodies, *mocaps, *objs, *([feat_block] if feat_block else []),
         '  </worldbody>',
+        *(['  <contact>', excl_block, '  </contact>'] if excl_block else []),
         *(['  <equality>', eq_block, '  </equality>'] if eq_block else []),
         *(['  <actuator>', act_block, '  </actuator>'] if act_block else []),
         '</mujoco>'])

@@ -40,7 +40,7 @@ from skeleton_core.model import NUM_JOINTS, TRACKED
 from skeleton_core.params import ParamSpec, assign, build, param, specs
 from skeleton_core.presence import Presence
 from skeleton_core.rosnode import DiagnosticsPublisher, InputDrops, Parameters, run_node
-from skeleton_msgs.msg import SkeletonArray
+from skeleton_msgs.msg import Intention, SkeletonArray
 from skeleton_msgs.srv import ApplyPush
 from visualization_msgs.msg import Marker, MarkerArray
 
@@ -104,6 +104,9 @@ class PhysicsNodeConfig:
     push_duration: float = param(0.1, 'duration of pushes from the ~/push topic (s)',
                                  range=(0.001, 5.0))
     frame_id: str = param('kinect', 'frame of the outputs until an input arrives', read_only=True)
+    intention_topic: str = param('/control/intention', 'with feature_world: the control '
+                                 "node's engaged effectors (skeleton_msgs/Intention), whose hands "
+                                 'grip the features', read_only=True)
 
 
 # the node's parameters: its own and every SimConfig field (declared there, with its ROS name)
@@ -170,12 +173,16 @@ class PhysicsNode(Node):
         self.create_subscription(SkeletonArray, v['input_topic'], self._on_input,
                                  v['input_depth'], raw=True)
         self.create_subscription(WrenchStamped, '~/push', self._on_push_topic, 10)
+        if v['feature_world']:
+            self.create_subscription(Intention, v['intention_topic'], self._on_intention, 10)
         self.create_service(ApplyPush, '~/apply_push', self._on_push_srv)
         self.timer = self.create_timer(1.0 / v['output_rate'], self._on_timer)
         self.diag = DiagnosticsPublisher(self, self.health, extra=self._diag_extra)
         self.get_logger().info(
             f'physics: {v["controller"]} at {v["timestep"] * 1000:.1f} ms, input {v["input_topic"]}'
-            f' -> {v["output_topic"]}, {len(self.sim.objects)} objects')
+            f' -> {v["output_topic"]}, {len(self.sim.objects)} objects'
+            + (f', features of {v["feature_world"]} ({", ".join(self.sim.shared.features)}),'
+               f' grips from {v["intention_topic"]}' if v['feature_world'] else ''))
 
     # ------------------------------------------------------------------ parameters
     def _on_params(self, changed: Dict) -> Optional[str]:
@@ -199,6 +206,12 @@ class PhysicsNode(Node):
         return out
 
     # ------------------------------------------------------------------ input
+    def _on_intention(self, msg: Intention) -> None:
+        try:
+            self.sim.set_engaged(msg.user_id, msg.engaged_effectors, msg.engaged_features)
+        except ValueError as e:
+            self._drop('bad intention', str(e))
+
     def _on_input(self, data: bytes) -> None:
         self.health.on_receive()
         decoded = self._drop.decode(data)

@@ -49,6 +49,8 @@ from skeleton_core.model import (FOOT_LEFT, FOOT_RIGHT, HAND_LEFT, HAND_RIGHT, H
 from .character import Character, Target
 from .config import INTEGRATORS, SOLVERS, CharacterState, SimConfig, controllers
 from .controller import Gains
+from .feature_geometry import load_geometry
+from .feature_holds import engaged_hands
 from .frames import SensorPose
 from .mjcf_world import ObjectSpec
 from .posture import is_identity, joint_quats_to_segment, segment_quats_to_joints
@@ -67,8 +69,11 @@ class Simulation:
         self.shared = Shared(self.config,
                              {'constraint_conflict': 0, 'virtual_joint_released': 0,
                               'nan_reset': 0, 'refused_target': 0, 'rebuilds': 0, 'pins': 0,
-                              'regroups': 0, 'reused_models': 0},
+                              'regroups': 0, 'reused_models': 0, 'grips': 0},
                              list(objects))
+        if self.config.feature_world:
+            self.shared.features = load_geometry(self.config.feature_world)
+        self.engaged: Dict[int, Dict[int, str]] = {}   # uid -> {hand: feature} (set_engaged)
         self.counters = self.shared.counters
         self._ball_count = 0
         self.time = 0.0
@@ -322,6 +327,8 @@ class Simulation:
         if int(user_id) not in self.characters:
             return False
         del self.characters[int(user_id)]
+        self.engaged.pop(int(user_id), None)
+        self.shared.grips.pop(int(user_id), None)
         self.pushes[:] = [p for p in self.pushes if p[0] != int(user_id)]
         self._world_of.pop(int(user_id), None)
         self._rebuild()
@@ -427,6 +434,27 @@ class Simulation:
             w.pins.set(ch, j, False)
             w.pack_targets()
 
+    # ------------------------------------------------------------------ feature grips
+    def set_engaged(self, user_id: int, effectors: Sequence[str] = (),
+                    features: Sequence[str] = ()) -> None:
+        """The control node's engaged effectors and their features for a user (parallel lists,
+        as in ``skeleton_msgs/Intention``): its hands grip those features from the next step on
+        and let go of the others (only with ``feature_world``)."""
+        hands = engaged_hands(effectors, features)
+        if hands:
+            self.engaged[int(user_id)] = hands
+        else:
+            self.engaged.pop(int(user_id), None)
+
+    @property
+    def grips(self) -> Dict[int, Dict[int, tuple]]:
+        """{uid: {hand joint: (feature, body, anchor in the body)}} of the gripping hands."""
+        return self.shared.grips
+
+    def grip_points(self, user_id: int) -> Dict[int, np.ndarray]:
+        """{hand joint: world point} of a user's grips now (a rope's where it swung to)."""
+        return self.world_of(user_id).grip_points(int(user_id))
+
     # ------------------------------------------------------------------ pushes
     def apply_push(self, user_id: int, segment, force, duration: float) -> None:
         """External force (N, world) on a segment's centre of mass for ``duration`` s. ``segment`` is
@@ -484,6 +512,8 @@ class Simulation:
         n = max(1, int(round(duration / self.config.timestep)))
         for w in self.worlds:
             w.time = self.time
+            if self.shared.features and (self.engaged or self.shared.grips):
+                w.update_grips(self.engaged)
             w.advance(n)
         self.time = self.worlds[0].time
         if self.pushes:

@@ -24,8 +24,10 @@ from .character import Character
 from .config import CharacterState, SimConfig
 from .controller import pd_twist_torque, twist_angle, twist_drive, twist_forms
 from .controllers import make_controller
+from .feature_holds import grip_changes
 from .frames import SensorPose
 from .mjcf_body import ROOT_SEGMENT, CharacterParams, joint_anchor
+from .mjcf_features import grip_name, rope_segment
 from .mjcf_world import ALL_BITS, CharacterEntry, ObjectSpec, WorldParams, character_bits, world_xml
 from .pins import FootPins
 
@@ -51,6 +53,8 @@ class Shared:
     holds: Dict[str, tuple] = field(default_factory=dict)   # object name -> (user_id, hand joint)
     pushes: List[tuple] = field(default_factory=list)  # (user_id, segment, force (3,), end time)
     sensor: Optional[SensorPose] = None
+    features: Dict[str, list] = field(default_factory=dict)   # feature_world geometry (or none)
+    grips: Dict[int, Dict[int, tuple]] = field(default_factory=dict)  # uid -> hand -> (feature, point)
 
 
 def controller_for(config: SimConfig, n_characters: int) -> str:
@@ -117,7 +121,8 @@ class World:
             self.controller = make_controller(self.controller_name)
             entries = [CharacterEntry(ch.prefix, ch.body, tuple(ch.cur.positions[0]), ch.slot,
                                       ch.cur.positions) for ch in self.chars]
-            xml = world_xml(entries, self.objects, self._world_params())
+            xml = world_xml(entries, self.objects, self._world_params(),
+                            self.shared.features or None, self.floor)
             m = mujoco.MjModel.from_xml_string(xml)
             d = mujoco.MjData(m)
             self.xml = xml
@@ -147,6 +152,7 @@ class World:
             for j, pin in ch.pins.items():
                 if pin.active:
                     self.pins.set(ch, j, True, pin.point)
+        self._restore_grips()
         mujoco.mj_forward(m, d)
         self._pack_indices()
         self.controller.bind(self)
@@ -363,6 +369,7 @@ class World:
         for name, (uid, hand) in list(self.shared.holds.items()):
             if self.with_objects and self.character(uid) is not None:
                 self._activate_hold(name, uid, hand, teleport=True)
+        self._restore_grips()
         d.time = t
         mujoco.mj_forward(m, d)
         self._pts = None
@@ -412,6 +419,91 @@ class World:
             dadr = m.jnt_dofadr[m.body_jntadr[oid]]
             d.qvel[dadr:dadr + 6] = 0.0
             mujoco.mj_forward(m, d)
+
+    # ------------------------------------------------------------------ feature grips
+    def _grip_eq(self, ch: Character, hand: int, body: str) -> int:
+        return mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_EQUALITY,
+                                 grip_name(ch.prefix, hand, body))
+
+    def set_grip(self, ch: Character, hand: int, body: str, local=None) -> None:
+        """Connect ``ch``'s hand joint point to ``local`` in ``body`` ('world' or a rope
+        segment); None: let go."""
+        e = self._grip_eq(ch, hand, body)
+        if e < 0:
+            return
+        if local is not None:
+            self.model.eq_data[e, 0:3] = joint_anchor(ch.body, hand)[1]
+            self.model.eq_data[e, 3:6] = local
+        self.data.eq_active[e] = 0 if local is None else 1
+
+    def _restore_grips(self) -> None:
+        for ch in self.chars:
+            for hand, (_, body, local) in self.shared.grips.get(ch.user_id, {}).items():
+                self.set_grip(ch, hand, body, local)
+
+    def _body_frame(self, body: str):
+        if body == 'world':
+            return np.zeros(3), np.eye(3)
+        b = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_BODY, body)
+        return self.data.xpos[b], self.data.xmat[b].reshape(3, 3)
+
+    def feature_axes(self) -> Dict[str, list]:
+        """{feature: [(a, b, body)]}: the axes a hand can hold now (bars raised by the lift, rope
+        segments where they are)."""
+        up = np.array([0.0, 0.0, self.floor])
+        out = {}
+        for name, geoms in self.shared.features.items():
+            ax = []
+            for i, g in enumerate(geoms):
+                if g.type == 'capsule':
+                    ax.append((g.vec('from') + up, g.vec('to') + up, 'world'))
+                elif g.type == 'rope':
+                    seg = g.num('length')
+                    for s in range(int(g.data['segments'])):
+                        body = rope_segment(name, i, s)
+                        p, r = self._body_frame(body)
+                        ax.append((p.copy(), p - seg * r[:, 2], body))
+            if ax:
+                out[name] = ax
+        return out
+
+    def grip_points(self, user_id: int) -> Dict[int, np.ndarray]:
+        """{hand: world point} of a character's grips now (where the anchors have moved to)."""
+        out = {}
+        for hand, (_, body, local) in self.shared.grips.get(user_id, {}).items():
+            p, r = self._body_frame(body)
+            out[hand] = p + r @ local
+        return out
+
+    def update_grips(self, engaged: Dict[int, Dict[int, str]]) -> None:
+        """Grip and release the characters' hands to follow ``engaged`` ({uid: {hand:
+        feature}}, :func:`physics_sim.feature_holds.grip_changes`)."""
+        if not self.shared.features:
+            return
+        grips = self.shared.grips
+        axes = None
+        for ch in self.chars:
+            want = engaged.get(ch.user_id, {})
+            held = grips.get(ch.user_id, {})
+            if not want and not held:
+                continue
+            if axes is None:
+                axes = self.feature_axes()
+            pts = ch.joint_points(self.data)
+            grab, release = grip_changes(want, held, {h: pts[h] for h in want}, axes,
+                                         self.config.grip_reach)
+            for h in release:
+                self.set_grip(ch, h, held.pop(h)[1], None)
+            for h, (f, body, point) in grab.items():
+                p, r = self._body_frame(body)
+                local = r.T @ (point - p)
+                self.set_grip(ch, h, body, local)
+                held[h] = (f, body, local)
+                self.counters['grips'] += 1
+            if held:
+                grips[ch.user_id] = held
+            else:
+                grips.pop(ch.user_id, None)
 
     # ------------------------------------------------------------------ dodge (Fig. 4)
     def _update_dodge(self) -> None:
