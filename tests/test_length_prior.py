@@ -103,3 +103,22 @@ def test_length_ratios_are_scale_free_and_reach_the_reconstructor():
     off = Reconstructor(db, method='C', length_prior=False)
     assert off.segment_output.length_prior is None
     assert Reconstructor(db.positions, method='C').segment_output.length_prior is None
+
+
+def test_the_fusion_runs_again_only_when_an_observation_arrives():
+    clip = builtin_clips()[0]
+    db, _ = build_database([clip], progress=False)
+    out = Reconstructor(db, method='C').segment_output
+    calls = []
+    prior = out.length_prior
+    out.length_prior = lambda L, n: calls.append(n.copy()) or prior(L, n)
+    p = np.asarray(clip.positions[0], float)
+    seen = np.full(p.shape[0], 1.0)
+    seen[SEGMENT_CHILD_INDEX[-1]] = 0.0  # one segment never observed: lengths never freeze
+    first = out.lengths(p, seen)
+    assert len(calls) == 1
+    first[:] = -1.0  # the caller's copy: the cache keeps its own
+    again = out.lengths(p, np.zeros_like(seen))  # nothing reliable: nothing new observed
+    assert len(calls) == 1 and np.all(again > 0)
+    out.lengths(p, seen)  # new observations: fused again
+    assert len(calls) == 2

@@ -166,6 +166,7 @@ class SegmentOutput:
         self._seg_count = np.zeros(NUM_SEGMENTS, int)
         self._seg_fallback = np.full(NUM_SEGMENTS, np.nan)
         self._frozen_lengths: Optional[np.ndarray] = None
+        self._prior_cache: Optional[tuple] = None  # (prior, sides, counts, fused lengths)
         mc, b, dc = self.smooth
         self._last_stamp: Optional[int] = None
         self._filter_clock_ns = 0
@@ -213,7 +214,14 @@ class SegmentOutput:
         if self.length_prior is not None:
             # the observed lengths of each side and the length prior (it shares the sides'
             # lengths itself when symmetric_lengths)
-            L = self.length_prior(L, self._seg_count)
+            cached = self._prior_cache
+            if cached is not None and cached[0] is self.length_prior \
+                    and np.array_equal(cached[1], L) and np.array_equal(cached[2], self._seg_count):
+                L = cached[3].copy()  # nothing observed since: the same fusion
+            else:
+                fused = self.length_prior(L, self._seg_count)
+                self._prior_cache = (self.length_prior, L, self._seg_count.copy(), fused.copy())
+                L = fused
         elif self.symmetric_lengths:
             L = 0.5 * (L + L[_MIRROR_SEG])
         if self._seg_count.min() >= self.length_frames:
