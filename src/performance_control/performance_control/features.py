@@ -14,7 +14,7 @@ from typing import Dict, List, Optional, Tuple
 import numpy as np
 import yaml
 from physics_sim.feature_geometry import GEOM_TYPES, Geom  # noqa: F401 -- re-exported
-from physics_sim.feature_geometry import check_geom as _check_geom
+from physics_sim.feature_geometry import parse_geometry
 from skeleton_core.model import JOINT_INDEX
 
 EFFECTORS = ('HandLeft', 'HandRight', 'FootLeft', 'FootRight')
@@ -122,20 +122,15 @@ def world_path(name_or_path: str) -> Path:
 
 
 def parse_world(doc: Dict, path: str = '<dict>') -> World:
-    if not isinstance(doc, dict) or not isinstance(doc.get('features'), dict) or not doc['features']:
-        raise WorldError(f'{path}: a world needs a non-empty mapping "features"')
+    try:  # the geometry, as the physics character's world reads it
+        geometry = parse_geometry(doc, path)
+    except ValueError as e:
+        raise WorldError(str(e)) from None
     feats: Dict[str, Feature] = {}
     for name, fd in doc['features'].items():
         where = f'{path}: feature {name!r}'
+        geoms = geometry[str(name)]
         try:
-            if not isinstance(fd, dict) or not fd.get('geometry'):
-                raise ValueError('needs a non-empty "geometry" list')
-            geoms = []
-            for gd in fd['geometry']:
-                gd = dict(gd)
-                g = Geom(str(gd.pop('type', '')), gd)
-                _check_geom(g)
-                geoms.append(g)
             ed = dict(fd.get('engage') or {})
             eff = tuple(ed.get('effectors', ()))
             for e in eff:
