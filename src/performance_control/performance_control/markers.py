@@ -72,6 +72,7 @@ def to_marker_array(shapes: List[Shape], ns: str, frame_id: str, stamp,
                     to_frame: Callable[[np.ndarray], np.ndarray], quat_to_frame=None,
                     id0: int = 0):
     """visualization_msgs/MarkerArray with a DELETEALL of ``ns`` first."""
+    from skeleton_core.rosnode import fill_marker
     from visualization_msgs.msg import Marker, MarkerArray
     out = MarkerArray()
     clear = Marker()
@@ -87,14 +88,8 @@ def to_marker_array(shapes: List[Shape], ns: str, frame_id: str, stamp,
         m.id = id0 + i
         m.type = types[kind]
         m.action = Marker.ADD
-        p = to_frame(np.asarray(pos, float))
-        q = quat if quat_to_frame is None else quat_to_frame(quat)
-        m.pose.position.x, m.pose.position.y, m.pose.position.z = (float(x) for x in p)
-        (m.pose.orientation.x, m.pose.orientation.y, m.pose.orientation.z,
-         m.pose.orientation.w) = (float(x) for x in q)
-        m.scale.x, m.scale.y, m.scale.z = (float(x) for x in scale)
-        m.color.r, m.color.g, m.color.b, m.color.a = (float(x) for x in rgba)
-        m.text = name
+        fill_marker(m, to_frame(np.asarray(pos, float)),
+                    quat if quat_to_frame is None else quat_to_frame(quat), scale, rgba, name)
         out.markers.append(m)
     return out
 

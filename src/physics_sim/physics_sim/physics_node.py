@@ -39,7 +39,8 @@ from skeleton_core.health import Health
 from skeleton_core.model import NUM_JOINTS, TRACKED
 from skeleton_core.params import ParamSpec, assign, build, param, specs
 from skeleton_core.presence import Presence
-from skeleton_core.rosnode import DiagnosticsPublisher, InputDrops, Parameters, run_node
+from skeleton_core.rosnode import (DiagnosticsPublisher, InputDrops, Parameters, fill_marker,
+                                   run_node)
 from skeleton_msgs.msg import Intention, SkeletonArray
 from skeleton_msgs.srv import ApplyPush
 from visualization_msgs.msg import Marker, MarkerArray
@@ -425,13 +426,7 @@ class PhysicsNode(Node):
                 mid += 1
                 m.type = mtype
                 m.action = Marker.ADD
-                p = pos + quat_rotate(quat, local)
-                m.pose.position.x, m.pose.position.y, m.pose.position.z = (float(x) for x in p)
-                (m.pose.orientation.x, m.pose.orientation.y, m.pose.orientation.z,
-                 m.pose.orientation.w) = (float(x) for x in quat)
-                m.scale.x, m.scale.y, m.scale.z = (float(x) for x in scale)
-                m.color.r, m.color.g, m.color.b, m.color.a = (float(x) for x in rgba)
-                m.text = name
+                fill_marker(m, pos + quat_rotate(quat, local), quat, scale, rgba, name)
                 out.markers.append(m)
         self.obj_pub.publish(out)
 

@@ -153,6 +153,16 @@ class DiagnosticsPublisher:
         self._pub.publish(msg)
 
 
+def fill_marker(m, position, quat, scale, rgba, text: str = '') -> None:
+    """Pose (xyz, quaternion xyzw), scale, colour (rgba) and text of a visualization_msgs Marker."""
+    m.pose.position.x, m.pose.position.y, m.pose.position.z = (float(x) for x in position)
+    (m.pose.orientation.x, m.pose.orientation.y, m.pose.orientation.z,
+     m.pose.orientation.w) = (float(x) for x in quat)
+    m.scale.x, m.scale.y, m.scale.z = (float(x) for x in scale)
+    m.color.r, m.color.g, m.color.b, m.color.a = (float(x) for x in rgba)
+    m.text = text
+
+
 def ignore_further_interrupts() -> None:
     """Call when shutdown has begun: a second SIGINT must not interrupt the cleanup with a
     KeyboardInterrupt traceback. It comes routinely: Ctrl-C in a terminal reaches ``ros2 launch``
