@@ -145,7 +145,7 @@ class PerformanceController:
         self.obstacles = Obstacles()
         self.frames = 0
         self._hand_z: Dict[str, float] = {}
-        self._hand_vz: Dict[str, float] = {e: 0.0 for e in HANDS}
+        self._hand_vz: Dict[str, float] = {e: 0.0 for e in EFFECTORS}
 
     # ------------------------------------------------------------------ set-up
     def _offsets(self, rel_world: np.ndarray) -> Dict[str, np.ndarray]:
@@ -179,6 +179,9 @@ class PerformanceController:
             c = g.vec('center')
             xy = np.asarray(st.get('com_xy', c[:2]), float)
             return np.array([xy[0], xy[1], float(st.get('com_z', c[2]))])
+        if kind == 'rocks':       # standing on the floor in front of the wall
+            xy = np.asarray(st.get('com_xy', self.world.spawn), float)
+            return np.array([xy[0], xy[1], stand[2]])
         if kind == 'trampoline':
             g = next(g for g in f.geoms if g.type == 'box')
             c, hf = g.vec('center'), g.vec('half')
@@ -247,10 +250,10 @@ class PerformanceController:
         return bool(p[JOINT_INDEX[e], 2] - self.user_floor < self.params.foot_down_height)
 
     def _track_hands(self, p: np.ndarray, dt: float) -> None:
-        """Smoothed vertical speed (0.1 s) of the user's hands relative to their COM."""
+        """Smoothed vertical speed (0.1 s) of the user's hands and feet relative to their COM."""
         com_z = float(center_of_mass(p)[2])
         g = 1.0 - math.exp(-dt / 0.1)
-        for e in HANDS:
+        for e in EFFECTORS:
             z = float(p[JOINT_INDEX[e], 2]) - com_z
             if e in self._hand_z:
                 self._hand_vz[e] += g * ((z - self._hand_z[e]) / dt - self._hand_vz[e])
@@ -282,6 +285,10 @@ class PerformanceController:
                     if lost or regrab or not self._user_hand_raised(p, e, f,
                                                                     prm.hand_release_margin):
                         dp.release(e)
+                elif f.kind == 'rocks':
+                    # a foot on a rock (Sec. 8.4) lets go when the user lifts it to step higher
+                    if self._hand_vz[e] > prm.regrab_speed:
+                        dp.release(e)
                 elif not self._user_foot_down(p, e):
                     dp.release(e)
                 continue
@@ -292,8 +299,8 @@ class PerformanceController:
                     continue
                 if e in HANDS and f.engage.regrab and self._hand_vz[e] > 0.1:
                     continue      # climbing: grab at the top of the reach, not on the way up
-                if e in FEET and not self._user_foot_down(p, e):
-                    continue
+                if e in FEET and f.kind != 'rocks' and not self._user_foot_down(p, e):
+                    continue      # on a rock the foot is held above its face, not on the floor
                 # hand over hand: the other hand holds the rope, this one is at the top of its
                 # reach -- it reaches for the rope where it is now (an arm's length), whatever
                 # its speed (the rope and the body swing)

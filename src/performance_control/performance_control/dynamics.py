@@ -189,6 +189,14 @@ class DynamicProcess:
                 inside = np.all(np.abs(p[:2] - ctr[:2]) <= half[:2])
                 c = np.array([p[0], p[1], top + rad])
                 cand = [(float(p[2]) - top - rad if inside else math.inf, body, c)]
+            elif g.type == 'rock':
+                # Sec. 8.4: a contact point and the radius within which it may be held; a foot
+                # only from above the rock's face (its centre's height), held on top of it
+                ctr = g.vec('center')
+                c = ctr + [0.0, 0.0, rad] if effector.startswith('Foot') else ctr
+                far = float(np.linalg.norm(p - ctr)) - g.num('radius')
+                above = not effector.startswith('Foot') or p[2] >= ctr[2]
+                cand = [(far if above else math.inf, 'world', c)]
             elif g.type == 'rope':
                 cand = []
                 seg, r = g.num('length'), g.num('radius')

@@ -69,9 +69,12 @@ class Feature:
 
     @property
     def kind(self) -> str:
-        """'floor' (a plane), 'rope', 'trampoline' (a box on a spring), 'water' (a volume) or
-        'bars' (static capsules / boxes)."""
+        """'floor' (a plane), 'rope', 'trampoline' (a box on a spring), 'water' (a volume),
+        'rocks' (climbing holds: points with a reach radius) or 'bars' (static capsules /
+        boxes)."""
         types = {g.type for g in self.geoms}
+        if 'rock' in types:
+            return 'rocks'
         if 'rope' in types:
             return 'rope'
         if 'volume' in types:
