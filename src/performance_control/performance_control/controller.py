@@ -30,6 +30,7 @@ from .examples import example_motion
 from .features import EFFECTORS, Feature, World
 from .intention import (ExampleModel, IntentionRecognizer, Recognition, RecognizerParams,
                         center_of_mass, yaw_rotation)
+from .locomotion import Walker, example_gait
 
 HANDS = ('HandLeft', 'HandRight')
 FEET = ('FootLeft', 'FootRight')
@@ -144,7 +145,15 @@ class PerformanceController:
         self.blend_feature = ''
         self.obstacles = Obstacles()
         self.frames = 0
+        self._stand_z = 1.0
         self._hand_z: Dict[str, float] = {}
+        # walking on the floor (Sec. 8.3): the floor's example is a walk cycle
+        self.floor_walk = next((f.name for f in world.features.values()
+                                if f.kind == 'floor' and f.name in self.models), '')
+        self.walker = (Walker(*example_gait(self.models[self.floor_walk].positions,
+                                            self.params.recognizer.fps))
+                       if self.floor_walk else None)
+        self.walking = False
         self._hand_vz: Dict[str, float] = {e: 0.0 for e in EFFECTORS}
 
     # ------------------------------------------------------------------ set-up
@@ -197,6 +206,8 @@ class PerformanceController:
         rel = self._char_rel(p)
         mass = self.params.body_mass * (self.height / 1.75) ** 3
         com = self._start_com(rel)
+        feet_z = min(rel[FOOT_LEFT, 2], rel[FOOT_RIGHT, 2])
+        self._stand_z = float(-feet_z + 0.04)     # the COM's height standing on the floor
         self.dp = DynamicProcess(self.world, mass, com, self._offsets(rel), self.params.free_gain)
         if self.start:
             f = self.world.features[self.start]
@@ -352,6 +363,16 @@ class PerformanceController:
         # ---- kinematic composition (Sec. 6.2)
         user_yaw = float(facing_yaw(p))
         char_yaw = user_yaw - self.yaw0
+        # ---- walking on the floor (Sec. 8.3): the user walks in place, the character walks
+        self.walking = False
+        if self.walker is not None:
+            self.walker.update(p, user_yaw, t)
+            rw = recs.get(self.floor_walk)
+            self.walking = bool(not feature and rw is not None and rw.imitating
+                                and dp.com[2] < self._stand_z + 0.3)
+            if self.walking:
+                feature = self.floor_walk
+                dp.shift(self.walker.velocity(char_yaw) * dt)
         body_rel = (p - center_of_mass(p)) @ yaw_rotation(user_yaw).T   # body frame
         rec = recs.get(feature)
         compose = feature in self.composers and rec is not None and rec.imitating
@@ -370,7 +391,8 @@ class PerformanceController:
             m = self.models[bf]
             comp = self.composers[bf].compose({j: body_rel[j] for j in m.effectors}, r_bf.w,
                                               self.height)
-            replace = [e for e in FEET if self._user_foot_down(p, e) and e not in held]
+            replace = (list(FEET) if self.walking and bf == self.floor_walk else
+                       [e for e in FEET if self._user_foot_down(p, e) and e not in held])
             mixed = integrate_rule(body_rel, comp, replace)
             q = (1.0 - self.blend) * body_rel + self.blend * mixed
         if water:

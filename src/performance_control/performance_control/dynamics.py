@@ -143,6 +143,20 @@ class DynamicProcess:
         d.qvel[:] = 0.0
         mujoco.mj_forward(self.model, d)
 
+    def shift(self, delta) -> None:
+        """Move the character (COM and effectors) by ``delta`` (world, m) keeping its velocity:
+        walking on the floor (Sec. 8.3). Effectors held on the floor are let go first (they
+        engage again where they come down)."""
+        delta = np.asarray(delta, float)
+        for e, c in list(self.contacts.items()):
+            if self.world.features[c.feature].kind == 'floor':
+                self.release(e)
+        d = self.data
+        d.qpos[self.com_qpos:self.com_qpos + 3] += delta
+        for a in self.eff_qpos:
+            d.qpos[a:a + 3] += delta
+        mujoco.mj_forward(self.model, d)
+
     # ------------------------------------------------------------------ targets
     def set_targets(self, rel: np.ndarray, yaw: float, period: float) -> None:
         """The user's relative movement r^_j (4, 3, world axes) for the next ``period`` s: the
