@@ -33,6 +33,10 @@ from .intention import (ExampleModel, IntentionRecognizer, Recognition, Recogniz
 from .locomotion import Walker, example_gait
 
 HANDS = ('HandLeft', 'HandRight')
+# s: the character keeps walking this long after the floor's recognizer last said "imitating"
+# (one walking step: a user's walk in place drops out for a few frames -- an arm briefly
+# occluded, a step off the example's rhythm -- and the character should not stop and go)
+WALK_HOLD = 0.4
 FEET = ('FootLeft', 'FootRight')
 
 
@@ -154,6 +158,7 @@ class PerformanceController:
                                             self.params.recognizer.fps))
                        if self.floor_walk else None)
         self.walking = False
+        self._walk_seen = -math.inf
         self._hand_vz: Dict[str, float] = {e: 0.0 for e in EFFECTORS}
 
     # ------------------------------------------------------------------ set-up
@@ -368,7 +373,9 @@ class PerformanceController:
         if self.walker is not None:
             self.walker.update(p, user_yaw, t)
             rw = recs.get(self.floor_walk)
-            self.walking = bool(not feature and rw is not None and rw.imitating
+            if rw is not None and rw.imitating:
+                self._walk_seen = t
+            self.walking = bool(not feature and t - self._walk_seen <= WALK_HOLD
                                 and dp.com[2] < self._stand_z + 0.3)
             if self.walking:
                 feature = self.floor_walk

@@ -145,12 +145,13 @@ class DynamicProcess:
 
     def shift(self, delta) -> None:
         """Move the character (COM and effectors) by ``delta`` (world, m) keeping its velocity:
-        walking on the floor (Sec. 8.3). Effectors held on the floor are let go first (they
-        engage again where they come down)."""
+        walking on the floor (Sec. 8.3). The anchors of effectors held on the floor move along
+        (the character's feet step where the composed walk puts them; the simplified model only
+        carries the body)."""
         delta = np.asarray(delta, float)
-        for e, c in list(self.contacts.items()):
-            if self.world.features[c.feature].kind == 'floor':
-                self.release(e)
+        for c in self.contacts.values():
+            if self.world.features[c.feature].kind == 'floor' and c.body == 'world':
+                self.model.eq_data[c.eq, 3:6] += delta
         d = self.data
         d.qpos[self.com_qpos:self.com_qpos + 3] += delta
         for a in self.eff_qpos:
