@@ -158,6 +158,8 @@ class PerformanceController:
                                             self.params.recognizer.fps))
                        if self.floor_walk else None)
         self.walking = False
+        self._was_walking = False
+        self._walk_z = 1.0
         self._walk_seen = -math.inf
         self._hand_vz: Dict[str, float] = {e: 0.0 for e in EFFECTORS}
 
@@ -378,8 +380,11 @@ class PerformanceController:
             self.walking = bool(not feature and t - self._walk_seen <= WALK_HOLD
                                 and dp.com[2] < self._stand_z + 0.3)
             if self.walking:
+                if not self._was_walking:
+                    self._walk_z = float(dp.com[2])    # the height it walks at
                 feature = self.floor_walk
-                dp.shift(self.walker.velocity(char_yaw) * dt)
+                dp.shift(np.zeros(3))      # the feet let go of the floor (carried below)
+            self._was_walking = self.walking
         body_rel = (p - center_of_mass(p)) @ yaw_rotation(user_yaw).T   # body frame
         rec = recs.get(feature)
         compose = feature in self.composers and rec is not None and rec.imitating
@@ -410,7 +415,11 @@ class PerformanceController:
         q_world_rel = q @ _rotz(char_yaw).T
         # ---- dynamic process (Sec. 5)
         dp.set_targets(np.array([q_world_rel[JOINT_INDEX[e]] for e in EFFECTORS]), char_yaw, dt)
+        walk_from = dp.com
         dp.step(dt)
+        if self.walking:
+            v = self.walker.velocity(char_yaw)
+            dp.carry_to(np.array([*(walk_from[:2] + v[:2] * dt), self._walk_z]), v)
         # ---- motion integration (Sec. 7)
         self._refresh_obstacles()
         eff = dp.effectors()

@@ -144,16 +144,27 @@ class DynamicProcess:
         mujoco.mj_forward(self.model, d)
 
     def shift(self, delta) -> None:
-        """Move the character (COM and effectors) by ``delta`` (world, m) keeping its velocity:
-        walking on the floor (Sec. 8.3). The anchors of effectors held on the floor move along
-        (the character's feet step where the composed walk puts them; the simplified model only
-        carries the body)."""
+        """Move the character (COM and effectors) by ``delta`` (world, m): walking on the floor
+        (Sec. 8.3). The paper's reading of walking: the user's feet are constrained, the
+        character's are not -- the feet held on the floor let go, and the body is carried
+        (the composed walk's legs step; the simplified model holds no floor contact)."""
         delta = np.asarray(delta, float)
-        for c in self.contacts.values():
-            if self.world.features[c.feature].kind == 'floor' and c.body == 'world':
-                self.model.eq_data[c.eq, 3:6] += delta
+        for e, c in list(self.contacts.items()):
+            if self.world.features[c.feature].kind == 'floor':
+                self.release(e)
         d = self.data
         d.qpos[self.com_qpos:self.com_qpos + 3] += delta
+        for a in self.eff_qpos:
+            d.qpos[a:a + 3] += delta
+        mujoco.mj_forward(self.model, d)
+
+    def carry_to(self, com, velocity) -> None:
+        """Put the COM at ``com`` moving at ``velocity`` (world), the effectors moved along:
+        walking, the body is carried (the floor holds it while no foot does)."""
+        d = self.data
+        delta = np.asarray(com, float) - self.com
+        d.qpos[self.com_qpos:self.com_qpos + 3] += delta
+        d.qvel[self.com_dof:self.com_dof + 3] = np.asarray(velocity, float)
         for a in self.eff_qpos:
             d.qpos[a:a + 3] += delta
         mujoco.mj_forward(self.model, d)
