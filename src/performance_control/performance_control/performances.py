@@ -109,12 +109,12 @@ def continuous_stream(world, rng: np.random.Generator, fps: float = FPS):
     walk['period'] = float(walk.get('period', 1.1)) * tempo
     swim = dict(world.features['water'].example.params)
     swim['period'] = float(swim.get('period', 1.5)) * tempo
-    sched = [(0.0, 'stand'), (1.0, 'walk'), (10.0, 'swim')]
-    total = 16.0
+    sched = [(0.0, 'stand'), (1.0, 'walk'), (8.0, 'swim')]
+    total = 15.0
     n = int(round(total * fps))
     t = np.arange(n) / fps
-    env_w = _envelope(n, [(1.0, 10.0)], 0.2, fps)
-    env_s = _envelope(n, [(10.3, total + 1.0)], 0.25, fps)
+    env_w = _envelope(n, [(1.0, 8.0)], 0.2, fps)
+    env_s = _envelope(n, [(8.3, total + 1.0)], 0.25, fps)
     pw = imitation('walk_cycle', walk, body, n, fps, style, active=env_w)
     ps = imitation('breaststroke', swim, body, n, fps, style, active=env_s)
     arms = [j for j in range(pw.shape[1]) if j not in _LEG_JOINTS]
