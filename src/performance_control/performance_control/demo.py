@@ -39,7 +39,7 @@ def scene_stream(world, name: str, seed: int, seconds: float = 8.0) -> np.ndarra
     if name == 'continuous':      # floor -> walk (turning) -> into the water -> swim (15 s)
         from .performances import TURNING_PLACEMENT, continuous_stream
         p, _ = continuous_stream(world, np.random.default_rng(0))
-        return to_sensor(p, 'demo_continuous', 0, sensor_params=TURNING_PLACEMENT)
+        return to_sensor(p, 'cont0', 0, sensor_params=TURNING_PLACEMENT)   # the test's stream
     if name == 'trampoline':
         p = jump_stream(rng, n_jumps=5)
     else:
