@@ -87,3 +87,5 @@ def test_continuous_performance_walks_turning_into_the_water_and_swims():
     assert np.all(com[:first, 2] > stand - 0.2)              # no fall on the way
     water = WORLD.features['water'].geoms[0]
     assert np.all(np.abs(com[-1] - water.vec('center')) <= water.vec('half'))
+    # swimming, not standing on the pool's bottom: no foot holds the floor
+    assert not any(e.startswith('Foot') for o in rows[-60:] for e in o.contacts)

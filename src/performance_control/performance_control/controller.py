@@ -319,6 +319,9 @@ class PerformanceController:
                     continue      # climbing: grab at the top of the reach, not on the way up
                 if e in FEET and f.kind != 'rocks' and not self._user_foot_down(p, e):
                     continue      # on a rock the foot is held above its face, not on the floor
+                if e in FEET and f.kind == 'floor' and dp.in_water:
+                    continue      # swimming: the user's feet on their floor do not stand the
+                    # character on the pool's bottom (walked in, it would stay there)
                 # hand over hand: the other hand holds the rope, this one is at the top of its
                 # reach -- it reaches for the rope where it is now (an arm's length), whatever
                 # its speed (the rope and the body swing)
