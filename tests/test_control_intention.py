@@ -10,7 +10,7 @@ from performance_control.examples import imitation, random_style
 from performance_control.features import load_world
 from performance_control.intention import (ExampleModel, IntentionRecognizer, RecognizerParams,
                                            approach_discount, feature_vectors,
-                                           partial_reconstruction_error, pca_basis,
+                                           partial_reconstruction_error, pca_columns,
                                            reconstruction_error, residual)
 from performance_control.performances import non_imitation_clips
 from skeleton_core.model import (ELBOW_RIGHT, HAND_LEFT, HAND_RIGHT, INFERRED, TRACKED,
@@ -22,7 +22,7 @@ WORLD = load_world('playground')
 def test_e1_e2_against_a_hand_computed_pca():
     # three examples on the line w1 = w2: mean (2, 2), first component (1, 1)/sqrt(2)
     w = np.array([[1.0, 1.0], [2.0, 2.0], [3.0, 3.0]])
-    mean, a, lam = pca_basis(w, 1)
+    mean, a, lam = pca_columns(w, 1)
     assert mean == pytest.approx([2.0, 2.0])
     assert abs(a[:, 0] @ np.array([1.0, 1.0]) / math.sqrt(2)) == pytest.approx(1.0)
     assert lam[0] == pytest.approx(2.0)          # variance along the line: (2 + 0 + 2) / 2

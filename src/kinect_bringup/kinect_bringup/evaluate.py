@@ -18,9 +18,12 @@ Examples::
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import sys
 from pathlib import Path
+
+from .graph import preset_path, repo_root
 
 
 def _parser():
@@ -66,6 +69,10 @@ def _parser():
     p.add_argument('--method-params', default='', metavar='JSON',
                    help='table4 / --perturb / --real (C rows): parameter overrides per method, e.g. '
                         '\'{"C": {"plausibility": false, "smooth_lead": 0}}\'')
+    p.add_argument('--preset', default='', metavar='NAME',
+                   help='reconstruction preset (config/presets/NAME.yaml or a path, e.g. shum2013: '
+                        'the papers\' variant) for methods A, B, C (and the C rows of --real); '
+                        '--method-params override it')
     p.add_argument('--quiet', action='store_true', help='no progress lines')
     p.add_argument('--real', nargs='?', const='auto', default=None, metavar='UIPRMD_DIR',
                    help='real-data mode: raw, holt, one_euro, C and C with the learned sensor '
@@ -84,7 +91,6 @@ def run_real(args) -> int:
     folder (other subjects, same layout) with the correction learned from every development
     subject (kinect_bringup.real_loso)."""
     from . import real_loso
-    from .graph import repo_root
     src = args.real
     shared = os.environ.get('KP_SHARED') or str((repo_root() or Path.cwd()).parent / 'shared')
     dev = Path(shared) / 'kinect' / 'ui-prmd'
@@ -95,8 +101,9 @@ def run_real(args) -> int:
         argv += ['--variants', args.methods]
     if args.quiet:
         argv.append('--quiet')
+    if args.preset:
+        argv += ['--preset', args.preset]
     if getattr(args, 'method_params', ''):
-        import json
         over = json.loads(args.method_params)
         if not isinstance(over, dict) or set(over) - {'C'}:
             print('evaluate --real: --method-params takes {"C": {...}} (overrides of method C in '
@@ -110,16 +117,37 @@ def run_real(args) -> int:
     return real_loso.main(argv)
 
 
-def _with_params(methods, text):
-    """``methods`` with the ``--method-params`` overrides: (name, params, name) for those named."""
-    import json
+def _with_params(methods, text, preset: str = ''):
+    """``methods`` with the ``--preset`` values (methods A, B, C) and the ``--method-params``
+    overrides on top: (name, params, name) for those that get any."""
     over = json.loads(text) if text else {}
     if not isinstance(over, dict) or not all(isinstance(v, dict) for v in over.values()):
         raise ValueError('--method-params must be a JSON object of objects')
     unknown = set(over) - set(methods)
     if unknown:
         raise ValueError(f'--method-params names methods not run: {sorted(unknown)}')
+    values = _preset(preset)
+    if values:
+        over = {m: {**values, **over.get(m, {})} if m in PRESET_METHODS else over.get(m)
+                for m in methods}
+        over = {m: v for m, v in over.items() if v is not None}
     return [(m, over[m], m) if m in over else m for m in methods]
+
+
+# the methods a reconstruction preset applies to
+PRESET_METHODS = ('A', 'B', 'C')
+
+
+def _preset(name: str) -> dict:
+    """The values of the preset ``name`` ('' = none); ValueError (one line) when it is missing
+    or invalid."""
+    if not name:
+        return {}
+    from pose_reconstruction.methods import load_preset
+    try:
+        return load_preset(preset_path(name))
+    except FileNotFoundError as exc:
+        raise ValueError(str(exc)) from None
 
 
 def run_perturb(args, dev_clips, source) -> int:
@@ -143,7 +171,7 @@ def run_perturb(args, dev_clips, source) -> int:
         if not args.quiet:
             print(f'[evaluate] perturb {label} seed {seed}', file=sys.stderr)
     try:
-        run_methods = _with_params(methods, args.method_params)
+        run_methods = _with_params(methods, args.method_params, args.preset)
     except ValueError as exc:
         print(f'evaluate: {exc}', file=sys.stderr)
         return 2
@@ -196,7 +224,7 @@ def run(argv=None) -> int:
         return run_perturb(args, dev_clips, source)
     if exp == 'table4':
         try:
-            methods = _with_params(methods, args.method_params)
+            methods = _with_params(methods, args.method_params, args.preset)
         except ValueError as exc:
             print(f'evaluate: {exc}', file=sys.stderr)
             return 2
@@ -204,6 +232,11 @@ def run(argv=None) -> int:
                          sensor_params=args.sensor_params, data_source=source, progress=progress,
                          repeats=args.repeats)
     elif exp == 'table3':
+        try:
+            methods = _with_params(methods, '', args.preset)
+        except ValueError as exc:
+            print(f'evaluate: {exc}', file=sys.stderr)
+            return 2
         res = E.table3(methods, dev_clips, seed=args.seed, max_frames=max_frames,
                        sensor_params=args.sensor_params, data_source=source, progress=progress,
                        repeats=args.repeats, reference=args.reference,

@@ -434,6 +434,9 @@ def main(argv=None) -> int:
     ap.add_argument('--method-params', default='',
                     help='JSON parameter overrides of method C in the C variants, e.g. '
                     '\'{"position_fit": 0}\'')
+    ap.add_argument('--preset', default='', metavar='NAME',
+                    help='reconstruction preset of method C in the C variants '
+                    '(config/presets/NAME.yaml or a path, e.g. shum2013); --method-params on top')
     ap.add_argument('--no-cache', action='store_true')
     ap.add_argument('--quiet', action='store_true')
     args = ap.parse_args(argv)
@@ -464,6 +467,10 @@ def main(argv=None) -> int:
         over = json.loads(args.method_params) if args.method_params else None
         if over is not None and not isinstance(over, dict):
             raise ValueError('--method-params: a JSON object of C parameters')
+        if args.preset:
+            from pose_reconstruction.methods import load_preset
+            from .graph import preset_path
+            over = {**load_preset(preset_path(args.preset)), **(over or {})}
         prog = None if args.quiet else (lambda v, c: print(f'  {v:15s} {c}', file=sys.stderr))
         res = evaluate(src, variants,
                        loso=not args.no_loso, correction=corr, subjects=ints(args.subjects),

@@ -46,14 +46,14 @@ PARAM_CHANGES = {
     'fused': [
         ('reconstruction', 'optimizer.k', [20, 30]),
         ('reconstruction', 'optimizer.steps', [10, 20]),
-        ('reconstruction', 'reliability.theta_roof_deg', [130.0, 135.0]),
-        ('reconstruction', 'completion.reliable_threshold', [0.4, 0.5]),
+        ('reconstruction', 'user_timeout_s', [1.5, 2.0]),
+        ('reconstruction', 'reliable_threshold', [0.4, 0.5]),
         ('physics', 'kp', [None]),  # None: read the current value and set it again
     ],
     'split': [
         ('optimizer', 'k', [20, 30]),
         ('optimizer', 'steps', [10, 20]),
-        ('reliability', 'theta_roof_deg', [130.0, 135.0]),
+        ('reliability', 'user_timeout_s', [1.5, 2.0]),
         ('completion', 'reliable_threshold', [0.4, 0.5]),
         ('physics', 'kp', [None]),
     ],

@@ -37,7 +37,7 @@ from dataclasses import dataclass
 from typing import Dict, Optional, Sequence
 
 import numpy as np
-from skeleton_core.geometry import facing_yaw
+from skeleton_core.geometry import facing_yaw, pca
 from skeleton_core.params import check, param
 from skeleton_core.model import (JOINT_INDEX, SEGMENT_CHILDREN, SEGMENT_MASS_FRACTION,
                                  SEGMENT_PARENTS, JOINT_NAMES, TRACKED, estimate_height)
@@ -91,15 +91,11 @@ def relative_effectors(positions: np.ndarray, effectors: Sequence[int],
     return np.einsum('...ij,...kj->...ki', yaw_rotation(yaw), rel)
 
 
-def pca_basis(w: np.ndarray, m: int, center: bool = True):
-    """(mean (D,), A (D, m) orthonormal columns, eigenvalues (m,)) of the rows of ``w`` (N, D)."""
-    w = np.asarray(w, float)
-    mean = w.mean(axis=0) if center else np.zeros(w.shape[1])
-    x = w - mean
-    _, s, vt = np.linalg.svd(x, full_matrices=False)
-    m = min(m, vt.shape[0])
-    lam = s[:m] ** 2 / max(len(w) - 1, 1)
-    return mean, vt[:m].T.copy(), lam
+def pca_columns(w: np.ndarray, m: int, center: bool = True):
+    """(mean (D,), A (D, m) orthonormal columns, eigenvalues (m,)) of the rows of ``w`` (N, D):
+    :func:`skeleton_core.geometry.pca` with the axes as the columns of A (Ishigaki's notation)."""
+    mean, axes, lam = pca(w, m, center)
+    return mean, axes.T.copy(), lam
 
 
 def reconstruction_error(v: np.ndarray, a: np.ndarray) -> np.ndarray:
@@ -169,57 +165,63 @@ class RecognizerParams:
     e2_threshold: float = param(0.04, "Eq. 6 threshold: consistency of the user's change over "
                                 "lag frames with the example", range=(1e-5, 10.0))
     tau: float = param(0.25, 'weight (s) of the effector velocities against positions in w',
-                       range=(0.0, 2.0))
-    lag: int = param(2, 'frames of the velocity and of dw in Eq. 6', range=(1, 30), read_only=True)
-    smoothing: float = param(0.03, 'time constant (s) of the e1/e2 averages', range=(0.0, 5.0))
+                       range=(0.0, 2.0), public=False)
+    lag: int = param(2, 'frames of the velocity and of dw in Eq. 6', range=(1, 30), read_only=True,
+                     public=False)
+    smoothing: float = param(0.03, 'time constant (s) of the e1/e2 averages', range=(0.0, 5.0),
+                             public=False)
     min_activity: float = param(0.3, "share of the example's RMS effector speed the user must "
                                 "reach to be imitating (a still pose has dw = 0)",
                                 range=(0.0, 10.0))
     activity_window: float = param(0.3, 'time constant (s) of the speed average of the activity '
-                                   'gate', range=(0.0, 10.0))
+                                   'gate', range=(0.0, 10.0), public=False)
     activity_lag: int = param(9, "frames of the activity gate's displacement", range=(1, 60),
-                              read_only=True)
+                              read_only=True, public=False)
     prefilter: float = param(0.03, 'time constant (s) of the low-pass on the relative joint '
-                             'positions before the features (sensor noise)', range=(0.0, 1.0))
+                             'positions before the features (sensor noise)', range=(0.0, 1.0),
+                             public=False)
     combine: str = param('and', "and: e1 and e2 under their thresholds; or: either (the paper's "
                          "consistency read as an alternative to similarity)",
-                         choices=('and', 'or'))
+                         choices=('and', 'or'), public=False)
     normalise: bool = param(False, "e1/e2 in units of each example's own spread (total "
-                            "variance of w, mean |dw|^2); the thresholds are then in those units")
+                            "variance of w, mean |dw|^2); the thresholds are then in those units",
+                            public=False)
     max_change_share: float = param(1.0, "largest share of the user's effector displacement "
                                     "over share_lag frames outside the example's position "
                                     "subspace, for all features (each example has its own "
                                     "too; 1 = off): a change the example never makes, e.g. "
                                     "one hand punching against a two-handed stroke",
-                                    range=(0.0, 1.0))
+                                    range=(0.0, 1.0), public=False)
     share_lag: int = param(4, "frames of the change-share gate's displacement", range=(1, 60),
-                           read_only=True)
+                           read_only=True, public=False)
     share_window: float = param(0.1, 'time constant (s) of the change-share averages',
-                                range=(0.0, 10.0))
+                                range=(0.0, 10.0), public=False)
     reference: str = param('com', "origin of the relative effector positions: com (the paper's "
                            "whole-body COM) or shoulders (ShoulderCenter: independent of the legs)",
-                           choices=REFERENCES)
+                           choices=REFERENCES, public=False)
     segment_frames: int = param(0, "frames of the user's recent motion matched against the "
                                 "example at its best phase for e1 (Sec. 6.1 compares a short "
                                 "segment: e1 = min over the example's phase of the mean "
                                 "squared distance of the segment's w to the example's; 0 = "
-                                "Eq. 5 on the current frame)", range=(0, 60), read_only=True)
+                                "Eq. 5 on the current frame)", range=(0, 60), read_only=True,
+                                public=False)
     missing_effectors: bool = param(True, "compare only the effectors the sensor TRACKS when "
                                     "others are INFERRED or NOT_TRACKED (occluded: frozen, "
                                     "collapsed or dropped): e1/e2 of the observed coordinates "
                                     "with the PCA coefficients fitted to them; false = every "
-                                    "effector as reported")
+                                    "effector as reported", public=False)
     e2_approach: bool = param(True, "e2 leaves out the part of the change that heads back "
                               "into the example's subspace (the residual shrinking: a user "
-                              "moving into the example's range at the onset of an imitation)")
+                              "moving into the example's range at the onset of an imitation)",
+                              public=False)
     missing_prior: float = param(0.1, "the missing-data fit's residual variance sigma^2 (D - m) "
                                  "(body-height^2 units) against the example's variance along "
                                  "each component: c = argmin |v_o - A_o c|^2 + sigma^2 sum "
                                  "c_i^2 / lambda_i (0 = plain least squares)",
-                                 range=(0.0, 10.0))
+                                 range=(0.0, 10.0), public=False)
     track_settle: int = param(3, "TRACKED frames in a row before an effector counts as observed "
                               "again (its velocity over lag frames and the low-pass settle)",
-                              range=(1, 30), read_only=True)
+                              range=(1, 30), read_only=True, public=False)
     fps: float = 30.0
 
     def validate(self) -> None:
@@ -262,11 +264,11 @@ class ExampleModel:
         self.height = float(height or estimate_height(self.positions[0]))
         w = feature_vectors(self.positions, self.effectors, self.height, params)
         self.w = w
-        self.mean, self.A, self.eigenvalues = pca_basis(w, components)
+        self.mean, self.A, self.eigenvalues = pca_columns(w, components)
         # the change-share gate's subspace: every direction in which the example's relative
         # positions move (the principal components up to 99 % of their variance)
         npos = 3 * len(self.effectors)
-        _, a_pos, lam_pos = pca_basis(w[:, :npos], npos)
+        _, a_pos, lam_pos = pca_columns(w[:, :npos], npos)
         keep = int(np.searchsorted(np.cumsum(lam_pos) / max(lam_pos.sum(), 1e-12), 0.99)) + 1
         self.A_pos = a_pos[:, :min(keep, npos)]
         # the example's own spread: total variance of w and of dw over ``lag`` frames (the units
@@ -465,6 +467,6 @@ class IntentionRecognizer:
 
 
 __all__ = ['ExampleModel', 'IntentionRecognizer', 'RecognizerParams', 'Recognition',
-           'center_of_mass', 'relative_effectors', 'pca_basis', 'reconstruction_error',
+           'center_of_mass', 'relative_effectors', 'pca_columns', 'reconstruction_error',
            'partial_reconstruction_error', 'residual', 'approach_discount',
            'feature_vectors', 'yaw_rotation']

@@ -76,7 +76,7 @@ class CorrectionConfig:
         'learned from', choices=('',) + TRACKERS)
     correction_stage: str = param(
         'input', 'where the correction runs: input (every joint, before the reliability) or '
-        'reliable (the reliable joints, after it)', choices=STAGES)
+        'reliable (the reliable joints, after it)', choices=STAGES, public=False)
     user_profile: str = param(
         '', "user profile name (<profiles_dir>/<name>.json, from build_profile): the user's "
         "segment lengths from the first frame; '' = measured per user")

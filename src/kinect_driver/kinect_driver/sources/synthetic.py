@@ -66,7 +66,8 @@ class SyntheticConfig:
     num_users: int = param(1, 'number of users side by side', range=(1, MAX_USERS))
     clip: str = param('', "motion ('' = built-in motions, a built-in name such as builtin_wave, "
                       'or a CMU BVH path)')
-    user_spacing: float = param(0.8, 'lateral distance between users (m)', range=(0.3, 2.0))
+    user_spacing: float = param(0.8, 'lateral distance between users (m)', range=(0.3, 2.0),
+                                public=False)
     sensor_params: str = param('', "sensor model YAML ('' = config/sensor_model.yaml or the "
                                'built-in defaults)')
     rate_hz: float = param(30.0, 'frame rate (Hz)', range=(1.0, 120.0))
