@@ -24,6 +24,11 @@ import sys
 from pathlib import Path
 
 from .graph import preset_path, repo_root
+from . import real_loso
+from pose_reconstruction.methods import load_preset
+from skeleton_eval import perturb as P
+from skeleton_eval.evaluation import to_json
+from skeleton_eval import evaluation as E
 
 
 def _parser():
@@ -90,7 +95,6 @@ def run_real(args) -> int:
     """``--real``: the development subjects (default folder) leave-one-subject-out; another
     folder (other subjects, same layout) with the correction learned from every development
     subject (kinect_bringup.real_loso)."""
-    from . import real_loso
     src = args.real
     shared = os.environ.get('KP_SHARED') or str((repo_root() or Path.cwd()).parent / 'shared')
     dev = Path(shared) / 'kinect' / 'ui-prmd'
@@ -143,7 +147,6 @@ def _preset(name: str) -> dict:
     or invalid."""
     if not name:
         return {}
-    from pose_reconstruction.methods import load_preset
     try:
         return load_preset(preset_path(name))
     except FileNotFoundError as exc:
@@ -151,8 +154,6 @@ def _preset(name: str) -> dict:
 
 
 def run_perturb(args, dev_clips, source) -> int:
-    from skeleton_eval import perturb as P
-    from skeleton_eval.evaluation import to_json
     try:
         seeds = [int(v) for v in args.perturb_seeds.split(',') if v]
         factors = [float(v) for v in args.perturb_factors.split(',') if v]
@@ -193,7 +194,6 @@ def run(argv=None) -> int:
     args = _parser().parse_args(argv)
     if args.real:
         return run_real(args)
-    from skeleton_eval import evaluation as E
 
     plugins = E.load_plugins()
     for mod, st in plugins.items():

@@ -31,6 +31,7 @@ from skeleton_core.model import (ANKLE_LEFT, ANKLE_RIGHT, ELBOW_LEFT, ELBOW_RIGH
                                  WRIST_RIGHT, subtree)
 
 from .intention import ExampleModel, center_of_mass, pca_columns, yaw_rotation
+from skeleton_core.geometry import facing_yaw
 
 # chains for the IK: effector -> (root, mid, end) joints; the effector rides rigidly on ``end``
 CHAINS = {'HandLeft': (SHOULDER_LEFT, ELBOW_LEFT, WRIST_LEFT, HAND_LEFT),
@@ -64,7 +65,6 @@ class PoseComposer:
         self.model = model
         p = model.positions
         rel = (p - center_of_mass(p)[:, None, :])
-        from skeleton_core.geometry import facing_yaw
         rel = np.einsum('tij,tkj->tki', yaw_rotation(facing_yaw(p)), rel) / model.height
         self.poses = rel.reshape(len(p), -1)            # (N, 60), height units
         self.q_avg, self.B, self.lam = pca_columns(self.poses, components)

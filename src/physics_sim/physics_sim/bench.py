@@ -38,6 +38,7 @@ from skeleton_eval import metrics
 
 from .controller import Gains
 from .simulation import SimConfig, Simulation
+from .controllers import explicit_pd as mod
 
 SENSOR_SHIFT = np.array([2.5, 0.0, -0.8])  # world -> sensor frame: person 2.5 m ahead, sensor 0.8 m up
 # (name, controller, integrator): every controller, actuator_pd (the default: Euler, explicit as the
@@ -100,14 +101,12 @@ class _numpy_kernel:
         self.on = on
 
     def __enter__(self):
-        from .controllers import explicit_pd as mod
         self.saved = mod.explicit_pd_wrenches
         if self.on:
             from .controller import _explicit_pd_numpy
             mod.explicit_pd_wrenches = _explicit_pd_numpy
 
     def __exit__(self, *exc):
-        from .controllers import explicit_pd as mod
         mod.explicit_pd_wrenches = self.saved
 
 

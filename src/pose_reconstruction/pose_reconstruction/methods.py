@@ -24,6 +24,7 @@ from .optimizer import OptimizerConfig
 from .posture_space import DatabaseArrays, as_database_arrays
 from .reconstructor import Reconstructor, ReconstructorConfig
 from .reliability import ReliabilityConfig
+from pathlib import Path
 
 _DEFAULT_DB = None
 
@@ -57,7 +58,6 @@ def make_method(method: str, db=None, database: str = '', db_size: Optional[int]
     ('' = default); ``db_size``: use only that many postures of it. ``correction`` may be a
     :class:`~.correction.SensorCorrection` or a file name, ``profile`` a
     :class:`~.profile.UserProfile` or a profile file name."""
-    from pathlib import Path
     corr = overrides.get('correction')
     if isinstance(corr, (str, Path)):
         from .correction import load as load_correction
