@@ -183,9 +183,6 @@ class RecognizerParams:
     combine: str = param('and', "and: e1 and e2 under their thresholds; or: either (the paper's "
                          "consistency read as an alternative to similarity)",
                          choices=('and', 'or'), public=False)
-    normalise: bool = param(False, "e1/e2 in units of each example's own spread (total "
-                            "variance of w, mean |dw|^2); the thresholds are then in those units",
-                            public=False)
     max_change_share: float = param(1.0, "largest share of the user's effector displacement "
                                     "over share_lag frames outside the example's position "
                                     "subspace, for all features (each example has its own "
@@ -271,11 +268,7 @@ class ExampleModel:
         _, a_pos, lam_pos = pca_columns(w[:, :npos], npos)
         keep = int(np.searchsorted(np.cumsum(lam_pos) / max(lam_pos.sum(), 1e-12), 0.99)) + 1
         self.A_pos = a_pos[:, :min(keep, npos)]
-        # the example's own spread: total variance of w and of dw over ``lag`` frames (the units
-        # of the normalised errors)
         lag = min(int(params.lag), len(w) - 1)
-        self.var_w = float(np.sum(np.var(w, axis=0)))
-        self.var_dw = float(np.mean(np.sum((w[lag:] - w[:-lag]) ** 2, axis=1)))
         # the variance of dw's coefficients (the missing-data fit's prior for e2)
         self.eigenvalues_dw = np.var((w[lag:] - w[:-lag]) @ self.A, axis=0)
         # the activity gate's normaliser: the example's RMS effector speed measured as the gate
@@ -305,8 +298,7 @@ class ExampleModel:
 
     def errors(self, w: np.ndarray, dw: np.ndarray, observed: Optional[np.ndarray] = None):
         """(e1, e2) of Eq. 5-6 (on the ``observed`` coordinates (D,) bool only, when given:
-        :func:`partial_reconstruction_error`); divided by the example's total variance of w and
-        mean |dw|^2 when ``params.normalise``."""
+        :func:`partial_reconstruction_error`)."""
         prm = getattr(self, 'params', None)
         p1 = p2 = None
         pf = float(getattr(prm, 'missing_prior', 0.0))
@@ -318,10 +310,7 @@ class ExampleModel:
         dr, _ = residual(dw, self.A, observed, p2)
         if getattr(prm, 'e2_approach', False):
             dr = approach_discount(r, dr)
-        e1, e2 = float(r @ r) * scale, float(dr @ dr) * scale
-        if getattr(prm, 'normalise', False):
-            return e1 / max(self.var_w, 1e-12), e2 / max(self.var_dw, 1e-12)
-        return e1, e2
+        return float(r @ r) * scale, float(dr @ dr) * scale
 
 
 @dataclass
