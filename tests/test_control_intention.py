@@ -136,23 +136,6 @@ def test_scripted_imitation_engages_the_bars_and_a_walk_engages_nothing():
     assert all(o.feature in ('', 'floor') for o in outs)
 
 
-def test_segment_error_is_the_best_phase_mean_distance():
-    """segment_frames: e1 = min over the example's (cyclic) phase of the mean squared distance of
-    the user's last L feature vectors to the example's, brute force against the vectorised one."""
-    rng = np.random.default_rng(3)
-    m = ExampleModel.__new__(ExampleModel)
-    m.w = rng.normal(size=(23, 6))
-    seg = m.w[[20, 21, 22]] + 0.01 * rng.normal(size=(3, 6))
-    brute = min(np.mean([np.sum((seg[j] - m.w[(p - 2 + j) % 23]) ** 2) for j in range(3)])
-                for p in range(23))
-    assert m.segment_error(seg) == pytest.approx(brute, rel=1e-9)
-    # the matched phase is the segment's own: far below a shuffled segment's
-    assert m.segment_error(seg) < 0.01 < m.segment_error(seg[::-1] + 1.0)
-    # wrap-around: a segment over the example's end and start matches as well as inside
-    wrap = m.w[[22, 0, 1]]
-    assert m.segment_error(wrap) == pytest.approx(0.0, abs=1e-9)
-
-
 def test_missing_effector_error_against_a_hand_computed_fit():
     """Eq. 5 on the observed coordinates: the subspace coefficient fitted to them, the residual
     scaled by (D - m) / (D_o - m)."""

@@ -64,30 +64,14 @@ def yaw_rotation(yaw) -> np.ndarray:
     return r
 
 
-REFERENCES = ('com', 'shoulders')
-
-
-def reference_point(positions: np.ndarray, reference: str = 'com') -> np.ndarray:
-    """The origin of the relative effector positions (..., 3): the whole-body COM (the paper's)
-    or the ShoulderCenter joint (``shoulders``: the arms' own root, independent of what the legs
-    do -- a user imitating a frog kick or a swing with the arms only, standing, has another COM
-    than the example)."""
-    p = np.asarray(positions, float)
-    if reference == 'shoulders':
-        return p[..., JOINT_INDEX['ShoulderCenter'], :]
-    if reference != 'com':
-        raise ValueError(f'reference must be one of {REFERENCES}, got {reference!r}')
-    return center_of_mass(p)
-
-
 def relative_effectors(positions: np.ndarray, effectors: Sequence[int],
-                       yaw: Optional[np.ndarray] = None, reference: str = 'com') -> np.ndarray:
-    """r_j = d_j - COM (or another :func:`reference_point`) in the yaw-removed body frame,
+                       yaw: Optional[np.ndarray] = None) -> np.ndarray:
+    """r_j = d_j - COM (the paper's origin, the whole-body COM) in the yaw-removed body frame,
     (..., len(effectors), 3)."""
     p = np.asarray(positions, float)
     if yaw is None:
         yaw = facing_yaw(p)
-    rel = p[..., list(effectors), :] - reference_point(p, reference)[..., None, :]
+    rel = p[..., list(effectors), :] - center_of_mass(p)[..., None, :]
     return np.einsum('...ij,...kj->...ki', yaw_rotation(yaw), rel)
 
 
@@ -180,9 +164,6 @@ class RecognizerParams:
     prefilter: float = param(0.03, 'time constant (s) of the low-pass on the relative joint '
                              'positions before the features (sensor noise)', range=(0.0, 1.0),
                              public=False)
-    combine: str = param('and', "and: e1 and e2 under their thresholds; or: either (the paper's "
-                         "consistency read as an alternative to similarity)",
-                         choices=('and', 'or'), public=False)
     max_change_share: float = param(1.0, "largest share of the user's effector displacement "
                                     "over share_lag frames outside the example's position "
                                     "subspace, for all features (each example has its own "
@@ -193,15 +174,6 @@ class RecognizerParams:
                            read_only=True, public=False)
     share_window: float = param(0.1, 'time constant (s) of the change-share averages',
                                 range=(0.0, 10.0), public=False)
-    reference: str = param('com', "origin of the relative effector positions: com (the paper's "
-                           "whole-body COM) or shoulders (ShoulderCenter: independent of the legs)",
-                           choices=REFERENCES, public=False)
-    segment_frames: int = param(0, "frames of the user's recent motion matched against the "
-                                "example at its best phase for e1 (Sec. 6.1 compares a short "
-                                "segment: e1 = min over the example's phase of the mean "
-                                "squared distance of the segment's w to the example's; 0 = "
-                                "Eq. 5 on the current frame)", range=(0, 60), read_only=True,
-                                public=False)
     missing_effectors: bool = param(True, "compare only the effectors the sensor TRACKS when "
                                     "others are INFERRED or NOT_TRACKED (occluded: frozen, "
                                     "collapsed or dropped): e1/e2 of the observed coordinates "
@@ -226,8 +198,6 @@ class RecognizerParams:
         for k in ('e1_threshold', 'e2_threshold', 'tau', 'fps'):
             if not getattr(self, k) > 0:
                 raise ValueError(f'{k} must be positive')
-        if self.combine not in ('and', 'or'):
-            raise ValueError("combine must be 'and' or 'or'")
         if not 1 <= int(self.lag) <= 30 or not 1 <= int(self.activity_lag) <= 60:
             raise ValueError('lag must be in [1, 30] frames, activity_lag in [1, 60]')
         if not (self.smoothing >= 0 and self.min_activity >= 0 and self.activity_window >= 0):
@@ -238,7 +208,7 @@ def feature_vectors(positions: np.ndarray, effectors: Sequence[int], height: flo
                     params: RecognizerParams) -> np.ndarray:
     """w for every frame of a clip (T, 20, 3) -> (T, 6 * len(effectors)); the first ``lag``
     frames get the velocity of frame ``lag``."""
-    r = relative_effectors(positions, effectors, reference=params.reference) / height
+    r = relative_effectors(positions, effectors) / height
     lag = int(params.lag)
     v = np.zeros_like(r)
     if len(r) > lag:
@@ -273,28 +243,12 @@ class ExampleModel:
         self.eigenvalues_dw = np.var((w[lag:] - w[:-lag]) @ self.A, axis=0)
         # the activity gate's normaliser: the example's RMS effector speed measured as the gate
         # measures it (displacement over activity_lag frames)
-        r = relative_effectors(self.positions, self.effectors,
-                               reference=params.reference) / self.height
+        r = relative_effectors(self.positions, self.effectors) / self.height
         k = min(int(params.activity_lag), len(r) - 1)
         v = (r[k:] - r[:-k]).reshape(len(r) - k, -1) * (params.fps / k)
         self.rms_speed = float(np.sqrt(np.mean(np.sum(v * v, axis=1))))
         # per effector: its share of the mean square speed (the gate over observed effectors)
         self.ms_speed = np.mean(v * v, axis=0).reshape(len(self.effectors), 3).sum(axis=1)
-
-    def segment_error(self, seg: np.ndarray) -> float:
-        """min over the example's phase phi (cyclic) of the mean over the segment's frames j of
-        |u_j - w_ex(phi - (L-1) + j)|^2, for the user's last L feature vectors ``seg`` (L, D),
-        oldest first."""
-        seg = np.asarray(seg, float)
-        n = len(seg)
-        cache = getattr(self, '_seg_norm', None)
-        if cache is None or cache[0] != n:
-            wn = np.sum(self.w * self.w, axis=1)
-            cache = self._seg_norm = (n, sum(np.roll(wn, n - 1 - j) for j in range(n)))
-        g = seg @ self.w.T                                     # (L, T)
-        cross = sum(np.roll(g[j], n - 1 - j) for j in range(n))
-        d = float(np.sum(seg * seg)) - 2.0 * cross + cache[1]
-        return float(max(np.min(d), 0.0) / n)
 
     def errors(self, w: np.ndarray, dw: np.ndarray, observed: Optional[np.ndarray] = None):
         """(e1, e2) of Eq. 5-6 (on the ``observed`` coordinates (D,) bool only, when given:
@@ -337,7 +291,6 @@ class IntentionRecognizer:
         self._hist = []      # the last lag + 1 relative joint arrays
         self._whist: Dict[str, list] = {}   # the last lag + 1 feature vectors per model
         self._avg: Dict[str, list] = {}
-        self._shist: Dict[str, list] = {}   # the last segment_frames feature vectors per model
         self._last_t: Optional[float] = None
         self._tracked_run: Optional[np.ndarray] = None   # TRACKED frames in a row per joint
 
@@ -345,7 +298,6 @@ class IntentionRecognizer:
         self._tracked_run = None
         self._hist = []
         self._whist = {}
-        self._shist = {}
         self._avg = {}
         self._last_t = None
 
@@ -365,7 +317,7 @@ class IntentionRecognizer:
             run = self._tracked_run if self._tracked_run is not None else np.full(len(tr), 10 ** 6)
             self._tracked_run = np.where(tr, run + 1, 0)
         yaw = facing_yaw(p)
-        com = reference_point(p, prm.reference)
+        com = center_of_mass(p)
         rot = yaw_rotation(yaw)
         rel = (p - com) @ rot.T / self.height          # every joint, body frame, height units
         if self._hist and prm.prefilter > 0:
@@ -406,13 +358,6 @@ class IntentionRecognizer:
             dw = w - wh[0]
             obs_w = None if obs_e is None else np.tile(np.repeat(obs_e, 3), 2)
             e1, e2 = m.errors(w, dw, obs_w)
-            nseg = int(prm.segment_frames)
-            if nseg > 0:
-                sh = self._shist.setdefault(m.name, [])
-                sh.append(w)
-                if len(sh) > nseg:
-                    sh.pop(0)
-                e1 = m.segment_error(np.array(sh))
             va = (r - old_a[idx].reshape(-1)) * (prm.fps / ka) if ka else np.zeros_like(r)
             # the share of the displacement over share_lag frames outside the example's
             # position subspace (energies averaged over share_window, then divided)
@@ -439,7 +384,7 @@ class IntentionRecognizer:
             share = a[3] / max(a[4], 1e-12)
             act = math.sqrt(max(a[2], 0.0))
             r1, r2 = a[0] / prm.e1_threshold, a[1] / prm.e2_threshold
-            ratio = max(r1, r2) if prm.combine == 'and' else min(r1, r2)
+            ratio = max(r1, r2)   # e1 and e2 both under their thresholds
             imitating = bool(ratio < 1.0 and act >= prm.min_activity and k >= lag
                              and share <= min(prm.max_change_share, m.max_change_share))
             conf = 1.0 / (1.0 + ratio * ratio)
