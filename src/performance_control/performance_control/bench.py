@@ -34,6 +34,7 @@ from typing import Dict, Optional
 
 import numpy as np
 
+from . import real_data as rd
 from .controller import ControlParams, PerformanceController, build_models
 from .features import load_world
 from .intention import IntentionRecognizer, RecognizerParams
@@ -132,7 +133,6 @@ def real_recognition(world, params: RecognizerParams, seed: int = 0) -> Dict:
     through the sensor model (per class, tuning / held-out clips; the walk recognizer not counted
     on locomotion: walking is walking), and subject 01's hanging frames recognised as the monkey
     bars after the first 0.5 s of each segment."""
-    from . import real_data as rd
     models = build_models(world, params)
     names = list(models)
     walk = [names.index(n) for n in walking_features(world)]

@@ -28,7 +28,8 @@ import numpy as np
 
 from .controller import ControlParams, PerformanceController, build_models
 from .features import load_world
-from .performances import SENSOR_HEIGHT, imitation_stream, jump_stream, to_sensor
+from .performances import (SENSOR_HEIGHT, TURNING_PLACEMENT, continuous_stream,
+                           imitation_stream, jump_stream, to_sensor)
 from skeleton_core.bagio import BagWriter
 from skeleton_core.cdr import frames_to_cdr
 from skeleton_core.conversions import SkeletonFrame
@@ -42,7 +43,6 @@ SCENES = ('monkey_bars', 'rope', 'trampoline', 'water', 'continuous')
 def scene_stream(world, name: str, seed: int, seconds: float = 8.0) -> np.ndarray:
     rng = np.random.default_rng(seed)
     if name == 'continuous':      # floor -> walk (turning) -> into the water -> swim (15 s)
-        from .performances import TURNING_PLACEMENT, continuous_stream
         p, _ = continuous_stream(world, np.random.default_rng(0))
         return to_sensor(p, 'cont0', 0, sensor_params=TURNING_PLACEMENT)   # the test's stream
     if name == 'trampoline':

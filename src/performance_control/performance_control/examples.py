@@ -19,6 +19,8 @@ A BVH example (``example.bvh`` in the world file) is loaded with the CMU loader.
 """
 from __future__ import annotations
 
+import os
+from pathlib import Path
 from typing import Callable, Dict, Optional
 
 import numpy as np
@@ -26,6 +28,7 @@ from skeleton_core.geometry import quat_rotate
 from skeleton_core.model import (ANKLE_LEFT, ANKLE_RIGHT, ELBOW_LEFT, ELBOW_RIGHT, FOOT_LEFT,
                                  FOOT_RIGHT, HAND_LEFT, HAND_RIGHT, KNEE_LEFT, KNEE_RIGHT,
                                  WRIST_LEFT, WRIST_RIGHT, Body, standard_body)
+from skeleton_data.mocap import load_cmu_clip
 from skeleton_data.motions import pose_from_rotations
 
 FPS = 30.0
@@ -259,8 +262,6 @@ GENERATORS: Dict[str, Callable] = {'monkey_swing': monkey_swing, 'rope_climb': r
 def bvh_path(name: str, world_file: str = ''):
     """The file of an example's ``bvh`` (absolute; next to the world file; under ``../shared``
     of the source tree) or None when there is none (the generator then makes the example)."""
-    import os
-    from pathlib import Path
     p = Path(os.path.expanduser(name))
     cands = [p] if p.is_absolute() else [p, Path(world_file).parent / p]
     if not p.is_absolute():
@@ -279,7 +280,6 @@ def example_motion(example, body: Optional[Body] = None, fps: float = FPS) -> np
     body = body or standard_body()
     path = bvh_path(example.bvh) if example.bvh else None
     if path is not None or (example.bvh and not example.generator):
-        from skeleton_data.mocap import load_cmu_clip
         clip = load_cmu_clip(path or example.bvh)
         p = np.asarray(clip.positions, float)
         if abs(clip.fps - fps) > 1e-3:

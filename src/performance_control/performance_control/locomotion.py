@@ -25,6 +25,7 @@ import math
 from typing import Optional
 
 import numpy as np
+from skeleton_core.geometry import facing_yaw
 from skeleton_core.model import HAND_LEFT, HAND_RIGHT
 
 from .intention import center_of_mass, yaw_rotation
@@ -41,7 +42,6 @@ def swing_signal(positions: np.ndarray, yaw) -> np.ndarray:
 def example_gait(positions: np.ndarray, fps: float) -> tuple:
     """(speed m/s, period s, swing amplitude (RMS of :func:`swing_signal`)) of a walk example
     (T, 20, 3)."""
-    from skeleton_core.geometry import facing_yaw
     p = np.asarray(positions, float)
     com = center_of_mass(p)
     dur = (len(p) - 1) / fps

@@ -16,12 +16,17 @@ here is shipped or cached in the repository).
 """
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterator, List, Optional, Sequence, Tuple
 
 import numpy as np
 from skeleton_core.model import JOINT_INDEX
+from skeleton_data.mocap import load_cmu_clip, load_cmu_clips, split_clips
+from skeleton_data.uiprmd import find_clips, load_kinect_clip
+
+from .performances import to_sensor
 
 HANG_CLIPS = ('01_10', '01_11', '01_12')
 UIPRMD_SUBJECTS = ('s01', 's02', 's03', 's04', 's05')
@@ -29,7 +34,6 @@ UIPRMD_SUBJECTS = ('s01', 's02', 's03', 's04', 's05')
 
 def shared_dir() -> Path:
     """``../shared`` of the source tree (KINECT_POSTURE_ROOT/../shared, else next to this file)."""
-    import os
     root = os.environ.get('KINECT_POSTURE_ROOT')
     cands = [Path(root).parent / 'shared'] if root else []
     here = Path(__file__).resolve()
@@ -54,7 +58,6 @@ class Stream:
 
 def uiprmd_streams(src: Optional[Path] = None, subjects: Sequence[str] = UIPRMD_SUBJECTS
                    ) -> Iterator[Stream]:
-    from skeleton_data.uiprmd import find_clips, load_kinect_clip
     src = Path(src) if src else shared_dir() / 'kinect' / 'ui-prmd'
     for f in find_clips(src):
         k = load_kinect_clip(f)
@@ -68,9 +71,6 @@ def uiprmd_streams(src: Optional[Path] = None, subjects: Sequence[str] = UIPRMD_
 
 def cmu_streams(cmu_dir: Optional[Path] = None, seed: int = 0, noise: bool = True
                 ) -> Iterator[Stream]:
-    from skeleton_data.mocap import load_cmu_clips, split_clips
-
-    from .performances import to_sensor
     cmu_dir = Path(cmu_dir) if cmu_dir else shared_dir() / 'mocap' / 'cmu'
     clips = [c for c in load_cmu_clips(cmu_dir, classes=None) if not c.name.startswith('01_')]
     tune, held = split_clips(clips, 0.3)
@@ -105,9 +105,6 @@ def hanging_segments(cmu_dir: Optional[Path] = None, clips: Sequence[str] = HANG
                      ) -> Iterator[Stream]:
     """Subject 01's playground clips through the sensor model, labelled (the label from the clean
     mocap)."""
-    from skeleton_data.mocap import load_cmu_clip
-
-    from .performances import to_sensor
     cmu_dir = Path(cmu_dir) if cmu_dir else shared_dir() / 'mocap' / 'cmu'
     for i, name in enumerate(clips):
         f = cmu_dir / f'{name}.bvh'
