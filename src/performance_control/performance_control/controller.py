@@ -383,7 +383,9 @@ class PerformanceController:
             rw = recs.get(self.floor_walk)
             if rw is not None and rw.imitating:
                 self._walk_seen = t
-            self.walking = bool(not feature and t - self._walk_seen <= WALK_HOLD
+            on_floor = all(self.world.features[c.feature].kind == 'floor'
+                           for c in dp.contacts.values())   # not on a rock, the trampoline
+            self.walking = bool(not feature and on_floor and t - self._walk_seen <= WALK_HOLD
                                 and dp.com[2] < self._stand_z + 0.3)
             if self.walking:
                 if not self._was_walking:
