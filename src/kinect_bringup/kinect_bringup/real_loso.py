@@ -125,7 +125,6 @@ def lab_database(src, held_out: int, clips):
 
 def _make(variant: str, correction, db, method_params: Optional[Dict] = None):
     from skeleton_eval import evaluation as E
-    from skeleton_eval import no_harm as NH
     if variant == 'raw+corr':
         return _Corrected(correction)
     base = variant.split('+')[0]
@@ -247,6 +246,7 @@ def evaluate(src, variants: Sequence[str] = DEFAULT_VARIANTS, loso: bool = True,
     from pose_reconstruction.correction import build_from_clips
     from pose_reconstruction.methods import default_database
     from skeleton_eval import evaluation as E
+    from skeleton_eval import no_harm as NH
     from skeleton_eval.real_eval import make_streams
     from skeleton_eval.sensor_model import load_params
     from skeleton_eval.paired import load_dataset
