@@ -175,3 +175,42 @@ def test_turn_episodes_at_the_configured_rate():
     t = [e for e in s.events if e['type'] == 'turn'][0]
     mid = t['frame'] + t['duration'] // 2
     assert np.allclose(s.truth[mid, HIP_CENTER], m.place(toy_clip(90.0))[mid, HIP_CENTER])
+
+
+def test_class_e_small_persistent_tracked_errors():
+    """Class e: TRACKED joints 5-15 cm off for seconds, the parent pulled partway, marked not
+    clean; the other classes draw no random number for it (their streams are unchanged)."""
+    m = SensorModel({'scenarios': {'e': {'turn_per_min': 0.0, 'occlusion_per_min': 0.0,
+                                         'false_positive_per_min': 0.0}}}, seed=2)
+    s = m.corrupt(toy_clip(60.0), 'e')
+    ev = [e for e in s.events if e['type'] == 'tracked_error']
+    # 8 per minute while none is active, each 1-5 s (~3 s): about 6 in a minute
+    assert 3 <= len(ev) <= 12, len(ev)
+    ref = SensorModel({'tracked_error': {'enabled': False},
+                       'scenarios': {'e': {'turn_per_min': 0.0, 'occlusion_per_min': 0.0,
+                                           'false_positive_per_min': 0.0}}}, seed=2)
+    assert {e['cause'] for e in ev} <= {'rest', 'drift'}
+    checked = False
+    for e in ev:
+        j, par = e['joints']
+        assert 0.05 <= e['offset_m'] <= 0.15 and 0.3 <= e['neighbour_fraction'] <= 0.7
+        mid = e['frame'] + e['duration'] // 2
+        if mid >= len(s) or e['duration'] < 32 or s.tracking_state[mid, j] != TRACKED:
+            continue   # short, or the joint self-occluded meanwhile (INFERRED)
+        checked = True
+        assert not s.clean[mid, j]
+        assert not s.clean[mid, par]
+        # the joint's error (beyond the ordinary noise: the 15 frames around mid, averaged)
+        # is of the configured size, the parent's a fraction of it
+        w = slice(mid - 7, mid + 8)
+        err = np.linalg.norm((s.positions[w, j] - s.truth[w, j]).mean(0))
+        assert 0.02 < err < 0.25, err
+    assert checked
+    # without class e's rate, nothing changes in the other classes
+    for sc in ('a', 'd'):
+        a = SensorModel(seed=0).corrupt(toy_clip(20.0), sc)
+        b = SensorModel({'tracked_error': {'enabled': False}}, seed=0).corrupt(toy_clip(20.0), sc)
+        assert np.array_equal(a.positions, b.positions)
+    # and disabling it in class e leaves the stream without such errors
+    s0 = ref.corrupt(toy_clip(60.0), 'e')
+    assert not [e for e in s0.events if e['type'] == 'tracked_error']

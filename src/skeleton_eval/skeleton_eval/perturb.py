@@ -11,7 +11,10 @@ at a time and the whole table is run again per variant and per sensor seed:
   scenario), their length (``episodes.duration_s``) and the wobble of held joints
   (``occlusion_geometry.hold_noise_mm``) — so 0.5x / 1.5x is about 0.25x / 2.25x the occluded time;
 * ``failure`` — the rates of the wrong-but-TRACKED events: ``false_positive_per_min`` and the
-  confident failures' ``<mode>_per_min`` of every scenario.
+  confident failures' ``<mode>_per_min`` of every scenario;
+* ``tracked`` — the small persistent errors of TRACKED joints (class e): their rate
+  (``tracked_error_per_min``), size (``tracked_error.offset_m``) and length
+  (``tracked_error.duration_s``).
 
 :func:`targets` checks the issue-21 targets on the result (C against raw per class and variant).
 """
@@ -25,7 +28,7 @@ import numpy as np
 from . import no_harm as NH
 from .sensor_model import CONFIDENT_FAILURES, load_params
 
-GROUPS = ('noise', 'offset', 'occlusion', 'failure')
+GROUPS = ('noise', 'offset', 'occlusion', 'failure', 'tracked')
 OCCLUDED_CLASSES = ('a', 'b', 'c')
 FAILURE_CLASS = 'd'
 TRACKED_ERROR_CLASS = 'e'   # small persistent errors of TRACKED joints (issue 34)
@@ -57,6 +60,13 @@ def perturbed_params(group: str, factor: float, base=None) -> Dict:
         p['episodes']['duration_s'] = [float(v) * f for v in p['episodes']['duration_s']]
         p['occlusion_geometry']['hold_noise_mm'] = float(
             p['occlusion_geometry']['hold_noise_mm']) * f
+    elif group == 'tracked':
+        for sc in p['scenarios'].values():
+            if 'tracked_error_per_min' in sc:
+                sc['tracked_error_per_min'] = float(sc['tracked_error_per_min']) * f
+        te = p['tracked_error']
+        te['offset_m'] = [float(v) * f for v in te['offset_m']]
+        te['duration_s'] = [float(v) * f for v in te['duration_s']]
     else:
         for sc in p['scenarios'].values():
             for key in ['false_positive_per_min'] + [f'{m}_per_min' for m in CONFIDENT_FAILURES]:
@@ -75,7 +85,7 @@ def variants(factors: Sequence[float] = (0.5, 1.5),
     return out
 
 
-def run(methods, clips, scenarios=('a', 'b', 'c', 'd'), seeds: Sequence[int] = (0,),
+def run(methods, clips, scenarios=('a', 'b', 'c', 'd', 'e'), seeds: Sequence[int] = (0,),
         factors: Sequence[float] = (0.5, 1.5), groups: Sequence[str] = GROUPS,
         max_frames: Optional[int] = 300, base_params=None, data_source: str = '',
         progress: Optional[Callable] = None, evaluate: Optional[Callable] = None) -> Dict:
