@@ -227,6 +227,37 @@ def _group_array(table: Dict[str, float]) -> np.ndarray:
     return np.array([float(table[g]) for g in JOINT_GROUP])
 
 
+LOOP_BLEND_FRAMES = 15  # 0.5 s at 30 Hz: a looping clip ends in its first posture (stream())
+
+
+def loop_blend(pos: np.ndarray, frames: int = LOOP_BLEND_FRAMES) -> np.ndarray:
+    """(T, 20, 3) ``pos`` whose last ``frames`` (at most a third of the clip) turn smoothly
+    into its first posture: the root moves linearly, every segment's direction is blended
+    (normalised) with the same smooth-step weight at its own length, so a clip played in a loop
+    has no teleport at the loop point and keeps its bone lengths."""
+    from skeleton_core.model import forward_kinematics, parent_relative
+    p = np.array(pos, float)
+    T = len(p)
+    B = min(int(frames), T // 3)
+    if B < 2:
+        return p
+    rel = parent_relative(p)
+    u0 = rel[0, 1:] / np.maximum(np.linalg.norm(rel[0, 1:], axis=-1, keepdims=True), 1e-9)
+    for k in range(B):
+        i = T - B + k
+        x = (k + 1) / (B + 1)
+        w = x * x * (3 - 2 * x)
+        seg = rel[i, 1:]
+        L = np.linalg.norm(seg, axis=-1, keepdims=True)
+        u = (1 - w) * seg / np.maximum(L, 1e-9) + w * u0
+        u *= L / np.maximum(np.linalg.norm(u, axis=-1, keepdims=True), 1e-9)
+        root = (1 - w) * p[i, HIP_CENTER] + w * p[0, HIP_CENTER]
+        r = rel[i].copy()
+        r[1:] = u
+        p[i] = forward_kinematics(r, root)
+    return p
+
+
 def _point_segment_2d(p, a, b):
     """Distance and parameter of 2-D points p (J,2) to segments a-b (S,2) -> (J,S)."""
     ab = b - a                                     # (S,2)
@@ -857,8 +888,12 @@ class SensorModel:
 
     def stream(self, clip, scenario: str = 'a', loop: bool = True,
                seed: Optional[int] = None) -> Iterator[Tuple[np.ndarray, np.ndarray, np.ndarray]]:
-        """Live: yields ``(positions, tracking_state, truth)`` per frame (forever if ``loop``)."""
+        """Live: yields ``(positions, tracking_state, truth)`` per frame (forever if ``loop``;
+        then the clip's last :data:`LOOP_BLEND_FRAMES` turn into its first posture,
+        :func:`loop_blend`: no teleport at the loop point)."""
         c = _Corrupter(self, clip, scenario, self.stream_seed(clip, scenario, seed))
+        if loop:
+            c.truth_all = loop_blend(c.truth_all)
         while True:
             for i in range(c.T):
                 pos, st, tr, _ = c.step(i)
