@@ -35,12 +35,14 @@ from typing import Dict, Iterator, List, Optional, Sequence, Tuple, Union
 import numpy as np
 
 from skeleton_core.geometry import facing_yaw, yaw_matrix
+from skeleton_core.model import forward_kinematics, parent_relative
 from skeleton_core.model import (CHILDREN, FOOT_LEFT, FOOT_RIGHT, HAND_LEFT, HAND_RIGHT, HIP_CENTER,
                                  HIP_LEFT, HIP_RIGHT, INFERRED, JOINT_INDEX,
                                  JOINT_NAMES, LIMB_JOINTS, MIRROR, NOT_TRACKED, NUM_JOINTS, PARENTS,
                                  SEGMENT_CHILDREN, SEGMENT_CHILD_INDEX, SEGMENT_PARENTS,
                                  SEGMENT_PARENT_INDEX, SHOULDER_LEFT, SHOULDER_RIGHT, SPINE,
                                  TRACKED, estimate_height, segment_lengths, standard_body)
+from skeleton_core.model import SEGMENT_NAMES
 
 SCENARIOS = ('clean', 'a', 'b', 'c', 'd', 'e')
 CONFIDENT_FAILURES = ('hand_snap', 'limb_swap', 'foot_slide', 'person_jump')
@@ -235,7 +237,6 @@ def loop_blend(pos: np.ndarray, frames: int = LOOP_BLEND_FRAMES) -> np.ndarray:
     into its first posture: the root moves linearly, every segment's direction is blended
     (normalised) with the same smooth-step weight at its own length, so a clip played in a loop
     has no teleport at the loop point and keeps its bone lengths."""
-    from skeleton_core.model import forward_kinematics, parent_relative
     p = np.array(pos, float)
     T = len(p)
     B = min(int(frames), T // 3)
@@ -997,7 +998,6 @@ def format_statistics(stats: Dict) -> str:
     for j, n in enumerate(JOINT_NAMES):
         lines.append(f'| {n} | {stats["jitter_mm"][j]:.1f} | {stats["offset_mm"][j]:.1f} |')
     lines += ['', '| segment | length std (mm) |', '|---|---:|']
-    from skeleton_core.model import SEGMENT_NAMES
     for k, n in enumerate(SEGMENT_NAMES):
         lines.append(f'| {n} | {stats["bone_length_std_mm"][k]:.1f} |')
     lines += ['', '| scenario | minutes | not tracked | inferred | false positive | events/min |',
