@@ -50,7 +50,7 @@ from .mocap import FIVE_CLASSES, MotionClip, rest_directions
 from skeleton_core.model import (JOINT_NAMES, NUM_JOINTS, SEGMENT_CHILD_INDEX, SEGMENT_NAMES,
                                  SEGMENT_PARENT_INDEX, Body, estimate_height, standard_body)
 
-__all__ = ['MotionDatabase', 'DatabaseError', 'build_database', 'load_or_build_default',
+__all__ = ['MotionDatabase', 'DatabaseError', 'build_database', 'load_or_build_default', 'default_path',
            'segment_twists', 'filter_postures', 'DEFAULT_THRESHOLD', 'FORMAT_VERSION',
            'default_cache_dir', 'default_shared_dir', 'repo_root', 'class_statistics',
            'MappedSource', 'uiprmd_vicon_source']
@@ -371,6 +371,16 @@ def repo_root() -> Path:
 def default_cache_dir() -> Path:
     env = os.environ.get('KINECT_POSTURE_CACHE')
     return Path(env) if env else repo_root() / 'cache'
+
+
+DEFAULT_FILE = 'motion_db.npz'
+
+
+def default_path() -> Path:
+    """The default motion database file: what ``make build-db`` writes and what every node's
+    ``database`` parameter ('' ) loads. Nodes never build it (a missing file is a one-line
+    configure error naming ``make build-db``)."""
+    return default_cache_dir() / DEFAULT_FILE
 
 
 def default_shared_dir() -> Optional[Path]:
