@@ -182,7 +182,7 @@ class PhysicsNode(ManagedNode):
         if v['feature_world']:
             self.subscription(Intention, v['intention_topic'], self._on_intention, 10)
         self.service(ApplyPush, '~/apply_push', self._on_push_srv)
-        self.timer(1.0 / v['output_rate'], self._on_timer)
+        self.tick_timer = self.timer(1.0 / v['output_rate'], self._on_timer)
         self.get_logger().info(
             f'physics: {v["controller"]} at {v["timestep"] * 1000:.1f} ms, input {v["input_topic"]}'
             f' -> {v["output_topic"]}, {len(self.sim.objects)} objects'
