@@ -434,8 +434,8 @@ def main(argv=None) -> int:
                                 capture_output=True).stdout.strip() or 'unknown'
     except OSError:
         commit = 'unknown'
-    from skeleton_data.database import load_or_build_default
-    load_or_build_default()  # build the cache once, outside the measurement
+    from skeleton_data.database import build_default
+    build_default()  # the nodes' default database file (make build-db), outside the measurement
     probe = LatencyProbe()
     results = []
     try:

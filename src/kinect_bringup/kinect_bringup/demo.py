@@ -119,10 +119,11 @@ def main(argv=None) -> int:
     if bag.exists():
         bag.unlink()
 
-    # Build (or load from cache) the motion database first, so the nodes start at once.
+    # The nodes load the default database file, never build it: its producer (make build-db)
+    # first, from the cache when its inputs have not changed.
     t0 = time.monotonic()
-    from skeleton_data.database import load_or_build_default
-    db = load_or_build_default()
+    from skeleton_data.database import build_default
+    db = build_default()
     print(f'[demo] motion database: {len(db)} postures ({db.meta.get("source", "?")}), '
           f'{time.monotonic() - t0:.1f} s', flush=True)
 

@@ -98,9 +98,9 @@ def main(argv=None) -> int:
     from rclpy.node import Node
     from skeleton_msgs.msg import SkeletonArray
 
-    from skeleton_data.database import load_or_build_default
+    from skeleton_data.database import build_default
     from .fuzz import MUTATIONS, malformed, valid_array
-    load_or_build_default()
+    build_default()   # the nodes' default database file (make build-db)
 
     ctx = rclpy.Context()
     rclpy.init(context=ctx)

@@ -51,6 +51,7 @@ from skeleton_core.model import (JOINT_NAMES, NUM_JOINTS, SEGMENT_CHILD_INDEX, S
                                  SEGMENT_PARENT_INDEX, Body, estimate_height, standard_body)
 
 __all__ = ['MotionDatabase', 'DatabaseError', 'build_database', 'load_or_build_default', 'default_path',
+           'build_default',
            'segment_twists', 'filter_postures', 'DEFAULT_THRESHOLD', 'FORMAT_VERSION',
            'default_cache_dir', 'default_shared_dir', 'repo_root', 'class_statistics',
            'MappedSource', 'uiprmd_vicon_source']
@@ -543,4 +544,13 @@ def load_or_build_default(source: str = 'auto', cache_dir=None, shared_dir=None,
     log.info('motion database built: %d -> %d postures from %d clips in %.1f s, saved %s',
              st['frames_before'], st['frames_after'], st['clips'], st['seconds'], path)
     out_stats.update(st, cache_hit=False, path=str(path), skipped=skipped)
+    return db
+
+
+def build_default(**kwargs) -> MotionDatabase:
+    """The producer of the nodes' default database (``make build-db``, and the tools that start
+    the graph: ``demo``, ``bench``, ``soak``): :func:`load_or_build_default` (``kwargs``), written
+    to :func:`default_path`, the file every node's default ``database`` loads."""
+    db = load_or_build_default(**kwargs)
+    db.save(default_path())
     return db

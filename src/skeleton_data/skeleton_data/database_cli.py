@@ -172,14 +172,13 @@ def main(argv=None) -> int:
             st.update(cache_hit=False, path=str(out), skipped=skipped, load_seconds=t_load)
         else:
             st = {}
-            db = database.load_or_build_default(
-                args.source, cache_dir=args.cache_dir, threshold=threshold, classes=classes,
-                split=split, mirror=args.mirror, progress=progress, rebuild=args.rebuild,
-                stats=st, mapped=mapped)
-            # the fixed file every node's default `database` loads (nodes never build one)
-            default = database.default_path()
-            db.save(default)
-            st['default_path'] = str(default)
+            # the cached build, written to the fixed file every node's default `database`
+            # loads (nodes never build one)
+            db = database.build_default(
+                source=args.source, cache_dir=args.cache_dir, threshold=threshold,
+                classes=classes, split=split, mirror=args.mirror, progress=progress,
+                rebuild=args.rebuild, stats=st, mapped=mapped)
+            st['default_path'] = str(database.default_path())
     except (database.DatabaseError, FileNotFoundError, ValueError) as e:
         print(f'build_db: {e}', file=sys.stderr)
         return 1
