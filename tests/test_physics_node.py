@@ -17,7 +17,7 @@ from visualization_msgs.msg import MarkerArray  # noqa: E402
 from skeleton_core.conversions import SkeletonFrame, frames_from_array_msg, frames_to_array_msg  # noqa: E402
 from skeleton_core.model import NUM_JOINTS, segment_lengths, standard_body  # noqa: E402
 from physics_sim.physics_node import PhysicsNode  # noqa: E402
-from skeleton_core.rosnode import TransitionFailed, bring_up  # noqa: E402
+from skeleton_core.rosnode import bring_up  # noqa: E402
 from ros_helpers import Spinner, wait_until as _wait  # noqa: E402
 
 BODY = standard_body()

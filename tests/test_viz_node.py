@@ -17,7 +17,7 @@ from visualization_msgs.msg import Marker, MarkerArray  # noqa: E402
 from skeleton_core.conversions import SkeletonFrame, frames_to_array_msg  # noqa: E402
 from skeleton_core.model import ELBOW_LEFT, NUM_JOINTS, NUM_SEGMENTS, standard_body  # noqa: E402
 from viz.viz_node import VizNode  # noqa: E402
-from skeleton_core.rosnode import TransitionFailed, bring_up  # noqa: E402
+from skeleton_core.rosnode import bring_up  # noqa: E402
 from ros_helpers import Spinner  # noqa: E402
 
 
