@@ -46,10 +46,10 @@ class RecorderNode(ManagedNode):
 
     def __init__(self, **kwargs):
         super().__init__('recorder', **kwargs)
-        self.params = Parameters(self, PARAMS)
         self._lock = threading.Lock()
         self._writer = None
         self.counts = {}
+        self.params = Parameters(self, PARAMS)
 
     def configure(self) -> None:
         from skeleton_core.bagio import BagWriter

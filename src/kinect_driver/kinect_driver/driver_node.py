@@ -104,8 +104,9 @@ class DriverNode(ManagedNode):
         super().__init__('driver', **kwargs)
         from skeleton_msgs.msg import SkeletonArray
         self._msg_type = SkeletonArray
-        self.params = Parameters(self, driver_params())
         self.source = None
+        self._other_pubs = {}
+        self.params = Parameters(self, driver_params())
 
     def configure(self) -> None:
         v = self.params.values

@@ -71,11 +71,11 @@ class ControlNode(ManagedNode):
     def __init__(self, **kwargs):
         super().__init__('control', **kwargs)
         self._drop = InputDrops(self.health, self.get_logger())
-        self.params = Parameters(self, PARAMS, apply=self._apply_change)
         self.world = None
         self.cp = None
         self.users: Dict[int, PerformanceController] = {}
         self.last_seen: Dict[int, float] = {}
+        self.params = Parameters(self, PARAMS, apply=self._apply_change)
 
     def configure(self) -> None:
         v = self.params.values

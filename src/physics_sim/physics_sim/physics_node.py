@@ -144,10 +144,10 @@ class PhysicsNode(ManagedNode):
     def __init__(self, **kwargs):
         super().__init__('physics', **kwargs)
         self._drop = InputDrops(self.health, self.get_logger())
-        self.params = Parameters(self, PARAMS, validate=self._validate_change,
-                                 apply=self._apply_change)
         self.sim: Optional[Simulation] = None
         self._deferred = None   # one-shot timer of a frame that arrived too soon after a tick
+        self.params = Parameters(self, PARAMS, validate=self._validate_change,
+                                 apply=self._apply_change)
 
     # ------------------------------------------------------------------ lifecycle
     def configure(self) -> None:

@@ -334,7 +334,10 @@ def load_user_terms(values: Dict[str, Any], logger=None) -> Dict[str, Any]:
             path = C.default_path()
             if not path.is_file():
                 raise FileNotFoundError(missing_correction(path))
-            corr = C.load(path)   # CorrectionFileError (a ValueError): one line
+            try:
+                corr = C.load(path)
+            except C.CorrectionFileError as e:   # one line, with its producer
+                raise ValueError(f'{e}: rebuild it with `{BUILD_CORRECTION}`') from None
     elif name:
         corr = C.load(name)  # CorrectionFileError (a ValueError): one line
     if corr is not None:

@@ -229,12 +229,14 @@ class ManagedNode(LifecycleNode):
     """
 
     def __init__(self, name: str, **kwargs):
-        super().__init__(name, **kwargs)
-        self.health = Health()
+        # (first: a constructor that fails later is still destroyed cleanly, e.g. by the
+        # context's shutdown)
         self.lifecycle_state = 'unconfigured'
         self.configure_error: Optional[str] = None   # the last failed configure's line
         self._configured: list = []   # (kind, entity) made by configure, released on cleanup
         self._active: list = []       # made by activate, released on deactivate
+        super().__init__(name, **kwargs)
+        self.health = Health()
 
     # -- hooks -----------------------------------------------------------------------------------
     def configure(self) -> None:
@@ -302,7 +304,8 @@ class ManagedNode(LifecycleNode):
             self.configure()
         except CONFIGURE_ERRORS as e:
             self.configure_error = str(e)
-            self.get_logger().error(str(e))
+            if self.context.ok():   # (else: stopped while starting, nothing to report)
+                self.get_logger().error(str(e))
             self._release_configured()
             return TransitionCallbackReturn.FAILURE
         self.lifecycle_state = 'inactive'
@@ -313,7 +316,8 @@ class ManagedNode(LifecycleNode):
             self.activate()
         except CONFIGURE_ERRORS as e:
             self.configure_error = str(e)
-            self.get_logger().error(str(e))
+            if self.context.ok():
+                self.get_logger().error(str(e))
             self._release(self._active)
             return TransitionCallbackReturn.FAILURE
         ret = super().on_activate(state)   # enables the lifecycle publishers
@@ -348,8 +352,9 @@ class ManagedNode(LifecycleNode):
 
     def _release_configured(self) -> None:
         self._release(self._configured)
-        self.cleanup()
-        self.lifecycle_state = 'unconfigured'
+        if self.lifecycle_state != 'finalized':
+            self.cleanup()
+            self.lifecycle_state = 'unconfigured'
 
     def _release_all(self) -> None:
         self._stop()
@@ -357,7 +362,9 @@ class ManagedNode(LifecycleNode):
         self._release_configured()
 
     def destroy_node(self):
-        self._release_all()
+        if self.lifecycle_state != 'finalized':
+            self._release_all()
+            self.lifecycle_state = 'finalized'
         return super().destroy_node()
 
 
@@ -405,13 +412,14 @@ def run_node(node_factory: Callable[..., Node], args=None, executor=None) -> int
         rclpy.try_shutdown()
         return 0
     except (ValueError, FileNotFoundError, RuntimeError, OSError, ParameterException) as e:
-        if not isinstance(e, TransitionFailed):   # (a failed transition has logged its line)
-            print(f'[ERROR] {e}', file=sys.stderr)
+        stopped = not rclpy.ok()   # Ctrl-C / SIGTERM while starting up: a clean stop
+        if not isinstance(e, TransitionFailed) and not stopped:
+            print(f'[ERROR] {e}', file=sys.stderr)   # (a failed transition has logged its line)
         if node is not None:
+            ignore_further_interrupts()
             node.destroy_node()
-        if rclpy.ok():
-            rclpy.try_shutdown()
-        return 1
+        rclpy.try_shutdown()
+        return 0 if stopped else 1
     try:
         if executor is None:
             rclpy.spin(node)

@@ -145,6 +145,9 @@ class VizNode(ManagedNode):
 
     def __init__(self, **kwargs):
         super().__init__('viz', **kwargs)
+        self.scene = None
+        self._layer_subs: Dict[str, Any] = {}
+        self._timer = None
         try:
             self.params = Parameters(self, PARAMS, validate=self._validate_change,
                                      apply=self._apply_change)
