@@ -17,6 +17,8 @@ import time
 from pathlib import Path
 
 from .graph import repo_root
+from skeleton_data.database import build_default
+from viz.report import main as report_main
 
 
 def launch_available() -> bool:
@@ -122,7 +124,6 @@ def main(argv=None) -> int:
     # The nodes load the default database file, never build it: its producer (make build-db)
     # first, from the cache when its inputs have not changed.
     t0 = time.monotonic()
-    from skeleton_data.database import build_default
     db = build_default()
     print(f'[demo] motion database: {len(db)} postures ({db.meta.get("source", "?")}), '
           f'{time.monotonic() - t0:.1f} s', flush=True)
@@ -135,7 +136,6 @@ def main(argv=None) -> int:
         print(f'[demo] no bag was written at {bag}', file=sys.stderr)
         return 1
 
-    from viz.report import main as report_main
     rc = report_main(['--bag', str(bag), '--out', str(out)])
     print(f'[demo] done. Outputs in {out}:')
     for f in sorted(out.iterdir()):

@@ -38,7 +38,10 @@ def descriptor(spec: ParamSpec) -> ParameterDescriptor:
 
 
 class Parameters:
-    """Declares :class:`ParamSpec` s on a node and keeps the current values in ``values``.
+    """Declares the public :class:`ParamSpec` s on a node and keeps the current values in
+    ``values``. A spec with ``public=False`` (set by a preset only, ``skeleton_core.params``) is
+    not declared: its default stays in ``values``. A parameter file or ``-p`` naming a parameter
+    the node does not declare is refused with one line (rclpy would silently ignore it).
 
     Two callbacks, as rclpy separates them: the on-set callback only *validates* (each value
     against its spec, then ``validate(values_after, changed)`` for cross-parameter checks: an
@@ -51,10 +54,12 @@ class Parameters:
                  validate: Optional[Callable[[Dict[str, Any], Dict[str, Any]], Optional[str]]] = None,
                  apply: Optional[Callable[[Dict[str, Any]], None]] = None):
         self._node = node
-        self.specs = {s.name: s for s in specs}
-        self.values: Dict[str, Any] = {}
+        every = list(specs)
+        self.specs = {s.name: s for s in every if s.public}
+        self.values: Dict[str, Any] = {s.name: s.default for s in every if not s.public}
         self._validate = validate
         self._apply = apply
+        check_overrides(node, self.specs, {s.name for s in every if not s.public})
         for s in self.specs.values():
             p = node.declare_parameter(s.name, s.default, descriptor(s))
             value = self._typed(s, p.value)
@@ -106,6 +111,30 @@ class Parameters:
             'parameters set: ' + ', '.join(f'{k}={v!r}' for k, v in changed.items()))
         if self._apply is not None:
             self._apply(changed)
+
+
+# parameters rclpy itself reads from the overrides (declared by Node, or QoS overrides)
+_RCLPY_PARAMS = ('use_sim_time', 'start_type_description_service')
+
+
+def check_overrides(node: Node, declared: Iterable[str], fixed: Iterable[str] = ()) -> None:
+    """Raise ValueError (one line) when the node's parameter overrides (its YAML files, ``-p``,
+    launch ``parameters=``) name a parameter outside ``declared``: a misspelt or removed name
+    would otherwise be ignored without a word. ``fixed``: names the node keeps as fixed values
+    (set by a preset in the evaluation, not on a node), said so in the message."""
+    overrides = getattr(node, '_parameter_overrides', None) or {}
+    known = set(declared) | set(_RCLPY_PARAMS) | set(getattr(node, '_parameters', {}))
+    unknown = sorted(n for n in overrides
+                     if n not in known and not n.startswith('qos_overrides.'))
+    if not unknown:
+        return
+    fixed = set(fixed)
+    preset = [n for n in unknown if n in fixed]
+    what = (f'{unknown[0]!r} is not a parameter of node {node.get_name()!r}'
+            + (' (a fixed value of the library, set only by a preset file in config/presets)'
+               if preset and preset[0] == unknown[0] else ' (removed or misspelt)'))
+    more = f'; also {", ".join(unknown[1:])}' if len(unknown) > 1 else ''
+    raise ValueError(f'{what}{more}: see docs/parameters.md')
 
 
 class InputDrops:
