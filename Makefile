@@ -8,8 +8,10 @@ help:
 	@echo "make test       bootstrap if needed and run the test suite (lint included)"
 	@echo "make lint       only the linter (ruff, configured in ruff.toml)"
 	@echo "make setup      only bootstrap (venv / ROS 2, launch tooling, colcon build)"
-	@echo "make build-db   build the motion database from ../shared/mocap/cmu (or built-in motions)"
+	@echo "make build-db   build the motion database from ../shared/mocap/cmu (or built-in motions) into"
+	@echo "                cache/motion_db.npz, the file the nodes load (they never build it)"
 	@echo "make build-correction  learn the sensor correction from ../shared/kinect/ui-prmd (or ARGS=\"--src DIR\")"
+	@echo "                into cache/sensor_correction_kinect_v2_sdk.npz (input_tracker:=kinect_v2_sdk loads it)"
 	@echo "make evaluate   accuracy table of every method on the sensor-model streams"
 	@echo "make bench      end-to-end latency/throughput benchmark"
 	@echo "make soak       10-minute soak of the running graph"
@@ -24,7 +26,7 @@ test:
 lint:
 	@$(RUN) ruff check .
 
-demo:
+demo: build-db
 	@$(RUN) ros2 run kinect_bringup demo
 
 build-db:

@@ -9,8 +9,9 @@ from ament_index_python.packages import get_package_share_directory
 from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument
 from launch.substitutions import LaunchConfiguration
-from launch_ros.actions import Node
 from launch_ros.parameter_descriptions import ParameterValue
+
+from kinect_bringup.launch_nodes import managed_node
 
 
 def generate_launch_description():
@@ -25,6 +26,6 @@ def generate_launch_description():
                  for n in names}
     return LaunchDescription(
         [DeclareLaunchArgument(n, default_value=d, description=t) for n, d, t in args] + [
-            Node(package='kinect_driver', executable='driver', name='driver', output='screen',
+            managed_node(package='kinect_driver', executable='driver', name='driver', output='screen',
                  emulate_tty=True, parameters=[config, overrides]),
         ])

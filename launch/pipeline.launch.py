@@ -20,6 +20,8 @@ from launch.conditions import IfCondition
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node, PushRosNamespace
 
+from kinect_bringup.launch_nodes import managed_node
+
 ARGS = [
     # '' = keep the value from config/<node>.yaml
     ('source', '', 'skeleton source: synthetic | replay | live (default: driver.yaml)'),
@@ -30,7 +32,7 @@ ARGS = [
      'confident failures, e: small persistent errors of TRACKED joints'),
     ('num_users', '', 'synthetic source: number of users (1-6)'),
     ('seed', '', 'synthetic source: random seed'),
-    ('database', '', 'motion database file ("" = built-in / CMU default, built and cached)'),
+    ('database', '', 'motion database file ("" = cache/motion_db.npz, written by make build-db)'),
     ('method', '', 'reconstruction driving the character: A (completion) | B | C (optimizer); '
      'default: optimizer.yaml'),
     ('reconstruction', 'fused', 'fused: one reconstruction node; split: reliability, completion and '
@@ -102,22 +104,22 @@ def _nodes(context):
     if arg('record'):
         readers.append('recorder')
     driver_over['wait_for_subscribers'] = skeleton_subscribers(readers, config_dir)
-    nodes = [Node(package='kinect_driver', executable='driver', name='driver',
+    nodes = [managed_node(package='kinect_driver', executable='driver', name='driver',
                   parameters=params('driver', **driver_over), **common)]
     mode = arg('reconstruction')
     if mode == 'fused':
         from kinect_bringup.graph import load_params
         fused = load_params('reconstruction', config_dir)
         fused.update({f'optimizer.{k}' if k == 'method' else k: v for k, v in opt_over.items()})
-        nodes.append(Node(package='pose_reconstruction', executable='reconstruction',
+        nodes.append(managed_node(package='pose_reconstruction', executable='reconstruction',
                           name='reconstruction', parameters=[fused], **common))
     elif mode == 'split':
         nodes += [
-            Node(package='pose_reconstruction', executable='reliability', name='reliability',
+            managed_node(package='pose_reconstruction', executable='reliability', name='reliability',
                  parameters=params('reliability'), **common),
-            Node(package='pose_reconstruction', executable='completion', name='completion',
+            managed_node(package='pose_reconstruction', executable='completion', name='completion',
                  parameters=params('completion', **db_over), **common),
-            Node(package='pose_reconstruction', executable='optimizer', name='optimizer',
+            managed_node(package='pose_reconstruction', executable='optimizer', name='optimizer',
                  parameters=params('optimizer', **opt_over), **common),
         ]
     else:
@@ -130,7 +132,7 @@ def _nodes(context):
         ctl_over = {'world': arg('world'), 'start_feature': arg('start_feature')}
         if posture_topic:
             ctl_over['input_topic'] = posture_topic
-        nodes.append(Node(package='performance_control', executable='control', name='control',
+        nodes.append(managed_node(package='performance_control', executable='control', name='control',
                           parameters=params('control', **ctl_over), **common))
     if arg('physics').lower() in ('true', '1', 'yes'):
         phys_over = {}
@@ -142,13 +144,13 @@ def _nodes(context):
             phys_over['feature_world'] = str(world_path(arg('world')))
         elif posture_topic:
             phys_over['input_topic'] = posture_topic
-        nodes.append(Node(package='physics_sim', executable='physics', name='physics',
+        nodes.append(managed_node(package='physics_sim', executable='physics', name='physics',
                           parameters=params('physics', **phys_over), **common))
     if arg('viz').lower() in ('true', '1', 'yes'):
-        nodes.append(Node(package='viz', executable='viz', name='viz',
+        nodes.append(managed_node(package='viz', executable='viz', name='viz',
                           parameters=params('viz'), **common))
     if arg('record'):
-        nodes.append(Node(package='kinect_bringup', executable='recorder', name='recorder',
+        nodes.append(managed_node(package='kinect_bringup', executable='recorder', name='recorder',
                           parameters=params('recorder', output=arg('record')), **common))
     ns = arg('namespace')
     return [GroupAction(([PushRosNamespace(ns)] if ns else []) + nodes)]

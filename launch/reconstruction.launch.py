@@ -8,8 +8,9 @@ from ament_index_python.packages import get_package_share_directory
 from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument
 from launch.substitutions import LaunchConfiguration
-from launch_ros.actions import Node
 from launch_ros.parameter_descriptions import ParameterValue
+
+from kinect_bringup.launch_nodes import managed_node
 
 
 def generate_launch_description():
@@ -18,11 +19,11 @@ def generate_launch_description():
     return LaunchDescription([
         DeclareLaunchArgument('method', default_value='C', description='optimizer method: B | C'),
         DeclareLaunchArgument('database', default_value='', description='database file ("" = default)'),
-        Node(package='pose_reconstruction', executable='reliability', name='reliability',
+        managed_node(package='pose_reconstruction', executable='reliability', name='reliability',
              output='screen', parameters=[os.path.join(config, 'reliability.yaml')]),
-        Node(package='pose_reconstruction', executable='completion', name='completion',
+        managed_node(package='pose_reconstruction', executable='completion', name='completion',
              output='screen', parameters=[os.path.join(config, 'completion.yaml'), db]),
-        Node(package='pose_reconstruction', executable='optimizer', name='optimizer',
+        managed_node(package='pose_reconstruction', executable='optimizer', name='optimizer',
              output='screen', parameters=[os.path.join(config, 'optimizer.yaml'), db,
                                           {'method': ParameterValue(LaunchConfiguration('method'), value_type=str)}]),
     ])

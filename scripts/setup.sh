@@ -105,3 +105,6 @@ if [ ! -f install/.kp-stamp ] || [ "$(cat install/.kp-stamp)" != "$src_stamp" ];
   echo "$src_stamp" > install/.kp-stamp
 fi
 log "ready (${underlay:-pip wheels venv}$( [ -f .venv/ros2-tools/.built ] && echo ' + launch tooling'))"
+
+# 4. (lifecycle, issue 29) the nodes' default motion database: they load it, never build it (make build-db)
+[ -f "${KINECT_POSTURE_CACHE:-$root/cache}/motion_db.npz" ] || (set +u; source scripts/env.sh; python -m skeleton_data.database_cli --no-progress >&2) || log "make build-db failed: nodes will not configure without a database"

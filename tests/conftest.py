@@ -31,6 +31,21 @@ def shared_dir():
     return SHARED
 
 
+@pytest.fixture(scope='session', autouse=True)
+def default_database():
+    """The default motion database file the nodes load (``cache/motion_db.npz``): nodes never
+    build it, so the suite calls its producer (``make build-db``'s ``build_db``) once when it is
+    missing (CMU clips from ../shared, else the built-in motions)."""
+    try:
+        from skeleton_data import database, database_cli
+    except ImportError:   # the workspace is not built: the tests that need it skip
+        return None
+    path = database.default_path()
+    if not path.is_file():
+        assert database_cli.main(['--no-progress']) == 0, 'build_db failed'
+    return path
+
+
 @pytest.fixture
 def rclpy_context():
     """A fresh rclpy context, shut down after the test."""

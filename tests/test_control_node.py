@@ -15,6 +15,7 @@ from skeleton_msgs.msg import Intention, SkeletonArray  # noqa: E402
 from visualization_msgs.msg import MarkerArray  # noqa: E402
 
 from performance_control.control_node import ControlNode  # noqa: E402
+from skeleton_core.rosnode import TransitionFailed, bring_up  # noqa: E402
 from performance_control.examples import imitation  # noqa: E402
 from performance_control.features import load_world  # noqa: E402
 from ros_helpers import Spinner, wait_until  # noqa: E402
@@ -25,10 +26,10 @@ from skeleton_core.model import NUM_JOINTS, standard_body  # noqa: E402
 
 @pytest.fixture
 def graph(rclpy_context):
-    node = ControlNode(context=rclpy_context, parameter_overrides=[
+    node = bring_up(ControlNode(context=rclpy_context, parameter_overrides=[
         Parameter('input_topic', value='/test_control/in'),
         Parameter('output_topic', value='/test_control/out'),
-        Parameter('start_feature', value='monkey_bars')])
+        Parameter('start_feature', value='monkey_bars')]))
     peer = rclpy.create_node('control_test_peer', context=rclpy_context)
     spinner = Spinner(rclpy_context, node, peer)
     yield node, peer
@@ -84,6 +85,11 @@ def test_parameters_are_validated_and_live(graph):
 
 
 def test_unknown_world_is_a_clear_start_up_error(rclpy_context):
-    with pytest.raises(ValueError, match='no world'):
-        ControlNode(context=rclpy_context, parameter_overrides=[
-            Parameter('world', value='atlantis')])
+    node = ControlNode(context=rclpy_context, parameter_overrides=[
+        Parameter('world', value='atlantis')])   # the constructor reads no file
+    try:
+        with pytest.raises(TransitionFailed, match='no world'):
+            bring_up(node)   # on_configure: one line, the node stays unconfigured
+        assert node.lifecycle_state == 'unconfigured'
+    finally:
+        node.destroy_node()

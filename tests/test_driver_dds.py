@@ -229,9 +229,16 @@ def test_live_retry_keeps_running_without_sensor():
         pytest.skip('libopenni2-0 not installed')
     pytest.importorskip('openni')
     proc = _start('source:=live', 'retry_s:=0.5', 'nite2_path:=/opt/NiTE2')
-    time.sleep(3.0)
+    seen = []   # until the node reports its first retry (start-up takes long on a loaded machine)
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline and proc.poll() is None:
+        line = proc.stdout.readline()
+        seen.append(line)
+        if 'retrying every' in line:
+            break
+    time.sleep(1.5)                   # and it keeps running, retrying
     alive = proc.poll() is None
-    out = _stop(proc)
+    out = ''.join(seen) + _stop(proc)
     assert alive, out
     assert 'no device' in out and 'retrying every 0.5 s' in out and 'Traceback' not in out
 

@@ -12,6 +12,7 @@ pytest.importorskip('skeleton_msgs.msg', reason='skeleton_msgs not built (run sc
 
 from rclpy.exceptions import ParameterException  # noqa: E402
 from rclpy.node import Node  # noqa: E402
+from skeleton_core.rosnode import bring_up  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 from skeleton_msgs.msg import SkeletonArray  # noqa: E402
 
@@ -81,9 +82,10 @@ def test_a_registered_source_runs_through_the_driver_node(registered, rclpy_cont
     with pytest.raises((ValueError, ParameterException)):  # validated like every parameter
         DriverNode(context=rclpy_context, parameter_overrides=[
             Parameter('source', value='standing'), Parameter('standing_users', value=9)])
-    driver = DriverNode(context=rclpy_context, parameter_overrides=[
+    driver = bring_up(DriverNode(context=rclpy_context, parameter_overrides=[
         Parameter('source', value='standing'), Parameter('standing_users', value=3),
-        Parameter('standing_height', value=0.25), Parameter('frame_id', value='cam')])
+        Parameter('standing_height', value=0.25), Parameter('frame_id', value='cam')]))
+    source = driver.source   # (released by cleanup)
     got = []
     sink = Node('standing_sink', context=rclpy_context)
     sink.create_subscription(SkeletonArray, '/kinect/skeletons', got.append, 10)
@@ -94,7 +96,7 @@ def test_a_registered_source_runs_through_the_driver_node(registered, rclpy_cont
         spinner.stop()
         sink.destroy_node()
         driver.destroy_node()
-    assert isinstance(driver.source, StandingSource) and driver.source.polls >= 5
+    assert isinstance(source, StandingSource) and source.polls >= 5
     assert driver.truth_pub is None     # the source has no ground truth
     frames = frames_from_array_msg(got[-1])
     assert [f.user_id for f in frames] == [1, 2, 3]

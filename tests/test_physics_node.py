@@ -17,6 +17,7 @@ from visualization_msgs.msg import MarkerArray  # noqa: E402
 from skeleton_core.conversions import SkeletonFrame, frames_from_array_msg, frames_to_array_msg  # noqa: E402
 from skeleton_core.model import NUM_JOINTS, segment_lengths, standard_body  # noqa: E402
 from physics_sim.physics_node import PhysicsNode  # noqa: E402
+from skeleton_core.rosnode import bring_up  # noqa: E402
 from ros_helpers import Spinner, wait_until as _wait  # noqa: E402
 
 BODY = standard_body()
@@ -41,9 +42,9 @@ def _msg(p, stamp_ns, uid=4):
 
 @pytest.fixture
 def graph(rclpy_context):
-    node = PhysicsNode(context=rclpy_context, parameter_overrides=[
+    node = bring_up(PhysicsNode(context=rclpy_context, parameter_overrides=[
         Parameter('input_topic', value='/test_physics/in'), Parameter('body_height', value=1.75),
-        Parameter('balls', value=[1.0, 1.0, 0.1, 0.1, 0.5])])
+        Parameter('balls', value=[1.0, 1.0, 0.1, 0.1, 0.5])]))
     peer = rclpy.create_node('physics_test_peer', context=rclpy_context)
     spinner = Spinner(rclpy_context, node, peer)
     yield node, peer
@@ -202,11 +203,12 @@ def test_ticks_follow_the_input_but_keep_the_output_rate(graph, monkeypatch):
     from rclpy.serialization import serialize_message
     import physics_sim.physics_node as pn
     node, _ = graph
-    node.timer.cancel()                       # the test drives the callbacks itself
+    node.tick_timer.cancel()                       # the test drives the callbacks itself
     clock = _Clock()
     import types
     monkeypatch.setattr(pn, 'time', types.SimpleNamespace(monotonic=clock,
                                                           perf_counter=time.perf_counter))
+    monkeypatch.setattr(node.scheduler, 'clock', clock)   # the scheduler's injected clock
     ticks = []
     real_tick = node._tick
     monkeypatch.setattr(node, '_tick', lambda *a: (ticks.append(clock.t), real_tick(*a)))
@@ -260,7 +262,7 @@ def test_a_slow_tick_skips_stale_targets_instead_of_queueing_them(graph, monkeyp
             time.sleep(0.6)   # a tick far slower than the input
 
     monkeypatch.setattr(node, '_tick', slow_tick)
-    node.timer.cancel()       # only inputs tick
+    node.tick_timer.cancel()       # only inputs tick
     p = clip(1)[0]
     received = node.health.snapshot().get('received', 0)
     pub.publish(_msg(p, 7_000_000_000))
@@ -281,7 +283,7 @@ def test_a_frame_arriving_in_a_burst_is_simulated_not_dropped(graph, monkeypatch
     rate) ticks 0.75 period after it (a one-shot timer): every stamp is published."""
     from rclpy.serialization import serialize_message
     node, peer = graph
-    node.timer.cancel()
+    node.tick_timer.cancel()
     got = []
     peer.create_subscription(SkeletonArray, '/character/skeletons',
                              lambda m: got.append(frames_from_array_msg(m)[0].stamp_ns), 50)
@@ -312,10 +314,10 @@ def test_intention_over_dds_makes_the_hands_grip_the_bars(rclpy_context):
     from skeleton_msgs.msg import Intention
     from test_physics_features import PLAYGROUND, SENSOR_H, hanging_pose
     assert Path(PLAYGROUND).is_file()
-    node = PhysicsNode(context=rclpy_context, parameter_overrides=[
+    node = bring_up(PhysicsNode(context=rclpy_context, parameter_overrides=[
         Parameter('input_topic', value='/test_grip/in'), Parameter('body_height', value=1.75),
         Parameter('feature_world', value=str(PLAYGROUND)),
-        Parameter('intention_topic', value='/test_grip/intention')])
+        Parameter('intention_topic', value='/test_grip/intention')]))
     peer = rclpy.create_node('grip_test_peer', context=rclpy_context)
     spinner = Spinner(rclpy_context, node, peer)
     try:

@@ -13,6 +13,7 @@ pytestmark = pytest.mark.ros
 rclpy = pytest.importorskip('rclpy')
 
 from ros_helpers import Spinner, wait_until as _wait  # noqa: E402
+from skeleton_core.rosnode import bring_up  # noqa: E402
 
 
 @pytest.fixture(scope='module')
@@ -48,6 +49,7 @@ def test_pipeline_over_dds(rclpy_context, case):
                             parameter_overrides=topics(t_rel, t_comp)),
              OptimizerNode(database_obj=db, context=ctx,
                            parameter_overrides=topics(t_rel, t_rec))]
+    bring_up(*nodes)   # configure, then activate (lifecycle nodes)
     client = Node('test_client', context=ctx)
     got = {t_rel: {}, t_comp: {}, t_rec: {}}
     headers = []
@@ -134,6 +136,9 @@ def test_missing_database_is_one_clear_error(tmp_path):
         assert p.returncode == 1, p.stderr
         lines = [ln for ln in p.stderr.strip().splitlines() if ln.strip()]
         assert lines[-1].startswith('[ERROR]') and path in lines[-1], p.stderr
+        # one line, from on_configure, naming the command that builds the file
+        assert len([ln for ln in lines if '[ERROR]' in ln]) == 1, p.stderr
+        assert 'make build-db' in lines[-1], p.stderr
         assert 'Traceback' not in p.stderr
 
 
@@ -146,10 +151,10 @@ def test_state_per_user_dropped_after_timeout(rclpy_context, case):
     from skeleton_core.conversions import SkeletonFrame, frames_to_array_msg
 
     _, _, obs, ts = case
-    node = ReliabilityNode(context=rclpy_context, parameter_overrides=[
+    node = bring_up(ReliabilityNode(context=rclpy_context, parameter_overrides=[
         Parameter('user_timeout_s', value=0.2),
         Parameter('input_topic', value=f'/t{os.getpid()}/unused_in'),
-        Parameter('output_topic', value=f'/t{os.getpid()}/unused_out')])
+        Parameter('output_topic', value=f'/t{os.getpid()}/unused_out')]))
     try:
         def send(uids, stamp):
             frames = [SkeletonFrame(positions=obs[0], tracking_state=ts[0], user_id=u,
@@ -255,6 +260,7 @@ def test_fused_node_over_dds(rclpy_context, case):
     node = ReconstructionNode(database_obj=db, context=ctx, parameter_overrides=[
         Parameter('input_topic', value=t_in), Parameter('output_topic', value=t_rec),
         Parameter('reliability_topic', value=t_rel), Parameter('completed_topic', value=t_comp)])
+    bring_up(node)
     client = Node('fused_client', context=ctx)
     got = {t_rel: {}, t_comp: {}, t_rec: {}}
     lock = threading.Lock()

@@ -17,6 +17,7 @@ from visualization_msgs.msg import Marker, MarkerArray  # noqa: E402
 from skeleton_core.conversions import SkeletonFrame, frames_to_array_msg  # noqa: E402
 from skeleton_core.model import ELBOW_LEFT, NUM_JOINTS, NUM_SEGMENTS, standard_body  # noqa: E402
 from viz.viz_node import VizNode  # noqa: E402
+from skeleton_core.rosnode import bring_up  # noqa: E402
 from ros_helpers import Spinner  # noqa: E402
 
 
@@ -43,9 +44,9 @@ TOPICS = {'raw_topic': P + '/kinect/skeletons',
 
 @pytest.fixture
 def graph(rclpy_context):
-    viz = VizNode(context=rclpy_context, parameter_overrides=[
+    viz = bring_up(VizNode(context=rclpy_context, parameter_overrides=[
         Parameter('max_rate_hz', value=20.0), Parameter('stale_timeout_s', value=30.0)] + [
-        Parameter(k, value=v) for k, v in TOPICS.items()])
+        Parameter(k, value=v) for k, v in TOPICS.items()]))
     peer = rclpy.create_node('viz_test_peer', context=rclpy_context)
     spinner = Spinner(rclpy_context, viz, peer)
     yield viz, peer
@@ -143,7 +144,7 @@ def test_config_file_lists_every_parameter_and_loads(rclpy_context):
     cfg = Path(__file__).resolve().parents[1] / 'config' / 'viz.yaml'
     values = yaml.safe_load(cfg.read_text())['/**']['ros__parameters']
     assert set(values) == {s.name for s in PARAMS if s.public}
-    node = VizNode(context=rclpy_context, cli_args=['--ros-args', '--params-file', str(cfg)])
+    node = bring_up(VizNode(context=rclpy_context, cli_args=['--ros-args', '--params-file', str(cfg)]))
     try:
         for name, v in values.items():
             got = node.params[name]

@@ -35,7 +35,7 @@ from .processes import Graph
 from skeleton_core.cdr import frames_from_cdr
 from skeleton_core.bagio import bag_topics
 import signal
-from skeleton_data.database import load_or_build_default
+from skeleton_data.database import build_default
 
 PROCESS_BAG_MODULE = 'kinect_bringup.process_bag'
 
@@ -435,7 +435,7 @@ def main(argv=None) -> int:
                                 capture_output=True).stdout.strip() or 'unknown'
     except OSError:
         commit = 'unknown'
-    load_or_build_default()  # build the cache once, outside the measurement
+    build_default()  # the nodes' default database file (make build-db), outside the measurement
     probe = LatencyProbe()
     results = []
     try:

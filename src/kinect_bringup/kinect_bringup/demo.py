@@ -17,7 +17,7 @@ import time
 from pathlib import Path
 
 from .graph import repo_root
-from skeleton_data.database import load_or_build_default
+from skeleton_data.database import build_default
 from viz.report import main as report_main
 
 
@@ -121,9 +121,10 @@ def main(argv=None) -> int:
     if bag.exists():
         bag.unlink()
 
-    # Build (or load from cache) the motion database first, so the nodes start at once.
+    # The nodes load the default database file, never build it: its producer (make build-db)
+    # first, from the cache when its inputs have not changed.
     t0 = time.monotonic()
-    db = load_or_build_default()
+    db = build_default()
     print(f'[demo] motion database: {len(db)} postures ({db.meta.get("source", "?")}), '
           f'{time.monotonic() - t0:.1f} s', flush=True)
 

@@ -89,8 +89,11 @@ def node_overrides(args) -> Dict[str, Dict]:
 
 
 def create_nodes(names: List[str], overrides: Dict[str, Dict], directory: Optional[Path] = None,
-                 context=None):
-    """Instantiate the graph's nodes in this process, each with its YAML file and overrides."""
+                 context=None, activate: bool = True):
+    """Instantiate the graph's nodes in this process, each with its YAML file and overrides, and
+    (``activate``) configure, then activate them (lifecycle nodes: ``skeleton_core.rosnode.
+    bring_up``; a failed configure raises TransitionFailed with the node's one line, the nodes
+    destroyed)."""
     from rclpy.parameter import Parameter
     nodes = []
     for name in names:
@@ -106,7 +109,20 @@ def create_nodes(names: List[str], overrides: Dict[str, Dict], directory: Option
         kwargs = dict(cli_args=cli, parameter_overrides=po)
         if context is not None:
             kwargs['context'] = context
-        nodes.append(cls(**kwargs))
+        try:
+            nodes.append(cls(**kwargs))
+        except Exception:
+            for n in nodes:
+                n.destroy_node()
+            raise
+    if activate:
+        from skeleton_core.rosnode import bring_up
+        try:
+            bring_up(*nodes)
+        except Exception:
+            for n in nodes:
+                n.destroy_node()
+            raise
     return nodes
 
 
@@ -115,7 +131,7 @@ def main(argv=None) -> int:
     import rclpy
     from rclpy.executors import ExternalShutdownException
 
-    from skeleton_core.rosnode import ignore_further_interrupts
+    from skeleton_core.rosnode import TransitionFailed, ignore_further_interrupts
 
     directory = Path(args.config_dir) if args.config_dir else config_dir()
     names = graph_nodes(args.method, physics=not args.no_physics, viz=not args.no_viz,
@@ -135,7 +151,8 @@ def main(argv=None) -> int:
         nodes = create_nodes(names, over, directory)
         executor = make_executor(args.executor, args.threads)
     except (ValueError, FileNotFoundError, RuntimeError, OSError, ImportError) as e:
-        print(f'[pipeline] ERROR: {e}', file=sys.stderr)
+        if not isinstance(e, TransitionFailed):   # (the node has logged its one line)
+            print(f'[pipeline] ERROR: {e}', file=sys.stderr)
         for n in nodes:
             n.destroy_node()
         rclpy.try_shutdown()

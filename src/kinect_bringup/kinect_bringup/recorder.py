@@ -13,11 +13,9 @@ import threading
 import time
 from pathlib import Path
 
-from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 
-from skeleton_core.health import Health
-from skeleton_core.rosnode import DiagnosticsPublisher, ParamSpec, Parameters, run_node
+from skeleton_core.rosnode import ManagedNode, ParamSpec, Parameters, run_node
 
 from .graph import TOPICS
 
@@ -42,35 +40,44 @@ PARAMS = [
 ]
 
 
-class RecorderNode(Node):
-    """Subscribes to every configured topic and appends each message to one MCAP file."""
+class RecorderNode(ManagedNode):
+    """Subscribes to every configured topic and appends each message to one MCAP file: opened on
+    configure, written while active, closed (a complete bag) on cleanup / shutdown."""
 
     def __init__(self, **kwargs):
         super().__init__('recorder', **kwargs)
+        self._lock = threading.Lock()
+        self._writer = None
+        self.counts = {}
         self.params = Parameters(self, PARAMS)
+
+    def configure(self) -> None:
         from skeleton_core.bagio import BagWriter
-        self.health = Health()
+        for topic in self.params['topics']:
+            if topic not in TOPICS:
+                raise ValueError(f'recorder: unknown topic {topic!r} (known: {sorted(TOPICS)})')
         self.path = Path(self.params['output']).expanduser().resolve()
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        self._lock = threading.Lock()
         self._keep_unfinished()
         self._writer = BagWriter(str(self.path), flush_period_s=self.params['flush_period'],
                                  fsync=self.params['fsync'])
+        self.counts = {topic: 0 for topic in self.params['topics']}
+        self.diagnostics()
+
+    def activate(self) -> None:
         if self.params['flush_period'] > 0:
-            self.create_timer(min(0.5, self.params['flush_period']), self._poll)
-        self.counts = {}
+            self.timer(min(0.5, self.params['flush_period']), self._poll)
         qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
         for topic in self.params['topics']:
-            msgtype = TOPICS.get(topic)
-            if msgtype is None:
-                raise ValueError(f'recorder: unknown topic {topic!r} (known: {sorted(TOPICS)})')
-            self.counts[topic] = 0
+            msgtype = TOPICS[topic]
             # raw=True: the serialized bytes go to the bag as received (no decode/encode)
-            self.create_subscription(_msg_class(msgtype), topic,
-                                     lambda data, t=topic, mt=msgtype: self._on_msg(t, mt, data),
-                                     qos, raw=True)
-        self.diagnostics = DiagnosticsPublisher(self, self.health)
+            self.subscription(_msg_class(msgtype), topic,
+                              lambda data, t=topic, mt=msgtype: self._on_msg(t, mt, data),
+                              qos, raw=True)
         self.get_logger().info(f'recording {len(self.counts)} topics to {self.path}')
+
+    def cleanup(self) -> None:
+        self.close()
 
     def _on_msg(self, topic, msgtype, msg):
         self.health.on_receive()
@@ -112,10 +119,6 @@ class RecorderNode(Node):
                 self._writer = None
                 self.get_logger().info(
                     f'wrote {self.path}: ' + ', '.join(f'{t} {n}' for t, n in self.counts.items()))
-
-    def destroy_node(self):
-        self.close()
-        return super().destroy_node()
 
 
 def main(args=None):

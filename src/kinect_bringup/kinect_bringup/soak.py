@@ -39,7 +39,7 @@ import numpy as np
 
 from .graph import repo_root
 from .processes import Graph
-from skeleton_data.database import load_or_build_default
+from skeleton_data.database import build_default
 from .fuzz import MUTATIONS, malformed, valid_array
 from skeleton_core.bagio import BagError, read_messages, recover, truncation
 
@@ -101,7 +101,7 @@ def main(argv=None) -> int:
     from rclpy.node import Node
     from skeleton_msgs.msg import SkeletonArray
 
-    load_or_build_default()
+    build_default()   # the nodes' default database file (make build-db)
 
     ctx = rclpy.Context()
     rclpy.init(context=ctx)

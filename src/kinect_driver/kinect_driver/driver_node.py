@@ -25,15 +25,14 @@ import dataclasses
 from dataclasses import dataclass
 from typing import List
 
-from rclpy.node import Node
 from rclpy.qos import QoSProfile
 
 from skeleton_core.cdr import frames_to_cdr
 from skeleton_core.conversions import frames_from_array_msg, frames_to_array_msg, ns_to_stamp
-from skeleton_core.health import Health
 from skeleton_core.params import ParamSpec, build, param, specs
-from skeleton_core.rosnode import DiagnosticsPublisher, Parameters, run_node
+from skeleton_core.rosnode import ManagedNode, Parameters, run_node
 
+from .replay_gate import ReplayGate
 from .sources import SourceError, SourceOutput, source_class, source_names
 from .tf_names import tf_frames
 
@@ -97,48 +96,70 @@ def make_source(v, log=None, clock_ns=None):
                            clock_ns=clock_ns)
 
 
-class DriverNode(Node):
+class DriverNode(ManagedNode):
+    """Configure makes the source and opens it (a device that is not there yet, with a retry
+    period, is retried while active); activate starts the capture timer; cleanup closes it."""
+
     def __init__(self, **kwargs):
         super().__init__('driver', **kwargs)
         from skeleton_msgs.msg import SkeletonArray
         self._msg_type = SkeletonArray
+        self.source = None
+        self._other_pubs = {}
         self.params = Parameters(self, driver_params())
+
+    def configure(self) -> None:
         v = self.params.values
-        self.health = Health()
         qos = QoSProfile(depth=10)
-        self.pub = self.create_publisher(SkeletonArray, SKELETONS_TOPIC, qos)
-        self.truth_pub = self.create_publisher(SkeletonArray, GROUND_TRUTH_TOPIC, qos) \
+        self.pub = self.publisher(self._msg_type, SKELETONS_TOPIC, qos)
+        self.truth_pub = self.publisher(self._msg_type, GROUND_TRUTH_TOPIC, qos) \
             if source_class(v['source']).has_truth else None
         self.tf_pub = None
         try:
             from tf2_msgs.msg import TFMessage
-            self.tf_pub = self.create_publisher(TFMessage, '/tf', qos)
+            self.tf_pub = self.publisher(TFMessage, '/tf', qos)
         except ImportError:
             if v['publish_tf']:
                 self.get_logger().warning('publish_tf is set but tf2_msgs is not installed: '
                                           'no TF is published')
         self._warned = set()
-        self.source = make_source(v, log=self._warn_once, clock_ns=self._now_ns)
         self._finished_logged = False
         self._stalled = False
-        self._retry_timer = None
         self._other_pubs = {}
-        self._waiting_since = None   # replay: monotonic time the wait for subscribers began
-        self._ack_since = None       # replay: monotonic time the first frame was published
-        self._waited = not self.source.recorded or v['wait_for_subscribers'] == 0
+        self.source = make_source(v, log=self._warn_once, clock_ns=self._now_ns)
+        self._opened = False
         try:
             self.source.open()
+            self._opened = True
             self._open_other_topics()
-            self._started()
         except SourceError as e:
-            retry = self.source.retry_s
-            if e.retryable and retry > 0:
-                self.get_logger().warning(f'{e} - retrying every {retry:g} s')
-                self._retry_timer = self.create_timer(retry, self._retry_open)
-            else:
+            if not (e.retryable and self.source.retry_s > 0):
                 raise RuntimeError(str(e)) from None
-        self.timer = self.create_timer(self.source.period_s, self._tick)
-        self.diagnostics = DiagnosticsPublisher(self, self.health, extra=self.source.status)
+            self.get_logger().warning(f'{e} - retrying every {self.source.retry_s:g} s')
+        # replay: hold the first frame until the graph is there (kinect_driver.replay_gate)
+        want = v['wait_for_subscribers'] if self.source.recorded else 0
+        log = self.get_logger()
+        self.gate = ReplayGate(want, v['wait_timeout_s'], info=log.info, warn=log.warning,
+                               on_release=self._delay_source, topic=SKELETONS_TOPIC)
+        self.diagnostics(extra=self.source.status)
+
+    def activate(self) -> None:
+        self._retry_timer = None
+        if self._opened:
+            self._started()
+        else:
+            self._retry_timer = self.timer(self.source.retry_s, self._retry_open)
+        self.timer(self.source.period_s, self._tick)
+
+    def cleanup(self) -> None:
+        if self.source is not None:
+            self.source.close()
+            self.source = None
+        self._other_pubs = {}
+
+    def _delay_source(self, held_s: float) -> None:
+        if hasattr(self.source, 'delay'):
+            self.source.delay(int(held_s * 1e9))
 
     # ------------------------------------------------------------------------------------
     def _now_ns(self) -> int:
@@ -168,62 +189,7 @@ class DriverNode(Node):
                 self._warn_once(f'replay: {topic} ({msgtype}) is not replayed: the message type '
                                 f'is not installed')
                 continue
-            self._other_pubs[topic] = self.create_publisher(cls, topic, QoSProfile(depth=100))
-
-    def _subscribers_ready(self) -> bool:
-        """Replay: hold the first frame until /kinect/skeletons has the expected subscribers
-        (and, for at most half a second more, until every other replayed topic has one)."""
-        import time
-        now = time.monotonic()
-        v = self.params.values
-        want = v['wait_for_subscribers']
-        if self._waiting_since is None:
-            self._waiting_since = now
-            self._main_ready_at = None
-            self.get_logger().info(f'replay: waiting for {want} subscriber(s) on '
-                                   f'{SKELETONS_TOPIC} before the first frame')
-        have = self.pub.get_subscription_count()
-        if have >= want:
-            if self._main_ready_at is None:
-                self._main_ready_at = now
-            others = [t for t, p in self._other_pubs.items() if p.get_subscription_count() == 0]
-            if others and now - self._main_ready_at < 0.5:
-                return False
-            self.get_logger().info(f'replay: {have} subscriber(s) after '
-                                   f'{now - self._waiting_since:.1f} s: playing')
-            return True
-        if now - self._waiting_since >= v['wait_timeout_s']:
-            self.get_logger().warning(
-                f'replay: only {have} of {want} subscriber(s) on {SKELETONS_TOPIC} after '
-                f'{v["wait_timeout_s"]:g} s: playing anyway (frames may be lost)')
-            return True
-        return False
-
-    def _acks_pending(self) -> bool:
-        """Replay: a subscription counted by the publisher may not have discovered the publisher
-        yet (discovery is two-way; on a loaded machine one direction lagged 2.4 s, and the frames
-        sent meanwhile were lost beyond the queue depth). After the first frame the replay's
-        clock is therefore held (without blocking the node) until every reliable subscriber has
-        acknowledged it (1-3 s: acknowledgements follow DDS heartbeats), at most
-        ``wait_timeout_s``; nothing is released in a burst afterwards. True while holding."""
-        import time
-        from rclpy.duration import Duration
-        now = time.monotonic()
-        zero = Duration(seconds=0)
-        acked = all(p.wait_for_all_acked(zero) for p in [self.pub, *self._other_pubs.values()])
-        held = now - self._ack_since
-        if not acked and held < self.params['wait_timeout_s']:
-            return True
-        self._ack_since = None
-        if hasattr(self.source, 'delay'):
-            self.source.delay(int(held * 1e9))
-        if acked:
-            self.get_logger().info(f'replay: the first frame acknowledged by every subscriber '
-                                   f'after {held:.2f} s: playing on')
-        else:
-            self.get_logger().warning(f'replay: the first frame not acknowledged by every '
-                                      f'subscriber after {held:.1f} s: playing on')
-        return False
+            self._other_pubs[topic] = self.publisher(cls, topic, QoSProfile(depth=100))
 
     def _retry_open(self) -> None:
         try:
@@ -231,18 +197,18 @@ class DriverNode(Node):
         except SourceError as e:
             self._warn_once(str(e))
             return
-        self._retry_timer.cancel()
-        self.destroy_timer(self._retry_timer)
-        self._retry_timer = None
+        self._opened = True
+        self._retry_timer.cancel()   # (destroyed on deactivate)
+        self._open_other_topics()
         self._started()
 
     def _tick(self) -> None:
-        first = False
-        if not self._waited:
-            if not self._subscribers_ready():
-                return
-            self._waited = first = True
-        elif self._ack_since is not None and self._acks_pending():
+        if not self._opened:
+            return
+        if not self.gate.playing and not self.gate.may_poll(
+                self.pub.get_subscription_count,
+                lambda: [t for t, p in self._other_pubs.items() if p.get_subscription_count() == 0],
+                self._all_acked):
             return
         now = self._now_ns()
         try:
@@ -258,9 +224,8 @@ class DriverNode(Node):
             if not self.context.ok():  # shutting down (Ctrl-C / SIGTERM) mid-callback
                 return
             raise
-        if first and outputs:
-            import time
-            self._ack_since = time.monotonic()
+        if not self.gate.playing:
+            self.gate.published(len(outputs))
         try:
             self.source.prepare()
         except Exception as e:  # noqa: BLE001 - as poll(): counted and logged, never fatal
@@ -360,11 +325,10 @@ class DriverNode(Node):
         if tfs:
             self.tf_pub.publish(TFMessage(transforms=tfs))
 
-    def destroy_node(self):
-        source = getattr(self, 'source', None)  # absent when __init__ failed early
-        if source is not None:
-            source.close()
-        return super().destroy_node()
+    def _all_acked(self) -> bool:
+        from rclpy.duration import Duration
+        zero = Duration(seconds=0)
+        return all(p.wait_for_all_acked(zero) for p in [self.pub, *self._other_pubs.values()])
 
 
 def main(args=None) -> int:

@@ -21,16 +21,14 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
-from typing import Dict, List, Optional
+from typing import Dict, List
 
 import numpy as np
-from rclpy.node import Node
 from skeleton_core.cdr import frames_to_cdr
 from skeleton_core.conversions import SkeletonFrame, ns_to_stamp
-from skeleton_core.health import Health
 from skeleton_core.model import NUM_JOINTS, TRACKED
 from skeleton_core.params import ParamSpec, assign, build, param, specs
-from skeleton_core.rosnode import DiagnosticsPublisher, InputDrops, Parameters, run_node
+from skeleton_core.rosnode import InputDrops, ManagedNode, Parameters, run_node
 from skeleton_msgs.msg import Intention, SkeletonArray
 from visualization_msgs.msg import MarkerArray
 
@@ -66,15 +64,20 @@ PARAMS: List[ParamSpec] = specs(ControlNodeConfig) + CONTROL_PARAMS
 LIVE = {s.name: s for s in CONTROL_PARAMS if not s.read_only}
 
 
-class ControlNode(Node):
+class ControlNode(ManagedNode):
     """Thin adapter: SkeletonArray -> :class:`PerformanceController` per user -> SkeletonArray,
-    Intention and markers."""
+    Intention and markers. Configure reads the world file; activate starts the input."""
 
     def __init__(self, **kwargs):
         super().__init__('control', **kwargs)
-        self.health = Health()
         self._drop = InputDrops(self.health, self.get_logger())
-        self.params = Parameters(self, PARAMS, on_change=self._on_params)
+        self.world = None
+        self.cp = None
+        self.users: Dict[int, PerformanceController] = {}
+        self.last_seen: Dict[int, float] = {}
+        self.params = Parameters(self, PARAMS, apply=self._apply_change)
+
+    def configure(self) -> None:
         v = self.params.values
         try:
             self.world = load_world(v['world'])
@@ -87,25 +90,34 @@ class ControlNode(Node):
         self.rp = self.cp.recognizer          # shared by every user's controller: live changes
         self.cp.validate()
         self.models = build_models(self.world, self.rp)
-        self.users: Dict[int, PerformanceController] = {}
-        self.last_seen: Dict[int, float] = {}
         self.frame_id = 'kinect'
         self.ms: List[float] = []
-        self.pub = self.create_publisher(SkeletonArray, v['output_topic'], 10)
-        self.int_pub = self.create_publisher(Intention, v['intention_topic'], 10)
-        self.mk_pub = self.create_publisher(MarkerArray, v['markers_topic'], 10)
-        self.create_subscription(SkeletonArray, v['input_topic'], self._on_input, 1, raw=True)
-        self.create_timer(1.0, self._publish_features)
-        self.diag = DiagnosticsPublisher(self, self.health, extra=self._diag)
+        self.pub = self.publisher(SkeletonArray, v['output_topic'], 10)
+        self.int_pub = self.publisher(Intention, v['intention_topic'], 10)
+        self.mk_pub = self.publisher(MarkerArray, v['markers_topic'], 10)
+        self.diagnostics(extra=self._diag)
+
+    def activate(self) -> None:
+        v = self.params.values
+        self.subscription(SkeletonArray, v['input_topic'], self._on_input, 1, raw=True)
+        self.timer(1.0, self._publish_features)
         self.get_logger().info(
             f'control: world {self.world.name} ({", ".join(self.world.features)}), '
             f'{v["input_topic"]} -> {v["output_topic"]}')
 
-    def _on_params(self, changed: Dict) -> Optional[str]:
+    def deactivate(self) -> None:
+        self.users.clear()
+        self.last_seen.clear()
+
+    def cleanup(self) -> None:
+        self.world = self.cp = self.models = None
+
+    def _apply_change(self, changed: Dict) -> None:
+        if self.cp is None:
+            return   # configure reads the values
         for k, val in changed.items():
             if k in LIVE:
                 assign(self.cp, LIVE[k], val)
-        return None
 
     def _diag(self) -> Dict:
         out = {'users': len(self.users), 'world': self.world.name}

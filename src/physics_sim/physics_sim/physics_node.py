@@ -32,20 +32,18 @@ from typing import Dict, List, Optional
 
 import numpy as np
 from geometry_msgs.msg import WrenchStamped
-from rclpy.node import Node
 from skeleton_core.cdr import frames_to_cdr
 from skeleton_core.conversions import SkeletonFormatError, SkeletonFrame, ns_to_stamp
-from skeleton_core.health import Health
 from skeleton_core.model import NUM_JOINTS, TRACKED
 from skeleton_core.params import ParamSpec, assign, build, param, specs
 from skeleton_core.presence import Presence
-from skeleton_core.rosnode import (DiagnosticsPublisher, InputDrops, Parameters, fill_marker,
-                                   run_node)
+from skeleton_core.rosnode import InputDrops, ManagedNode, Parameters, fill_marker, run_node
 from skeleton_msgs.msg import Intention, SkeletonArray
 from skeleton_msgs.srv import ApplyPush
 from visualization_msgs.msg import Marker, MarkerArray
 
 from .mjcf_world import ObjectSpec
+from .scheduler import TickScheduler
 from .simulation import SimConfig, Simulation, warm_up
 
 
@@ -137,14 +135,21 @@ def objects_from_params(v: Dict) -> List[ObjectSpec]:
     return objs
 
 
-class PhysicsNode(Node):
-    """Thin adapter: SkeletonArray targets -> :class:`Simulation` -> SkeletonArray + markers."""
+class PhysicsNode(ManagedNode):
+    """Thin adapter: SkeletonArray targets -> :class:`Simulation` -> SkeletonArray + markers.
+    Configure builds the simulation (world, objects, compiled kernels); activate starts the
+    input, the pushes and the tick timer."""
 
     def __init__(self, **kwargs):
         super().__init__('physics', **kwargs)
-        self.health = Health()
         self._drop = InputDrops(self.health, self.get_logger())
-        self.params = Parameters(self, PARAMS, on_change=self._on_params)
+        self.sim: Optional[Simulation] = None
+        self._deferred = None   # one-shot timer of a frame that arrived too soon after a tick
+        self.params = Parameters(self, PARAMS, validate=self._validate_change,
+                                 apply=self._apply_change)
+
+    # ------------------------------------------------------------------ lifecycle
+    def configure(self) -> None:
         v = self.params.values
         try:
             self.sim = Simulation(config_from_params(v), objects_from_params(v))
@@ -155,45 +160,51 @@ class PhysicsNode(Node):
             self.get_logger().info(f'compiled kernels ready in {warm_s:.1f} s (cached from now on)')
         self.frame_id = v['frame_id']
         self.presence = Presence(v['user_timeout_s'])
+        self.scheduler = TickScheduler(v['output_rate'], v['sync_to_input'])
         self._user_stamp: Dict[int, int] = {}   # stamp of each user's newest target
         self._published_empty = True
         self._mace_given = False
         self._wall_in_step = 0.0
         self._sim_in_step = 0.0
-        self._last_tick: Optional[float] = None
-        self._last_input_tick: Optional[float] = None
-        self._last_input_stamp: Optional[float] = None   # capture stamp (s) of the last input tick
-        self._pending_stamp: Optional[float] = None      # ... of the newest deferred target
-        self._deferred = None   # one-shot timer of a frame that arrived too soon after a tick
-        self._time_debt = 0.0
-        self.pub = self.create_publisher(SkeletonArray, v['output_topic'], 10)
-        self.obj_pub = self.create_publisher(MarkerArray, v['objects_topic'], 10)
+        self.pub = self.publisher(SkeletonArray, v['output_topic'], 10)
+        self.obj_pub = self.publisher(MarkerArray, v['objects_topic'], 10)
+        self.diagnostics(extra=self._diag_extra)
+
+    def activate(self) -> None:
+        v = self.params.values
+        self.scheduler.reset()
         # serialized in and out (skeleton_core.cdr): no rclpy message objects per joint
-        self.create_subscription(SkeletonArray, v['input_topic'], self._on_input,
-                                 v['input_depth'], raw=True)
-        self.create_subscription(WrenchStamped, '~/push', self._on_push_topic, 10)
+        self.subscription(SkeletonArray, v['input_topic'], self._on_input, v['input_depth'],
+                          raw=True)
+        self.subscription(WrenchStamped, '~/push', self._on_push_topic, 10)
         if v['feature_world']:
-            self.create_subscription(Intention, v['intention_topic'], self._on_intention, 10)
-        self.create_service(ApplyPush, '~/apply_push', self._on_push_srv)
-        self.timer = self.create_timer(1.0 / v['output_rate'], self._on_timer)
-        self.diag = DiagnosticsPublisher(self, self.health, extra=self._diag_extra)
+            self.subscription(Intention, v['intention_topic'], self._on_intention, 10)
+        self.service(ApplyPush, '~/apply_push', self._on_push_srv)
+        self.tick_timer = self.timer(1.0 / v['output_rate'], self._on_timer)
         self.get_logger().info(
             f'physics: {v["controller"]} at {v["timestep"] * 1000:.1f} ms, input {v["input_topic"]}'
             f' -> {v["output_topic"]}, {len(self.sim.objects)} objects'
             + (f', features of {v["feature_world"]} ({", ".join(self.sim.shared.features)}),'
                f' grips from {v["intention_topic"]}' if v['feature_world'] else ''))
 
+    def deactivate(self) -> None:
+        self._cancel_deferred()
+
+    def cleanup(self) -> None:
+        self.sim = None
+
     # ------------------------------------------------------------------ parameters
-    def _on_params(self, changed: Dict) -> Optional[str]:
-        if 'pin_height' in changed or 'pin_release_height' in changed:
-            lo = changed.get('pin_height', self.params.values['pin_height'])
-            hi = changed.get('pin_release_height', self.params.values['pin_release_height'])
-            if hi < lo:
-                return 'pin_release_height must be >= pin_height'
+    def _validate_change(self, values: Dict, changed: Dict) -> Optional[str]:
+        if values['pin_release_height'] < values['pin_height']:
+            return 'pin_release_height must be >= pin_height'
+        return None
+
+    def _apply_change(self, changed: Dict) -> None:
+        if self.sim is None:
+            return   # configure reads the values
         for k, val in changed.items():
             if k in LIVE_PARAMS:
                 assign(self.sim.config, LIVE_PARAMS[k], val)
-        return None
 
     def _diag_extra(self) -> Dict:
         out = {f'sim_{k}': v for k, v in self.sim.counters.items()}
@@ -247,41 +258,21 @@ class PhysicsNode(Node):
             self.sim.hold(uid, 'mace', self.params['mace_hand'])
             self._mace_given = True
         if self.params['sync_to_input'] and frames:
-            # phase-lock to the sensor: tick now unless the last input tick was less than 0.75
-            # period ago *by the capture stamps* (input faster than the output rate: tick 0.75
-            # period after the last one instead, taking the newest target then). Judged by the
-            # stamps, frames delivered in a burst after a delay (a loaded machine) are each
-            # simulated for their own frame time and published at once; the timer only ticks
-            # when no input ticked for a period (see _on_timer)
-            period = 1.0 / self.params['output_rate']
+            # phase-lock to the sensor (physics_sim.scheduler): tick now, or once 0.75 period
+            # after the last input tick when this target came sooner by its capture stamp
             stamp = max((f.stamp_ns or header_stamp) for f in frames) * 1e-9
-            last = self._last_input_stamp
-            if last is None or stamp - last >= 0.75 * period or stamp < last - 1.0:
+            d = self.scheduler.on_input(stamp)
+            if d.action == 'tick':
                 self._cancel_deferred()
-                self._last_input_tick = now
-                # the simulated time of this tick: the frame time since the last input tick
-                dt = None if last is None else min(max(stamp - last, 0.5 * period), 1.5 * period)
-                self._last_input_stamp = stamp
-                self._tick(dt)
-            else:
-                self._pending_stamp = max(self._pending_stamp or stamp, stamp)
-                if self._deferred is None:
-                    delay = max(0.75 * period - (now - self._last_input_tick), 1e-4)
-                    self._deferred = self.create_timer(delay, self._on_deferred)
+                self._tick(d.dt)
+            elif d.action == 'defer' and self._deferred is None:
+                self._deferred = self.create_timer(d.delay_s, self._on_deferred)
 
     def _on_deferred(self) -> None:
         self._cancel_deferred()
-        self._last_input_tick = time.monotonic()
-        period = 1.0 / self.params['output_rate']
-        stamp, self._pending_stamp = self._pending_stamp, None
-        dt = None
-        if stamp is not None and self._last_input_stamp is not None:
-            dt = min(max(stamp - self._last_input_stamp, 0.5 * period), 1.5 * period)
-            self._last_input_stamp = stamp
-        self._tick(dt)
+        self._tick(self.scheduler.on_deferred())
 
     def _cancel_deferred(self) -> None:
-        self._pending_stamp = None
         if self._deferred is not None:
             self._deferred.cancel()
             self.destroy_timer(self._deferred)
@@ -324,30 +315,18 @@ class PhysicsNode(Node):
 
     # ------------------------------------------------------------------ simulation tick
     def _on_timer(self) -> None:
-        if (self.params['sync_to_input'] and self._last_input_tick is not None
-                and time.monotonic() - self._last_input_tick < 1.0 / self.params['output_rate']):
-            return   # input is flowing and ticking: the timer is the fallback when it stops
-        self._tick()
+        if self.scheduler.timer_due():   # input ticking: the timer is the fallback when it stops
+            self._tick()
 
     def _tick(self, dt: Optional[float] = None) -> None:
-        """Advance and publish; ``dt``: the simulated time (s), else the wall time since the last
-        tick (bounded) or, without sync_to_input, one period."""
+        """Advance and publish; ``dt``: the simulated time (s), else the scheduler's."""
         now = time.monotonic()
-        period = 1.0 / self.params['output_rate']
-        if dt is None and self.params['sync_to_input'] and self._last_tick is not None:
-            # the wall time since the last tick, bounded: an overloaded machine gets a slower
-            # simulation at a kept output rate, not ever longer (costlier) ticks
-            dt = min(max(now - self._last_tick, 0.5 * period), 1.5 * period)
-        elif dt is None:
-            dt = period
-        self._last_tick = now
+        dt = self.scheduler.tick_time(dt)
         self._expire(now)
         # whole physics steps; the remainder is carried to the next tick (sim time = wall time)
         ts = self.params['timestep']
-        self._time_debt += dt
-        steps = int(self._time_debt / ts + 1e-9)
+        steps = self.scheduler.steps(dt, ts)
         if steps:
-            self._time_debt -= steps * ts
             t0 = time.perf_counter()
             self.sim.advance(steps * ts)
             self._wall_in_step = 0.9 * self._wall_in_step + 0.1 * (time.perf_counter() - t0)

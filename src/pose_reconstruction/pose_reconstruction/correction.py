@@ -73,8 +73,8 @@ class CorrectionConfig:
 
     sensor_correction: str = param(
         'auto', "learned sensor correction file; 'auto' = "
-        'cache/sensor_correction_kinect_v2_sdk.npz, built from <shared>/kinect/ui-prmd when '
-        "those paired recordings exist (else off); '' = off")
+        'cache/sensor_correction_kinect_v2_sdk.npz (written by `make build-correction`) for a '
+        "kinect_v2_sdk input, else off; '' = off")
     input_tracker: str = param(
         '', 'skeleton tracker of the input stream (kinect_v2_sdk, kinect_v1_sdk, nite2, '
         "sensor_model; '' = not declared): a correction is applied only to the tracker it was "

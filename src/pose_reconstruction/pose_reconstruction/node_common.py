@@ -15,14 +15,12 @@ import threading
 import time
 from typing import Any, Callable, Dict, List, Optional, Sequence
 
-from rclpy.node import Node
 from rclpy.qos import QoSProfile
 
 from skeleton_core.cdr import CdrError, frames_from_cdr, frames_to_cdr
 from skeleton_core.conversions import SkeletonFormatError, frame_from_arrays
-from skeleton_core.health import Health
 from skeleton_core.params import ParamSpec, build, hidden, specs
-from skeleton_core.rosnode import DiagnosticsPublisher, InputDrops, Parameters
+from skeleton_core.rosnode import InputDrops, ManagedNode, Parameters
 
 from .correction import CorrectionConfig
 from .reliability import ReliabilityConfig
@@ -31,7 +29,8 @@ from .reliability import ReliabilityConfig
 # node that may estimate it
 RELIABILITY_SPECS = specs(ReliabilityConfig)
 RELIABILITY_NAMES = [s.name for s in RELIABILITY_SPECS]
-DATABASE_SPEC = ParamSpec('database', '', "motion database file ('' = built-in / CMU default)")
+DATABASE_SPEC = ParamSpec('database', '', "motion database file ('' = the default one that "
+                          '`make build-db` writes: cache/motion_db.npz)')
 
 # Learned sensor correction and user profile (pose_reconstruction.correction / .profile)
 CORRECTION_SPECS = specs(CorrectionConfig)
@@ -62,39 +61,60 @@ def check_reliability_params(values: Dict[str, Any]) -> Optional[str]:
     return None
 
 
-class SkeletonArrayNode(Node):
+class SkeletonArrayNode(ManagedNode):
     """Base class (see module docstring)."""
 
     def __init__(self, name: str, specs: List[ParamSpec], outputs: Sequence[str] = ('output_topic',),
                  **kwargs):
         super().__init__(name, **kwargs)
         self._lock = threading.RLock()
-        self.health = Health()
         self._drop = InputDrops(self.health, self.get_logger())
         self._users: Dict[int, Any] = {}
         self._last_seen: Dict[int, float] = {}
         self._last_stamp_ns: Optional[int] = None
-        self.params = Parameters(self, specs, on_change=self._on_params)
+        self._outputs = tuple(outputs)
+        self._multi = len(outputs) > 1
+        self._pubs: list = []
+        self.params = Parameters(self, specs, validate=self._validate_change,
+                                 apply=self._apply_change)
         err = self.validate(dict(self.params.values))
         if err:
             raise ValueError(f'invalid parameter: {err}')
+
+    # -- lifecycle -------------------------------------------------------------------------------
+    def configure(self) -> None:
         self.setup()
         from skeleton_msgs.msg import SkeletonArray
         depth = self.params['qos_depth']
-        self._multi = len(outputs) > 1
-        self._pubs = [self.create_publisher(SkeletonArray, self.params[o], QoSProfile(depth=depth))
-                      for o in outputs]
+        self._pubs = [self.publisher(SkeletonArray, self.params[o], QoSProfile(depth=depth))
+                      for o in self._outputs]
+        self.diagnostics(extra=self.diagnostics_extra)
+
+    def activate(self) -> None:
+        from skeleton_msgs.msg import SkeletonArray
         # serialized in and out (skeleton_core.cdr): no rclpy message objects per joint
-        self._sub = self.create_subscription(SkeletonArray, self.params['input_topic'],
-                                             self._on_msg, QoSProfile(depth=depth), raw=True)
-        self._timer = self.create_timer(0.5, self._purge)
-        self.diagnostics = DiagnosticsPublisher(self, self.health, extra=self.diagnostics_extra)
+        self.subscription(SkeletonArray, self.params['input_topic'], self._on_msg,
+                          QoSProfile(depth=self.params['qos_depth']), raw=True)
+        self.timer(0.5, self._purge)
         self.get_logger().info(f"{self.params['input_topic']} -> "
                                + ', '.join(p.topic_name for p in self._pubs))
 
+    def deactivate(self) -> None:
+        with self._lock:   # a restart begins with every user anew
+            self._users.clear()
+            self._last_seen.clear()
+            self._last_stamp_ns = None
+
+    def cleanup(self) -> None:
+        self._pubs = []
+        self.teardown()
+
     # -- hooks -----------------------------------------------------------------------------------
     def setup(self) -> None:
-        """Called once after parameters are declared (load databases here)."""
+        """Called on configure (load the files named by the parameters here)."""
+
+    def teardown(self) -> None:
+        """Called on cleanup: release what :meth:`setup` loaded."""
 
     def validate(self, values: Dict[str, Any]) -> Optional[str]:
         """Cross-parameter checks; return an error text or None."""
@@ -103,31 +123,35 @@ class SkeletonArrayNode(Node):
     def make_processor(self, values: Dict[str, Any]):
         raise NotImplementedError
 
-    def apply_params(self, values: Dict[str, Any], changed: Dict[str, Any]) -> Optional[str]:
-        """React to a validated change (e.g. reload a database); return an error text or None."""
+    def check_change(self, values: Dict[str, Any], changed: Dict[str, Any]) -> Optional[str]:
+        """Validate a change before it is accepted (no side effects); an error text or None."""
         return None
+
+    def apply_params(self, values: Dict[str, Any], changed: Dict[str, Any]) -> None:
+        """Make an accepted change take effect (e.g. reload a database)."""
 
     def diagnostics_extra(self) -> Dict[str, Any]:
         with self._lock:
             return {'users': len(self._users)}
 
     # -- internals -------------------------------------------------------------------------------
-    def _on_params(self, changed: Dict[str, Any]) -> Optional[str]:
-        values = dict(self.params.values)
-        values.update(changed)
-        err = self.validate(values)
+    def _validate_change(self, values: Dict[str, Any], changed: Dict[str, Any]) -> Optional[str]:
+        err = self.validate(values) or self.check_change(values, changed)
         if err:
             return err
-        with self._lock:
-            err = self.apply_params(values, changed)
-            if err:
-                return err
+        if self.lifecycle_state != 'unconfigured':
             try:
                 self.make_processor(values)  # refuse values the library rejects
             except (ValueError, TypeError) as e:
                 return str(e)
-            self._users.clear()  # rebuilt with the new values on the next message
         return None
+
+    def _apply_change(self, changed: Dict[str, Any]) -> None:
+        if self.lifecycle_state == 'unconfigured':
+            return   # configure reads the values
+        with self._lock:
+            self.apply_params(dict(self.params.values), changed)
+            self._users.clear()  # rebuilt with the new values on the next message
 
     def _purge(self) -> None:
         now = time.monotonic()
@@ -196,18 +220,24 @@ class SkeletonArrayNode(Node):
 
 class DatabaseNode(SkeletonArrayNode):
     """A :class:`SkeletonArrayNode` holding the motion database named by its ``database``
-    parameter (``self.db``), reloaded when the parameter changes (a missing or corrupt file is a
-    refused change). ``database_obj`` (tests) stands in for the default database."""
+    parameter (``self.db``), loaded on configure and reloaded when the parameter changes (a
+    missing file is a refused change; a corrupt one is logged, the old database kept).
+    ``database_obj`` (tests) stands in for the default database."""
 
     def __init__(self, name: str, specs: List[ParamSpec], database_obj=None, **kwargs):
         self._database_obj = database_obj
+        self.db = None
+        self.user_terms: Dict[str, Any] = {}
         super().__init__(name, specs, **kwargs)
 
     def setup(self) -> None:
         self._load(self.params['database'])
-        self.user_terms: Dict[str, Any] = {}
         if 'sensor_correction' in self.params.values:
             self.user_terms = load_user_terms(dict(self.params.values), self.get_logger())
+
+    def teardown(self) -> None:
+        self.db = None
+        self.user_terms = {}
 
     def _load(self, path: str) -> None:
         from .posture_space import as_database_arrays
@@ -216,25 +246,79 @@ class DatabaseNode(SkeletonArrayNode):
         self.db = as_database_arrays(db)
         self.get_logger().info(f'motion database: {self.db.size} postures')
 
-    def apply_params(self, values: Dict[str, Any], changed: Dict[str, Any]) -> Optional[str]:
-        if 'database' in changed:
-            try:
-                self._load(changed['database'])
-            except (FileNotFoundError, ValueError, RuntimeError) as e:
-                return str(e)
+    def check_change(self, values: Dict[str, Any], changed: Dict[str, Any]) -> Optional[str]:
+        if 'database' in changed and not (self._database_obj is not None
+                                          and not changed['database']):
+            p = database_path(changed['database'])
+            if not p.is_file():
+                return missing_database(p)
         if any(k in changed for k in CORRECTION_NAMES):
-            try:
-                self.user_terms = load_user_terms(values, self.get_logger())
-            except (FileNotFoundError, ValueError, RuntimeError) as e:
-                return str(e)
+            return check_user_files(values)
         return None
+
+    def apply_params(self, values: Dict[str, Any], changed: Dict[str, Any]) -> None:
+        try:
+            if 'database' in changed:
+                self._load(changed['database'])
+            if any(k in changed for k in CORRECTION_NAMES):
+                self.user_terms = load_user_terms(values, self.get_logger())
+        except (FileNotFoundError, ValueError, RuntimeError, OSError) as e:
+            self.get_logger().error(f'{e} (the previous one stays in use)')
+
+
+BUILD_DB = 'make build-db'
+BUILD_CORRECTION = 'make build-correction'
+
+
+def database_path(path: str):
+    """The file the ``database`` parameter names: '' = the default that ``make build-db``
+    writes (:func:`skeleton_data.database.default_path`)."""
+    from pathlib import Path
+
+    from skeleton_data.database import default_path
+    return Path(path).expanduser() if path else default_path()
+
+
+def missing_database(p) -> str:
+    return (f'motion database {str(p)!r} does not exist: build it with `{BUILD_DB}` '
+            f'(or name another file: database:=FILE)')
+
+
+def check_user_files(values: Dict[str, Any]) -> Optional[str]:
+    """The correction / profile files the parameters name exist (no file is read)."""
+    from . import correction as C
+    from . import profile as P
+    name = values.get('sensor_correction', '')
+    tracker = values.get('input_tracker', '')
+    if name == 'auto' and tracker == C.UIPRMD_TRACKER and not C.default_path().is_file():
+        return missing_correction(C.default_path())
+    if name and name != 'auto':
+        from pathlib import Path
+        if not Path(name).expanduser().is_file():
+            return f'sensor correction {name!r} does not exist'
+    if values.get('user_profile'):
+        try:
+            path = P.profile_path(values['user_profile'], values.get('profiles_dir') or None)
+        except ValueError as e:
+            return str(e)
+        if not path.is_file():
+            return (f'user profile {str(path)!r} does not exist: build it with '
+                    f'`ros2 run pose_reconstruction build_profile --name {values["user_profile"]}`')
+    return None
+
+
+def missing_correction(p) -> str:
+    return (f'sensor correction {str(p)!r} does not exist: build it with '
+            f'`{BUILD_CORRECTION}` (or sensor_correction:=\'\' for none)')
 
 
 def load_user_terms(values: Dict[str, Any], logger=None) -> Dict[str, Any]:
     """The Reconstructor keywords of the correction / profile parameters: ``correction`` (None
     when off or refused: another or an undeclared tracker, logged in one line),
-    ``correction_stage``, ``input_tracker``, ``profile``. A named file that is missing or
-    malformed raises ValueError with one line."""
+    ``correction_stage``, ``input_tracker``, ``profile``. Files are loaded by path, never built:
+    a named file (or the default correction that applies to the input) that is missing or
+    malformed raises FileNotFoundError / ValueError with one line naming the command that
+    builds it."""
     from . import correction as C
     from . import profile as P
     info = logger.info if logger is not None else (lambda m: None)
@@ -248,13 +332,13 @@ def load_user_terms(values: Dict[str, Any], logger=None) -> Dict[str, Any]:
                  f'{C.UIPRMD_TRACKER} skeletons and the input tracker is '
                  f'{tracker or "not declared"} (input_tracker)')
         else:
+            path = C.default_path()
+            if not path.is_file():
+                raise FileNotFoundError(missing_correction(path))
             try:
-                corr = C.load_or_build_default(log=info)
-            except (ValueError, OSError) as e:
-                warn(f'sensor correction off: cannot build the default one ({e})')
-            if corr is None:
-                info('sensor correction off: no paired recordings under <shared>/kinect/ui-prmd '
-                     f'and no {C.default_path()}')
+                corr = C.load(path)
+            except C.CorrectionFileError as e:   # one line, with its producer
+                raise ValueError(f'{e}: rebuild it with `{BUILD_CORRECTION}`') from None
     elif name:
         corr = C.load(name)  # CorrectionFileError (a ValueError): one line
     if corr is not None:
@@ -273,30 +357,17 @@ def load_user_terms(values: Dict[str, Any], logger=None) -> Dict[str, Any]:
 
 
 def load_database(path: str, loader: Optional[Callable[[], Any]] = None):
-    """The motion database named by the ``database`` parameter ('' = built-in / CMU default).
-
-    Raises FileNotFoundError / ValueError with one clear line (run_node prints it and exits 1).
-    """
+    """The motion database named by the ``database`` parameter ('' = the default file that
+    ``make build-db`` writes). Loaded, never built: a missing or unreadable file raises
+    FileNotFoundError / ValueError with one line naming the command that builds it."""
     if loader is not None:
         return loader()
-    try:
-        from skeleton_data import database as dbmod
-    except ImportError as e:  # pragma: no cover - the library ships with the workspace
-        raise RuntimeError(f'skeleton_data.database is not available: {e}') from e
-    if not path:
-        try:
-            return dbmod.load_or_build_default()
-        except (FileNotFoundError, ValueError, RuntimeError):
-            raise
-        except Exception as e:  # noqa: BLE001
-            raise ValueError(f'cannot build the default motion database: {e}') from e
-    from pathlib import Path
-    p = Path(path).expanduser()
+    from skeleton_data import database as dbmod
+    p = database_path(path)
     if not p.is_file():
-        raise FileNotFoundError(f'motion database {str(p)!r} does not exist')
+        raise FileNotFoundError(missing_database(p))
     try:
         return dbmod.MotionDatabase.load(str(p))
-    except (FileNotFoundError, ValueError, RuntimeError):
-        raise
     except Exception as e:  # noqa: BLE001 - corrupt file: one clear line
-        raise ValueError(f'motion database {str(p)!r} cannot be read: {type(e).__name__}: {e}') from e
+        raise ValueError(f'motion database {str(p)!r} cannot be read ({type(e).__name__}: {e}): '
+                         f'rebuild it with `{BUILD_DB}`') from e

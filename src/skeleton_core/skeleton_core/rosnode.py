@@ -14,6 +14,7 @@ import rclpy
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
                                 SetParametersResult)
 from rclpy.exceptions import ParameterException
+from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
@@ -37,61 +38,79 @@ def descriptor(spec: ParamSpec) -> ParameterDescriptor:
 
 
 class Parameters:
-    """Declares the public :class:`ParamSpec` s on a node, validates every set (out-of-range sets
-    are refused with a reason) and keeps the current values in ``values``; ``on_change(changed_dict)``
-    runs after a successful set so the node can push new values into its library objects. A spec
-    with ``public=False`` (set by a preset only, ``skeleton_core.params``) is not declared: its
-    default stays in ``values``. A parameter file or ``-p`` naming a parameter the node does not
-    declare is refused with one line (rclpy would silently ignore it)."""
+    """Declares the public :class:`ParamSpec` s on a node and keeps the current values in
+    ``values``. A spec with ``public=False`` (set by a preset only, ``skeleton_core.params``) is
+    not declared: its default stays in ``values``. A parameter file or ``-p`` naming a parameter
+    the node does not declare is refused with one line (rclpy would silently ignore it).
+
+    Two callbacks, as rclpy separates them: the on-set callback only *validates* (each value
+    against its spec, then ``validate(values_after, changed)`` for cross-parameter checks: an
+    error text refuses the whole set, nothing else happens); the post-set callback *applies*
+    (``values`` updated, then ``apply(changed)`` pushes the new values into the library objects,
+    reloads a file...). ``apply`` cannot refuse any more: what may fail is checked in
+    ``validate``, what still fails (a file corrupt beyond what a check sees) is logged there."""
 
     def __init__(self, node: Node, specs: Iterable[ParamSpec],
-                 on_change: Optional[Callable[[Dict[str, Any]], Optional[str]]] = None):
+                 validate: Optional[Callable[[Dict[str, Any], Dict[str, Any]], Optional[str]]] = None,
+                 apply: Optional[Callable[[Dict[str, Any]], None]] = None):
         self._node = node
         every = list(specs)
         self.specs = {s.name: s for s in every if s.public}
         self.values: Dict[str, Any] = {s.name: s.default for s in every if not s.public}
-        self._on_change = on_change
+        self._validate = validate
+        self._apply = apply
         check_overrides(node, self.specs, {s.name for s in every if not s.public})
         for s in self.specs.values():
             p = node.declare_parameter(s.name, s.default, descriptor(s))
-            value = p.value
-            if isinstance(s.default, float) and isinstance(value, int):
-                value = float(value)
+            value = self._typed(s, p.value)
             err = s.check(value)
             if err is not None:
                 raise ValueError(f'invalid parameter: {err}')
             self.values[s.name] = value
         node.add_on_set_parameters_callback(self._on_set)
+        node.add_post_set_parameters_callback(self._post_set)
 
     def __getitem__(self, name: str) -> Any:
         return self.values[name]
 
+    @staticmethod
+    def _typed(spec: ParamSpec, value: Any) -> Any:
+        if isinstance(spec.default, float) and isinstance(value, int) and not isinstance(value, bool):
+            return float(value)
+        return value
+
+    def _changed(self, params: Sequence[Parameter]) -> Dict[str, Any]:
+        return {p.name: self._typed(self.specs[p.name], p.value)
+                for p in params if p.name in self.specs}
+
     def _on_set(self, params: Sequence[Parameter]) -> SetParametersResult:
-        changed = {}
-        for p in params:
-            spec = self.specs.get(p.name)
-            if spec is None:
-                continue
-            value = p.value
-            if isinstance(spec.default, float) and isinstance(value, int) and not isinstance(value, bool):
-                value = float(value)
+        """Validation only: no state of the node changes here."""
+        changed = self._changed(params)
+        for name, value in changed.items():
+            spec = self.specs[name]
             err = spec.check(value)
             if err is None and spec.read_only:
-                err = f'{p.name} is read-only'
+                err = f'{name} is read-only'
             if err is not None:
                 self._node.get_logger().warning(f'refused parameter change: {err}')
                 return SetParametersResult(successful=False, reason=err)
-            changed[p.name] = value
-        if changed and self._on_change is not None:
-            err = self._on_change(changed)
+        if changed and self._validate is not None:
+            err = self._validate({**self.values, **changed}, changed)
             if err:
                 self._node.get_logger().warning(f'refused parameter change: {err}')
                 return SetParametersResult(successful=False, reason=err)
-        self.values.update(changed)
-        if changed:
-            self._node.get_logger().info(
-                'parameters set: ' + ', '.join(f'{k}={v!r}' for k, v in changed.items()))
         return SetParametersResult(successful=True)
+
+    def _post_set(self, params: Sequence[Parameter]) -> None:
+        """The accepted values take effect."""
+        changed = self._changed(params)
+        if not changed:
+            return
+        self.values.update(changed)
+        self._node.get_logger().info(
+            'parameters set: ' + ', '.join(f'{k}={v!r}' for k, v in changed.items()))
+        if self._apply is not None:
+            self._apply(changed)
 
 
 # parameters rclpy itself reads from the overrides (declared by Node, or QoS overrides)
@@ -151,13 +170,21 @@ class DiagnosticsPublisher:
     """Publishes a node's :class:`Health` on ``/diagnostics`` (diagnostic_msgs/DiagnosticArray)."""
 
     def __init__(self, node: Node, health: Health, period_s: float = 1.0,
-                 extra: Optional[Callable[[], Dict[str, Any]]] = None):
+                 extra: Optional[Callable[[], Dict[str, Any]]] = None,
+                 state: Optional[Callable[[], str]] = None):
         from diagnostic_msgs.msg import DiagnosticArray  # noqa: F401 (fail early if missing)
         self._node = node
         self._health = health
         self._extra = extra
-        self._pub = node.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        self._state = state
+        # a plain publisher, also on a lifecycle node: an inactive node still reports its state
+        self._pub = Node.create_publisher(node, DiagnosticArray, '/diagnostics', 10)
         self._timer = node.create_timer(period_s, self._publish)
+
+    def destroy(self) -> None:
+        self._timer.cancel()
+        self._node.destroy_timer(self._timer)
+        self._node.destroy_publisher(self._pub)
 
     def _publish(self) -> None:
         from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -168,7 +195,11 @@ class DiagnosticsPublisher:
         st.name = f'{self._node.get_fully_qualified_name()}'
         st.hardware_id = 'kinect_posture'
         dropped = snap.get('dropped_total', 0)
-        if snap.get('received', 0) > 0 and snap.get('rate_hz', 0.0) == 0.0:
+        state = self._state() if self._state is not None else 'active'
+        if state != 'active':
+            snap['state'] = state
+            st.level, st.message = DiagnosticStatus.OK, state
+        elif snap.get('received', 0) > 0 and snap.get('rate_hz', 0.0) == 0.0:
             st.level, st.message = DiagnosticStatus.WARN, 'no output for > 2 s'
         elif dropped:
             st.level, st.message = DiagnosticStatus.OK, f'running, {dropped} inputs dropped'
@@ -202,22 +233,222 @@ def ignore_further_interrupts() -> None:
         pass
 
 
+# What a configure step reports as one line (a missing or corrupt file, a value the library
+# refuses, a device that does not open): never a traceback
+CONFIGURE_ERRORS = (ValueError, FileNotFoundError, RuntimeError, OSError, ParameterException)
+MANAGED_FLAG = '--managed'
+
+
+class ManagedNode(LifecycleNode):
+    """A lifecycle node (``rclpy.lifecycle``, as ros2/demos lifecycle_py) with the project's
+    division of work:
+
+    * the constructor declares the parameters, nothing else: it reads, writes and opens nothing;
+    * :meth:`configure` loads the node's files by path (its parameters), builds its library
+      objects and creates its publishers (:meth:`publisher`: lifecycle publishers, silent unless
+      active) and its diagnostics (a plain publisher: reported in every state). A failure is
+      raised as one of :data:`CONFIGURE_ERRORS` with one line that names what to do (the
+      command that builds a missing file); ``on_configure`` logs that line, releases what was
+      made and returns FAILURE: the node stays unconfigured, ready to be configured again after
+      a corrected parameter;
+    * :meth:`activate` starts the input and the timers (:meth:`subscription`, :meth:`timer`:
+      destroyed again on deactivate);
+    * :meth:`deactivate` / :meth:`cleanup` stop / release (cleanup and shutdown release
+      everything configure made).
+    """
+
+    def __init__(self, name: str, **kwargs):
+        # (first: a constructor that fails later is still destroyed cleanly, e.g. by the
+        # context's shutdown)
+        self.lifecycle_state = 'unconfigured'
+        self.configure_error: Optional[str] = None   # the last failed configure's line
+        self._configured: list = []   # (kind, entity) made by configure, released on cleanup
+        self._active: list = []       # made by activate, released on deactivate
+        super().__init__(name, **kwargs)
+        self.health = Health()
+
+    # -- hooks -----------------------------------------------------------------------------------
+    def configure(self) -> None:
+        """Load files, build the library objects, create publishers (raise one line on error)."""
+
+    def activate(self) -> None:
+        """Create subscriptions and timers (:meth:`subscription`, :meth:`timer`)."""
+
+    def deactivate(self) -> None:
+        """Stop what activate started beyond its subscriptions and timers (released here)."""
+
+    def cleanup(self) -> None:
+        """Release what configure loaded beyond its publishers (released here)."""
+
+    # -- entities tied to a state ------------------------------------------------------------
+    def publisher(self, msg_type, topic: str, qos):
+        """A lifecycle publisher (publishes only while active), destroyed on cleanup."""
+        pub = self.create_lifecycle_publisher(msg_type, topic, qos)
+        self._configured.append(('lifecycle_publisher', pub))
+        if self.lifecycle_state == 'active':   # made while active (a device opened late)
+            pub.on_activate(None)
+        return pub
+
+    def diagnostics(self, extra: Optional[Callable[[], Dict[str, Any]]] = None):
+        """Health on /diagnostics in every state from configure to cleanup."""
+        d = DiagnosticsPublisher(self, self.health, extra=extra,
+                                 state=lambda: self.lifecycle_state)
+        self._configured.append(('diagnostics', d))
+        return d
+
+    def subscription(self, *args, **kwargs):
+        sub = self.create_subscription(*args, **kwargs)
+        self._active.append(('subscription', sub))
+        return sub
+
+    def timer(self, period_s: float, callback):
+        t = self.create_timer(period_s, callback)
+        self._active.append(('timer', t))
+        return t
+
+    def service(self, *args, **kwargs):
+        srv = self.create_service(*args, **kwargs)
+        self._active.append(('service', srv))
+        return srv
+
+    def _release(self, entities: list) -> None:
+        while entities:
+            kind, e = entities.pop()
+            if kind == 'timer':
+                e.cancel()
+                self.destroy_timer(e)
+            elif kind == 'subscription':
+                self.destroy_subscription(e)
+            elif kind == 'service':
+                self.destroy_service(e)
+            elif kind == 'lifecycle_publisher':
+                self.destroy_lifecycle_publisher(e)
+            elif kind == 'diagnostics':
+                e.destroy()
+
+    # -- transitions ---------------------------------------------------------------------------
+    def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self.configure_error = None
+        try:
+            self.configure()
+        except CONFIGURE_ERRORS as e:
+            self.configure_error = str(e)
+            if self.context.ok():   # (else: stopped while starting, nothing to report)
+                self.get_logger().error(str(e))
+            self._release_configured()
+            return TransitionCallbackReturn.FAILURE
+        self.lifecycle_state = 'inactive'
+        return super().on_configure(state)
+
+    def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        try:
+            self.activate()
+        except CONFIGURE_ERRORS as e:
+            self.configure_error = str(e)
+            if self.context.ok():
+                self.get_logger().error(str(e))
+            self._release(self._active)
+            return TransitionCallbackReturn.FAILURE
+        ret = super().on_activate(state)   # enables the lifecycle publishers
+        self.lifecycle_state = 'active'
+        return ret
+
+    def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self._stop()
+        return super().on_deactivate(state)
+
+    def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self._release_configured()
+        return super().on_cleanup(state)
+
+    def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self._release_all()
+        self.lifecycle_state = 'finalized'
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_error(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self._release_all()
+        return TransitionCallbackReturn.SUCCESS   # back to unconfigured
+
+    def _stop(self) -> None:
+        if self.lifecycle_state == 'active':
+            self._release(self._active)
+            self.deactivate()
+            for kind, e in self._configured:
+                if kind == 'lifecycle_publisher':
+                    e.on_deactivate(None)
+            self.lifecycle_state = 'inactive'
+
+    def _release_configured(self) -> None:
+        self._release(self._configured)
+        if self.lifecycle_state != 'finalized':
+            self.cleanup()
+            self.lifecycle_state = 'unconfigured'
+
+    def _release_all(self) -> None:
+        self._stop()
+        self._release(self._active)
+        self._release_configured()
+
+    def destroy_node(self):
+        if self.lifecycle_state != 'finalized':
+            self._release_all()
+            self.lifecycle_state = 'finalized'
+        return super().destroy_node()
+
+
+class TransitionFailed(RuntimeError):
+    """A configure / activate that failed: the node has logged its one line already."""
+
+
+def bring_up(*nodes: 'ManagedNode'):
+    """Configure, then activate ``nodes`` in this process (the one-process pipeline, tools,
+    tests); a failure raises :class:`TransitionFailed` with the node's one line (logged by the
+    node already). Returns the node (one) or the nodes."""
+    ok = TransitionCallbackReturn.SUCCESS
+    for step in ('trigger_configure', 'trigger_activate'):
+        for node in nodes:
+            if getattr(node, step)() != ok:
+                raise TransitionFailed(node.configure_error
+                                       or f'{node.get_name()}: {step[8:]} failed')
+    return nodes[0] if len(nodes) == 1 else nodes
+
+
 def run_node(node_factory: Callable[..., Node], args=None, executor=None) -> int:
-    """Standard ``main()``: init, build the node (a start-up error is one clear line and exit 1),
-    spin until Ctrl-C / SIGTERM, shut down cleanly."""
+    """Standard ``main()``: init, build the node (a parameter error is one clear line and exit 1),
+    configure and activate it (a failed configure: the node's one line, exit 1) unless started
+    with ``--managed`` (then a lifecycle manager drives it: the launch file's LifecycleNode or
+    ``ros2 lifecycle set``), spin until Ctrl-C / SIGTERM, shut down cleanly."""
     from rclpy.executors import ExternalShutdownException
+    from rclpy.utilities import remove_ros_args
+    argv = list(args if args is not None else sys.argv)
+    managed = MANAGED_FLAG in remove_ros_args(argv)
     rclpy.init(args=args)
     node = None
     try:
         node = node_factory()
+        if isinstance(node, ManagedNode):
+            if managed:
+                node.get_logger().info(f'unconfigured: waiting for the lifecycle transitions '
+                                       f'(ros2 lifecycle set {node.get_fully_qualified_name()} '
+                                       'configure, then activate)')
+            else:
+                bring_up(node)
     except KeyboardInterrupt:  # Ctrl-C while still starting up
+        if node is not None:
+            ignore_further_interrupts()
+            node.destroy_node()
         rclpy.try_shutdown()
         return 0
     except (ValueError, FileNotFoundError, RuntimeError, OSError, ParameterException) as e:
-        print(f'[ERROR] {e}', file=sys.stderr)
-        if rclpy.ok():
-            rclpy.try_shutdown()
-        return 1
+        stopped = not rclpy.ok()   # Ctrl-C / SIGTERM while starting up: a clean stop
+        if not isinstance(e, TransitionFailed) and not stopped:
+            print(f'[ERROR] {e}', file=sys.stderr)   # (a failed transition has logged its line)
+        if node is not None:
+            ignore_further_interrupts()
+            node.destroy_node()
+        rclpy.try_shutdown()
+        return 0 if stopped else 1
     try:
         if executor is None:
             rclpy.spin(node)

@@ -55,7 +55,8 @@ from .joint_map import load_joint_map
 from .mocap import mapped_files
 from .mocap import load_mapped_clips
 
-__all__ = ['MotionDatabase', 'DatabaseError', 'build_database', 'load_or_build_default',
+__all__ = ['MotionDatabase', 'DatabaseError', 'build_database', 'load_or_build_default', 'default_path',
+           'build_default',
            'segment_twists', 'filter_postures', 'DEFAULT_THRESHOLD', 'FORMAT_VERSION',
            'default_cache_dir', 'default_shared_dir', 'repo_root', 'class_statistics',
            'MappedSource', 'uiprmd_vicon_source']
@@ -378,6 +379,16 @@ def default_cache_dir() -> Path:
     return Path(env) if env else repo_root() / 'cache'
 
 
+DEFAULT_FILE = 'motion_db.npz'
+
+
+def default_path() -> Path:
+    """The default motion database file: what ``make build-db`` writes and what every node's
+    ``database`` parameter ('' ) loads. Nodes never build it (a missing file is a one-line
+    configure error naming ``make build-db``)."""
+    return default_cache_dir() / DEFAULT_FILE
+
+
 def default_shared_dir() -> Optional[Path]:
     env = os.environ.get('KP_SHARED')
     p = Path(env) if env else repo_root().parent / 'shared'
@@ -531,4 +542,13 @@ def load_or_build_default(source: str = 'auto', cache_dir=None, shared_dir=None,
     log.info('motion database built: %d -> %d postures from %d clips in %.1f s, saved %s',
              st['frames_before'], st['frames_after'], st['clips'], st['seconds'], path)
     out_stats.update(st, cache_hit=False, path=str(path), skipped=skipped)
+    return db
+
+
+def build_default(**kwargs) -> MotionDatabase:
+    """The producer of the nodes' default database (``make build-db``, and the tools that start
+    the graph: ``demo``, ``bench``, ``soak``): :func:`load_or_build_default` (``kwargs``), written
+    to :func:`default_path`, the file every node's default ``database`` loads."""
+    db = load_or_build_default(**kwargs)
+    db.save(default_path())
     return db

@@ -55,7 +55,8 @@ def _parser():
     g.add_argument('--exclude', action='append', default=[], metavar='PATTERN',
                    help="skip files whose name matches, e.g. 'm*_s05_*' (repeatable)")
     p.add_argument('--out', type=Path, default=None,
-                   help='write the database here (default: the cache, keyed by the inputs)')
+                   help='write the database here (default: the cache, keyed by the inputs, and '
+                        "the nodes' default file <cache>/motion_db.npz)")
     p.add_argument('--cache-dir', type=Path, default=None,
                    help='cache folder (default $KINECT_POSTURE_CACHE or <repo>/cache)')
     p.add_argument('--rebuild', action='store_true', help='ignore a cached database')
@@ -171,10 +172,13 @@ def main(argv=None) -> int:
             st.update(cache_hit=False, path=str(out), skipped=skipped, load_seconds=t_load)
         else:
             st = {}
-            db = database.load_or_build_default(
-                args.source, cache_dir=args.cache_dir, threshold=threshold, classes=classes,
-                split=split, mirror=args.mirror, progress=progress, rebuild=args.rebuild,
-                stats=st, mapped=mapped)
+            # the cached build, written to the fixed file every node's default `database`
+            # loads (nodes never build one)
+            db = database.build_default(
+                source=args.source, cache_dir=args.cache_dir, threshold=threshold,
+                classes=classes, split=split, mirror=args.mirror, progress=progress,
+                rebuild=args.rebuild, stats=st, mapped=mapped)
+            st['default_path'] = str(database.default_path())
     except (database.DatabaseError, FileNotFoundError, ValueError) as e:
         print(f'build_db: {e}', file=sys.stderr)
         return 1
@@ -193,6 +197,8 @@ def main(argv=None) -> int:
         print(f"built in {st.get('seconds', float('nan')):.2f} s"
               + (f" (+{st['load_seconds']:.2f} s loading)" if 'load_seconds' in st else ''))
         print(f"written: {st['path']}")
+    if st.get('default_path'):
+        print(f"the nodes' default database: {st['default_path']}")
     return 0
 
 

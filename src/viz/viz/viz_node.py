@@ -16,15 +16,13 @@ import time
 from typing import Any, Dict, Optional
 
 from rclpy.exceptions import InvalidParameterValueException
-from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
 from visualization_msgs.msg import Marker, MarkerArray
 
 from skeleton_core.cdr import CdrError, frames_from_cdr
 from skeleton_core.conversions import ns_to_stamp
-from skeleton_core.health import Health
 from skeleton_core.params import ParamSpec, build, hidden, specs
-from skeleton_core.rosnode import DiagnosticsPublisher, Parameters, run_node
+from skeleton_core.rosnode import ManagedNode, Parameters, run_node
 
 from . import markers as mk
 
@@ -143,16 +141,25 @@ def spec_to_msg(spec: mk.MarkerSpec, lifetime_s: float) -> Marker:
     return MarkerCache().to_msg(spec, lifetime_s)
 
 
-class VizNode(Node):
-    """Thin adapter: SkeletonArray topics -> :class:`viz.markers.SceneState` -> MarkerArray."""
+class VizNode(ManagedNode):
+    """Thin adapter: SkeletonArray topics -> :class:`viz.markers.SceneState` -> MarkerArray.
+    Configure builds the scene and the publisher; activate subscribes to the shown layers."""
 
     def __init__(self, **kwargs):
         super().__init__('viz', **kwargs)
-        self.health = Health()
+        self.scene = None
+        self._layer_subs: Dict[str, Any] = {}
+        self._timer = None
         try:
-            self.params = Parameters(self, PARAMS, on_change=self._on_params)
+            self.params = Parameters(self, PARAMS, validate=self._validate_change,
+                                     apply=self._apply_change)
         except InvalidParameterValueException as e:  # out of a descriptor range at start-up
             raise ValueError(f'viz: {e}') from None
+        self.scene = None
+        self._layer_subs: Dict[str, Any] = {}
+        self._timer = None
+
+    def configure(self) -> None:
         v = self.params.values
         self.scene = mk.SceneState(style_from_params(v), stale_timeout_s=v['stale_timeout_s'],
                                    default_frame_id=v['default_frame_id'])
@@ -163,15 +170,28 @@ class VizNode(Node):
         self._objects_at = 0.0
         self._objects_shown: Dict[tuple, str] = {}
         self._objects_new = False
-        self._pub = self.create_publisher(MarkerArray, v['markers_topic'], 10)
-        self._layer_subs: Dict[str, Any] = {}
+        self._pub = self.publisher(MarkerArray, v['markers_topic'], 10)
+        self.diagnostics(extra=lambda: {'namespaces': len(self.scene.shown_namespaces())})
+
+    def activate(self) -> None:
+        v = self.params.values
         self._sync_subscriptions(v)
-        self.create_subscription(MarkerArray, v['objects_topic'], self._on_objects, 10)
+        self.subscription(MarkerArray, v['objects_topic'], self._on_objects, 10)
         self._timer = self.create_timer(1.0 / v['max_rate_hz'], self._tick)
-        self._diag = DiagnosticsPublisher(self, self.health, extra=lambda: {
-            'namespaces': len(self.scene.shown_namespaces())})
         self.get_logger().info(f"publishing markers on {self._pub.topic_name} at <= "
                                f"{v['max_rate_hz']:g} Hz")
+
+    def deactivate(self) -> None:
+        for sub in self._layer_subs.values():
+            self.destroy_subscription(sub)
+        self._layer_subs = {}
+        if self._timer is not None:
+            self._timer.cancel()
+            self.destroy_timer(self._timer)
+            self._timer = None
+
+    def cleanup(self) -> None:
+        self.scene = None
 
     # ---------------------------------------------------------------- parameters
     def _apply_enabled(self, v: Dict[str, Any]) -> None:
@@ -193,25 +213,29 @@ class VizNode(Node):
                 self.destroy_subscription(sub)
                 del self._layer_subs[layer]
 
-    def _on_params(self, changed: Dict[str, Any]) -> Optional[str]:
-        v = dict(self.params.values)
-        v.update(changed)
+    def _validate_change(self, v: Dict[str, Any], changed: Dict[str, Any]) -> Optional[str]:
         try:
-            style = style_from_params(v)
+            style_from_params(v)
         except (TypeError, ValueError) as e:
             return str(e)
-        self.scene.style = style
+        return None
+
+    def _apply_change(self, changed: Dict[str, Any]) -> None:
+        if self.scene is None:
+            return   # configure reads the values
+        v = self.params.values
+        self.scene.style = style_from_params(v)
         self.scene.invalidate()
         self.scene.stale_timeout_s = v['stale_timeout_s']
         self.scene.default_frame_id = v['default_frame_id']
         self._apply_enabled(v)
-        self._sync_subscriptions(v)
-        if 'max_rate_hz' in changed:
-            self._timer.cancel()
-            self.destroy_timer(self._timer)
-            self._timer = self.create_timer(1.0 / v['max_rate_hz'], self._tick)
+        if self.lifecycle_state == 'active':
+            self._sync_subscriptions(v)
+            if 'max_rate_hz' in changed:
+                self._timer.cancel()
+                self.destroy_timer(self._timer)
+                self._timer = self.create_timer(1.0 / v['max_rate_hz'], self._tick)
         self._dirty = True
-        return None
 
     # ---------------------------------------------------------------- inputs
     def _on_skeletons(self, layer: str, data: bytes) -> None:

@@ -1,0 +1,119 @@
+"""When the physics node ticks and how much simulated time each tick covers: the input scheduler,
+ROS-free, with an injected clock (tests drive it with a fake one, without sleeping).
+
+With ``sync_to_input`` the node ticks as soon as a target arrives (phase-locked to the sensor: the
+output leaves right after its input instead of up to one period later); its timer is only the
+fallback that keeps the output rate when the input is slower or stops.
+
+* An input tick simulates the frame time since the previous input tick, judged by the capture
+  stamps and bounded to [0.5, 1.5] periods: frames delivered in a burst after a delay (a loaded
+  machine) are each simulated for their own frame time and published at once.
+* A target sooner than 0.75 period after the last input tick (by its stamp) is not ticked at once:
+  one tick is deferred to 0.75 period after the last one (wall time), and simulates the frame time
+  up to the newest target deferred meanwhile (input faster than the output rate).
+* A timer tick (no input tick for a period) simulates the wall time since the last tick, bounded
+  to [0.5, 1.5] periods: an overloaded machine gets a slower simulation at a kept output rate, not
+  ever longer (costlier) ticks. Without ``sync_to_input`` every tick is one period.
+* Each tick's time is spent in whole physics steps; the remainder is carried to the next tick
+  (simulated time = the time ticked).
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Callable, Optional
+
+# the bounds of one tick's simulated time, in periods, and the shortest input-tick spacing
+MIN_TICK = 0.5      # shorter ticks would publish nearly the same state again
+MAX_TICK = 1.5      # longer ones cost more than a period of compute: the node would fall behind
+DEFER_AFTER = 0.75  # a target closer than this (periods) to the last input tick waits for it
+# a stamp this far (s) before the last input tick's is a bag loop or a restarted sensor: ticked
+STAMP_JUMP_S = 1.0
+
+
+@dataclass
+class InputDecision:
+    """What the node does with an arriving target: ``tick`` now simulating ``dt`` (None: the
+    wall time, see :meth:`TickScheduler.tick_time`), or ``defer`` one tick by ``delay_s`` (arm a
+    one-shot timer), or nothing (a deferred tick is armed already)."""
+
+    action: str                  # 'tick' | 'defer' | 'wait'
+    dt: Optional[float] = None
+    delay_s: float = 0.0
+
+
+class TickScheduler:
+    def __init__(self, rate_hz: float, sync_to_input: bool = True,
+                 clock: Callable[[], float] = time.monotonic):
+        if rate_hz <= 0:
+            raise ValueError(f'rate must be > 0 Hz, got {rate_hz}')
+        self.period = 1.0 / rate_hz
+        self.sync = bool(sync_to_input)
+        self.clock = clock
+        self.reset()
+
+    def reset(self) -> None:
+        self.last_tick: Optional[float] = None          # wall time of the last tick
+        self.last_input_tick: Optional[float] = None    # ... of the last input (or deferred) tick
+        self.last_input_stamp: Optional[float] = None   # capture stamp (s) of the last input tick
+        self.pending_stamp: Optional[float] = None      # newest target waiting for a deferred tick
+        self.deferred = False
+        self.time_debt = 0.0
+
+    def _bounded(self, dt: float) -> float:
+        return min(max(dt, MIN_TICK * self.period), MAX_TICK * self.period)
+
+    # -- events ----------------------------------------------------------------------------------
+    def on_input(self, stamp_s: float) -> InputDecision:
+        """A target with capture stamp ``stamp_s`` arrived (sync_to_input)."""
+        now = self.clock()
+        last = self.last_input_stamp
+        if last is None or stamp_s - last >= DEFER_AFTER * self.period \
+                or stamp_s < last - STAMP_JUMP_S:
+            self.deferred = False
+            self.pending_stamp = None
+            self.last_input_tick = now
+            self.last_input_stamp = stamp_s
+            return InputDecision('tick', None if last is None else self._bounded(stamp_s - last))
+        self.pending_stamp = stamp_s if self.pending_stamp is None else max(self.pending_stamp,
+                                                                             stamp_s)
+        if self.deferred:
+            return InputDecision('wait')
+        self.deferred = True
+        delay = max(DEFER_AFTER * self.period - (now - self.last_input_tick), 1e-4)
+        return InputDecision('defer', delay_s=delay)
+
+    def on_deferred(self) -> Optional[float]:
+        """The deferred tick is due: its simulated time (the frame time up to the newest target
+        deferred; None when there is none: the wall time)."""
+        self.deferred = False
+        self.last_input_tick = self.clock()
+        stamp, self.pending_stamp = self.pending_stamp, None
+        if stamp is None or self.last_input_stamp is None:
+            return None
+        dt = self._bounded(stamp - self.last_input_stamp)
+        self.last_input_stamp = stamp
+        return dt
+
+    def timer_due(self) -> bool:
+        """The timer fired: tick unless input ticked less than a period ago."""
+        return not (self.sync and self.last_input_tick is not None
+                    and self.clock() - self.last_input_tick < self.period)
+
+    def tick_time(self, dt: Optional[float] = None) -> float:
+        """A tick happens now: its simulated time (``dt``, else the bounded wall time since the
+        last tick with sync_to_input, else one period)."""
+        now = self.clock()
+        if dt is None and self.sync and self.last_tick is not None:
+            dt = self._bounded(now - self.last_tick)
+        elif dt is None:
+            dt = self.period
+        self.last_tick = now
+        return dt
+
+    def steps(self, dt: float, timestep: float) -> int:
+        """Whole physics steps of ``timestep`` for ``dt`` more seconds; the rest is carried."""
+        self.time_debt += dt
+        n = int(self.time_debt / timestep + 1e-9)
+        self.time_debt -= n * timestep
+        return n

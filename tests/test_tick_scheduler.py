@@ -1,0 +1,97 @@
+"""The physics input scheduler (physics_sim.scheduler) on a fake clock: no sleeping, no ROS."""
+import pytest
+
+from physics_sim.scheduler import MAX_TICK, MIN_TICK, TickScheduler
+
+RATE = 30.0
+P = 1.0 / RATE
+
+
+class Clock:
+    def __init__(self, t=100.0):
+        self.t = t
+
+    def __call__(self):
+        return self.t
+
+
+def make(sync=True):
+    clock = Clock()
+    return TickScheduler(RATE, sync, clock=clock), clock
+
+
+def test_every_input_at_the_output_rate_ticks_at_once_for_its_frame_time():
+    s, clock = make()
+    d = s.on_input(5.0)
+    assert d.action == 'tick' and d.dt is None          # first: no frame time yet
+    for i in range(1, 10):
+        clock.t += P + (0.004 if i % 2 else -0.003)     # delivery jitter does not matter,
+        d = s.on_input(5.0 + i * P)                      # the stamps do
+        assert d.action == 'tick' and d.dt == pytest.approx(P)
+
+
+def test_a_frame_time_is_bounded_to_half_and_one_and_a_half_periods():
+    s, clock = make()
+    s.on_input(5.0)
+    assert s.on_input(5.0 + 10 * P).dt == pytest.approx(MAX_TICK * P)   # a gap: not 10 periods
+    assert s.on_input(4.0 + 10 * P - 0.5).dt == pytest.approx(MIN_TICK * P)   # a bag loop
+    # a loop by more than a second ticks at once (a restarted sensor), not deferred
+    assert s.on_input(1.0).action == 'tick'
+
+
+def test_input_faster_than_the_rate_is_deferred_to_three_quarters_of_a_period():
+    s, clock = make()
+    s.on_input(5.0)
+    clock.t += 0.010
+    d = s.on_input(5.0 + 0.010)                          # 10 ms after by its stamp
+    assert d.action == 'defer' and d.delay_s == pytest.approx(0.75 * P - 0.010)
+    clock.t += 0.005
+    assert s.on_input(5.0 + 0.015).action == 'wait'     # one deferred tick at a time
+    clock.t += d.delay_s - 0.005
+    # the deferred tick simulates the frame time up to the newest deferred target (bounded)
+    assert s.on_deferred() == pytest.approx(MIN_TICK * P)
+    assert s.last_input_stamp == pytest.approx(5.015)
+    clock.t += P
+    assert s.on_input(5.015 + P).dt == pytest.approx(P)  # and the next input follows it
+
+
+def test_an_input_tick_cancels_a_deferred_one():
+    s, clock = make()
+    s.on_input(5.0)
+    assert s.on_input(5.01).action == 'defer'
+    assert s.on_input(5.0 + P).action == 'tick'          # a later frame came first
+    assert not s.deferred and s.pending_stamp is None
+
+
+def test_the_timer_is_the_fallback_when_input_stops():
+    s, clock = make()
+    s.on_input(5.0)
+    s.tick_time(None)
+    clock.t += 0.5 * P
+    assert not s.timer_due()                             # input ticking: the timer waits
+    clock.t += P
+    assert s.timer_due()
+    # a timer tick simulates the wall time since the last tick, bounded
+    assert s.tick_time() == pytest.approx(MAX_TICK * P)
+    clock.t += 0.9 * P
+    assert s.tick_time() == pytest.approx(0.9 * P)
+    clock.t += 0.1 * P
+    assert s.tick_time() == pytest.approx(MIN_TICK * P)
+
+
+def test_without_sync_every_tick_is_one_period_and_the_timer_always_ticks():
+    s, clock = make(sync=False)
+    assert s.timer_due()
+    clock.t += 5.0
+    assert s.tick_time() == pytest.approx(P)
+    clock.t += 5.0
+    assert s.tick_time() == pytest.approx(P) and s.timer_due()
+
+
+def test_whole_steps_carry_the_remainder():
+    s, _ = make()
+    ts = 0.002
+    steps = [s.steps(0.005, ts) for _ in range(4)]       # 2.5 steps per tick
+    assert steps == [2, 3, 2, 3] and s.time_debt == pytest.approx(0.0)
+    with pytest.raises(ValueError):
+        TickScheduler(0.0)
