@@ -9,6 +9,12 @@ Each of ``num_users`` (1-6) users gets its own sensor-model stream (``SensorMode
 scenario a|b|c, seed ``seed + user``), placed side by side ``user_spacing`` metres apart across the
 field of view (the model's ``placement.lateral_offset_m``). User ids are 1..num_users.
 
+Several sensors (``driver.launch.py sensors:=N``): one driver per sensor, each with ``view_pose``
+= its pose in the first sensor's frame; every driver simulates the same people (placed for the
+first sensor, facing it) seen from its own place, with its own noise and occlusion
+(``SensorModel.stream(view=...)``). Each driver's clock starts when it opens, so the sensors'
+streams are offset in time as unsynchronised sensors are.
+
 Timing: a simulated sensor captures frames on a fixed, drift-free schedule ``A + k / rate_hz``,
 anchored at the first poll. Each frame is stamped with its scheduled capture time; a poll returns
 every frame due by then, so a late poll (a loaded machine) catches up instead of losing frames.
@@ -29,6 +35,7 @@ import numpy as np
 from skeleton_core.conversions import SkeletonFrame
 from skeleton_core.model import NUM_JOINTS, TRACKED
 from skeleton_core.params import check, param
+from skeleton_core.tf import parse_pose
 
 from .base import Source, SourceError, SourceOutput
 
@@ -56,6 +63,16 @@ def _load_motion(clip: str, seed: int):
         raise SourceError(f'cannot load motion clip {p}: {e}') from None
 
 
+def _pose_error(text: str):
+    if not text:
+        return None
+    try:
+        parse_pose(text)
+    except ValueError as e:
+        return str(e)
+    return None
+
+
 @dataclass
 class SyntheticConfig:
     """Parameters of :class:`SyntheticSource`."""
@@ -70,6 +87,10 @@ class SyntheticConfig:
     sensor_params: str = param('', "sensor model YAML ('' = config/sensor_model.yaml or the "
                                'built-in defaults)')
     rate_hz: float = param(30.0, 'frame rate (Hz)', range=(1.0, 120.0))
+    view_pose: str = param('', "several sensors: this sensor's pose in the first sensor's frame, "
+                           '"x y z yaw pitch roll" (m, deg; the people face the first sensor; '
+                           "set by driver.launch.py sensors:=N); '' = the only sensor",
+                           validator=lambda v: _pose_error(v))
 
 
 class SyntheticSource(Source):
@@ -94,6 +115,7 @@ class SyntheticSource(Source):
         self.frame_id = frame_id
         self.user_spacing = float(cfg.user_spacing)
         self.sensor_params = cfg.sensor_params
+        self.view = parse_pose(cfg.view_pose) if cfg.view_pose else None
         self.with_truth = with_truth
         self._streams: List = []
         self.frames_out = 0
@@ -129,7 +151,7 @@ class SyntheticSource(Source):
                 float(base['placement'].get('lateral_offset_m', 0.0))
                 + (k - (n - 1) / 2.0) * self.user_spacing)
             model = sensor_model.SensorModel(params=params, seed=self.seed + k)
-            self._streams.append(model.stream(clip, self.scenario, loop=True))
+            self._streams.append(model.stream(clip, self.scenario, loop=True, view=self.view))
             self.clip_names.append(clip.name)
 
     def poll(self, now_ns: int) -> List[SourceOutput]:
