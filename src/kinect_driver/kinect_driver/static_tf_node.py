@@ -9,8 +9,8 @@ message as tf2's ``static_transform_publisher`` does. No tf2_ros needed.
 
 A pose is ``x y z yaw pitch roll`` (m, degrees; tf2's intrinsic z-y-x angles; positive pitch =
 tilted down). ``--file`` takes the sensor-pose YAML of :mod:`skeleton_core.tf` (hand-measured or
-written by ``calibrate_extrinsics``); ``--pose`` entries after it override its frames. A bad pose
-or file is one clear line and exit code 1.
+written by ``calibrate_extrinsics``); its frames override the ``--pose`` ones (a calibration
+replaces the launch file's defaults). A bad pose or file is one clear line and exit code 1.
 """
 from __future__ import annotations
 
@@ -28,7 +28,7 @@ from skeleton_core.tf_ros import StaticTfBroadcaster
 def parse_args(argv: Optional[List[str]] = None) -> argparse.Namespace:
     ap = argparse.ArgumentParser(prog='static_tf', description=__doc__.split('\n\n')[0])
     ap.add_argument('--file', action='append', default=[],
-                    help='sensor-pose YAML (repeatable; later entries override earlier frames)')
+                    help='sensor-pose YAML (repeatable; overrides --pose for its frames, a later file an earlier one)')
     ap.add_argument('--pose', action='append', default=[],
                     help='"x y z yaw pitch roll" (m, deg) of the next --child (default '
                          'kinect_link) in --parent')
@@ -42,14 +42,14 @@ def transforms_from_args(args: argparse.Namespace) -> List[Tuple[str, str, Trans
     """The transforms the arguments name, in order, a later one replacing an earlier child.
     Raises ``ValueError`` with a one-line reason."""
     items = {}
-    for path in args.file:
-        for parent, child, t in load_transforms(path):
-            items[child] = (parent, child, t)
     if len(args.child) > len(args.pose):
         raise ValueError(f'{len(args.child)} --child but {len(args.pose)} --pose')
     for i, pose in enumerate(args.pose):
         child = args.child[i] if i < len(args.child) else 'kinect_link'
         items[child] = (args.parent, child, parse_pose(pose))
+    for path in args.file:
+        for parent, child, t in load_transforms(path):
+            items[child] = (parent, child, t)
     if not items:
         raise ValueError('nothing to publish: give --pose or --file')
     return list(items.values())

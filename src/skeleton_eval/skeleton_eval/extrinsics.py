@@ -3,11 +3,12 @@
 A person moves for ~10 s where both sensors see them. Both report the same joints, each in its own
 frame and on its own clock. :func:`calibrate` finds
 
-* the **time offset** ``dt`` (B's stamp = A's stamp + ``dt`` for the same instant): joint *speeds*
-  do not depend on the frame, so the per-joint speed signals of the two tracks are
-  cross-correlated (every joint both sensors track, summed); the few best correlation peaks
-  (walking is periodic: a step apart looks alike) are each scored by the rigid fit they allow and
-  the best is refined to a fraction of a frame on that fit;
+* the **time offset** ``dt`` (B's stamp = A's stamp + ``dt`` for the same instant): every
+  whole-frame offset within ``MAX_OFFSET_S`` is scored by the rigid fit of the joints' motion it
+  allows (below; a wrong offset leaves every moving joint off), and the best is refined to a
+  fraction of a frame by a golden-section search on the inliers of its robust fit. (A
+  cross-correlation of joint speeds, which do not depend on the frame, was tried first: walking
+  is periodic, and its peaks a step apart were as high as the true one.)
 * the **rigid transform** ``T`` with ``p_A = T p_B`` (the pose of sensor B in A's frame): B is
   interpolated at A's stamps + ``dt``; every joint both report TRACKED (weighted by the product of
   their reliabilities when the tracks carry one) is a correspondence; RANSAC over minimal sets of
@@ -21,7 +22,7 @@ The transform from the world to B is then ``world->A * T``. ROS-free; the comman
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Dict, List, Optional, Sequence
+from typing import Dict, Optional, Sequence
 
 import numpy as np
 
@@ -29,7 +30,6 @@ from skeleton_core.model import NUM_JOINTS, TRACKED
 from skeleton_core.tf import Transform
 
 MAX_OFFSET_S = 2.0        # the sensors' clocks agree to this much (NTP-synchronised PCs: far less)
-OFFSET_CANDIDATES = 5     # correlation peaks scored by their rigid fit
 RANSAC_ITERATIONS = 300
 RANSAC_INLIER_M = 0.15    # a correspondence this close under a candidate transform is an inlier
                           # (the trackers' joint centres differ by several cm per view)
@@ -183,46 +183,6 @@ def _period_s(track: Track) -> float:
     return float(np.median(d)) if len(d) else 1.0 / 30.0
 
 
-def joint_speeds(track: Track, rate_hz: float, t0_ns: int, n: int):
-    """(n, 20) joint speeds (m/s) on a regular grid ``t0 + k / rate_hz`` and their validity."""
-    t = t0_ns + np.round(np.arange(n) * 1e9 / rate_hz).astype(np.int64)
-    p, w = _interp(track, t, 2.5 * _period_s(track))
-    v = np.linalg.norm(np.diff(p, axis=0), axis=2) * rate_hz
-    ok = (w[1:] > 0) & (w[:-1] > 0)
-    return v, ok
-
-
-def offset_candidates(a: Track, b: Track, max_offset_s: float = MAX_OFFSET_S,
-                      count: int = OFFSET_CANDIDATES) -> List[float]:
-    """The ``count`` best time offsets (s) by the cross-correlation of the joint speeds, best
-    first (B's stamp = A's stamp + offset)."""
-    rate = 1.0 / min(_period_s(a), _period_s(b))
-    t0 = int(max(a.stamps_ns[0], b.stamps_ns[0] - max_offset_s * 1e9))
-    span = (min(a.stamps_ns[-1], b.stamps_ns[-1] + max_offset_s * 1e9) - t0) * 1e-9
-    n = int(span * rate)
-    m = int(round(max_offset_s * rate))
-    if n < 3 * rate:
-        raise CalibrationError(f'the recordings overlap {max(span, 0):.1f} s in time (allowing '
-                               f'{max_offset_s:.1f} s of clock offset): at least 3 s needed')
-    va, oka = joint_speeds(a, rate, t0, n)
-    vb, okb = joint_speeds(b, rate, t0 - int(m * 1e9 / rate), n + 2 * m)
-    scores = np.full(2 * m + 1, -np.inf)
-    for k in range(2 * m + 1):   # b shifted by (k - m) frames: b[k + i] against a[i]
-        ok = oka & okb[k:k + len(va)]
-        if ok.sum() < 2 * rate:
-            continue
-        x, y = va[ok], vb[k:k + len(va)][ok]
-        x, y = x - x.mean(), y - y.mean()
-        den = float(np.sqrt((x * x).sum() * (y * y).sum()))
-        scores[k] = float((x * y).sum() / den) if den > 0 else -np.inf
-    if not np.isfinite(scores).any():
-        raise CalibrationError('the two sensors never track the same joints at the same time')
-    peaks = [k for k in range(2 * m + 1) if np.isfinite(scores[k])
-             and (k == 0 or scores[k] >= scores[k - 1]) and (k == 2 * m or scores[k] >= scores[k + 1])]
-    peaks.sort(key=lambda k: -scores[k])
-    return [(k - m) / rate for k in peaks[:count]]
-
-
 def correspondences(a: Track, b: Track, offset_s: float):
     """Matched joints: A's positions (N, 3), B's interpolated at A's stamps + offset (N, 3),
     weights (N,), A's frame index of each (N,) and joint (N,)."""
@@ -277,11 +237,31 @@ def centred_fit(a: np.ndarray, b: np.ndarray, w: np.ndarray, joint: np.ndarray,
     return t, inl, rc
 
 
-def _fit_at(a: Track, b: Track, offset_s: float, rng):
+def _centred_once(a, b, w, joint):
+    """One motion-centred fit of every correspondence given (see :func:`centred_fit`)."""
+    ca, cb = np.empty_like(a), np.empty_like(b)
+    for j in np.unique(joint):
+        m = joint == j
+        ww = w[m][:, None]
+        ca[m] = a[m] - (ww * a[m]).sum(0) / ww.sum()
+        cb[m] = b[m] - (ww * b[m]).sum(0) / ww.sum()
+    rot = kabsch(ca, cb, w).matrix
+    tr = (w[:, None] * (a - b @ rot.T)).sum(0) / w.sum()
+    return Transform.from_matrix(rot, tr), np.linalg.norm(ca - cb @ rot.T, axis=1)
+
+
+def _fit_at(a: Track, b: Track, offset_s: float, rng, robust: bool = True, only=None):
     pa, pb, w, f, j = correspondences(a, b, offset_s)
+    if only is not None:   # a fixed set of (frame, joint) correspondences, no trimming
+        sel = only[f, j]
+        pa, pb, w, f, j = pa[sel], pb[sel], w[sel], f[sel], j[sel]
     if len(pa) < MIN_PAIRS:
         return None
-    t0, inl0 = robust_fit(pa, pb, w, f, rng)
+    if only is not None:
+        t, rc = _centred_once(pa, pb, w, j)
+        q = float(np.average(rc ** 2, weights=w))
+        return t, np.ones(len(pa), bool), _residuals(t, pa, pb), q, len(pa), 0, rc
+    inl0 = robust_fit(pa, pb, w, f, rng)[1] if robust else np.ones(len(pa), bool)
     t, inl, rc = centred_fit(pa, pb, w, j, inl0)
     if t is None:
         return None
@@ -299,26 +279,37 @@ def calibrate(a: Track, b: Track, seed: int = 0, max_offset_s: float = MAX_OFFSE
     :class:`CalibrationError` with one line when the tracks do not allow it."""
     if len(a) < 10 or len(b) < 10:
         raise CalibrationError(f'too few frames ({len(a)} and {len(b)})')
-    rng = np.random.default_rng(seed)
+    details: Dict = {}
     if offset_s is None:
-        cands = offset_candidates(a, b, max_offset_s)
-        fits = [(c, _fit_at(a, b, c, rng)) for c in cands]
-        fits = [(c, fit) for c, fit in fits if fit is not None]
-        if not fits:
+        period = max(_period_s(a), _period_s(b))
+        # every whole-frame offset scored by the motion fit it allows (a quick fit without
+        # RANSAC); the joint-speed correlation ranks them too, as a check
+        grid = np.arange(-max_offset_s, max_offset_s + 1e-9, period)
+        scores = []
+        for o in grid:
+            fit = _fit_at(a, b, float(o), None, robust=False)
+            scores.append(np.inf if fit is None else fit[3])
+        scores = np.array(scores)
+        if not np.isfinite(scores).any():
             raise CalibrationError(f'fewer than {MIN_PAIRS} joints tracked by both sensors at '
-                                   'the same time')
-        best_c, _ = min(fits, key=lambda cf: cf[1][3])
-        # refine to a fraction of a frame: golden-section search of the fit quality
-        half = 0.5 * max(_period_s(a), _period_s(b))
-        lo, hi = best_c - half, best_c + half
+                                   f'the same time (clock offsets up to {max_offset_s:.1f} s '
+                                   'tried)')
+        best = float(grid[int(np.argmin(scores))])
+        # refine to a fraction of a frame: golden-section search of the fit's quality over the
+        # inliers of the robust fit at the best whole frame (a fixed set: a smooth function)
+        pa, pb, w, f, j = correspondences(a, b, best)
+        inl = _fit_at(a, b, best, np.random.default_rng(seed))[1]
+        only = np.zeros((len(a), NUM_JOINTS), bool)
+        only[f[inl], j[inl]] = True
+        lo, hi = best - period, best + period
         g = (np.sqrt(5) - 1) / 2
 
         def quality(o):
-            fit = _fit_at(a, b, o, np.random.default_rng(seed))
+            fit = _fit_at(a, b, o, None, only=only)
             return np.inf if fit is None else fit[3]
         x1, x2 = hi - g * (hi - lo), lo + g * (hi - lo)
         f1, f2 = quality(x1), quality(x2)
-        for _ in range(12):
+        for _ in range(14):
             if f1 < f2:
                 hi, x2, f2 = x2, x1, f1
                 x1 = hi - g * (hi - lo)
@@ -328,9 +319,6 @@ def calibrate(a: Track, b: Track, seed: int = 0, max_offset_s: float = MAX_OFFSE
                 x2 = lo + g * (hi - lo)
                 f2 = quality(x2)
         offset_s = 0.5 * (lo + hi)
-        details = {'offset_candidates_s': [round(c, 4) for c in cands]}
-    else:
-        details = {}
     fit = _fit_at(a, b, offset_s, np.random.default_rng(seed))
     if fit is None:
         raise CalibrationError(f'fewer than {MIN_PAIRS} joints tracked by both sensors at the '
@@ -371,18 +359,64 @@ def tracks_from_frames(frames: Sequence) -> Dict[int, Track]:
     return out
 
 
+CIRCLE_RADIUS_M = 1.0      # the calibration walk: a loop about 2 m across in the shared view ...
+CIRCLE_WOBBLE = 0.6        # ... turning unevenly (heading = s/R + 0.6 sin(s/R))
+# the sensor model's placement for it: no treadmill and no turning back to the first sensor (the
+# walk goes round; the user faces every way)
+WALK_PLACEMENT = {'placement': {'keep_facing': False, 'max_travel_m': 10.0}}
+
+
+def walk_in_circle(clip, radius: float = CIRCLE_RADIUS_M, wobble: float = CIRCLE_WOBBLE):
+    """A straight walk bent onto a loop about ``2 radius`` across (counter-clockwise, the heading
+    turning at ``1/radius`` rad per metre, unevenly by ``wobble``): every frame's body keeps its
+    pose relative to the root's progress and is carried round, facing along the path. The
+    calibration walk: the user faces every way and the joints sweep the shared view, which the
+    rotation needs (walking on the spot leaves it weak). The uneven turning matters: on a
+    perfect circle a time shift and a rotation about the vertical look alike."""
+    from dataclasses import replace
+    p = np.asarray(clip.positions, float)
+    root = p[:, 0, :2]
+    d = root[-1] - root[0]
+    n = float(np.linalg.norm(d))
+    if n < 0.5:
+        raise ValueError(f'{getattr(clip, "name", "clip")}: not a walk (the root moves {n:.2f} m)')
+    d = d / n
+    left = np.array([-d[1], d[0]])
+    rel = p[..., :2] - root[0]
+    s = (root - root[0]) @ d                     # the root's progress (T,)
+    u = rel @ d - s[:, None]                     # along the walk, relative to the root (T, J)
+    v = rel @ left                               # to the left of the walk (T, J)
+    # the path: heading psi(s) = s / R + wobble sin(s / R), integrated over the progress
+    grid = np.linspace(min(s.min(), 0.0), max(s.max(), 0.0) + 1e-9, 4000)
+    psi = grid / radius + wobble * np.sin(grid / radius)
+    step = np.diff(grid, prepend=grid[0])
+    path = np.cumsum(np.stack([np.cos(psi), np.sin(psi)], 1) * step[:, None], axis=0)
+    c = np.stack([np.interp(s, grid, path[:, 0]), np.interp(s, grid, path[:, 1])], 1)
+    h = np.interp(s, grid, psi)
+    fwd = np.stack([np.cos(h), np.sin(h)], 1)[:, None, :]
+    lft = np.stack([-np.sin(h), np.cos(h)], 1)[:, None, :]
+    out = p.copy()
+    out[..., :2] = c[:, None, :] + u[..., None] * fwd + v[..., None] * lft
+    return replace(clip, name=f'{getattr(clip, "name", "clip")}_loop', positions=out)
+
+
 def synthetic_tracks(view: Transform, seed: int = 0, scenario: str = 'a', duration_s: float = 10.0,
                      clock_offset_s: float = 0.0, phase_s: float = 0.0, clip=None,
-                     sensor_params=None):
+                     sensor_params=None, circle: bool = True):
     """Two sensors watching one person (the sensor model, :meth:`SensorModel.corrupt` with
     ``view``): A at the reference placement, B at ``view`` (its pose in A's frame), capturing
     ``phase_s`` later in the motion (0 to one period) and stamping with a clock ``clock_offset_s``
-    ahead of A's. ``clip``: default the built-in walk of ``seed``. Returns (A, B, truth of A)."""
+    ahead of A's. ``clip``: default the built-in walk of ``seed``, walked round a circle
+    (:func:`walk_in_circle`; ``circle=False``: on the spot, facing A). Returns (A, B, truth of A)."""
     from skeleton_data.motions import builtin_clips
 
     from .sensor_model import SensorModel
     if clip is None:
         clip = builtin_clips(seed, duration=duration_s + 1.0)[0]
+    if circle:
+        from .sensor_model import _merge, load_params
+        clip = walk_in_circle(clip)
+        sensor_params = _merge(load_params(sensor_params), WALK_PLACEMENT)
     model = SensorModel(sensor_params, seed=seed)
     n = int(round(duration_s * model.fps))
     sa = model.corrupt(clip, scenario, max_frames=n, view=Transform())
@@ -395,5 +429,4 @@ def synthetic_tracks(view: Transform, seed: int = 0, scenario: str = 'a', durati
 
 
 __all__ = ['synthetic_tracks', 'Track', 'Calibration', 'CalibrationError', 'calibrate', 'kabsch', 'robust_fit',
-           'offset_candidates', 'correspondences', 'pick_user', 'tracks_from_frames',
-           'joint_speeds']
+           'correspondences', 'pick_user', 'tracks_from_frames', 'walk_in_circle']
