@@ -18,6 +18,7 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 
 from skeleton_core.health import Health
 from skeleton_core.rosnode import DiagnosticsPublisher, ParamSpec, Parameters, run_node
+from skeleton_core.tf_ros import STATIC_LISTENER_QOS, TF_STATIC_TOPIC
 
 from .graph import TOPICS
 
@@ -65,10 +66,12 @@ class RecorderNode(Node):
             if msgtype is None:
                 raise ValueError(f'recorder: unknown topic {topic!r} (known: {sorted(TOPICS)})')
             self.counts[topic] = 0
-            # raw=True: the serialized bytes go to the bag as received (no decode/encode)
+            # raw=True: the serialized bytes go to the bag as received (no decode/encode); the
+            # latched /tf_static as tf2 subscribes to it (every broadcaster's last message)
             self.create_subscription(_msg_class(msgtype), topic,
                                      lambda data, t=topic, mt=msgtype: self._on_msg(t, mt, data),
-                                     qos, raw=True)
+                                     STATIC_LISTENER_QOS if topic == TF_STATIC_TOPIC else qos,
+                                     raw=True)
         self.diagnostics = DiagnosticsPublisher(self, self.health)
         self.get_logger().info(f'recording {len(self.counts)} topics to {self.path}')
 

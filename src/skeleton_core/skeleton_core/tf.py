@@ -262,6 +262,23 @@ class TfBuffer:
         return self._to_ancestor(target, common).inverse() * self._to_ancestor(source, common)
 
 
+def transforms_from_msg(msg) -> List[Tuple[str, str, 'Transform']]:
+    """The ``(parent, child, Transform)`` items of a ``tf2_msgs/TFMessage`` (an rclpy message or
+    any object with its fields, e.g. one decoded from a bag); a transform that is not one (NaN,
+    zero quaternion, empty frame) raises ``ValueError`` naming it."""
+    out = []
+    for m in msg.transforms:
+        tr, q = m.transform.translation, m.transform.rotation
+        if not m.header.frame_id or not m.child_frame_id:
+            raise ValueError('transform without a frame name')
+        try:
+            t = Transform((tr.x, tr.y, tr.z), (q.x, q.y, q.z, q.w))
+        except ValueError as e:
+            raise ValueError(f'{m.header.frame_id} -> {m.child_frame_id}: {e}') from None
+        out.append((m.header.frame_id.lstrip('/'), m.child_frame_id.lstrip('/'), t))
+    return out
+
+
 # ------------------------------------------------------------------ files and launch arguments
 def parse_pose(text: Union[str, Sequence[float]]) -> Transform:
     """``'x y z yaw pitch roll'`` (m, degrees; commas allowed; 3 values = no rotation)."""
@@ -360,7 +377,7 @@ def default_sensor_poses(count: int, height: float = 0.8, distance: float = 2.5)
     return out
 
 
-__all__ = ['Transform', 'TfBuffer', 'WORLD_FRAME', 'parse_pose', 'format_pose',
+__all__ = ['Transform', 'TfBuffer', 'WORLD_FRAME', 'transforms_from_msg', 'parse_pose', 'format_pose',
            'transforms_to_yaml', 'load_transforms', 'sensor_frame', 'sensor_namespace',
            'default_sensor_poses', 'quat_from_matrix', 'matrix_from_quat', 'matrix_from_ypr',
            'ypr_from_matrix']

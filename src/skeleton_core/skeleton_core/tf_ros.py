@@ -11,7 +11,7 @@ from typing import Callable, Iterable, List, Optional, Tuple
 
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-from .tf import TfBuffer, Transform
+from .tf import TfBuffer, Transform, transforms_from_msg
 
 TF_STATIC_TOPIC = '/tf_static'
 STATIC_BROADCASTER_QOS = QoSProfile(depth=1, history=HistoryPolicy.KEEP_LAST,
@@ -43,19 +43,9 @@ def to_tf_message(items: Iterable[Tuple[str, str, Transform]], stamp=None):
 
 
 def from_tf_message(msg) -> List[Tuple[str, str, Transform]]:
-    """The ``(parent, child, Transform)`` items of a ``TFMessage``; a transform that is not one
-    (NaN, zero quaternion, empty frame) raises ``ValueError`` naming it."""
-    out = []
-    for m in msg.transforms:
-        tr, q = m.transform.translation, m.transform.rotation
-        if not m.header.frame_id or not m.child_frame_id:
-            raise ValueError('transform without a frame name')
-        try:
-            t = Transform((tr.x, tr.y, tr.z), (q.x, q.y, q.z, q.w))
-        except ValueError as e:
-            raise ValueError(f'{m.header.frame_id} -> {m.child_frame_id}: {e}') from None
-        out.append((m.header.frame_id.lstrip('/'), m.child_frame_id.lstrip('/'), t))
-    return out
+    """The ``(parent, child, Transform)`` items of a ``TFMessage`` (see
+    :func:`skeleton_core.tf.transforms_from_msg`)."""
+    return transforms_from_msg(msg)
 
 
 class StaticTfListener:
