@@ -12,7 +12,7 @@ in their shared view for ~10 s (``skeleton_eval.extrinsics``). Writes the sensor
 
 The first sensor is the reference: its pose in world comes from the first bag's ``/tf_static``, else
 ``--reference-pose`` (default 0.8 m above the floor at the origin, as the launch files). Every
-other sensor is calibrated against it. The person should walk round a loop about 2 m across
+other sensor is calibrated against it. The person should walk round a loop 2.5-3 m across
 where every sensor sees them (facing every way; walking on the spot leaves the rotation weak).
 """
 from __future__ import annotations
@@ -159,7 +159,7 @@ def tracks_live(n: int, duration: float):
     for k in range(n):
         node.create_subscription(SkeletonArray, f'/kinect_{k + 1}/skeletons', cb(k), 100,
                                  raw=True)
-    node.get_logger().info(f'walk round a loop about 2 m across where all {n} sensors see you; '
+    node.get_logger().info(f'walk round a loop 2.5-3 m across where all {n} sensors see you; '
                            f'recording {duration:.0f} s from the first skeleton of every sensor')
     start = None
     try:

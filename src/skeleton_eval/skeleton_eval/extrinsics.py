@@ -26,6 +26,7 @@ from typing import Dict, Optional, Sequence
 
 import numpy as np
 
+from skeleton_core.geometry import facing_yaw
 from skeleton_core.model import NUM_JOINTS, TRACKED
 from skeleton_core.tf import Transform
 
@@ -37,6 +38,7 @@ TRIM_SIGMAS = 2.5         # trimming: residuals beyond this many robust sigmas a
 TRIM_FLOOR_M = 0.02       # ... but never below this (the joints' jitter)
 TRIM_ITERATIONS = 10
 JOINT_NOISE_WEIGHTS = True
+BODY_FRAME_OFFSETS = True
 MIN_PAIRS = 60            # fewer correspondences than this: no calibration
 
 
@@ -76,7 +78,8 @@ class Track:
 
     def weights(self) -> np.ndarray:
         """(T, 20) per-joint weight: TRACKED and finite, times the reliability if any."""
-        w = ((self.tracking_state == TRACKED) & np.isfinite(self.positions).all(axis=2)).astype(float)
+        ok = (self.tracking_state == TRACKED) & np.isfinite(self.positions).all(axis=2)
+        w = ok.astype(float)
         if self.reliability is not None:
             w *= np.clip(np.nan_to_num(self.reliability), 0.0, 1.0)
         return w
@@ -237,6 +240,48 @@ def centred_fit(a: np.ndarray, b: np.ndarray, w: np.ndarray, joint: np.ndarray,
     return t, inl, rc
 
 
+def body_frame_fit(a: np.ndarray, b: np.ndarray, w: np.ndarray, joint: np.ndarray,
+                   heading: np.ndarray, start: Transform, inliers: np.ndarray):
+    """The rigid fit with each joint's offset between the two trackers modelled in the *body*
+    frame: ``a = T b + Rz(heading) d_j`` (the trackers' joint centres differ by a few cm per
+    joint, carried with the body as it turns; ``heading``: the body's yaw in A's frame per
+    correspondence). Alternates the offsets ``d_j`` (mean of the rotated residuals) and ``T``
+    (weighted Kabsch of the corrected points), joints weighted by the inverse of their residual
+    variance, trimmed at ``TRIM_SIGMAS``. When the user faces every way (a walk round a loop)
+    the offsets separate from ``T``; when the heading hardly changes they are a constant the
+    motion-centred start already removed, and ``T`` stays where it was.
+    Returns (transform, inlier mask, residuals)."""
+    c, sn = np.cos(heading), np.sin(heading)
+    t, inl = start, inliers.copy()
+    joints = np.unique(joint)
+    r = None
+    for _ in range(2 * TRIM_ITERATIONS):
+        e = a - t.apply(b)
+        body = np.stack([c * e[:, 0] + sn * e[:, 1], -sn * e[:, 0] + c * e[:, 1], e[:, 2]], 1)
+        d = np.zeros((NUM_JOINTS, 3))
+        ww = w.copy()
+        for j in joints:
+            m = inl & (joint == j)
+            if m.sum() >= 10:
+                d[j] = np.average(body[m], axis=0, weights=w[m])
+        off = d[joint]
+        world_off = np.stack([c * off[:, 0] - sn * off[:, 1], sn * off[:, 0] + c * off[:, 1],
+                              off[:, 2]], 1)
+        r = np.linalg.norm(e - world_off, axis=1)
+        for j in joints:   # each joint by the inverse of its noise variance
+            m = inl & (joint == j)
+            if m.sum() >= 10:
+                ww[joint == j] /= max(float(np.mean(r[m] ** 2)), 1e-6)
+        new_t = kabsch(a[inl] - world_off[inl], b[inl], ww[inl])
+        sigma = 1.4826 * float(np.median(r[inl]))
+        new_inl = r < max(TRIM_SIGMAS * sigma, TRIM_FLOOR_M)
+        done = (new_inl == inl).all() and sum(new_t.distance(t)) < 1e-7
+        t, inl = new_t, new_inl
+        if done or inl.sum() < 3:
+            break
+    return t, inl, r
+
+
 def _centred_once(a, b, w, joint):
     """One motion-centred fit of every correspondence given (see :func:`centred_fit`)."""
     ca, cb = np.empty_like(a), np.empty_like(b)
@@ -265,6 +310,9 @@ def _fit_at(a: Track, b: Track, offset_s: float, rng, robust: bool = True, only=
     t, inl, rc = centred_fit(pa, pb, w, j, inl0)
     if t is None:
         return None
+    if robust and BODY_FRAME_OFFSETS:
+        heading = facing_yaw(a.positions, a.weights())[f]
+        t, inl, _ = body_frame_fit(pa, pb, w, j, heading, t, inl)
     # the fit's quality: the trimmed mean of the squared centred residuals of every
     # correspondence (a wrong offset moves every moving joint; the fraction kept does not hide it)
     q = float(np.mean(np.sort(rc ** 2)[:max(1, int(0.8 * len(rc)))]))
@@ -359,20 +407,20 @@ def tracks_from_frames(frames: Sequence) -> Dict[int, Track]:
     return out
 
 
-CIRCLE_RADIUS_M = 1.0      # the calibration walk: a loop about 2 m across in the shared view ...
-CIRCLE_WOBBLE = 0.6        # ... turning unevenly (heading = s/R + 0.6 sin(s/R))
+CIRCLE_RADIUS_M = 1.3      # the calibration walk: a loop about 2.6 m across in the shared view ...
+CIRCLE_WOBBLE = 0.6        # ... not a circle: c = R [(cos t, sin t) + 0.3 (cos 2t, sin 2t)]
 # the sensor model's placement for it: no treadmill and no turning back to the first sensor (the
 # walk goes round; the user faces every way)
 WALK_PLACEMENT = {'placement': {'keep_facing': False, 'max_travel_m': 10.0}}
 
 
 def walk_in_circle(clip, radius: float = CIRCLE_RADIUS_M, wobble: float = CIRCLE_WOBBLE):
-    """A straight walk bent onto a loop about ``2 radius`` across (counter-clockwise, the heading
-    turning at ``1/radius`` rad per metre, unevenly by ``wobble``): every frame's body keeps its
-    pose relative to the root's progress and is carried round, facing along the path. The
-    calibration walk: the user faces every way and the joints sweep the shared view, which the
-    rotation needs (walking on the spot leaves it weak). The uneven turning matters: on a
-    perfect circle a time shift and a rotation about the vertical look alike."""
+    """A straight walk bent onto a closed loop about ``2 radius`` across (counter-clockwise; a
+    circle with a ``wobble`` of twice its frequency, so it has no rotational symmetry): every
+    frame's body keeps its pose relative to the root's progress and is carried round, facing
+    along the path. The calibration walk: the user faces every way and the joints sweep the
+    shared view, which the rotation needs (walking on the spot leaves it weak). The asymmetry
+    matters: on a perfect circle a time shift and a rotation about the vertical look alike."""
     from dataclasses import replace
     p = np.asarray(clip.positions, float)
     root = p[:, 0, :2]
@@ -386,13 +434,18 @@ def walk_in_circle(clip, radius: float = CIRCLE_RADIUS_M, wobble: float = CIRCLE
     s = (root - root[0]) @ d                     # the root's progress (T,)
     u = rel @ d - s[:, None]                     # along the walk, relative to the root (T, J)
     v = rel @ left                               # to the left of the walk (T, J)
-    # the path: heading psi(s) = s / R + wobble sin(s / R), integrated over the progress
-    grid = np.linspace(min(s.min(), 0.0), max(s.max(), 0.0) + 1e-9, 4000)
-    psi = grid / radius + wobble * np.sin(grid / radius)
-    step = np.diff(grid, prepend=grid[0])
-    path = np.cumsum(np.stack([np.cos(psi), np.sin(psi)], 1) * step[:, None], axis=0)
-    c = np.stack([np.interp(s, grid, path[:, 0]), np.interp(s, grid, path[:, 1])], 1)
-    h = np.interp(s, grid, psi)
+    # the path: the closed curve c(th) = R [(cos th, sin th) + wobble (cos 2th, sin 2th) / 2]
+    # (no rotational symmetry), walked at the clip's own pace: th from the arc length
+    laps = int(np.ceil(max(abs(s.min()), abs(s.max())) / (2 * np.pi * radius))) + 2
+    th = np.linspace(-laps * 2 * np.pi, laps * 2 * np.pi, 4000 * laps)
+    curve = radius * (np.stack([np.cos(th), np.sin(th)], 1)
+                      + 0.5 * wobble * np.stack([np.cos(2 * th), np.sin(2 * th)], 1))
+    arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(curve, axis=0), axis=1))])
+    arc -= np.interp(0.0, th, arc)
+    tang = np.gradient(curve, axis=0)
+    psi = np.unwrap(np.arctan2(tang[:, 1], tang[:, 0]))
+    c = np.stack([np.interp(s, arc, curve[:, 0]), np.interp(s, arc, curve[:, 1])], 1)
+    h = np.interp(s, arc, psi)
     fwd = np.stack([np.cos(h), np.sin(h)], 1)[:, None, :]
     lft = np.stack([-np.sin(h), np.cos(h)], 1)[:, None, :]
     out = p.copy()
