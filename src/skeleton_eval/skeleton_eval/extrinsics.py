@@ -39,6 +39,7 @@ TRIM_FLOOR_M = 0.02       # ... but never below this (the joints' jitter)
 TRIM_ITERATIONS = 10
 JOINT_NOISE_WEIGHTS = True
 BODY_FRAME_OFFSETS = True
+BODY_FRAME_ITERATIONS = 20    # alternations of offsets and placement
 MIN_PAIRS = 60            # fewer correspondences than this: no calibration
 
 
@@ -255,7 +256,7 @@ def body_frame_fit(a: np.ndarray, b: np.ndarray, w: np.ndarray, joint: np.ndarra
     t, inl = start, inliers.copy()
     joints = np.unique(joint)
     r = None
-    for _ in range(2 * TRIM_ITERATIONS):
+    for _ in range(BODY_FRAME_ITERATIONS):
         e = a - t.apply(b)
         body = np.stack([c * e[:, 0] + sn * e[:, 1], -sn * e[:, 0] + c * e[:, 1], e[:, 2]], 1)
         d = np.zeros((NUM_JOINTS, 3))
