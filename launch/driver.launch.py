@@ -5,6 +5,7 @@ the rest of the graph elsewhere).
     ros2 launch kinect_bringup driver.launch.py source:=replay replay_file:=out/demo.mcap
     ros2 launch kinect_bringup driver.launch.py sensor_pose:="0 0 1.1 0 10 0"      # 1.1 m, tilted
     ros2 launch kinect_bringup driver.launch.py sensors:=2                          # front + side
+    ros2 launch kinect_bringup driver.launch.py sensors:=2 calibrate:=cache/extrinsics.yaml
     ros2 launch kinect_bringup driver.launch.py sensors:=2 extrinsics:=cache/extrinsics.yaml
 
 One sensor (``sensors:=1``, the default): node ``/driver`` on ``/kinect/skeletons``, frame
@@ -35,6 +36,9 @@ FRAME_ARGS = [
     ('extrinsics', '', 'sensor-pose YAML (hand-measured or from calibrate_extrinsics); its frames '
      'override sensor_pose on TF'),
     ('static_tf', 'true', 'publish the sensor frames on /tf_static (false: another launch does)'),
+    ('calibrate', '', 'sensors:=N: record 12 s of one person walking round a loop in the shared '
+     'view and write the calibrated sensor poses to this YAML (calibrate_extrinsics --live); '
+     'relaunch with extrinsics:=THAT_FILE'),
 ]
 
 
@@ -88,6 +92,13 @@ def _sensors(context):
         actions.append(Node(package='kinect_driver', executable='driver', name='driver',
                             namespace=ns or None, output='screen', emulate_tty=True,
                             parameters=[config, params], remappings=remap))
+    if arg('calibrate'):
+        if n < 2:
+            raise RuntimeError('calibrate:= needs sensors:=2 or more')
+        actions.append(Node(package='kinect_bringup', executable='calibrate_extrinsics',
+                            name='calibrate_extrinsics', output='screen', emulate_tty=True,
+                            arguments=['--live', str(n), '--duration', '12',
+                                       '--out', arg('calibrate')]))
     if arg('static_tf').lower() in ('true', '1', 'yes'):
         tf_args = []
         for k in range(1, n + 1):

@@ -5,7 +5,7 @@ in their shared view for ~10 s (``skeleton_eval.extrinsics``). Writes the sensor
     # two recordings (one per sensor PC, or one bag with both topics)
     ros2 run kinect_bringup calibrate_extrinsics kinect1.mcap kinect2.mcap --out cache/extrinsics.yaml
     ros2 run kinect_bringup calibrate_extrinsics both.mcap --out cache/extrinsics.yaml
-    # live: the drivers of driver.launch.py sensors:=N are running (or: calibrate:=FILE)
+    # live: the drivers of driver.launch.py sensors:=N are running (or its calibrate:=FILE)
     ros2 run kinect_bringup calibrate_extrinsics --live 2 --duration 12 --out cache/extrinsics.yaml
     # the synthetic source: the error against the true placement, over seeds
     ros2 run kinect_bringup calibrate_extrinsics --synthetic --seeds 3-12
@@ -238,7 +238,10 @@ def run_synthetic(args) -> int:
 
 
 def main(argv=None) -> int:
-    args = build_parser().parse_args(argv if argv is not None else sys.argv[1:])
+    if argv is None:   # started by a launch file: without the --ros-args part
+        from rclpy.utilities import remove_ros_args
+        argv = remove_ros_args(sys.argv)[1:]
+    args = build_parser().parse_args(argv)
     try:
         if args.synthetic:
             return run_synthetic(args)
@@ -267,6 +270,9 @@ def main(argv=None) -> int:
     except (ValueError, OSError, CalibrationError) as e:
         print(f'calibrate_extrinsics: error: {e}', file=sys.stderr)
         return 1
+    except KeyboardInterrupt:
+        print('calibrate_extrinsics: interrupted, nothing written', file=sys.stderr)
+        return 130
     for (_, child, t), c in zip(items[1:], cals):
         print(f'{child}: {format_pose(t)} (x y z m, yaw pitch roll deg in {WORLD_FRAME}); clock '
               f'offset {c.time_offset_s * 1000:+.1f} ms; motion residual {c.rms_m * 100:.1f} cm '

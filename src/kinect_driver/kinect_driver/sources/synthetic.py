@@ -12,8 +12,9 @@ field of view (the model's ``placement.lateral_offset_m``). User ids are 1..num_
 Several sensors (``driver.launch.py sensors:=N``): one driver per sensor, each with ``view_pose``
 = its pose in the first sensor's frame; every driver simulates the same people (placed for the
 first sensor, facing it) seen from its own place, with its own noise and occlusion
-(``SensorModel.stream(view=...)``). Each driver's clock starts when it opens, so the sensors'
-streams are offset in time as unsynchronised sensors are.
+(``SensorModel.stream(view=...)``), and shows the motion's frame of the wall clock (frame k at
+k / rate_hz s since the epoch): drivers started at different times see the same instant together,
+their frames apart by their timers' phase.
 
 Timing: a simulated sensor captures frames on a fixed, drift-free schedule ``A + k / rate_hz``,
 anchored at the first poll. Each frame is stamped with its scheduled capture time; a poll returns
@@ -118,6 +119,7 @@ class SyntheticSource(Source):
         self.view = parse_pose(cfg.view_pose) if cfg.view_pose else None
         self.with_truth = with_truth
         self._streams: List = []
+        self._lengths: List[int] = []
         self.frames_out = 0
         self.skipped = 0
         self.clip_names: List[str] = []
@@ -136,6 +138,7 @@ class SyntheticSource(Source):
                               f'{self.sensor_params or "(default)"}: {e}') from None
         clips = _load_motion(self.clip, self.seed)
         self._streams = []
+        self._lengths = []
         self._ready = None
         self.clip_names = []
         n = self.num_users
@@ -153,9 +156,20 @@ class SyntheticSource(Source):
             model = sensor_model.SensorModel(params=params, seed=self.seed + k)
             self._streams.append(model.stream(clip, self.scenario, loop=True, view=self.view))
             self.clip_names.append(clip.name)
+            self._lengths.append(len(sensor_model.resample(
+                np.asarray(clip.positions, float)[:, :1], float(clip.fps), model.fps)))
 
     def poll(self, now_ns: int) -> List[SourceOutput]:
         period = self._period_ns
+        if self._next_ns is None and self.view is not None:
+            # several sensors: every driver shows the motion frame of the wall clock (frame k at
+            # k / rate s since the epoch), so sensors started at different times see the same
+            # instant at the same time, as real ones do
+            k = int(now_ns // period)
+            self._ready = None
+            for stream, length in zip(self._streams, self._lengths):
+                for _ in range(k % max(length, 1)):
+                    next(stream)
         if self._next_ns is None or 0 < self._next_ns - now_ns < period // 2:
             self._next_ns = now_ns   # first poll, or the timer ticks earlier than the schedule
         due = (now_ns - self._next_ns) // period + 1
