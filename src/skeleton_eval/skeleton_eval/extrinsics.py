@@ -396,14 +396,15 @@ def tracks_from_frames(frames: Sequence) -> Dict[int, Track]:
         by.setdefault(int(fr.user_id), []).append(fr)
     out = {}
     for uid, fs in by.items():
-        rel = [fr.reliability for fr in fs]
-        has_rel = all(r is not None for r in rel) and not all(np.all(np.asarray(r) == 1.0) or
-                                                               np.all(np.asarray(r) == 0.0)
-                                                               for r in rel)
+        rel = [None if fr.reliability is None else np.asarray(fr.reliability, float) for fr in fs]
+        # a reliability counts when every frame has one (the driver's raw skeletons carry none:
+        # NaN, or all 0 / all 1)
+        has_rel = all(r is not None and np.isfinite(r).all() for r in rel) and not all(
+            np.all(r == 1.0) or np.all(r == 0.0) for r in rel)
         out[uid] = Track(stamps_ns=[fr.stamp_ns for fr in fs],
                          positions=[fr.positions for fr in fs],
                          tracking_state=[fr.tracking_state for fr in fs],
-                         reliability=[np.asarray(r, float) for r in rel] if has_rel else None,
+                         reliability=rel if has_rel else None,
                          frame_id=fs[0].frame_id)
     return out
 
