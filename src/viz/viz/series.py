@@ -10,6 +10,7 @@ import numpy as np
 
 from skeleton_core.conversions import SkeletonFrame, frames_from_array_msg
 from skeleton_core.model import NUM_JOINTS, TRACKED
+from skeleton_core import bagio
 from skeleton_core.tf import TfBuffer, transforms_from_msg
 
 TF_STATIC_TOPIC = '/tf_static'
@@ -185,7 +186,6 @@ def _to_common_frame(frames: Dict[str, Dict[int, List[SkeletonFrame]]], tf: TfBu
 
 def load_bag(path, role_topics: Optional[Dict[str, str]] = None) -> BagData:
     """Read the skeleton topics of an MCAP bag (other topics are only counted)."""
-    from skeleton_core import bagio
     role_topics = dict(ROLE_TOPICS if role_topics is None else role_topics)
     wanted = set(role_topics.values()) | {TF_STATIC_TOPIC}
     counts = bagio.bag_topics(path)
