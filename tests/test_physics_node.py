@@ -366,8 +366,7 @@ def test_targets_wait_for_the_sensor_frame_and_follow_a_tilted_sensor(rclpy_cont
     down), the character stands where that pose puts the sensor-frame target: on the floor of
     world, not where the sensor frame's own axes would put it."""
     node = PhysicsNode(context=rclpy_context, parameter_overrides=[
-        Parameter('input_topic', value='/test_tf_phys/in'), Parameter('body_height', value=1.75),
-        Parameter('pin_feet', value=False)])
+        Parameter('input_topic', value='/test_tf_phys/in'), Parameter('body_height', value=1.75)])
     peer = rclpy.create_node('tf_phys_peer', context=rclpy_context)
     spinner = Spinner(rclpy_context, node, peer)
     got = []
