@@ -9,7 +9,8 @@ The reconstruction is one node (`reconstruction`: reliability, completion and op
 hops between them) or, with reconstruction:=split, the three nodes `reliability`, `completion` and
 `optimizer`; both publish the same topics. Parameters come from the package's config/<node>.yaml
 files (the same files the one-process `pipeline` executable reads); launch arguments override the
-few that users change most.
+few that users change most. The sensor frame is on TF: ``static_tf`` publishes ``world ->
+kinect_link`` from ``sensor_pose`` or an ``extrinsics`` file; the physics character is in ``world``.
 """
 import os
 
@@ -50,6 +51,12 @@ ARGS = [
     ('viz', 'true', 'run the RViz marker node'),
     ('rviz', 'false', 'start RViz with the bundled config'),
     ('record', '', 'record every pipeline topic to this MCAP file ("" = no recording)'),
+    ('sensor_pose', '0 0 0.8 0 0 0', 'the sensor\'s pose in world, on TF as world -> kinect_link: '
+     '"x y z yaw pitch roll" (m, deg; positive pitch = tilted down)'),
+    ('extrinsics', '', 'sensor-pose YAML (hand-measured or from calibrate_extrinsics); '
+     'overrides sensor_pose'),
+    ('static_tf', 'true', 'publish the sensor frame on /tf_static (false: another launch does, '
+     'e.g. driver.launch.py on the sensor PC)'),
     ('namespace', '', 'namespace for all nodes'),
     ('config_dir', '', 'directory with <node>.yaml parameter files ("" = the installed config)'),
     ('log_level', 'info', 'log level of all nodes'),
@@ -152,6 +159,18 @@ def _nodes(context):
     if arg('record'):
         nodes.append(managed_node(package='kinect_bringup', executable='recorder', name='recorder',
                           parameters=params('recorder', output=arg('record')), **common))
+    if arg('static_tf').lower() in ('true', '1', 'yes'):
+        # the sensor frame on TF (/tf_static is absolute: the namespace does not move it)
+        from skeleton_core.tf import parse_pose
+        try:
+            parse_pose(arg('sensor_pose'))
+        except ValueError as e:
+            raise RuntimeError(str(e)) from None
+        tf_args = ['--pose', arg('sensor_pose'), '--child', 'kinect_link']
+        if arg('extrinsics'):
+            tf_args += ['--file', arg('extrinsics')]
+        nodes.append(Node(package='kinect_driver', executable='static_tf', name='static_tf',
+                          arguments=tf_args, output='screen', emulate_tty=True))
     ns = arg('namespace')
     return [GroupAction(([PushRosNamespace(ns)] if ns else []) + nodes)]
 

@@ -1,5 +1,6 @@
-"""physics node over real DDS: a short clip in on the input topic, simulated skeletons out on
-/character/skeletons (stamps and frame preserved), object markers, pushes, parameter validation."""
+"""physics node over real DDS: a short clip in on the input topic, moved to the world through the
+sensor's static TF (/tf_static), simulated skeletons out on /character/skeletons (in world,
+stamps preserved), object markers, pushes, parameter validation."""
 import time
 
 import numpy as np
@@ -15,12 +16,22 @@ from skeleton_msgs.srv import ApplyPush  # noqa: E402
 from visualization_msgs.msg import MarkerArray  # noqa: E402
 
 from skeleton_core.conversions import SkeletonFrame, frames_from_array_msg, frames_to_array_msg  # noqa: E402
-from skeleton_core.model import NUM_JOINTS, segment_lengths, standard_body  # noqa: E402
+from skeleton_core.model import FOOT_LEFT, FOOT_RIGHT, NUM_JOINTS, segment_lengths, standard_body  # noqa: E402
+from skeleton_core.tf import Transform  # noqa: E402
+from skeleton_core.tf_ros import StaticTfBroadcaster  # noqa: E402
 from physics_sim.physics_node import PhysicsNode  # noqa: E402
 from skeleton_core.rosnode import bring_up  # noqa: E402
 from ros_helpers import Spinner, wait_until as _wait  # noqa: E402
 
 BODY = standard_body()
+SENSOR_HEIGHT = 0.8
+
+
+def sensor_on_tf(peer, pose=None):
+    """world -> kinect_link on /tf_static, as the launch files' static_tf does."""
+    b = StaticTfBroadcaster(peer)
+    b.send([('world', 'kinect_link', pose or Transform.from_xyz_ypr(0, 0, SENSOR_HEIGHT))])
+    return b
 
 
 def clip(n=45):
@@ -46,7 +57,9 @@ def graph(rclpy_context):
         Parameter('input_topic', value='/test_physics/in'), Parameter('body_height', value=1.75),
         Parameter('balls', value=[1.0, 1.0, 0.1, 0.1, 0.5])]))
     peer = rclpy.create_node('physics_test_peer', context=rclpy_context)
+    peer.tf = sensor_on_tf(peer)
     spinner = Spinner(rclpy_context, node, peer)
+    assert _wait(lambda: node.tf.can_transform('world', 'kinect_link'), 10)
     yield node, peer
     spinner.stop()
     node.destroy_node()
@@ -74,17 +87,17 @@ def test_node_tracks_a_clip_over_dds(graph):
         time.sleep(0.05)
     assert got, 'no /character/skeletons received'
     last = got[-1]
-    assert last.header.frame_id == 'kinect_link'
+    assert last.header.frame_id == 'world'          # the character is in world (floor z = 0)
     frames = frames_from_array_msg(last)
     assert [f.user_id for f in frames] == [4]
     f = frames[0]
     assert f.stamp_ns == stamps[-1]              # the stamp of the target being tracked
     np.testing.assert_allclose(segment_lengths(f.positions), BODY.segment_lengths, atol=1e-3)
-    err = np.linalg.norm(f.positions - clip()[-1], axis=1)
+    err = np.linalg.norm(f.positions - (clip()[-1] + [0.0, 0.0, SENSOR_HEIGHT]), axis=1)
     assert err.mean() < 0.05
     assert f.orientations is not None
-    # objects: one DELETEALL then the ball, in the input's frame
-    assert objs and objs[-1].markers[-1].header.frame_id == 'kinect_link'
+    # objects: one DELETEALL then the ball, in world
+    assert objs and objs[-1].markers[-1].header.frame_id == 'world'
     assert len(objs[-1].markers) == 2
 
     # the node keeps simulating (and publishing) when input stops
@@ -319,7 +332,9 @@ def test_intention_over_dds_makes_the_hands_grip_the_bars(rclpy_context):
         Parameter('feature_world', value=str(PLAYGROUND)),
         Parameter('intention_topic', value='/test_grip/intention')]))
     peer = rclpy.create_node('grip_test_peer', context=rclpy_context)
+    peer.tf = sensor_on_tf(peer, Transform.from_xyz_ypr(0, 0, SENSOR_H))
     spinner = Spinner(rclpy_context, node, peer)
+    assert _wait(lambda: node.tf.can_transform('world', 'kinect_link'), 10)
     try:
         pub = peer.create_publisher(SkeletonArray, '/test_grip/in', 10)
         ipub = peer.create_publisher(Intention, '/test_grip/intention', 10)
@@ -341,6 +356,44 @@ def test_intention_over_dds_makes_the_hands_grip_the_bars(rclpy_context):
             send(i, [])
         assert _wait(lambda: node.sim.grips == {}, 5)
         assert node.sim.counters['grips'] == 2
+    finally:
+        spinner.stop()
+        node.destroy_node()
+        peer.destroy_node()
+
+
+def test_targets_wait_for_the_sensor_frame_and_follow_a_tilted_sensor(rclpy_context):
+    """No transform for the input's frame yet: targets are dropped (counted as 'no transform'),
+    no character. Once /tf_static has world -> kinect_link (1.2 m up, yawed 90 deg, tilted 20 deg
+    down), the character stands where that pose puts the sensor-frame target: on the floor of
+    world, not where the sensor frame's own axes would put it."""
+    node = PhysicsNode(context=rclpy_context, parameter_overrides=[
+        Parameter('input_topic', value='/test_tf_phys/in'), Parameter('body_height', value=1.75)])
+    peer = rclpy.create_node('tf_phys_peer', context=rclpy_context)
+    spinner = Spinner(rclpy_context, node, peer)
+    got = []
+    try:
+        peer.create_subscription(SkeletonArray, '/character/skeletons', got.append, 50)
+        pub = peer.create_publisher(SkeletonArray, '/test_tf_phys/in', 10)
+        _wait(lambda: pub.get_subscription_count() > 0, 10)
+        pose = Transform.from_xyz_ypr(0.3, -0.2, 1.2, 90.0, 20.0, 0.0)
+        world = BODY.rest_positions() + [0.1, 2.5, 0.0]          # standing in world
+        target = pose.inverse().apply(world)                      # as the tilted sensor sees it
+        for i in range(5):
+            pub.publish(_msg(target, 5_000_000_000 + i * 33_333_333))
+            time.sleep(1 / 30)
+        assert _wait(lambda: node.health.dropped.get('no transform', 0) >= 1, 5)
+        assert not node.sim.characters
+        peer.tf = sensor_on_tf(peer, pose)
+        for i in range(5, 50):
+            pub.publish(_msg(target, 5_000_000_000 + i * 33_333_333))
+            time.sleep(1 / 30)
+        assert _wait(lambda: any(m.header.frame_id == 'world' and m.skeletons for m in got), 10)
+        f = frames_from_array_msg(got[-1])[0]
+        err = np.linalg.norm(f.positions - world, axis=1)
+        assert err.mean() < 0.05, err
+        feet = [FOOT_LEFT, FOOT_RIGHT]
+        assert np.abs(f.positions[feet, 2] - world[feet, 2]).max() < 0.05
     finally:
         spinner.stop()
         node.destroy_node()

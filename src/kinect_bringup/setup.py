@@ -33,6 +33,7 @@ setup(
             'passthrough = kinect_bringup.passthrough:main',
             'param_docs = kinect_bringup.param_docs:main',
             'process_bag = kinect_bringup.process_bag:main',
+            'calibrate_extrinsics = kinect_bringup.calibrate_extrinsics:main',
         ],
     },
 )

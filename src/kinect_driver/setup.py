@@ -20,6 +20,7 @@ setup(
     entry_points={
         'console_scripts': [
             'driver = kinect_driver.driver_node:main',
+            'static_tf = kinect_driver.static_tf_node:main',
         ],
     },
 )

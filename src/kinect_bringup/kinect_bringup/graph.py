@@ -47,6 +47,7 @@ TOPICS: Dict[str, str] = {
     '/posture/reconstructed': 'skeleton_msgs/msg/SkeletonArray',
     '/character/skeletons': 'skeleton_msgs/msg/SkeletonArray',
     '/viz/markers': 'visualization_msgs/msg/MarkerArray',
+    '/tf_static': 'tf2_msgs/msg/TFMessage',   # the sensor frames (the character is in world)
 }
 
 

@@ -37,6 +37,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--record', default='', help='record the pipeline topics to this MCAP file')
     p.add_argument('--duration', type=float, default=0.0, help='stop after this many seconds (0 = run)')
     p.add_argument('--config-dir', default=None, help='directory of <node>.yaml files')
+    p.add_argument('--sensor-pose', default=DEFAULT_SENSOR_POSE,
+                   help='the sensor\'s pose in world (TF world -> kinect_link): "x y z yaw pitch '
+                        f'roll" (m, deg; default "{DEFAULT_SENSOR_POSE}")')
+    p.add_argument('--extrinsics', default='',
+                   help='sensor-pose YAML (hand-measured or from calibrate_extrinsics; overrides '
+                        '--sensor-pose)')
     p.add_argument('--executor', choices=EXECUTORS, default='single',
                    help='rclpy executor: single (default; the nodes share one interpreter lock, so '
                         'threads add overhead, not parallelism), multi, events (rclpy.experimental)')
@@ -46,6 +52,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 EXECUTORS = ('single', 'multi', 'events')
+DEFAULT_SENSOR_POSE = '0 0 0.8 0 0 0'   # the sensor model's placement: 0.8 m above the floor
 
 
 def make_executor(kind: str, threads: Optional[int] = None):
@@ -148,7 +155,12 @@ def main(argv=None) -> int:
         over = node_overrides(args)
         # a replay holds its first frame until every node reading /kinect/skeletons is there
         over['driver'].setdefault('wait_for_subscribers', skeleton_subscribers(names, directory))
-        nodes = create_nodes(names, over, directory)
+        from kinect_driver.static_tf_node import StaticTfNode, parse_args, transforms_from_args
+        tf_args = ['--pose', args.sensor_pose] + (['--file', args.extrinsics]
+                                                  if args.extrinsics else [])
+        frames = transforms_from_args(parse_args(tf_args))   # the sensor frame on TF
+        nodes = [StaticTfNode(frames)]
+        nodes += create_nodes(names, over, directory)
         executor = make_executor(args.executor, args.threads)
     except (ValueError, FileNotFoundError, RuntimeError, OSError, ImportError) as e:
         if not isinstance(e, TransitionFailed):   # (the node has logged its one line)

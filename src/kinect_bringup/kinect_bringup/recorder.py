@@ -16,6 +16,7 @@ from pathlib import Path
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 
 from skeleton_core.rosnode import ManagedNode, ParamSpec, Parameters, run_node
+from skeleton_core.tf_ros import STATIC_LISTENER_QOS, TF_STATIC_TOPIC
 
 from .graph import TOPICS
 
@@ -69,11 +70,15 @@ class RecorderNode(ManagedNode):
             self.timer(min(0.5, self.params['flush_period']), self._poll)
         qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
         for topic in self.params['topics']:
-            msgtype = TOPICS[topic]
-            # raw=True: the serialized bytes go to the bag as received (no decode/encode)
+            msgtype = TOPICS.get(topic)
+            if msgtype is None:
+                raise ValueError(f'recorder: unknown topic {topic!r} (known: {sorted(TOPICS)})')
+            # raw=True: the serialized bytes go to the bag as received (no decode/encode); the
+            # latched /tf_static as tf2 subscribes to it (every broadcaster's last message)
             self.subscription(_msg_class(msgtype), topic,
                               lambda data, t=topic, mt=msgtype: self._on_msg(t, mt, data),
-                              qos, raw=True)
+                              STATIC_LISTENER_QOS if topic == TF_STATIC_TOPIC else qos,
+                              raw=True)
         self.get_logger().info(f'recording {len(self.counts)} topics to {self.path}')
 
     def cleanup(self) -> None:

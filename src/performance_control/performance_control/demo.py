@@ -81,8 +81,10 @@ def run(world, out_dir: Path, seconds: float = 8.0, physics: bool = True) -> Dic
             sim = None
             if physics:
                 from physics_sim.simulation import SimConfig, Simulation
-                sim = Simulation(SimConfig(sensor_height=SENSOR_HEIGHT, pin_feet=False,
-                                           lift_feet=False, feature_world=world.path))
+                from skeleton_core.tf import Transform
+                sim = Simulation(SimConfig(pin_feet=False, lift_feet=False,
+                                           feature_world=world.path),
+                                 sensor_pose=Transform.from_xyz_ypr(0.0, 0.0, SENSOR_HEIGHT))
             rows[name] = []
             grips[name] = []
             for i in range(len(s)):

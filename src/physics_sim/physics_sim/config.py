@@ -92,12 +92,10 @@ class SimConfig:
     friction: float = param(1.0, 'sliding friction of the character capsules', range=(0.0, 10.0),
                             read_only=True, public=False)
     # frames
-    sensor_height: float = param(0.8, 'sensor height above the floor (m)', range=(0.0, 3.0),
-                                 read_only=True)
-    sensor_pitch: float = param(0.0, 'sensor tilt, positive = down (deg)', range=(-45.0, 45.0),
-                                read_only=True, name='sensor_pitch_deg', degrees=True)
+    # (the sensor's pose is on TF: world -> the input's frame; see frames.py)
     auto_floor: bool = param(False, 'put the floor under the lowest foot of the first target '
-                             '(overrides sensor_height)', read_only=True, public=False)
+                             "(overrides the height of the sensor's TF pose)", read_only=True,
+                             public=False)
     lift_feet: bool = param(True, 'raise the targets by the foot capsule radius (the capsules '
                             'rest on the floor instead of sinking into it)', read_only=True,
                             public=False)

@@ -123,15 +123,15 @@ class PhysicsMethod:
 EVAL_CONTROLLER = 'explicit_pd'
 # what the evaluation reports with each physics method (read from SimConfig's declarations)
 EVAL_DEFAULTS = {'controller': EVAL_CONTROLLER,
-                 **defaults(SimConfig, only=('sensor_height', 'auto_floor'))}
+                 **defaults(SimConfig, only=('auto_floor',))}
 
 
 def make_physics(upstream: Optional[str] = 'C', **params) -> PhysicsMethod:
     """Factory for the harness: ``upstream`` is a registered method name ('C' = the full
     reconstruction; None = physics on the raw stream). ``params``: physics node parameters
-    (SimConfig's ROS names: ``controller``, ``kp``, ``kd``, ``sensor_height``,
-    ``sensor_pitch_deg``, ``auto_floor``, ...; controller default :data:`EVAL_CONTROLLER`), the
-    others pass through to the upstream method."""
+    (SimConfig's ROS names: ``controller``, ``kp``, ``kd``, ``auto_floor``, ...; controller
+    default :data:`EVAL_CONTROLLER`; the sensor at ``frames.DEFAULT_SENSOR_POSE``, where the
+    sensor model puts it), the others pass through to the upstream method."""
     sim_values, upstream_params = split(params, SimConfig)
     cfg = build(SimConfig, {'controller': EVAL_CONTROLLER, **sim_values})
     up = None

@@ -8,10 +8,14 @@ Subscribes
   ``push_duration`` s.
 Publishes
   ``/character/skeletons`` -- SkeletonArray at ``output_rate``: joint positions and orientations of the
-  simulated bodies, in the input's frame, header stamp = the stamp of the target being tracked.
+  simulated bodies in ``world`` (floor at z = 0), header stamp = the stamp of the target being
+  tracked.
   ``/physics/objects`` -- visualization_msgs/MarkerArray: one DELETEALL then the boxes (CUBE), balls
-  (SPHERE) and mace (CYLINDER handle + SPHERE head, two ids) in the input's frame, namespace
+  (SPHERE) and mace (CYLINDER handle + SPHERE head, two ids) in ``world``, namespace
   ``physics_objects``.
+  ``/tf_static`` (subscribed) -- the input frame's pose in ``world`` (``world -> kinect_link``,
+  published by the launch files' ``static_tf``): targets are moved to the world with it; a target
+  whose frame TF does not know yet is dropped (counted as ``no transform``, logged once).
   ``/diagnostics`` -- Health plus the simulation's counters and real-time factor.
 Service
   ``~/apply_push`` -- skeleton_msgs/srv/ApplyPush.
@@ -38,6 +42,8 @@ from skeleton_core.model import NUM_JOINTS, TRACKED
 from skeleton_core.params import ParamSpec, assign, build, param, specs
 from skeleton_core.presence import Presence
 from skeleton_core.rosnode import InputDrops, ManagedNode, Parameters, fill_marker, run_node
+from skeleton_core.tf import WORLD_FRAME, TfBuffer
+from skeleton_core.tf_ros import StaticTfListener
 from skeleton_msgs.msg import Intention, SkeletonArray
 from skeleton_msgs.srv import ApplyPush
 from visualization_msgs.msg import Marker, MarkerArray
@@ -100,8 +106,6 @@ class PhysicsNodeConfig:
                            read_only=True)
     push_duration: float = param(0.1, 'duration of pushes from the ~/push topic (s)',
                                  range=(0.001, 5.0), public=False)
-    frame_id: str = param('kinect', 'frame of the outputs until an input arrives', read_only=True,
-                          public=False)
     intention_topic: str = param('/control/intention', 'with feature_world: the control '
                                  "node's engaged effectors (skeleton_msgs/Intention), whose hands "
                                  'grip the features', read_only=True)
@@ -158,7 +162,11 @@ class PhysicsNode(ManagedNode):
         warm_s = warm_up()   # compiled kernels now, not on the first frame
         if warm_s > 0.5:
             self.get_logger().info(f'compiled kernels ready in {warm_s:.1f} s (cached from now on)')
-        self.frame_id = v['frame_id']
+        # frames on TF: the targets' frame (the sensor's) -> world from /tf_static; the
+        # characters are published in world
+        self.tf = TfBuffer()
+        self.tf_listener = StaticTfListener(self, self.tf)
+        self._pose_key = None   # (input frame, TF version) of the sensor pose in use
         self.presence = Presence(v['user_timeout_s'])
         self.scheduler = TickScheduler(v['output_rate'], v['sync_to_input'])
         self._user_stamp: Dict[int, int] = {}   # stamp of each user's newest target
@@ -228,9 +236,9 @@ class PhysicsNode(ManagedNode):
         if decoded is None:
             return
         header_stamp, header_frame, frames = decoded
+        if not self._sensor_pose(header_frame or 'kinect_link'):
+            return
         now = time.monotonic()
-        if header_frame:
-            self.frame_id = header_frame
         self.presence.observe(header_stamp, (), wall=now)   # the input's clock moves on:
         self._expire(now)                                   # who left before this message?
         for f in frames:
@@ -333,6 +341,24 @@ class PhysicsNode(ManagedNode):
             self._sim_in_step = 0.9 * self._sim_in_step + 0.1 * steps * ts
         self._publish()
 
+    def _sensor_pose(self, frame: str) -> bool:
+        """Take the sensor's pose (world <- ``frame``) from TF; False (the message dropped and
+        counted, the reason logged once) while TF does not know it."""
+        key = (frame, self.tf.version)
+        if key == self._pose_key:
+            return True
+        try:
+            pose = self.tf.lookup(WORLD_FRAME, frame)
+        except LookupError as e:
+            self._drop('no transform', f'waiting for TF {WORLD_FRAME} -> {frame} ({e}); the '
+                       'launch files publish it (static_tf, launch argument sensor_pose)')
+            return False
+        self.sim.set_sensor_pose(pose)
+        if self._pose_key is None or self._pose_key[0] != frame:
+            self.get_logger().info(f'sensor frame {frame} in {WORLD_FRAME}: {pose}')
+        self._pose_key = key
+        return True
+
     def _publish(self) -> None:
         states = self.sim.states()
         if not states and self._published_empty:
@@ -340,13 +366,14 @@ class PhysicsNode(ManagedNode):
             return
         frames = []
         latest = 0
+        lift = self._lift()
         for uid, st in states.items():
             frames.append(SkeletonFrame(
-                positions=st.positions_sensor, tracking_state=np.full(NUM_JOINTS, TRACKED, np.uint8),
-                reliability=np.ones(NUM_JOINTS, np.float32), orientations=st.orientations_sensor,
-                user_id=uid, stamp_ns=st.stamp_ns, frame_id=self.frame_id))
+                positions=st.positions - lift, tracking_state=np.full(NUM_JOINTS, TRACKED, np.uint8),
+                reliability=np.ones(NUM_JOINTS, np.float32), orientations=st.orientations,
+                user_id=uid, stamp_ns=st.stamp_ns, frame_id=WORLD_FRAME))
             latest = max(latest, st.stamp_ns)
-        self.pub.publish(frames_to_cdr(frames, latest, self.frame_id))
+        self.pub.publish(frames_to_cdr(frames, latest, WORLD_FRAME))
         self._published_empty = not frames
         lat = None
         if latest:
@@ -355,10 +382,15 @@ class PhysicsNode(ManagedNode):
         self.health.on_publish(lat)
         self._publish_objects(latest)
 
+    def _lift(self) -> np.ndarray:
+        """The simulated world's offset from TF's world (the feet's lift above the floor)."""
+        sensor = self.sim.sensor
+        return np.array([0.0, 0.0, sensor.lift if sensor is not None else 0.0])
+
     def _publish_objects(self, stamp_ns: Optional[int]) -> None:
         if not self.sim.objects:
             return
-        sensor = self.sim.sensor
+        lift = self._lift()
         out = MarkerArray()
         clear = Marker()
         clear.action = Marker.DELETEALL
@@ -367,9 +399,7 @@ class PhysicsNode(ManagedNode):
         stamp = self.get_clock().now().to_msg() if not stamp_ns else ns_to_stamp(stamp_ns)
         mid = 0
         for name, (pos, quat, spec) in self.sim.object_poses().items():
-            if sensor is not None:
-                pos = sensor.to_sensor(pos)
-                quat = sensor.quat_to_sensor(quat)
+            pos = pos - lift
             parts = []
             if spec.kind == 'box':
                 parts.append((Marker.CUBE, np.zeros(3), 2 * np.asarray(spec.size), spec.rgba))
@@ -384,7 +414,7 @@ class PhysicsNode(ManagedNode):
             from skeleton_core.geometry import quat_rotate
             for mtype, local, scale, rgba in parts:
                 m = Marker()
-                m.header.frame_id = self.frame_id
+                m.header.frame_id = WORLD_FRAME
                 m.header.stamp = stamp
                 m.ns = 'physics_objects'
                 m.id = mid

@@ -42,6 +42,7 @@ from typing import Dict, List, Mapping, Optional, Sequence
 import numpy as np
 from skeleton_core.conversions import validate_arrays
 from skeleton_core.geometry import quat_rotate, retarget, retarget_by_joint
+from skeleton_core.tf import Transform
 from skeleton_core.model import (FOOT_LEFT, FOOT_RIGHT, HAND_LEFT, HAND_RIGHT, HEAD, JOINT_INDEX,
                                  JOINT_NAMES, SEGMENT_OF_JOINT, SEGMENTS, Body, estimate_height,
                                  standard_body)
@@ -51,7 +52,7 @@ from .config import INTEGRATORS, SOLVERS, CharacterState, SimConfig, controllers
 from .controller import Gains
 from .feature_geometry import load_geometry
 from .feature_holds import engaged_hands
-from .frames import SensorPose
+from .frames import DEFAULT_SENSOR_POSE, SensorPose
 from .mjcf_world import ObjectSpec
 from .posture import is_identity, joint_quats_to_segment, segment_quats_to_joints
 from .world import Shared, World, controller_for
@@ -64,9 +65,12 @@ class Simulation:
 
     PART_AFTER = 1.0   # s apart before two characters sharing a world are split up
 
-    def __init__(self, config: Optional[SimConfig] = None, objects: Sequence[ObjectSpec] = ()):
+    def __init__(self, config: Optional[SimConfig] = None, objects: Sequence[ObjectSpec] = (),
+                 sensor_pose: Optional[Transform] = None):
         self.config = config or SimConfig()
         self.config.validate()
+        # the sensor's pose in the world (TF world -> sensor frame; the node looks it up)
+        self.sensor_pose: Transform = DEFAULT_SENSOR_POSE if sensor_pose is None else sensor_pose
         self.characters: Dict[int, Character] = {}
         self.shared = Shared(self.config,
                              {'constraint_conflict': 0, 'virtual_joint_released': 0,
@@ -246,18 +250,28 @@ class Simulation:
                            if self._world_of.get(k[0]) is self._world_of.get(k[1])}
 
     # ------------------------------------------------------------------ targets
+    def set_sensor_pose(self, transform: Transform) -> None:
+        """Move the sensor (world <- sensor, e.g. a new TF transform): later targets and states
+        use it; the floor lift stays."""
+        if transform is self.sensor_pose:
+            return
+        self.sensor_pose = transform
+        if self.sensor is not None:
+            self.sensor = SensorPose.from_transform(transform, self.sensor.lift)
+
     def _sensor_pose(self, first_world_positions: Optional[np.ndarray] = None) -> SensorPose:
         if self.sensor is None:
             c = self.config
-            height = c.sensor_height
+            pose = self.sensor_pose
             if c.auto_floor and first_world_positions is not None:
-                rot = SensorPose(0.0, c.sensor_pitch).to_world(first_world_positions)
-                height = -float(min(rot[FOOT_LEFT, 2], rot[FOOT_RIGHT, 2]))
+                lifted = SensorPose.from_transform(pose).to_world(first_world_positions)
+                low = float(min(lifted[FOOT_LEFT, 2], lifted[FOOT_RIGHT, 2]))
+                pose = Transform(pose.translation - np.array([0.0, 0.0, low]), pose.rotation)
             lift = 0.0
             if c.lift_feet:
                 lift = float(standard_body(max(self._body_height_for(first_world_positions), 0.6))
                              .segment_radii[SEGMENT_OF_JOINT[FOOT_LEFT]])
-            self.sensor = SensorPose(height, c.sensor_pitch, lift)
+            self.sensor = SensorPose.from_transform(pose, lift)
         return self.sensor
 
     def _body_height_for(self, positions: Optional[np.ndarray]) -> float:
@@ -527,7 +541,7 @@ class Simulation:
 
     # ------------------------------------------------------------------ state
     def _sensor_or_default(self) -> SensorPose:
-        return self.sensor or SensorPose(self.config.sensor_height, self.config.sensor_pitch)
+        return self.sensor or SensorPose.from_transform(self.sensor_pose)
 
     def state(self, user_id: int) -> CharacterState:
         ch = self.characters[int(user_id)]

@@ -300,10 +300,20 @@ def _occludable() -> np.ndarray:
 _OCCLUDABLE = _occludable()
 
 
+def _shifted(positions: np.ndarray, frames: float) -> np.ndarray:
+    """(T, J, 3) positions at frame times ``i + frames`` (linear; the ends held)."""
+    t = np.clip(np.arange(len(positions)) + frames, 0, len(positions) - 1)
+    i0 = np.floor(t).astype(int)
+    i1 = np.minimum(i0 + 1, len(positions) - 1)
+    w = (t - i0)[:, None, None]
+    return positions[i0] * (1 - w) + positions[i1] * w
+
+
 class _Corrupter:
     """Per-frame state machine shared by :meth:`SensorModel.corrupt` and :meth:`SensorModel.stream`."""
 
-    def __init__(self, model: 'SensorModel', clip, scenario: str, seed: int):
+    def __init__(self, model: 'SensorModel', clip, scenario: str, seed: int, view=None,
+                 time_shift_s: float = 0.0):
         if scenario not in model.params['scenarios']:
             raise ValueError(f'unknown scenario {scenario!r}; '
                              f'known: {sorted(model.params["scenarios"])}')
@@ -312,8 +322,21 @@ class _Corrupter:
         self.scenario = scenario
         self.seed = seed
         self.rng = np.random.default_rng(seed)
+        self.turns_drawn = False   # several views: the turns are drawn ahead, in the truth
         self.fps = float(self.p['fps'])
         self.truth_all = model.place(clip)
+        self.height = float(self.p['placement']['sensor_height_m'])
+        if view is not None:
+            # one of several sensors (see SensorModel.stream): the same people (and the same
+            # turns, drawn from the stream's own seed) seen from this sensor, with its own noise,
+            # occlusion and failures (drawn from a seed of the view)
+            tag = zlib.crc32(' '.join(f'{v:.6f}' for v in view.xyz_ypr()).encode())
+            self.rng = np.random.default_rng((seed * 1_000_003 + tag + 1) % (2 ** 31))
+            self.truth_all = self._turned(self.truth_all, np.random.default_rng(seed))
+            if time_shift_s:
+                self.truth_all = _shifted(self.truth_all, float(time_shift_s) * self.fps)
+            self.truth_all = view.inverse().apply(self.truth_all)
+            self.height += float(view.translation[2])
         self.T = len(self.truth_all)
         rng = self.rng
         # body size for the capsules
@@ -335,9 +358,9 @@ class _Corrupter:
             near_x = float(np.min(self.truth_all[..., 0]))
             gap = rng.uniform(*obj['gap_m'])
             width = rng.uniform(*obj['width_m'])
-            top = rng.uniform(*obj['top_m']) - float(self.p['placement']['sensor_height_m'])
+            top = rng.uniform(*obj['top_m']) - self.height
             yc = float(np.median(root[:, 1])) + rng.uniform(*obj['lateral_m'])
-            floor = -float(self.p['placement']['sensor_height_m'])
+            floor = -self.height
             x1 = near_x - 0.02 if gap < 0.5 else near_x - gap + float(obj['depth_m'])
             x1 = min(x1, near_x - 0.02)
             x0 = x1 - float(obj['depth_m'])
@@ -354,8 +377,8 @@ class _Corrupter:
         self.mirrored = False
         self.cf: Dict[str, Optional[Dict]] = {k: None for k in CONFIDENT_FAILURES}
         self.te: Optional[Dict] = None  # active small tracked error (class e)
-        self.floor = -float(self.p['placement']['sensor_height_m'])
-        self.events: List[Dict] = []
+        self.floor = -self.height
+        self.events: List[Dict] = list(getattr(self, 'turn_events', []))
         self.frame_index = 0
         self.fp_joints = [JOINT_INDEX[n] for n in self.sc.get('fp_joints', [])]
         w = np.asarray(self.sc.get('limb_weights', [1, 1, 1, 1]), float)
@@ -368,16 +391,11 @@ class _Corrupter:
     def _duration(self, rng_pair) -> int:
         return max(1, int(round(self.rng.uniform(*rng_pair) * self.fps)))
 
-    def step(self, i: int):
-        """Process truth frame ``i`` (of the placed clip); returns (positions, state, truth, clean)."""
-        rng, p, sc = self.rng, self.p, self.sc
-        fi = self.frame_index
-        truth = self.truth_all[i].copy()
-        clean = np.ones(NUM_JOINTS, bool)
-
-        # --- the user turning away (changes the truth) ------------------------------------
+    def _turn_step(self, truth: np.ndarray, rng, fi: int) -> np.ndarray:
+        """The user turning away: maybe begin a turn episode, apply the current one's yaw."""
+        p, sc = self.p, self.sc
         if self.turn is None and rng.random() < self._per_frame(sc.get('turn_per_min', 0.0)):
-            n = self._duration(p['turn']['duration_s'])
+            n = max(1, int(round(rng.uniform(*p['turn']['duration_s']) * self.fps)))
             peak = np.deg2rad(rng.uniform(*p['turn']['peak_deg'])) * rng.choice([-1.0, 1.0])
             prof = peak * 0.5 * (1 - np.cos(2 * np.pi * (np.arange(n) + 1) / (n + 1)))
             self.turn = {'profile': prof, 'k': 0}
@@ -390,6 +408,26 @@ class _Corrupter:
                 self.turn = None
             root = truth[HIP_CENTER].copy()
             truth = (truth - root) @ yaw_matrix(yaw).T + root
+        return truth
+
+    def _turned(self, truth_all: np.ndarray, rng) -> np.ndarray:
+        """Several views: every frame's turn drawn ahead from ``rng`` (the same for every view)."""
+        self.events, self.turn = [], None
+        out = np.stack([self._turn_step(t, rng, i) for i, t in enumerate(truth_all)])
+        self.turn_events = self.events
+        self.turns_drawn = True
+        return out
+
+    def step(self, i: int):
+        """Process truth frame ``i`` (of the placed clip); returns (positions, state, truth, clean)."""
+        rng, p, sc = self.rng, self.p, self.sc
+        fi = self.frame_index
+        truth = self.truth_all[i].copy()
+        clean = np.ones(NUM_JOINTS, bool)
+
+        # --- the user turning away (changes the truth) ------------------------------------
+        if not self.turns_drawn:
+            truth = self._turn_step(truth, rng, fi)
         body_yaw = float(facing_yaw(truth))
         to_sensor = float(np.arctan2(-truth[HIP_CENTER, 1], -truth[HIP_CENTER, 0]))
         rel = abs(float(_wrap(body_yaw - to_sensor)))
@@ -861,13 +899,18 @@ class SensorModel:
     def corrupt(self, clip, scenario: str = 'a', seed: Optional[int] = None,
                 max_frames: Optional[int] = None, start_ns: int = 0,
                 seed_tag: Optional[str] = None,
-                sys_offset: Optional[np.ndarray] = None) -> KinectStream:
+                sys_offset: Optional[np.ndarray] = None, view=None,
+                time_shift_s: float = 0.0) -> KinectStream:
         """The whole clip through the sensor model (offline). ``seed_tag``: the stream's random
         seed from this tag instead of the scenario's name (another recording of the same user);
         ``sys_offset`` (20, 3): the systematic joint-centre offsets to use (e.g. those of
-        :meth:`session_offsets`: the same sensor session) instead of drawing new ones."""
+        :meth:`session_offsets`: the same sensor session) instead of drawing new ones; ``view``:
+        see :meth:`stream`; ``time_shift_s`` (with a ``view``): this sensor captures that much
+        later in the motion than the reference (an unsynchronised sensor's phase)."""
         s = self.stream_seed(clip, scenario if seed_tag is None else seed_tag, seed)
-        c = _Corrupter(self, clip, scenario, s)
+        if time_shift_s and view is None:
+            raise ValueError('time_shift_s needs a view')
+        c = _Corrupter(self, clip, scenario, s, view, time_shift_s)
         if sys_offset is not None:
             c.sys_offset = np.array(sys_offset, float).reshape(NUM_JOINTS, 3)
         n = c.T if max_frames is None else min(c.T, int(max_frames))
@@ -887,12 +930,20 @@ class SensorModel:
         return _Corrupter(self, clip, scenario,
                           self.stream_seed(clip, scenario, seed)).sys_offset.copy()
 
-    def stream(self, clip, scenario: str = 'a', loop: bool = True,
-               seed: Optional[int] = None) -> Iterator[Tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    def stream(self, clip, scenario: str = 'a', loop: bool = True, seed: Optional[int] = None,
+               view=None) -> Iterator[Tuple[np.ndarray, np.ndarray, np.ndarray]]:
         """Live: yields ``(positions, tracking_state, truth)`` per frame (forever if ``loop``;
         then the clip's last :data:`LOOP_BLEND_FRAMES` turn into its first posture,
-        :func:`loop_blend`: no teleport at the loop point)."""
-        c = _Corrupter(self, clip, scenario, self.stream_seed(clip, scenario, seed))
+        :func:`loop_blend`: no teleport at the loop point).
+
+        ``view`` (a :class:`skeleton_core.tf.Transform`, None = the one sensor): several sensors
+        watching the same people. The clip is placed for the *reference* sensor (``placement``)
+        and ``view`` is this sensor's pose in the reference sensor's frame; the output is in this
+        sensor's frame. Every view of one clip, scenario and seed shares the motion and the
+        user's turns; noise, offsets, occlusion (line of sight from this sensor; the scenario's
+        object between the user and this sensor) and failures are drawn per view. The sensors
+        are assumed level (the floor at ``-(sensor_height_m + view z)``)."""
+        c = _Corrupter(self, clip, scenario, self.stream_seed(clip, scenario, seed), view)
         if loop:
             c.truth_all = loop_blend(c.truth_all)
         while True:

@@ -11,6 +11,9 @@ import numpy as np
 from skeleton_core.conversions import SkeletonFrame, frames_from_array_msg
 from skeleton_core.model import NUM_JOINTS, TRACKED
 from skeleton_core import bagio
+from skeleton_core.tf import TfBuffer, transforms_from_msg
+
+TF_STATIC_TOPIC = '/tf_static'
 
 # Report roles -> default topics (as recorded by the bringup recorder)
 ROLE_TOPICS: Dict[str, str] = {
@@ -126,10 +129,17 @@ def collect(messages: Iterable, role_topics: Optional[Dict[str, str]] = None) ->
                                                          for r in role_topics}
     counts: Dict[str, List] = {}
     dropped: Dict[str, int] = collections.Counter()
+    tf = TfBuffer()
     for m in messages:
         topic, msg = (m.topic, m.msg) if hasattr(m, 'topic') else (m[0], m[1])
         msgtype = getattr(m, 'msgtype', '')
         counts.setdefault(topic, [msgtype, 0])[1] += 1
+        if topic == TF_STATIC_TOPIC and msg is not None:
+            try:
+                tf.update(transforms_from_msg(msg))
+            except (AttributeError, ValueError) as e:
+                dropped[f'unreadable transform: {e}'] += 1
+            continue
         if topic not in roles_of or msg is None:
             continue
         errors: list = []
@@ -143,16 +153,41 @@ def collect(messages: Iterable, role_topics: Optional[Dict[str, str]] = None) ->
         for f in got:
             for role in roles_of[topic]:
                 frames[role][f.user_id].append(f)
+    _to_common_frame(frames, tf)
     series = {role: {uid: SkeletonSeries.from_frames(fs) for uid, fs in sorted(by_user.items())}
               for role, by_user in frames.items()}
     return BagData(series, {k: (v[0], v[1]) for k, v in counts.items()}, dict(dropped),
                    role_topics)
 
 
+def _to_common_frame(frames: Dict[str, Dict[int, List[SkeletonFrame]]], tf: TfBuffer) -> None:
+    """Every role in the frame of the raw skeletons (else of the ground truth): the physics
+    character is published in ``world``; the bag's ``/tf_static`` says where the sensor is. A
+    frame TF does not connect stays as it is."""
+    ref = next((fs[0].frame_id for role in ('raw', 'ground_truth', 'reconstructed')
+                for fs in frames.get(role, {}).values() if fs and fs[0].frame_id), None)
+    if ref is None:
+        return
+    cache: Dict[str, Optional[object]] = {}
+    for by_user in frames.values():
+        for uid, fs in by_user.items():
+            for i, f in enumerate(fs):
+                if not f.frame_id or f.frame_id == ref:
+                    continue
+                if f.frame_id not in cache:
+                    try:
+                        cache[f.frame_id] = tf.lookup(ref, f.frame_id)
+                    except LookupError:
+                        cache[f.frame_id] = None
+                t = cache[f.frame_id]
+                if t is not None:
+                    fs[i] = f.copy(positions=t.apply(f.positions), frame_id=ref)
+
+
 def load_bag(path, role_topics: Optional[Dict[str, str]] = None) -> BagData:
     """Read the skeleton topics of an MCAP bag (other topics are only counted)."""
     role_topics = dict(ROLE_TOPICS if role_topics is None else role_topics)
-    wanted = set(role_topics.values())
+    wanted = set(role_topics.values()) | {TF_STATIC_TOPIC}
     counts = bagio.bag_topics(path)
     present = [t for t in wanted if t in counts]
     data = collect(bagio.read_messages(path, topics=present), role_topics) if present else \

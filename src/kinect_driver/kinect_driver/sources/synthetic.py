@@ -10,6 +10,13 @@ scenario a-e, seed ``seed + user``; a clip's last 0.5 s turn into its first post
 has no teleport: ``sensor_model.loop_blend``), placed side by side ``user_spacing`` metres apart across the
 field of view (the model's ``placement.lateral_offset_m``). User ids are 1..num_users.
 
+Several sensors (``driver.launch.py sensors:=N``): one driver per sensor, each with ``view_pose``
+= its pose in the first sensor's frame; every driver simulates the same people (placed for the
+first sensor, facing it) seen from its own place, with its own noise and occlusion
+(``SensorModel.stream(view=...)``), and shows the motion's frame of the wall clock (frame k at
+k / rate_hz s since the epoch): drivers started at different times see the same instant together,
+their frames apart by their timers' phase.
+
 Timing: a simulated sensor captures frames on a fixed, drift-free schedule ``A + k / rate_hz``,
 anchored at the first poll. Each frame is stamped with its scheduled capture time; a poll returns
 every frame due by then, so a late poll (a loaded machine) catches up instead of losing frames.
@@ -30,6 +37,7 @@ import numpy as np
 from skeleton_core.conversions import SkeletonFrame
 from skeleton_core.model import NUM_JOINTS, TRACKED
 from skeleton_core.params import check, param
+from skeleton_core.tf import parse_pose
 
 from .base import Source, SourceError, SourceOutput
 from skeleton_data.motions import builtin_clips
@@ -58,6 +66,16 @@ def _load_motion(clip: str, seed: int):
         raise SourceError(f'cannot load motion clip {p}: {e}') from None
 
 
+def _pose_error(text: str):
+    if not text:
+        return None
+    try:
+        parse_pose(text)
+    except ValueError as e:
+        return str(e)
+    return None
+
+
 @dataclass
 class SyntheticConfig:
     """Parameters of :class:`SyntheticSource`."""
@@ -74,6 +92,10 @@ class SyntheticConfig:
     sensor_params: str = param('', "sensor model YAML ('' = config/sensor_model.yaml or the "
                                'built-in defaults)')
     rate_hz: float = param(30.0, 'frame rate (Hz)', range=(1.0, 120.0))
+    view_pose: str = param('', "several sensors: this sensor's pose in the first sensor's frame, "
+                           '"x y z yaw pitch roll" (m, deg; the people face the first sensor; '
+                           "set by driver.launch.py sensors:=N); '' = the only sensor",
+                           validator=lambda v: _pose_error(v), public=False)
 
 
 class SyntheticSource(Source):
@@ -98,8 +120,10 @@ class SyntheticSource(Source):
         self.frame_id = frame_id
         self.user_spacing = float(cfg.user_spacing)
         self.sensor_params = cfg.sensor_params
+        self.view = parse_pose(cfg.view_pose) if cfg.view_pose else None
         self.with_truth = with_truth
         self._streams: List = []
+        self._lengths: List[int] = []
         self.frames_out = 0
         self.skipped = 0
         self.clip_names: List[str] = []
@@ -117,6 +141,7 @@ class SyntheticSource(Source):
                               f'{self.sensor_params or "(default)"}: {e}') from None
         clips = _load_motion(self.clip, self.seed)
         self._streams = []
+        self._lengths = []
         self._ready = None
         self.clip_names = []
         n = self.num_users
@@ -132,11 +157,22 @@ class SyntheticSource(Source):
                 float(base['placement'].get('lateral_offset_m', 0.0))
                 + (k - (n - 1) / 2.0) * self.user_spacing)
             model = sensor_model.SensorModel(params=params, seed=self.seed + k)
-            self._streams.append(model.stream(clip, self.scenario, loop=True))
+            self._streams.append(model.stream(clip, self.scenario, loop=True, view=self.view))
             self.clip_names.append(clip.name)
+            self._lengths.append(len(sensor_model.resample(
+                np.asarray(clip.positions, float)[:, :1], float(clip.fps), model.fps)))
 
     def poll(self, now_ns: int) -> List[SourceOutput]:
         period = self._period_ns
+        if self._next_ns is None and self.view is not None:
+            # several sensors: every driver shows the motion frame of the wall clock (frame k at
+            # k / rate s since the epoch), so sensors started at different times see the same
+            # instant at the same time, as real ones do
+            k = int(now_ns // period)
+            self._ready = None
+            for stream, length in zip(self._streams, self._lengths):
+                for _ in range(k % max(length, 1)):
+                    next(stream)
         if self._next_ns is None or 0 < self._next_ns - now_ns < period // 2:
             self._next_ns = now_ns   # first poll, or the timer ticks earlier than the schedule
         due = (now_ns - self._next_ns) // period + 1
