@@ -75,10 +75,10 @@ case "${VIRTUAL_ENV:-}" in "$_kp_root"/.venv*) unset VIRTUAL_ENV VIRTUAL_ENV_PRO
 unset -f _kp_strip
 
 export ROS_DISTRO="$_kp_distro"
-# DDS discovery stays on this machine. Humble/Iron have no ROS_AUTOMATIC_DISCOVERY_RANGE; Jazzy and
-# later deprecate ROS_LOCALHOST_ONLY (and warn when it is set).
+# DDS discovery stays on this machine (as skeleton_core.compat does for Python). Humble has no
+# ROS_AUTOMATIC_DISCOVERY_RANGE; Jazzy and later deprecate ROS_LOCALHOST_ONLY (and warn when set).
 export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
 case "$_kp_distro" in
-  humble|iron) export ROS_LOCALHOST_ONLY=1 ;;
+  foxy|galactic|humble) export ROS_LOCALHOST_ONLY=1 ;;
   *) unset ROS_LOCALHOST_ONLY ;;
 esac

@@ -3,11 +3,13 @@ import os
 import sys
 from pathlib import Path
 
-# Before any ROS process or rclpy import: keep discovery on this machine (the variable per distro:
-# scripts/distro.sh, which scripts/env.sh sources; set here too for a bare `pytest`).
-os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
-if os.environ.get('ROS_DISTRO') in ('humble', 'iron'):
-    os.environ['ROS_LOCALHOST_ONLY'] = '1'
+# Before any ROS process or rclpy import: keep discovery on this machine (the variables per distro:
+# skeleton_core.compat; scripts/distro.sh does the same for the shell; here for a bare `pytest`).
+try:
+    from skeleton_core.compat import apply_localhost_discovery
+    apply_localhost_discovery()
+except ImportError:   # not built yet: the tests that need it fail and say so
+    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 # a private DDS domain per test run (scripts/env.sh's default 42 would be shared by every shell)
 os.environ['ROS_DOMAIN_ID'] = os.environ.get('KP_TEST_DOMAIN_ID', str(1 + os.getpid() % 100))
 os.environ.setdefault('MPLBACKEND', 'Agg')
