@@ -214,6 +214,7 @@ def node_help(node_factory: Callable[..., Node], prog: str) -> str:
         lines += [doc, '']
     fn = getattr(mod, 'node_params', None)
     specs = fn() if callable(fn) else getattr(mod, 'PARAMS', None)
+    specs = [s for s in specs or () if getattr(s, 'public', True)]
     if specs:
         lines.append('parameters (default; docs/parameters.md has ranges and details):')
         lines += [f'  {s.name} ({s.default!r}): {s.description}' for s in specs]
