@@ -126,8 +126,14 @@ def reference_complete(c, p, rel, height, orientations=None, bones=None):
     rz = np.array([[np.cos(yaw), -np.sin(yaw), 0.0], [np.sin(yaw), np.cos(yaw), 0.0], [0, 0, 1]])
     rest = c.body.rest_offsets / np.maximum(np.linalg.norm(c.body.rest_offsets, axis=1),
                                             1e-12)[:, None]
+    from skeleton_core.model import SPINE
     for j in np.flatnonzero(missing):
-        if j == ROOT:
+        if j == ROOT and not missing[SPINE]:
+            # the root hangs below the observed spine (the match's direction, the user's length)
+            d = match[SPINE] - match[ROOT]
+            u = d / np.linalg.norm(d) if np.linalg.norm(d) > 1e-9 else rest[SPINE]
+            out[j] = p[SPINE] - rz @ (u * bone[SPINE])
+        elif j == ROOT:
             out[j] = denormalize(match[j:j + 1] / scale, tf)[0]
         else:
             d = match[j] - match[PARENTS[j]]

@@ -108,7 +108,7 @@ def main(argv=None) -> int:
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument('--out', default=str(root / 'out'), help='output directory')
     p.add_argument('--duration', type=float, default=20.0, help='seconds of running graph')
-    p.add_argument('--scenario', default='b', choices=['a', 'b', 'c', 'd'])
+    p.add_argument('--scenario', default='b', choices=['a', 'b', 'c', 'd', 'e'])
     p.add_argument('--num-users', type=int, default=1)
     p.add_argument('--method', default='C', choices=['A', 'B', 'C'])
     p.add_argument('--seed', type=int, default=0)

@@ -6,14 +6,15 @@ the sensor model's noise statistics. No ROS graph is started (the methods are ru
 
 Examples::
 
-    evaluate                                   # table4: all methods, classes a-d, dev clips
+    evaluate                                   # table4: all methods, classes a-e, dev clips
     evaluate --methods raw,holt,one_euro --source builtin --max-frames 300
     evaluate --experiment table3 --methods raw,C                     # calibrated user (T-pose)
     evaluate --experiment table3 --methods raw,C --calibration none  # no calibration segment
     evaluate --experiment fig5
     evaluate --experiment fig8 --methods C --params k,steps
-    evaluate --perturb                         # raw and C, classes a-d, seeds 0-2, sensor model
-                                               # noise/offset/occlusion/failure groups 0.5x, 1.5x
+    evaluate --perturb                         # raw and C, classes a-e, seeds 0-2, sensor model
+                                               # noise/offset/occlusion/failure/tracked groups
+                                               # 0.5x, 1.5x
 """
 from __future__ import annotations
 
@@ -38,8 +39,9 @@ def _parser():
                    help='comma-separated method names (default: every registered method)')
     p.add_argument('--source', default='auto', choices=('auto', 'cmu', 'builtin'),
                    help='clips: CMU dev split from ../shared (auto falls back to built-ins)')
-    p.add_argument('--scenarios', default='a,b,c,d',
-                   help='sensor-model scenario classes (d: confident failures)')
+    p.add_argument('--scenarios', default='a,b,c,d,e',
+                   help='sensor-model scenario classes (d: confident failures, e: small '
+                        'persistent errors of TRACKED joints)')
     p.add_argument('--seed', type=int, default=0)
     p.add_argument('--max-frames', type=int, default=300,
                    help='frames (30 Hz) per clip; 0 = whole clips (default 300 = 10 s)')
@@ -69,8 +71,8 @@ def _parser():
     p.add_argument('--perturb-seeds', default='0,1,2',
                    help='--perturb: sensor seeds (parameters were tuned on seed 0 only)')
     p.add_argument('--perturb-factors', default='0.5,1.5', help='--perturb: scale factors')
-    p.add_argument('--perturb-groups', default='noise,offset,occlusion,failure',
-                   help='--perturb: parameter groups (noise, offset, occlusion, failure)')
+    p.add_argument('--perturb-groups', default='noise,offset,occlusion,failure,tracked',
+                   help='--perturb: parameter groups (noise, offset, occlusion, failure, tracked)')
     p.add_argument('--method-params', default='', metavar='JSON',
                    help='table4 / --perturb / --real (C rows): parameter overrides per method, e.g. '
                         '\'{"C": {"plausibility": false, "smooth_lead": 0}}\'')

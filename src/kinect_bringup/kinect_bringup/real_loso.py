@@ -49,6 +49,7 @@ from skeleton_data.uiprmd import TRACKING_FAILURE_CASES
 from .mocap_db_eval import fold_database
 from skeleton_eval import evaluation as E
 from skeleton_eval import metrics as M
+from skeleton_eval import no_harm as NH
 from skeleton_eval.registration import apply_transform, kabsch
 from skeleton_eval.real_eval import added_latency_ms, tracked_xcorr
 from skeleton_eval.evaluation import json_safe
@@ -192,6 +193,8 @@ def run_variant(variant: str, streams: Sequence, correction=None, profiles=None,
                             'latency_one_sided_ms': added_latency_ms(pos, s.positions, s.fps),
                             'xcorr': tracked_xcorr(pos, s).tolist(),
                             'xcorr_raw': tracked_xcorr(s.positions, s).tolist(),
+                            'no_harm': NH.add(NH.empty(), *NH.direction_sums(
+                                pos, s.truth, NH.segment_mask(s.tracking_state))),
                             'times': t.tolist(), 'frames': len(s)}
         if progress:
             progress(variant, s.clip_name)
@@ -338,6 +341,7 @@ def evaluate(src, variants: Sequence[str] = DEFAULT_VARIANTS, loso: bool = True,
             t = np.concatenate([np.asarray(r['times'], float) for r in lst])
             results[v][row] = {'clips': len(lst), 'frames': int(sum(w)),
                                'metrics': E._combine(parts, w),
+                               'no_harm': NH.merge([r.get('no_harm') for r in lst]),
                                'latency_ms': lat, 'time': E._time_summary(t)}
             if row != 'm03_s01':
                 allp += parts
@@ -347,6 +351,7 @@ def evaluate(src, variants: Sequence[str] = DEFAULT_VARIANTS, loso: bool = True,
         if allp:
             results[v]['overall'] = {'clips': len(allp), 'frames': int(sum(allw)),
                                      'metrics': E._combine(allp, allw),
+                                     'no_harm': NH.merge([r.get('no_harm') for r in alll]),
                                      'latency_ms': added_xcorr_latency(alll),
                                      'time': E._time_summary(np.concatenate(allt))}
     protocol = ('leave-one-subject-out: each subject scored with a correction learned on the '
@@ -412,7 +417,26 @@ def to_markdown(res: Dict) -> str:
             vals.append('n/a' if v is None or not np.isfinite(v) else f'{v:.2f}')
         lines.append(f'| {row} | ' + ' | '.join(vals) + ' |')
     return ('\n'.join(head) + '\n\n' + summary(res) + '\n\n' + base(res) + '\n'
-            + '\n'.join(lines))
+            + '\n'.join(lines) + '\n\n' + no_harm_markdown(res))
+
+
+NO_HARM_PAIRS = (('C', 'raw'), ('C+corr', 'raw+corr'), ('C+corr+profile', 'raw+corr'))
+
+
+def no_harm_markdown(res: Dict) -> str:
+    """The per-segment "no harm" table (skeleton_eval.no_harm) on the TRACKED segments of the
+    recordings, overall: C against raw and C + correction against raw + correction."""
+    R = res['results']
+    per = {}
+    for m, ref in NO_HARM_PAIRS:
+        a = R.get(m, {}).get('overall', {}).get('no_harm')
+        b = R.get(ref, {}).get('overall', {}).get('no_harm')
+        if a and b:
+            per[f'{m} vs {ref}'] = {'method': a, 'reference': b}
+    if not per:
+        return ''
+    return NH.to_markdown(per, 'method', 'reference', title='### No harm: per segment on the '
+                          'TRACKED segments (overall, m03_s01 apart); columns: method vs reference')
 
 
 def main(argv=None) -> int:

@@ -64,6 +64,12 @@ def yaw_rotation(yaw) -> np.ndarray:
     return r
 
 
+# The activity gate also asks the effectors to move relative to the trunk (the arms themselves, at
+# min_activity x the example's speed of the same): a squat, a lunge or standing up carries still
+# arms through the COM-relative frame (real Kinect v2, UI-PRMD: the breaststroke fired on them).
+ARM_ACTIVITY = True
+
+
 def relative_effectors(positions: np.ndarray, effectors: Sequence[int],
                        yaw: Optional[np.ndarray] = None) -> np.ndarray:
     """r_j = d_j - COM (the paper's origin, the whole-body COM) in the yaw-removed body frame,
@@ -73,6 +79,22 @@ def relative_effectors(positions: np.ndarray, effectors: Sequence[int],
         yaw = facing_yaw(p)
     rel = p[..., list(effectors), :] - center_of_mass(p)[..., None, :]
     return np.einsum('...ij,...kj->...ki', yaw_rotation(yaw), rel)
+
+
+def trunk_relative(positions: np.ndarray, effectors: Sequence[int]) -> np.ndarray:
+    """The effectors relative to the ShoulderCenter in the trunk's own frame (x forward, y left,
+    z from the HipCenter to the ShoulderCenter), (..., len(effectors), 3): what the arms do, not
+    the body carrying them (a squat or a lunge moves the hands relative to the COM, not here)."""
+    p = np.asarray(positions, float)
+    up = p[..., JOINT_INDEX['ShoulderCenter'], :] - p[..., JOINT_INDEX['HipCenter'], :]
+    up = up / np.maximum(np.linalg.norm(up, axis=-1, keepdims=True), 1e-9)
+    lat = p[..., JOINT_INDEX['ShoulderLeft'], :] - p[..., JOINT_INDEX['ShoulderRight'], :]
+    lat = lat - np.sum(lat * up, axis=-1, keepdims=True) * up
+    lat = lat / np.maximum(np.linalg.norm(lat, axis=-1, keepdims=True), 1e-9)
+    fwd = np.cross(lat, up)
+    rot = np.stack([fwd, lat, up], axis=-2)                      # rows: the trunk's axes
+    rel = p[..., list(effectors), :] - p[..., JOINT_INDEX['ShoulderCenter'], None, :]
+    return np.einsum('...ij,...kj->...ki', rot, rel)
 
 
 def pca_columns(w: np.ndarray, m: int, center: bool = True):
@@ -249,6 +271,11 @@ class ExampleModel:
         self.rms_speed = float(np.sqrt(np.mean(np.sum(v * v, axis=1))))
         # per effector: its share of the mean square speed (the gate over observed effectors)
         self.ms_speed = np.mean(v * v, axis=0).reshape(len(self.effectors), 3).sum(axis=1)
+        # the arm-activity gate's normaliser: per effector, the example's mean square speed of
+        # the effector relative to the trunk (:func:`trunk_relative`), measured the same way
+        ra = trunk_relative(self.positions, self.effectors) / self.height
+        va = (ra[k:] - ra[:-k]).reshape(len(ra) - k, -1) * (params.fps / k)
+        self.ms_arm_speed = np.mean(va * va, axis=0).reshape(len(self.effectors), 3).sum(axis=1)
 
     def errors(self, w: np.ndarray, dw: np.ndarray, observed: Optional[np.ndarray] = None):
         """(e1, e2) of Eq. 5-6 (on the ``observed`` coordinates (D,) bool only, when given:
@@ -289,6 +316,7 @@ class IntentionRecognizer:
         self.params = params
         self.height: Optional[float] = None
         self._hist = []      # the last lag + 1 relative joint arrays
+        self._thist = []     # the same, trunk-relative (:func:`trunk_relative`)
         self._whist: Dict[str, list] = {}   # the last lag + 1 feature vectors per model
         self._avg: Dict[str, list] = {}
         self._last_t: Optional[float] = None
@@ -297,6 +325,7 @@ class IntentionRecognizer:
     def reset(self) -> None:
         self._tracked_run = None
         self._hist = []
+        self._thist = []
         self._whist = {}
         self._avg = {}
         self._last_t = None
@@ -320,15 +349,20 @@ class IntentionRecognizer:
         com = center_of_mass(p)
         rot = yaw_rotation(yaw)
         rel = (p - com) @ rot.T / self.height          # every joint, body frame, height units
+        dt_f = 1.0 / prm.fps if self._last_t is None else max(t - self._last_t, 1e-3)
+        g = 1.0 - math.exp(-dt_f / prm.prefilter) if prm.prefilter > 0 else 1.0
         if self._hist and prm.prefilter > 0:
-            dt_f = 1.0 / prm.fps if self._last_t is None else max(t - self._last_t, 1e-3)
-            g = 1.0 - math.exp(-dt_f / prm.prefilter)
             rel = self._hist[-1] + g * (rel - self._hist[-1])
+        trunk = trunk_relative(p, range(len(p))) / self.height
+        if self._thist and prm.prefilter > 0:
+            trunk = self._thist[-1] + g * (trunk - self._thist[-1])
         self._hist.append(rel)
+        self._thist.append(trunk)
         lag = int(prm.lag)
         keep = max(lag, int(prm.activity_lag), int(prm.share_lag)) + 1
         if len(self._hist) > keep:
             self._hist.pop(0)
+            self._thist.pop(0)
         dt = 1.0 / prm.fps if self._last_t is None else max(t - self._last_t, 1e-3)
         self._last_t = t
         alpha = 1.0 if prm.smoothing <= 0 else 1.0 - math.exp(-dt / prm.smoothing)
@@ -359,30 +393,39 @@ class IntentionRecognizer:
             obs_w = None if obs_e is None else np.tile(np.repeat(obs_e, 3), 2)
             e1, e2 = m.errors(w, dw, obs_w)
             va = (r - old_a[idx].reshape(-1)) * (prm.fps / ka) if ka else np.zeros_like(r)
+            old_t = self._thist[-1 - ka]
+            vt = ((trunk[idx] - old_t[idx]).reshape(-1) * (prm.fps / ka) if ka
+                  else np.zeros_like(r))
             # the share of the displacement over share_lag frames outside the example's
             # position subspace (energies averaged over share_window, then divided)
             vs = r - old_s[idx].reshape(-1)
             if obs_e is None:
                 sp2 = float(np.sum(va * va)) / max(m.rms_speed, 1e-9) ** 2
+                arm2 = float(np.sum(vt * vt)) / max(float(m.ms_arm_speed.sum()), 1e-18)
                 out2, all2 = float(reconstruction_error(vs, m.A_pos)), float(np.sum(vs * vs))
             else:     # the observed effectors against the example's speed of the same ones
                 obs_p = np.repeat(obs_e, 3)
                 sp2 = float(np.sum(va[obs_p] ** 2)) / max(float(m.ms_speed[obs_e].sum()), 1e-18)
+                arm2 = (float(np.sum(vt[obs_p] ** 2))
+                        / max(float(m.ms_arm_speed[obs_e].sum()), 1e-18))
                 all2 = float(np.sum(vs[obs_p] ** 2))
                 out2 = (partial_reconstruction_error(vs, m.A_pos, obs_p)
                         * (int(obs_p.sum()) - m.A_pos.shape[1]) / (len(obs_p) - m.A_pos.shape[1])
                         if int(obs_p.sum()) > m.A_pos.shape[1] else all2)
             a = self._avg.get(m.name)
             if a is None:
-                a = self._avg[m.name] = [e1, e2, sp2, out2, all2]
+                a = self._avg[m.name] = [e1, e2, sp2, out2, all2, arm2]
             else:
                 a[0] += alpha * (e1 - a[0])
                 a[1] += alpha * (e2 - a[1])
                 a[2] += beta * (sp2 - a[2])
                 a[3] += gam * (out2 - a[3])
                 a[4] += gam * (all2 - a[4])
+                a[5] += beta * (arm2 - a[5])
             share = a[3] / max(a[4], 1e-12)
             act = math.sqrt(max(a[2], 0.0))
+            if ARM_ACTIVITY:      # the arms themselves must move, not only the body carrying them
+                act = min(act, math.sqrt(max(a[5], 0.0)))
             r1, r2 = a[0] / prm.e1_threshold, a[1] / prm.e2_threshold
             ratio = max(r1, r2)   # e1 and e2 both under their thresholds
             imitating = bool(ratio < 1.0 and act >= prm.min_activity and k >= lag

@@ -24,7 +24,7 @@ from typing import Optional
 import numpy as np
 
 from skeleton_core.geometry import NormalizeTransform, pca
-from skeleton_core.model import NUM_JOINTS, PARENTS, ROOT
+from skeleton_core.model import NUM_JOINTS, PARENTS, ROOT, SPINE
 from skeleton_core.params import check, param
 
 from .posture_space import (PARENT_ROWS, QueryConfig, QueryPreparer, as_database_arrays,
@@ -155,7 +155,15 @@ class PCACompletion:
                 # is a tree order); Python floats, as a numpy row operation costs ~1 us each
                 placed = {}
                 for j, o in zip(ms.rows, world_off.tolist()):
-                    if j == ROOT:
+                    if j == ROOT and not (bits >> SPINE) & 1:
+                        # root missing, the spine seen: the root hangs below the observed spine
+                        # with the match's direction and the user's length (anchored at the
+                        # tracked joint, not at a stale INFERRED hip centre)
+                        ln = (self._standard_bones[SPINE] / scale if user_bone_lengths is None
+                              else float(user_bone_lengths[SPINE]))
+                        d = np.dot(self._match_dirs[idx][SPINE] * ln, rot.T)
+                        row = (p[SPINE] - d).tolist()
+                    elif j == ROOT:
                         # root missing: place it from the match relative to the observed hips'
                         # centre
                         tf = NormalizeTransform(yaw=np.asarray(yaw), translation=t)

@@ -233,6 +233,7 @@ class Reconstructor:
         return self.trust.noise
 
     def reset(self) -> None:
+        self._user_id = None
         self.reliability.reset()
         self._last_output: Optional[SkeletonFrame] = None
         self._prev = deque(maxlen=2)  # (normalised solution (20, 3), yaw)
@@ -287,6 +288,14 @@ class Reconstructor:
 
     def process(self, frame: SkeletonFrame) -> SkeletonFrame:
         t0 = time.perf_counter()
+        uid = getattr(frame, 'user_id', None)
+        if uid != self._user_id:
+            if self._user_id is not None:
+                # the input says this is another user (a new tracking id): nothing of the last
+                # one holds -- no whole-skeleton-jump hold on the old place, no lengths, no
+                # smoothing state (plausibility.py's jump rule is for one user's skeleton)
+                self.reset()
+            self._user_id = uid
         corr = self.correction
         if corr is not None and self.correction_stage == 'input':
             frame = frame.copy(positions=corr.apply(frame.positions))

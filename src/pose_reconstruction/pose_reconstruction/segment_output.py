@@ -260,7 +260,12 @@ class SegmentOutput:
         if self.position_fit > 0.0 and trust > 0.0:
             pull = (self.position_fit * trust) * np.minimum(w * (1.0 / max(thr, 1e-6)), 1.0)
             if pull.any():
-                self._fit_positions(vr, obs, pull, L, rel_frac)
+                # a segment takes the fitted direction only as far as its direction is not the
+                # sensor's already: the fit restores constant lengths by moving joints, which
+                # turns short segments (the hips, the feet, the shoulders) away from what the
+                # sensor sees (real UI-PRMD subset: +4-6 deg on the hip segments, issue 34); an
+                # observed direction is kept, the fit then places the skeleton
+                self._fit_positions(vr, obs, pull, L, rel_frac * (1.0 - beta))
         if self._seg_filter is not None:
             # filter clock: the stamps' steps where plausible (1 ms - 0.5 s), else 30 Hz
             stamp = int(frame.stamp_ns or 0)

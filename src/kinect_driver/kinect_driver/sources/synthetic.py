@@ -6,7 +6,8 @@ gets motion k), the name of a built-in clip (e.g. ``builtin_wave``), or a path t
 plays the same clip, user k starts k/num_users of the way into it.
 
 Each of ``num_users`` (1-6) users gets its own sensor-model stream (``SensorModel.stream``,
-scenario a|b|c, seed ``seed + user``), placed side by side ``user_spacing`` metres apart across the
+scenario a-e, seed ``seed + user``; a clip's last 0.5 s turn into its first posture, so the loop
+has no teleport: ``sensor_model.loop_blend``), placed side by side ``user_spacing`` metres apart across the
 field of view (the model's ``placement.lateral_offset_m``). User ids are 1..num_users.
 
 Timing: a simulated sensor captures frames on a fixed, drift-free schedule ``A + k / rate_hz``,
@@ -61,8 +62,9 @@ def _load_motion(clip: str, seed: int):
 class SyntheticConfig:
     """Parameters of :class:`SyntheticSource`."""
 
-    scenario: str = param('b', 'sensor-model scenario class a | b | c | d (d: confident '
-                          'failures; clean: noise only)', choices=('a', 'b', 'c', 'd', 'clean'))
+    scenario: str = param('b', 'sensor-model scenario class a | b | c | d | e (d: confident '
+                          'failures; e: small persistent errors of TRACKED joints; clean: noise '
+                          'only)', choices=('a', 'b', 'c', 'd', 'e', 'clean'))
     seed: int = param(0, 'random seed of the sensor model and motions', range=(0, 2 ** 31 - 1))
     num_users: int = param(1, 'number of users side by side', range=(1, MAX_USERS))
     clip: str = param('', "motion ('' = built-in motions, a built-in name such as builtin_wave, "
