@@ -1,4 +1,5 @@
 # Two commands on a fresh machine:  make demo   and   make test
+# ROS 2 Jazzy by default; ROS_DISTRO=kilted make <target> for Kilted (docs/setup.md, scripts/distro.sh).
 SHELL := /bin/bash
 .DEFAULT_GOAL := help
 RUN := scripts/run.sh
@@ -7,7 +8,7 @@ help:
 	@echo "make demo       run the node graph on the default input, write out/ (bag, animation, plots)"
 	@echo "make test       bootstrap if needed and run the test suite (lint included)"
 	@echo "make lint       only the linter (ruff, configured in ruff.toml)"
-	@echo "make setup      only bootstrap (venv / ROS 2, launch tooling, colcon build)"
+	@echo "make setup      only bootstrap (venv / ROS 2, launch tooling, colcon build); ROS_DISTRO=kilted for Kilted"
 	@echo "make build-db   build the motion database from ../shared/mocap/cmu (or built-in motions) into"
 	@echo "                cache/motion_db.npz, the file the nodes load (they never build it)"
 	@echo "make build-correction  learn the sensor correction from ../shared/kinect/ui-prmd (or ARGS=\"--src DIR\")"

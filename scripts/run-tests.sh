@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # The one test command (README, `make test`, .ci/run): bootstrap if needed, then pytest.
 #   scripts/run-tests.sh [pytest args]      e.g. scripts/run-tests.sh -k reliability
+#   ROS_DISTRO=kilted scripts/run-tests.sh  the same on ROS 2 Kilted (scripts/distro.sh)
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST

@@ -1,9 +1,10 @@
 #!/usr/bin/env bash
 # Idempotent bootstrap: ROS 2 underlay (system or pip wheels venv), Python deps, launch tooling,
 # colcon build of the workspace. A second run with nothing changed takes about a second.
-#   scripts/setup.sh            # everything
-#   KP_SKIP_TOOLING=1 ...       # don't build the launch tooling from ../shared/ros2
-# Environment: ROS2_TOOLING_SRC (default ../shared/ros2), ROS_DISTRO_PATH (pick /opt/ros/<distro>).
+#   scripts/setup.sh                       # ROS 2 Jazzy (or the system ROS 2 under /opt/ros)
+#   ROS_DISTRO=kilted scripts/setup.sh     # ROS 2 Kilted
+# Which distro and where its venv (.venv-<distro>), tooling and colcon build go: scripts/distro.sh.
+# Nothing here needs ../shared: the launch tooling builds from third_party/ros2/<distro>/.
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$root"
@@ -34,35 +35,44 @@ if ! { ls /usr/lib/*/libOpenNI2.so.0 || ls /usr/lib/libOpenNI2.so.0; } >/dev/nul
     log "libopenni2-0 could not be installed: the live source will say so; everything else works"
 fi
 
-underlay=""
-for d in ${ROS_DISTRO_PATH:-} /opt/ros/kilted /opt/ros/jazzy /opt/ros/humble /opt/ros/rolling; do
-  [ -f "$d/setup.bash" ] && { underlay="$d"; break; }
-done
+set +u
+# shellcheck source=distro.sh
+source "$root/scripts/distro.sh" || exit 1
+set -u
+underlay="$_kp_underlay"; venv="$_kp_venv"; read -r -a reqs <<< "$_kp_reqs"
 
+# The wheels are cp311 builds: their venv needs Python 3.11 (PYTHON= picks the interpreter).
 py=${PYTHON:-python3}
+if [ -z "$underlay" ] && ! "$py" -c 'import sys; sys.exit(sys.version_info[:2] != (3, 11))' 2>/dev/null; then
+  if command -v python3.11 >/dev/null; then py=python3.11; else
+    log "the ROS 2 $_kp_distro wheels need Python 3.11 ($py is $("$py" -V 2>&1)): install python3.11 or set PYTHON="
+    exit 1
+  fi
+fi
 stamp_of() { cat "$@" 2>/dev/null | sha256sum | cut -c1-16; }
 
 # 1. venv -------------------------------------------------------------------------------------
 if [ -n "$underlay" ]; then
-  venv_args=(--system-site-packages); reqs=(requirements-py.txt)
-  log "using system ROS 2 at $underlay"
+  venv_args=(--system-site-packages)
+  log "ROS 2 $_kp_distro: the system install at $underlay"
 else
-  venv_args=(); reqs=(requirements.txt requirements-py.txt)
+  venv_args=()
 fi
-want="$(stamp_of "${reqs[@]}" scripts/setup.sh) ${underlay:-wheels}"
-if [ ! -f .venv/.kp-stamp ] || [ "$(cat .venv/.kp-stamp)" != "$want" ]; then
-  log "creating/updating .venv (${reqs[*]}) — a few minutes the first time"
-  [ -x .venv/bin/python ] || "$py" -m venv "${venv_args[@]}" .venv
-  .venv/bin/python -m pip install -q --upgrade pip
+want="$(stamp_of "${reqs[@]}" scripts/setup.sh scripts/distro.sh) ${underlay:-wheels}"
+if [ ! -f "$venv/.kp-stamp" ] || [ "$(cat "$venv/.kp-stamp")" != "$want" ]; then
+  log "ROS 2 $_kp_distro: creating/updating ${venv#"$root"/} (${reqs[*]}) — a few minutes the first time"
+  [ -x "$venv/bin/python" ] || "$py" -m venv "${venv_args[@]}" "$venv"
+  "$venv/bin/python" -m pip install -q --upgrade pip
   pip_args=(); for r in "${reqs[@]}"; do pip_args+=(-r "$r"); done
-  .venv/bin/python -m pip install -q "${pip_args[@]}"
-  echo "$want" > .venv/.kp-stamp
-  rm -f install/.kp-stamp
+  "$venv/bin/python" -m pip install -q "${pip_args[@]}" ||
+    { log "pip could not install ${reqs[*]} into ${venv#"$root"/} (output above)"; exit 1; }
+  echo "$want" > "$venv/.kp-stamp"
+  rm -f "$_kp_install/.kp-stamp"
 fi
 
 set +u
 [ -n "$underlay" ] && source "$underlay/setup.bash"
-source .venv/bin/activate
+source "$venv/bin/activate"
 set -u
 
 if [ -z "$underlay" ]; then
@@ -77,16 +87,13 @@ if [ -z "$underlay" ]; then
   export CMAKE_PREFIX_PATH="$VIRTUAL_ENV${CMAKE_PREFIX_PATH:+:$CMAKE_PREFIX_PATH}"
 
   # 2. launch tooling (ros2 launch, launch_testing, launch_pytest, ros2 CLI, tf2_msgs) ----------
-  tooling_src="${ROS2_TOOLING_SRC:-$root/../shared/ros2}"
-  if [ -z "${KP_SKIP_TOOLING:-}" ] && [ -x "$tooling_src/build-into-venv.sh" ]; then
-    if [ ! -f .venv/ros2-tools/.built ]; then log "building ROS 2 launch tooling from $tooling_src (~1 min)"; fi
-    bash "$tooling_src/build-into-venv.sh" "$root/.venv/ros2-tools" >&2
-    # the tooling script swaps lark-parser for lark; both provide `lark`, keep exactly one
-  elif [ ! -f .venv/ros2-tools/.built ]; then
-    log "no launch tooling source at $tooling_src: 'ros2 launch' and launch tests will be unavailable"
+  if [ ! -f "$_kp_tools/.built" ]; then
+    log "building the ROS 2 $_kp_distro launch tooling from third_party/ros2/$_kp_distro (~1 min)"
   fi
+  bash third_party/ros2/build-into-venv.sh "$_kp_distro" "$_kp_tools" >&2 ||
+    { log "the launch tooling did not build (output above)"; exit 1; }
   set +u
-  [ -f .venv/ros2-tools/local_setup.bash ] && source .venv/ros2-tools/local_setup.bash
+  source "$_kp_tools/local_setup.bash"
   set -u
 fi
 
@@ -96,15 +103,16 @@ src_stamp="$( (find src -type f \( -name package.xml -o -name setup.py -o -name 
       -o -name '*.rviz' \) -print0 | sort -z | xargs -0 sha256sum; \
       find src -maxdepth 3 -type d -print | sort; ls launch config 2>/dev/null; \
       echo "${underlay:-wheels}") | sha256sum | cut -c1-16)"
-if [ ! -f install/.kp-stamp ] || [ "$(cat install/.kp-stamp)" != "$src_stamp" ]; then
-  log "colcon build"
-  colcon --log-base log build --symlink-install \
+if [ ! -f "$_kp_install/.kp-stamp" ] || [ "$(cat "$_kp_install/.kp-stamp")" != "$src_stamp" ]; then
+  log "colcon build (${_kp_install#"$root"/})"
+  colcon --log-base "$_kp_log" build --symlink-install --base-paths src \
+    --build-base "$_kp_build" --install-base "$_kp_install" \
     --event-handlers console_direct- console_cohesion- console_stderr- status- summary+ \
     --cmake-args -DBUILD_TESTING=OFF -DPython3_EXECUTABLE="$(command -v python)" >&2 ||
-    { log "colcon build failed; logs in $root/log/latest_build"; exit 1; }
-  echo "$src_stamp" > install/.kp-stamp
+    { log "colcon build failed; logs in $_kp_log/latest_build"; exit 1; }
+  echo "$src_stamp" > "$_kp_install/.kp-stamp"
 fi
-log "ready (${underlay:-pip wheels venv}$( [ -f .venv/ros2-tools/.built ] && echo ' + launch tooling'))"
+log "ready: ROS 2 $_kp_distro (${underlay:-pip wheels in ${venv#"$root"/} + launch tooling})"
 
-# 4. (lifecycle, issue 29) the nodes' default motion database: they load it, never build it (make build-db)
+# 4. (issue 29) the nodes' default motion database: they load it, never build it (make build-db)
 [ -f "${KINECT_POSTURE_CACHE:-$root/cache}/motion_db.npz" ] || (set +u; source scripts/env.sh; python -m skeleton_data.database_cli --no-progress >&2) || log "make build-db failed: nodes will not configure without a database"

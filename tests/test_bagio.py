@@ -124,15 +124,12 @@ def test_other_message_types_round_trip(tmp_path):
     mk.points = [Point(x=1.0, y=2.0, z=3.0), Point(x=-1.0, y=0.5, z=0.0)]
     markers = MarkerArray(markers=[mk])
     written = [('/diagnostics', diag, DiagnosticArray), ('/viz/markers', markers, MarkerArray)]
-    try:
-        from tf2_msgs.msg import TFMessage
-        from geometry_msgs.msg import TransformStamped
-        tf = TFMessage(transforms=[TransformStamped(child_frame_id='head_1')])
-        tf.transforms[0].header.frame_id = 'kinect_depth'
-        tf.transforms[0].transform.rotation.w = 1.0
-        written.append(('/tf', tf, TFMessage))
-    except ImportError:
-        pass
+    from geometry_msgs.msg import TransformStamped
+    from tf2_msgs.msg import TFMessage  # make setup builds tf2_msgs: never optional
+    tf = TFMessage(transforms=[TransformStamped(child_frame_id='head_1')])
+    tf.transforms[0].header.frame_id = 'kinect_depth'
+    tf.transforms[0].transform.rotation.w = 1.0
+    written.append(('/tf', tf, TFMessage))
     with BagWriter(tmp_path / 'mixed.mcap') as bag:
         for k, (topic, msg, _) in enumerate(written):
             bag.write(topic, msg, k)

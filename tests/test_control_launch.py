@@ -4,12 +4,9 @@ real DDS."""
 import os
 import time
 
+import launch
+import launch_pytest  # make setup builds the launch tooling: these tests never skip
 import pytest
-
-launch_pytest = pytest.importorskip(
-    'launch_pytest', reason='ROS 2 launch tooling not installed (scripts/setup.sh)')
-
-import launch  # noqa: E402
 from ament_index_python.packages import get_package_share_directory  # noqa: E402
 from launch.actions import IncludeLaunchDescription  # noqa: E402
 from launch.launch_description_sources import PythonLaunchDescriptionSource  # noqa: E402

@@ -14,6 +14,7 @@ pytest.importorskip('skeleton_msgs.msg', reason='skeleton_msgs not built (run sc
 
 from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from skeleton_msgs.msg import SkeletonArray  # noqa: E402
+from tf2_msgs.msg import TFMessage  # noqa: E402  (make setup builds tf2_msgs with the launch tooling)
 
 from skeleton_core.bagio import BagWriter, read_messages  # noqa: E402
 from skeleton_core.conversions import (SkeletonFrame, frames_from_array_msg,  # noqa: E402
@@ -89,7 +90,6 @@ def _rate(times, warmup=0.5):
 
 
 def test_synthetic_three_users_at_30hz(dds):
-    from tf2_msgs.msg import TFMessage
     proc = _start('num_users:=3', 'scenario:=b', 'publish_tf:=true')
     truth, tf = [], []
     try:
@@ -166,7 +166,6 @@ def test_replayed_bag_reproduces_recorded_bytes_at_30hz(dds, tmp_path):
 
 
 def test_replay_restamp_with_tf(dds, tmp_path):
-    from tf2_msgs.msg import TFMessage
     bag = tmp_path / 'take.mcap'
     _record_bag(bag, n=30, users=(7,))
     proc = _start('source:=replay', f'replay_file:={bag}', 'loop:=true', 'restamp:=true',

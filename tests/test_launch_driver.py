@@ -6,13 +6,9 @@ import os
 import signal
 import time
 
+import launch
+import launch_pytest  # make setup builds the launch tooling: these tests never skip
 import pytest
-
-launch_pytest = pytest.importorskip(
-    'launch_pytest', reason='ROS 2 launch tooling not installed: no /opt/ros/<distro> and no '
-    '../shared/ros2 to build it from (scripts/setup.sh builds it when ../shared/ros2 exists)')
-
-import launch  # noqa: E402
 from ament_index_python.packages import get_package_share_directory  # noqa: E402
 from launch.actions import IncludeLaunchDescription, RegisterEventHandler  # noqa: E402
 from launch.event_handlers import OnProcessExit  # noqa: E402

@@ -1,18 +1,14 @@
 """launch_pytest tests: pipeline.launch.py started as a user would, checked over real DDS.
 
-They need the launch tooling (a system ROS 2, or the tooling built from ../shared/ros2 by
-scripts/setup.sh); without it they skip with that reason.
+They need the launch tooling: a system ROS 2's, or the one `make setup` builds from
+third_party/ros2/<distro>; it is never optional, so they never skip.
 """
 import os
 import time
 
+import launch
+import launch_pytest  # make setup builds the launch tooling: these tests never skip
 import pytest
-
-launch_pytest = pytest.importorskip(
-    'launch_pytest', reason='ROS 2 launch tooling not installed: no /opt/ros/<distro> and no '
-    '../shared/ros2 to build it from (scripts/setup.sh builds it when ../shared/ros2 exists)')
-
-import launch  # noqa: E402
 from ament_index_python.packages import get_package_share_directory  # noqa: E402
 from launch.actions import IncludeLaunchDescription  # noqa: E402
 from launch.launch_description_sources import PythonLaunchDescriptionSource  # noqa: E402

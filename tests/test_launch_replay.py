@@ -9,13 +9,9 @@ import time
 from pathlib import Path
 
 import numpy as np
+import launch
+import launch_pytest  # make setup builds the launch tooling: these tests never skip
 import pytest
-
-launch_pytest = pytest.importorskip(
-    'launch_pytest', reason='ROS 2 launch tooling not installed: no /opt/ros/<distro> and no '
-    '../shared/ros2 to build it from (scripts/setup.sh builds it when ../shared/ros2 exists)')
-
-import launch  # noqa: E402
 from ament_index_python.packages import get_package_share_directory  # noqa: E402
 from launch.actions import IncludeLaunchDescription  # noqa: E402
 from launch.launch_description_sources import PythonLaunchDescriptionSource  # noqa: E402

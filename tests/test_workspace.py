@@ -29,8 +29,10 @@ def test_package_registered_in_ament_index_with_its_executables(pkg):
 
 
 def test_every_ros_entry_point_exports_loopback_discovery():
-    for script in ('scripts/env.sh', 'scripts/run-tests.sh', '.ci/run'):
+    for script in ('scripts/distro.sh', 'scripts/run-tests.sh', '.ci/run'):
         assert 'ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST' in (ROOT / script).read_text(), script
+    for script in ('scripts/env.sh', 'scripts/setup.sh'):   # both take it from distro.sh
+        assert 'distro.sh' in (ROOT / script).read_text(), script
     assert os.environ.get('ROS_AUTOMATIC_DISCOVERY_RANGE') == 'LOCALHOST'
 
 

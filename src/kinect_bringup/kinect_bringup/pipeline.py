@@ -61,12 +61,8 @@ def make_executor(kind: str, threads: Optional[int] = None):
         from rclpy.executors import MultiThreadedExecutor
         return MultiThreadedExecutor(num_threads=threads)
     if kind == 'events':
-        try:
-            from rclpy.experimental import EventsExecutor
-        except ImportError as e:  # Humble has none
-            raise RuntimeError('--executor events needs rclpy.experimental.EventsExecutor '
-                               '(Jazzy or newer)') from e
-        return EventsExecutor()
+        from skeleton_core.compat import events_executor
+        return events_executor()   # RuntimeError with the reason on Humble
     from rclpy.executors import SingleThreadedExecutor
     return SingleThreadedExecutor()
 

@@ -414,14 +414,37 @@ def bring_up(*nodes: 'ManagedNode'):
     return nodes[0] if len(nodes) == 1 else nodes
 
 
+def node_help(node_factory: Callable[..., Node], prog: str) -> str:
+    """``--help`` of a node executable: what it is (its module's first paragraph), how to set its
+    parameters, and each parameter with its default when the module lists them (``PARAMS`` or
+    ``node_params()``, as ``make params`` reads them)."""
+    mod = sys.modules.get(getattr(node_factory, '__module__', ''), None)
+    doc = ' '.join(((mod.__doc__ if mod else None) or node_factory.__doc__ or '').strip()
+                   .split('\n\n')[0].split())
+    lines = [f'usage: {prog} [--ros-args -p NAME:=VALUE ... --params-file FILE -r FROM:=TO]', '']
+    if doc:
+        lines += [doc, '']
+    fn = getattr(mod, 'node_params', None)
+    specs = fn() if callable(fn) else getattr(mod, 'PARAMS', None)
+    specs = [s for s in specs or () if getattr(s, 'public', True)]
+    if specs:
+        lines.append('parameters (default; docs/parameters.md has ranges and details):')
+        lines += [f'  {s.name} ({s.default!r}): {s.description}' for s in specs]
+    return '\n'.join(lines)
+
+
 def run_node(node_factory: Callable[..., Node], args=None, executor=None) -> int:
     """Standard ``main()``: init, build the node (a parameter error is one clear line and exit 1),
     configure and activate it (a failed configure: the node's one line, exit 1) unless started
     with ``--managed`` (then a lifecycle manager drives it: the launch file's LifecycleNode or
-    ``ros2 lifecycle set``), spin until Ctrl-C / SIGTERM, shut down cleanly."""
+    ``ros2 lifecycle set``), spin until Ctrl-C / SIGTERM, shut down cleanly. ``-h`` / ``--help``
+    before any ``--ros-args`` prints :func:`node_help` and exits 0 without starting ROS."""
     from rclpy.executors import ExternalShutdownException
     from rclpy.utilities import remove_ros_args
     argv = list(args if args is not None else sys.argv)
+    if any(a in ('-h', '--help') for a in remove_ros_args(args=argv)[1:]):
+        print(node_help(node_factory, prog=argv[0].rsplit('/', 1)[-1] if argv else 'node'))
+        return 0
     managed = MANAGED_FLAG in remove_ros_args(argv)
     rclpy.init(args=args)
     node = None
