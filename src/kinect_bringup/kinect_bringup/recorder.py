@@ -14,7 +14,7 @@ import time
 from pathlib import Path
 
 from rclpy.node import Node
-from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
 from skeleton_core.health import Health
 from skeleton_core.rosnode import DiagnosticsPublisher, ParamSpec, Parameters, run_node
@@ -65,10 +65,13 @@ class RecorderNode(Node):
             if msgtype is None:
                 raise ValueError(f'recorder: unknown topic {topic!r} (known: {sorted(TOPICS)})')
             self.counts[topic] = 0
-            # raw=True: the serialized bytes go to the bag as received (no decode/encode)
+            # raw=True: the serialized bytes go to the bag as received (no decode/encode); the
+            # stream's tracker is latched (skeleton_core.tracker): subscribed to as such
+            latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                                 durability=DurabilityPolicy.TRANSIENT_LOCAL)
             self.create_subscription(_msg_class(msgtype), topic,
                                      lambda data, t=topic, mt=msgtype: self._on_msg(t, mt, data),
-                                     qos, raw=True)
+                                     latched if topic == '/kinect/tracker' else qos, raw=True)
         self.diagnostics = DiagnosticsPublisher(self, self.health)
         self.get_logger().info(f'recording {len(self.counts)} topics to {self.path}')
 

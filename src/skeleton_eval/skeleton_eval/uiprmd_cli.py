@@ -43,12 +43,15 @@ def write_clip_bag(path, rc, start_ns: int, user_id: int = 1, frame_id: str = 'k
     from skeleton_core.bagio import BagWriter
     from skeleton_core.conversions import frames_to_array_msg
     from skeleton_core.model import NUM_JOINTS, TRACKED
-    from skeleton_data.uiprmd import clip_frames
+    from skeleton_core.tracker import write_to_bag
+    from skeleton_data.uiprmd import TRACKER, clip_frames
 
     frames = clip_frames(rc.kinect, start_ns, user_id, frame_id)
     n_sk = n_gt = 0
     tmp = Path(str(path) + '.part')
     with BagWriter(tmp) as bag:
+        if frames:   # the tracker travels with the data (skeleton_core.tracker)
+            write_to_bag(bag, TRACKER, frames[0].stamp_ns)
         for i, f in enumerate(frames):
             bag.write(SKELETON_TOPIC, frames_to_array_msg([f], f.stamp_ns, frame_id), f.stamp_ns)
             n_sk += 1
