@@ -161,3 +161,29 @@ def test_process_bag_picks_the_correction_of_the_bags_tracker(tmp_path, monkeypa
     assert any("the input comes from 'kinect_v1_sdk', another tracker" in m for m in lines)
     # the tracker is in the output bag too
     assert T.from_bag(tmp_path / 'out.mcap') == 'nite2'
+
+
+def test_c3d_markers_read_through_a_plug_in_gait_map(tmp_path):
+    from skeleton_data import vicon
+    from skeleton_data.c3d import read_c3d, write_c3d
+    from skeleton_data.joint_map import builtin_map
+    from skeleton_data.reference import load_reference
+    jm = builtin_map('plug_in_gait')
+    rng = np.random.default_rng(0)
+    pts = rng.normal(scale=300.0, size=(25, len(jm.columns), 3))   # mm, the file's labels
+    pts[3, 5] = np.nan                                            # one invalid sample
+    path = write_c3d(tmp_path / 'take.c3d', [f'Sub:{c}' for c in jm.columns], pts, 100.0)
+    labels, xyz, rate = read_c3d(path)
+    assert rate == 100.0 and labels[0] == f'Sub:{jm.columns[0]}'
+    np.testing.assert_allclose(xyz[np.isfinite(xyz)], pts[np.isfinite(pts)], rtol=1e-6)
+    assert np.isnan(xyz[3, 5]).all()
+    ref = load_reference(path, jm)
+    assert ref.positions.shape == (25, NUM_JOINTS, 3)
+    assert ref.times[1] == pytest.approx(0.01)
+    # the same markers through the text reader give the same joint centres
+    from skeleton_data.joint_map import marker_joint_centres
+    m = (np.nan_to_num(pts) * jm.scale) @ jm.rotation.T
+    m[3, 5] = np.nan
+    order = [jm.markers.get(c, c) for c in jm.columns]
+    want = marker_joint_centres(m[:, [order.index(n) for n in vicon.MARKERS]], jm)
+    np.testing.assert_allclose(ref.positions, want, atol=1e-5)
