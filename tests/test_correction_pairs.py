@@ -187,3 +187,27 @@ def test_c3d_markers_read_through_a_plug_in_gait_map(tmp_path):
     order = [jm.markers.get(c, c) for c in jm.columns]
     want = marker_joint_centres(m[:, [order.index(n) for n in vicon.MARKERS]], jm)
     np.testing.assert_allclose(ref.positions, want, atol=1e-5)
+
+
+def test_process_bag_leaves_out_joints_the_ground_truth_does_not_know(tmp_path):
+    """UI-PRMD bags mark the reference hands NOT_TRACKED (the Kinect never recorded them):
+    process_bag then scores the other joints only, as make evaluate --real does."""
+    from kinect_bringup.process_bag import process
+    truth = _subject_data(0, n_clips=1)[:30]
+    t = 1.7e9 + np.arange(len(truth)) / 30.0
+    with BagWriter(tmp_path / 'in.mcap') as bag:
+        for ti, p in zip(t, truth):
+            ns = int(round(ti * 1e9))
+            raw = p.copy()
+            raw[[7, 11]] += 0.5                      # hands 50 cm off: would dominate the error
+            for topic, pos, state in (('/kinect/skeletons', raw, TRACKED),
+                                      ('/kinect/ground_truth', p, TRACKED)):
+                st = np.full(NUM_JOINTS, state, np.uint8)
+                if topic == '/kinect/ground_truth':
+                    st[[7, 11]] = 0                  # NOT_TRACKED: no reference there
+                f = SkeletonFrame(user_id=1, stamp_ns=ns, positions=pos, tracking_state=st,
+                                  frame_id='kinect_link')
+                bag.write(topic, frames_to_array_msg([f], ns, 'kinect_link'), ns)
+    s = process(tmp_path / 'in.mcap', tmp_path / 'out.mcap', 'C', progress=False,
+                correction='')
+    assert s['accuracy']['raw']['mpjpe_cm'] == pytest.approx(0.0, abs=1e-6)

@@ -62,6 +62,7 @@ def process(bag: Path, out: Path, method: str = 'C', database: str = '', physics
     was applied."""
     from skeleton_core.bagio import BagWriter, bag_topics, read_messages
     from skeleton_core.cdr import SKELETON_ARRAY, CdrError, frames_from_cdr, frames_to_cdr
+    from skeleton_core.model import NOT_TRACKED
     from skeleton_core.presence import Presence
     from pose_reconstruction.node_common import load_database
     from pose_reconstruction.reconstructor import Reconstructor
@@ -126,7 +127,10 @@ def process(bag: Path, out: Path, method: str = 'C', database: str = '', physics
             if m.topic == '/kinect/ground_truth' and m.msgtype == SKELETONS:
                 try:
                     for f in frames_from_cdr(m.data)[2]:
-                        truth[(f.user_id, f.stamp_ns)] = f.positions
+                        # a joint the ground truth marks NOT_TRACKED has no reference: not
+                        # scored (e.g. UI-PRMD's hands, which the Kinect never recorded)
+                        truth[(f.user_id, f.stamp_ns)] = np.where(
+                            (f.tracking_state == NOT_TRACKED)[:, None], np.nan, f.positions)
                 except CdrError:
                     corrupt += 1
                 continue

@@ -42,7 +42,7 @@ def write_clip_bag(path, rc, start_ns: int, user_id: int = 1, frame_id: str = 'k
     """Write one :class:`~skeleton_eval.paired.RealClip` to an MCAP bag; returns message counts."""
     from skeleton_core.bagio import BagWriter
     from skeleton_core.conversions import frames_to_array_msg
-    from skeleton_core.model import NUM_JOINTS, TRACKED
+    from skeleton_core.model import HAND_LEFT, HAND_RIGHT, NOT_TRACKED, NUM_JOINTS, TRACKED
     from skeleton_core.tracker import write_to_bag
     from skeleton_data.uiprmd import TRACKER, clip_frames
 
@@ -56,8 +56,11 @@ def write_clip_bag(path, rc, start_ns: int, user_id: int = 1, frame_id: str = 'k
             bag.write(SKELETON_TOPIC, frames_to_array_msg([f], f.stamp_ns, frame_id), f.stamp_ns)
             n_sk += 1
             if rc.reference is not None and np.isfinite(rc.reference[i]).all():
-                g = f.copy(positions=rc.reference[i].copy(),
-                           tracking_state=np.full(NUM_JOINTS, TRACKED, np.uint8))
+                # the hands are not scored (the Kinect's are extrapolated, not recorded: as in
+                # skeleton_eval.real_eval): NOT_TRACKED in the truth, left out by process_bag
+                state = np.full(NUM_JOINTS, TRACKED, np.uint8)
+                state[[HAND_LEFT, HAND_RIGHT]] = NOT_TRACKED
+                g = f.copy(positions=rc.reference[i].copy(), tracking_state=state)
                 bag.write(GROUND_TRUTH_TOPIC, frames_to_array_msg([g], f.stamp_ns, frame_id),
                           f.stamp_ns)
                 n_gt += 1
