@@ -165,10 +165,17 @@ def load_pairs(rows: Sequence[Dict], topic: str = '/kinect/skeletons', log=None)
     """:class:`skeleton_eval.pairing.Pair` per manifest row, and the trackers the bags declare."""
     from skeleton_data.reference import load_reference
     from skeleton_eval.pairing import Pair
+    from skeleton_core.bagio import BagError
     pairs, trackers = [], []
     for r in rows:
-        t, pos, tracker = read_tracker_bag(r['bag'], topic)
-        ref = load_reference(r['reference'], r.get('joint_map') or None, r.get('units') or 'm')
+        try:
+            t, pos, tracker = read_tracker_bag(r['bag'], topic)
+            ref = load_reference(r['reference'], r.get('joint_map') or None,
+                                 r.get('units') or 'm')
+        except (BagError, ValueError, OSError) as e:   # one bad pair: skipped, said, the rest go on
+            if log is not None:
+                log(f'skipped {Path(r["bag"]).name}: {e}')
+            continue
         p = Pair(name=Path(r['bag']).stem, subject=r['subject'], tracker_times=t, tracker=pos,
                  ref_times=ref.times, ref=ref.positions, session=r.get('session', ''))
         if r.get('offset_s'):
@@ -269,7 +276,11 @@ def main(argv=None) -> int:
             for r in rows:
                 r.setdefault('joint_map', args.joint_map)
                 r['units'] = r.get('units') or args.units
-            pairs, declared = load_pairs(rows, args.topic)
+            pairs, declared = load_pairs(
+                rows, args.topic, log=lambda m: print(f'build_correction: warning: {m}',
+                                                      file=sys.stderr))
+            if not pairs:
+                return fail('no usable pair')
             found = sorted({t for t in declared if t})
             tracker = args.tracker
             if not tracker:
