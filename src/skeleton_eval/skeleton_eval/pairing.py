@@ -26,6 +26,7 @@ from dataclasses import dataclass, field
 from typing import Dict, List, Optional, Sequence
 
 import numpy as np
+from scipy.signal import correlate
 
 from . import registration as reg
 
@@ -86,7 +87,8 @@ def xcorr_curve(a: np.ndarray, b: np.ndarray, min_count: int):
     vb = np.zeros(len(lags))
     for k in range(a.shape[1]):
         x, y = a[:, k], b[:, k]
-        sab = np.correlate(y, x, mode='full')[lags + na - 1]
+        sab = correlate(y, x, mode='full', method='fft' if na * nb > 1e6 else 'direct')[
+            lags + na - 1]   # FFT for long recordings (minutes at 100 Hz)
         sa, sb = _sliding(x, lo_a, hi_a), _sliding(y, lo_b, hi_b)
         saa, sbb = _sliding(x * x, lo_a, hi_a), _sliding(y * y, lo_b, hi_b)
         num += sab - sa * sb / n
