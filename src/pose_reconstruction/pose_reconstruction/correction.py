@@ -465,13 +465,3 @@ def select(name: str, tracker: str, log=None, warn=None) -> Optional[SensorCorre
         warn(str(e))
         return None
     return corr
-
-
-def main(argv=None) -> int:
-    """``build_correction`` (:mod:`pose_reconstruction.correction_build`)."""
-    from .correction_build import main as build_main
-    return build_main(argv)
-
-
-if __name__ == '__main__':
-    raise SystemExit(main())
