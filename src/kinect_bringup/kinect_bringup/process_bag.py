@@ -19,6 +19,11 @@ from pathlib import Path
 from typing import Dict, List, Optional
 
 import numpy as np
+from skeleton_core.bagio import BagWriter, bag_topics, read_messages
+from skeleton_core.cdr import SKELETON_ARRAY, CdrError, frames_from_cdr, frames_to_cdr
+from skeleton_core.presence import Presence
+from pose_reconstruction.reconstructor import Reconstructor
+from skeleton_eval.metrics import eq18_error, mpjpe
 
 SKELETONS = 'skeleton_msgs/msg/SkeletonArray'
 
@@ -60,12 +65,7 @@ def process(bag: Path, out: Path, method: str = 'C', database: str = '', physics
     or ``input_tracker`` when given (it overrides); a correction for another tracker is refused
     with one line through ``warn`` (the run goes on without it); ``info(text)`` gets which one
     was applied."""
-    from skeleton_core.bagio import BagWriter, bag_topics, read_messages
-    from skeleton_core.cdr import SKELETON_ARRAY, CdrError, frames_from_cdr, frames_to_cdr
     from skeleton_core.model import NOT_TRACKED
-    from skeleton_core.presence import Presence
-    from pose_reconstruction.node_common import load_database
-    from pose_reconstruction.reconstructor import Reconstructor
 
     if warn is None:
         def warn(text):
@@ -87,6 +87,8 @@ def process(bag: Path, out: Path, method: str = 'C', database: str = '', physics
         params.update(correction=corr, input_tracker=tracker)
         info(f'{corr_mod.describe_file(corr)} applied (tracker {tracker}: '
              f'{"--input-tracker" if input_tracker else "declared by the bag"})')
+    # node_common imports rclpy: process_bag runs without a ROS graph
+    from pose_reconstruction.node_common import load_database
     db = load_database(database)
     out_topic = '/posture/completed' if method == 'A' else '/posture/reconstructed'
     users: Dict[int, object] = {}
@@ -212,7 +214,6 @@ def process(bag: Path, out: Path, method: str = 'C', database: str = '', physics
 
 def accuracy(truth: Dict, streams: Dict[str, Dict]) -> Dict:
     """Per-stream MPJPE and Eq. 18 error (cm) against the ground truth, matched by (user, stamp)."""
-    from skeleton_eval.metrics import eq18_error, mpjpe
     out = {}
     for name, data in streams.items():
         keys = sorted(k for k in data if k in truth)

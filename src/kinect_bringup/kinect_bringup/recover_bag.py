@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
+from skeleton_core.bagio import BagError, bag_topics, recover
 
 
 def main(argv=None) -> int:
@@ -22,7 +23,6 @@ def main(argv=None) -> int:
     p.add_argument('output', nargs='?', default=None,
                    help='the complete bag to write (default: <input>_recovered.mcap)')
     args = p.parse_args(argv)
-    from skeleton_core.bagio import BagError, bag_topics, recover
     src = Path(args.input)
     out = Path(args.output) if args.output else src.with_name(src.stem + '_recovered.mcap')
     try:

@@ -30,7 +30,8 @@ from skeleton_core.model import (ANKLE_LEFT, ANKLE_RIGHT, ELBOW_LEFT, ELBOW_RIGH
                                  SHOULDER_LEFT, SHOULDER_RIGHT, WRIST_LEFT,
                                  WRIST_RIGHT, subtree)
 
-from .intention import ExampleModel, center_of_mass, pca_basis, yaw_rotation
+from .intention import ExampleModel, center_of_mass, pca_columns, yaw_rotation
+from skeleton_core.geometry import facing_yaw
 
 # chains for the IK: effector -> (root, mid, end) joints; the effector rides rigidly on ``end``
 CHAINS = {'HandLeft': (SHOULDER_LEFT, ELBOW_LEFT, WRIST_LEFT, HAND_LEFT),
@@ -64,10 +65,9 @@ class PoseComposer:
         self.model = model
         p = model.positions
         rel = (p - center_of_mass(p)[:, None, :])
-        from skeleton_core.geometry import facing_yaw
         rel = np.einsum('tij,tkj->tki', yaw_rotation(facing_yaw(p)), rel) / model.height
         self.poses = rel.reshape(len(p), -1)            # (N, 60), height units
-        self.q_avg, self.B, self.lam = pca_basis(self.poses, components)
+        self.q_avg, self.B, self.lam = pca_columns(self.poses, components)
         self.lam = np.maximum(self.lam, 1e-6)
         self.k = int(k)
         self.w_p, self.w_e, self.w_s = float(w_p), float(w_e), float(w_s)

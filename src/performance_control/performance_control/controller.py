@@ -41,33 +41,35 @@ class ControlParams:
 
     recognizer: RecognizerParams = nested(RecognizerParams)
     free_gain: float = param(1500.0, 'N/m (N/rad): gain of effectors without a contact',
-                             range=(10.0, 1e5))
+                             range=(10.0, 1e5), public=False)
     release_after: float = param(2.0, 's without imitation before hands on a feature with an '
                                  'example let go (the character falls when the user stops; '
                                  'longer than a hand the sensor reports TRACKED at a wrong place, '
                                  'up to 1.5 s, plus the errors\' smoothing; 0 = never)',
-                                 range=(0.0, 60.0))
+                                 range=(0.0, 60.0), public=False)
     hand_release_margin: float = param(0.05, "m: a held hand lets go when the user's hand drops "
                                        "this far below the feature's engage joint",
-                                       range=(0.0, 1.0))
+                                       range=(0.0, 1.0), public=False)
     regrab_speed: float = param(0.5, 'm/s: on a feature with engage.regrab (the rope) a held hand '
                                 'the user raises faster lets go to grab higher (hand over hand)',
-                                range=(0.05, 10.0))
+                                range=(0.05, 10.0), public=False)
     regrab_reach: float = param(0.2, "body heights: climbing hand over hand, the free hand at the "
                                 "top of its reach grabs the rope where it passes this close (an "
                                 "arm's length: the arm reaches for the swinging rope; 0 = only "
-                                "within the feature's engage distance)", range=(0.0, 1.0))
+                                "within the feature's engage distance)", range=(0.0, 1.0),
+                                public=False)
     foot_down_height: float = param(0.06, "m: the user's foot this close to their floor is "
                                     'constrained (may hold the floor / trampoline)',
-                                    range=(0.005, 0.5))
+                                    range=(0.005, 0.5), public=False)
     blend_time: float = param(0.3, 's: transition in/out of the composed pose (Sec. 6.2)',
                               range=(0.01, 5.0))
-    compose_components: int = param(6, 'pose PCA size m of Eq. 7', range=(1, 30), read_only=True)
+    compose_components: int = param(6, 'pose PCA size m of Eq. 7', range=(1, 30), read_only=True,
+                                    public=False)
     compose_k: int = param(4, 'nearest example frames in q_rep (Eq. 10)', range=(1, 50),
-                           read_only=True)
+                           read_only=True, public=False)
     w_e: float = param(0.05, 'Eq. 8 weight of G_E (example similarity; w_P = 1)',
-                       range=(0.0, 100.0))
-    w_s: float = param(0.2, 'Eq. 8 weight of G_S (smoothness)', range=(0.0, 100.0))
+                       range=(0.0, 100.0), public=False)
+    w_s: float = param(0.2, 'Eq. 8 weight of G_S (smoothness)', range=(0.0, 100.0), public=False)
     sensor_height: float = param(0.8, 'm above the floor (the same world as the physics node)',
                                  range=(0.0, 5.0), read_only=True)
     sensor_pitch: float = param(0.0, 'sensor tilt down (deg)', range=(-45.0, 45.0),
@@ -75,7 +77,8 @@ class ControlParams:
     body_mass: float = param(75.0, 'kg at 1.75 m (scaled with height^3)', range=(20.0, 300.0),
                              read_only=True)
     compute_penetration: bool = param(True, 'measure the deepest penetration of the body into '
-                                      'the features every frame (diagnostics, the benchmark)')
+                                      'the features every frame (diagnostics, the benchmark)',
+                                      public=False)
 
     def validate(self) -> None:
         check(self, nested=False)

@@ -27,6 +27,11 @@ import numpy as np
 from .controller import ControlParams, PerformanceController, build_models
 from .features import load_world
 from .performances import SENSOR_HEIGHT, imitation_stream, jump_stream, to_sensor
+from skeleton_core.bagio import BagWriter
+from skeleton_core.cdr import frames_to_cdr
+from skeleton_core.conversions import SkeletonFrame
+from skeleton_core.model import NUM_JOINTS, TRACKED
+from skeleton_core.model import SEGMENTS
 
 FPS = 30.0
 SCENES = ('monkey_bars', 'rope', 'trampoline', 'water')
@@ -45,10 +50,6 @@ def scene_stream(world, name: str, seed: int, seconds: float = 8.0) -> np.ndarra
 
 
 def run(world, out_dir: Path, seconds: float = 8.0, physics: bool = True) -> Dict:
-    from skeleton_core.bagio import BagWriter
-    from skeleton_core.cdr import frames_to_cdr
-    from skeleton_core.conversions import SkeletonFrame
-    from skeleton_core.model import NUM_JOINTS, TRACKED
     cp = ControlParams(sensor_height=SENSOR_HEIGHT)
     models = build_models(world, cp.recognizer)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -140,7 +141,6 @@ def plot(result: Dict, world, path: Path) -> None:
     import matplotlib
     matplotlib.use('Agg')
     import matplotlib.pyplot as plt
-    from skeleton_core.model import SEGMENTS
     rows, cp = result['rows'], result['params']
     fig, axes = plt.subplots(3, len(rows), figsize=(4.2 * len(rows), 10))
     for col, (name, rr) in enumerate(rows.items()):

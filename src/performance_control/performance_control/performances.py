@@ -18,6 +18,7 @@ from skeleton_core.model import TRACKED, Body, standard_body
 from skeleton_data.motions import builtin_clips, pose_from_rotations
 
 from .examples import FPS, _legs, imitation, random_style
+from skeleton_eval.sensor_model import SensorModel
 
 
 def performer(rng: np.random.Generator) -> Tuple[Body, Dict, float]:
@@ -112,7 +113,6 @@ def to_sensor(positions: np.ndarray, name: str, seed: int, noise: bool = True,
     """A world clip as the sensor reports it (sensor frame): the sensor model's stream (placement,
     noise, dropouts; scenario a) or, with ``noise=False``, just placed 2.5 m ahead facing it.
     With ``states``: (positions, tracking states (T, 20) uint8; all TRACKED without noise)."""
-    from skeleton_eval.sensor_model import SensorModel
     sm = SensorModel(PERFORMANCE_PLACEMENT if sensor_params is None else sensor_params, seed=seed)
     clip = SimpleNamespace(name=name, positions=positions, fps=FPS)
     if not noise:

@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Dict, List, Optional
 
 import numpy as np
+import yaml
 
 GEOM_TYPES = ('plane', 'capsule', 'box', 'rope', 'volume')
 
@@ -95,7 +96,6 @@ def parse_geometry(doc: Dict, path: str = '<dict>') -> Dict[str, List[Geom]]:
 
 def load_geometry(path: str) -> Dict[str, List[Geom]]:
     """:func:`parse_geometry` of a world YAML file (a path: the launch file resolves world names)."""
-    import yaml
     p = Path(path).expanduser()
     if not p.is_file():
         raise FileNotFoundError(f'feature_world: no file {p}')

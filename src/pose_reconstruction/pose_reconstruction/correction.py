@@ -47,6 +47,9 @@ from skeleton_core.params import param
 from skeleton_core.tracker import TRACKERS
 from skeleton_core.model import (HAND_LEFT, HAND_RIGHT, NUM_JOINTS, NUM_SEGMENTS,
                                  SEGMENT_CHILDREN, SEGMENT_PARENTS, WRIST_LEFT, WRIST_RIGHT)
+from skeleton_data.database import default_shared_dir
+from skeleton_data.database import default_cache_dir
+from skeleton_eval.paired import load_dataset
 
 FORMAT = 'kinect_posture.sensor_correction'
 FORMAT_VERSION = 1
@@ -75,7 +78,7 @@ class CorrectionConfig:
         'applied only to the tracker it was learned from', choices=('',) + TRACKERS)
     correction_stage: str = param(
         'input', 'where the correction runs: input (every joint, before the reliability) or '
-        'reliable (the reliable joints, after it)', choices=STAGES)
+        'reliable (the reliable joints, after it)', choices=STAGES, public=False)
     user_profile: str = param(
         '', "user profile name (<profiles_dir>/<name>.json, from build_profile): the user's "
         "segment lengths from the first frame; '' = measured per user")
@@ -330,14 +333,12 @@ from skeleton_data.uiprmd import TRACKER as UIPRMD_TRACKER  # noqa: E402 - Kinec
 
 def default_source() -> Optional[Path]:
     """The paired development recordings (``<shared>/kinect/ui-prmd``) if present."""
-    from skeleton_data.database import default_shared_dir
     shared = default_shared_dir()
     p = None if shared is None else Path(shared) / 'kinect' / 'ui-prmd'
     return p if p is not None and (p / 'Vicon' / 'Positions').is_dir() else None
 
 
 def default_path(tracker: str = UIPRMD_TRACKER) -> Path:
-    from skeleton_data.database import default_cache_dir
     return default_cache_dir() / f'sensor_correction_{tracker}.npz'
 
 
@@ -391,7 +392,6 @@ def build_from_clips(clips, subjects: Optional[Sequence[int]] = None, posture: b
 def build(src, out=None, subjects: Optional[Sequence[int]] = None,
           posture: bool = True) -> tuple:
     """Load paired recordings under ``src`` (UI-PRMD layout), fit, save; (correction, path)."""
-    from skeleton_eval.paired import load_dataset
     src = Path(src)
     clips, skipped, _ = load_dataset(src, subjects=subjects)
     corr = build_from_clips(clips, subjects, posture,

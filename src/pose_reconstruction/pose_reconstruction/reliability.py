@@ -214,29 +214,34 @@ class ReliabilityConfig:
     except ``sigma_frames``, which the paper does not give)."""
 
     d_min: float = param(0.03, 'Eq. 3: minimum displacement (m) for an angle to count',
-                         range=(0.0, 0.5))
-    f_b: int = param(3, 'Eq. 4: frames averaged by the behaviour term', range=(1, 30))
+                         range=(0.0, 0.5), public=False)
+    f_b: int = param(3, 'Eq. 4: frames averaged by the behaviour term', range=(1, 30),
+                     public=False)
     theta_floor_deg: float = param(90.0, 'Eq. 4: acceptable angle change (deg)',
-                                   range=(0.0, 180.0))
+                                   range=(0.0, 180.0), public=False)
     theta_roof_deg: float = param(135.0, 'Eq. 4: fully unacceptable angle change (deg)',
-                                  range=(0.0, 180.0))
-    f_total: int = param(6, 'Eq. 8: frames in the Gaussian-weighted window', range=(1, 60))
+                                  range=(0.0, 180.0), public=False)
+    f_total: int = param(6, 'Eq. 8: frames in the Gaussian-weighted window', range=(1, 60),
+                         public=False)
     sigma_frames: float = param(2.0, 'Eq. 8: width (frames) of the Gaussian weight',
-                                range=(0.1, 60.0))
-    tracked_value: float = param(1.0, 'Eq. 7: R_t of a tracked joint', range=(0.0, 1.0))
-    inferred_value: float = param(0.0, 'Eq. 7: R_t of an inferred joint', range=(0.0, 1.0))
-    not_tracked_value: float = param(0.0, 'Eq. 7: R_t of a not-tracked joint', range=(0.0, 1.0))
+                                range=(0.1, 60.0), public=False)
+    tracked_value: float = param(1.0, 'Eq. 7: R_t of a tracked joint', range=(0.0, 1.0),
+                                 public=False)
+    inferred_value: float = param(0.0, 'Eq. 7: R_t of an inferred joint', range=(0.0, 1.0),
+                                  public=False)
+    not_tracked_value: float = param(0.0, 'Eq. 7: R_t of a not-tracked joint', range=(0.0, 1.0),
+                                     public=False)
     reference_pose_tolerance_deg: float = param(
         25.0, 'largest segment-direction error (deg) to accept a T-pose / standing reference '
-        'posture', range=(1.0, 90.0))
+        'posture', range=(1.0, 90.0), public=False)
     reference_frames: int = param(15, 'reference segment lengths: median of this many captures',
-                                  range=(1, 300))
+                                  range=(1, 300), public=False)
     reference_mode: str = param(
         'observed', 'reference lengths before a reference posture is captured: observed (running '
         'median of tracked segments) or standard (the standard body at the user height, paper)',
-        choices=REFERENCE_MODES)
+        choices=REFERENCE_MODES, public=False)
     observed_window: int = param(90, 'reference_mode observed: frames in the running median',
-                                 range=(1, 10000))
+                                 range=(1, 10000), public=False)
     plausibility: PlausibilityConfig = nested(PlausibilityConfig)
 
     def validate(self) -> None:

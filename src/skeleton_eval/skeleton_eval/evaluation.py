@@ -43,6 +43,11 @@ from skeleton_core.model import (ELBOW_LEFT, ELBOW_RIGHT, FOOT_LEFT, FOOT_RIGHT,
                     HAND_RIGHT, JOINT_NAMES, KNEE_LEFT, KNEE_RIGHT, NOT_TRACKED, NUM_JOINTS,
                     TRACKED, standard_body)
 from .sensor_model import KinectStream, SensorModel, format_statistics, statistics
+from skeleton_data.motions import builtin_split
+from skeleton_data.mocap import MotionClip
+from skeleton_core.model import (ELBOW_LEFT as EL, ELBOW_RIGHT as ER, SHOULDER_LEFT as SL,
+                                 SHOULDER_RIGHT as SR, WRIST_LEFT as WL, WRIST_RIGHT as WR)
+from skeleton_core.geometry import normalize, retarget
 
 FRAME_ID = 'kinect_depth'
 
@@ -186,16 +191,12 @@ def load_clips(source: str = 'auto', seed: int = 0):
         return db, dev, f'cmu:{cmu}'
     if source == 'cmu':
         raise FileNotFoundError(f'no CMU mocap at {cmu}')
-    from skeleton_data.motions import builtin_split
     db, dev = builtin_split(seed)
     return db, dev, f'builtin:seed={seed}'
 
 
 def toy_clip(seconds: float = 10.0, fps: float = 30.0, name: str = 'toy_arm_swing'):
     """The standard body standing with both arms swinging up and down (for tests and smoke runs)."""
-    from skeleton_data.mocap import MotionClip
-    from skeleton_core.model import (ELBOW_LEFT as EL, ELBOW_RIGHT as ER, SHOULDER_LEFT as SL,
-                        SHOULDER_RIGHT as SR, WRIST_LEFT as WL, WRIST_RIGHT as WR)
     body = standard_body()
     rest = body.rest_positions()
     n = int(round(seconds * fps))
@@ -499,7 +500,6 @@ def calibration_stream(sensor: SensorModel, clip, pose: str = 'tpose', seed: int
     sensor model's 'clean' path (same placement and noise model as the clip's stream). It is the
     same session as ``sensor.corrupt(clip, 'clean', seed)``: the same systematic joint-centre
     offsets, with independent jitter and drift. Stamps end one frame before ``start_ns``."""
-    from skeleton_data.mocap import MotionClip
     pos, desc = calibration_pose(clip, pose, cmu_dir)
     fps = sensor.fps
     n = max(1, int(round(float(seconds) * fps)))
@@ -599,7 +599,6 @@ def calibration_text(results: Dict) -> str:
 def _database_postures(database=None, clips=None) -> np.ndarray:
     """(N, 20, 3) normalised postures of a MotionDatabase (several attribute names tried) or of
     clips (normalised and retargeted to the standard body here, as the database does)."""
-    from skeleton_core.geometry import normalize, retarget
     if database is not None:
         for attr in ('positions', 'postures', 'normalized_positions', 'poses'):
             arr = getattr(database, attr, None)

@@ -41,6 +41,7 @@ from skeleton_core.model import (CHILDREN, FOOT_LEFT, FOOT_RIGHT, HAND_LEFT, HAN
                                  SEGMENT_CHILDREN, SEGMENT_CHILD_INDEX, SEGMENT_PARENTS,
                                  SEGMENT_PARENT_INDEX, SHOULDER_LEFT, SHOULDER_RIGHT, SPINE,
                                  TRACKED, estimate_height, segment_lengths, standard_body)
+from skeleton_core.model import SEGMENT_NAMES
 
 SCENARIOS = ('clean', 'a', 'b', 'c', 'd')
 CONFIDENT_FAILURES = ('hand_snap', 'limb_swap', 'foot_slide', 'person_jump')
@@ -881,7 +882,6 @@ def format_statistics(stats: Dict) -> str:
     for j, n in enumerate(JOINT_NAMES):
         lines.append(f'| {n} | {stats["jitter_mm"][j]:.1f} | {stats["offset_mm"][j]:.1f} |')
     lines += ['', '| segment | length std (mm) |', '|---|---:|']
-    from skeleton_core.model import SEGMENT_NAMES
     for k, n in enumerate(SEGMENT_NAMES):
         lines.append(f'| {n} | {stats["bone_length_std_mm"][k]:.1f} |')
     lines += ['', '| scenario | minutes | not tracked | inferred | false positive | events/min |',
