@@ -351,9 +351,10 @@ def load_user_terms(values: Dict[str, Any], logger=None) -> Dict[str, Any]:
     """The Reconstructor keywords of the correction / profile parameters: ``correction`` (None
     when off or refused: another or an undeclared tracker, logged in one line; the tracker is
     ``input_tracker``, else ``stream_tracker``: the one the stream declares on /kinect/tracker),
-    ``correction_stage``, ``input_tracker``, ``profile``. Files are loaded by path, never built: a named file (or the default correction
-    that applies to the input) that is missing or malformed raises FileNotFoundError /
-    ValueError with one line naming the command that builds it."""
+    ``correction_stage``, ``input_tracker``, ``profile``. Files are loaded by path, never
+    built: a named file (or the default correction that applies to the input) that is missing
+    or malformed raises FileNotFoundError / ValueError with one line naming the command that
+    builds it."""
     from . import correction as C
     from . import profile as P
     info = logger.info if logger is not None else (lambda m: None)
