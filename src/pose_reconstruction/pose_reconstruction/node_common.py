@@ -108,7 +108,8 @@ class SkeletonArrayNode(Node):
 
     def diagnostics_extra(self) -> Dict[str, Any]:
         with self._lock:
-            return {'users': len(self._users)}
+            return {'users': len(self._users),
+                    'user_states': len(set(self._users) | set(self._last_seen))}
 
     # -- internals -------------------------------------------------------------------------------
     def _on_params(self, changed: Dict[str, Any]) -> Optional[str]:

@@ -167,7 +167,7 @@ class VizNode(Node):
         self.create_subscription(MarkerArray, v['objects_topic'], self._on_objects, 10)
         self._timer = self.create_timer(1.0 / v['max_rate_hz'], self._tick)
         self._diag = DiagnosticsPublisher(self, self.health, extra=lambda: {
-            'namespaces': len(self.scene.shown_namespaces())})
+            'namespaces': len(self.scene.shown_namespaces()), 'markers_cached': len(self._cache)})
         self.get_logger().info(f"publishing markers on {self._pub.topic_name} at <= "
                                f"{v['max_rate_hz']:g} Hz")
 
