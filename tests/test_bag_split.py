@@ -123,3 +123,38 @@ def test_bad_sources(tmp_path):
         bag_pieces([tmp_path / 'a.mcap', tmp_path / 'b.mcap'])
     assert np.all(np.diff([int(p.stem.split('_')[1]) for p in
                            _record(tmp_path / 'n.mcap', 130, split_duration_s=10).pieces]) == 1)
+
+
+@pytest.mark.ros
+def test_recorder_node_rotates_and_process_bag_takes_the_folder(tmp_path):
+    """A real recorder (synthetic driver -> recorder over DDS) with split_duration_s 2: complete
+    pieces of 2 s each, closed on Ctrl-C too; process_bag runs over the folder as one bag."""
+    import time
+    from kinect_bringup.process_bag import process
+    from kinect_bringup.processes import Graph
+    folder = tmp_path / 'rot'
+    g = Graph('processes', nodes=['driver', 'recorder'], log_dir=tmp_path / 'logs',
+              overrides={'recorder': {'output': str(tmp_path / 'rot.mcap'),
+                                      'topics': ['/kinect/skeletons'], 'split_duration_s': 2.0},
+                         'driver': {'num_users': 1}})
+    try:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and len(list(folder.glob('*.mcap'))) < 4:
+            time.sleep(0.2)
+    finally:
+        codes = g.stop()
+    log = (tmp_path / 'logs' / 'recorder.log').read_text()
+    assert codes['recorder'] == 0, log[-2000:]
+    pieces = bag_pieces(folder)
+    assert len(pieces) >= 4, log[-2000:]
+    assert all(truncation(p) is None for p in pieces), 'a piece was left unfinished'
+    firsts = []
+    for p in pieces:
+        t = [m.stamp_ns for m in read_pieces([p], decode=False)]
+        assert t and t[-1] - t[0] < 2 * 10 ** 9
+        firsts.append(t[0])
+    assert all(b - a >= 2 * 10 ** 9 for a, b in zip(firsts, firsts[1:]))
+    assert 'finished piece rot_0.mcap' in log
+    total = pieces_topics(pieces)['/kinect/skeletons'][1]
+    s = process(folder, tmp_path / 'out.mcap', 'A', progress=False)
+    assert s['frames'] == total
