@@ -82,3 +82,54 @@ def test_visitors_coming_and_going_keep_memory_flat():
     assert per_visitor < 0.2, f'{per_visitor:.2f} MB per visitor that came and went'
     # the worlds alive: the current ones and the cache (bounded), not one per recompile
     assert alive <= len(sim.worlds) + Simulation.CACHE_SIZE
+
+
+def test_soak_judges_slopes_not_percentages():
+    """The soak's verdict per node: a steady 0.1 MB/s after warm-up fails even where it is only a
+    few per cent of the process; a flat RSS that follows the load (visitors in the physics world)
+    passes; open files and log volume that grow fail too."""
+    from kinect_bringup.soak import MAX_RSS_SLOPE, judge_process
+    t = np.arange(0.0, 600.0, 2.0)
+    load = 20.0 * ((t // 40) % 2)                       # a visitor in, out, in, ...
+
+    def rows(rss, fds=None, log=None):
+        fds = np.full(t.size, 18) if fds is None else fds
+        log = 100.0 * t if log is None else log        # 6 kB/min
+        return [(a, b, 7, int(c), 0.2 * a, int(d)) for a, b, c, d in zip(t, rss, fds, log)]
+
+    leak = judge_process(rows(3000.0 + 0.1 * t), 120)
+    assert leak['judged'] and not leak['flat'] and leak['growth_percent'] < 2.0
+    assert abs(leak['rss_slope_mb_per_s'] - 0.1) < 1e-3
+    flat = judge_process(rows(250.0 + load + np.where(t < 60, t, 60.0)), 120)
+    assert flat['flat'] and abs(flat['rss_slope_mb_per_s']) < MAX_RSS_SLOPE / 5
+    assert not judge_process(rows(250.0 + 0 * t, fds=18 + t // 60), 120)['flat']
+    assert not judge_process(rows(250.0 + 0 * t, log=2000.0 * t), 120)['flat']
+    # a process too short to tell warm-up from a leak is reported, not judged
+    assert not judge_process(rows(3000.0 + 0.1 * t)[:40], 120)['judged']
+
+
+def test_lab_day_people_come_and_go():
+    """The lab-day profile: people every 10-60 s, 0-5 besides the driver's user, each a new id,
+    occluded limbs now and then, the sensor unplugged every 7-13 minutes."""
+    import random
+    from kinect_bringup.soak import LabDay
+    from skeleton_core.cdr import frames_from_cdr  # noqa: F401 (the message package is built)
+    lab = LabDay(random.Random(1))
+    counts, ids, states, unplugs = [], set(), set(), []
+    for i in range(0, 30 * 60 * 15, 3):             # 15 minutes, every third frame
+        t = i / 30.0
+        if lab.unplug_due(t):
+            unplugs.append(t)
+        msg = lab.frame(t, 10 ** 18 + i * 33_333_333)
+        n = 0 if msg is None else len(msg.skeletons)
+        counts.append(n)
+        if msg is not None and i % 9 == 0:
+            for sk in msg.skeletons:
+                ids.add(sk.user_id)
+                states |= set(sk.tracking_state)
+    s = lab.summary()
+    changes = s['arrivals'] + s['departures']
+    assert 15 <= changes <= 90 and max(counts) <= 5 and s['most_people'] >= 3
+    assert len(ids) == s['arrivals']                     # every visit a new user id
+    assert states == {0, 1, 2} and s['occlusions'] > 5
+    assert 1 <= len(unplugs) <= 3 and unplugs[0] >= 420
