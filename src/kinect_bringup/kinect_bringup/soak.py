@@ -13,17 +13,23 @@ start) is killed with SIGKILL and its bag recovered (>= 95 % of the frames it re
 physics node is killed and restarted (the driver's user gets its character back), and the
 recording cut at a random byte is replayed by the replay source (every complete frame). It ends
 with a report: crashes, NaN outputs, RSS growth after warm-up per process, recovery times, and
-exits non-zero when a target is missed (no crash, no NaN, RSS growth < 5 %, every restart recovers,
-every parameter change accepted, every fault above recovered).
+exits non-zero when a target is missed (no crash, no NaN, every node's resources flat, every
+restart recovers, every parameter change accepted, every fault above recovered).
 
-RSS growth is judged per OS process, never across a restart: for each node the longest-lived of
-its processes (the first one, or the one started by a restart), from 25 % of that process's life
-on (the median of the last third of that window against the median of its first third: the RSS
-follows the load, e.g. the number of characters in the physics world), and only when that
-process lived at least --rss-min-duration s (default 120). Over a shorter
-window the figures are reported but allocator and cache warm-up cannot be told from a leak: the
-node's entry says ``judged: false`` and, when no process was judged (e.g. the 45 s soak of the test
-suite), ``rss_verdict`` says ``skipped``.
+    ros2 run kinect_bringup soak --profile lab-day --duration 3600   # a lab day in an hour
+
+``--profile lab-day`` adds a lab day compressed (:class:`LabDay`): people arriving and leaving
+every 10-60 s, one to six at a time, occluded limbs, the sensor unplugged and replugged, and
+fewer node restarts (at most 4) so that every node has a long-lived process to judge.
+
+Resources are judged per OS process, never across a restart (:func:`judge_process`): for each
+node the longest-lived of its processes, from 25 % of that process's life on, and only when that
+process lived at least --rss-min-duration s (default 120): the RSS slope (Theil-Sen, MB/s) at
+most --max-rss-slope (0.05), open files and log volume not growing; CPU is reported. Growth is a
+slope, never a percentage after warm-up: a steady 1 MB/s is a few per cent over a few minutes
+and 20 GB over a day (issue 32). Over a shorter window allocator and cache warm-up cannot be
+told from a leak: the node's entry says ``judged: false`` and, when no process was judged (e.g.
+the 45 s soak of the test suite), ``rss_verdict`` says ``skipped``.
 """
 from __future__ import annotations
 
