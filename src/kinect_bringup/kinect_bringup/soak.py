@@ -36,6 +36,7 @@ from __future__ import annotations
 import argparse
 import json
 import random
+import signal
 import sys
 import time
 from pathlib import Path
@@ -108,6 +109,9 @@ def main(argv=None) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     rnd = random.Random(args.seed)
+    # a soak stopped with SIGTERM (kill, a CI timeout) stops its graph too (the finally below):
+    # nodes left running would go on publishing into the next run on the same DDS domain
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))
 
     import psutil
     import rclpy
