@@ -26,7 +26,8 @@ ARGS = [
     ('replay_file', '', 'bag (.mcap) or CSV file for source:=replay'),
     ('device_uri', '', 'live: OpenNI2 device URI or .oni recording ("" = first device)'),
     ('nite2_path', '', 'live: NiTE2 Redist directory (never bundled; see docs/live_kinect.md)'),
-    ('scenario', '', 'synthetic source scenario class (Shum 2013 Table IV): a | b | c'),
+    ('scenario', '', 'synthetic source scenario class (Shum 2013 Table IV): a | b | c; d: '
+     'confident failures, e: small persistent errors of TRACKED joints'),
     ('num_users', '', 'synthetic source: number of users (1-6)'),
     ('seed', '', 'synthetic source: random seed'),
     ('database', '', 'motion database file ("" = built-in / CMU default, built and cached)'),

@@ -2,11 +2,11 @@
 import numpy as np
 import pytest
 
-from pose_reconstruction.completion import PCACompletion, pca_basis
+from pose_reconstruction.completion import PCACompletion
 from pose_reconstruction.reconstructor import Reconstructor
 from pose_reconstruction.synthetic import random_database, smooth_angles, smooth_clip
 from skeleton_core.conversions import SkeletonFrame
-from skeleton_core.geometry import denormalize, NormalizeTransform
+from skeleton_core.geometry import denormalize, NormalizeTransform, pca
 from skeleton_core.model import LIMB_JOINTS, NUM_JOINTS, TRACKED, standard_body
 
 
@@ -19,12 +19,12 @@ def place(p, yaw=0.8, t=(2.0, -0.4, 0.9)):
     return denormalize(p, NormalizeTransform(yaw=np.asarray(yaw), translation=np.asarray(t)))
 
 
-def test_pca_basis_orthonormal_and_default_dims(db):
+def test_pca_orthonormal_and_default_dims(db):
     c = PCACompletion(db)
     assert c.components.shape == (7, 60)
     assert np.allclose(c.components @ c.components.T, np.eye(7), atol=1e-9)
-    mean, comps, s = pca_basis(np.asarray(db.flat, float), 60)
-    assert np.all(np.diff(s) <= 1e-9)  # sorted by variance
+    mean, comps, var = pca(np.asarray(db.flat, float), 60)
+    assert np.all(np.diff(var) <= 1e-9)  # sorted by variance
 
 
 def test_completion_recovers_database_posture_with_missing_limb():
@@ -126,8 +126,14 @@ def reference_complete(c, p, rel, height, orientations=None, bones=None):
     rz = np.array([[np.cos(yaw), -np.sin(yaw), 0.0], [np.sin(yaw), np.cos(yaw), 0.0], [0, 0, 1]])
     rest = c.body.rest_offsets / np.maximum(np.linalg.norm(c.body.rest_offsets, axis=1),
                                             1e-12)[:, None]
+    from skeleton_core.model import SPINE
     for j in np.flatnonzero(missing):
-        if j == ROOT:
+        if j == ROOT and not missing[SPINE]:
+            # the root hangs below the observed spine (the match's direction, the user's length)
+            d = match[SPINE] - match[ROOT]
+            u = d / np.linalg.norm(d) if np.linalg.norm(d) > 1e-9 else rest[SPINE]
+            out[j] = p[SPINE] - rz @ (u * bone[SPINE])
+        elif j == ROOT:
             out[j] = denormalize(match[j:j + 1] / scale, tf)[0]
         else:
             d = match[j] - match[PARENTS[j]]

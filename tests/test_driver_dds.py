@@ -90,7 +90,7 @@ def _rate(times, warmup=0.5):
 
 def test_synthetic_three_users_at_30hz(dds):
     from tf2_msgs.msg import TFMessage
-    proc = _start('num_users:=3', 'scenario:=b', 'publish_ground_truth:=true', 'publish_tf:=true')
+    proc = _start('num_users:=3', 'scenario:=b', 'publish_tf:=true')
     truth, tf = [], []
     try:
         got = _collect(dds, '/kinect/skeletons', 3.5, proc=proc,
@@ -259,8 +259,7 @@ def test_replay_waits_for_its_subscribers_and_plays_the_other_topics(tmp_path, d
             w.write('/posture/reconstructed', _array(stamp, (1,)), stamp)
             if k % 10 == 0:
                 w.write('/notes', String(data=f'note {k}'), stamp)
-    proc = _start('source:=replay', f'replay_file:={bag}', 'wait_for_subscribers:=2',
-                  'wait_timeout_s:=60.0')
+    proc = _start('source:=replay', f'replay_file:={bag}', 'wait_for_subscribers:=2')
     node = rclpy.create_node('replay_probe', context=dds)
     got = {'/kinect/skeletons': [], '/kinect/ground_truth': [], '/posture/reconstructed': [],
            '/notes': []}

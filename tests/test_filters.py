@@ -204,8 +204,6 @@ def test_acceleration_stage_keeps_the_rest_quiet_and_the_swing_on_time():
 
 def test_lead_parameters_are_validated():
     with pytest.raises(ValueError):
-        OneEuroFilter(lead_cutoff=-1.0)
-    with pytest.raises(ValueError):
         OneEuroFilter(lead_accel=-0.5)
     with pytest.raises(ValueError):
         OneEuroFilter(accel_cutoff=-1.0)

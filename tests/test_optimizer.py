@@ -255,9 +255,8 @@ def test_filled_segments_are_smoothed_more(small_db):
     ts = np.full(NUM_JOINTS, TRACKED, np.uint8)
     ts[[WRIST_RIGHT, HAND_RIGHT]] = NOT_TRACKED
 
-    def run_scale(scale, states, frames=frames, speed=False):
-        r = Reconstructor(small_db, method='C', smooth_filled_scale=scale,
-                          smooth_filled_speed=speed)
+    def run_scale(scale, states, frames=frames):
+        r = Reconstructor(small_db, method='C', smooth_filled_scale=scale)
         return np.array([r.process(SkeletonFrame(positions=f, tracking_state=states,
                                                  stamp_ns=i * 33_333_333)).positions
                          for i, f in enumerate(frames)])
@@ -269,11 +268,6 @@ def test_filled_segments_are_smoothed_more(small_db):
         return np.mean(np.linalg.norm(v[2:] - 2 * v[1:-1] + v[:-2], axis=1))
     full, soft = run_scale(1.0, ts), run_scale(0.2, ts)
     assert seg_jitter(soft[20:], HAND_RIGHT) < 0.7 * seg_jitter(full[20:], HAND_RIGHT)
-    # smooth_filled_speed: the factor lowers only the minimum cutoff, the speed term (large for
-    # 2 cm noise) stays: less extra smoothing, but still some
-    fast = run_scale(0.2, ts, speed=True)
-    assert (seg_jitter(soft[20:], HAND_RIGHT) < seg_jitter(fast[20:], HAND_RIGHT)
-            < 0.85 * seg_jitter(full[20:], HAND_RIGHT))
     # everything tracked and steady (every reliability 1): scale 1 everywhere, the same output
     all_ts = np.full(NUM_JOINTS, TRACKED, np.uint8)
     quiet = _noisy_frames(p, 30, 0.002, seed=4)
@@ -314,7 +308,11 @@ def test_translation_invariant_knn_and_floating_root(small_db):
                       parent_relative_error(out.positions[None], p[None]))
     assert errs[True][0] < 0.03 < 0.1 < errs[False][0]
     assert errs[True][1] < errs[False][1]
-    # a trusted sensor (trust 1) keeps its own root when the skeleton is chained from it
+    # a trusted sensor (trust 1) keeps its own root when the skeleton is chained from it (a
+    # hand 2 cm off the database posture: with the hips and spine reliable next to the untracked
+    # root -- reliability Eq. 6 does not blame them for it -- the match is otherwise exact, and
+    # a distance of 0 is never trusted)
+    bad[HAND_LEFT] += (0.0, 0.02, 0.0)
     r = Reconstructor(small_db, method='C', output_scale='standard', trust_mode='distance',
                       trust_sensor_distance=1e-6, position_fit=0.0)
     for i in range(20):

@@ -57,3 +57,29 @@ def test_fit_recovers_a_translated_skeleton_and_ignores_missing_joints():
     assert np.isfinite(p).all()
     assert np.allclose(np.linalg.norm(SEG_DIFF @ p, axis=1), L, atol=1e-9)
     assert np.abs(p - obs)[[0, 1, 2, 3]].max() < 0.01
+
+
+def test_a_trusted_observed_direction_is_not_bent_by_the_fit():
+    """Issue 34: where the sensor is trusted and reliable, the output's segment directions are the
+    sensor's; the fit places the constant-length skeleton (here: only its root can move), it does
+    not turn short segments to restore lengths."""
+    from skeleton_core.conversions import SkeletonFrame
+    from skeleton_core.model import TRACKED
+    rng = np.random.default_rng(4)
+    L = rng.uniform(0.08, 0.4, NUM_SEGMENTS)
+    u = _unit(rng, NUM_SEGMENTS)
+    root = np.array([0.1, -0.2, 2.5])
+    obs = root + _SEG_CHAIN @ (u * (L * rng.uniform(0.85, 1.15, NUM_SEGMENTS))[:, None])
+    so = _output(smooth_min_cutoff=0.0, symmetric_lengths=False)
+    so.profile_lengths = L
+    solution = root + _SEG_CHAIN @ (_unit(rng, NUM_SEGMENTS) * L[:, None])  # the database's
+    f = SkeletonFrame(positions=obs, tracking_state=np.full(NUM_JOINTS, TRACKED, np.uint8))
+    out = so.output(f, solution, np.ones(NUM_JOINTS), 1.0)
+    d = SEG_DIFF @ out
+    cos = np.sum(d * u, axis=1) / np.linalg.norm(d, axis=1)
+    assert np.degrees(np.arccos(np.clip(cos, -1, 1))).max() < 1e-4
+    assert np.allclose(np.linalg.norm(d, axis=1), L)
+    # and it is placed nearer the observed joints than chained from the observed root
+    chained = obs[0] + _SEG_CHAIN @ (u * L[:, None])
+    err = lambda p: np.linalg.norm(p - obs, axis=1).mean()  # noqa: E731
+    assert err(out) < err(chained)

@@ -112,8 +112,8 @@ def test_pipeline_over_dds(rclpy_context, case):
         # parameters: validated at run time, out-of-range and inconsistent values refused
         opt = nodes[2]
         assert not opt.set_parameters([Parameter('k', value=0)])[0].successful
-        assert not opt.set_parameters([Parameter('solver', value='newton')])[0].successful
-        assert not nodes[0].set_parameters([Parameter('theta_floor_deg', value=150.0)])[0].successful
+        assert not opt.set_parameters([Parameter('samples', value=0)])[0].successful
+        assert not nodes[0].set_parameters([Parameter('user_timeout_s', value=0.0)])[0].successful
         assert opt.set_parameters([Parameter('method', value='B')])[0].successful
         assert not opt.set_parameters([Parameter('database', value='/nonexistent/db.npz')])[0].successful
     finally:
@@ -162,9 +162,9 @@ def test_state_per_user_dropped_after_timeout(rclpy_context, case):
         send([2], 2_000)
         assert set(node._users) == {2}  # user 1 unseen for longer than user_timeout_s
         # a valid run-time change rebuilds every user's state; an invalid one is refused
-        assert node.set_parameters([Parameter('f_total', value=4)])[0].successful
+        assert node.set_parameters([Parameter('user_timeout_s', value=0.25)])[0].successful
         assert node._users == {}
-        assert not node.set_parameters([Parameter('f_total', value=0)])[0].successful
+        assert not node.set_parameters([Parameter('user_timeout_s', value=0.0)])[0].successful
         assert not node.set_parameters([Parameter('input_topic', value='/x')])[0].successful
         # duplicate stamps are dropped and counted once per cause
         send([2], 3_000)
@@ -193,6 +193,7 @@ def test_config_files_hold_every_parameter_with_its_default():
     import yaml
 
     from pose_reconstruction import completion_node, node_common, optimizer_node
+    from skeleton_core.params import public
     from conftest import ROOT
     common = node_common.common_specs('', '')
     for name, specs in (('reliability', common + node_common.RELIABILITY_SPECS),
@@ -202,6 +203,7 @@ def test_config_files_hold_every_parameter_with_its_default():
                          + node_common.RELIABILITY_SPECS + node_common.CORRECTION_SPECS)):
         values = yaml.safe_load((ROOT / 'config' / f'{name}.yaml').read_text())
         values = values['/**']['ros__parameters']
+        specs = public(specs)
         assert set(values) == {s.name for s in specs}, name
         for s in specs:
             if s.name not in ('input_topic', 'output_topic'):
@@ -211,23 +213,26 @@ def test_config_files_hold_every_parameter_with_its_default():
 def test_fused_parameters_map_the_three_config_files():
     from kinect_bringup.graph import load_params
     from pose_reconstruction import reconstruction_node as rn
-    from pose_reconstruction import node_common
+    from skeleton_core.params import public
 
     fused = rn.fused_parameters(load_params('reliability'), load_params('completion'),
                                 load_params('optimizer'))
-    specs = {s.name: s for s in rn.PARAMS}
-    # every prefixed parameter comes from its node's file with that file's value
-    prefixed = {k for k in specs if '.' in k}
-    assert set(fused) == prefixed | {'qos_depth', 'user_timeout_s', 'time_jump_reset_s',
-                                     'database'} | set(node_common.CORRECTION_NAMES)
+    specs = {s.name: s for s in public(rn.PARAMS)}
+    # every public parameter but the topics comes from the split nodes' files with their values
+    assert set(fused) == set(specs) - {'input_topic', 'output_topic', 'reliability_topic',
+                                       'completed_topic'}
     assert fused['optimizer.k'] == load_params('optimizer')['k']
-    assert fused['completion.pca_dims'] == load_params('completion')['pca_dims'] != \
-        fused['optimizer.pca_dims']
-    assert fused['reliability.theta_roof_deg'] == load_params('reliability')['theta_roof_deg']
+    # one reliable_threshold for both methods (the split nodes' files hold one each)
+    assert fused['reliable_threshold'] == load_params('optimizer')['reliable_threshold'] == \
+        load_params('completion')['reliable_threshold']
+    assert not any(k.startswith('reliability.') for k in specs)   # fixed (presets only)
     for k, v in fused.items():  # and the files hold the specs' defaults
         assert specs[k].default == v, k
     assert rn.section(fused, 'optimizer')['method'] == 'C'
-    assert 'optimizer.database' not in specs and 'completion.use_input_reliability' not in specs
+    every = {s.name for s in rn.PARAMS}
+    assert 'optimizer.database' not in every and 'completion.use_input_reliability' not in every
+    assert 'optimizer.reliable_threshold' not in every and 'completion.reliable_threshold' \
+        not in every
 
 
 def test_fused_node_over_dds(rclpy_context, case):
@@ -307,7 +312,7 @@ def test_fused_node_over_dds(rclpy_context, case):
         # prefixed parameters: validated, and a change reaches the library objects
         assert not node.set_parameters([Parameter('optimizer.k', value=0)])[0].successful
         assert not node.set_parameters(
-            [Parameter('reliability.theta_floor_deg', value=150.0)])[0].successful
+            [Parameter('reliable_threshold', value=1.5)])[0].successful
         assert node.set_parameters([Parameter('optimizer.k', value=12)])[0].successful
         assert node._users == {}
         assert node.make_processor(dict(node.params.values)).rec.core.k == 12
@@ -315,3 +320,19 @@ def test_fused_node_over_dds(rclpy_context, case):
         spinner.stop()
         for n in (node, client):
             n.destroy_node()
+
+
+def test_a_parameter_the_node_does_not_declare_is_refused_by_name(rclpy_context):
+    """rclpy ignores an override of an undeclared parameter: a removed or misspelt name in a YAML
+    file or -p would change nothing without a word. The nodes refuse it in one line, and say
+    when the name is a library value set only by a preset."""
+    from rclpy.parameter import Parameter
+
+    from pose_reconstruction.reliability_node import ReliabilityNode
+    with pytest.raises(ValueError, match=r"'theta_floor_deg' is not a parameter of node "
+                                         r"'reliability' \(a fixed value .* preset"):
+        ReliabilityNode(context=rclpy_context,
+                        parameter_overrides=[Parameter('theta_floor_deg', value=100.0)])
+    with pytest.raises(ValueError, match=r"'user_timeout' is not a parameter .*misspelt"):
+        ReliabilityNode(context=rclpy_context,
+                        parameter_overrides=[Parameter('user_timeout', value=1.0)])

@@ -148,11 +148,19 @@ def test_live_stream_equals_offline():
     m = SensorModel(seed=7)
     clip = toy_clip(4.0)
     s = m.corrupt(clip, 'c')
+    once = list(m.stream(clip, 'c', loop=False))
+    assert len(once) == len(s)
+    for i, (p, st, tr) in enumerate(once):
+        assert np.array_equal(p, s.positions[i]) and np.array_equal(st, s.tracking_state[i])
+        assert np.array_equal(tr, s.truth[i])
+    # looping: the same until the clip's last LOOP_BLEND_FRAMES, which turn into its first
+    # posture (sensor_model.loop_blend)
+    from skeleton_eval.sensor_model import LOOP_BLEND_FRAMES
     gen = m.stream(clip, 'c', loop=True)
     for i in range(len(s)):
         p, st, tr = next(gen)
-        assert np.array_equal(p, s.positions[i]) and np.array_equal(st, s.tracking_state[i])
-        assert np.array_equal(tr, s.truth[i])
+        if i < len(s) - LOOP_BLEND_FRAMES:
+            assert np.array_equal(tr, s.truth[i]) and np.array_equal(p, s.positions[i])
     p, st, tr = next(gen)  # loops
     assert p.shape == (20, 3) and st.dtype == np.uint8
     assert np.array_equal(m.corrupt(clip, 'c').positions, s.positions)  # seeded
@@ -175,3 +183,42 @@ def test_turn_episodes_at_the_configured_rate():
     t = [e for e in s.events if e['type'] == 'turn'][0]
     mid = t['frame'] + t['duration'] // 2
     assert np.allclose(s.truth[mid, HIP_CENTER], m.place(toy_clip(90.0))[mid, HIP_CENTER])
+
+
+def test_class_e_small_persistent_tracked_errors():
+    """Class e: TRACKED joints 5-15 cm off for seconds, the parent pulled partway, marked not
+    clean; the other classes draw no random number for it (their streams are unchanged)."""
+    m = SensorModel({'scenarios': {'e': {'turn_per_min': 0.0, 'occlusion_per_min': 0.0,
+                                         'false_positive_per_min': 0.0}}}, seed=2)
+    s = m.corrupt(toy_clip(60.0), 'e')
+    ev = [e for e in s.events if e['type'] == 'tracked_error']
+    # 8 per minute while none is active, each 1-5 s (~3 s): about 6 in a minute
+    assert 3 <= len(ev) <= 12, len(ev)
+    ref = SensorModel({'tracked_error': {'enabled': False},
+                       'scenarios': {'e': {'turn_per_min': 0.0, 'occlusion_per_min': 0.0,
+                                           'false_positive_per_min': 0.0}}}, seed=2)
+    assert {e['cause'] for e in ev} <= {'rest', 'drift'}
+    checked = False
+    for e in ev:
+        j, par = e['joints']
+        assert 0.05 <= e['offset_m'] <= 0.15 and 0.3 <= e['neighbour_fraction'] <= 0.7
+        mid = e['frame'] + e['duration'] // 2
+        if mid >= len(s) or e['duration'] < 32 or s.tracking_state[mid, j] != TRACKED:
+            continue   # short, or the joint self-occluded meanwhile (INFERRED)
+        checked = True
+        assert not s.clean[mid, j]
+        assert not s.clean[mid, par]
+        # the joint's error (beyond the ordinary noise: the 15 frames around mid, averaged)
+        # is of the configured size, the parent's a fraction of it
+        w = slice(mid - 7, mid + 8)
+        err = np.linalg.norm((s.positions[w, j] - s.truth[w, j]).mean(0))
+        assert 0.02 < err < 0.25, err
+    assert checked
+    # without class e's rate, nothing changes in the other classes
+    for sc in ('a', 'd'):
+        a = SensorModel(seed=0).corrupt(toy_clip(20.0), sc)
+        b = SensorModel({'tracked_error': {'enabled': False}}, seed=0).corrupt(toy_clip(20.0), sc)
+        assert np.array_equal(a.positions, b.positions)
+    # and disabling it in class e leaves the stream without such errors
+    s0 = ref.corrupt(toy_clip(60.0), 'e')
+    assert not [e for e in s0.events if e['type'] == 'tracked_error']

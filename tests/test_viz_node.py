@@ -105,10 +105,10 @@ def test_markers_cross_dds_and_hiding_a_layer_takes_effect(graph):
     fwd = next(x for x in msg.markers if x.ns == 'environment/box')  # forwarded object
     assert fwd.id == 3 and fwd.type == Marker.CUBE and fwd.lifetime.nanosec == 500_000_000
 
-    # refused: out of range / bad colour
+    # refused: out of range / a bad offset
     res = viz.set_parameters([Parameter('max_rate_hz', value=1000.0)])[0]
     assert not res.successful and 'max_rate_hz' in res.reason
-    res = viz.set_parameters([Parameter('raw_joint_color', value=[1.0, 0.0, 0.0])])[0]
+    res = viz.set_parameters([Parameter('character_offset', value=[1.0, 0.0])])[0]
     assert not res.successful
 
     # hide the raw layer at run time: its markers are deleted, then no longer sent
@@ -142,7 +142,7 @@ def test_config_file_lists_every_parameter_and_loads(rclpy_context):
     from viz.viz_node import PARAMS
     cfg = Path(__file__).resolve().parents[1] / 'config' / 'viz.yaml'
     values = yaml.safe_load(cfg.read_text())['/**']['ros__parameters']
-    assert set(values) == {s.name for s in PARAMS}
+    assert set(values) == {s.name for s in PARAMS if s.public}
     node = VizNode(context=rclpy_context, cli_args=['--ros-args', '--params-file', str(cfg)])
     try:
         for name, v in values.items():

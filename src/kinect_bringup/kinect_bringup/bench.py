@@ -32,6 +32,10 @@ import numpy as np
 
 from .graph import RECONSTRUCTION, graph_nodes, repo_root
 from .processes import Graph
+from skeleton_core.cdr import frames_from_cdr
+from skeleton_core.bagio import bag_topics
+import signal
+from skeleton_data.database import load_or_build_default
 
 PROCESS_BAG_MODULE = 'kinect_bringup.process_bag'
 
@@ -84,7 +88,6 @@ class LatencyProbe:
         now = time.time_ns()
         if not self.recording:
             return
-        from skeleton_core.cdr import frames_from_cdr
         errors = []
         frames = frames_from_cdr(data, errors)[2]   # a NaN skeleton comes back as an error
         with self.lock:
@@ -273,7 +276,6 @@ def _time_process_bag(bag: Path, log_dir: Path, physics: bool) -> Dict:
     wall = time.monotonic() - t0
     if proc.returncode != 0:
         return {'error': proc.stderr.strip().splitlines()[-1:] or 'process_bag failed'}
-    from skeleton_core.bagio import bag_topics
     n = bag_topics(str(bag)).get('/kinect/skeletons', (None, 0))[1]
     loop = json.loads(report.read_text())
     # the processing loop (read, reconstruct, write) is what grows with the recording; the
@@ -408,7 +410,6 @@ def to_markdown(results: List[Dict], bag_speed: Dict, commit: str) -> str:
 
 
 def main(argv=None) -> int:
-    import signal
     # started in the background by a shell, this process ignores SIGINT, and so would every node
     # it starts (Python keeps an inherited SIG_IGN): the graphs could not be stopped cleanly (a
     # recorder killed mid-file). A handler of our own is reset to the default in the children
@@ -434,7 +435,6 @@ def main(argv=None) -> int:
                                 capture_output=True).stdout.strip() or 'unknown'
     except OSError:
         commit = 'unknown'
-    from skeleton_data.database import load_or_build_default
     load_or_build_default()  # build the cache once, outside the measurement
     probe = LatencyProbe()
     results = []

@@ -17,6 +17,8 @@ import time
 from pathlib import Path
 
 from .graph import repo_root
+from skeleton_data.database import load_or_build_default
+from viz.report import main as report_main
 
 
 def launch_available() -> bool:
@@ -106,7 +108,7 @@ def main(argv=None) -> int:
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument('--out', default=str(root / 'out'), help='output directory')
     p.add_argument('--duration', type=float, default=20.0, help='seconds of running graph')
-    p.add_argument('--scenario', default='b', choices=['a', 'b', 'c', 'd'])
+    p.add_argument('--scenario', default='b', choices=['a', 'b', 'c', 'd', 'e'])
     p.add_argument('--num-users', type=int, default=1)
     p.add_argument('--method', default='C', choices=['A', 'B', 'C'])
     p.add_argument('--seed', type=int, default=0)
@@ -121,7 +123,6 @@ def main(argv=None) -> int:
 
     # Build (or load from cache) the motion database first, so the nodes start at once.
     t0 = time.monotonic()
-    from skeleton_data.database import load_or_build_default
     db = load_or_build_default()
     print(f'[demo] motion database: {len(db)} postures ({db.meta.get("source", "?")}), '
           f'{time.monotonic() - t0:.1f} s', flush=True)
@@ -134,7 +135,6 @@ def main(argv=None) -> int:
         print(f'[demo] no bag was written at {bag}', file=sys.stderr)
         return 1
 
-    from viz.report import main as report_main
     rc = report_main(['--bag', str(bag), '--out', str(out)])
     print(f'[demo] done. Outputs in {out}:')
     for f in sorted(out.iterdir()):

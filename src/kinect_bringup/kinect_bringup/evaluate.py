@@ -6,21 +6,30 @@ the sensor model's noise statistics. No ROS graph is started (the methods are ru
 
 Examples::
 
-    evaluate                                   # table4: all methods, classes a-d, dev clips
+    evaluate                                   # table4: all methods, classes a-e, dev clips
     evaluate --methods raw,holt,one_euro --source builtin --max-frames 300
     evaluate --experiment table3 --methods raw,C                     # calibrated user (T-pose)
     evaluate --experiment table3 --methods raw,C --calibration none  # no calibration segment
     evaluate --experiment fig5
     evaluate --experiment fig8 --methods C --params k,steps
-    evaluate --perturb                         # raw and C, classes a-d, seeds 0-2, sensor model
-                                               # noise/offset/occlusion/failure groups 0.5x, 1.5x
+    evaluate --perturb                         # raw and C, classes a-e, seeds 0-2, sensor model
+                                               # noise/offset/occlusion/failure/tracked groups
+                                               # 0.5x, 1.5x
 """
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import sys
 from pathlib import Path
+
+from .graph import preset_path, repo_root
+from . import real_loso
+from pose_reconstruction.methods import load_preset
+from skeleton_eval import perturb as P
+from skeleton_eval.evaluation import to_json
+from skeleton_eval import evaluation as E
 
 
 def _parser():
@@ -30,8 +39,9 @@ def _parser():
                    help='comma-separated method names (default: every registered method)')
     p.add_argument('--source', default='auto', choices=('auto', 'cmu', 'builtin'),
                    help='clips: CMU dev split from ../shared (auto falls back to built-ins)')
-    p.add_argument('--scenarios', default='a,b,c,d',
-                   help='sensor-model scenario classes (d: confident failures)')
+    p.add_argument('--scenarios', default='a,b,c,d,e',
+                   help='sensor-model scenario classes (d: confident failures, e: small '
+                        'persistent errors of TRACKED joints)')
     p.add_argument('--seed', type=int, default=0)
     p.add_argument('--max-frames', type=int, default=300,
                    help='frames (30 Hz) per clip; 0 = whole clips (default 300 = 10 s)')
@@ -61,11 +71,15 @@ def _parser():
     p.add_argument('--perturb-seeds', default='0,1,2',
                    help='--perturb: sensor seeds (parameters were tuned on seed 0 only)')
     p.add_argument('--perturb-factors', default='0.5,1.5', help='--perturb: scale factors')
-    p.add_argument('--perturb-groups', default='noise,offset,occlusion,failure',
-                   help='--perturb: parameter groups (noise, offset, occlusion, failure)')
+    p.add_argument('--perturb-groups', default='noise,offset,occlusion,failure,tracked',
+                   help='--perturb: parameter groups (noise, offset, occlusion, failure, tracked)')
     p.add_argument('--method-params', default='', metavar='JSON',
                    help='table4 / --perturb / --real (C rows): parameter overrides per method, e.g. '
                         '\'{"C": {"plausibility": false, "smooth_lead": 0}}\'')
+    p.add_argument('--preset', default='', metavar='NAME',
+                   help='reconstruction preset (config/presets/NAME.yaml or a path, e.g. shum2013: '
+                        'the papers\' variant) for methods A, B, C (and the C rows of --real); '
+                        '--method-params override it')
     p.add_argument('--quiet', action='store_true', help='no progress lines')
     p.add_argument('--real', nargs='?', const='auto', default=None, metavar='UIPRMD_DIR',
                    help='real-data mode: raw, holt, one_euro, C and C with the learned sensor '
@@ -83,8 +97,6 @@ def run_real(args) -> int:
     """``--real``: the development subjects (default folder) leave-one-subject-out; another
     folder (other subjects, same layout) with the correction learned from every development
     subject (kinect_bringup.real_loso)."""
-    from . import real_loso
-    from .graph import repo_root
     src = args.real
     shared = os.environ.get('KP_SHARED') or str((repo_root() or Path.cwd()).parent / 'shared')
     dev = Path(shared) / 'kinect' / 'ui-prmd'
@@ -95,8 +107,9 @@ def run_real(args) -> int:
         argv += ['--variants', args.methods]
     if args.quiet:
         argv.append('--quiet')
+    if args.preset:
+        argv += ['--preset', args.preset]
     if getattr(args, 'method_params', ''):
-        import json
         over = json.loads(args.method_params)
         if not isinstance(over, dict) or set(over) - {'C'}:
             print('evaluate --real: --method-params takes {"C": {...}} (overrides of method C in '
@@ -110,21 +123,39 @@ def run_real(args) -> int:
     return real_loso.main(argv)
 
 
-def _with_params(methods, text):
-    """``methods`` with the ``--method-params`` overrides: (name, params, name) for those named."""
-    import json
+def _with_params(methods, text, preset: str = ''):
+    """``methods`` with the ``--preset`` values (methods A, B, C) and the ``--method-params``
+    overrides on top: (name, params, name) for those that get any."""
     over = json.loads(text) if text else {}
     if not isinstance(over, dict) or not all(isinstance(v, dict) for v in over.values()):
         raise ValueError('--method-params must be a JSON object of objects')
     unknown = set(over) - set(methods)
     if unknown:
         raise ValueError(f'--method-params names methods not run: {sorted(unknown)}')
+    values = _preset(preset)
+    if values:
+        over = {m: {**values, **over.get(m, {})} if m in PRESET_METHODS else over.get(m)
+                for m in methods}
+        over = {m: v for m, v in over.items() if v is not None}
     return [(m, over[m], m) if m in over else m for m in methods]
 
 
+# the methods a reconstruction preset applies to
+PRESET_METHODS = ('A', 'B', 'C')
+
+
+def _preset(name: str) -> dict:
+    """The values of the preset ``name`` ('' = none); ValueError (one line) when it is missing
+    or invalid."""
+    if not name:
+        return {}
+    try:
+        return load_preset(preset_path(name))
+    except FileNotFoundError as exc:
+        raise ValueError(str(exc)) from None
+
+
 def run_perturb(args, dev_clips, source) -> int:
-    from skeleton_eval import perturb as P
-    from skeleton_eval.evaluation import to_json
     try:
         seeds = [int(v) for v in args.perturb_seeds.split(',') if v]
         factors = [float(v) for v in args.perturb_factors.split(',') if v]
@@ -143,7 +174,7 @@ def run_perturb(args, dev_clips, source) -> int:
         if not args.quiet:
             print(f'[evaluate] perturb {label} seed {seed}', file=sys.stderr)
     try:
-        run_methods = _with_params(methods, args.method_params)
+        run_methods = _with_params(methods, args.method_params, args.preset)
     except ValueError as exc:
         print(f'evaluate: {exc}', file=sys.stderr)
         return 2
@@ -165,7 +196,6 @@ def run(argv=None) -> int:
     args = _parser().parse_args(argv)
     if args.real:
         return run_real(args)
-    from skeleton_eval import evaluation as E
 
     plugins = E.load_plugins()
     for mod, st in plugins.items():
@@ -196,7 +226,7 @@ def run(argv=None) -> int:
         return run_perturb(args, dev_clips, source)
     if exp == 'table4':
         try:
-            methods = _with_params(methods, args.method_params)
+            methods = _with_params(methods, args.method_params, args.preset)
         except ValueError as exc:
             print(f'evaluate: {exc}', file=sys.stderr)
             return 2
@@ -204,6 +234,11 @@ def run(argv=None) -> int:
                          sensor_params=args.sensor_params, data_source=source, progress=progress,
                          repeats=args.repeats)
     elif exp == 'table3':
+        try:
+            methods = _with_params(methods, '', args.preset)
+        except ValueError as exc:
+            print(f'evaluate: {exc}', file=sys.stderr)
+            return 2
         res = E.table3(methods, dev_clips, seed=args.seed, max_frames=max_frames,
                        sensor_params=args.sensor_params, data_source=source, progress=progress,
                        repeats=args.repeats, reference=args.reference,

@@ -76,6 +76,20 @@ def config_dir() -> Path:
     return root / 'config'
 
 
+def preset_path(name: str) -> Path:
+    """The preset file ``name``: a path, or a name in config/presets (``shum2013``). Raises
+    FileNotFoundError (one line, with the presets there are) when there is none."""
+    p = Path(name).expanduser()
+    if p.suffix in ('.yaml', '.yml') and p.is_file():
+        return p
+    d = config_dir() / 'presets'
+    p = d / f'{name}.yaml'
+    if p.is_file():
+        return p
+    have = sorted(f.stem for f in d.glob('*.yaml')) if d.is_dir() else []
+    raise FileNotFoundError(f'no preset {name!r} (a .yaml path or one of {have} in {d})')
+
+
 def params_file(node: str, directory: Optional[Path] = None) -> Optional[Path]:
     p = Path(directory or config_dir()) / f'{node}.yaml'
     return p if p.is_file() else None

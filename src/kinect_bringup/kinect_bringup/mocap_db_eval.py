@@ -28,6 +28,15 @@ from pathlib import Path
 from typing import Dict, List, Optional, Sequence
 
 import numpy as np
+from skeleton_data.database import load_or_build_default, uiprmd_vicon_source
+from pose_reconstruction.methods import default_database
+from skeleton_eval import evaluation as E
+from skeleton_eval import metrics as M
+from skeleton_eval.paired import load_dataset
+from skeleton_eval.real_eval import make_streams
+from skeleton_eval.sensor_model import load_params
+from skeleton_data.database import default_shared_dir
+from skeleton_eval.evaluation import json_safe
 
 SUBJECTS = (1, 2, 3, 4, 5)
 VARIANTS = ('raw', 'C (CMU)', 'C (CMU+vicon)')
@@ -40,7 +49,6 @@ def fold_database(src, held_out: int, subjects: Sequence[int] = SUBJECTS, stats=
                   source: str = 'auto', cache_dir=None):
     """The default (``source``) + Vicon-postures database of the fold that scores ``held_out``
     (training subjects only); raises RuntimeError if a clip of ``held_out`` got in."""
-    from skeleton_data.database import load_or_build_default, uiprmd_vicon_source
     train = [s for s in subjects if s != held_out]
     db = load_or_build_default(source, cache_dir=cache_dir, stats=stats,
                                mapped=[uiprmd_vicon_source(src, subjects=train)])
@@ -76,12 +84,6 @@ class _TrustProbe:
 def evaluate(src, folds: Sequence[int] = SUBJECTS, max_clips: int = 0, progress=None,
              params: Optional[Dict] = None) -> Dict:
     """``params``: overrides of C's parameters, the same for both databases."""
-    from pose_reconstruction.methods import default_database
-    from skeleton_eval import evaluation as E
-    from skeleton_eval import metrics as M
-    from skeleton_eval.paired import load_dataset
-    from skeleton_eval.real_eval import make_streams
-    from skeleton_eval.sensor_model import load_params
     E.load_plugins()
     height = float(load_params(None)['placement']['sensor_height_m'])
     db_cmu = default_database()
@@ -132,9 +134,6 @@ def evaluate_synthetic(src, subjects: Sequence[int] = SUBJECTS, max_frames: int 
     """The other side of the trade: C with CMU vs CMU + every listed subject's Vicon postures on
     the sensor-model streams of the CMU dev clips (``evaluate``'s Table IV: scenarios a, b, c).
     {variant: {scenario: Eq. 18 cm}}."""
-    from pose_reconstruction.methods import default_database
-    from skeleton_data.database import load_or_build_default, uiprmd_vicon_source
-    from skeleton_eval import evaluation as E
     E.load_plugins()
     _, dev_clips, _ = E.load_clips('auto', 0)
     mix = load_or_build_default(mapped=[uiprmd_vicon_source(src, subjects=subjects)])
@@ -180,8 +179,6 @@ def to_markdown(res: Dict) -> str:
 
 
 def main(argv=None) -> int:
-    from skeleton_data.database import default_shared_dir
-    from skeleton_eval.evaluation import json_safe
     shared = default_shared_dir()
     ap = argparse.ArgumentParser(prog='mocap_db_eval', description=__doc__.split('\n')[0])
     ap.add_argument('--src', type=Path,

@@ -15,23 +15,34 @@ import sys
 from pathlib import Path
 from typing import Any, Dict, List, Optional
 
+import yaml
+
+from skeleton_core.params import public
+
 from .graph import NODES, repo_root
 
 # nodes with a config/<node>.yaml (the fused reconstruction node maps the three split nodes' files,
 # the recorder takes its two parameters from the launch file)
 YAML_NODES = ('driver', 'reliability', 'completion', 'optimizer', 'control', 'physics', 'viz')
 DOC = Path('docs') / 'parameters.md'
+PRESETS = Path('config') / 'presets'
 
 
-def node_params(name: str) -> List:
-    """The ParamSpecs of node ``name``: its module's ``node_params()`` (parameters that depend on
-    a registry, e.g. the driver's sources) or ``PARAMS`` list."""
+def all_params(name: str) -> List:
+    """Every ParamSpec node ``name`` lists, the fixed ones (``public=False``) too: its module's
+    ``node_params()`` (parameters that depend on a registry, e.g. the driver's sources) or
+    ``PARAMS`` list."""
     mod = importlib.import_module(NODES[name].module)
     fn = getattr(mod, 'node_params', None)
     params = fn() if callable(fn) else getattr(mod, 'PARAMS', None)
     if params is None:
         raise RuntimeError(f'{mod.__name__} has neither node_params() nor PARAMS')
     return list(params)
+
+
+def node_params(name: str) -> List:
+    """The parameters node ``name`` declares (the public ones)."""
+    return public(all_params(name))
 
 
 def _summary(name: str) -> str:
@@ -94,9 +105,15 @@ def render_markdown() -> str:
            'declarations; `make test` fails when this page or a `config/*.yaml` file is stale. '
            'Every node also describes its parameters at run time: '
            '`ros2 param describe /<node> <name>`.', '',
+           'A node declares only what a lab changes: topics, files (database, sensor correction, '
+           'user profile, world), the method, the sensor pose, rates, limits, users. Every '
+           'other value of the algorithms is fixed in the code, where it is declared with its '
+           'reason, or set by a [preset](#presets) in the evaluation; a parameter file or `-p` '
+           'naming a parameter the node does not declare is refused at start-up with one line.',
+           '',
            'A parameter is declared once, as a field of the library configuration it belongs to '
            "(`skeleton_core.params.param(default, description, range=..., choices=..., "
-           "read_only=...)`, e.g. `OptimizerConfig.w_style` in "
+           "read_only=..., public=...)`, e.g. `OptimizerConfig.k` in "
            '`pose_reconstruction/optimizer.py`); the node parameters, the YAML files, this page '
            'and the evaluation defaults are derived from it. Read-only parameters are read at '
            'start-up; the others can be set on the running node.', '']
@@ -108,16 +125,36 @@ def render_markdown() -> str:
         if name in YAML_NODES:
             out += [f'Defaults file: `config/{name}.yaml`.', '']
         elif name == 'reconstruction':
-            out += ['Its parameters are the reliability, completion and optimizer nodes\', '
-                    'prefixed with the node name; the launch file maps their YAML files onto '
-                    'them.', '']
+            out += ['Its parameters are the split nodes\' (reliability, completion, optimizer): '
+                    'those of one stage prefixed with its name (`optimizer.k`), those they share '
+                    'once (`database`, `reliable_threshold`, the correction and profile); the '
+                    'launch file maps their YAML files onto them.', '']
         out += ['| name | default | range | description |', '|---|---|---|---|']
         for s in node_params(name):
             desc = s.description + (' *(read-only)*' if s.read_only else '')
             out.append(f'| `{s.name}` | {_md_default(s.default)} | '
                        f'{_md(s.constraint_text())} | {_md(desc)} |')
         out.append('')
+    out += _presets_section()
     return '\n'.join(out)
+
+
+def _presets_section() -> List[str]:
+    out = ['## Presets', '',
+           'A preset (`config/presets/<name>.yaml`) sets fields the nodes do not declare (`public='
+           'False`: the papers\' variants, the experiments\' settings): a flat mapping of their '
+           'names to values, each checked against its declaration. The evaluation loads one with '
+           '`make evaluate ARGS="--preset <name>"` (methods A, B, C) and `python -m '
+           'kinect_bringup.real_loso --preset <name>` (the C rows).', '',
+           '| preset | sets |', '|---|---|']
+    root = repo_root()
+    d = (root / PRESETS) if root is not None else None
+    for f in sorted(d.glob('*.yaml')) if d is not None and d.is_dir() else []:
+        values = yaml.safe_load(f.read_text()) or {}
+        sets = ', '.join(f'`{k}` {yaml_value(v)}' for k, v in values.items())
+        out.append(f'| `{f.stem}` | {_md(sets)} |')
+    out.append('')
+    return out
 
 
 def outputs() -> Dict[Path, str]:

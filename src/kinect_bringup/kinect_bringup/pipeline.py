@@ -23,7 +23,7 @@ def build_parser() -> argparse.ArgumentParser:
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument('--source', choices=['synthetic', 'replay', 'live'], default=None)
     p.add_argument('--replay-file', default=None)
-    p.add_argument('--scenario', choices=['a', 'b', 'c', 'd'], default=None)
+    p.add_argument('--scenario', choices=['a', 'b', 'c', 'd', 'e'], default=None)
     p.add_argument('--num-users', type=int, default=None)
     p.add_argument('--seed', type=int, default=None)
     p.add_argument('--database', default=None, help='motion database file ("" = default)')

@@ -19,6 +19,12 @@ from pathlib import Path
 from typing import Dict, List, Optional
 
 import numpy as np
+from skeleton_core.bag_split import bag_pieces, pieces_topics, read_pieces
+from skeleton_core.bagio import BagError, BagWriter
+from skeleton_core.cdr import SKELETON_ARRAY, CdrError, frames_from_cdr, frames_to_cdr
+from skeleton_core.presence import Presence
+from pose_reconstruction.reconstructor import Reconstructor
+from skeleton_eval.metrics import eq18_error, mpjpe
 
 SKELETONS = 'skeleton_msgs/msg/SkeletonArray'
 
@@ -54,12 +60,6 @@ def process(bag, out: Path, method: str = 'C', database: str = '', physics: bool
     user. Frames the physics world refuses (a 7th simultaneous user, an invalid target) are
     counted per reason in ``refused`` and warned once per reason (``warn(text)``, default
     stderr)."""
-    from skeleton_core.bag_split import bag_pieces, pieces_topics, read_pieces
-    from skeleton_core.bagio import BagError, BagWriter
-    from skeleton_core.cdr import SKELETON_ARRAY, CdrError, frames_from_cdr, frames_to_cdr
-    from skeleton_core.presence import Presence
-    from pose_reconstruction.node_common import load_database
-    from pose_reconstruction.reconstructor import Reconstructor
 
     if warn is None:
         def warn(text):
@@ -74,6 +74,8 @@ def process(bag, out: Path, method: str = 'C', database: str = '', physics: bool
     if input_topic not in topics:
         raise ValueError(f'{bag}: no {input_topic} in the bag (topics: {sorted(topics)})')
     n_in = topics[input_topic][1]
+    # node_common imports rclpy: process_bag runs without a ROS graph
+    from pose_reconstruction.node_common import load_database
     db = load_database(database)
     out_topic = '/posture/completed' if method == 'A' else '/posture/reconstructed'
     users: Dict[int, object] = {}
@@ -195,7 +197,6 @@ def process(bag, out: Path, method: str = 'C', database: str = '', physics: bool
 
 def accuracy(truth: Dict, streams: Dict[str, Dict]) -> Dict:
     """Per-stream MPJPE and Eq. 18 error (cm) against the ground truth, matched by (user, stamp)."""
-    from skeleton_eval.metrics import eq18_error, mpjpe
     out = {}
     for name, data in streams.items():
         keys = sorted(k for k in data if k in truth)

@@ -39,6 +39,29 @@ from pathlib import Path
 from typing import Dict, List, Optional, Sequence
 
 import numpy as np
+import pose_reconstruction
+import skeleton_core
+import skeleton_data
+import skeleton_eval
+from skeleton_core.model import SEGMENT_CHILDREN, SEGMENT_PARENTS
+from pose_reconstruction.profile import measure
+from skeleton_data.uiprmd import TRACKING_FAILURE_CASES
+from .mocap_db_eval import fold_database
+from skeleton_eval import evaluation as E
+from skeleton_eval import metrics as M
+from skeleton_eval import no_harm as NH
+from skeleton_eval.registration import apply_transform, kabsch
+from skeleton_eval.real_eval import added_latency_ms, tracked_xcorr
+from skeleton_eval.evaluation import json_safe
+from pose_reconstruction.correction import build_from_clips
+from pose_reconstruction.methods import default_database
+from skeleton_eval.real_eval import make_streams
+from skeleton_eval.sensor_model import load_params
+from skeleton_eval.paired import load_dataset
+from skeleton_eval.real_eval import to_markdown as base
+import argparse
+from pose_reconstruction import correction as C
+from skeleton_data.database import default_cache_dir
 
 VARIANTS = ('raw', 'holt', 'one_euro', 'C', 'raw+corr', 'C+corr', 'C+corr@reliable',
             'C+profile', 'C+corr+profile', 'C+labdb', 'C+corr+labdb')
@@ -51,10 +74,6 @@ def _subject(name: str) -> int:
 
 
 def _code_digest() -> str:
-    import pose_reconstruction
-    import skeleton_core
-    import skeleton_data
-    import skeleton_eval
     h = hashlib.sha256()
     for pkg in (pose_reconstruction, skeleton_core, skeleton_data, skeleton_eval):
         for f in sorted(Path(pkg.__file__).parent.glob('*.py')):
@@ -79,7 +98,6 @@ class _Corrected:
 
 
 def _segment_lengths(pos: np.ndarray) -> np.ndarray:
-    from skeleton_core.model import SEGMENT_CHILDREN, SEGMENT_PARENTS
     return np.linalg.norm(pos[:, list(SEGMENT_CHILDREN)] - pos[:, list(SEGMENT_PARENTS)], axis=-1)
 
 
@@ -88,8 +106,6 @@ def profiles_leave_clip_out(streams: Sequence, correction=None,
     """{clip: (19,) profile lengths from the same subject's other clips} (median over their
     frames, left/right averaged), after ``correction`` when given; tracking-failure clips are
     scored with a profile but do not contribute to one. ``scored``: only these clips get one."""
-    from pose_reconstruction.profile import measure
-    from skeleton_data.uiprmd import TRACKING_FAILURE_CASES
     fail = {f'{m}_{s}' for m, s in TRACKING_FAILURE_CASES}
     by_subject: Dict[int, List] = {}
     for s in streams:
@@ -118,13 +134,11 @@ def lab_database(src, held_out: int, clips):
     """The default database plus the Vicon postures of the training subjects of ``clips`` (those
     with a reference, never ``held_out``), through ``config/joint_maps/plug_in_gait.yaml``
     (:func:`kinect_bringup.mocap_db_eval.fold_database`; cached in ``cache/``)."""
-    from .mocap_db_eval import fold_database
     train = sorted({c.clip.subject for c in training_clips(clips, held_out)})
     return fold_database(src, held_out, subjects=train)
 
 
 def _make(variant: str, correction, db, method_params: Optional[Dict] = None):
-    from skeleton_eval import evaluation as E
     if variant == 'raw+corr':
         return _Corrected(correction)
     base = variant.split('+')[0]
@@ -144,8 +158,6 @@ def session_registered_mpjpe(outputs: Dict[str, np.ndarray], truths: Dict[str, n
     frames and joints of the setup's clips), so no method is scored in a frame fitted to another
     (the reference of :func:`skeleton_eval.paired.load_dataset` is registered to the raw Kinect,
     which favours raw). {clip: {'per_joint', 'overall'}}."""
-    from skeleton_eval import metrics as M
-    from skeleton_eval.registration import apply_transform, kabsch
     by_setup: Dict[str, List[str]] = {}
     for name in outputs:
         by_setup.setdefault(setup_of.get(name, name), []).append(name)
@@ -167,9 +179,6 @@ def run_variant(variant: str, streams: Sequence, correction=None, profiles=None,
                 method_params: Optional[Dict] = None) -> Dict[str, Dict]:
     """{clip: {'metrics', 'latency_ms', 'times', 'frames'}} of one variant on some streams;
     the metrics include ``mpjpe_reg_cm`` (:func:`session_registered_mpjpe`)."""
-    from skeleton_eval import evaluation as E
-    from skeleton_eval import metrics as M
-    from skeleton_eval.real_eval import added_latency_ms, tracked_xcorr
     method = _make(variant, correction, db, method_params)
     out = {}
     outputs, truths = {}, {}
@@ -184,6 +193,8 @@ def run_variant(variant: str, streams: Sequence, correction=None, profiles=None,
                             'latency_one_sided_ms': added_latency_ms(pos, s.positions, s.fps),
                             'xcorr': tracked_xcorr(pos, s).tolist(),
                             'xcorr_raw': tracked_xcorr(s.positions, s).tolist(),
+                            'no_harm': NH.add(NH.empty(), *NH.direction_sums(
+                                pos, s.truth, NH.segment_mask(s.tracking_state))),
                             'times': t.tolist(), 'frames': len(s)}
         if progress:
             progress(variant, s.clip_name)
@@ -201,7 +212,6 @@ def added_xcorr_latency(clip_results: Sequence[Dict]) -> float:
     cross-correlation with the marker reference (TRACKED joints, curves of the clips added)
     minus the raw Kinect's own (:func:`skeleton_eval.real_eval.tracked_xcorr`); resolves less
     than a frame, negative when the output leads the raw input."""
-    from skeleton_eval import metrics as M
     xc = sum(np.asarray(r['xcorr'], float) for r in clip_results)
     xr = sum(np.asarray(r['xcorr_raw'], float) for r in clip_results)
     return M.xcorr_latency_ms(xc) - M.xcorr_latency_ms(xr)
@@ -219,7 +229,6 @@ def _cached(cache: Optional[Path], key: Dict, compute):
             pass
     res = compute()
     cache.mkdir(parents=True, exist_ok=True)
-    from skeleton_eval.evaluation import json_safe
     f.write_text(json.dumps(json_safe(res)))
     return res
 
@@ -240,12 +249,6 @@ def evaluate(src, variants: Sequence[str] = DEFAULT_VARIANTS, loso: bool = True,
     elsewhere) for every clip. Returns a dict :func:`skeleton_eval.real_eval.to_markdown` prints,
     plus ``protocol``, ``folds`` and ``correction_ms``. ``method_params``: parameter overrides of
     method C in the ``C...`` variants (e.g. earlier defaults, for a before/after table)."""
-    from pose_reconstruction.correction import build_from_clips
-    from pose_reconstruction.methods import default_database
-    from skeleton_eval import evaluation as E
-    from skeleton_eval.real_eval import make_streams
-    from skeleton_eval.sensor_model import load_params
-    from skeleton_eval.paired import load_dataset
     t_start = time.time()
     E.load_plugins()
     bad = [v for v in variants if v not in VARIANTS]
@@ -338,6 +341,7 @@ def evaluate(src, variants: Sequence[str] = DEFAULT_VARIANTS, loso: bool = True,
             t = np.concatenate([np.asarray(r['times'], float) for r in lst])
             results[v][row] = {'clips': len(lst), 'frames': int(sum(w)),
                                'metrics': E._combine(parts, w),
+                               'no_harm': NH.merge([r.get('no_harm') for r in lst]),
                                'latency_ms': lat, 'time': E._time_summary(t)}
             if row != 'm03_s01':
                 allp += parts
@@ -347,6 +351,7 @@ def evaluate(src, variants: Sequence[str] = DEFAULT_VARIANTS, loso: bool = True,
         if allp:
             results[v]['overall'] = {'clips': len(allp), 'frames': int(sum(allw)),
                                      'metrics': E._combine(allp, allw),
+                                     'no_harm': NH.merge([r.get('no_harm') for r in alll]),
                                      'latency_ms': added_xcorr_latency(alll),
                                      'time': E._time_summary(np.concatenate(allt))}
     protocol = ('leave-one-subject-out: each subject scored with a correction learned on the '
@@ -390,7 +395,6 @@ def summary(res: Dict) -> str:
 
 
 def to_markdown(res: Dict) -> str:
-    from skeleton_eval.real_eval import to_markdown as base
     head = [f'Protocol: {res["protocol"]}.']
     for f in res['folds']:
         if f['trained_on']:
@@ -413,11 +417,29 @@ def to_markdown(res: Dict) -> str:
             vals.append('n/a' if v is None or not np.isfinite(v) else f'{v:.2f}')
         lines.append(f'| {row} | ' + ' | '.join(vals) + ' |')
     return ('\n'.join(head) + '\n\n' + summary(res) + '\n\n' + base(res) + '\n'
-            + '\n'.join(lines))
+            + '\n'.join(lines) + '\n\n' + no_harm_markdown(res))
+
+
+NO_HARM_PAIRS = (('C', 'raw'), ('C+corr', 'raw+corr'), ('C+corr+profile', 'raw+corr'))
+
+
+def no_harm_markdown(res: Dict) -> str:
+    """The per-segment "no harm" table (skeleton_eval.no_harm) on the TRACKED segments of the
+    recordings, overall: C against raw and C + correction against raw + correction."""
+    R = res['results']
+    per = {}
+    for m, ref in NO_HARM_PAIRS:
+        a = R.get(m, {}).get('overall', {}).get('no_harm')
+        b = R.get(ref, {}).get('overall', {}).get('no_harm')
+        if a and b:
+            per[f'{m} vs {ref}'] = {'method': a, 'reference': b}
+    if not per:
+        return ''
+    return NH.to_markdown(per, 'method', 'reference', title='### No harm: per segment on the '
+                          'TRACKED segments (overall, m03_s01 apart); columns: method vs reference')
 
 
 def main(argv=None) -> int:
-    import argparse
     ap = argparse.ArgumentParser(prog='real_loso', description=__doc__.split('\n\n')[0])
     ap.add_argument('--src', default=None, help='UI-PRMD-layout folder (default '
                     '<shared>/kinect/ui-prmd)')
@@ -434,12 +456,12 @@ def main(argv=None) -> int:
     ap.add_argument('--method-params', default='',
                     help='JSON parameter overrides of method C in the C variants, e.g. '
                     '\'{"position_fit": 0}\'')
+    ap.add_argument('--preset', default='', metavar='NAME',
+                    help='reconstruction preset of method C in the C variants '
+                    '(config/presets/NAME.yaml or a path, e.g. shum2013); --method-params on top')
     ap.add_argument('--no-cache', action='store_true')
     ap.add_argument('--quiet', action='store_true')
     args = ap.parse_args(argv)
-    from pose_reconstruction import correction as C
-    from skeleton_data.database import default_cache_dir
-    from skeleton_eval.evaluation import json_safe
     src = Path(args.src) if args.src else C.default_source()
     if src is None or not Path(src).is_dir():
         print(f'real_loso: no UI-PRMD folder at {args.src or "<shared>/kinect/ui-prmd"}',
@@ -464,6 +486,10 @@ def main(argv=None) -> int:
         over = json.loads(args.method_params) if args.method_params else None
         if over is not None and not isinstance(over, dict):
             raise ValueError('--method-params: a JSON object of C parameters')
+        if args.preset:
+            from pose_reconstruction.methods import load_preset
+            from .graph import preset_path
+            over = {**load_preset(preset_path(args.preset)), **(over or {})}
         prog = None if args.quiet else (lambda v, c: print(f'  {v:15s} {c}', file=sys.stderr))
         res = evaluate(src, variants,
                        loso=not args.no_loso, correction=corr, subjects=ints(args.subjects),

@@ -18,6 +18,7 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
+from skeleton_core.bagio import BagError, bag_topics, recover
 
 
 def main(argv=None) -> int:
@@ -29,7 +30,6 @@ def main(argv=None) -> int:
                    help='the complete bag to write (default: <input>_recovered.mcap; for a '
                    'folder, the folder <input>_recovered)')
     args = p.parse_args(argv)
-    from skeleton_core.bagio import BagError, bag_topics, recover
     src = Path(args.input)
     if src.is_dir():
         return _recover_folder(src, Path(args.output) if args.output else

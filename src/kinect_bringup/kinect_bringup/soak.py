@@ -46,6 +46,9 @@ import numpy as np
 
 from .graph import repo_root
 from .processes import Graph
+from skeleton_data.database import load_or_build_default
+from .fuzz import MUTATIONS, malformed, valid_array
+from skeleton_core.bagio import BagError, read_messages, recover, truncation
 
 # run-time parameter changes the soak cycles through: (node, parameter, values), per
 # reconstruction layout (names as declared by the nodes, see config/<node>.yaml)
@@ -53,14 +56,14 @@ PARAM_CHANGES = {
     'fused': [
         ('reconstruction', 'optimizer.k', [20, 30]),
         ('reconstruction', 'optimizer.steps', [10, 20]),
-        ('reconstruction', 'reliability.theta_roof_deg', [130.0, 135.0]),
-        ('reconstruction', 'completion.reliable_threshold', [0.4, 0.5]),
+        ('reconstruction', 'user_timeout_s', [1.5, 2.0]),
+        ('reconstruction', 'reliable_threshold', [0.4, 0.5]),
         ('physics', 'kp', [None]),  # None: read the current value and set it again
     ],
     'split': [
         ('optimizer', 'k', [20, 30]),
         ('optimizer', 'steps', [10, 20]),
-        ('reliability', 'theta_roof_deg', [130.0, 135.0]),
+        ('reliability', 'user_timeout_s', [1.5, 2.0]),
         ('completion', 'reliable_threshold', [0.4, 0.5]),
         ('physics', 'kp', [None]),
     ],
@@ -119,8 +122,6 @@ def main(argv=None) -> int:
     from rclpy.node import Node
     from skeleton_msgs.msg import SkeletonArray
 
-    from skeleton_data.database import load_or_build_default
-    from .fuzz import MUTATIONS, malformed, valid_array
     load_or_build_default()
 
     ctx = rclpy.Context()
@@ -540,7 +541,6 @@ def _faults(graph, recording: Path, out: Path, spin_for, characters, rnd, expect
     """The recorder killed with SIGKILL and its bag recovered; the physics node killed and
     restarted (the driver's user gets its character back); the recording cut at a random byte
     and replayed by the replay source."""
-    from skeleton_core.bagio import BagError, read_messages, recover, truncation
     res: Dict = {}
     # 1. recorder: SIGKILL, then what the file holds against what it had received
     expected_dead.add('recorder')

@@ -56,10 +56,10 @@ class DriverConfig:
                           'REP-103)', read_only=True, validator=_non_empty('frame_id'))
     publish_tf: bool = param(False, 'also broadcast one TF frame per NiTE joint and user '
                              '(head_1, neck_1, ...) on /tf')
-    tf_prefix: str = param('', 'prefix of the TF joint frame names')
+    tf_prefix: str = param('', 'prefix of the TF joint frame names', public=False)
     publish_ground_truth: bool = param(
         True, 'publish the noise-free skeletons of a source that has them (synthetic) on '
-        '/kinect/ground_truth')
+        '/kinect/ground_truth', public=False)
     restamp: bool = param(False, 'stamp messages with the current time instead of the recorded '
                           'stamps (replay)', read_only=True)
 

@@ -29,10 +29,12 @@ import argparse
 import subprocess
 import sys
 import time
+from pathlib import Path
 from typing import Dict, Optional
 
 import numpy as np
 
+from . import real_data as rd
 from .controller import ControlParams, PerformanceController, build_models
 from .features import load_world
 from .intention import IntentionRecognizer, RecognizerParams
@@ -46,15 +48,26 @@ def _sensor_world(s: np.ndarray, height: float = SENSOR_HEIGHT) -> np.ndarray:
     return s + np.array([0.0, 0.0, height])
 
 
+def walking_features(world) -> set:
+    """The features whose example is a walk (the floor, Sec. 8.3): real walking is one."""
+    return {f.name for f in world.with_example() if f.kind == 'floor'}
+
+
 def recognition(world, params: RecognizerParams, seed0: int, performers: int,
-                noise: bool = True, sensor: Optional[Dict] = None) -> Dict:
+                noise: bool = True, sensor: Optional[Dict] = None, walking: bool = False) -> Dict:
+    """The imitation windows of the features with an example (``walking``: of the walk on the
+    floor only -- walking in place; else every other feature: the 180-window set) and the
+    false engagements on the built-in non-imitation clips (the walk recognizer not counted on
+    the walking clip)."""
     models = build_models(world, params)
+    walk = walking_features(world)
     out = {'windows': 0, 'hit': 0, 'latency': [], 'per_feature': {}, 'confusion_frames': 0,
            'imit_frames': 0}
-    for fi, f in enumerate(world.with_example()):
+    feats = [f for f in world.with_example() if (f.name in walk) == walking]
+    for fi, f in enumerate(feats):    # the seeds of the 180-window set as before the walk
         hits = tot = 0
         for k in range(performers):
-            seed = seed0 + 100 * fi + k
+            seed = seed0 + (3000 if walking else 0) + 100 * fi + k
             rng = np.random.default_rng(seed)
             p, windows = imitation_stream(f, rng)
             s, st = to_sensor(p, f'{f.name}_{k}', seed, noise, sensor, states=True)
@@ -65,7 +78,8 @@ def recognition(world, params: RecognizerParams, seed0: int, performers: int,
             for i in range(len(s)):
                 r = rec.update(s[i], i / FPS, st[i])
                 flags[i] = r[f.name].imitating
-                other[i] = any(x.imitating for n, x in r.items() if n != f.name)
+                other[i] = any(x.imitating for n, x in r.items()
+                               if n != f.name and n not in walk)
             t = np.arange(len(s)) / FPS
             for a, b in windows:
                 tot += 1
@@ -81,7 +95,7 @@ def recognition(world, params: RecognizerParams, seed0: int, performers: int,
         out['hit'] += hits
     fe_frames = fe_total = 0
     per_clip = {}
-    for k in range(max(1, performers // 2)):
+    for k in range(0 if walking else max(1, performers // 2)):
         seed = seed0 + 5000 + k
         for name, clip in non_imitation_clips(seed):
             s, st = to_sensor(clip, f'{name}_{seed}', seed, noise, sensor, states=True)
@@ -90,13 +104,115 @@ def recognition(world, params: RecognizerParams, seed0: int, performers: int,
             n_bad = 0
             for i in range(len(s)):
                 r = rec.update(s[i], i / FPS, st[i])
-                n_bad += any(x.imitating for x in r.values())
+                n_bad += any(x.imitating for n, x in r.items()
+                             if not (name == 'walk' and n in walk))
             fe_frames += n_bad
             fe_total += len(s)
             a, b = per_clip.get(name, (0, 0))
             per_clip[name] = (a + n_bad, b + len(s))
     out['false_frames'], out['false_total'], out['per_clip'] = fe_frames, fe_total, per_clip
     return out
+
+
+def _imitating(models, params, pos, st) -> np.ndarray:
+    """(T, features) bool: each feature's recognizer says "imitating", per frame."""
+    rec = IntentionRecognizer(list(models.values()), params)
+    out = np.zeros((len(pos), len(models)), bool)
+    for i in range(len(pos)):
+        r = rec.update(pos[i], i / FPS, st[i])
+        out[i] = [r[n].imitating for n in models]
+    return out
+
+
+TUNE_SUBJECTS = ('s01', 's02')   # UI-PRMD subjects looked at while choosing the mechanisms
+
+
+def real_recognition(world, params: RecognizerParams, seed: int = 0) -> Dict:
+    """Recognition on real movements (:mod:`.real_data`, needs ../shared): frames "imitating"
+    any feature in the UI-PRMD Kinect v2 clips (per exercise and subject) and in the CMU clips
+    through the sensor model (per class, tuning / held-out clips; the walk recognizer not counted
+    on locomotion: walking is walking), and subject 01's hanging frames recognised as the monkey
+    bars after the first 0.5 s of each segment."""
+    models = build_models(world, params)
+    names = list(models)
+    walk = [names.index(n) for n in walking_features(world)]
+    res: Dict = {'uiprmd': {}, 'cmu': {}, 'hang': {}, 'names': names}
+
+    def add(table, key, flags):
+        a = table.setdefault(key, np.zeros(2 + len(names)))
+        a[0] += flags.any(axis=1).sum()
+        a[1] += len(flags)
+        a[2:] += flags.sum(axis=0)
+
+    for s in rd.uiprmd_streams():
+        f = _imitating(models, params, s.positions, s.states)
+        split = 'tune' if s.subject in TUNE_SUBJECTS else 'held-out'
+        for key in ((split, s.group), (split, 'all'), ('subject', s.subject), ('all', s.group),
+                    ('all', 'all')):
+            add(res['uiprmd'], key, f)
+    for s in rd.cmu_streams(seed=seed):
+        f = _imitating(models, params, s.positions, s.states)
+        if s.group == 'locomotion':
+            f[:, walk] = False
+        for key in ((s.split, s.group), (s.split, 'all')):
+            add(res['cmu'], key, f)
+    if 'monkey_bars' in names:
+        mb = names.index('monkey_bars')
+        for s in rd.hanging_segments(seed=seed):
+            f = _imitating(models, params, s.positions, s.states)
+            hit = tot = 0
+            for a, b in rd.segments(s.label):
+                a2 = a + int(round(0.5 * FPS))
+                if b > a2:
+                    hit += int(f[a2:b, mb].sum())
+                    tot += b - a2
+            res['hang'][s.name] = (hit, tot, int(s.label.sum()))
+    return res
+
+
+def print_real(res: Dict, world) -> None:
+    names = res['names']
+
+    def row(label, a):
+        per = ', '.join(f'{n} {100 * x / max(a[1], 1):.1f}' for n, x in zip(names, a[2:]) if x)
+        return f'  {label:22s} {100 * a[0] / max(a[1], 1):5.2f} % of {int(a[1]):6d}' + (
+            f'  ({per})' if per else '')
+
+    u = res['uiprmd']
+    if u:
+        held = [k for k in u if k[0] == 'held-out' and k[1] != 'all']
+        worst = max((100 * u[k][0] / max(u[k][1], 1) for k in held), default=0.0)
+        tot = u.get(('held-out', 'all'), np.zeros(2))
+        fr = 100 * tot[0] / max(tot[1], 1)
+        print(f'real Kinect v2 (UI-PRMD), frames "imitating" on held-out subjects '
+              f'(not {"/".join(TUNE_SUBJECTS)}): {fr:.2f} % overall (target <= 2 %), worst '
+              f'exercise {worst:.1f} % (target <= 5 %) -> '
+              f'{"met" if fr <= 2 and worst <= 5 else "NOT met"}')
+        for k in sorted(u):
+            print(row(f'{k[0]} {k[1]}', u[k]))
+    c = res['cmu']
+    if c:
+        held = [k for k in c if k[0] == 'held-out' and k[1] != 'all']
+        worst = max((100 * c[k][0] / max(c[k][1], 1) for k in held), default=0.0)
+        tot = c.get(('held-out', 'all'), np.zeros(2))
+        fr = 100 * tot[0] / max(tot[1], 1)
+        print(f'CMU through the sensor model, held-out clips: {fr:.2f} % overall, worst class '
+              f'{worst:.1f} % (targets <= 2 / 5 %) -> {"met" if fr <= 2 and worst <= 5 else "NOT met"}')
+        for k in sorted(c):
+            print(row(f'{k[0]} {k[1]}', c[k]))
+    h = res['hang']
+    if h:
+        ex = world.features['monkey_bars'].example
+        own = Path(ex.bvh).stem if ex is not None and ex.bvh else ''
+        held = [k for k in h if k != own]
+        hit = sum(h[k][0] for k in held)
+        tot = sum(h[k][1] for k in held)
+        print(f'CMU subject 01 hanging frames recognised as monkey bars after 0.5 s, clips other '
+              f'than the example\'s ({own or "generated"}): {100 * hit / max(tot, 1):.1f} % of '
+              f'{tot} (target >= 80 %) -> {"met" if hit >= 0.8 * tot and tot else "NOT met"}')
+        for k, (a, b, n) in h.items():
+            print(f'  {k}{" (the example clip)" if k == own else ""}: {a}/{b} '
+                  f'({n} hanging frames)')
 
 
 def physics(world, params: ControlParams, seed0: int, noise: bool = True,
@@ -158,6 +274,10 @@ def main(argv=None) -> int:
     ap.add_argument('--performers', type=int, default=30, help='imitating users per feature')
     ap.add_argument('--no-noise', action='store_true', help='sensor placement only, no noise')
     ap.add_argument('--skip-physics', action='store_true')
+    ap.add_argument('--real', action='store_true',
+                    help='also the real recordings of ../shared (UI-PRMD Kinect v2, CMU clips '
+                         'through the sensor model, CMU subject 01 hanging; several minutes)')
+    ap.add_argument('--real-only', action='store_true', help='only the real recordings')
     ap.add_argument('--e1', type=float, default=None, help='e1 threshold (default: node default)')
     ap.add_argument('--e2', type=float, default=None)
     ap.add_argument('--min-activity', type=float, default=None)
@@ -211,6 +331,17 @@ def main(argv=None) -> int:
     t0 = time.time()
     if sensor is not None:
         print(f'# sensor model overrides {sensor}')
+    if a.real or a.real_only:
+        print_real(real_recognition(world, rp), world)
+        if a.real_only:
+            print(f'# {time.time() - t0:.0f} s')
+            return 0
+    rw = recognition(world, rp, seed0, a.performers, not a.no_noise, sensor, walking=True)
+    if rw['windows']:
+        rate = rw['hit'] / rw['windows']
+        print(f'walking in place recognised within 0.5 s: {100 * rate:.1f} % of '
+              f'{rw["windows"]} windows (target >= 90 %) -> {"met" if rate >= 0.9 else "NOT met"}'
+              + (f'; latency median {np.median(rw["latency"]):.2f} s' if rw['latency'] else ''))
     r = recognition(world, rp, seed0, a.performers, not a.no_noise, sensor)
     rate = r['hit'] / max(r['windows'], 1)
     fe = r['false_frames'] / max(r['false_total'], 1)

@@ -30,7 +30,8 @@ from skeleton_core.model import (ANKLE_LEFT, ANKLE_RIGHT, ELBOW_LEFT, ELBOW_RIGH
                                  SHOULDER_LEFT, SHOULDER_RIGHT, WRIST_LEFT,
                                  WRIST_RIGHT, subtree)
 
-from .intention import ExampleModel, center_of_mass, pca_basis, yaw_rotation
+from .intention import ExampleModel, center_of_mass, pca_columns, yaw_rotation
+from skeleton_core.geometry import facing_yaw
 
 # chains for the IK: effector -> (root, mid, end) joints; the effector rides rigidly on ``end``
 CHAINS = {'HandLeft': (SHOULDER_LEFT, ELBOW_LEFT, WRIST_LEFT, HAND_LEFT),
@@ -64,10 +65,9 @@ class PoseComposer:
         self.model = model
         p = model.positions
         rel = (p - center_of_mass(p)[:, None, :])
-        from skeleton_core.geometry import facing_yaw
         rel = np.einsum('tij,tkj->tki', yaw_rotation(facing_yaw(p)), rel) / model.height
         self.poses = rel.reshape(len(p), -1)            # (N, 60), height units
-        self.q_avg, self.B, self.lam = pca_basis(self.poses, components)
+        self.q_avg, self.B, self.lam = pca_columns(self.poses, components)
         self.lam = np.maximum(self.lam, 1e-6)
         self.k = int(k)
         self.w_p, self.w_e, self.w_s = float(w_p), float(w_e), float(w_s)
@@ -328,7 +328,13 @@ class Obstacles:
         for c, h, _ in self.boxes:
             q = np.abs(p - c) - h - r_joint[:, None]
             inside = keep & np.all(q < 0, axis=1)
-            p[inside, 2] = c[2] + h[2] + r_joint[inside]
+            if np.argmin(h) == 2:        # a flat box (the trampoline): out through the top
+                p[inside, 2] = c[2] + h[2] + r_joint[inside]
+                continue
+            for j in np.nonzero(inside)[0]:   # a slab (a wall): out through its nearest face
+                ax = int(np.argmax(q[j]))
+                sgn = 1.0 if p[j, ax] >= c[ax] else -1.0
+                p[j, ax] = c[ax] + sgn * (h[ax] + r_joint[j])
         a, b, rc, _ = self._caps()
         if len(rc):
             d, cp = self._dist(p, a, b)
@@ -404,6 +410,12 @@ class Obstacles:
             worst = max(worst, float(np.max(np.where(allowed(self.floor), rad - pts[:, 2], 0))))
         for c, h, f in self.boxes:
             q = np.abs(pts - c) - h
+            if np.argmin(h) != 2:          # a slab: depth through the nearest face
+                qr = q - rad[:, None]
+                inside = np.all(qr < 0, axis=1) & allowed(f)
+                if np.any(inside):
+                    worst = max(worst, float(np.max(-np.max(qr[inside], axis=1))))
+                continue
             inside = np.all(q[:, :2] < 0, axis=1) & (pts[:, 2] > c[2] - h[2]) & allowed(f)
             if np.any(inside):
                 worst = max(worst, float(np.max((c[2] + h[2] + rad - pts[:, 2])[inside])))

@@ -55,8 +55,8 @@ class ControlNodeConfig:
     intention_topic: str = param('/control/intention', 'skeleton_msgs/Intention', read_only=True)
     markers_topic: str = param('/control/markers', 'features and contacts (MarkerArray)',
                                read_only=True)
-    user_timeout: float = param(2.0, 's without a user before its controller is dropped',
-                                range=(0.1, 60.0))
+    user_timeout_s: float = param(2.0, 'drop the controller of a user unseen this long (s)',
+                                  range=(0.1, 60.0))
     max_users: int = param(6, 'users controlled at once (more are ignored)', range=(1, 30),
                            read_only=True)
 
@@ -148,7 +148,8 @@ class ControlNode(Node):
                 reliability=np.ones(NUM_JOINTS, np.float32), user_id=uid, stamp_ns=st,
                 frame_id=self.frame_id))
             self._publish_intention(uid, st, o)
-        for uid in [u for u, t in self.last_seen.items() if now - t > self.params['user_timeout']]:
+        timeout = self.params['user_timeout_s']
+        for uid in [u for u, t in self.last_seen.items() if now - t > timeout]:
             self.users.pop(uid, None)
             self.last_seen.pop(uid, None)
             self.get_logger().info(f'user {uid} left: controller dropped')

@@ -30,8 +30,13 @@ from .examples import example_motion
 from .features import EFFECTORS, Feature, World
 from .intention import (ExampleModel, IntentionRecognizer, Recognition, RecognizerParams,
                         center_of_mass, yaw_rotation)
+from .locomotion import Walker, example_gait
 
 HANDS = ('HandLeft', 'HandRight')
+# s: the character keeps walking this long after the floor's recognizer last said "imitating"
+# (one walking step: a user's walk in place drops out for a few frames -- an arm briefly
+# occluded, a step off the example's rhythm -- and the character should not stop and go)
+WALK_HOLD = 0.4
 FEET = ('FootLeft', 'FootRight')
 
 
@@ -41,33 +46,35 @@ class ControlParams:
 
     recognizer: RecognizerParams = nested(RecognizerParams)
     free_gain: float = param(1500.0, 'N/m (N/rad): gain of effectors without a contact',
-                             range=(10.0, 1e5))
+                             range=(10.0, 1e5), public=False)
     release_after: float = param(2.0, 's without imitation before hands on a feature with an '
                                  'example let go (the character falls when the user stops; '
                                  'longer than a hand the sensor reports TRACKED at a wrong place, '
                                  'up to 1.5 s, plus the errors\' smoothing; 0 = never)',
-                                 range=(0.0, 60.0))
+                                 range=(0.0, 60.0), public=False)
     hand_release_margin: float = param(0.05, "m: a held hand lets go when the user's hand drops "
                                        "this far below the feature's engage joint",
-                                       range=(0.0, 1.0))
+                                       range=(0.0, 1.0), public=False)
     regrab_speed: float = param(0.5, 'm/s: on a feature with engage.regrab (the rope) a held hand '
                                 'the user raises faster lets go to grab higher (hand over hand)',
-                                range=(0.05, 10.0))
+                                range=(0.05, 10.0), public=False)
     regrab_reach: float = param(0.2, "body heights: climbing hand over hand, the free hand at the "
                                 "top of its reach grabs the rope where it passes this close (an "
                                 "arm's length: the arm reaches for the swinging rope; 0 = only "
-                                "within the feature's engage distance)", range=(0.0, 1.0))
+                                "within the feature's engage distance)", range=(0.0, 1.0),
+                                public=False)
     foot_down_height: float = param(0.06, "m: the user's foot this close to their floor is "
                                     'constrained (may hold the floor / trampoline)',
-                                    range=(0.005, 0.5))
+                                    range=(0.005, 0.5), public=False)
     blend_time: float = param(0.3, 's: transition in/out of the composed pose (Sec. 6.2)',
                               range=(0.01, 5.0))
-    compose_components: int = param(6, 'pose PCA size m of Eq. 7', range=(1, 30), read_only=True)
+    compose_components: int = param(6, 'pose PCA size m of Eq. 7', range=(1, 30), read_only=True,
+                                    public=False)
     compose_k: int = param(4, 'nearest example frames in q_rep (Eq. 10)', range=(1, 50),
-                           read_only=True)
+                           read_only=True, public=False)
     w_e: float = param(0.05, 'Eq. 8 weight of G_E (example similarity; w_P = 1)',
-                       range=(0.0, 100.0))
-    w_s: float = param(0.2, 'Eq. 8 weight of G_S (smoothness)', range=(0.0, 100.0))
+                       range=(0.0, 100.0), public=False)
+    w_s: float = param(0.2, 'Eq. 8 weight of G_S (smoothness)', range=(0.0, 100.0), public=False)
     sensor_height: float = param(0.8, 'm above the floor (the same world as the physics node)',
                                  range=(0.0, 5.0), read_only=True)
     sensor_pitch: float = param(0.0, 'sensor tilt down (deg)', range=(-45.0, 45.0),
@@ -75,7 +82,8 @@ class ControlParams:
     body_mass: float = param(75.0, 'kg at 1.75 m (scaled with height^3)', range=(20.0, 300.0),
                              read_only=True)
     compute_penetration: bool = param(True, 'measure the deepest penetration of the body into '
-                                      'the features every frame (diagnostics, the benchmark)')
+                                      'the features every frame (diagnostics, the benchmark)',
+                                      public=False)
 
     def validate(self) -> None:
         check(self, nested=False)
@@ -144,8 +152,19 @@ class PerformanceController:
         self.blend_feature = ''
         self.obstacles = Obstacles()
         self.frames = 0
+        self._stand_z = 1.0
         self._hand_z: Dict[str, float] = {}
-        self._hand_vz: Dict[str, float] = {e: 0.0 for e in HANDS}
+        # walking on the floor (Sec. 8.3): the floor's example is a walk cycle
+        self.floor_walk = next((f.name for f in world.features.values()
+                                if f.kind == 'floor' and f.name in self.models), '')
+        self.walker = (Walker(*example_gait(self.models[self.floor_walk].positions,
+                                            self.params.recognizer.fps))
+                       if self.floor_walk else None)
+        self.walking = False
+        self._was_walking = False
+        self._walk_z = 1.0
+        self._walk_seen = -math.inf
+        self._hand_vz: Dict[str, float] = {e: 0.0 for e in EFFECTORS}
 
     # ------------------------------------------------------------------ set-up
     def _offsets(self, rel_world: np.ndarray) -> Dict[str, np.ndarray]:
@@ -179,6 +198,9 @@ class PerformanceController:
             c = g.vec('center')
             xy = np.asarray(st.get('com_xy', c[:2]), float)
             return np.array([xy[0], xy[1], float(st.get('com_z', c[2]))])
+        if kind == 'rocks':       # standing on the floor in front of the wall
+            xy = np.asarray(st.get('com_xy', self.world.spawn), float)
+            return np.array([xy[0], xy[1], stand[2]])
         if kind == 'trampoline':
             g = next(g for g in f.geoms if g.type == 'box')
             c, hf = g.vec('center'), g.vec('half')
@@ -194,6 +216,8 @@ class PerformanceController:
         rel = self._char_rel(p)
         mass = self.params.body_mass * (self.height / 1.75) ** 3
         com = self._start_com(rel)
+        feet_z = min(rel[FOOT_LEFT, 2], rel[FOOT_RIGHT, 2])
+        self._stand_z = float(-feet_z + 0.04)     # the COM's height standing on the floor
         self.dp = DynamicProcess(self.world, mass, com, self._offsets(rel), self.params.free_gain)
         if self.start:
             f = self.world.features[self.start]
@@ -247,10 +271,10 @@ class PerformanceController:
         return bool(p[JOINT_INDEX[e], 2] - self.user_floor < self.params.foot_down_height)
 
     def _track_hands(self, p: np.ndarray, dt: float) -> None:
-        """Smoothed vertical speed (0.1 s) of the user's hands relative to their COM."""
+        """Smoothed vertical speed (0.1 s) of the user's hands and feet relative to their COM."""
         com_z = float(center_of_mass(p)[2])
         g = 1.0 - math.exp(-dt / 0.1)
-        for e in HANDS:
+        for e in EFFECTORS:
             z = float(p[JOINT_INDEX[e], 2]) - com_z
             if e in self._hand_z:
                 self._hand_vz[e] += g * ((z - self._hand_z[e]) / dt - self._hand_vz[e])
@@ -282,6 +306,10 @@ class PerformanceController:
                     if lost or regrab or not self._user_hand_raised(p, e, f,
                                                                     prm.hand_release_margin):
                         dp.release(e)
+                elif f.kind == 'rocks':
+                    # a foot on a rock (Sec. 8.4) lets go when the user lifts it to step higher
+                    if self._hand_vz[e] > prm.regrab_speed:
+                        dp.release(e)
                 elif not self._user_foot_down(p, e):
                     dp.release(e)
                 continue
@@ -292,8 +320,11 @@ class PerformanceController:
                     continue
                 if e in HANDS and f.engage.regrab and self._hand_vz[e] > 0.1:
                     continue      # climbing: grab at the top of the reach, not on the way up
-                if e in FEET and not self._user_foot_down(p, e):
-                    continue
+                if e in FEET and f.kind != 'rocks' and not self._user_foot_down(p, e):
+                    continue      # on a rock the foot is held above its face, not on the floor
+                if e in FEET and f.kind == 'floor' and dp.in_water:
+                    continue      # swimming: the user's feet on their floor do not stand the
+                    # character on the pool's bottom (walked in, it would stay there)
                 # hand over hand: the other hand holds the rope, this one is at the top of its
                 # reach -- it reaches for the rope where it is now (an arm's length), whatever
                 # its speed (the rope and the body swing)
@@ -345,6 +376,23 @@ class PerformanceController:
         # ---- kinematic composition (Sec. 6.2)
         user_yaw = float(facing_yaw(p))
         char_yaw = user_yaw - self.yaw0
+        # ---- walking on the floor (Sec. 8.3): the user walks in place, the character walks
+        self.walking = False
+        if self.walker is not None:
+            self.walker.update(p, user_yaw, t)
+            rw = recs.get(self.floor_walk)
+            if rw is not None and rw.imitating:
+                self._walk_seen = t
+            on_floor = all(self.world.features[c.feature].kind == 'floor'
+                           for c in dp.contacts.values())   # not on a rock, the trampoline
+            self.walking = bool(not feature and on_floor and t - self._walk_seen <= WALK_HOLD
+                                and dp.com[2] < self._stand_z + 0.3)
+            if self.walking:
+                if not self._was_walking:
+                    self._walk_z = float(dp.com[2])    # the height it walks at
+                feature = self.floor_walk
+                dp.shift(np.zeros(3))      # the feet let go of the floor (carried below)
+            self._was_walking = self.walking
         body_rel = (p - center_of_mass(p)) @ yaw_rotation(user_yaw).T   # body frame
         rec = recs.get(feature)
         compose = feature in self.composers and rec is not None and rec.imitating
@@ -363,7 +411,8 @@ class PerformanceController:
             m = self.models[bf]
             comp = self.composers[bf].compose({j: body_rel[j] for j in m.effectors}, r_bf.w,
                                               self.height)
-            replace = [e for e in FEET if self._user_foot_down(p, e) and e not in held]
+            replace = (list(FEET) if self.walking and bf == self.floor_walk else
+                       [e for e in FEET if self._user_foot_down(p, e) and e not in held])
             mixed = integrate_rule(body_rel, comp, replace)
             q = (1.0 - self.blend) * body_rel + self.blend * mixed
         if water:
@@ -374,7 +423,11 @@ class PerformanceController:
         q_world_rel = q @ _rotz(char_yaw).T
         # ---- dynamic process (Sec. 5)
         dp.set_targets(np.array([q_world_rel[JOINT_INDEX[e]] for e in EFFECTORS]), char_yaw, dt)
+        walk_from = dp.com
         dp.step(dt)
+        if self.walking:
+            v = self.walker.velocity(char_yaw)
+            dp.carry_to(np.array([*(walk_from[:2] + v[:2] * dt), self._walk_z]), v)
         # ---- motion integration (Sec. 7)
         self._refresh_obstacles()
         eff = dp.effectors()

@@ -2,11 +2,13 @@
 
     ros2 run performance_control demo_control                 # out/control_demo.{mcap,png}
 
-Four scenes, one simulated user each (user ids 1-4), 8 s apiece, performed by a user of another
+Five scenes, one simulated user each (user ids 1-5), 8 s apiece (the last 15 s), performed by a user of another
 size and style than the examples and seen through the Kinect sensor model (the performance
 placement: 3.5 m away, sensor 1.2 m up): hanging from the monkey bars and swinging (imitation,
 then the arms drop at 6 s: the character falls), climbing the rope, jumping on the trampoline,
-swimming a breaststroke. Each frame runs :class:`PerformanceController` and the physics character
+swimming a breaststroke, and one continuous performance from the floor (Sec. 8.3: the user turns
+45 degrees and walks in place, the character walks into the water, then the user swims). Each
+frame runs :class:`PerformanceController` and the physics character
 (:class:`physics_sim.simulation.Simulation`) tracking the composed pose, as the graph does with
 ``control:=true``. Writes
 
@@ -26,14 +28,23 @@ import numpy as np
 
 from .controller import ControlParams, PerformanceController, build_models
 from .features import load_world
-from .performances import SENSOR_HEIGHT, imitation_stream, jump_stream, to_sensor
+from .performances import (SENSOR_HEIGHT, TURNING_PLACEMENT, continuous_stream,
+                           imitation_stream, jump_stream, to_sensor)
+from skeleton_core.bagio import BagWriter
+from skeleton_core.cdr import frames_to_cdr
+from skeleton_core.conversions import SkeletonFrame
+from skeleton_core.model import NUM_JOINTS, TRACKED
+from skeleton_core.model import SEGMENTS
 
 FPS = 30.0
-SCENES = ('monkey_bars', 'rope', 'trampoline', 'water')
+SCENES = ('monkey_bars', 'rope', 'trampoline', 'water', 'continuous')
 
 
 def scene_stream(world, name: str, seed: int, seconds: float = 8.0) -> np.ndarray:
     rng = np.random.default_rng(seed)
+    if name == 'continuous':      # floor -> walk (turning) -> into the water -> swim (15 s)
+        p, _ = continuous_stream(world, np.random.default_rng(0))
+        return to_sensor(p, 'cont0', 0, sensor_params=TURNING_PLACEMENT)   # the test's stream
     if name == 'trampoline':
         p = jump_stream(rng, n_jumps=5)
     else:
@@ -45,10 +56,6 @@ def scene_stream(world, name: str, seed: int, seconds: float = 8.0) -> np.ndarra
 
 
 def run(world, out_dir: Path, seconds: float = 8.0, physics: bool = True) -> Dict:
-    from skeleton_core.bagio import BagWriter
-    from skeleton_core.cdr import frames_to_cdr
-    from skeleton_core.conversions import SkeletonFrame
-    from skeleton_core.model import NUM_JOINTS, TRACKED
     cp = ControlParams(sensor_height=SENSOR_HEIGHT)
     models = build_models(world, cp.recognizer)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -69,7 +76,8 @@ def run(world, out_dir: Path, seconds: float = 8.0, physics: bool = True) -> Dic
         for k, name in enumerate(SCENES):
             uid = k + 1
             s = scene_stream(world, name, 300 + k, seconds)
-            ctl = PerformanceController(world, cp, models, start=name)
+            ctl = PerformanceController(world, cp, models,
+                                        start='' if name == 'continuous' else name)
             sim = None
             if physics:
                 from physics_sim.simulation import SimConfig, Simulation
@@ -114,7 +122,8 @@ def run(world, out_dir: Path, seconds: float = 8.0, physics: bool = True) -> Dic
 
 def _draw_world(ax, world, obstacles, scene: str) -> None:
     for f in world.features.values():
-        if f.name not in (scene, 'floor'):
+        if f.name not in (scene, 'floor') and not (scene == 'continuous'
+                                                    and f.kind == 'water'):
             continue
         for g in f.geoms:
             if g.type == 'plane':
@@ -140,7 +149,6 @@ def plot(result: Dict, world, path: Path) -> None:
     import matplotlib
     matplotlib.use('Agg')
     import matplotlib.pyplot as plt
-    from skeleton_core.model import SEGMENTS
     rows, cp = result['rows'], result['params']
     fig, axes = plt.subplots(3, len(rows), figsize=(4.2 * len(rows), 10))
     for col, (name, rr) in enumerate(rows.items()):
@@ -158,6 +166,12 @@ def plot(result: Dict, world, path: Path) -> None:
                 ax.plot(q[0], q[2], 'o', color='red', ms=6)
         com = np.array([r[0].com for r in rr])
         ax.set_xlim(com[:, 0].mean() - 1.6, com[:, 0].mean() + 1.6)
+        if name == 'continuous':      # the walk: the COM's path seen from above, shifted up
+            ax.plot(com[:, 0], com[:, 1] + 6.0, color='C2', lw=1.5,
+                    label='COM path, top view (y + 6 m)')
+            ax.axhline(2.0, color='C0', lw=0.8, ls='--', label="water's edge (top view)")
+            ax.legend(fontsize=7, loc='lower left')
+            ax.set_xlim(float(com[:, 0].min()) - 1.0, float(com[:, 0].max()) + 1.0)
         ax.set_ylim(-0.1, max(3.8, float(com[:, 2].max()) + 1.4))   # a climber stays in view
         ax.set_aspect('equal')
         ax.set_title(f'{name}: character at 25/50/85 % (side view)')

@@ -143,6 +143,32 @@ class DynamicProcess:
         d.qvel[:] = 0.0
         mujoco.mj_forward(self.model, d)
 
+    def shift(self, delta) -> None:
+        """Move the character (COM and effectors) by ``delta`` (world, m): walking on the floor
+        (Sec. 8.3). The paper's reading of walking: the user's feet are constrained, the
+        character's are not -- the feet held on the floor let go, and the body is carried
+        (the composed walk's legs step; the simplified model holds no floor contact)."""
+        delta = np.asarray(delta, float)
+        for e, c in list(self.contacts.items()):
+            if self.world.features[c.feature].kind == 'floor':
+                self.release(e)
+        d = self.data
+        d.qpos[self.com_qpos:self.com_qpos + 3] += delta
+        for a in self.eff_qpos:
+            d.qpos[a:a + 3] += delta
+        mujoco.mj_forward(self.model, d)
+
+    def carry_to(self, com, velocity) -> None:
+        """Put the COM at ``com`` moving at ``velocity`` (world), the effectors moved along:
+        walking, the body is carried (the floor holds it while no foot does)."""
+        d = self.data
+        delta = np.asarray(com, float) - self.com
+        d.qpos[self.com_qpos:self.com_qpos + 3] += delta
+        d.qvel[self.com_dof:self.com_dof + 3] = np.asarray(velocity, float)
+        for a in self.eff_qpos:
+            d.qpos[a:a + 3] += delta
+        mujoco.mj_forward(self.model, d)
+
     # ------------------------------------------------------------------ targets
     def set_targets(self, rel: np.ndarray, yaw: float, period: float) -> None:
         """The user's relative movement r^_j (4, 3, world axes) for the next ``period`` s: the
@@ -189,6 +215,14 @@ class DynamicProcess:
                 inside = np.all(np.abs(p[:2] - ctr[:2]) <= half[:2])
                 c = np.array([p[0], p[1], top + rad])
                 cand = [(float(p[2]) - top - rad if inside else math.inf, body, c)]
+            elif g.type == 'rock':
+                # Sec. 8.4: a contact point and the radius within which it may be held; a foot
+                # only from above the rock's face (its centre's height), held on top of it
+                ctr = g.vec('center')
+                c = ctr + [0.0, 0.0, rad] if effector.startswith('Foot') else ctr
+                far = float(np.linalg.norm(p - ctr)) - g.num('radius')
+                above = not effector.startswith('Foot') or p[2] >= ctr[2]
+                cand = [(far if above else math.inf, 'world', c)]
             elif g.type == 'rope':
                 cand = []
                 seg, r = g.num('length'), g.num('radius')

@@ -19,6 +19,8 @@ A BVH example (``example.bvh`` in the world file) is loaded with the CMU loader.
 """
 from __future__ import annotations
 
+import os
+from pathlib import Path
 from typing import Callable, Dict, Optional
 
 import numpy as np
@@ -26,6 +28,7 @@ from skeleton_core.geometry import quat_rotate
 from skeleton_core.model import (ANKLE_LEFT, ANKLE_RIGHT, ELBOW_LEFT, ELBOW_RIGHT, FOOT_LEFT,
                                  FOOT_RIGHT, HAND_LEFT, HAND_RIGHT, KNEE_LEFT, KNEE_RIGHT,
                                  WRIST_LEFT, WRIST_RIGHT, Body, standard_body)
+from skeleton_data.mocap import load_cmu_clip
 from skeleton_data.motions import pose_from_rotations
 
 FPS = 30.0
@@ -129,8 +132,22 @@ def _stroke_arms(ph, reach, style):
     return (flex, abd, elbow), (flex_r, abd_r, el_r)
 
 
+def _walk_arms(ph, amp, style):
+    """Walking arm swing: the arms swing fore-aft in anti-phase (left forward with the right
+    leg), elbows slightly bent and bending more in front."""
+    lag = style.get('asym', 0.0)
+    sl = np.sin(2 * np.pi * ph)
+    sr = -np.sin(2 * np.pi * (ph + lag))
+    base = np.radians(4) + style.get('flex_offset', 0.0) * 0.5
+    abd = np.radians(8) + style.get('abd_offset', 0.0) * 0.5
+    el0 = np.radians(15) + style.get('elbow', 0.0)
+    left = (base + amp * sl, abd, el0 + 0.6 * amp * np.maximum(sl, 0))
+    right = (base + amp * sr, abd, el0 + 0.6 * amp * np.maximum(sr, 0))
+    return left, right
+
+
 ARM_PATTERNS = {'monkey_swing': _swing_arms, 'rope_climb': _climb_arms,
-                'breaststroke': _stroke_arms}
+                'breaststroke': _stroke_arms, 'walk_cycle': _walk_arms}
 
 
 def _param(params: Dict, key: str, default: float) -> float:
@@ -192,21 +209,87 @@ def breaststroke(params: Dict, body: Body, n: int, fps: float = FPS) -> np.ndarr
     return p
 
 
+def walk_cycle(params: Dict, body: Body, n: int, fps: float = FPS) -> np.ndarray:
+    """Walking (Sec. 8.3's Q, generated): one step per half ``period``, the legs swinging
+    ``stride_deg`` at the hips, the knee bent in the swing, the arms swinging in anti-phase by
+    ``amplitude_deg``; the body moves forward (+x) one stride per step."""
+    ph = _phase(params, n, fps)
+    amp = np.radians(_param(params, 'amplitude_deg', 22.0))
+    hip = np.radians(_param(params, 'stride_deg', 22.0))
+    local, aims = {}, {}
+    l, r = _walk_arms(ph, amp, {})
+    _arm(aims, 'left', *l, n)
+    _arm(aims, 'right', *r, n)
+    sl = -np.sin(2 * np.pi * ph)                 # the left leg forward with the right arm
+    swing_l = np.maximum(np.sin(2 * np.pi * ph + np.pi / 2), 0)
+    swing_r = np.maximum(np.sin(2 * np.pi * ph - np.pi / 2), 0)
+    _legs(local, hip * sl, np.radians(8) + np.radians(50) * swing_l,
+          -hip * sl, np.radians(8) + np.radians(50) * swing_r, n)
+    p, _, _ = pose_from_rotations(body, local, n, aims)
+    leg = float(np.linalg.norm(body.rest_offsets[KNEE_LEFT])
+                + np.linalg.norm(body.rest_offsets[ANKLE_LEFT]))
+    speed = 2.0 * 2.0 * leg * np.sin(hip) / _param(params, 'period', 1.1)   # 2 steps per cycle
+    p[..., 0] += (np.arange(n) / fps * speed)[:, None]
+    return p
+
+
+def walk_in_place(params: Dict, body: Body, n: int, fps: float = FPS, style=None, phase0=0.0,
+                  active=None) -> np.ndarray:
+    """What a user does to walk in the small real space: the arms swing as in walking, the knees
+    lift in turn (``knee_lift_deg`` at the hip), the body stays where it is."""
+    style = style or {}
+    ph = _phase(params, n, fps, phase0)
+    act = np.ones(n) if active is None else np.asarray(active, float)
+    amp = np.radians(_param(params, 'amplitude_deg', 22.0))
+    lift = np.radians(_param(params, 'knee_lift_deg', 35.0))
+    l, r = _walk_arms(ph, amp, style)
+    rest = (np.radians(6), np.radians(8), np.radians(12))
+    local, aims = {}, {}
+    for side, arm in (('left', l), ('right', r)):
+        vals = [rr + (np.broadcast_to(a, (n,)) - rr) * act for a, rr in zip(arm, rest)]
+        _arm(aims, side, *vals, n)
+    up_l = lift * np.maximum(-np.sin(2 * np.pi * ph), 0) * act
+    up_r = lift * np.maximum(np.sin(2 * np.pi * ph), 0) * act
+    _legs(local, up_l, np.radians(4) + 1.6 * up_l, up_r, np.radians(4) + 1.6 * up_r, n)
+    p, _, _ = pose_from_rotations(body, local, n, aims)
+    return p
+
+
 GENERATORS: Dict[str, Callable] = {'monkey_swing': monkey_swing, 'rope_climb': rope_climb,
-                                   'breaststroke': breaststroke}
+                                   'breaststroke': breaststroke, 'walk_cycle': walk_cycle}
+
+
+def bvh_path(name: str, world_file: str = ''):
+    """The file of an example's ``bvh`` (absolute; next to the world file; under ``../shared``
+    of the source tree) or None when there is none (the generator then makes the example)."""
+    p = Path(os.path.expanduser(name))
+    cands = [p] if p.is_absolute() else [p, Path(world_file).parent / p]
+    if not p.is_absolute():
+        root = os.environ.get('KINECT_POSTURE_ROOT')
+        here = Path(__file__).resolve()
+        bases = ([Path(root).parent / 'shared'] if root else []) + [
+            q / 'shared' for q in here.parents]
+        cands += [b / p for b in bases]
+    return next((c for c in cands if c.is_file()), None)
 
 
 def example_motion(example, body: Optional[Body] = None, fps: float = FPS) -> np.ndarray:
-    """Positions (T, 20, 3) of a feature's example Q: two cycles of its generator on ``body``
-    (default the standard body), or the frames of its BVH file."""
+    """Positions (T, 20, 3) of a feature's example Q: the frames of its BVH file where it exists
+    (:func:`bvh_path`), else two cycles of its generator on ``body`` (default the standard
+    body)."""
     body = body or standard_body()
-    if example.bvh:
-        from skeleton_data.mocap import load_cmu_clip
-        clip = load_cmu_clip(example.bvh)
+    path = bvh_path(example.bvh) if example.bvh else None
+    if path is not None or (example.bvh and not example.generator):
+        clip = load_cmu_clip(path or example.bvh)
         p = np.asarray(clip.positions, float)
-        if clip.fps != fps:
+        if abs(clip.fps - fps) > 1e-3:
             idx = np.round(np.arange(0, len(p) - 1, clip.fps / fps)).astype(int)
             p = p[idx]
+        frames = tuple(getattr(example, 'frames', ()) or ())
+        if frames:     # the segments one after the other
+            p = np.concatenate([p[a:b] for a, b in frames])
+            if len(p) < 10:
+                raise ValueError(f'{example.bvh}: frames {list(frames)} hold {len(p)} frames')
         return p
     gen = GENERATORS.get(example.generator)
     if gen is None:
@@ -234,6 +317,8 @@ def imitation(generator: str, params: Dict, body: Body, n: int, fps: float = FPS
     """A user standing on the floor imitating ``generator``'s example with the arms (T, 20, 3).
     ``active`` (T,) in [0, 1] fades the imitation in and out (0 = arms relaxed at the sides)."""
     style = style or {}
+    if generator == 'walk_cycle':
+        return walk_in_place(params, body, n, fps, style, phase0, active)
     ph = _phase(params, n, fps, phase0)
     act = np.ones(n) if active is None else np.asarray(active, float)
     if generator == 'monkey_swing':
@@ -256,4 +341,4 @@ def imitation(generator: str, params: Dict, body: Body, n: int, fps: float = FPS
 
 
 __all__ = ['GENERATORS', 'example_motion', 'imitation', 'random_style', 'monkey_swing',
-           'rope_climb', 'breaststroke', 'FPS']
+           'rope_climb', 'breaststroke', 'walk_cycle', 'walk_in_place', 'bvh_path', 'FPS']

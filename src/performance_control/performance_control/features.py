@@ -48,7 +48,10 @@ class Example:
     """Example motion Q: a generator in :mod:`performance_control.examples` (with its params) or
     a BVH file; ``effectors``: the unconstrained end-effectors compared (Sec. 6.1);
     ``max_change_share``: the largest share of the user's recent hand displacement outside the
-    directions the example moves in (a one-handed punch against a two-handed stroke; 1 = off)."""
+    directions the example moves in (a one-handed punch against a two-handed stroke; 1 = off).
+    ``bvh`` (optionally cut to ``frames``) is the real mocap example where the file exists (a
+    relative path is looked up next to the world file, then in ``../shared``); without it the
+    ``generator`` makes one, so a world runs without ``../shared``."""
 
     generator: str = ''
     params: Dict = field(default_factory=dict)
@@ -56,6 +59,7 @@ class Example:
     components: int = 3
     bvh: str = ''
     max_change_share: float = 1.0   # the recognizer's change-share gate for this feature (1 = off)
+    frames: Tuple[Tuple[int, int], ...] = ()   # [first, stop) segments of the BVH file used as Q
 
 
 @dataclass
@@ -69,9 +73,12 @@ class Feature:
 
     @property
     def kind(self) -> str:
-        """'floor' (a plane), 'rope', 'trampoline' (a box on a spring), 'water' (a volume) or
-        'bars' (static capsules / boxes)."""
+        """'floor' (a plane), 'rope', 'trampoline' (a box on a spring), 'water' (a volume),
+        'rocks' (climbing holds: points with a reach radius) or 'bars' (static capsules /
+        boxes)."""
         types = {g.type for g in self.geoms}
+        if 'rock' in types:
+            return 'rocks'
         if 'rope' in types:
             return 'rope'
         if 'volume' in types:
@@ -121,6 +128,21 @@ def world_path(name_or_path: str) -> Path:
     return p
 
 
+def _frames(v) -> Tuple[Tuple[int, int], ...]:
+    """``example.frames``: [first, stop) or a list of them (segments of the BVH file, 30 fps)."""
+    if not v:
+        return ()
+    v = list(v)
+    ranges = [v] if not isinstance(v[0], (list, tuple)) else v
+    out = []
+    for r in ranges:
+        if len(r) != 2 or not 0 <= int(r[0]) < int(r[1]):
+            raise ValueError('example.frames must be [first, stop) (or a list of them), '
+                             'first < stop')
+        out.append((int(r[0]), int(r[1])))
+    return tuple(out)
+
+
 def parse_world(doc: Dict, path: str = '<dict>') -> World:
     try:  # the geometry, as the physics character's world reads it
         geometry = parse_geometry(doc, path)
@@ -150,7 +172,8 @@ def parse_world(doc: Dict, path: str = '<dict>') -> World:
                 ex = Example(str(xd.get('generator', '')), dict(xd.get('params') or {}),
                              tuple(xd.get('effectors', ('HandLeft', 'HandRight'))),
                              int(xd.get('components', 3)), str(xd.get('bvh', '')),
-                             float(xd.get('max_change_share', 1.0)))
+                             float(xd.get('max_change_share', 1.0)),
+                             _frames(xd.get('frames', ())))
                 if not ex.generator and not ex.bvh:
                     raise ValueError('example needs a generator or a bvh file')
                 for e in ex.effectors:

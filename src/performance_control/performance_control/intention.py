@@ -37,7 +37,7 @@ from dataclasses import dataclass
 from typing import Dict, Optional, Sequence
 
 import numpy as np
-from skeleton_core.geometry import facing_yaw
+from skeleton_core.geometry import facing_yaw, pca
 from skeleton_core.params import check, param
 from skeleton_core.model import (JOINT_INDEX, SEGMENT_CHILDREN, SEGMENT_MASS_FRACTION,
                                  SEGMENT_PARENTS, JOINT_NAMES, TRACKED, estimate_height)
@@ -64,42 +64,44 @@ def yaw_rotation(yaw) -> np.ndarray:
     return r
 
 
-REFERENCES = ('com', 'shoulders')
-
-
-def reference_point(positions: np.ndarray, reference: str = 'com') -> np.ndarray:
-    """The origin of the relative effector positions (..., 3): the whole-body COM (the paper's)
-    or the ShoulderCenter joint (``shoulders``: the arms' own root, independent of what the legs
-    do -- a user imitating a frog kick or a swing with the arms only, standing, has another COM
-    than the example)."""
-    p = np.asarray(positions, float)
-    if reference == 'shoulders':
-        return p[..., JOINT_INDEX['ShoulderCenter'], :]
-    if reference != 'com':
-        raise ValueError(f'reference must be one of {REFERENCES}, got {reference!r}')
-    return center_of_mass(p)
+# The activity gate also asks the effectors to move relative to the trunk (the arms themselves, at
+# min_activity x the example's speed of the same): a squat, a lunge or standing up carries still
+# arms through the COM-relative frame (real Kinect v2, UI-PRMD: the breaststroke fired on them).
+ARM_ACTIVITY = True
 
 
 def relative_effectors(positions: np.ndarray, effectors: Sequence[int],
-                       yaw: Optional[np.ndarray] = None, reference: str = 'com') -> np.ndarray:
-    """r_j = d_j - COM (or another :func:`reference_point`) in the yaw-removed body frame,
+                       yaw: Optional[np.ndarray] = None) -> np.ndarray:
+    """r_j = d_j - COM (the paper's origin, the whole-body COM) in the yaw-removed body frame,
     (..., len(effectors), 3)."""
     p = np.asarray(positions, float)
     if yaw is None:
         yaw = facing_yaw(p)
-    rel = p[..., list(effectors), :] - reference_point(p, reference)[..., None, :]
+    rel = p[..., list(effectors), :] - center_of_mass(p)[..., None, :]
     return np.einsum('...ij,...kj->...ki', yaw_rotation(yaw), rel)
 
 
-def pca_basis(w: np.ndarray, m: int, center: bool = True):
-    """(mean (D,), A (D, m) orthonormal columns, eigenvalues (m,)) of the rows of ``w`` (N, D)."""
-    w = np.asarray(w, float)
-    mean = w.mean(axis=0) if center else np.zeros(w.shape[1])
-    x = w - mean
-    _, s, vt = np.linalg.svd(x, full_matrices=False)
-    m = min(m, vt.shape[0])
-    lam = s[:m] ** 2 / max(len(w) - 1, 1)
-    return mean, vt[:m].T.copy(), lam
+def trunk_relative(positions: np.ndarray, effectors: Sequence[int]) -> np.ndarray:
+    """The effectors relative to the ShoulderCenter in the trunk's own frame (x forward, y left,
+    z from the HipCenter to the ShoulderCenter), (..., len(effectors), 3): what the arms do, not
+    the body carrying them (a squat or a lunge moves the hands relative to the COM, not here)."""
+    p = np.asarray(positions, float)
+    up = p[..., JOINT_INDEX['ShoulderCenter'], :] - p[..., JOINT_INDEX['HipCenter'], :]
+    up = up / np.maximum(np.linalg.norm(up, axis=-1, keepdims=True), 1e-9)
+    lat = p[..., JOINT_INDEX['ShoulderLeft'], :] - p[..., JOINT_INDEX['ShoulderRight'], :]
+    lat = lat - np.sum(lat * up, axis=-1, keepdims=True) * up
+    lat = lat / np.maximum(np.linalg.norm(lat, axis=-1, keepdims=True), 1e-9)
+    fwd = np.cross(lat, up)
+    rot = np.stack([fwd, lat, up], axis=-2)                      # rows: the trunk's axes
+    rel = p[..., list(effectors), :] - p[..., JOINT_INDEX['ShoulderCenter'], None, :]
+    return np.einsum('...ij,...kj->...ki', rot, rel)
+
+
+def pca_columns(w: np.ndarray, m: int, center: bool = True):
+    """(mean (D,), A (D, m) orthonormal columns, eigenvalues (m,)) of the rows of ``w`` (N, D):
+    :func:`skeleton_core.geometry.pca` with the axes as the columns of A (Ishigaki's notation)."""
+    mean, axes, lam = pca(w, m, center)
+    return mean, axes.T.copy(), lam
 
 
 def reconstruction_error(v: np.ndarray, a: np.ndarray) -> np.ndarray:
@@ -169,57 +171,48 @@ class RecognizerParams:
     e2_threshold: float = param(0.04, "Eq. 6 threshold: consistency of the user's change over "
                                 "lag frames with the example", range=(1e-5, 10.0))
     tau: float = param(0.25, 'weight (s) of the effector velocities against positions in w',
-                       range=(0.0, 2.0))
-    lag: int = param(2, 'frames of the velocity and of dw in Eq. 6', range=(1, 30), read_only=True)
-    smoothing: float = param(0.03, 'time constant (s) of the e1/e2 averages', range=(0.0, 5.0))
+                       range=(0.0, 2.0), public=False)
+    lag: int = param(2, 'frames of the velocity and of dw in Eq. 6', range=(1, 30), read_only=True,
+                     public=False)
+    smoothing: float = param(0.03, 'time constant (s) of the e1/e2 averages', range=(0.0, 5.0),
+                             public=False)
     min_activity: float = param(0.3, "share of the example's RMS effector speed the user must "
                                 "reach to be imitating (a still pose has dw = 0)",
                                 range=(0.0, 10.0))
     activity_window: float = param(0.3, 'time constant (s) of the speed average of the activity '
-                                   'gate', range=(0.0, 10.0))
+                                   'gate', range=(0.0, 10.0), public=False)
     activity_lag: int = param(9, "frames of the activity gate's displacement", range=(1, 60),
-                              read_only=True)
+                              read_only=True, public=False)
     prefilter: float = param(0.03, 'time constant (s) of the low-pass on the relative joint '
-                             'positions before the features (sensor noise)', range=(0.0, 1.0))
-    combine: str = param('and', "and: e1 and e2 under their thresholds; or: either (the paper's "
-                         "consistency read as an alternative to similarity)",
-                         choices=('and', 'or'))
-    normalise: bool = param(False, "e1/e2 in units of each example's own spread (total "
-                            "variance of w, mean |dw|^2); the thresholds are then in those units")
+                             'positions before the features (sensor noise)', range=(0.0, 1.0),
+                             public=False)
     max_change_share: float = param(1.0, "largest share of the user's effector displacement "
                                     "over share_lag frames outside the example's position "
                                     "subspace, for all features (each example has its own "
                                     "too; 1 = off): a change the example never makes, e.g. "
                                     "one hand punching against a two-handed stroke",
-                                    range=(0.0, 1.0))
+                                    range=(0.0, 1.0), public=False)
     share_lag: int = param(4, "frames of the change-share gate's displacement", range=(1, 60),
-                           read_only=True)
+                           read_only=True, public=False)
     share_window: float = param(0.1, 'time constant (s) of the change-share averages',
-                                range=(0.0, 10.0))
-    reference: str = param('com', "origin of the relative effector positions: com (the paper's "
-                           "whole-body COM) or shoulders (ShoulderCenter: independent of the legs)",
-                           choices=REFERENCES)
-    segment_frames: int = param(0, "frames of the user's recent motion matched against the "
-                                "example at its best phase for e1 (Sec. 6.1 compares a short "
-                                "segment: e1 = min over the example's phase of the mean "
-                                "squared distance of the segment's w to the example's; 0 = "
-                                "Eq. 5 on the current frame)", range=(0, 60), read_only=True)
+                                range=(0.0, 10.0), public=False)
     missing_effectors: bool = param(True, "compare only the effectors the sensor TRACKS when "
                                     "others are INFERRED or NOT_TRACKED (occluded: frozen, "
                                     "collapsed or dropped): e1/e2 of the observed coordinates "
                                     "with the PCA coefficients fitted to them; false = every "
-                                    "effector as reported")
+                                    "effector as reported", public=False)
     e2_approach: bool = param(True, "e2 leaves out the part of the change that heads back "
                               "into the example's subspace (the residual shrinking: a user "
-                              "moving into the example's range at the onset of an imitation)")
+                              "moving into the example's range at the onset of an imitation)",
+                              public=False)
     missing_prior: float = param(0.1, "the missing-data fit's residual variance sigma^2 (D - m) "
                                  "(body-height^2 units) against the example's variance along "
                                  "each component: c = argmin |v_o - A_o c|^2 + sigma^2 sum "
                                  "c_i^2 / lambda_i (0 = plain least squares)",
-                                 range=(0.0, 10.0))
+                                 range=(0.0, 10.0), public=False)
     track_settle: int = param(3, "TRACKED frames in a row before an effector counts as observed "
                               "again (its velocity over lag frames and the low-pass settle)",
-                              range=(1, 30), read_only=True)
+                              range=(1, 30), read_only=True, public=False)
     fps: float = 30.0
 
     def validate(self) -> None:
@@ -227,8 +220,6 @@ class RecognizerParams:
         for k in ('e1_threshold', 'e2_threshold', 'tau', 'fps'):
             if not getattr(self, k) > 0:
                 raise ValueError(f'{k} must be positive')
-        if self.combine not in ('and', 'or'):
-            raise ValueError("combine must be 'and' or 'or'")
         if not 1 <= int(self.lag) <= 30 or not 1 <= int(self.activity_lag) <= 60:
             raise ValueError('lag must be in [1, 30] frames, activity_lag in [1, 60]')
         if not (self.smoothing >= 0 and self.min_activity >= 0 and self.activity_window >= 0):
@@ -239,7 +230,7 @@ def feature_vectors(positions: np.ndarray, effectors: Sequence[int], height: flo
                     params: RecognizerParams) -> np.ndarray:
     """w for every frame of a clip (T, 20, 3) -> (T, 6 * len(effectors)); the first ``lag``
     frames get the velocity of frame ``lag``."""
-    r = relative_effectors(positions, effectors, reference=params.reference) / height
+    r = relative_effectors(positions, effectors) / height
     lag = int(params.lag)
     v = np.zeros_like(r)
     if len(r) > lag:
@@ -262,49 +253,33 @@ class ExampleModel:
         self.height = float(height or estimate_height(self.positions[0]))
         w = feature_vectors(self.positions, self.effectors, self.height, params)
         self.w = w
-        self.mean, self.A, self.eigenvalues = pca_basis(w, components)
+        self.mean, self.A, self.eigenvalues = pca_columns(w, components)
         # the change-share gate's subspace: every direction in which the example's relative
         # positions move (the principal components up to 99 % of their variance)
         npos = 3 * len(self.effectors)
-        _, a_pos, lam_pos = pca_basis(w[:, :npos], npos)
+        _, a_pos, lam_pos = pca_columns(w[:, :npos], npos)
         keep = int(np.searchsorted(np.cumsum(lam_pos) / max(lam_pos.sum(), 1e-12), 0.99)) + 1
         self.A_pos = a_pos[:, :min(keep, npos)]
-        # the example's own spread: total variance of w and of dw over ``lag`` frames (the units
-        # of the normalised errors)
         lag = min(int(params.lag), len(w) - 1)
-        self.var_w = float(np.sum(np.var(w, axis=0)))
-        self.var_dw = float(np.mean(np.sum((w[lag:] - w[:-lag]) ** 2, axis=1)))
         # the variance of dw's coefficients (the missing-data fit's prior for e2)
         self.eigenvalues_dw = np.var((w[lag:] - w[:-lag]) @ self.A, axis=0)
         # the activity gate's normaliser: the example's RMS effector speed measured as the gate
         # measures it (displacement over activity_lag frames)
-        r = relative_effectors(self.positions, self.effectors,
-                               reference=params.reference) / self.height
+        r = relative_effectors(self.positions, self.effectors) / self.height
         k = min(int(params.activity_lag), len(r) - 1)
         v = (r[k:] - r[:-k]).reshape(len(r) - k, -1) * (params.fps / k)
         self.rms_speed = float(np.sqrt(np.mean(np.sum(v * v, axis=1))))
         # per effector: its share of the mean square speed (the gate over observed effectors)
         self.ms_speed = np.mean(v * v, axis=0).reshape(len(self.effectors), 3).sum(axis=1)
-
-    def segment_error(self, seg: np.ndarray) -> float:
-        """min over the example's phase phi (cyclic) of the mean over the segment's frames j of
-        |u_j - w_ex(phi - (L-1) + j)|^2, for the user's last L feature vectors ``seg`` (L, D),
-        oldest first."""
-        seg = np.asarray(seg, float)
-        n = len(seg)
-        cache = getattr(self, '_seg_norm', None)
-        if cache is None or cache[0] != n:
-            wn = np.sum(self.w * self.w, axis=1)
-            cache = self._seg_norm = (n, sum(np.roll(wn, n - 1 - j) for j in range(n)))
-        g = seg @ self.w.T                                     # (L, T)
-        cross = sum(np.roll(g[j], n - 1 - j) for j in range(n))
-        d = float(np.sum(seg * seg)) - 2.0 * cross + cache[1]
-        return float(max(np.min(d), 0.0) / n)
+        # the arm-activity gate's normaliser: per effector, the example's mean square speed of
+        # the effector relative to the trunk (:func:`trunk_relative`), measured the same way
+        ra = trunk_relative(self.positions, self.effectors) / self.height
+        va = (ra[k:] - ra[:-k]).reshape(len(ra) - k, -1) * (params.fps / k)
+        self.ms_arm_speed = np.mean(va * va, axis=0).reshape(len(self.effectors), 3).sum(axis=1)
 
     def errors(self, w: np.ndarray, dw: np.ndarray, observed: Optional[np.ndarray] = None):
         """(e1, e2) of Eq. 5-6 (on the ``observed`` coordinates (D,) bool only, when given:
-        :func:`partial_reconstruction_error`); divided by the example's total variance of w and
-        mean |dw|^2 when ``params.normalise``."""
+        :func:`partial_reconstruction_error`)."""
         prm = getattr(self, 'params', None)
         p1 = p2 = None
         pf = float(getattr(prm, 'missing_prior', 0.0))
@@ -316,10 +291,7 @@ class ExampleModel:
         dr, _ = residual(dw, self.A, observed, p2)
         if getattr(prm, 'e2_approach', False):
             dr = approach_discount(r, dr)
-        e1, e2 = float(r @ r) * scale, float(dr @ dr) * scale
-        if getattr(prm, 'normalise', False):
-            return e1 / max(self.var_w, 1e-12), e2 / max(self.var_dw, 1e-12)
-        return e1, e2
+        return float(r @ r) * scale, float(dr @ dr) * scale
 
 
 @dataclass
@@ -344,17 +316,17 @@ class IntentionRecognizer:
         self.params = params
         self.height: Optional[float] = None
         self._hist = []      # the last lag + 1 relative joint arrays
+        self._thist = []     # the same, trunk-relative (:func:`trunk_relative`)
         self._whist: Dict[str, list] = {}   # the last lag + 1 feature vectors per model
         self._avg: Dict[str, list] = {}
-        self._shist: Dict[str, list] = {}   # the last segment_frames feature vectors per model
         self._last_t: Optional[float] = None
         self._tracked_run: Optional[np.ndarray] = None   # TRACKED frames in a row per joint
 
     def reset(self) -> None:
         self._tracked_run = None
         self._hist = []
+        self._thist = []
         self._whist = {}
-        self._shist = {}
         self._avg = {}
         self._last_t = None
 
@@ -374,18 +346,23 @@ class IntentionRecognizer:
             run = self._tracked_run if self._tracked_run is not None else np.full(len(tr), 10 ** 6)
             self._tracked_run = np.where(tr, run + 1, 0)
         yaw = facing_yaw(p)
-        com = reference_point(p, prm.reference)
+        com = center_of_mass(p)
         rot = yaw_rotation(yaw)
         rel = (p - com) @ rot.T / self.height          # every joint, body frame, height units
+        dt_f = 1.0 / prm.fps if self._last_t is None else max(t - self._last_t, 1e-3)
+        g = 1.0 - math.exp(-dt_f / prm.prefilter) if prm.prefilter > 0 else 1.0
         if self._hist and prm.prefilter > 0:
-            dt_f = 1.0 / prm.fps if self._last_t is None else max(t - self._last_t, 1e-3)
-            g = 1.0 - math.exp(-dt_f / prm.prefilter)
             rel = self._hist[-1] + g * (rel - self._hist[-1])
+        trunk = trunk_relative(p, range(len(p))) / self.height
+        if self._thist and prm.prefilter > 0:
+            trunk = self._thist[-1] + g * (trunk - self._thist[-1])
         self._hist.append(rel)
+        self._thist.append(trunk)
         lag = int(prm.lag)
         keep = max(lag, int(prm.activity_lag), int(prm.share_lag)) + 1
         if len(self._hist) > keep:
             self._hist.pop(0)
+            self._thist.pop(0)
         dt = 1.0 / prm.fps if self._last_t is None else max(t - self._last_t, 1e-3)
         self._last_t = t
         alpha = 1.0 if prm.smoothing <= 0 else 1.0 - math.exp(-dt / prm.smoothing)
@@ -415,40 +392,42 @@ class IntentionRecognizer:
             dw = w - wh[0]
             obs_w = None if obs_e is None else np.tile(np.repeat(obs_e, 3), 2)
             e1, e2 = m.errors(w, dw, obs_w)
-            nseg = int(prm.segment_frames)
-            if nseg > 0:
-                sh = self._shist.setdefault(m.name, [])
-                sh.append(w)
-                if len(sh) > nseg:
-                    sh.pop(0)
-                e1 = m.segment_error(np.array(sh))
             va = (r - old_a[idx].reshape(-1)) * (prm.fps / ka) if ka else np.zeros_like(r)
+            old_t = self._thist[-1 - ka]
+            vt = ((trunk[idx] - old_t[idx]).reshape(-1) * (prm.fps / ka) if ka
+                  else np.zeros_like(r))
             # the share of the displacement over share_lag frames outside the example's
             # position subspace (energies averaged over share_window, then divided)
             vs = r - old_s[idx].reshape(-1)
             if obs_e is None:
                 sp2 = float(np.sum(va * va)) / max(m.rms_speed, 1e-9) ** 2
+                arm2 = float(np.sum(vt * vt)) / max(float(m.ms_arm_speed.sum()), 1e-18)
                 out2, all2 = float(reconstruction_error(vs, m.A_pos)), float(np.sum(vs * vs))
             else:     # the observed effectors against the example's speed of the same ones
                 obs_p = np.repeat(obs_e, 3)
                 sp2 = float(np.sum(va[obs_p] ** 2)) / max(float(m.ms_speed[obs_e].sum()), 1e-18)
+                arm2 = (float(np.sum(vt[obs_p] ** 2))
+                        / max(float(m.ms_arm_speed[obs_e].sum()), 1e-18))
                 all2 = float(np.sum(vs[obs_p] ** 2))
                 out2 = (partial_reconstruction_error(vs, m.A_pos, obs_p)
                         * (int(obs_p.sum()) - m.A_pos.shape[1]) / (len(obs_p) - m.A_pos.shape[1])
                         if int(obs_p.sum()) > m.A_pos.shape[1] else all2)
             a = self._avg.get(m.name)
             if a is None:
-                a = self._avg[m.name] = [e1, e2, sp2, out2, all2]
+                a = self._avg[m.name] = [e1, e2, sp2, out2, all2, arm2]
             else:
                 a[0] += alpha * (e1 - a[0])
                 a[1] += alpha * (e2 - a[1])
                 a[2] += beta * (sp2 - a[2])
                 a[3] += gam * (out2 - a[3])
                 a[4] += gam * (all2 - a[4])
+                a[5] += beta * (arm2 - a[5])
             share = a[3] / max(a[4], 1e-12)
             act = math.sqrt(max(a[2], 0.0))
+            if ARM_ACTIVITY:      # the arms themselves must move, not only the body carrying them
+                act = min(act, math.sqrt(max(a[5], 0.0)))
             r1, r2 = a[0] / prm.e1_threshold, a[1] / prm.e2_threshold
-            ratio = max(r1, r2) if prm.combine == 'and' else min(r1, r2)
+            ratio = max(r1, r2)   # e1 and e2 both under their thresholds
             imitating = bool(ratio < 1.0 and act >= prm.min_activity and k >= lag
                              and share <= min(prm.max_change_share, m.max_change_share))
             conf = 1.0 / (1.0 + ratio * ratio)
@@ -465,6 +444,6 @@ class IntentionRecognizer:
 
 
 __all__ = ['ExampleModel', 'IntentionRecognizer', 'RecognizerParams', 'Recognition',
-           'center_of_mass', 'relative_effectors', 'pca_basis', 'reconstruction_error',
+           'center_of_mass', 'relative_effectors', 'pca_columns', 'reconstruction_error',
            'partial_reconstruction_error', 'residual', 'approach_discount',
            'feature_vectors', 'yaw_rotation']

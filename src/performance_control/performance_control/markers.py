@@ -6,6 +6,7 @@ from __future__ import annotations
 from typing import Callable, Dict, List, Optional, Tuple
 
 import numpy as np
+from physics_sim.feature_geometry import ROCK_SIZE
 
 from .composition import Obstacles
 from .features import World
@@ -41,6 +42,10 @@ def world_shapes(world: World, obstacles: Optional[Obstacles] = None) -> List[Sh
             elif g.type in ('box', 'volume'):
                 rgba = (0.2, 0.4, 0.9, 0.25) if g.type == 'volume' else (0.2, 0.5, 0.9, 1.0)
                 out.append(('cube', g.vec('center'), ident, 2 * g.vec('half'), rgba, f.name))
+            elif g.type == 'rock':
+                d = 2 * g.num('size', ROCK_SIZE)
+                out.append(('sphere', g.vec('center'), ident, np.array([d, d, d]),
+                            (0.6, 0.35, 0.2, 1.0), f.name))
             elif g.type == 'plane':
                 out.append(('cube', np.array([0.0, 0.0, -0.005]), ident,
                             np.array([20.0, 20.0, 0.01]), (0.8, 0.8, 0.8, 0.3), f.name))

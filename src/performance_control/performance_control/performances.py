@@ -14,10 +14,16 @@ from types import SimpleNamespace
 from typing import Dict, List, Optional, Tuple
 
 import numpy as np
-from skeleton_core.model import TRACKED, Body, standard_body
+from skeleton_core.model import (ANKLE_LEFT, ANKLE_RIGHT, FOOT_LEFT, FOOT_RIGHT, HIP_LEFT,
+                                 HIP_RIGHT, KNEE_LEFT, KNEE_RIGHT, TRACKED, Body, standard_body)
 from skeleton_data.motions import builtin_clips, pose_from_rotations
 
 from .examples import FPS, _legs, imitation, random_style
+from skeleton_eval.sensor_model import SensorModel
+
+
+_LEG_JOINTS = (HIP_LEFT, HIP_RIGHT, KNEE_LEFT, KNEE_RIGHT, ANKLE_LEFT, ANKLE_RIGHT, FOOT_LEFT,
+               FOOT_RIGHT)
 
 
 def performer(rng: np.random.Generator) -> Tuple[Body, Dict, float]:
@@ -84,6 +90,43 @@ def jump_stream(rng: np.random.Generator, n_jumps: int = 4, fps: float = FPS,
     return p
 
 
+def _turn(p: np.ndarray, yaw: np.ndarray) -> np.ndarray:
+    """Each frame (T, 20, 3) turned by ``yaw`` (T,) rad about the vertical through its hips."""
+    c, s = np.cos(yaw), np.sin(yaw)
+    rot = np.zeros((len(yaw), 3, 3))
+    rot[:, 0, 0], rot[:, 0, 1], rot[:, 1, 0], rot[:, 1, 1], rot[:, 2, 2] = c, -s, s, c, 1.0
+    piv = p[:, :1, :].copy()
+    piv[..., 2] = 0.0
+    return np.einsum('tij,tkj->tki', rot, p - piv) + piv
+
+
+def continuous_stream(world, rng: np.random.Generator, fps: float = FPS):
+    """One continuous performance (Sec. 8.3): stand, turn 45 deg right while walking in place (the
+    character walks and turns towards the water), walk in place until the character is in the
+    water, swim a breaststroke. Returns (positions (T, 20, 3) world, schedule
+    [(start s, what the user does)]) with the user's body, style and tempo drawn from ``rng``."""
+    body, style, tempo = performer(rng)
+    walk = dict(world.features['floor'].example.params)
+    walk['period'] = float(walk.get('period', 1.1)) * tempo
+    swim = dict(world.features['water'].example.params)
+    swim['period'] = float(swim.get('period', 1.5)) * tempo
+    sched = [(0.0, 'stand'), (1.0, 'walk'), (8.0, 'swim')]
+    total = 15.0
+    n = int(round(total * fps))
+    t = np.arange(n) / fps
+    env_w = _envelope(n, [(1.0, 8.0)], 0.2, fps)
+    env_s = _envelope(n, [(8.3, total + 1.0)], 0.25, fps)
+    pw = imitation('walk_cycle', walk, body, n, fps, style, active=env_w)
+    ps = imitation('breaststroke', swim, body, n, fps, style, active=env_s)
+    arms = [j for j in range(pw.shape[1]) if j not in _LEG_JOINTS]
+    p = pw.copy()
+    sw = (env_s > 0)[:, None]
+    p[:, arms] = np.where(sw[..., None], ps[:, arms], pw[:, arms])
+    yaw = -np.radians(45) * np.clip((t - 1.5) / 1.0, 0, 1)   # half turned: still tracked
+    return _turn(p, yaw), sched
+
+
+
 def non_imitation_clips(seed: int) -> List[Tuple[str, np.ndarray]]:
     """Walking, boxing (punch, kick) and standing clips (name, (T, 20, 3) world)."""
     out = []
@@ -104,6 +147,9 @@ def non_imitation_clips(seed: int) -> List[Tuple[str, np.ndarray]]:
 # the 43 deg vertical field of view; at the default 2.5 m / 0.8 m (sensor_model.yaml) raised hands
 # leave it (NOT_TRACKED). 3.5 m away with the sensor 1.2 m up sees 2.4 m high hands and the feet.
 PERFORMANCE_PLACEMENT = {'placement': {'distance_m': 3.5, 'sensor_height_m': 1.2}}
+# The continuous performance's sensor: the same placement, the user's turns kept (the sensor model
+# otherwise keeps every user facing the screen)
+TURNING_PLACEMENT = {'placement': {**PERFORMANCE_PLACEMENT['placement'], 'keep_facing': False}}
 SENSOR_HEIGHT = 1.2
 
 
@@ -112,7 +158,6 @@ def to_sensor(positions: np.ndarray, name: str, seed: int, noise: bool = True,
     """A world clip as the sensor reports it (sensor frame): the sensor model's stream (placement,
     noise, dropouts; scenario a) or, with ``noise=False``, just placed 2.5 m ahead facing it.
     With ``states``: (positions, tracking states (T, 20) uint8; all TRACKED without noise)."""
-    from skeleton_eval.sensor_model import SensorModel
     sm = SensorModel(PERFORMANCE_PLACEMENT if sensor_params is None else sensor_params, seed=seed)
     clip = SimpleNamespace(name=name, positions=positions, fps=FPS)
     if not noise:
@@ -124,4 +169,5 @@ def to_sensor(positions: np.ndarray, name: str, seed: int, noise: bool = True,
 
 
 __all__ = ['PERFORMANCE_PLACEMENT', 'SENSOR_HEIGHT', 'imitation_stream', 'jump_stream',
+           'continuous_stream', 'TURNING_PLACEMENT',
            'non_imitation_clips', 'to_sensor', 'performer']

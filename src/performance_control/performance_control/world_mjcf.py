@@ -23,6 +23,7 @@ from dataclasses import dataclass
 from typing import Dict, List, Tuple
 
 import numpy as np
+from physics_sim.feature_geometry import ROCK_SIZE
 from physics_sim.mjcf_body import fmt
 
 from .features import EFFECTORS, Feature, World
@@ -83,6 +84,11 @@ def feature_xml(f: Feature) -> Tuple[List[str], List[Anchor]]:
                 f'<geom name="{n}_geom" type="box" size="{fmt(g.vec("half"))}" '
                 f'mass="{g.num("mass"):.6g}" {col} rgba="0.2 0.5 0.9 1"/></body>')
             anchors.append(Anchor(n, f.name))
+        elif g.type == 'rock':   # a climbing hold: a point to hold, no collision
+            lines.append(f'<geom name="{n}" type="sphere" pos="{fmt(g.vec("center"))}" '
+                         f'size="{g.num("size", ROCK_SIZE):.6g}" contype="0" conaffinity="0" '
+                         f'rgba="0.6 0.35 0.2 1"/>')
+            static = True
         elif g.type == 'volume':
             lines.append(f'<geom name="{n}" type="box" pos="{fmt(g.vec("center"))}" '
                          f'size="{fmt(g.vec("half"))}" contype="0" conaffinity="0" '

@@ -13,7 +13,8 @@ explicit Euler integration as the paper and with implicitfast (``actuator_pd_imp
   interleaved in chunks of 10 frames and each figure is the median over its chunks,
 * steady-state tracking error on a static T-pose and on the built-in motion clips
   (``skeleton_data.motions.builtin_clips``, 30 fps), segment length preservation, pinned foot drift,
-* output jitter against the raw input with Kinect-like noise (mean |second difference|),
+* output jitter against the raw input with Kinect-like noise (mean joint acceleration, m/s^2, as
+  ``skeleton_eval.metrics.jitter``),
 * the stability limits (largest stable Ke at 2 ms with the damping ratio kept, largest stable Kd)
   of explicit_pd and of actuator_pd with either integrator, and the constraint option's stiffest
   setting,
@@ -33,9 +34,11 @@ from typing import Dict
 
 import numpy as np
 from skeleton_core.model import NUM_JOINTS, segment_lengths, standard_body
+from skeleton_eval import metrics
 
 from .controller import Gains
 from .simulation import SimConfig, Simulation
+from .controllers import explicit_pd as mod
 
 SENSOR_SHIFT = np.array([2.5, 0.0, -0.8])  # world -> sensor frame: person 2.5 m ahead, sensor 0.8 m up
 # (name, controller, integrator): every controller, actuator_pd (the default: Euler, explicit as the
@@ -98,14 +101,12 @@ class _numpy_kernel:
         self.on = on
 
     def __enter__(self):
-        from .controllers import explicit_pd as mod
         self.saved = mod.explicit_pd_wrenches
         if self.on:
             from .controller import _explicit_pd_numpy
             mod.explicit_pd_wrenches = _explicit_pd_numpy
 
     def __exit__(self, *exc):
-        from .controllers import explicit_pd as mod
         mod.explicit_pd_wrenches = self.saved
 
 
@@ -130,9 +131,8 @@ def run_clip(controller: str, seq: np.ndarray, ori=None, noise: float = 0.0, see
 
 
 def jitter(seq: np.ndarray) -> float:
-    """Mean norm of the second difference of joint positions (m/frame^2)."""
-    a = seq[2:] - 2 * seq[1:-1] + seq[:-2]
-    return float(np.mean(np.linalg.norm(a, axis=-1)))
+    """Mean joint acceleration magnitude (m/s^2) of a 30 fps sequence (skeleton_eval.metrics)."""
+    return metrics.jitter(seq, fps=30.0)[1]
 
 
 def tracking(quick: bool) -> Dict:
@@ -163,8 +163,8 @@ def tracking(quick: bool) -> Dict:
         name, seq, ori = clips(quick)[0]
         rr = run_clip(ctrl, seq, ori, noise=0.015, seed=1)
         jr, jo = jitter(rr['raw'][30:]), jitter(rr['sensor'][30:])
-        r['jitter_raw_mm'] = 1000 * jr
-        r['jitter_out_mm'] = 1000 * jo
+        r['jitter_raw_m_s2'] = jr
+        r['jitter_out_m_s2'] = jo
         r['jitter_reduction_pct'] = 100 * (1 - jo / jr)
         res[ctrl] = r
     return res
@@ -342,7 +342,7 @@ def main(argv=None) -> int:
               f'p95 {r["clip_err_p95_cm"]:.2f} cm {r["clip_err_by_clip_cm"]}', flush=True)
         print(f'  [{ctrl}] segment length error max {r["segment_length_err_max_mm"]:.4f} mm; '
               f'pinned foot drift max {r["pinned_foot_drift_max_cm"]:.2f} cm; jitter raw '
-              f'{r["jitter_raw_mm"]:.2f} mm -> out {r["jitter_out_mm"]:.2f} mm '
+              f'{r["jitter_raw_m_s2"]:.2f} m/s2 -> out {r["jitter_out_m_s2"]:.2f} m/s2 '
               f'({r["jitter_reduction_pct"]:.0f} % lower)', flush=True)
     res['stability'] = stability(args.quick)
     s = res['stability']

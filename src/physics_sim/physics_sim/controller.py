@@ -31,13 +31,13 @@ class Gains:
     ke: float = param(4000.0, 'Ke of Eq. 1 (N/m), shared by all joints', range=(0.0, 1e6),
                       name='kp')
     kd: float = param(100.0, 'Kd of Eq. 1 (N s/m), shared by all joints', range=(0.0, 1e4))
-    max_force: float = param(800.0, 'bound on |F| of Eq. 1 (N)', range=(0.0, 1e5))
+    max_force: float = param(800.0, 'bound on |F| of Eq. 1 (N)', range=(0.0, 1e5), public=False)
     twist_ke: float = param(400.0, 'Eq. 2 elasticity per unit axial inertia (1/s^2): Ke_i = '
                             'twist_kp * I_i (I_i = axial inertia + armature)', range=(0.0, 1e5),
-                            name='twist_kp')
+                            name='twist_kp', public=False)
     twist_kd: float = param(40.0, 'Eq. 2 damping per unit axial inertia (1/s): Kd_i = twist_kd '
-                            '* I_i', range=(0.0, 1e4))
-    max_torque: float = param(50.0, 'bound on |T| of Eq. 2 (N m)', range=(0.0, 1e4))
+                            '* I_i', range=(0.0, 1e4), public=False)
+    max_torque: float = param(50.0, 'bound on |T| of Eq. 2 (N m)', range=(0.0, 1e4), public=False)
 
     def validate(self) -> None:
         for name in ('ke', 'kd', 'max_force', 'twist_ke', 'twist_kd', 'max_torque'):

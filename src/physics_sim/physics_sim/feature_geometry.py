@@ -9,7 +9,9 @@ physics is below ``performance_control`` in the package layers.
 Primitives (world frame, floor at z = 0, metres): ``plane`` (the floor), ``capsule`` (``from``,
 ``to``, ``radius``), ``box`` (``center``, ``half``; with ``stiffness`` a trampoline on a spring),
 ``rope`` (a chain of ``segments`` capsules of ``length`` and ``radius`` hanging from ``top``),
-``volume`` (water: no collision geometry).
+``volume`` (water: no collision geometry), ``rock`` (a climbing hold, Ishigaki et al. 2009 Sec. 8.4:
+one contact point ``center`` and the ``radius`` within which an effector may hold it; drawn and
+collided as a small sphere of ``size``, default 0.04 m).
 """
 from __future__ import annotations
 
@@ -18,8 +20,10 @@ from pathlib import Path
 from typing import Dict, List, Optional
 
 import numpy as np
+import yaml
 
-GEOM_TYPES = ('plane', 'capsule', 'box', 'rope', 'volume')
+GEOM_TYPES = ('plane', 'capsule', 'box', 'rope', 'volume', 'rock')
+ROCK_SIZE = 0.04    # m: the radius of a rock's sphere (the hold itself; ``radius`` is its reach)
 
 
 @dataclass
@@ -61,6 +65,10 @@ def check_geom(g: Geom) -> None:
         if 'stiffness' in g.data:
             for k in ('stiffness', 'damping', 'mass', 'travel'):
                 g.num(k)
+    elif g.type == 'rock':
+        g.vec('center')
+        g.num('radius')
+        g.num('size', ROCK_SIZE)
     elif g.type == 'rope':
         g.vec('top')
         for k in ('length', 'radius', 'segment_mass'):
@@ -95,7 +103,6 @@ def parse_geometry(doc: Dict, path: str = '<dict>') -> Dict[str, List[Geom]]:
 
 def load_geometry(path: str) -> Dict[str, List[Geom]]:
     """:func:`parse_geometry` of a world YAML file (a path: the launch file resolves world names)."""
-    import yaml
     p = Path(path).expanduser()
     if not p.is_file():
         raise FileNotFoundError(f'feature_world: no file {p}')
@@ -112,5 +119,5 @@ def closest_on_segment(p, a, b) -> np.ndarray:
     return a + t * ab
 
 
-__all__ = ['Geom', 'GEOM_TYPES', 'check_geom', 'parse_geometry', 'load_geometry',
+__all__ = ['Geom', 'GEOM_TYPES', 'ROCK_SIZE', 'check_geom', 'parse_geometry', 'load_geometry',
            'closest_on_segment']

@@ -22,6 +22,7 @@ from skeleton_core.model import NOT_TRACKED, NUM_JOINTS, TRACKED
 from skeleton_core.params import build, defaults, split
 
 from .simulation import SimConfig, Simulation
+import functools
 
 
 class PhysicsMethod:
@@ -150,7 +151,6 @@ def register() -> bool:
         from skeleton_eval.evaluation import register_method
     except ImportError:
         return False
-    import functools
     register_method('physics', functools.partial(make_physics, 'C'),
                     'Shum et al. 2013 Sec. VII: method C, then the PD-tracked MuJoCo character',
                     EVAL_DEFAULTS)

@@ -22,7 +22,7 @@ from typing import Dict, List, Sequence
 import numpy as np
 from skeleton_core.model import JOINT_NAMES
 
-from .feature_geometry import Geom
+from .feature_geometry import ROCK_SIZE, Geom
 from .mjcf_body import fmt
 
 FEATURE_RGBA = '0.55 0.45 0.3 1'
@@ -67,7 +67,7 @@ def holdable_bodies(features: Dict[str, List[Geom]]) -> List[str]:
     out = []
     for name, geoms in features.items():
         for i, g in enumerate(geoms):
-            if g.type == 'capsule' and 'world' not in out:
+            if g.type in ('capsule', 'rock') and 'world' not in out:
                 out.insert(0, 'world')
             elif g.type == 'rope':
                 out += [rope_segment(name, i, s) for s in range(int(g.data['segments']))]
@@ -84,6 +84,9 @@ def geom_xml(name: str, g: Geom, lift: float) -> List[str]:
     up = np.array([0.0, 0.0, lift])
     if g.type == 'capsule':
         return [_capsule(name, g.vec('from') + up, g.vec('to') + up, g.num('radius'))]
+    if g.type == 'rock':
+        return [f'      <geom name="{name}" type="sphere" pos="{fmt(g.vec("center") + up)}" '
+                f'size="{g.num("size", ROCK_SIZE):.6g}" rgba="{FEATURE_RGBA}"/>']
     if g.type == 'box':
         return [f'      <geom name="{name}" type="box" pos="{fmt(g.vec("center") + up)}" '
                 f'size="{fmt(g.vec("half"))}" rgba="{FEATURE_RGBA}"/>']
@@ -104,7 +107,7 @@ def features_xml(features: Dict[str, List[Geom]], lift: float = 0.0) -> str:
 def hand_excludes_xml(features: Dict[str, List[Geom]], hand_bodies: Sequence[str]) -> str:
     """``<exclude>`` lines (inside ``<contact>``) between holdable bodies and hand bodies."""
     held = [feature_body(n) for n, geoms in features.items()
-            if any(g.type == 'capsule' for g in geoms)]
+            if any(g.type in ('capsule', 'rock') for g in geoms)]
     held += [b for b in holdable_bodies(features) if b != 'world']
     return '\n'.join(f'    <exclude body1="{f}" body2="{b}"/>' for f in held for b in hand_bodies)
 

@@ -19,6 +19,9 @@ from .mjcf_body import (ORIGIN_SITE, CharacterParams, ElementNames, character_ac
                         character_xml_parts, fmt)
 from .mjcf_features import (features_xml, grip_equality_xml, hand_excludes_xml,
                             holdable_bodies)
+from dataclasses import replace
+from skeleton_core.model import HAND_LEFT, HAND_RIGHT, SEGMENT_CHILDREN
+from .mjcf_body import joint_anchor
 
 ALL_BITS = 0x7FFFFFFF
 OBJECT_KINDS = ('box', 'ball', 'mace')
@@ -131,9 +134,6 @@ def world_xml(characters: Sequence[CharacterEntry], objects: Sequence[ObjectSpec
     ``features`` ({name: [Geom]}, :mod:`physics_sim.feature_geometry`) their static geometry
     (raised by ``feature_lift``), the hands' grips and contact excludes
     (:mod:`physics_sim.mjcf_features`); without, the model is exactly as before."""
-    from dataclasses import replace
-    from skeleton_core.model import HAND_LEFT, HAND_RIGHT, SEGMENT_CHILDREN
-    from .mjcf_body import joint_anchor
     params = params or WorldParams()
     integ = {'euler': 'Euler', 'implicitfast': 'implicitfast', 'implicit': 'implicit',
              'rk4': 'RK4'}[params.integrator]

@@ -81,14 +81,14 @@ class PhysicsNodeConfig:
     input_depth: int = param(
         1, 'input queue depth: 1 = the character always tracks the newest target (when ticks '
         'fall behind the input, stale targets are skipped, not queued); more = every target is '
-        'applied, at the cost of latency under load', range=(1, 100), read_only=True)
+        'applied, at the cost of latency under load', range=(1, 100), read_only=True, public=False)
     sync_to_input: bool = param(
         True, 'tick as soon as a target arrives (phase-locked to the sensor: the output leaves '
         'right after its input instead of up to one period later); the timer keeps the output '
         'rate when input is slower or stops. An input tick simulates the frame time since the '
         'previous one (capture stamps; 0.5 to 1.5 periods), a timer tick the wall time: frames '
         'delivered together after a delay tick each; a target sooner than 0.75 period after '
-        'the last by its stamp is simulated 0.75 period after it')
+        'the last by its stamp is simulated 0.75 period after it', public=False)
     user_timeout_s: float = param(1.0, "remove a character whose user is absent this long (s) "
                                   "of the input's time (running on while nothing arrives)",
                                   range=(0.05, 60.0))
@@ -100,11 +100,10 @@ class PhysicsNodeConfig:
                        read_only=True)
     mace_hand: str = param('right', 'hand holding the mace', choices=('left', 'right'),
                            read_only=True)
-    auto_throw_period: float = param(0.0, "throw a ball at the first character's head every N s "
-                                     '(0 = off)', range=(0.0, 600.0))
     push_duration: float = param(0.1, 'duration of pushes from the ~/push topic (s)',
-                                 range=(0.001, 5.0))
-    frame_id: str = param('kinect', 'frame of the outputs until an input arrives', read_only=True)
+                                 range=(0.001, 5.0), public=False)
+    frame_id: str = param('kinect', 'frame of the outputs until an input arrives', read_only=True,
+                          public=False)
     intention_topic: str = param('/control/intention', 'with feature_world: the control '
                                  "node's engaged effectors (skeleton_msgs/Intention), whose hands "
                                  'grip the features', read_only=True)
@@ -159,7 +158,6 @@ class PhysicsNode(Node):
         self._user_stamp: Dict[int, int] = {}   # stamp of each user's newest target
         self._published_empty = True
         self._mace_given = False
-        self._next_throw = None
         self._wall_in_step = 0.0
         self._sim_in_step = 0.0
         self._last_tick: Optional[float] = None
@@ -351,13 +349,6 @@ class PhysicsNode(Node):
             dt = period
         self._last_tick = now
         self._expire(now)
-        throw = self.params['auto_throw_period']
-        if throw > 0 and self.sim.characters:
-            if self._next_throw is None or now >= self._next_throw:
-                if self._next_throw is not None:
-                    self.sim.throw_at(next(iter(self.sim.characters)))
-                    self._prune_thrown()
-                self._next_throw = now + throw
         # whole physics steps; the remainder is carried to the next tick (sim time = wall time)
         ts = self.params['timestep']
         self._time_debt += dt
@@ -369,11 +360,6 @@ class PhysicsNode(Node):
             self._wall_in_step = 0.9 * self._wall_in_step + 0.1 * (time.perf_counter() - t0)
             self._sim_in_step = 0.9 * self._sim_in_step + 0.1 * steps * ts
         self._publish()
-
-    def _prune_thrown(self, keep: int = 8) -> None:
-        thrown = [o.name for o in self.sim.objects if o.name.startswith('thrown')]
-        for name in thrown[:-keep]:
-            self.sim.remove_object(name)
 
     def _publish(self) -> None:
         states = self.sim.states()

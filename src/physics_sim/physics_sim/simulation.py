@@ -55,6 +55,8 @@ from .frames import SensorPose
 from .mjcf_world import ObjectSpec
 from .posture import is_identity, joint_quats_to_segment, segment_quats_to_joints
 from .world import Shared, World, controller_for
+from skeleton_core.model import SEGMENT_NAMES
+import time
 
 
 class Simulation:
@@ -489,7 +491,6 @@ class Simulation:
 
     @staticmethod
     def segment_index(segment) -> int:
-        from skeleton_core.model import SEGMENT_NAMES
         if isinstance(segment, (int, np.integer)):
             if 0 <= int(segment) < len(SEGMENTS):
                 return int(segment)
@@ -571,7 +572,6 @@ def warm_up() -> float:
     """Compile (or load from numba's cache) the compiled kernels -- explicit_pd's Eq. 1, the target
     orientations -- by stepping a throw-away one-character world once, so that a node does it at
     start and not on its first frame. Returns the seconds it took."""
-    import time
     t0 = time.perf_counter()
     body = standard_body()
     sim = Simulation(SimConfig(controller='explicit_pd', body_height=body.height))

@@ -466,6 +466,8 @@ class World:
             for i, g in enumerate(geoms):
                 if g.type == 'capsule':
                     ax.append((g.vec('from') + up, g.vec('to') + up, 'world'))
+                elif g.type == 'rock':      # a point: the hand grips the hold's centre
+                    ax.append((g.vec('center') + up, g.vec('center') + up, 'world'))
                 elif g.type == 'rope':
                     seg = g.num('length')
                     for s in range(int(g.data['segments'])):

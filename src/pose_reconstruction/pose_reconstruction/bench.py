@@ -35,6 +35,8 @@ from .optimizer import NaturalPostureOptimizer
 from .posture_space import as_database_arrays, parent_relative_error
 from .reconstructor import Reconstructor
 from .synthetic import SyntheticDatabase, corrupt_clip, scenario
+from skeleton_data.database import DatabaseError, load_or_build_default
+from . import search as opt_mod
 
 BUDGET_MS = 1000.0 / 30.0
 
@@ -218,8 +220,6 @@ def main(argv=None) -> int:
 
 def big_database(obs, ts) -> None:
     """Section 6: method C on every CMU clip and its mirror image (no filter)."""
-    from skeleton_data.database import DatabaseError, load_or_build_default
-    from . import search as opt_mod
     try:
         db = load_or_build_default(source='cmu', classes=None, split='all', mirror=True,
                                    threshold=0.0)

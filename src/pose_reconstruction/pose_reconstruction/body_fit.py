@@ -42,18 +42,19 @@ class BodyFitConfig:
     height_frames: int = param(
         30, 'no frame with every joint tracked yet: frames of scale-invariant database fits '
         "whose median is taken as the user's height (query scale, standard-body lengths), then "
-        'kept; 0 = off (standard height)', range=(0, 100000))
+        'kept; 0 = off (standard height)', range=(0, 100000), public=False)
     yaw_rate: float = param(
         0.5, 'few reliable joints (hips, shoulders and every segment unreliable): fraction per '
         'frame of the heading correction that best fits the reliable joints to the database; '
-        '0 = keep the last heading', range=(0.0, 1.0))
+        '0 = keep the last heading', range=(0.0, 1.0), public=False)
     yaw_search: int = param(
         12, 'few reliable joints from the first frame: headings tried against the database '
-        '(from the one the unreliable torso gives); 0 = take that one', range=(0, 360))
+        '(from the one the unreliable torso gives); 0 = take that one', range=(0, 360),
+        public=False)
     yaw_neighbours: int = param(
         5, 'few reliable joints: database postures whose best rotations (each a weighted 2-D '
         'Procrustes of the reliable joints) are averaged into the heading correction',
-        range=(1, 1000))
+        range=(1, 1000), public=False)
 
 
 class BodyFit:

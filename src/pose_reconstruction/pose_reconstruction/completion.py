@@ -23,21 +23,13 @@ from typing import Optional
 
 import numpy as np
 
-from skeleton_core.geometry import NormalizeTransform
-from skeleton_core.model import NUM_JOINTS, PARENTS, ROOT
+from skeleton_core.geometry import NormalizeTransform, pca
+from skeleton_core.model import NUM_JOINTS, PARENTS, ROOT, SPINE
 from skeleton_core.params import check, param
 
 from .posture_space import (PARENT_ROWS, QueryConfig, QueryPreparer, as_database_arrays,
                             fast_denormalize, heading_yaw, joint_set, orientations_to_sensor,
                             rest_directions)
-
-
-def pca_basis(flat: np.ndarray, dims: int):
-    """Mean (60,) and the first ``dims`` principal axes (dims, 60) of the rows of ``flat``."""
-    mean = flat.mean(axis=0)
-    _, s, vt = np.linalg.svd(flat - mean, full_matrices=False)
-    dims = int(min(dims, vt.shape[0]))
-    return mean, vt[:dims], s[:dims]
 
 
 @dataclass
@@ -57,10 +49,10 @@ class CompletionConfig(QueryConfig):
     """Parameters of method A (:class:`PCACompletion`)."""
 
     pca_dims: int = param(7, 'PCA dimensions of the database search (Shum & Ho: 7 of 60)',
-                          range=(1, 60))
+                          range=(1, 60), public=False)
     substitution: str = param('offset', 'offset: hang substituted joints off their parent with '
                               "the user's bone length; absolute: the match's position (paper)",
-                              choices=SUBSTITUTIONS)
+                              choices=SUBSTITUTIONS, public=False)
 
 
 class PCACompletion:
@@ -91,7 +83,7 @@ class PCACompletion:
         key = ('completion_pca', self.pca_dims)
         arrays = self.db.derived.get(key)
         if arrays is None:
-            mean, components, _ = pca_basis(self.db.flat, self.pca_dims)
+            mean, components, _ = pca(self.db.flat, self.pca_dims)
             projected = np.ascontiguousarray((self.db.flat - mean) @ components.T)
             projected_sq = np.einsum('nd,nd->n', projected, projected)
             # -2 x the projections, transposed, for the search: the distance is then one product
@@ -163,7 +155,15 @@ class PCACompletion:
                 # is a tree order); Python floats, as a numpy row operation costs ~1 us each
                 placed = {}
                 for j, o in zip(ms.rows, world_off.tolist()):
-                    if j == ROOT:
+                    if j == ROOT and not (bits >> SPINE) & 1:
+                        # root missing, the spine seen: the root hangs below the observed spine
+                        # with the match's direction and the user's length (anchored at the
+                        # tracked joint, not at a stale INFERRED hip centre)
+                        ln = (self._standard_bones[SPINE] / scale if user_bone_lengths is None
+                              else float(user_bone_lengths[SPINE]))
+                        d = np.dot(self._match_dirs[idx][SPINE] * ln, rot.T)
+                        row = (p[SPINE] - d).tolist()
+                    elif j == ROOT:
                         # root missing: place it from the match relative to the observed hips'
                         # centre
                         tf = NormalizeTransform(yaw=np.asarray(yaw), translation=t)

@@ -46,6 +46,11 @@ from skeleton_core.geometry import facing_yaw
 from skeleton_core.params import param
 from skeleton_core.model import (HAND_LEFT, HAND_RIGHT, NUM_JOINTS, NUM_SEGMENTS,
                                  SEGMENT_CHILDREN, SEGMENT_PARENTS, WRIST_LEFT, WRIST_RIGHT)
+from skeleton_data.database import default_shared_dir
+from skeleton_data.database import default_cache_dir
+from skeleton_eval.paired import load_dataset
+import argparse
+import sys
 
 FORMAT = 'kinect_posture.sensor_correction'
 FORMAT_VERSION = 1
@@ -76,7 +81,7 @@ class CorrectionConfig:
         'learned from', choices=('',) + TRACKERS)
     correction_stage: str = param(
         'input', 'where the correction runs: input (every joint, before the reliability) or '
-        'reliable (the reliable joints, after it)', choices=STAGES)
+        'reliable (the reliable joints, after it)', choices=STAGES, public=False)
     user_profile: str = param(
         '', "user profile name (<profiles_dir>/<name>.json, from build_profile): the user's "
         "segment lengths from the first frame; '' = measured per user")
@@ -330,14 +335,12 @@ UIPRMD_TRACKER = 'kinect_v2_sdk'  # UI-PRMD's skeletons: the Kinect v2 SDK body 
 
 def default_source() -> Optional[Path]:
     """The paired development recordings (``<shared>/kinect/ui-prmd``) if present."""
-    from skeleton_data.database import default_shared_dir
     shared = default_shared_dir()
     p = None if shared is None else Path(shared) / 'kinect' / 'ui-prmd'
     return p if p is not None and (p / 'Vicon' / 'Positions').is_dir() else None
 
 
 def default_path(tracker: str = UIPRMD_TRACKER) -> Path:
-    from skeleton_data.database import default_cache_dir
     return default_cache_dir() / f'sensor_correction_{tracker}.npz'
 
 
@@ -391,7 +394,6 @@ def build_from_clips(clips, subjects: Optional[Sequence[int]] = None, posture: b
 def build(src, out=None, subjects: Optional[Sequence[int]] = None,
           posture: bool = True) -> tuple:
     """Load paired recordings under ``src`` (UI-PRMD layout), fit, save; (correction, path)."""
-    from skeleton_eval.paired import load_dataset
     src = Path(src)
     clips, skipped, _ = load_dataset(src, subjects=subjects)
     corr = build_from_clips(clips, subjects, posture,
@@ -428,8 +430,6 @@ def load_or_build_default(src=None, rebuild: bool = False, log=None) -> Optional
 
 def main(argv=None) -> int:
     """``build_correction``: learn a sensor correction from paired recordings into a file."""
-    import argparse
-    import sys
     ap = argparse.ArgumentParser(prog='build_correction', description=main.__doc__)
     ap.add_argument('--src', default=None, help='paired recordings in the UI-PRMD layout '
                     '(Kinect/Positions, Kinect/Angles, Vicon/Positions; default '

@@ -2,7 +2,8 @@
 method B / C and, when wanted, method A, from one skeleton.
 
 Parameters are the reliability, completion and optimizer nodes' own, prefixed with the node name
-(``reliability.d_min``, ``completion.pca_dims``, ``optimizer.k``).
+(``reliability.d_min``, ``completion.pca_dims``, ``optimizer.k``), and one ``reliable_threshold``
+for both methods.
 """
 from __future__ import annotations
 
@@ -27,6 +28,8 @@ class FusedProcessor:
     def __init__(self, db, values: Dict[str, Any], user_terms: Optional[Dict[str, Any]] = None):
         self._db = db
         rel = section(values, 'reliability')
+        if 'reliable_threshold' in values:   # one threshold for both methods
+            rel = dict(rel, reliable_threshold=values['reliable_threshold'])
         terms = dict(user_terms or {})  # correction, correction_stage, input_tracker, profile
         self.rec = Reconstructor(db, use_input_reliability=False,
                                  **section(values, 'optimizer'), **rel, **terms)

@@ -61,21 +61,21 @@ class LengthPriorConfig:
     length_prior: bool = param(
         True, "segments: combine the observed segment lengths with the database bodies' "
         "proportions at the user's fitted size, each weighted by its expected error "
-        '(length_prior.py); off = observed lengths only')
+        '(length_prior.py); off = observed lengths only', public=False)
     length_offset_sigma: float = param(
         0.03, 'length_prior: expected joint-centre offset of a tracked joint (m per axis), the '
         'error of an observed length (with length_offset_online: until measured)',
-        range=(1e-4, 1.0))
+        range=(1e-4, 1.0), public=False)
     length_offset_online: bool = param(
         True, 'length_prior: measure the offset scale on the user, from the differences between '
-        'the observed left and right lengths of the mirrored segments')
+        'the observed left and right lengths of the mirrored segments', public=False)
     length_prior_outlier: float = param(
         3.0, 'length_prior: a segment whose observed length is farther from the prior than this '
         'many standard deviations (offsets and prior spread) keeps its observed length and is '
-        'left out of the size fit', range=(0.5, 1e6))
+        'left out of the size fit', range=(0.5, 1e6), public=False)
     length_offset_min_segments: int = param(
         6, 'length_prior: observed segments (both ends reliable) needed before the prior is used '
-        "(the user's size is fitted to them)", range=(1, NUM_SEGMENTS))
+        "(the user's size is fitted to them)", range=(1, NUM_SEGMENTS), public=False)
 
 
 class LengthPrior:

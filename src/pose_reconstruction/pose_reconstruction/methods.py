@@ -17,11 +17,14 @@ from typing import Callable, Dict, Optional
 import numpy as np
 
 from skeleton_core.params import defaults
+from skeleton_core.params import load_preset as _load_preset
 
 from .completion import CompletionConfig
 from .optimizer import OptimizerConfig
 from .posture_space import DatabaseArrays, as_database_arrays
-from .reconstructor import Reconstructor
+from .reconstructor import Reconstructor, ReconstructorConfig
+from .reliability import ReliabilityConfig
+from pathlib import Path
 
 _DEFAULT_DB = None
 
@@ -55,7 +58,6 @@ def make_method(method: str, db=None, database: str = '', db_size: Optional[int]
     ('' = default); ``db_size``: use only that many postures of it. ``correction`` may be a
     :class:`~.correction.SensorCorrection` or a file name, ``profile`` a
     :class:`~.profile.UserProfile` or a profile file name."""
-    from pathlib import Path
     corr = overrides.get('correction')
     if isinstance(corr, (str, Path)):
         from .correction import load as load_correction
@@ -92,6 +94,18 @@ _OPT_DEFAULTS = defaults(OptimizerConfig, only=('k', 'pca_dims', 'steps', 'sampl
                                                 'solver'))
 DEFAULTS = {'A': defaults(CompletionConfig, only=('pca_dims', 'reliable_threshold')),
             'B': dict(_OPT_DEFAULTS), 'C': dict(_OPT_DEFAULTS)}
+
+# what a preset file (config/presets/<name>.yaml) may set: any field of the reconstruction's
+# configurations, public or not
+PRESET_CLASSES = (ReliabilityConfig, CompletionConfig, OptimizerConfig, ReconstructorConfig)
+
+
+def load_preset(path) -> Dict:
+    """``{parameter: value}`` of a reconstruction preset file (every name and value checked
+    against the declarations; ``skeleton_core.params.PresetError`` otherwise): keyword overrides
+    of :func:`make_method` for methods A, B and C."""
+    return _load_preset(path, PRESET_CLASSES)
+
 
 FACTORIES: Dict[str, Callable[..., Reconstructor]] = {
     'A': make_method_a, 'B': make_method_b, 'C': make_method_c}

@@ -21,7 +21,7 @@ from rclpy.qos import QoSProfile
 from skeleton_core.cdr import CdrError, frames_from_cdr, frames_to_cdr
 from skeleton_core.conversions import SkeletonFormatError, frame_from_arrays
 from skeleton_core.health import Health
-from skeleton_core.params import ParamSpec, build, specs
+from skeleton_core.params import ParamSpec, build, hidden, specs
 from skeleton_core.rosnode import DiagnosticsPublisher, InputDrops, Parameters
 
 from .correction import CorrectionConfig
@@ -42,13 +42,14 @@ def common_specs(input_topic: str, output_topic: str) -> List[ParamSpec]:
     return [
         ParamSpec('input_topic', input_topic, 'SkeletonArray input topic', read_only=True),
         ParamSpec('output_topic', output_topic, 'SkeletonArray output topic', read_only=True),
-        ParamSpec('qos_depth', 10, 'publisher/subscription queue depth', (1, 1000),
-                  read_only=True),
+        # fixed: the queue depth and the bag-loop time jump are not what a lab tunes
+        hidden(ParamSpec('qos_depth', 10, 'publisher/subscription queue depth', (1, 1000),
+                         read_only=True)),
         ParamSpec('user_timeout_s', 2.0, "drop a user's state after this long unseen (s)",
                   (0.05, 3600.0)),
-        ParamSpec('time_jump_reset_s', 1.0,
-                  'a stamp this far back in time (s) restarts every user (bag loop); smaller '
-                  'backward steps are dropped as out of order', (0.0, 3600.0)),
+        hidden(ParamSpec('time_jump_reset_s', 1.0,
+                         'a stamp this far back in time (s) restarts every user (bag loop); '
+                         'smaller backward steps are dropped as out of order', (0.0, 3600.0))),
     ]
 
 

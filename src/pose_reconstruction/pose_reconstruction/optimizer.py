@@ -109,26 +109,32 @@ class OptimizerConfig:
     Eq. 15)."""
 
     k: int = param(30, 'Table V: neighbours of the KNN search (Eq. 9)', range=(2, 1000))
-    pca_dims: int = param(20, 'Table V: dimensions of the natural posture space', range=(1, 60))
+    pca_dims: int = param(20, 'Table V: dimensions of the natural posture space', range=(1, 60),
+                          public=False)
     steps: int = param(20, 'Table V: maximum optimisation steps', range=(0, 1000))
     samples: int = param(100, 'Table V: samples per optimisation step', range=(1, 100000))
-    w_control: float = param(1.0, 'Eq. 15: weight of the control term E_c', range=(0.0, 1000.0))
-    w_style: float = param(8.0, 'Eq. 15: weight of the style term E_s (paper 0.5; 8 measured on '
-                           'the sensor-model streams)', range=(0.0, 1000.0))
+    w_control: float = param(1.0, 'Eq. 15: weight of the control term E_c', range=(0.0, 1000.0),
+                             public=False)
+    w_style: float = param(8.0, 'Eq. 15: weight of the style term E_s (the paper: 0.5, '
+                           'preset shum2013)', range=(0.0, 1000.0), public=False)
     w_kinematics: float = param(1.5, 'Eq. 15: weight of the kinematics term E_k',
-                                range=(0.0, 1000.0))
+                                range=(0.0, 1000.0), public=False)
     w_continuity: float = param(0.25, 'Eq. 15: weight of the continuity term E_m',
-                                range=(0.0, 1000.0))
+                                range=(0.0, 1000.0), public=False)
     step_scale: float = param(0.5, 'stochastic search: sample spread in neighbour standard '
-                              'deviations', range=(1e-4, 100.0))
+                              'deviations', range=(1e-4, 100.0), public=False)
     solver: str = param('stochastic', 'stochastic (paper) or gauss_newton (deterministic)',
-                        choices=SOLVERS)
-    gn_iterations: int = param(6, 'gauss_newton: maximum iterations', range=(1, 1000))
-    seed: int = param(0, 'random seed of the stochastic search', range=(0, 2 ** 31 - 1))
+                        choices=SOLVERS, public=False)
+    gn_iterations: int = param(6, 'gauss_newton: maximum iterations', range=(1, 1000),
+                               public=False)
+    seed: int = param(0, 'random seed of the stochastic search', range=(0, 2 ** 31 - 1),
+                      public=False)
     knn: str = param('brute', 'KNN search: brute (exact BLAS) or kdtree (approximate)',
-                     choices=KNN_MODES)
-    kdtree_dims: int = param(12, 'kdtree: global PCA dimensions of the tree', range=(1, 60))
-    kdtree_candidates: int = param(4, 'kdtree: candidates fetched per neighbour', range=(1, 100))
+                     choices=KNN_MODES, public=False)
+    kdtree_dims: int = param(12, 'kdtree: global PCA dimensions of the tree', range=(1, 60),
+                             public=False)
+    kdtree_candidates: int = param(4, 'kdtree: candidates fetched per neighbour', range=(1, 100),
+                                   public=False)
 
 
 _INT_PARAMS = tuple(n for n, t in OptimizerConfig.__annotations__.items() if t == 'int')

@@ -62,47 +62,48 @@ class PlausibilityConfig:
     plausibility: bool = param(
         True, 'confident failures: lower the reliability of TRACKED joints a body cannot have '
         '(bone lengths against the profile, segment speed, left/right against the heading, '
-        'floor, whole-skeleton jump); false = Eq. 1-8 only (paper)')
+        'floor, whole-skeleton jump); false = Eq. 1-8 only (paper)', public=False)
     bone_tolerance: float = param(
         0.4, 'plausibility: relative segment-length deviation from the user profile tolerated',
-        range=(0.0, 10.0))
+        range=(0.0, 10.0), public=False)
     bone_tolerance_m: float = param(
         0.03, 'plausibility: absolute segment-length deviation (m) tolerated on top',
-        range=(0.0, 1.0))
+        range=(0.0, 1.0), public=False)
     bone_reject: float = param(
         1.0, 'plausibility: relative deviation beyond the tolerance at which a segment (and what '
-        'hangs from it) has no plausibility left', range=(0.01, 100.0))
+        'hangs from it) has no plausibility left', range=(0.01, 100.0), public=False)
     max_segment_speed_m_s: float = param(
         8.0, 'plausibility: fastest a segment end moves relative to its parent (m/s); faster is '
-        'a snap onset', range=(0.1, 1000.0))
+        'a snap onset', range=(0.1, 1000.0), public=False)
     latch_frames: int = param(
         45, 'plausibility: frames a segment stays implausible after a snap onset unless it jumps '
-        'back first; 0 = the onset frame only', range=(0, 100000))
+        'back first; 0 = the onset frame only', range=(0, 100000), public=False)
     lr_flip_deg: float = param(
         110.0, 'plausibility: a girdle (shoulders or hips) this far (deg) off the body heading, '
-        'the other girdle agreeing with it, has its left and right swapped', range=(1.0, 180.0))
+        'the other girdle agreeing with it, has its left and right swapped', range=(1.0, 180.0),
+        public=False)
     lr_unswap: bool = param(
         True, 'plausibility: swap detected left/right limbs back (true) or make both limbs '
-        'unreliable (false)')
+        'unreliable (false)', public=False)
     heading_rate: float = param(
         0.3, 'plausibility: per-frame rate at which the body heading follows the girdles that '
-        'agree with it', range=(0.001, 1.0))
+        'agree with it', range=(0.001, 1.0), public=False)
     floor_tolerance_m: float = param(
         0.05, 'plausibility: depth (m) below the estimated floor a joint may reach unpunished',
-        range=(0.0, 2.0))
+        range=(0.0, 2.0), public=False)
     floor_reject_m: float = param(
         0.12, 'plausibility: depth (m) below the floor at which a joint has no plausibility '
-        'left', range=(0.001, 5.0))
+        'left', range=(0.001, 5.0), public=False)
     floor_window: int = param(
         150, 'plausibility: frames whose lowest TRACKED foot gives the floor (median)',
-        range=(1, 100000))
+        range=(1, 100000), public=False)
     jump_m: float = param(
         0.35, 'plausibility: median distance (m) of the TRACKED joints from their last plausible '
         'place that makes the whole skeleton another person (last output held)',
-        range=(0.01, 100.0))
+        range=(0.01, 100.0), public=False)
     jump_frames: int = param(
         15, 'plausibility: frames a whole-skeleton jump is rejected before the new place is '
-        'accepted (re-acquisition)', range=(1, 10000))
+        'accepted (re-acquisition)', range=(1, 10000), public=False)
 
     def validate(self) -> None:
         check(self)

@@ -25,6 +25,11 @@ import numpy as np
 
 from skeleton_core.model import (JOINT_NAMES, MIRROR, NUM_JOINTS, NUM_SEGMENTS, SEGMENT_CHILDREN,
                                  SEGMENT_PARENTS)
+from skeleton_core.bagio import read_messages
+from skeleton_core.cdr import frames_from_cdr
+from skeleton_core.model import TRACKED
+import argparse
+import sys
 
 FORMAT = 'kinect_posture.user_profile'
 FORMAT_VERSION = 1
@@ -153,9 +158,6 @@ def from_optional(profile) -> Optional[np.ndarray]:
 
 def frames_from_bag(path, topic: str = '/kinect/skeletons', user_id: Optional[int] = None):
     """(T, 20, 3) positions of the frames of one user in a bag whose joints are all TRACKED."""
-    from skeleton_core.bagio import read_messages
-    from skeleton_core.cdr import frames_from_cdr
-    from skeleton_core.model import TRACKED
     out = []
     for m in read_messages(str(path), topics=[topic], decode=False):
         for f in frames_from_cdr(m.data)[2]:
@@ -169,8 +171,6 @@ def frames_from_bag(path, topic: str = '/kinect/skeletons', user_id: Optional[in
 def main(argv=None) -> int:
     """``build_profile``: measure a user's profile from a calibration capture (a bag) and save it
     by name (``<dir>/<name>.json``), for the reconstruction's ``user_profile`` parameter."""
-    import argparse
-    import sys
     ap = argparse.ArgumentParser(prog='build_profile', description=main.__doc__)
     ap.add_argument('--name', required=True, help='profile name (letters, digits, _ . -)')
     ap.add_argument('--bag', action='append', default=[], required=True,

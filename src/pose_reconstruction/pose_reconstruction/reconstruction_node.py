@@ -8,24 +8,27 @@ nobody consumes it. The reliability is estimated once per user, inside the optim
 :class:`~.reconstructor.Reconstructor`, and handed to the completion.
 
 Parameters are the three nodes' own, prefixed with the node name (``reliability.d_min``,
-``completion.pca_dims``, ``optimizer.k``; :func:`fused_parameters` maps the three nodes' YAML
-files onto them), plus one shared ``database`` and the topics.
+``optimizer.k``; :func:`fused_parameters` maps the three nodes' YAML files onto them), plus one
+shared ``database``, ``reliable_threshold``, the correction / profile files and the topics.
 """
 from __future__ import annotations
 
 import dataclasses
 from typing import Any, Dict, Optional
 
+from skeleton_core.params import specs
 from skeleton_core.rosnode import ParamSpec, run_node
 
 from . import completion_node, optimizer_node
 from .node_common import (CORRECTION_SPECS, DATABASE_SPEC, RELIABILITY_SPECS, DatabaseNode,
                           check_reliability_params, common_specs)
 from .fused import FusedProcessor, section
+from .posture_space import QueryConfig
 
-# the split nodes' settings that have no meaning here: one database, and the reliability always
-# comes from this node's own estimate
-_NOT_FUSED = ('database', 'use_input_reliability')
+# the split nodes' settings that are one here (one database, one reliable_threshold for both
+# methods), or have no meaning here (the reliability always comes from this node's own estimate)
+_NOT_FUSED = ('database', 'use_input_reliability', 'reliable_threshold')
+THRESHOLD_SPEC = specs(QueryConfig, only=['reliable_threshold'])[0]
 _SECTIONS = {
     'reliability': RELIABILITY_SPECS,
     'completion': [s for s in completion_node.SPECS if s.name not in _NOT_FUSED],
@@ -43,9 +46,10 @@ PARAMS = (common_specs('/kinect/skeletons', '/posture/reconstructed') + [
               read_only=True),
     ParamSpec('completed_topic', '/posture/completed',
               'method A output (computed and published only while subscribed)', read_only=True),
-    DATABASE_SPEC,
+    DATABASE_SPEC, THRESHOLD_SPEC,
 ] + CORRECTION_SPECS + [_prefixed(sec, s) for sec, specs in _SECTIONS.items() for s in specs])
-_SHARED = ('qos_depth', 'user_timeout_s', 'time_jump_reset_s', 'database') + tuple(
+_SHARED = ('qos_depth', 'user_timeout_s', 'time_jump_reset_s', 'database',
+           'reliable_threshold') + tuple(
     s.name for s in CORRECTION_SPECS)
 
 

@@ -53,14 +53,12 @@ positions reported for the unreliable joints must not decide them. Then
   the database (:meth:`~.search.DatabaseSearch.database_yaw`: per database posture a weighted 2-D
   Procrustes, the ``yaw_neighbours`` best postures averaged).
 
-Both need at least three reliable joints. ``smooth_filled_speed``: ``smooth_filled_scale`` lowers
-only the minimum cutoff of a filled segment, not the One Euro speed term (less lag in fast
-motion, but more jitter: off by default).
+Both need at least three reliable joints.
 
 ``smooth_anchored_speed`` (default on): with few reliable joints (as above: the hip and the
 shoulder line unreliable and no segment with two reliable ends), a filled segment with a
 reliable joint at or below its child (a tracked hand or foot hanging from it) keeps the One Euro
-speed term as with ``smooth_filled_speed``, in proportion to that joint's reliability (1 at or
+speed term (``smooth_filled_scale`` lowers only its minimum cutoff), in proportion to that joint's reliability (1 at or
 above ``reliable_threshold``). Then every segment is filled, and filtering them all with
 ``smooth_filled_scale`` times the whole cutoff made the whole body trail the tracked hands and
 feet by about two frames (Table III hands + feet: the error was lowest against the reference
@@ -138,18 +136,20 @@ class ReconstructorConfig(QueryConfig):
     in :class:`~.reliability.ReliabilityConfig`."""
 
     use_input_reliability: bool = param(
-        True, 'use the reliability field of the input when it is filled (else estimate it)')
+        True, 'use the reliability field of the input when it is filled (else estimate it)',
+        public=False)
     output_scale: str = param('user', "user: result retargeted to the user's bone lengths; "
-                              'standard: the database body', choices=('user', 'standard'))
+                              'standard: the database body', choices=('user', 'standard'),
+                              public=False)
     output_mode: str = param(
         'segments', 'segments: blended segment directions, constant user lengths, chained from '
         'the root, smoothed; blend: solution blended towards the observed joints (paper)',
-        choices=OUTPUT_MODES)
+        choices=OUTPUT_MODES, public=False)
     length_window: int = param(90, 'blend: frames of observed segment lengths whose median gives '
-                               "the user's lengths", range=(1, 100000))
+                               "the user's lengths", range=(1, 100000), public=False)
     float_root: bool = param(
         True, 'when the root joint is unreliable, match the database translation-invariantly '
-        'and place the root (and the query) where the neighbours put it')
+        'and place the root (and the query) where the neighbours put it', public=False)
     trust: TrustConfig = nested(TrustConfig)
     lengths: LengthPriorConfig = nested(LengthPriorConfig)
     segments: SegmentOutputConfig = nested(SegmentOutputConfig)
@@ -233,6 +233,7 @@ class Reconstructor:
         return self.trust.noise
 
     def reset(self) -> None:
+        self._user_id = None
         self.reliability.reset()
         self._last_output: Optional[SkeletonFrame] = None
         self._prev = deque(maxlen=2)  # (normalised solution (20, 3), yaw)
@@ -287,6 +288,14 @@ class Reconstructor:
 
     def process(self, frame: SkeletonFrame) -> SkeletonFrame:
         t0 = time.perf_counter()
+        uid = getattr(frame, 'user_id', None)
+        if uid != self._user_id:
+            if self._user_id is not None:
+                # the input says this is another user (a new tracking id): nothing of the last
+                # one holds -- no whole-skeleton-jump hold on the old place, no lengths, no
+                # smoothing state (plausibility.py's jump rule is for one user's skeleton)
+                self.reset()
+            self._user_id = uid
         corr = self.correction
         if corr is not None and self.correction_stage == 'input':
             frame = frame.copy(positions=corr.apply(frame.positions))

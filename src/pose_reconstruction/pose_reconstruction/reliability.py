@@ -16,7 +16,11 @@ Beyond the paper (``plausibility``, default on): the Kinect's confident failures
 TRACKED at a wrong place — are caught by :mod:`.plausibility` (bone lengths against the user's
 profile, segment speed, left/right against the heading, floor penetration, whole-skeleton jumps);
 the reliability is ``min(Eq. 8, R_p)``, so an implausible joint is unreliable from the frame it
-becomes implausible, and the length profile learns only from plausible segments.
+becomes implausible, and the length profile learns only from plausible segments. With it, Eq. 6
+judges a TRACKED joint by its segments to other TRACKED joints only: a segment whose other end is
+INFERRED (held at a stale place) or NOT_TRACKED has R_t = 0 there already and must not make the
+tracked end unreliable too (the paper's Eq. 6 averaged it in: a tracked spine above a hidden hip
+centre read R_k <= 0.5 and was replaced by the database; issue 34).
 
 Reference segment lengths (Sec. IV-B) are captured automatically whenever every joint is tracked
 and the posture is close to one of the two reference postures (T-pose, standing with arms down),
@@ -214,29 +218,34 @@ class ReliabilityConfig:
     except ``sigma_frames``, which the paper does not give)."""
 
     d_min: float = param(0.03, 'Eq. 3: minimum displacement (m) for an angle to count',
-                         range=(0.0, 0.5))
-    f_b: int = param(3, 'Eq. 4: frames averaged by the behaviour term', range=(1, 30))
+                         range=(0.0, 0.5), public=False)
+    f_b: int = param(3, 'Eq. 4: frames averaged by the behaviour term', range=(1, 30),
+                     public=False)
     theta_floor_deg: float = param(90.0, 'Eq. 4: acceptable angle change (deg)',
-                                   range=(0.0, 180.0))
+                                   range=(0.0, 180.0), public=False)
     theta_roof_deg: float = param(135.0, 'Eq. 4: fully unacceptable angle change (deg)',
-                                  range=(0.0, 180.0))
-    f_total: int = param(6, 'Eq. 8: frames in the Gaussian-weighted window', range=(1, 60))
+                                  range=(0.0, 180.0), public=False)
+    f_total: int = param(6, 'Eq. 8: frames in the Gaussian-weighted window', range=(1, 60),
+                         public=False)
     sigma_frames: float = param(2.0, 'Eq. 8: width (frames) of the Gaussian weight',
-                                range=(0.1, 60.0))
-    tracked_value: float = param(1.0, 'Eq. 7: R_t of a tracked joint', range=(0.0, 1.0))
-    inferred_value: float = param(0.0, 'Eq. 7: R_t of an inferred joint', range=(0.0, 1.0))
-    not_tracked_value: float = param(0.0, 'Eq. 7: R_t of a not-tracked joint', range=(0.0, 1.0))
+                                range=(0.1, 60.0), public=False)
+    tracked_value: float = param(1.0, 'Eq. 7: R_t of a tracked joint', range=(0.0, 1.0),
+                                 public=False)
+    inferred_value: float = param(0.0, 'Eq. 7: R_t of an inferred joint', range=(0.0, 1.0),
+                                  public=False)
+    not_tracked_value: float = param(0.0, 'Eq. 7: R_t of a not-tracked joint', range=(0.0, 1.0),
+                                     public=False)
     reference_pose_tolerance_deg: float = param(
         25.0, 'largest segment-direction error (deg) to accept a T-pose / standing reference '
-        'posture', range=(1.0, 90.0))
+        'posture', range=(1.0, 90.0), public=False)
     reference_frames: int = param(15, 'reference segment lengths: median of this many captures',
-                                  range=(1, 300))
+                                  range=(1, 300), public=False)
     reference_mode: str = param(
         'observed', 'reference lengths before a reference posture is captured: observed (running '
         'median of tracked segments) or standard (the standard body at the user height, paper)',
-        choices=REFERENCE_MODES)
+        choices=REFERENCE_MODES, public=False)
     observed_window: int = param(90, 'reference_mode observed: frames in the running median',
-                                 range=(1, 10000))
+                                 range=(1, 10000), public=False)
     plausibility: PlausibilityConfig = nested(PlausibilityConfig)
 
     def validate(self) -> None:
@@ -462,6 +471,18 @@ class ReliabilityEstimator:
         ds /= np.maximum(ref, 1e-6)
         np.minimum(ds, 1.0, out=ds)
         rk = 1.0 - _INCIDENCE_MEAN @ ds
+        if self.plausibility.enabled and not tracked.all():
+            # blame where it belongs: a segment with an end the sensor does not track (R_t = 0
+            # there already; an INFERRED joint is held at a stale place) says nothing about its
+            # TRACKED end. Eq. 6 averages it in, so a tracked spine above a table-hidden hip
+            # centre, or a tracked knee below a hidden hip, reads R_k <= 0.5 and is handed to the
+            # database although the sensor sees it (issue 34). A tracked joint is judged by its
+            # segments to other tracked joints only (none: R_k = 1; bone lengths of confident
+            # failures are the plausibility term's).
+            both = (tracked.take(SEGMENT_PARENT_INDEX) & tracked.take(SEGMENT_CHILD_INDEX))
+            cnt = INCIDENCE @ both
+            rk_t = 1.0 - (INCIDENCE @ (ds * both)) / np.maximum(cnt, 1.0)
+            rk = np.where(tracked, rk_t, rk)
         # Eq. 7
         if ts.dtype == np.uint8:
             rt = self._rt_lut8[ts]

@@ -17,15 +17,15 @@ MPJPE; docs/real_recordings.md). The segment
 vectors and the root are smoothed by a One Euro filter (``smooth_min_cutoff`` Hz, ``smooth_beta``
 s/m, ``smooth_d_cutoff`` Hz; ``smooth_min_cutoff`` 0 = off); a segment the database fills in (an
 end with reliability 0) gets ``smooth_filled_scale`` times the cutoff (1 at or above
-``reliable_threshold``, linear between). ``smooth_filled_speed`` and ``smooth_anchored_speed``:
-see :mod:`.reconstructor`. ``smooth_lead`` (prediction correction, default 1): on the reliable
+``reliable_threshold``, linear between). ``smooth_anchored_speed``: see :mod:`.reconstructor`.
+``smooth_lead`` (prediction correction, default 1): on the reliable
 segments (in proportion to ``min(1, reliability / reliable_threshold)`` of the less reliable
 end) and the root, the low-pass lag is added back along the smoothed velocity
 (``OneEuroFilter`` ``lead``): no lag on a ramp, so the light smoothing of what the sensor gives
 reliably adds no latency, and the heavy smoothing stays on the filled segments. The velocity it
 leads along trails the motion by its own low-pass lag; ``smooth_lead_accel`` extrapolates it
 along the smoothed acceleration over that lag and the low-pass lag (no lag when the motion
-accelerates either), ``smooth_lead_cutoff`` sets its cutoff. That acceleration is where the
+accelerates either). That acceleration is where the
 noise is (it made the lead's jitter): it passes a second low-pass whose cutoff rises with its own
 magnitude (``smooth_accel_cutoff`` + ``smooth_accel_beta`` |acceleration|, a One Euro filter on
 the acceleration): heavily smoothed where it is at its noise level, followed where it is large.
@@ -66,64 +66,56 @@ class SegmentOutputConfig:
 
     observation_weight: float = param(
         0.3, 'segments: weight of the observed direction of a segment with two reliable ends',
-        range=(0.0, 1.0))
+        range=(0.0, 1.0), public=False)
     length_frames: int = param(
         15, 'segments: reliable observations averaged per segment length, then frozen',
-        range=(1, 100000))
+        range=(1, 100000), public=False)
     symmetric_lengths: bool = param(True, 'segments: left and right limbs share their mean '
-                                    'lengths')
+                                    'lengths', public=False)
     smooth_min_cutoff: float = param(
         1.3, 'segments: One Euro minimum cutoff (Hz) of segment and root smoothing, 0 = off',
-        range=(0.0, 1000.0))
+        range=(0.0, 1000.0), public=False)
     smooth_beta: float = param(3.0, 'segments: One Euro speed coefficient (s/m)',
-                               range=(0.0, 1e6))
+                               range=(0.0, 1e6), public=False)
     smooth_d_cutoff: float = param(2.0, 'segments: One Euro speed cutoff (Hz)',
-                                   range=(1e-3, 1000.0))
+                                   range=(1e-3, 1000.0), public=False)
     smooth_lead: float = param(
         1.0, 'segments: prediction correction of the smoothing on reliable segments and the root '
         '(fraction of the low-pass lag added back along the smoothed velocity; 1 = no lag on a '
-        'ramp, 0 = plain One Euro); filled segments keep the plain low-pass', range=(0.0, 1.0))
-    smooth_lead_cutoff: float = param(
-        0.0, 'segments: cutoff (Hz) of the velocity the prediction correction leads along (the '
-        'smoothed output\'s velocity); higher = less delay in that velocity, less lag when the '
-        'motion accelerates, more jitter; 0 = smooth_d_cutoff', range=(0.0, 1000.0))
+        'ramp, 0 = plain One Euro); filled segments keep the plain low-pass', range=(0.0, 1.0),
+        public=False)
     smooth_lead_accel: float = param(
         1.0, 'segments: gain of the acceleration term of the prediction correction (the lead '
         'velocity extrapolated over its own and the low-pass lag; 1 = exact to first order on a '
-        'constant acceleration, 0 = off)', range=(0.0, 2.0))
+        'constant acceleration, 0 = off)', range=(0.0, 2.0), public=False)
     smooth_accel_cutoff: float = param(
         0.25, 'segments: minimum cutoff (Hz) of a second low-pass stage on the acceleration the '
         'prediction correction extrapolates along (the acceleration is where the noise is; a '
         'trailing acceleration costs lag only where the acceleration changes); 0 = no stage',
-        range=(0.0, 1000.0))
+        range=(0.0, 1000.0), public=False)
     smooth_accel_beta: float = param(
         3.0, 'segments: the cutoff of that acceleration stage rises by this times the '
         'acceleration magnitude (Hz per m/s2; a One Euro filter on the acceleration: heavy '
         'smoothing where the acceleration is at its noise level, light in real accelerations)',
-        range=(0.0, 1e6))
+        range=(0.0, 1e6), public=False)
     position_fit: float = param(
         1.0, 'segments: where the sensor is trusted, place the constant-length skeleton nearest '
         'the observed joints rather than chain it from the observed root (pull of each joint '
         'towards its observation: this times the trust times min(1, reliability / '
         'reliable_threshold), then the lengths restored by moving both ends of each segment); '
         'chaining adds every segment\'s length and direction error down the chain; 0 = off',
-        range=(0.0, 1.0))
+        range=(0.0, 1.0), public=False)
     position_fit_iterations: int = param(
         8, 'segments: length-restoring passes of position_fit (all segments at once, each end '
-        'half of the length error)', range=(1, 100))
+        'half of the length error)', range=(1, 100), public=False)
     smooth_filled_scale: float = param(
         0.2, 'segments: cutoff factor of a segment the database fills in (an end with '
         'reliability 0; 1 at or above reliable_threshold, linear between), 1 = same smoothing '
-        'everywhere', range=(0.01, 1.0))
-    smooth_filled_speed: bool = param(
-        False, 'segments: smooth_filled_scale lowers only the minimum cutoff of a filled segment '
-        '(the One Euro speed term is kept: less lag in fast motion, more jitter: class c '
-        '22.4 -> 29.3 m/s2 against raw 23.4)')
+        'everywhere', range=(0.01, 1.0), public=False)
     smooth_anchored_speed: bool = param(
         True, 'segments, few reliable joints (hips, shoulders and every segment unreliable): a '
         'filled segment with a reliable joint at or below its child keeps the One Euro speed '
-        'term (as smooth_filled_speed, for it alone): the body no longer trails the tracked '
-        'hands and feet (Table III hands+feet 8.63 -> 8.34 cm)')
+        'term, so that the body does not trail the tracked hands and feet', public=False)
 
 
 class SegmentOutput:
@@ -144,10 +136,8 @@ class SegmentOutput:
         self.smooth = (float(config.smooth_min_cutoff), float(config.smooth_beta),
                        float(config.smooth_d_cutoff))
         self.smooth_filled_scale = float(config.smooth_filled_scale)
-        self.smooth_filled_speed = bool(config.smooth_filled_speed)
         self.smooth_anchored_speed = bool(config.smooth_anchored_speed)
         self.smooth_lead = float(config.smooth_lead)
-        self.smooth_lead_cutoff = float(config.smooth_lead_cutoff)
         self.position_fit = float(config.position_fit)
         self.position_fit_iterations = int(config.position_fit_iterations)
         self.smooth_lead_accel = float(config.smooth_lead_accel)
@@ -173,7 +163,7 @@ class SegmentOutput:
         # one filter for the 19 segment vectors and the root (rows 0-18, 19): the same per-row
         # One Euro filter as two separate ones, in one call
         self._seg_filter = OneEuroFilter(
-            mc, b, dc, num_joints=NUM_SEGMENTS + 1, lead_cutoff=self.smooth_lead_cutoff,
+            mc, b, dc, num_joints=NUM_SEGMENTS + 1,
             lead_accel=self.smooth_lead_accel,
             accel_cutoff=self.smooth_accel_cutoff,
             accel_beta=self.smooth_accel_beta) if mc > 0 else None
@@ -270,7 +260,12 @@ class SegmentOutput:
         if self.position_fit > 0.0 and trust > 0.0:
             pull = (self.position_fit * trust) * np.minimum(w * (1.0 / max(thr, 1e-6)), 1.0)
             if pull.any():
-                self._fit_positions(vr, obs, pull, L, rel_frac)
+                # a segment takes the fitted direction only as far as its direction is not the
+                # sensor's already: the fit restores constant lengths by moving joints, which
+                # turns short segments (the hips, the feet, the shoulders) away from what the
+                # sensor sees (real UI-PRMD subset: +4-6 deg on the hip segments, issue 34); an
+                # observed direction is kept, the fit then places the skeleton
+                self._fit_positions(vr, obs, pull, L, rel_frac * (1.0 - beta))
         if self._seg_filter is not None:
             # filter clock: the stamps' steps where plausible (1 ms - 0.5 s), else 30 Hz
             stamp = int(frame.stamp_ns or 0)
@@ -286,12 +281,7 @@ class SegmentOutput:
                 fs = self.smooth_filled_scale
                 scale = np.ones(NUM_SEGMENTS + 1)
                 scale[:NUM_SEGMENTS] = fs + (1.0 - fs) * rel_frac
-                if self.smooth_filled_speed:
-                    # the factor applies to the minimum cutoff only: the One Euro speed term is
-                    # kept, so that a filled segment is smoothed at rest but does not lag when
-                    # the body moves
-                    speed = np.ones(NUM_SEGMENTS + 1)
-                elif (self.smooth_anchored_speed and torso_weight(w) < thr
+                if (self.smooth_anchored_speed and torso_weight(w) < thr
                         and not (wmin >= thr).any()):
                     # few reliable joints: filled segments with a reliable joint hanging from
                     # them keep the speed term too, in proportion (module docstring)

@@ -29,15 +29,17 @@ class TrustConfig:
 
     trust_sensor_distance: float = param(
         0.12, 'nearest database posture farther than this (RMS m per reliable joint): reliable '
-        'joints blend towards their observed positions (fully at twice it)', range=(0.0, 100.0))
+        'joints blend towards their observed positions (fully at twice it)', range=(0.0, 100.0),
+        public=False)
     trust_mode: str = param(
         'noise_ratio', "trust in the sensor from noise_ratio (database distance / the sensor's "
-        'measured noise) or distance (trust_sensor_distance, earlier rule)', choices=TRUST_MODES)
+        'measured noise) or distance (trust_sensor_distance, earlier rule)', choices=TRUST_MODES,
+        public=False)
     trust_sensor_ratio: float = param(
         8.0, 'noise_ratio: database distance / sensor noise at which the trust starts to rise '
-        '(full at twice it)', range=(1e-3, 1e6))
+        '(full at twice it)', range=(1e-3, 1e6), public=False)
     noise_alpha: float = param(0.05, 'noise_ratio: exponential-average rate of the noise '
-                               'estimate', range=(1e-4, 1.0))
+                               'estimate', range=(1e-4, 1.0), public=False)
 
 
 class SensorTrust:

@@ -44,6 +44,7 @@ import threading
 import time
 from pathlib import Path
 from typing import Any, Dict, Iterable, Iterator, List, NamedTuple, Optional, Tuple
+from io import BytesIO
 
 DEFAULT_MSGTYPE = 'skeleton_msgs/msg/SkeletonArray'
 _SEPARATOR = '=' * 80
@@ -416,7 +417,6 @@ def _complete(f, size: int) -> bool:
 def _scan(f, size: int, topics: Optional[set] = None):
     """Every complete record of an unfinished file, in file order, up to the first incomplete
     or corrupt one: (schemas, channels, [(schema, channel, message)], Truncation)."""
-    from io import BytesIO
     from mcap.data_stream import ReadDataStream
     from mcap.records import Channel, Chunk, Message, Schema
     from mcap.stream_reader import breakup_chunk

@@ -123,16 +123,15 @@ class OneEuroFilter:
 
     def __init__(self, min_cutoff: float = 1.0, beta: float = 3.0, d_cutoff: float = 1.0,
                  num_joints: int = NUM_JOINTS, default_rate: float = 30.0,
-                 lead_cutoff: float = 0.0, lead_accel: float = 0.0,
+                 lead_accel: float = 0.0,
                  accel_cutoff: float = 0.0, accel_beta: float = 0.0):
         if min_cutoff <= 0 or d_cutoff <= 0 or beta < 0:
             raise ValueError('cutoffs must be > 0 and beta >= 0')
-        if lead_cutoff < 0 or lead_accel < 0 or accel_cutoff < 0 or accel_beta < 0:
-            raise ValueError('lead_cutoff, lead_accel, accel_cutoff and accel_beta must be >= 0')
+        if lead_accel < 0 or accel_cutoff < 0 or accel_beta < 0:
+            raise ValueError('lead_accel, accel_cutoff and accel_beta must be >= 0')
         self.min_cutoff, self.beta, self.d_cutoff = min_cutoff, beta, d_cutoff
-        # the lead's velocity: the low-pass output's, smoothed at lead_cutoff (0: d_cutoff);
-        # lead_accel: gain of the acceleration term of the lead (see update)
-        self.lead_cutoff = float(lead_cutoff) if lead_cutoff > 0 else float(d_cutoff)
+        # the lead's velocity: the low-pass output's, smoothed at d_cutoff; lead_accel: gain of
+        # the acceleration term of the lead (see update)
         self.lead_accel = float(lead_accel)
         # accel_cutoff > 0: a second low-pass stage (Hz) on that acceleration (0 = none)
         self.accel_cutoff = float(accel_cutoff)
@@ -182,10 +181,10 @@ class OneEuroFilter:
         (smoothed with ``d_cutoff``), so a row with ``lead`` 1 has no lag on a ramp and keeps most
         of the smoothing at rest (the velocity of the smoothed signal is smooth; that of the raw
         input would bring its noise back). That velocity is the low-pass output's, smoothed at
-        ``lead_cutoff`` Hz (default ``d_cutoff``): it trails the motion by its own low-pass lag
+        ``d_cutoff`` Hz: it trails the motion by its own low-pass lag
         ``tau_v``, so when the motion accelerates the lead falls short; ``lead_accel`` g > 0 adds
         ``g (tau + tau_v)`` times the acceleration (the velocity's derivative smoothed at
-        ``lead_cutoff``) to the velocity the lag is multiplied by: with g = 1 the lead is exact
+        ``d_cutoff``) to the velocity the lag is multiplied by: with g = 1 the lead is exact
         to first order on a constant acceleration too. That acceleration (a second derivative)
         carries most of the noise the lead adds: ``accel_cutoff`` > 0 passes it through a second
         low-pass at ``accel_cutoff + accel_beta |acceleration|`` Hz (a One Euro filter on the
@@ -206,7 +205,7 @@ class OneEuroFilter:
             cutoff = self._cutoff(speed, cutoff_scale, speed_scale)
             a = (1.0 / (1.0 + (1.0 / (2 * np.pi * cutoff)) / dt))[:, None]
             out = a * x + (1 - a) * self.x
-            al = ad if self.lead_cutoff == self.d_cutoff else self._alpha(self.lead_cutoff, dt)
+            al = ad
             fdx = al * ((out - self.x) / dt) + (1 - al) * self.fdx
             if self.lead_accel > 0.0:
                 self.fdd = al * ((fdx - self.fdx) / dt) + (1 - al) * self.fdd
@@ -236,7 +235,7 @@ class OneEuroFilter:
             a = self._alpha(cutoff, dt)
             out[cont] = a * x[cont] + (1 - a) * self.x[cont]
             self.dx[cont] = edx
-            al = ad if self.lead_cutoff == self.d_cutoff else self._alpha(self.lead_cutoff, dt)
+            al = ad
             fdx = al * ((out[cont] - self.x[cont]) / dt) + (1 - al) * self.fdx[cont]
             if self.lead_accel > 0.0:
                 self.fdd[cont] = al * ((fdx - self.fdx[cont]) / dt) + (1 - al) * self.fdd[cont]

@@ -168,3 +168,15 @@ def swing_twist(q: np.ndarray, axis: np.ndarray):
     twist = np.concatenate([a * np.sin(half)[..., None], np.cos(half)[..., None]], -1)
     swing = quat_multiply(q, quat_conjugate(twist))
     return swing, angle
+
+
+def pca(x: np.ndarray, dims: int, center: bool = True):
+    """Principal components of the rows of ``x`` (N, D): ``(mean (D,), axes (m, D), variances
+    (m,))`` with m = min(dims, rank bound), the axes orthonormal rows sorted by decreasing
+    variance, the variances the sample variances along them (s^2 / (N - 1)). ``center=False``:
+    about the origin (mean zeros)."""
+    x = np.asarray(x, float)
+    mean = x.mean(axis=0) if center else np.zeros(x.shape[1])
+    _, s, vt = np.linalg.svd(x - mean, full_matrices=False)
+    m = int(min(dims, vt.shape[0]))
+    return mean, vt[:m].copy(), s[:m] ** 2 / max(len(x) - 1, 1)

@@ -16,6 +16,13 @@ Everything else is derived from that declaration:
 * the YAML files in ``config/`` and ``docs/parameters.md`` (``kinect_bringup.param_docs``);
 * the evaluation methods' defaults (:func:`defaults`).
 
+A field declared ``public=False`` stays a validated, documented field of its configuration but is
+not a ROS parameter of any node: it keeps its default in the running graph and is set only by a
+named preset file (``config/presets/<name>.yaml``, :func:`load_preset`) that the evaluation and the
+paper-table experiments load (e.g. the paper's own variant, ``shum2013``). A node declares only
+the public ones (``skeleton_core.rosnode.Parameters``) and refuses a YAML key or ``-p`` naming any
+other.
+
 A field whose ROS parameter has another name (``Gains.ke`` -> ``kp``) says so with ``name=``; one
 kept in radians but set in degrees on the node says ``degrees=True`` (the range and default of the
 ROS parameter are then in degrees). A nested configuration (``SimConfig.gains``) is declared with
@@ -26,7 +33,10 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass, fields, is_dataclass
+from pathlib import Path
 from typing import Any, Callable, Dict, Iterable, List, Mapping, Optional, Sequence, Tuple
+
+import yaml
 
 _KEY = 'param'
 
@@ -46,6 +56,7 @@ class ParamSpec:
     validator: Optional[Callable[[Any], Optional[str]]] = None  # returns an error text or None
     path: Tuple[str, ...] = ()
     degrees: bool = False
+    public: bool = True  # False: not a node parameter (a preset sets it; module docstring)
 
     def check(self, value: Any) -> Optional[str]:
         """An error text for ``value`` (in ROS units), or None."""
@@ -81,12 +92,14 @@ class ParamSpec:
 def param(default: Any = dataclasses.MISSING, description: str = '', *,
           range: Optional[tuple] = None, choices: Optional[Sequence[Any]] = None,
           read_only: bool = False, name: Optional[str] = None, degrees: bool = False,
-          validator: Optional[Callable[[Any], Optional[str]]] = None) -> Any:
+          validator: Optional[Callable[[Any], Optional[str]]] = None,
+          public: bool = True) -> Any:
     """A dataclass field that is also a parameter (see the module docstring). A list default is
-    copied for every instance. ``read_only``: the node cannot change it while running."""
+    copied for every instance. ``read_only``: the node cannot change it while running;
+    ``public=False``: not a node parameter, set only by a preset."""
     meta = {_KEY: dict(description=description, range=range,
                        choices=None if choices is None else tuple(choices), read_only=read_only,
-                       name=name, degrees=degrees, validator=validator)}
+                       name=name, degrees=degrees, validator=validator, public=public)}
     if isinstance(default, list):
         return dataclasses.field(default_factory=lambda d=tuple(default): list(d), metadata=meta)
     return dataclasses.field(default=default, metadata=meta)
@@ -108,8 +121,10 @@ def _ros_default(value: Any, degrees: bool) -> Any:
 def specs(cls: type, only: Optional[Iterable[str]] = None, exclude: Iterable[str] = (),
           prefix: str = '', read_only: Optional[bool] = None) -> List[ParamSpec]:
     """The parameters declared on ``cls`` (a dataclass; nested ones flattened), in declaration
-    order, by ROS name. ``only`` / ``exclude``: ROS names; ``prefix``: prepended to every name;
-    ``read_only``: force the flag (e.g. True for values a node reads once at start-up)."""
+    order, by ROS name, the public ones and those a preset sets (``public=False``; a node gives
+    them all to ``rosnode.Parameters``, which declares only the public ones). ``only`` /
+    ``exclude``: ROS names; ``prefix``: prepended to every name; ``read_only``: force the flag
+    (e.g. True for values a node reads once at start-up)."""
     out: List[ParamSpec] = []
     _collect(cls, (), out)
     if only is not None:
@@ -145,7 +160,18 @@ def _collect(cls: type, path: Tuple[str, ...], out: List[ParamSpec]) -> None:
         out.append(ParamSpec(meta['name'] or f.name, _ros_default(default, meta['degrees']),
                              meta['description'], meta['range'], meta['choices'],
                              meta['read_only'], meta['validator'], path + (f.name,),
-                             meta['degrees']))
+                             meta['degrees'], meta['public']))
+
+
+def public(params: Iterable[ParamSpec]) -> List[ParamSpec]:
+    """The node parameters among ``params`` (those not set by a preset only)."""
+    return [s for s in params if s.public]
+
+
+def hidden(spec: ParamSpec) -> ParamSpec:
+    """``spec`` as a fixed value of its node, not a parameter (a node-only ParamSpec that
+    keeps its name, default and description where the node's code reads it)."""
+    return dataclasses.replace(spec, public=False)
 
 
 def names(cls: type) -> List[str]:
@@ -220,3 +246,41 @@ def split(values: Mapping[str, Any], *classes: type) -> Tuple[Dict[str, Any], ..
         else:
             rest[k] = v
     return (*out, rest)
+
+
+class PresetError(ValueError):
+    """A preset file that cannot be used (one line)."""
+
+
+def load_preset(path: Any, classes: Sequence[type]) -> Dict[str, Any]:
+    """``{parameter name: value}`` of the preset YAML file ``path`` (a flat mapping), every name
+    declared (publicly or not) by one of ``classes`` and every value valid for it. Raises
+    :class:`PresetError` naming the file and the first bad entry."""
+    p = Path(path)
+    try:
+        data = yaml.safe_load(p.read_text())
+    except OSError as e:
+        raise PresetError(f'cannot read preset {str(p)!r}: {e.strerror or e}') from None
+    except yaml.YAMLError as e:
+        raise PresetError(f'preset {str(p)!r} is not valid YAML: '
+                          f'{str(e).splitlines()[0]}') from None
+    if data is None:
+        return {}
+    if not isinstance(data, dict):
+        raise PresetError(f'preset {str(p)!r} must be a mapping of parameter names to values')
+    known: Dict[str, ParamSpec] = {}
+    for cls in classes:
+        for s in specs(cls):
+            known.setdefault(s.name, s)
+    out: Dict[str, Any] = {}
+    for k, v in data.items():
+        s = known.get(k)
+        if s is None:
+            raise PresetError(f'preset {str(p)!r}: unknown parameter {k!r}')
+        if isinstance(s.default, float) and isinstance(v, int) and not isinstance(v, bool):
+            v = float(v)
+        err = s.check(v)
+        if err is not None:
+            raise PresetError(f'preset {str(p)!r}: {err}')
+        out[k] = v
+    return out

@@ -38,16 +38,21 @@ def descriptor(spec: ParamSpec) -> ParameterDescriptor:
 
 
 class Parameters:
-    """Declares :class:`ParamSpec` s on a node, validates every set (out-of-range sets are refused
-    with a reason) and keeps the current values in ``values``; ``on_change(changed_dict)`` runs after
-    a successful set so the node can push new values into its library objects."""
+    """Declares the public :class:`ParamSpec` s on a node, validates every set (out-of-range sets
+    are refused with a reason) and keeps the current values in ``values``; ``on_change(changed_dict)``
+    runs after a successful set so the node can push new values into its library objects. A spec
+    with ``public=False`` (set by a preset only, ``skeleton_core.params``) is not declared: its
+    default stays in ``values``. A parameter file or ``-p`` naming a parameter the node does not
+    declare is refused with one line (rclpy would silently ignore it)."""
 
     def __init__(self, node: Node, specs: Iterable[ParamSpec],
                  on_change: Optional[Callable[[Dict[str, Any]], Optional[str]]] = None):
         self._node = node
-        self.specs = {s.name: s for s in specs}
-        self.values: Dict[str, Any] = {}
+        every = list(specs)
+        self.specs = {s.name: s for s in every if s.public}
+        self.values: Dict[str, Any] = {s.name: s.default for s in every if not s.public}
         self._on_change = on_change
+        check_overrides(node, self.specs, {s.name for s in every if not s.public})
         for s in self.specs.values():
             p = node.declare_parameter(s.name, s.default, descriptor(s))
             value = p.value
@@ -88,6 +93,30 @@ class Parameters:
             self._node.get_logger().info(
                 'parameters set: ' + ', '.join(f'{k}={v!r}' for k, v in changed.items()))
         return SetParametersResult(successful=True)
+
+
+# parameters rclpy itself reads from the overrides (declared by Node, or QoS overrides)
+_RCLPY_PARAMS = ('use_sim_time', 'start_type_description_service')
+
+
+def check_overrides(node: Node, declared: Iterable[str], fixed: Iterable[str] = ()) -> None:
+    """Raise ValueError (one line) when the node's parameter overrides (its YAML files, ``-p``,
+    launch ``parameters=``) name a parameter outside ``declared``: a misspelt or removed name
+    would otherwise be ignored without a word. ``fixed``: names the node keeps as fixed values
+    (set by a preset in the evaluation, not on a node), said so in the message."""
+    overrides = getattr(node, '_parameter_overrides', None) or {}
+    known = set(declared) | set(_RCLPY_PARAMS) | set(getattr(node, '_parameters', {}))
+    unknown = sorted(n for n in overrides
+                     if n not in known and not n.startswith('qos_overrides.'))
+    if not unknown:
+        return
+    fixed = set(fixed)
+    preset = [n for n in unknown if n in fixed]
+    what = (f'{unknown[0]!r} is not a parameter of node {node.get_name()!r}'
+            + (' (a fixed value of the library, set only by a preset file in config/presets)'
+               if preset and preset[0] == unknown[0] else ' (removed or misspelt)'))
+    more = f'; also {", ".join(unknown[1:])}' if len(unknown) > 1 else ''
+    raise ValueError(f'{what}{more}: see docs/parameters.md')
 
 
 class InputDrops:

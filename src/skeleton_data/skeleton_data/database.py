@@ -49,6 +49,11 @@ from skeleton_core.geometry import normalize, quat_from_yaw, quat_multiply, reta
 from .mocap import FIVE_CLASSES, MotionClip, rest_directions
 from skeleton_core.model import (JOINT_NAMES, NUM_JOINTS, SEGMENT_CHILD_INDEX, SEGMENT_NAMES,
                                  SEGMENT_PARENT_INDEX, Body, estimate_height, standard_body)
+from skeleton_core import geometry, model
+from .joint_map import maps_dir
+from .joint_map import load_joint_map
+from .mocap import mapped_files
+from .mocap import load_mapped_clips
 
 __all__ = ['MotionDatabase', 'DatabaseError', 'build_database', 'load_or_build_default',
            'segment_twists', 'filter_postures', 'DEFAULT_THRESHOLD', 'FORMAT_VERSION',
@@ -383,8 +388,6 @@ def _code_digest() -> str:
     """Hash of the modules whose code decides the database content (so edits invalidate it)."""
     h = hashlib.sha256()
     here = Path(__file__).resolve().parent
-    from skeleton_core import geometry, model
-    from .joint_map import maps_dir
     for path in [here / n for n in ('database.py', 'mocap.py', 'motions.py', 'bvh.py',
                                      'joint_map.py', 'vicon.py')] \
             + [Path(geometry.__file__), Path(model.__file__), maps_dir() / 'cmu_bvh.yaml']:
@@ -415,8 +418,6 @@ class MappedSource:
     exclude: Tuple[str, ...] = ()
 
     def files(self) -> List[Path]:
-        from .joint_map import load_joint_map
-        from .mocap import mapped_files
         return mapped_files(self.folder, load_joint_map(self.joint_map), self.include,
                             self.exclude)
 
@@ -432,7 +433,6 @@ def uiprmd_vicon_source(src, subjects: Optional[Sequence[int]] = None,
     """The Vicon marker files of a UI-PRMD folder (``<src>/Vicon/Positions``) through the
     Plug-in-Gait map: the repetitions of ``subjects`` (None: all) except ``exclude_subjects``
     (e.g. the subject a leave-one-subject-out fold scores)."""
-    from .joint_map import maps_dir
     inc = tuple(f'm*_s{int(s):02d}_*' for s in subjects) if subjects else ()
     exc = tuple(f'm*_s{int(s):02d}_*' for s in exclude_subjects)
     return MappedSource(Path(src) / 'Vicon' / 'Positions',
@@ -442,8 +442,6 @@ def uiprmd_vicon_source(src, subjects: Optional[Sequence[int]] = None,
 
 def load_mapped_sources(sources: Sequence[MappedSource], skipped: Optional[list] = None) -> list:
     """The clips of every mapped source (see :func:`skeleton_data.mocap.load_mapped_clips`)."""
-    from .joint_map import load_joint_map
-    from .mocap import load_mapped_clips
     clips = []
     for ms in sources:
         clips += load_mapped_clips(ms.folder, load_joint_map(ms.joint_map), ms.include, ms.exclude,

@@ -57,6 +57,7 @@ from skeleton_core.model import MIRROR, NUM_JOINTS
 from .bvh import BvhError, load_bvh
 from .joint_map import (JointMap, JointMapError, builtin_map, bvh_frames, marker_joint_centres,
                         orientations_from_positions, read_markers, rest_directions)
+from fnmatch import fnmatch
 
 __all__ = [
     'MotionClip', 'MocapError', 'CMU_TO_KINECT', 'CMU_ORIENTATION_SOURCE', 'CMU_UNIT',
@@ -316,7 +317,6 @@ def mapped_files(folder, jmap: JointMap, include: Sequence[str] = (),
     """The files of ``folder`` a map reads (``*.bvh`` for BVH maps; ``*.txt``, ``*.txt.gz``,
     ``*.csv``, ``*.csv.gz`` for marker maps), sorted, filtered by shell patterns on the file name:
     kept when it matches one of ``include`` (if any) and none of ``exclude``."""
-    from fnmatch import fnmatch
     folder = Path(folder)
     if not folder.is_dir():
         raise FileNotFoundError(f'mocap folder {folder} does not exist')

@@ -51,6 +51,7 @@ import numpy as np
 from skeleton_core.model import (JOINT_NAMES, NOT_TRACKED, NUM_JOINTS, TRACKED,
                     ELBOW_LEFT, ELBOW_RIGHT, HAND_LEFT, HAND_RIGHT, WRIST_LEFT, WRIST_RIGHT,
                     standard_body)
+from skeleton_core.conversions import SkeletonFrame
 
 FRAME_RATE = 30.0  # Hz, Kinect streams
 FRAME_ID = 'kinect_link'
@@ -291,7 +292,6 @@ def clip_frames(kclip: KinectClip, start_ns: int = 0, user_id: int = 1,
                 frame_id: str = FRAME_ID, positions: Optional[np.ndarray] = None,
                 tracking_state: Optional[np.ndarray] = None):
     """SkeletonFrames at 30 Hz with monotonic stamps starting at ``start_ns``."""
-    from skeleton_core.conversions import SkeletonFrame
     pos = kclip.positions if positions is None else positions
     st = kclip.tracking_state if tracking_state is None else tracking_state
     period = int(round(1e9 / FRAME_RATE))

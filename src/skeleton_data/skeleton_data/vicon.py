@@ -56,6 +56,7 @@ from skeleton_core.model import (ANKLE_LEFT, ANKLE_RIGHT, ELBOW_LEFT, ELBOW_RIGH
                     HAND_LEFT, HAND_RIGHT, HEAD, HIP_CENTER, HIP_LEFT, HIP_RIGHT, KNEE_LEFT,
                     KNEE_RIGHT, NUM_JOINTS, SHOULDER_CENTER, SHOULDER_LEFT, SHOULDER_RIGHT, SPINE,
                     WRIST_LEFT, WRIST_RIGHT)
+from .uiprmd import read_table
 
 FRAME_RATE = 100.0  # Hz
 
@@ -95,7 +96,6 @@ def read_vicon(path) -> np.ndarray:
     (0, 0, 0) (e.g. CLAV in m10_s02_e01 frames 0-47, LASI in m07_s04_e01). Those samples are
     returned as NaN, so every joint centre built from them is NaN on those frames (and takes no
     part in the registration, the ground-truth topic or any score)."""
-    from .uiprmd import read_table
     m = read_table(Path(path), NUM_COLUMNS).reshape(-1, NUM_MARKERS, 3) / 1000.0
     m[np.all(np.abs(m) < 1e-6, axis=-1)] = np.nan
     return m

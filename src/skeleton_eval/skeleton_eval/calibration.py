@@ -34,6 +34,11 @@ import numpy as np
 
 from skeleton_core.model import (HAND_LEFT, HAND_RIGHT, JOINT_NAMES, NUM_JOINTS, SEGMENT_CHILDREN,
                     SEGMENT_NAMES, segment_lengths)
+from skeleton_core.geometry import retarget
+from skeleton_core.model import standard_body
+from .sensor_model import SensorModel
+import copy
+from .sensor_model import JOINT_GROUP
 
 SG_WINDOW, SG_ORDER = 9, 2
 FAIL_REL = 0.25
@@ -164,8 +169,6 @@ def _reference_clips(with_ref, src, max_clips):
     constant segment lengths (Shum & Ho Eq. 3-4 retargeting to its median lengths), so the model
     output's bone-length variation is the model's alone. Clips whose reference has gaps inside
     are left out; gaps at the ends are trimmed."""
-    from skeleton_core.geometry import retarget
-    from skeleton_core.model import standard_body
     pick = with_ref[:: max(1, len(with_ref) // max_clips)] if with_ref else []
     out = []
     for rc in pick:
@@ -189,7 +192,6 @@ def _reference_clips(with_ref, src, max_clips):
 
 def model_measure(ref_clips, params=None, seed: int = 0):
     """Run the sensor model ('clean') on the reference motions and measure its output."""
-    from .sensor_model import SensorModel
     model = SensorModel(params, seed=seed)
     streams = [model.corrupt(SimpleNamespace(name=n, positions=p, fps=fps), 'clean')
                for n, p, fps in ref_clips]
@@ -214,8 +216,6 @@ def fit_params(result, ref_clips, params, iterations: int = 3) -> Dict:
     ``slow_drift.sigma_mm[g]`` with real/model within-clip bone-length std of the segments
     ending in group g; the model is re-run after every step. Returns the fitted values and the
     model's measurements with them."""
-    import copy
-    from .sensor_model import JOINT_GROUP
     real = result['real']
     p = copy.deepcopy(params)
     cj = list(COMPARE_JOINTS)

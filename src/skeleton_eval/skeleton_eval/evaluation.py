@@ -37,12 +37,18 @@ from typing import Callable, Dict, Iterable, List, Optional, Protocol, Sequence,
 import numpy as np
 
 from . import metrics as M
+from . import no_harm as NH
 from skeleton_core.conversions import SkeletonFrame
 from skeleton_core.filters import HOLT_DEFAULTS, ONE_EURO_DEFAULTS, HoltFilter, OneEuroFilter
 from skeleton_core.model import (ELBOW_LEFT, ELBOW_RIGHT, FOOT_LEFT, FOOT_RIGHT, HAND_LEFT,
                     HAND_RIGHT, JOINT_NAMES, KNEE_LEFT, KNEE_RIGHT, NOT_TRACKED, NUM_JOINTS,
                     TRACKED, standard_body)
 from .sensor_model import KinectStream, SensorModel, format_statistics, statistics
+from skeleton_data.motions import builtin_split
+from skeleton_data.mocap import MotionClip
+from skeleton_core.model import (ELBOW_LEFT as EL, ELBOW_RIGHT as ER, SHOULDER_LEFT as SL,
+                                 SHOULDER_RIGHT as SR, WRIST_LEFT as WL, WRIST_RIGHT as WR)
+from skeleton_core.geometry import normalize, retarget
 
 FRAME_ID = 'kinect_depth'
 
@@ -186,16 +192,12 @@ def load_clips(source: str = 'auto', seed: int = 0):
         return db, dev, f'cmu:{cmu}'
     if source == 'cmu':
         raise FileNotFoundError(f'no CMU mocap at {cmu}')
-    from skeleton_data.motions import builtin_split
     db, dev = builtin_split(seed)
     return db, dev, f'builtin:seed={seed}'
 
 
 def toy_clip(seconds: float = 10.0, fps: float = 30.0, name: str = 'toy_arm_swing'):
     """The standard body standing with both arms swinging up and down (for tests and smoke runs)."""
-    from skeleton_data.mocap import MotionClip
-    from skeleton_core.model import (ELBOW_LEFT as EL, ELBOW_RIGHT as ER, SHOULDER_LEFT as SL,
-                        SHOULDER_RIGHT as SR, WRIST_LEFT as WL, WRIST_RIGHT as WR)
     body = standard_body()
     rest = body.rest_positions()
     n = int(round(seconds * fps))
@@ -349,6 +351,7 @@ def evaluate_streams(methods, streams: Dict[str, List[KinectStream]],
         results[label] = {}
         for sc, lst in streams.items():
             parts, weights, times, missing, lats = [], [], [], 0, []
+            nh = NH.empty()
             xc = np.zeros(2 * M.MAX_LATENCY_FRAMES + 1)
             xc_raw = np.zeros(2 * M.MAX_LATENCY_FRAMES + 1)
             for s in lst:
@@ -357,6 +360,8 @@ def evaluate_streams(methods, streams: Dict[str, List[KinectStream]],
                                     None if warmup is None else warmup(s))
                 missing += int(np.isnan(out).any(axis=(1, 2)).sum())
                 parts.append(M.compute_all(out, s.truth, s.fps))
+                NH.add(nh, *NH.direction_sums(out, s.truth,
+                                              NH.segment_mask(s.tracking_state, s.clean)))
                 lats.append(reliable_latency_curve(out, s))
                 xc += reliable_xcorr(out, s)
                 xc_raw += reliable_xcorr(s.positions, s)
@@ -366,6 +371,7 @@ def evaluate_streams(methods, streams: Dict[str, List[KinectStream]],
                     progress(label, sc, s.clip_name)
             results[label][sc] = {'frames': int(sum(weights)), 'missing_frames': missing,
                                   'metrics': _combine(parts, weights),
+                                  'no_harm': nh,
                                   'latency_ms': (M.xcorr_latency_ms(xc, lst[0].fps)
                                                  - M.xcorr_latency_ms(xc_raw, lst[0].fps))
                                   if lats else float('nan'),
@@ -499,7 +505,6 @@ def calibration_stream(sensor: SensorModel, clip, pose: str = 'tpose', seed: int
     sensor model's 'clean' path (same placement and noise model as the clip's stream). It is the
     same session as ``sensor.corrupt(clip, 'clean', seed)``: the same systematic joint-centre
     offsets, with independent jitter and drift. Stamps end one frame before ``start_ns``."""
-    from skeleton_data.mocap import MotionClip
     pos, desc = calibration_pose(clip, pose, cmu_dir)
     fps = sensor.fps
     n = max(1, int(round(float(seconds) * fps)))
@@ -599,7 +604,6 @@ def calibration_text(results: Dict) -> str:
 def _database_postures(database=None, clips=None) -> np.ndarray:
     """(N, 20, 3) normalised postures of a MotionDatabase (several attribute names tried) or of
     clips (normalised and retargeted to the standard body here, as the database does)."""
-    from skeleton_core.geometry import normalize, retarget
     if database is not None:
         for attr in ('positions', 'postures', 'normalized_positions', 'poses'):
             arr = getattr(database, attr, None)
@@ -716,6 +720,18 @@ def _meta_lines(meta: Dict) -> List[str]:
             f'- {meta["machine"]}; {meta["date_utc"]} UTC']
 
 
+def no_harm_lines(res: Dict, method: str = 'C', reference: str = 'raw') -> List[str]:
+    """The per-segment "no harm" table (:mod:`.no_harm`) of a table4 result, when it holds
+    ``method`` and ``reference``."""
+    if method not in res or reference not in res:
+        return []
+    per = {k: {method: res[method][k].get('no_harm'), reference: res[reference][k].get('no_harm')}
+           for k in res[method] if k in res[reference]}
+    per = {k: v for k, v in per.items() if all(v.values())}
+    md = NH.to_markdown(per, method, reference)
+    return [md] if md else []
+
+
 def to_markdown(results: Dict) -> str:
     exp = results.get('experiment', 'table4')
     lines: List[str] = []
@@ -776,6 +792,7 @@ def to_markdown(results: Dict) -> str:
                                      else float('nan')))
                 lines.append(f'| {JOINT_NAMES[j]} | ' + ' | '.join(vals) + ' |')
             lines.append('')
+            lines += no_harm_lines(res)
     elif exp == 'fig5':
         lines += ['## PCA dimensions vs matching error and search time (Shum & Ho 2012 Fig. 5)', '',
                   f'database {results["database_size"]} postures, {results["queries"]} queries', '',

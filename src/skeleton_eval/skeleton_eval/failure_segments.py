@@ -20,6 +20,8 @@ import numpy as np
 from skeleton_core.model import SEGMENT_CHILDREN, SEGMENT_PARENTS
 
 from .sensor_model import CONFIDENT_FAILURES, KinectStream
+from .evaluation import run_method
+from . import evaluation as E
 
 _SC = np.array(SEGMENT_CHILDREN)
 _SP = np.array(SEGMENT_PARENTS)
@@ -48,7 +50,6 @@ def segment_angles(pred: np.ndarray, truth: np.ndarray) -> np.ndarray:
 
 def score(methods: Sequence, streams: List[KinectStream]) -> Dict[str, Dict[str, tuple]]:
     """{label: {mode: (mean deg, segment-frames), 'all': ...}} for (label, factory) pairs."""
-    from .evaluation import run_method
     res = {}
     for label, factory in methods:
         m = factory()
@@ -74,7 +75,6 @@ def main(argv=None) -> int:
     p.add_argument('--config', action='append', default=[], metavar='LABEL=JSON',
                    help='C parameter overrides under a label (repeatable; default after={})')
     args = p.parse_args(argv)
-    from . import evaluation as E
     E.load_plugins()
     _, dev, _ = E.load_clips('auto')
     configs = [c.split('=', 1) for c in (args.config or ['after={}'])]

@@ -10,6 +10,8 @@ where either input is NaN are skipped (per joint); a quantity with no valid fram
   Being parent-relative, it ignores the global position (the paper compared Kinect with a magnetic
   mocap in different frames) and does not accumulate errors down the chains.
 * :func:`mpjpe` — mean per-joint position error, cm (all 20 joints).
+* :func:`mpjpe_root_relative` — MPJPE with both skeletons less their root joint, cm (the 19
+  non-root joints): where a method puts the whole body apart, how well the posture matches.
 * :func:`jitter` — mean magnitude of the joint acceleration by second differences, m/s^2.
 * :func:`bone_length_std` — std over time of each segment length, cm (19 segments);
   :func:`bone_length_error` — mean |length - true length|, cm.
@@ -70,6 +72,14 @@ def mpjpe(pred, truth) -> Tuple[np.ndarray, float]:
     """Mean per-joint position error in cm."""
     p, t = _check(pred, truth)
     e = np.linalg.norm(p - t, axis=-1) * 100.0
+    return _nanmean0(e), _overall(e)
+
+
+def mpjpe_root_relative(pred, truth) -> Tuple[np.ndarray, float]:
+    """MPJPE in cm of the postures relative to their root joints: (20,) with the root NaN."""
+    p, t = _check(pred, truth)
+    e = np.linalg.norm((p - p[:, :1]) - (t - t[:, :1]), axis=-1) * 100.0
+    e[:, 0] = np.nan
     return _nanmean0(e), _overall(e)
 
 
@@ -223,7 +233,7 @@ def xcorr_latency_ms(xc, fps: float = 30.0) -> float:
     return float((k - K + frac) * 1000.0 / fps)
 
 
-METRICS = ('eq18_cm', 'mpjpe_cm', 'jitter_ms2', 'bone_std_cm', 'bone_err_cm', 'bone_dir_deg')
+METRICS = ('eq18_cm', 'mpjpe_cm', 'mpjpe_rel_cm', 'jitter_ms2', 'bone_std_cm', 'bone_err_cm', 'bone_dir_deg')
 
 
 def compute_all(pred, truth, fps: float = 30.0) -> Dict[str, Dict]:
@@ -231,6 +241,7 @@ def compute_all(pred, truth, fps: float = 30.0) -> Dict[str, Dict]:
     out = {}
     for name, (per, tot) in (('eq18_cm', eq18_error(pred, truth)),
                              ('mpjpe_cm', mpjpe(pred, truth)),
+                             ('mpjpe_rel_cm', mpjpe_root_relative(pred, truth)),
                              ('jitter_ms2', jitter(pred, fps)),
                              ('bone_std_cm', bone_length_std(pred)),
                              ('bone_err_cm', bone_length_error(pred, truth)),

@@ -35,6 +35,12 @@ import numpy as np
 from .evaluation import json_safe
 from .metrics import MAX_LATENCY_FRAMES, added_latency_ms  # noqa: F401 (public here too)
 from skeleton_core.model import HAND_LEFT, HAND_RIGHT, NUM_JOINTS
+from skeleton_core.model import TRACKED
+from . import metrics as M
+from .sensor_model import KinectStream
+from . import evaluation as E
+from .sensor_model import load_params
+from .paired import load_dataset
 
 DEFAULT_METHODS = ('raw', 'holt', 'one_euro', 'A', 'B', 'C')
 TABLE_METRICS = (('eq18_cm', 'Eq.18 (cm)'), ('mpjpe_cm', 'MPJPE (cm)'),
@@ -46,7 +52,6 @@ def tracked_only(stream) -> np.ndarray:
     """The raw positions with every joint the sensor did not report TRACKED set to NaN: the
     latency is measured on the joints the sensor gives (the hands, not recorded and
     extrapolated NOT_TRACKED, are left out as from every other score)."""
-    from skeleton_core.model import TRACKED
     raw = np.array(stream.positions, float)
     raw[np.asarray(stream.tracking_state) != TRACKED] = np.nan
     return raw
@@ -57,14 +62,12 @@ def tracked_xcorr(out, stream) -> np.ndarray:
     reference (``truth``) on the joints the sensor reports TRACKED: the added latency of a method
     is the peak shift of its curve minus that of the raw input's (the reference is registered
     with a lag per clip, so raw's is ~0 but not exactly)."""
-    from . import metrics as M
     return M.velocity_xcorr(out, stream.truth, M.MAX_LATENCY_FRAMES,
                             np.isfinite(tracked_only(stream)).all(-1))
 
 
 def make_streams(clips, fps: float = 30.0) -> Dict[str, list]:
     """Real clips -> ``{row: [KinectStream]}`` with truth = registered reference (NaN if none)."""
-    from .sensor_model import KinectStream
     rows: Dict[str, list] = {}
     period = int(round(1e9 / fps))
     for rc in clips:
@@ -89,7 +92,6 @@ def make_streams(clips, fps: float = 30.0) -> Dict[str, list]:
 
 
 def _select_methods(methods):
-    from . import evaluation as E
     if not methods or any(m not in E.available_methods() for m in methods):
         E.load_plugins()
     avail = E.available_methods()
@@ -106,10 +108,6 @@ def evaluate_real(src, methods: Optional[Sequence[str]] = None, subjects=None, m
     ``max_clips``: at most this many clips per row (movement), spread over subjects and
     repetitions, to keep slow methods affordable. ``clips``: already loaded
     :func:`~skeleton_eval.paired.load_dataset` clips (else loaded from ``src``)."""
-    from . import evaluation as E
-    from . import metrics as M
-    from .sensor_model import load_params
-    from .paired import load_dataset
     t_start = time.time()
     skipped = []
     if clips is None:

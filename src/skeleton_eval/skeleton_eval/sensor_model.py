@@ -35,14 +35,16 @@ from typing import Dict, Iterator, List, Optional, Sequence, Tuple, Union
 import numpy as np
 
 from skeleton_core.geometry import facing_yaw, yaw_matrix
+from skeleton_core.model import forward_kinematics, parent_relative
 from skeleton_core.model import (CHILDREN, FOOT_LEFT, FOOT_RIGHT, HAND_LEFT, HAND_RIGHT, HIP_CENTER,
                                  HIP_LEFT, HIP_RIGHT, INFERRED, JOINT_INDEX,
                                  JOINT_NAMES, LIMB_JOINTS, MIRROR, NOT_TRACKED, NUM_JOINTS, PARENTS,
                                  SEGMENT_CHILDREN, SEGMENT_CHILD_INDEX, SEGMENT_PARENTS,
                                  SEGMENT_PARENT_INDEX, SHOULDER_LEFT, SHOULDER_RIGHT, SPINE,
                                  TRACKED, estimate_height, segment_lengths, standard_body)
+from skeleton_core.model import SEGMENT_NAMES
 
-SCENARIOS = ('clean', 'a', 'b', 'c', 'd')
+SCENARIOS = ('clean', 'a', 'b', 'c', 'd', 'e')
 CONFIDENT_FAILURES = ('hand_snap', 'limb_swap', 'foot_slide', 'person_jump')
 
 # Joint -> group used by the per-group noise tables
@@ -84,6 +86,12 @@ DEFAULT_PARAMS: Dict = {
                        'sink_m': [0.0, 0.15], 'ankle_probability': 0.5},
         'person_jump': {'enabled': True, 'duration_frames': [2, 8], 'distance_m': [0.6, 1.5]},
     },
+    'tracked_error': {'enabled': True, 'duration_s': [1.0, 5.0], 'offset_m': [0.05, 0.15],
+                      'ramp_s': 0.5, 'rest_probability': 0.5, 'neighbour_fraction': [0.3, 0.7],
+                      'vibration_mm': 4.0,
+                      'joints': ['HandLeft', 'HandRight', 'WristLeft', 'WristRight', 'ElbowLeft',
+                                 'ElbowRight', 'KneeLeft', 'KneeRight', 'AnkleLeft', 'AnkleRight',
+                                 'FootLeft', 'FootRight', 'ShoulderLeft', 'ShoulderRight']},
     'scenarios': {
         'clean': {'description': 'sensor noise only (no occlusion, false positives or turning)',
                   'self_occlusion': False, 'occlusion_per_min': 0.0,
@@ -123,6 +131,16 @@ DEFAULT_PARAMS: Dict = {
               'person_jump_per_min': 4.0,
               'object': {'gap_m': [0.0, 0.2], 'depth_m': 0.4, 'width_m': [0.4, 0.6],
                          'top_m': [0.7, 0.9], 'lateral_m': [0.45, 0.7], 'proximity_fp': False}},
+        'e': {'description': 'small persistent errors of TRACKED joints (a hand resting on an '
+                             'object, a joint centre drifting; the neighbouring joint pulled '
+                             'partway), beside a table',
+              'self_occlusion': True, 'occlusion_per_min': 2.0, 'false_positive_per_min': 0.5,
+              'turn_per_min': 0.5, 'limb_weights': [1, 1, 0.5, 0.5],
+              'not_tracked_fraction': 0.2, 'collapse_fraction': 0.5,
+              'fp_joints': ['HandLeft', 'HandRight', 'FootLeft', 'FootRight'],
+              'tracked_error_per_min': 8.0,
+              'object': {'gap_m': [0.2, 0.4], 'depth_m': 0.4, 'width_m': [0.5, 0.8],
+                         'top_m': [0.7, 0.95], 'lateral_m': [-0.3, 0.3], 'proximity_fp': False}},
     },
 }
 
@@ -209,6 +227,36 @@ def resample(positions: np.ndarray, fps_in: float, fps_out: float) -> np.ndarray
 
 def _group_array(table: Dict[str, float]) -> np.ndarray:
     return np.array([float(table[g]) for g in JOINT_GROUP])
+
+
+LOOP_BLEND_FRAMES = 15  # 0.5 s at 30 Hz: a looping clip ends in its first posture (stream())
+
+
+def loop_blend(pos: np.ndarray, frames: int = LOOP_BLEND_FRAMES) -> np.ndarray:
+    """(T, 20, 3) ``pos`` whose last ``frames`` (at most a third of the clip) turn smoothly
+    into its first posture: the root moves linearly, every segment's direction is blended
+    (normalised) with the same smooth-step weight at its own length, so a clip played in a loop
+    has no teleport at the loop point and keeps its bone lengths."""
+    p = np.array(pos, float)
+    T = len(p)
+    B = min(int(frames), T // 3)
+    if B < 2:
+        return p
+    rel = parent_relative(p)
+    u0 = rel[0, 1:] / np.maximum(np.linalg.norm(rel[0, 1:], axis=-1, keepdims=True), 1e-9)
+    for k in range(B):
+        i = T - B + k
+        x = (k + 1) / (B + 1)
+        w = x * x * (3 - 2 * x)
+        seg = rel[i, 1:]
+        L = np.linalg.norm(seg, axis=-1, keepdims=True)
+        u = (1 - w) * seg / np.maximum(L, 1e-9) + w * u0
+        u *= L / np.maximum(np.linalg.norm(u, axis=-1, keepdims=True), 1e-9)
+        root = (1 - w) * p[i, HIP_CENTER] + w * p[0, HIP_CENTER]
+        r = rel[i].copy()
+        r[1:] = u
+        p[i] = forward_kinematics(r, root)
+    return p
 
 
 def _point_segment_2d(p, a, b):
@@ -305,6 +353,7 @@ class _Corrupter:
         self.turn = None               # active turn episode
         self.mirrored = False
         self.cf: Dict[str, Optional[Dict]] = {k: None for k in CONFIDENT_FAILURES}
+        self.te: Optional[Dict] = None  # active small tracked error (class e)
         self.floor = -float(self.p['placement']['sensor_height_m'])
         self.events: List[Dict] = []
         self.frame_index = 0
@@ -494,6 +543,8 @@ class _Corrupter:
 
         # --- confident failures (class d): wrong places reported TRACKED ---------------------
         self._confident_failures(fi, i, truth, pos, state, clean, rel_deg)
+        # --- small persistent errors of TRACKED joints (class e) -----------------------------
+        self._tracked_error(fi, truth, pos, state, clean)
 
         tracked = state == TRACKED
         self.hold[tracked] = pos[tracked]
@@ -634,6 +685,68 @@ class _Corrupter:
             state[:] = TRACKED
             clean[:] = False
             self._tick('person_jump')
+
+    def _tracked_error(self, fi, truth, pos, state, clean):
+        """Class e (``tracked_error`` parameters, rate ``tracked_error_per_min`` in the
+        scenario): a joint of ``joints`` that the sensor reports TRACKED sits 5-15 cm
+        (``offset_m``) from its true centre for ``duration_s``, still TRACKED, with a little
+        vibration (``vibration_mm``) and the ordinary noise; its parent joint (the neighbour the
+        SDK's skeleton fit drags along) is pulled by ``neighbour_fraction`` of that offset. Two
+        modes: with ``rest_probability`` *rest* (a hand or foot resting on an object: the joint is
+        reported at a point fixed in the room, ``offset_m`` from where it was; the offset changes
+        as the limb moves), else *drift* (a joint centre drifting: an offset of fixed direction
+        and size carried with the joint). Both ramp in and out over ``ramp_s``. Unlike class d's
+        snaps the errors are small (the length of a hand) and last seconds; unlike the false
+        positives they do not vibrate, so the behaviour term of Eq. 1-4 cannot see them."""
+        te = self.p.get('tracked_error') or {}
+        rate = 0.0
+        if te.get('enabled', False):
+            rate = self._per_frame(self.sc.get('tracked_error_per_min', 0.0))
+        rng = self.rng
+        if self.te is None and self._onset(rate):
+            cands = [JOINT_INDEX[n] for n in te['joints']]
+            cands = [j for j in cands if state[j] == TRACKED and state[PARENTS[j]] == TRACKED]
+            if cands:
+                j = int(rng.choice(cands))
+                n = self._duration(te['duration_s'])
+                d = rng.standard_normal(3)
+                d /= np.linalg.norm(d)
+                size = float(rng.uniform(*te['offset_m']))
+                rest = rng.random() < float(te['rest_probability'])
+                frac = float(rng.uniform(*te['neighbour_fraction']))
+                self.te = {'joint': j, 'parent': int(PARENTS[j]), 'left': n, 'n': n, 'k': 0,
+                           'mode': 'rest' if rest else 'drift', 'frac': frac,
+                           'offset': d * size, 'point': pos[j] + d * size}
+                self.events.append({'type': 'tracked_error', 'cause': self.te['mode'],
+                                    'frame': fi, 'joints': [j, int(PARENTS[j])], 'duration': n,
+                                    'offset_m': size, 'neighbour_fraction': frac})
+        e = self.te
+        if e is None:
+            return
+        j, par = e['joint'], e['parent']
+        ramp = max(1, int(round(float(te.get('ramp_s', 0.5)) * self.fps)))
+        a = min(1.0, (e['k'] + 1) / ramp, e['left'] / ramp)
+        if e['mode'] == 'rest':
+            off = e['point'] - truth[j]
+            size = np.linalg.norm(off)
+            lo, hi = (float(v) for v in te['offset_m'])
+            if size > hi:   # the limb moved away: the joint lets go of the point partway
+                off *= hi / size
+            elif size < lo:
+                off = off * (lo / max(size, 1e-6)) if size > 1e-6 else e['offset']
+        else:
+            off = e['offset']
+        vib = rng.standard_normal(3) * float(te.get('vibration_mm', 0.0)) * 1e-3
+        if state[j] == TRACKED:
+            pos[j] = pos[j] + a * off + vib
+            clean[j] = False
+        if state[par] == TRACKED:
+            pos[par] = pos[par] + a * e['frac'] * off
+            clean[par] = False
+        e['k'] += 1
+        e['left'] -= 1
+        if e['left'] <= 0:
+            self.te = None
 
     def _onset(self, p: float) -> bool:
         """A Bernoulli draw with probability ``p``; no draw at all when ``p`` is 0, so classes
@@ -776,8 +889,12 @@ class SensorModel:
 
     def stream(self, clip, scenario: str = 'a', loop: bool = True,
                seed: Optional[int] = None) -> Iterator[Tuple[np.ndarray, np.ndarray, np.ndarray]]:
-        """Live: yields ``(positions, tracking_state, truth)`` per frame (forever if ``loop``)."""
+        """Live: yields ``(positions, tracking_state, truth)`` per frame (forever if ``loop``;
+        then the clip's last :data:`LOOP_BLEND_FRAMES` turn into its first posture,
+        :func:`loop_blend`: no teleport at the loop point)."""
         c = _Corrupter(self, clip, scenario, self.stream_seed(clip, scenario, seed))
+        if loop:
+            c.truth_all = loop_blend(c.truth_all)
         while True:
             for i in range(c.T):
                 pos, st, tr, _ = c.step(i)
@@ -881,7 +998,6 @@ def format_statistics(stats: Dict) -> str:
     for j, n in enumerate(JOINT_NAMES):
         lines.append(f'| {n} | {stats["jitter_mm"][j]:.1f} | {stats["offset_mm"][j]:.1f} |')
     lines += ['', '| segment | length std (mm) |', '|---|---:|']
-    from skeleton_core.model import SEGMENT_NAMES
     for k, n in enumerate(SEGMENT_NAMES):
         lines.append(f'| {n} | {stats["bone_length_std_mm"][k]:.1f} |')
     lines += ['', '| scenario | minutes | not tracked | inferred | false positive | events/min |',

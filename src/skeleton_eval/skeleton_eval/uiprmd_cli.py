@@ -21,6 +21,11 @@ import sys
 from pathlib import Path
 
 import numpy as np
+from skeleton_core.bagio import BagWriter
+from skeleton_core.conversions import frames_to_array_msg
+from skeleton_core.model import NUM_JOINTS, TRACKED
+from skeleton_data.uiprmd import clip_frames
+from .paired import load_dataset
 
 SKELETON_TOPIC = '/kinect/skeletons'
 DEFAULT_SENSOR_HEIGHT = 0.8  # m: config/sensor_model.yaml placement.sensor_height_m, physics node
@@ -40,10 +45,6 @@ def _int_list(text, prefix):
 
 def write_clip_bag(path, rc, start_ns: int, user_id: int = 1, frame_id: str = 'kinect_link'):
     """Write one :class:`~skeleton_eval.paired.RealClip` to an MCAP bag; returns message counts."""
-    from skeleton_core.bagio import BagWriter
-    from skeleton_core.conversions import frames_to_array_msg
-    from skeleton_core.model import NUM_JOINTS, TRACKED
-    from skeleton_data.uiprmd import clip_frames
 
     frames = clip_frames(rc.kinect, start_ns, user_id, frame_id)
     n_sk = n_gt = 0
@@ -93,7 +94,6 @@ def build_parser():
 
 def main(argv=None):
     args = build_parser().parse_args(argv)
-    from .paired import load_dataset
     src = Path(args.src)
     if not src.is_dir():
         print(f'import_uiprmd: no UI-PRMD folder at {src}', file=sys.stderr)

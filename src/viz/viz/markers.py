@@ -58,27 +58,30 @@ def _offset_ok(v) -> Optional[str]:
 
 
 def _color(default, description):
-    return param(list(default), description, validator=_color_ok)
+    return param(list(default), description, validator=_color_ok, public=False)
 
 
 @dataclass
 class Style:
     """Colours (RGBA in [0, 1]) and sizes (m) of every layer: parameters of the viz node."""
 
-    joint_diameter: float = param(0.05, 'joint sphere diameter (m)', range=(0.001, 0.5))
-    bone_width: float = param(0.015, 'bone line width (m)', range=(0.001, 0.2))
-    inferred_alpha: float = param(0.35, 'alpha multiplier of INFERRED joints', range=(0.0, 1.0))
-    not_tracked: str = param('hide', 'NOT_TRACKED joints: hide | grey', choices=('hide', 'grey'))
+    joint_diameter: float = param(0.05, 'joint sphere diameter (m)', range=(0.001, 0.5),
+                                  public=False)
+    bone_width: float = param(0.015, 'bone line width (m)', range=(0.001, 0.2), public=False)
+    inferred_alpha: float = param(0.35, 'alpha multiplier of INFERRED joints', range=(0.0, 1.0),
+                                  public=False)
+    not_tracked: str = param('hide', 'NOT_TRACKED joints: hide | grey', choices=('hide', 'grey'),
+                             public=False)
     reliability_square_max: float = param(0.15, 'side (m) of the square at reliability 0',
-                                          range=(0.005, 1.0))
+                                          range=(0.005, 1.0), public=False)
     reliability_square_min: float = param(0.005, 'smaller squares are not drawn (m)',
-                                          range=(0.0, 0.5))
+                                          range=(0.0, 0.5), public=False)
     reliability_thickness: float = param(0.004, 'thickness (m) of the reliability squares',
-                                         range=(0.0005, 0.1))
+                                         range=(0.0005, 0.1), public=False)
     character_height: float = param(
         0.0, 'character height for capsule radii (m); 0 = estimate from its segments',
         range=(0.0, 2.6), validator=lambda v: None if v == 0.0 or v > 0.5 else
-        'character_height must be 0 (auto) or in (0.5, 2.6]')
+        'character_height must be 0 (auto) or in (0.5, 2.6]', public=False)
     raw_joint_color: List[float] = _color((0.58, 0.20, 0.80, 1.0), 'raw joints RGBA (purple)')
     raw_bone_color: List[float] = _color((1.0, 0.90, 0.10, 1.0), 'raw bones RGBA (yellow)')
     not_tracked_color: List[float] = _color((0.5, 0.5, 0.5, 0.5),

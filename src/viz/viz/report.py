@@ -34,6 +34,7 @@ from skeleton_core.model import INFERRED, JOINT_NAMES, NOT_TRACKED, NUM_JOINTS, 
 
 from .render import Panel, render_frames
 from .series import METHOD_ROLES, ROLE_TOPICS, BagData, SkeletonSeries, load_bag, primary_user
+from skeleton_core.bagio import BagError
 
 DEFAULT_TOLERANCE_S = 0.02
 
@@ -382,7 +383,6 @@ def main(argv=None) -> int:
     ap.add_argument('--topic', action='append', default=[], metavar='ROLE=TOPIC',
                     help=f'override a topic; roles: {", ".join(ROLE_TOPICS)}')
     a = ap.parse_args(argv)
-    from skeleton_core.bagio import BagError
     topics = dict(ROLE_TOPICS)
     for t in a.topic:
         role, sep, topic = t.partition('=')

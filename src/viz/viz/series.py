@@ -10,6 +10,7 @@ import numpy as np
 
 from skeleton_core.conversions import SkeletonFrame, frames_from_array_msg
 from skeleton_core.model import NUM_JOINTS, TRACKED
+from skeleton_core import bagio
 
 # Report roles -> default topics (as recorded by the bringup recorder)
 ROLE_TOPICS: Dict[str, str] = {
@@ -150,7 +151,6 @@ def collect(messages: Iterable, role_topics: Optional[Dict[str, str]] = None) ->
 
 def load_bag(path, role_topics: Optional[Dict[str, str]] = None) -> BagData:
     """Read the skeleton topics of an MCAP bag (other topics are only counted)."""
-    from skeleton_core import bagio
     role_topics = dict(ROLE_TOPICS if role_topics is None else role_topics)
     wanted = set(role_topics.values())
     counts = bagio.bag_topics(path)

@@ -23,7 +23,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 from skeleton_core.cdr import CdrError, frames_from_cdr
 from skeleton_core.conversions import ns_to_stamp
 from skeleton_core.health import Health
-from skeleton_core.params import ParamSpec, build, specs
+from skeleton_core.params import ParamSpec, build, hidden, specs
 from skeleton_core.rosnode import DiagnosticsPublisher, Parameters, run_node
 
 from . import markers as mk
@@ -60,11 +60,13 @@ PARAMS = [
     ParamSpec('show_character', True, 'draw the simulated character capsules'),
     ParamSpec('show_objects', True, 'forward environment objects'),
     ParamSpec('max_rate_hz', 30.0, 'maximum MarkerArray publish rate', range=(0.5, 120.0)),
-    ParamSpec('marker_lifetime_s', 0.5, 'marker lifetime in RViz (0 = forever)', range=(0.0, 60.0)),
-    ParamSpec('stale_timeout_s', 1.0, 'a layer not updated for this long is deleted',
+    ParamSpec('stale_timeout_s', 1.0, 'a layer not updated for this long is deleted (s)',
               range=(0.05, 60.0)),
-    ParamSpec('default_frame_id', 'kinect_link', 'frame used when a message has none',
-              validator=lambda v: None if v else 'default_frame_id must not be empty'),
+    # fixed values (hidden: not what a lab changes), read where the node reads its parameters
+    hidden(ParamSpec('marker_lifetime_s', 0.5, 'marker lifetime in RViz (0 = forever)',
+                     range=(0.0, 60.0))),
+    hidden(ParamSpec('default_frame_id', 'kinect_link', 'frame used when a message has none',
+                     validator=lambda v: None if v else 'default_frame_id must not be empty')),
 ] + specs(mk.Style)   # the style's parameters, declared on viz.markers.Style
 
 

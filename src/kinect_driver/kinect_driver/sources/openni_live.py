@@ -68,10 +68,11 @@ class LiveConfig:
     openni2_path: str = param('', "directory of libOpenNI2.so ('' = system libraries)")
     max_users: int = param(MAX_USERS, 'most users published per frame', range=(1, MAX_USERS))
     tracked_confidence: float = param(0.5, 'NiTE joint confidence >= this -> TRACKED',
-                                      range=(0.0, 1.0))
+                                      range=(0.0, 1.0), public=False)
     inferred_confidence: float = param(0.0, 'NiTE joint confidence > this -> INFERRED (else '
-                                       'NOT_TRACKED)', range=(0.0, 1.0))
-    smoothing: float = param(0.0, 'NiTE skeleton smoothing factor (0 = off)', range=(0.0, 0.99))
+                                       'NOT_TRACKED)', range=(0.0, 1.0), public=False)
+    smoothing: float = param(0.0, 'NiTE skeleton smoothing factor (0 = off)', range=(0.0, 0.99),
+                             public=False)
     retry_s: float = param(0.0, 'when > 0, keep retrying a missing device every retry_s seconds '
                            'instead of exiting (a device lost mid-run is always retried)',
                            range=(0.0, 60.0))

@@ -6,7 +6,8 @@ gets motion k), the name of a built-in clip (e.g. ``builtin_wave``), or a path t
 plays the same clip, user k starts k/num_users of the way into it.
 
 Each of ``num_users`` (1-6) users gets its own sensor-model stream (``SensorModel.stream``,
-scenario a|b|c, seed ``seed + user``), placed side by side ``user_spacing`` metres apart across the
+scenario a-e, seed ``seed + user``; a clip's last 0.5 s turn into its first posture, so the loop
+has no teleport: ``sensor_model.loop_blend``), placed side by side ``user_spacing`` metres apart across the
 field of view (the model's ``placement.lateral_offset_m``). User ids are 1..num_users.
 
 Timing: a simulated sensor captures frames on a fixed, drift-free schedule ``A + k / rate_hz``,
@@ -31,6 +32,9 @@ from skeleton_core.model import NUM_JOINTS, TRACKED
 from skeleton_core.params import check, param
 
 from .base import Source, SourceError, SourceOutput
+from skeleton_data.motions import builtin_clips
+from skeleton_data.mocap import load_cmu_clip
+from skeleton_eval import sensor_model
 
 MAX_USERS = 6
 MAX_CATCHUP = 15  # frames (0.5 s at 30 Hz)
@@ -38,7 +42,6 @@ MAX_CATCHUP = 15  # frames (0.5 s at 30 Hz)
 
 def _load_motion(clip: str, seed: int):
     """The list of clips users cycle through."""
-    from skeleton_data.motions import builtin_clips
     if not clip:
         return builtin_clips(seed)
     builtins = {c.name: c for c in builtin_clips(seed)}
@@ -49,7 +52,6 @@ def _load_motion(clip: str, seed: int):
     if not p.is_file():
         raise SourceError(f'clip {clip!r} is neither a file nor a built-in motion '
                           f'({", ".join(sorted(builtins))})')
-    from skeleton_data.mocap import load_cmu_clip
     try:
         return [load_cmu_clip(p)]
     except Exception as e:  # BvhError / MocapError / OSError: one line naming the file
@@ -60,13 +62,15 @@ def _load_motion(clip: str, seed: int):
 class SyntheticConfig:
     """Parameters of :class:`SyntheticSource`."""
 
-    scenario: str = param('b', 'sensor-model scenario class a | b | c | d (d: confident '
-                          'failures; clean: noise only)', choices=('a', 'b', 'c', 'd', 'clean'))
+    scenario: str = param('b', 'sensor-model scenario class a | b | c | d | e (d: confident '
+                          'failures; e: small persistent errors of TRACKED joints; clean: noise '
+                          'only)', choices=('a', 'b', 'c', 'd', 'e', 'clean'))
     seed: int = param(0, 'random seed of the sensor model and motions', range=(0, 2 ** 31 - 1))
     num_users: int = param(1, 'number of users side by side', range=(1, MAX_USERS))
     clip: str = param('', "motion ('' = built-in motions, a built-in name such as builtin_wave, "
                       'or a CMU BVH path)')
-    user_spacing: float = param(0.8, 'lateral distance between users (m)', range=(0.3, 2.0))
+    user_spacing: float = param(0.8, 'lateral distance between users (m)', range=(0.3, 2.0),
+                                public=False)
     sensor_params: str = param('', "sensor model YAML ('' = config/sensor_model.yaml or the "
                                'built-in defaults)')
     rate_hz: float = param(30.0, 'frame rate (Hz)', range=(1.0, 120.0))
@@ -104,7 +108,6 @@ class SyntheticSource(Source):
         self._ready = None  # the next frame's simulated data, computed ahead by prepare()
 
     def open(self) -> None:
-        from skeleton_eval import sensor_model
         if self.sensor_params and not Path(self.sensor_params).is_file():
             raise SourceError(f'sensor model parameter file {self.sensor_params} not found')
         try:

@@ -1,0 +1,91 @@
+"""Walking on the floor (Ishigaki 2009, Sec. 8.3): walking in place is recognised on the arms, the
+character walks in the virtual world -- speed from the user's cadence and swing, direction from
+the user's facing -- and arrives at the features (the continuous performance: floor -> water)."""
+import numpy as np
+
+from performance_control.controller import ControlParams, PerformanceController
+from performance_control.features import load_world
+from performance_control.locomotion import Walker
+from performance_control.performances import (SENSOR_HEIGHT, TURNING_PLACEMENT,
+                                              continuous_stream, imitation_stream, to_sensor)
+from skeleton_core.model import HAND_LEFT, HAND_RIGHT
+
+WORLD = load_world('playground')
+
+
+def _swinging(period, amp=0.3, seconds=4.0, yaw=0.0):
+    """Poses whose hands swing fore-aft in anti-phase (only the hands matter to the Walker)."""
+    n = int(seconds * 30)
+    p = np.zeros((n, 20, 3))
+    t = np.arange(n) / 30
+    x = amp * np.sin(2 * np.pi * t / period)
+    c, s = np.cos(yaw), np.sin(yaw)
+    for j, sign in ((HAND_LEFT, 1.0), (HAND_RIGHT, -1.0)):
+        p[:, j, 0] = c * sign * x / 2
+        p[:, j, 1] = s * sign * x / 2
+    return p, t
+
+
+def test_walker_speed_follows_the_users_cadence_and_stride():
+    speeds = {}
+    for period, amp in ((1.1, 0.3), (0.8, 0.3), (1.1, 0.45)):
+        w = Walker(1.2, 1.1, 0.3 / np.sqrt(2))
+        p, t = _swinging(period, amp)
+        for i in range(len(p)):
+            w.update(p[i], 0.0, t[i])
+        assert abs(w.period() - period) < 0.1
+        speeds[(period, amp)] = w.speed()
+    assert abs(speeds[(1.1, 0.3)] - 1.2) < 0.1            # the example's gait: its speed
+    assert speeds[(0.8, 0.3)] > 1.25 * speeds[(1.1, 0.3)]  # faster steps, faster walk
+    assert speeds[(1.1, 0.45)] > 1.3 * speeds[(1.1, 0.3)]  # bigger swing, longer stride
+    v = Walker(1.2, 1.1, 0.2).velocity(np.pi / 2)
+    assert abs(v[0]) < 1e-9 and v[1] > 0                    # heading +90 deg: walks along +y
+    # a swing that stopped: the time since the last crossing lengthens the period
+    w = Walker(1.2, 1.1, 0.3 / np.sqrt(2))
+    p, t = _swinging(1.1)
+    for i in range(len(p)):
+        w.update(p[i], 0.0, t[i])
+    for k in range(60):
+        w.update(np.zeros((20, 3)), 0.0, t[-1] + (k + 1) / 30)
+    assert w.speed() < 0.6 * speeds[(1.1, 0.3)]
+
+
+def test_walking_in_place_walks_the_character_forward_and_it_stops_with_the_user():
+    f = WORLD.features['floor']
+    p, windows = imitation_stream(f, np.random.default_rng(3000), pattern=((1.0, 5.0),),
+                                  total=7.5)
+    s, st = to_sensor(p, 'walk_test', 3000, True, states=True)
+    ctl = PerformanceController(WORLD, ControlParams(sensor_height=SENSOR_HEIGHT))
+    rows = [ctl.step(s[i], i / 30.0, st[i]) for i in range(len(s))]
+    t = np.arange(len(rows)) / 30
+    com = np.array([o.com for o in rows])
+    walk = np.array([o.feature == 'floor' for o in rows])
+    assert not walk[t < 1.0].any()                          # standing: no walk
+    assert walk[(t > 1.5) & (t < 5.0)].mean() > 0.8
+    assert com[t >= 5.5][0, 0] - com[0, 0] > 2.0            # walked forward (+x: its heading)
+    assert abs(com[-1, 1] - com[0, 1]) < 0.5 * (com[-1, 0] - com[0, 0])
+    assert np.ptp(com[t >= 6.5, 0]) < 0.1                   # the user stopped: so does it
+    assert np.all(np.abs(com[:, 2] - com[0, 2]) < 0.2)      # upright on the floor throughout
+
+
+def test_continuous_performance_walks_turning_into_the_water_and_swims():
+    p, sched = continuous_stream(WORLD, np.random.default_rng(0))
+    s, st = to_sensor(p, 'cont0', 0, True, TURNING_PLACEMENT, states=True)
+    ctl = PerformanceController(WORLD, ControlParams(sensor_height=SENSOR_HEIGHT))
+    rows = [ctl.step(s[i], i / 30.0, st[i]) for i in range(len(s))]
+    feats = [o.feature for o in rows]
+    seq = [x for k, x in enumerate(feats) if x and (k == 0 or x != feats[k - 1])]
+    assert seq[0] == 'floor' and seq[-1] == 'water'
+    assert 'water' not in feats[:int(4 * 30)]
+    first = feats.index('water')
+    assert all(x == 'water' for x in feats[first:])          # stays in once in
+    com = np.array([o.com for o in rows])
+    # the user turned 45 deg right: the character walked forward and to the right (-y)
+    d = com[first] - com[0]
+    assert d[0] > 1.0 and d[1] < -1.0 and abs(abs(np.degrees(np.arctan2(d[1], d[0]))) - 45) < 20
+    stand = com[0, 2]
+    assert np.all(com[:first, 2] > stand - 0.2)              # no fall on the way
+    water = WORLD.features['water'].geoms[0]
+    assert np.all(np.abs(com[-1] - water.vec('center')) <= water.vec('half'))
+    # swimming, not standing on the pool's bottom: no foot holds the floor
+    assert not any(e.startswith('Foot') for o in rows[-60:] for e in o.contacts)
