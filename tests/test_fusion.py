@@ -11,8 +11,8 @@ from skeleton_core.model import (HAND_LEFT, HAND_RIGHT, HIP_CENTER, INFERRED, MI
 from skeleton_core.tf import Transform
 
 FRONT = Transform.from_xyz_ypr(0.0, 0.0, 0.8)                              # at the origin, looking +x
-SIDE = Transform.from_xyz_ypr(2.5, -2.5, 0.8, yaw=np.pi / 2)               # 90 deg: looking +y
-BACK = Transform.from_xyz_ypr(5.0, 0.0, 0.8, yaw=np.pi)                    # behind the user
+SIDE = Transform.from_xyz_ypr(2.5, -2.5, 0.8, yaw=90.0)               # 90 deg: looking +y
+BACK = Transform.from_xyz_ypr(5.0, 0.0, 0.8, yaw=180.0)                    # behind the user
 DT = FRAME_PERIOD_NS
 
 
