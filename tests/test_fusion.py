@@ -162,3 +162,22 @@ def test_unknown_sensor_and_no_sensor_are_one_line_errors():
         MultiSensorFusion({})
     with pytest.raises(KeyError, match='unknown sensor'):
         MultiSensorFusion({'k1': FRONT}).add('k9', [], 0)
+
+
+def test_sensor_model_views_share_one_object():
+    """Class b's table is one object in the room: each view sees it where it stands (before, every
+    view drew its own table in front of itself and the side view lost the same legs)."""
+    from skeleton_eval.evaluation import toy_clip
+    from skeleton_eval.sensor_model import SensorModel, _Corrupter
+    model = SensorModel(seed=0)
+    clip = toy_clip(2.0)
+    side = Transform.from_xyz_ypr(2.5, -2.5, 0.0, yaw=90.0)
+    ref = _Corrupter(model, clip, 'b', 7, Transform.identity())
+    view = _Corrupter(model, clip, 'b', 7, side)
+    lo, hi = ref.box
+    corners = side.apply(np.array([view.box[0], view.box[1]]))
+    assert np.allclose(np.sort(corners, axis=0), np.stack([lo, hi]), atol=1e-9)
+    # the table stands between the user and the reference sensor: in the side view it is beside
+    # the user (its y range, the side sensor's depth, overlaps the user's), not in front
+    root = view.truth_all[:, HIP_CENTER]
+    assert view.box[0][0] < np.median(root[:, 0]) < view.box[1][0] + 1.0
