@@ -10,6 +10,7 @@ unchanged, fed the fused skeletons). Eq. 18 error (cm) against the truth, and MP
 from __future__ import annotations
 
 import sys
+import time
 from typing import Dict, List
 
 import numpy as np
@@ -86,5 +87,46 @@ def run(args, dev_clips, methods=('raw', 'C')) -> int:
                 e = mt['eq18_cm']['overall']
                 lines.append(f'| {sc} | {label} {m} | {e:.2f} | {mt["mpjpe_cm"]["overall"]:.2f} | '
                              f'{100 * (e - base) / base:+.1f} % |')
+    longest = max(dev_clips, key=lambda c: len(c.positions))
+    last = [sensor.corrupt(longest, scenarios[-1], seed=args.seed, max_frames=300, view=p)
+            for p in poses]
+    cost = fusion_cost(last, poses)
+    lines += ['', f'fusion cost ({cost["sensors"]} sensors x {cost["users"]} users, '
+              f'{cost["frames"]} frames, class {scenarios[-1]}): {cost["mean_ms"]:.3f} ms mean, '
+              f'{cost["p95_ms"]:.3f} ms p95 per frame and user; without the per-sensor Eq. 1-8 (which '
+              f'the reconstruction then takes as given instead of computing it): '
+              f'{cost["no_eq8_mean_ms"]:.3f} ms mean, {cost["no_eq8_p95_ms"]:.3f} ms p95 (target '
+              '<= 0.5 ms; shared machine: timings disturbed by other jobs)']
     print('\n'.join(lines))
     return 0
+
+
+def fusion_cost(streams, poses: List[Transform], users: int = 6, spacing: float = 1.0) -> Dict:
+    """Fusion time per frame and user (ms): ``users`` copies of the views' streams side by side
+    (``spacing`` m apart along the reference sensor's y) through one :class:`MultiSensorFusion`,
+    Eq. 1-8 per sensor and user included (the views carry no reliability)."""
+    fu = MultiSensorFusion({f'kinect_{k + 1}': p for k, p in enumerate(poses)}, frame_id=E.FRAME_ID)
+    shifts = [(0.0, (u - (users - 1) / 2) * spacing, 0.0) for u in range(users)]
+    times, rel = [], []
+    for i in range(len(streams[0])):
+        batches = []
+        for k, s in enumerate(streams):
+            inv = poses[k].inverse()
+            # a user shifted in world is shifted by the view's rotation of the shift in its frame
+            d = [inv.apply(np.asarray([sh]))[0] - inv.apply(np.zeros((1, 3)))[0] for sh in shifts]
+            batches.append([SkeletonFrame(positions=s.positions[i] + d[u],
+                                          tracking_state=s.tracking_state[i].copy(), user_id=u + 1,
+                                          stamp_ns=int(s.stamps_ns[i])) for u in range(users)])
+        t0 = time.perf_counter()
+        r0 = fu.stats.reliability_s
+        for k, b in enumerate(batches):
+            fu.add(f'kinect_{k + 1}', b, int(streams[k].stamps_ns[i]))
+        out, _, _ = fu.fuse()
+        times.append((time.perf_counter() - t0) * 1e3)
+        rel.append((fu.stats.reliability_s - r0) * 1e3)
+        assert len(out) == users, f'{len(out)} fused users of {users}'
+    t = np.array(times[10:]) / users
+    r = t - np.array(rel[10:]) / users
+    return {'users': users, 'sensors': len(streams), 'frames': len(t),
+            'mean_ms': float(t.mean()), 'p95_ms': float(np.percentile(t, 95)),
+            'no_eq8_mean_ms': float(r.mean()), 'no_eq8_p95_ms': float(np.percentile(r, 95))}
