@@ -38,9 +38,10 @@ ARGS = [
      'default: optimizer.yaml'),
     ('reconstruction', 'fused', 'fused: one reconstruction node; split: reliability, completion and '
      'optimizer nodes (same topics)'),
-    ('input_tracker', '', 'skeleton tracker of the input: kinect_v2_sdk (e.g. replayed UI-PRMD bags: '
-     'the learned sensor correction applies) | nite2 | kinect_v1_sdk | sensor_model; default: '
-     'nite2 for source:=live, sensor_model for source:=synthetic, else optimizer.yaml'),
+    ('input_tracker', '', 'skeleton tracker of the input, overriding the one the stream declares '
+     'on /kinect/tracker (a replayed bag its own, live nite2, synthetic sensor_model): '
+     'kinect_v2_sdk | nite2 | kinect_v1_sdk | sensor_model; the learned sensor correction '
+     'for that tracker applies'),
     ('user_profile', '', 'user profile name (cache/profiles/<name>.json, from build_profile)'),
     ('physics', 'true', 'run the MuJoCo physics character'),
     ('control', 'false', 'performance-based control (Ishigaki 2009) between the reconstruction '

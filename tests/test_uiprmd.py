@@ -171,7 +171,10 @@ def test_cli_skips_bad_files_and_writes_the_rest(tmp_path, capsys):
     assert '1 bags written' in text and '2 skipped' in text
     assert 'm01_s09_e02_positions' in text and 'm01_s09_e03_positions' in text
     topics = bag_topics(out / 'm01_s09_e01.mcap')
-    assert topics == {'/kinect/skeletons': ('skeleton_msgs/msg/SkeletonArray', 5)}
+    assert topics == {'/kinect/skeletons': ('skeleton_msgs/msg/SkeletonArray', 5),
+                      '/kinect/tracker': ('std_msgs/msg/String', 1)}   # the tracker travels
+    from skeleton_core.tracker import from_bag
+    assert from_bag(out / 'm01_s09_e01.mcap') == 'kinect_v2_sdk'
     stamps = [m.stamp_ns for m in read_messages(out / 'm01_s09_e01.mcap')]
     assert stamps == sorted(stamps) and len(set(stamps)) == 5
     assert not (out / 'm01_s09_e02.mcap').exists()

@@ -42,6 +42,7 @@ NODES: Dict[str, NodeInfo] = {n.name: n for n in (
 TOPICS: Dict[str, str] = {
     '/kinect/skeletons': 'skeleton_msgs/msg/SkeletonArray',
     '/kinect/ground_truth': 'skeleton_msgs/msg/SkeletonArray',
+    '/kinect/tracker': 'std_msgs/msg/String',   # latched: the stream's skeleton tracker
     '/kinect/skeletons_reliability': 'skeleton_msgs/msg/SkeletonArray',
     '/posture/completed': 'skeleton_msgs/msg/SkeletonArray',
     '/posture/reconstructed': 'skeleton_msgs/msg/SkeletonArray',

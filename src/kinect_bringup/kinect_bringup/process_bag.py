@@ -45,7 +45,8 @@ def _progress(total: int, enabled: bool):
 def process(bag: Path, out: Path, method: str = 'C', database: str = '', physics: bool = False,
             input_topic: str = '/kinect/skeletons', user_timeout_s: float = 2.0,
             time_jump_reset_s: float = 1.0, progress: bool = True,
-            params: Optional[Dict] = None, warn=None) -> Dict:
+            params: Optional[Dict] = None, warn=None, correction: str = 'auto',
+            input_tracker: str = '', info=None) -> Dict:
     """Process ``bag`` into ``out``; returns a summary (frames, wall time, users, refusals,
     accuracy).
 
@@ -57,7 +58,14 @@ def process(bag: Path, out: Path, method: str = 'C', database: str = '', physics
     ``skipped_messages``); a bigger step back (a concatenated or looped recording) restarts every
     user. Frames the physics world refuses (a 7th simultaneous user, an invalid target) are
     counted per reason in ``refused`` and warned once per reason (``warn(text)``, default
-    stderr)."""
+    stderr).
+
+    The learned sensor correction (``correction``: 'auto', a file, or '' = off) is picked for
+    the skeleton tracker the bag declares (``/kinect/tracker``, :mod:`skeleton_core.tracker`)
+    or ``input_tracker`` when given (it overrides); a correction for another tracker is refused
+    with one line through ``warn`` (the run goes on without it); ``info(text)`` gets which one
+    was applied."""
+    from skeleton_core.model import NOT_TRACKED
 
     if warn is None:
         def warn(text):
@@ -66,6 +74,19 @@ def process(bag: Path, out: Path, method: str = 'C', database: str = '', physics
     if input_topic not in topics:
         raise ValueError(f'{bag}: no {input_topic} in the bag (topics: {sorted(topics)})')
     n_in = topics[input_topic][1]
+    from pose_reconstruction import correction as corr_mod
+    from skeleton_core import tracker as tracker_mod
+    if info is None:
+        def info(text):
+            print(f'process_bag: {text}', file=sys.stderr, flush=True)
+    streamed = tracker_mod.from_bag(str(bag))
+    tracker = tracker_mod.resolve(input_tracker, streamed)
+    corr = corr_mod.select(correction, tracker, log=info, warn=warn)
+    params = dict(params or {})
+    if corr is not None:
+        params.update(correction=corr, input_tracker=tracker)
+        info(f'{corr_mod.describe_file(corr)} applied (tracker {tracker}: '
+             f'{"--input-tracker" if input_tracker else "declared by the bag"})')
     # node_common imports rclpy: process_bag runs without a ROS graph
     from pose_reconstruction.node_common import load_database
     db = load_database(database)
@@ -108,7 +129,10 @@ def process(bag: Path, out: Path, method: str = 'C', database: str = '', physics
             if m.topic == '/kinect/ground_truth' and m.msgtype == SKELETONS:
                 try:
                     for f in frames_from_cdr(m.data)[2]:
-                        truth[(f.user_id, f.stamp_ns)] = f.positions
+                        # a joint the ground truth marks NOT_TRACKED has no reference: not
+                        # scored (e.g. UI-PRMD's hands, which the Kinect never recorded)
+                        truth[(f.user_id, f.stamp_ns)] = np.where(
+                            (f.tracking_state == NOT_TRACKED)[:, None], np.nan, f.positions)
                 except CdrError:
                     corrupt += 1
                 continue
@@ -143,7 +167,7 @@ def process(bag: Path, out: Path, method: str = 'C', database: str = '', physics
             for f in frames:
                 r = users.get(f.user_id)
                 if r is None:
-                    r = users[f.user_id] = Reconstructor(db, method=method, **(params or {}))
+                    r = users[f.user_id] = Reconstructor(db, method=method, **params)
                     arrivals += 1
                 seen_users.add(f.user_id)
                 raw[(f.user_id, f.stamp_ns)] = f.positions
@@ -175,7 +199,8 @@ def process(bag: Path, out: Path, method: str = 'C', database: str = '', physics
                'dropped_skeletons': len(errors), 'corrupt_messages': corrupt,
                'skipped_messages': skipped, 'physics': physics,
                'users': len(seen_users), 'user_arrivals': arrivals, 'user_frames': user_frames,
-               'user_timeout_s': user_timeout_s}
+               'user_timeout_s': user_timeout_s, 'tracker': tracker, 'tracker_declared': streamed,
+               'correction': (corr_mod.describe_file(corr) if corr is not None else None)}
     if sim is not None:
         summary.update({
             'characters': len(char_users), 'character_frames': char_frames,
@@ -202,6 +227,7 @@ def accuracy(truth: Dict, streams: Dict[str, Dict]) -> Dict:
 
 
 def main(argv=None) -> int:
+    from skeleton_core.tracker import TRACKERS
     p = argparse.ArgumentParser(prog='process_bag', description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument('bag', help='input MCAP bag with skeleton_msgs/SkeletonArray')
@@ -213,6 +239,13 @@ def main(argv=None) -> int:
     p.add_argument('--user-timeout', type=float, default=2.0,
                    help='a user unseen this long in the bag\'s time leaves, with its character '
                         '(s; default 2.0 = the reconstruction node\'s user_timeout_s)')
+    p.add_argument('--correction', default='auto',
+                   help="learned sensor correction: 'auto' (default) = the one learned for the "
+                        "bag's skeleton tracker (cache/sensor_correction_<tracker>.npz), a file, "
+                        "or '' = off")
+    p.add_argument('--input-tracker', default='', choices=('',) + TRACKERS,
+                   help="the input's skeleton tracker (default: the one the bag declares on "
+                        "/kinect/tracker); overrides the bag's")
     p.add_argument('--report', default=None, help='write the summary JSON here')
     p.add_argument('--no-progress', action='store_true')
     args = p.parse_args(argv)
@@ -220,7 +253,8 @@ def main(argv=None) -> int:
     out = Path(args.out) if args.out else bag.with_name(bag.stem + '_processed.mcap')
     try:
         summary = process(bag, out, args.method, args.database, args.physics, args.topic,
-                          user_timeout_s=args.user_timeout, progress=not args.no_progress)
+                          user_timeout_s=args.user_timeout, progress=not args.no_progress,
+                          correction=args.correction, input_tracker=args.input_tracker)
     except (ValueError, FileNotFoundError, OSError, RuntimeError) as e:
         print(f'process_bag: error: {e}', file=sys.stderr)
         return 1

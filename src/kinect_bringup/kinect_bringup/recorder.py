@@ -13,7 +13,7 @@ import threading
 import time
 from pathlib import Path
 
-from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
 from skeleton_core.rosnode import ManagedNode, ParamSpec, Parameters, run_node
 from skeleton_core.tf_ros import STATIC_LISTENER_QOS, TF_STATIC_TOPIC
@@ -74,11 +74,18 @@ class RecorderNode(ManagedNode):
             if msgtype is None:
                 raise ValueError(f'recorder: unknown topic {topic!r} (known: {sorted(TOPICS)})')
             # raw=True: the serialized bytes go to the bag as received (no decode/encode); the
-            # latched /tf_static as tf2 subscribes to it (every broadcaster's last message)
+            # latched /tf_static as tf2 subscribes to it (every broadcaster's last message), and
+            # the stream's tracker, latched too (skeleton_core.tracker)
+            if topic == TF_STATIC_TOPIC:
+                topic_qos = STATIC_LISTENER_QOS
+            elif topic == '/kinect/tracker':
+                topic_qos = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                                       durability=DurabilityPolicy.TRANSIENT_LOCAL)
+            else:
+                topic_qos = qos
             self.subscription(_msg_class(msgtype), topic,
                               lambda data, t=topic, mt=msgtype: self._on_msg(t, mt, data),
-                              STATIC_LISTENER_QOS if topic == TF_STATIC_TOPIC else qos,
-                              raw=True)
+                              topic_qos, raw=True)
         self.get_logger().info(f'recording {len(self.counts)} topics to {self.path}')
 
     def cleanup(self) -> None:

@@ -123,6 +123,7 @@ class DriverNode(ManagedNode):
                 self.get_logger().warning('publish_tf is set but tf2_msgs is not installed: '
                                           'no TF is published')
         self._warned = set()
+        self.tracker_pub = None
         self._finished_logged = False
         self._stalled = False
         self._other_pubs = {}
@@ -173,6 +174,14 @@ class DriverNode(ManagedNode):
 
     def _started(self) -> None:
         v = self.params.values
+        if self.source.tracker and self.tracker_pub is None:
+            # the skeleton tracker, latched for late joiners (skeleton_core.tracker)
+            from rclpy.qos import DurabilityPolicy
+            from std_msgs.msg import String
+            from skeleton_core.tracker import TOPIC
+            self.tracker_pub = self.create_publisher(
+                String, TOPIC, QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL))
+            self.tracker_pub.publish(String(data=self.source.tracker))
         extra = self.source.describe()
         extra = f' {extra}' if extra else ''
         self.get_logger().info(f"source {v['source']} started at "

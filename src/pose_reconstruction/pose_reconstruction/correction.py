@@ -44,18 +44,15 @@ import numpy as np
 
 from skeleton_core.geometry import facing_yaw
 from skeleton_core.params import param
+from skeleton_core.tracker import TRACKERS
 from skeleton_core.model import (HAND_LEFT, HAND_RIGHT, NUM_JOINTS, NUM_SEGMENTS,
                                  SEGMENT_CHILDREN, SEGMENT_PARENTS, WRIST_LEFT, WRIST_RIGHT)
 from skeleton_data.database import default_shared_dir
 from skeleton_data.database import default_cache_dir
 from skeleton_eval.paired import load_dataset
-import argparse
-import sys
 
 FORMAT = 'kinect_posture.sensor_correction'
 FORMAT_VERSION = 1
-# skeleton trackers a stream or a correction can come from
-TRACKERS = ('kinect_v2_sdk', 'kinect_v1_sdk', 'nite2', 'sensor_model')
 NUM_FEATURES = 3 * NUM_SEGMENTS
 RIDGE_GRID = (1e-3, 3e-3, 1e-2, 3e-2, 1e-1, 3e-1, 1.0)  # ridge strength / training frames
 _SC = np.array(SEGMENT_CHILDREN)
@@ -72,13 +69,13 @@ class CorrectionConfig:
     resolved by the node: :func:`pose_reconstruction.node_common.load_user_terms`)."""
 
     sensor_correction: str = param(
-        'auto', "learned sensor correction file; 'auto' = "
-        'cache/sensor_correction_kinect_v2_sdk.npz (written by `make build-correction`) for a '
-        "kinect_v2_sdk input, else off; '' = off")
+        'auto', "learned sensor correction file; 'auto' = the one for the input's tracker, "
+        'cache/sensor_correction_<tracker>.npz (written by `make build-correction` or '
+        "build_correction --bag ... --reference ...), else off; '' = off")
     input_tracker: str = param(
         '', 'skeleton tracker of the input stream (kinect_v2_sdk, kinect_v1_sdk, nite2, '
-        "sensor_model; '' = not declared): a correction is applied only to the tracker it was "
-        'learned from', choices=('',) + TRACKERS)
+        "sensor_model; '' = the one the stream declares on /kinect/tracker): a correction is "
+        'applied only to the tracker it was learned from', choices=('',) + TRACKERS)
     correction_stage: str = param(
         'input', 'where the correction runs: input (every joint, before the reliability) or '
         'reliable (the reliable joints, after it)', choices=STAGES, public=False)
@@ -238,8 +235,9 @@ def check_tracker(correction: SensorCorrection, input_tracker: str) -> None:
     """Raise :class:`TrackerMismatch` unless the stream's declared tracker is the correction's."""
     if not input_tracker:
         raise TrackerMismatch(f'{correction.describe()} not applied: the input stream\'s skeleton '
-                              f'tracker is not declared (set input_tracker to '
-                              f'{correction.tracker!r} if the input comes from it)')
+                              f'tracker is not declared (the stream carries none on '
+                              f'/kinect/tracker; set input_tracker to {correction.tracker!r} if '
+                              f'the input comes from it)')
     if input_tracker != correction.tracker:
         raise TrackerMismatch(f'{correction.describe()} not applied: the input comes from '
                               f'{input_tracker!r}, another tracker')
@@ -324,13 +322,13 @@ def digest(correction: SensorCorrection) -> str:
 
 
 __all__ = ['SensorCorrection', 'CorrectionFileError', 'TrackerMismatch', 'TRACKERS', 'fit',
-           'load', 'check_tracker', 'features', 'targets', 'body_frame', 'digest']
+           'load', 'check_tracker', 'select', 'features', 'targets', 'body_frame', 'digest']
 
 
 # ------------------------------------------------------------------------------------------
 # Building from paired recordings (UI-PRMD layout: Kinect/ + Vicon/ positions)
 # ------------------------------------------------------------------------------------------
-UIPRMD_TRACKER = 'kinect_v2_sdk'  # UI-PRMD's skeletons: the Kinect v2 SDK body tracker
+from skeleton_data.uiprmd import TRACKER as UIPRMD_TRACKER  # noqa: E402 - Kinect v2 SDK
 
 
 def default_source() -> Optional[Path]:
@@ -428,37 +426,45 @@ def load_or_build_default(src=None, rebuild: bool = False, log=None) -> Optional
     return corr
 
 
-def main(argv=None) -> int:
-    """``build_correction``: learn a sensor correction from paired recordings into a file."""
-    ap = argparse.ArgumentParser(prog='build_correction', description=main.__doc__)
-    ap.add_argument('--src', default=None, help='paired recordings in the UI-PRMD layout '
-                    '(Kinect/Positions, Kinect/Angles, Vicon/Positions; default '
-                    '<shared>/kinect/ui-prmd)')
-    ap.add_argument('--out', default=None, help=f'output file (default {default_path()})')
-    ap.add_argument('--subjects', default='', help='comma-separated subject numbers (default all)')
-    ap.add_argument('--offset-only', action='store_true',
-                    help='posture-independent per-joint offset only')
-    args = ap.parse_args(argv)
-    src = Path(args.src) if args.src else default_source()
-    if src is None or not src.is_dir():
-        print(f'build_correction: no paired recordings at {args.src or "<shared>/kinect/ui-prmd"}',
-              file=sys.stderr)
-        return 1
-    try:
-        subjects = [int(s.strip().lstrip('s')) for s in args.subjects.split(',') if s.strip()]
-    except ValueError:
-        print(f'build_correction: bad --subjects {args.subjects!r}', file=sys.stderr)
-        return 2
-    try:
-        corr, path = build(src, args.out, subjects or None, posture=not args.offset_only)
-    except (FileNotFoundError, ValueError) as e:
-        print(f'build_correction: {e}', file=sys.stderr)
-        return 1
-    m = corr.meta
-    print(f'{path}: {corr.describe()}; {m["clips"]} clips, ridge alpha {m["ridge_alpha"]} '
-          f'(chosen by leave-one-subject-out on the training subjects)')
-    return 0
+BUILD_COMMAND = 'make build-correction'
 
 
-if __name__ == '__main__':
-    raise SystemExit(main())
+def select(name: str, tracker: str, log=None, warn=None) -> Optional[SensorCorrection]:
+    """The correction for a stream of skeleton tracker ``tracker`` ('' = undeclared), as the
+    ``sensor_correction`` parameter / ``--correction`` option names it: '' = off; 'auto' = the
+    file for that tracker, :func:`default_path` (``cache/sensor_correction_<tracker>.npz``, never
+    built here: for ``kinect_v2_sdk`` a missing file raises FileNotFoundError naming
+    ``make build-correction``), None when there is none; a path = that file, which must exist and be valid
+    (:class:`CorrectionFileError`, one line). A correction for another tracker (or a stream whose
+    tracker is unknown) is refused with one line through ``warn`` and None is returned."""
+    info = log or (lambda m: None)
+    warn = warn or info
+    corr = None
+    if name == 'auto':
+        if not tracker:
+            info('sensor correction off: the input stream declares no skeleton tracker '
+                 '(/kinect/tracker) and input_tracker is not set')
+            return None
+        path = default_path(tracker)
+        if path.is_file():
+            try:
+                corr = load(path)
+            except CorrectionFileError as e:   # one line, with its producer
+                raise ValueError(f'{e}: rebuild it with `{BUILD_COMMAND}`') from None
+        elif tracker == UIPRMD_TRACKER:   # the shipped producer's tracker: a missing build step
+            raise FileNotFoundError(f'sensor correction {str(path)!r} does not exist: build it '
+                                    f"with `{BUILD_COMMAND}` (or sensor_correction:='' for none)")
+        else:
+            info(f'sensor correction off: none learned for {tracker} skeletons ({path} does not '
+                 f'exist; build_correction --bag ... --reference ... learns one)')
+            return None
+    elif name:
+        corr = load(name)  # CorrectionFileError (a ValueError): one line
+    if corr is None:
+        return None
+    try:
+        check_tracker(corr, tracker)
+    except TrackerMismatch as e:
+        warn(str(e))
+        return None
+    return corr

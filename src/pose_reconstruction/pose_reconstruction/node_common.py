@@ -37,6 +37,13 @@ CORRECTION_SPECS = specs(CorrectionConfig)
 CORRECTION_NAMES = [s.name for s in CORRECTION_SPECS]
 
 
+def tracker_qos():
+    """Latched QoS of /kinect/tracker (skeleton_core.tracker): a late joiner still gets it."""
+    from rclpy.qos import DurabilityPolicy, ReliabilityPolicy
+    return QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL,
+                      reliability=ReliabilityPolicy.RELIABLE)
+
+
 def common_specs(input_topic: str, output_topic: str) -> List[ParamSpec]:
     return [
         ParamSpec('input_topic', input_topic, 'SkeletonArray input topic', read_only=True),
@@ -232,8 +239,35 @@ class DatabaseNode(SkeletonArrayNode):
 
     def setup(self) -> None:
         self._load(self.params['database'])
+        self.stream_tracker = ''
         if 'sensor_correction' in self.params.values:
             self.user_terms = load_user_terms(dict(self.params.values), self.get_logger())
+            # the tracker the stream declares (skeleton_core.tracker): latched, read once
+            from std_msgs.msg import String
+            from skeleton_core import tracker as T
+            # (from configure on: the correction follows it before the input starts; released
+            # on cleanup)
+            sub = self.create_subscription(String, T.TOPIC, self._on_tracker, tracker_qos())
+            self._configured.append(('subscription', sub))
+
+    def _on_tracker(self, msg) -> None:
+        """The stream's tracker: used when input_tracker is not set (an explicit one wins)."""
+        name = msg.data.strip()
+        if name == self.stream_tracker:
+            return
+        self.get_logger().info(f'the input stream declares skeleton tracker {name!r} '
+                               f'(/kinect/tracker)')
+        with self._lock:
+            self.stream_tracker = name
+            if self.params['input_tracker']:
+                return
+            try:
+                self.user_terms = load_user_terms(
+                    {**self.params.values, 'stream_tracker': name}, self.get_logger())
+            except (FileNotFoundError, ValueError, RuntimeError) as e:
+                self.get_logger().error(f'sensor correction off: {e}')
+                self.user_terms = {**self.user_terms, 'correction': None}
+            self._users.clear()   # rebuilt with the correction on the next message
 
     def teardown(self) -> None:
         self.db = None
@@ -261,7 +295,8 @@ class DatabaseNode(SkeletonArrayNode):
             if 'database' in changed:
                 self._load(changed['database'])
             if any(k in changed for k in CORRECTION_NAMES):
-                self.user_terms = load_user_terms(values, self.get_logger())
+                self.user_terms = load_user_terms({**values, 'stream_tracker': self.stream_tracker},
+                                                  self.get_logger())
         except (FileNotFoundError, ValueError, RuntimeError, OSError) as e:
             self.get_logger().error(f'{e} (the previous one stays in use)')
 
@@ -314,40 +349,20 @@ def missing_correction(p) -> str:
 
 def load_user_terms(values: Dict[str, Any], logger=None) -> Dict[str, Any]:
     """The Reconstructor keywords of the correction / profile parameters: ``correction`` (None
-    when off or refused: another or an undeclared tracker, logged in one line),
-    ``correction_stage``, ``input_tracker``, ``profile``. Files are loaded by path, never built:
-    a named file (or the default correction that applies to the input) that is missing or
-    malformed raises FileNotFoundError / ValueError with one line naming the command that
+    when off or refused: another or an undeclared tracker, logged in one line; the tracker is
+    ``input_tracker``, else ``stream_tracker``: the one the stream declares on /kinect/tracker),
+    ``correction_stage``, ``input_tracker``, ``profile``. Files are loaded by path, never
+    built: a named file (or the default correction that applies to the input) that is missing
+    or malformed raises FileNotFoundError / ValueError with one line naming the command that
     builds it."""
     from . import correction as C
     from . import profile as P
     info = logger.info if logger is not None else (lambda m: None)
     warn = logger.warning if logger is not None else (lambda m: None)
-    name = values.get('sensor_correction', '')
-    tracker = values.get('input_tracker', '')
-    corr = None
-    if name == 'auto':
-        if tracker != C.UIPRMD_TRACKER:
-            info(f'sensor correction off: the default correction is learned from '
-                 f'{C.UIPRMD_TRACKER} skeletons and the input tracker is '
-                 f'{tracker or "not declared"} (input_tracker)')
-        else:
-            path = C.default_path()
-            if not path.is_file():
-                raise FileNotFoundError(missing_correction(path))
-            try:
-                corr = C.load(path)
-            except C.CorrectionFileError as e:   # one line, with its producer
-                raise ValueError(f'{e}: rebuild it with `{BUILD_CORRECTION}`') from None
-    elif name:
-        corr = C.load(name)  # CorrectionFileError (a ValueError): one line
+    tracker = values.get('input_tracker', '') or values.get('stream_tracker', '')
+    corr = C.select(values.get('sensor_correction', ''), tracker, log=info, warn=warn)
     if corr is not None:
-        try:
-            C.check_tracker(corr, tracker)
-            info(f'{C.describe_file(corr)}: applied at stage {values.get("correction_stage")}')
-        except C.TrackerMismatch as e:
-            warn(str(e))
-            corr = None
+        info(f'{C.describe_file(corr)}: applied at stage {values.get("correction_stage")}')
     prof = None
     if values.get('user_profile'):
         prof = P.load_by_name(values['user_profile'], values.get('profiles_dir') or None)

@@ -180,20 +180,26 @@ def main(argv=None) -> int:
     ap.add_argument('--user-id', type=int, default=None, help='only this user id of the bag')
     ap.add_argument('--dir', default='', help='profile directory (default cache/profiles)')
     ap.add_argument('--correction', default='',
-                    help="sensor correction file to apply first ('auto' = the default one; the "
-                         'reconstruction must then run with the same correction)')
-    ap.add_argument('--input-tracker', default='', help='the skeleton tracker of the bag')
+                    help="sensor correction file to apply first ('auto' = the one learned for "
+                         "the bag's tracker; the reconstruction must then run with the same "
+                         'correction)')
+    ap.add_argument('--input-tracker', default='', help="the skeleton tracker of the bag "
+                    "(default: the one the bag declares on /kinect/tracker)")
     ap.add_argument('--min-frames', type=int, default=30)
     args = ap.parse_args(argv)
     try:
         path = profile_path(args.name, args.dir or None)
         corr = None
+        if not args.input_tracker:   # the tracker the bags declare (skeleton_core.tracker)
+            from skeleton_core.tracker import from_bag
+            found = sorted({from_bag(b) for b in args.bag} - {''})
+            args.input_tracker = found[0] if len(found) == 1 else ''
         if args.correction:
             from . import correction as C
-            corr = (C.load_or_build_default() if args.correction == 'auto'
-                    else C.load(args.correction))
-            if corr is not None:
-                C.check_tracker(corr, args.input_tracker)
+
+            def refuse(text):   # a correction that cannot be used: one line, exit 1
+                raise C.TrackerMismatch(text)
+            corr = C.select(args.correction, args.input_tracker, warn=refuse)
         seqs = [frames_from_bag(b, args.topic, args.user_id) for b in args.bag]
         n = sum(len(s) for s in seqs)
         if n < args.min_frames:

@@ -54,6 +54,9 @@ def _parser():
                    help='only files whose name matches this shell pattern (repeatable)')
     g.add_argument('--exclude', action='append', default=[], metavar='PATTERN',
                    help="skip files whose name matches, e.g. 'm*_s05_*' (repeatable)")
+    g.add_argument('--check', action='store_true',
+                   help='before building, print per clip of --bvh-dir / --marker-dir the mapped '
+                        "skeleton's segment lengths against the standard body")
     p.add_argument('--out', type=Path, default=None,
                    help='write the database here (default: the cache, keyed by the inputs, and '
                         "the nodes' default file <cache>/motion_db.npz)")
@@ -122,6 +125,22 @@ def main(argv=None) -> int:
         if not mapped[0].files():
             print(f'build_db: no {want} files selected in {folder}', file=sys.stderr)
             return 1
+        if args.check:
+            from .joint_map import segment_table
+            rows = []
+            for f in mapped[0].files():
+                try:
+                    rows.append((f.name, mocap.load_mapped_clip(f, jm).positions))
+                except (mocap.MocapError, OSError) as e:
+                    print(f'check: {f.name}: {e}')
+                except JointMapError as e:
+                    print(f'build_db: {e}', file=sys.stderr)
+                    return 2
+            print(segment_table(rows))
+            print()
+    elif args.check:
+        print('build_db: --check needs --bvh-dir or --marker-dir', file=sys.stderr)
+        return 2
     if args.source == 'none' and not mapped:
         print('build_db: --source none needs --bvh-dir or --marker-dir', file=sys.stderr)
         return 2

@@ -15,6 +15,8 @@ up and forward, and the source's length unit. Two source kinds (``format``):
     joints:                    # model joint <- source point(s)
       HipCenter: Hips                               # one source joint
       ShoulderCenter: {LeftArm: 0.5, RightArm: 0.5} # weighted source points (weights sum to 1)
+      HandRight: {RightHand: 1.35, RightForeArm: -0.35}  # a negative weight extrapolates: 35 %
+                                                    # of the forearm past the wrist
       Head: {Head: 0.5, Head/End: 0.5}              # 'J/End' = the End Site below joint J
       HandLeft: [LeftHandMiddle1, LeftHand/End]     # alternatives: the first the file has
     orientation:               # optional: model joint <- source bone whose global rotation
@@ -41,6 +43,15 @@ Positions and orientations follow :mod:`skeleton_data.mocap` (orientation of the
 joint j, identity = standard T-pose facing +x). A joint with an ``orientation`` bone takes that
 bone's global rotation, corrected once for the rest-pose direction and swung onto the actual segment
 (the CMU rule); without one the orientation comes from positions (:func:`orientations_from_positions`).
+
+Zero-length segments: an alternative whose point lies on its parent model joint in the source's
+rest pose (an End Site at offset 0, a joint mapped onto its parent: the segment would have no
+direction) is passed over for the next one; when none is left the map is refused with a line
+naming the joint and the fix (an extrapolating point, e.g. the hand 35 % of the forearm past the
+wrist, or a head centre above the neck: ``Head: {Head: 1.5, Neck: -0.5}``).
+
+:func:`segment_table` prints a mapped clip's segment lengths against the standard body
+(``build_db --check``).
 
 Errors: :class:`JointMapError`, one line ``<file>:<line>: <key>: <reason>``, for unreadable YAML,
 unknown or missing keys, unknown model joints, bad weights, axes or units; and (at import) for a
@@ -69,7 +80,7 @@ from .bvh import Bvh
 __all__ = ['JointMap', 'JointMapError', 'load_joint_map', 'parse_joint_map', 'maps_dir',
            'builtin_map', 'axes_matrix', 'bvh_frames', 'marker_joint_centres', 'read_markers',
            'orientations_from_positions', 'rest_directions', 'min_rotation', 'min_rotation_batch',
-           'UNITS']
+           'UNITS', 'segment_check', 'segment_table']
 
 UNITS: Dict[str, float] = {'mm': 0.001, 'cm': 0.01, 'm': 1.0, 'inches': 0.0254}
 FORMATS = ('bvh', 'markers')
@@ -81,6 +92,11 @@ _KEYS = {
                 'frame_rate', 'columns', 'markers', 'subject', 'motion_class'},
 }
 _AXIS_RE = re.compile(r'^([+-]?)([XYZxyz])$')
+# a point may lie beyond its source joints (negative weights), but not absurdly far
+MAX_WEIGHT = 5.0
+# a model segment shorter than this in the source's rest pose is a zero-length segment
+# (an End Site at offset 0, a joint mapped onto its parent): that alternative is not used
+MIN_SEGMENT_M = 0.01
 
 
 class JointMapError(ValueError):
@@ -250,15 +266,22 @@ def axes_matrix(up: str, forward: str, handedness: str = 'right') -> np.ndarray:
 
 
 def _point(value, path, key, lines) -> Point:
-    """One source point: 'Name' or {Name: weight, ...} (weights > 0, sum 1)."""
+    """One source point: 'Name' or {Name: weight, ...} (weights non-zero, sum 1; a negative
+    weight extrapolates along a bone: {LeftHand: 1.35, LeftForeArm: -0.35} is 35 % of the
+    forearm past the wrist)."""
     if isinstance(value, str) and value.strip():
         return ((value.strip(), 1.0),)
     if isinstance(value, dict) and value:
         pts = []
         for src, w in value.items():
-            if isinstance(w, bool) or not isinstance(w, (int, float)) or not np.isfinite(w) or w <= 0:
+            if isinstance(w, bool) or not isinstance(w, (int, float)) or not np.isfinite(w) \
+                    or w == 0:
                 raise JointMapError(path, lines.get(f'{key}.{src}', lines.get(key)), f'{key}.{src}',
-                                    f'weight must be a positive number, got {w!r}')
+                                    f'weight must be a non-zero number, got {w!r}')
+            if abs(w) > MAX_WEIGHT:
+                raise JointMapError(path, lines.get(f'{key}.{src}', lines.get(key)), f'{key}.{src}',
+                                    f'weight {w:g} extrapolates too far (|weight| <= '
+                                    f'{MAX_WEIGHT:g})')
             pts.append((str(src), float(w)))
         total = sum(w for _, w in pts)
         if abs(total - 1.0) > 1e-6:
@@ -440,17 +463,51 @@ def _resolve(jm: JointMap, bvh: Bvh, source: str):
     return None if j is None else ('joint', j)
 
 
-def _points(jm: JointMap, bvh: Bvh):
-    """Per model joint the chosen alternative as [(kind, index, weight)] (JointMapError when a
-    joint has no alternative the file holds)."""
+def _describe(alt) -> str:
+    return alt[0][0] if len(alt) == 1 else '{' + ', '.join(f'{s}: {w:g}' for s, w in alt) + '}'
+
+
+def _points(jm: JointMap, bvh: Bvh, rest: Optional[Tuple[np.ndarray, np.ndarray]] = None):
+    """Per model joint the chosen alternative as [(kind, index, weight)]: the first one the file
+    holds that is not on top of its parent model joint in the rest pose (``rest``: the rest
+    pose's joint and End Site positions; a zero-length segment, from an End Site at offset 0 or
+    a joint mapped onto its parent, would have no direction). JointMapError when no alternative
+    fits: the message names the joint and the fix."""
     out = []
-    for name in JOINT_NAMES:
-        chosen = None
+    rest_pts = np.zeros((NUM_JOINTS, 3))
+    for j, name in enumerate(JOINT_NAMES):
+        chosen, zero = None, []
         for alt in jm.joints[name]:
             res = [(_resolve(jm, bvh, s), w) for s, w in alt]
-            if all(r is not None for r, _ in res):
-                chosen = [(r[0], r[1], w) for r, w in res]
-                break
+            if not all(r is not None for r, _ in res):
+                continue
+            cand = [(r[0], r[1], w) for r, w in res]
+            if rest is not None:
+                pt = _kinect_points([cand], rest[0][None], rest[1][None])[0, 0]
+                if j > 0 and np.linalg.norm(pt - rest_pts[PARENTS[j]]) < MIN_SEGMENT_M:
+                    zero.append(alt)
+                    continue
+                rest_pts[j] = pt
+            chosen = cand
+            break
+        if chosen is None and zero:
+            parent = JOINT_NAMES[PARENTS[j]]
+            hint = ''
+            pj, gj = PARENTS[j], PARENTS[PARENTS[j]] if PARENTS[j] > 0 else None
+            src_p = out[pj] if pj < len(out) else None
+            src_g = out[gj] if gj is not None and gj < len(out) else None
+            if src_p and src_g and len(src_p) == 1 and len(src_g) == 1 \
+                    and src_p[0][0] == 'joint' and src_g[0][0] == 'joint':
+                a = jm.source_name(bvh.names[src_p[0][1]])
+                b = jm.source_name(bvh.names[src_g[0][1]])
+                hint = (f', e.g. {name}: {{{a}: 1.35, {b}: -0.35}} (35 % of the '
+                        f'{JOINT_NAMES[gj]}-{parent} segment past {parent})')
+            raise jm.error(
+                f'joints.{name}',
+                f'{name} lands on its parent {parent} in {bvh.path} '
+                f'({" / ".join(_describe(a) for a in zero)}: a zero-length segment, e.g. an End '
+                f'Site at offset 0); place it beyond the joint with weights that extrapolate'
+                f'{hint}, or map it onto another source joint')
         if chosen is None:
             opts = ' or '.join('+'.join(s for s, _ in alt) for alt in jm.joints[name])
             raise jm.error(f'joints.{name}', f'{bvh.path} has no {opts}')
@@ -471,7 +528,9 @@ def bvh_frames(bvh: Bvh, jm: JointMap) -> Tuple[np.ndarray, np.ndarray]:
     parsed BVH through the map (``drop_first_frame`` and ``zero_rotations`` applied)."""
     if jm.format != 'bvh':
         raise jm.error('format', f'a {jm.format} map cannot read a BVH file')
-    points = _points(jm, bvh)
+    zero = np.zeros((1, bvh.motion.shape[1]))
+    pos0, _, ends0 = bvh.forward_kinematics(zero, scale=jm.scale)
+    points = _points(jm, bvh, (pos0[0], ends0[0]))
     names = {jm.source_name(n): i for i, n in enumerate(bvh.names)}
     src_bone = {}
     for name, bone in jm.orientation.items():
@@ -493,8 +552,6 @@ def bvh_frames(bvh: Bvh, jm: JointMap) -> Tuple[np.ndarray, np.ndarray]:
     kin = _kinect_points(points, pos, ends) @ c.T
     q = orientations_from_positions(kin) if len(kin) else np.zeros((0, NUM_JOINTS, 4))
     if src_bone and len(kin):
-        zero = np.zeros((1, bvh.motion.shape[1]))
-        pos0, _, ends0 = bvh.forward_kinematics(zero, scale=jm.scale)
         kin0 = (_kinect_points(points, pos0, ends0) @ c.T)[0]
         a_std = rest_directions()
         js = sorted(src_bone)
@@ -569,3 +626,44 @@ def marker_joint_centres(markers: np.ndarray, jm: JointMap) -> np.ndarray:
     rules of :mod:`skeleton_data.vicon`, with the map's subject measurements."""
     params = vicon.SubjectParams(**jm.subject)
     return vicon.joint_centres(markers, params)
+
+
+# ------------------------------------------------------------------------------------------
+# Checking a mapped rig against the standard body
+# ------------------------------------------------------------------------------------------
+CHECK_RATIO = (0.6, 1.6)   # a segment outside this share of the standard body's is flagged
+
+
+def segment_check(positions: np.ndarray) -> Tuple[np.ndarray, np.ndarray, list]:
+    """(median segment lengths (19,) m of a mapped clip, the standard body's (19,), flagged
+    segments [(name, length, standard)]: zero, or outside :data:`CHECK_RATIO` of the standard
+    after scaling the clip to the standard body's height)."""
+    from skeleton_core.model import SEGMENT_NAMES, segment_lengths
+    got = np.nanmedian(segment_lengths(positions), axis=0)
+    std = segment_lengths(standard_body().rest_positions())
+    scale = float(np.nansum(std) / max(np.nansum(got), 1e-9))
+    flagged = [(SEGMENT_NAMES[k], float(got[k]), float(std[k])) for k in range(len(got))
+               if not got[k] > 1e-3 or not CHECK_RATIO[0] <= got[k] * scale / std[k]
+               <= CHECK_RATIO[1]]
+    return got, std, flagged
+
+
+def segment_table(clips) -> str:
+    """A text table of ``[(name, positions (F, 20, 3))]``: per clip its segment lengths (cm)
+    against the standard body's; segments flagged by :func:`segment_check` marked ``!``."""
+    from skeleton_core.model import SEGMENT_NAMES, segment_lengths
+    short = [n.split('-')[1] for n in SEGMENT_NAMES]
+    std = segment_lengths(standard_body().rest_positions())
+    w = max([len(n) for n, _ in clips] + [14])
+    lines = ['segment lengths (cm) of each mapped clip (median over frames) against the standard '
+             f'body; ! = zero or outside {CHECK_RATIO[0]:g}-{CHECK_RATIO[1]:g}x of the standard '
+             'after scaling to its height', '',
+             'segment (ends at)'.ljust(w) + ' ' + ' '.join(f'{s[:9]:>9}' for s in short),
+             'standard body'.ljust(w) + ' ' + ' '.join(f'{100 * v:9.1f}' for v in std)]
+    for name, pos in clips:
+        got, _, flagged = segment_check(pos)
+        bad = {f[0] for f in flagged}
+        lines.append(name.ljust(w) + ' ' + ' '.join(
+            f'{100 * v:8.1f}' + ('!' if SEGMENT_NAMES[k] in bad else ' ')
+            for k, v in enumerate(got)))
+    return '\n'.join(lines)

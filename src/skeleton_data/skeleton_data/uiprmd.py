@@ -108,6 +108,9 @@ TRACKING_FAILURE_CASES = (('m03', 's01'),)
 _NAME_RE = re.compile(r'^m(\d\d)_s(\d\d)_e(\d\d)_(positions|angles)\.txt(\.gz)?$')
 
 
+# UI-PRMD's skeletons come from the Kinect v2 SDK body tracker (skeleton_core.tracker)
+TRACKER = 'kinect_v2_sdk'
+
 class UIPRMDFormatError(ValueError):
     """A UI-PRMD file that cannot be used; the message names the file and the reason."""
 

@@ -23,8 +23,9 @@ from pathlib import Path
 import numpy as np
 from skeleton_core.bagio import BagWriter
 from skeleton_core.conversions import frames_to_array_msg
-from skeleton_core.model import NUM_JOINTS, TRACKED
-from skeleton_data.uiprmd import clip_frames
+from skeleton_core.model import HAND_LEFT, HAND_RIGHT, NOT_TRACKED, NUM_JOINTS, TRACKED
+from skeleton_core.tracker import write_to_bag
+from skeleton_data.uiprmd import TRACKER, clip_frames
 from .paired import load_dataset
 
 SKELETON_TOPIC = '/kinect/skeletons'
@@ -50,12 +51,17 @@ def write_clip_bag(path, rc, start_ns: int, user_id: int = 1, frame_id: str = 'k
     n_sk = n_gt = 0
     tmp = Path(str(path) + '.part')
     with BagWriter(tmp) as bag:
+        if frames:   # the tracker travels with the data (skeleton_core.tracker)
+            write_to_bag(bag, TRACKER, frames[0].stamp_ns)
         for i, f in enumerate(frames):
             bag.write(SKELETON_TOPIC, frames_to_array_msg([f], f.stamp_ns, frame_id), f.stamp_ns)
             n_sk += 1
             if rc.reference is not None and np.isfinite(rc.reference[i]).all():
-                g = f.copy(positions=rc.reference[i].copy(),
-                           tracking_state=np.full(NUM_JOINTS, TRACKED, np.uint8))
+                # the hands are not scored (the Kinect's are extrapolated, not recorded: as in
+                # skeleton_eval.real_eval): NOT_TRACKED in the truth, left out by process_bag
+                state = np.full(NUM_JOINTS, TRACKED, np.uint8)
+                state[[HAND_LEFT, HAND_RIGHT]] = NOT_TRACKED
+                g = f.copy(positions=rc.reference[i].copy(), tracking_state=state)
                 bag.write(GROUND_TRUTH_TOPIC, frames_to_array_msg([g], f.stamp_ns, frame_id),
                           f.stamp_ns)
                 n_gt += 1
@@ -88,6 +94,11 @@ def build_parser():
                     help='measure the real sensor error and print it next to the sensor model '
                          '(writes <out>/calibration.{md,json}); no bags unless --bags is given')
     ap.add_argument('--bags', action='store_true', help='with --calibrate: also write the bags')
+    ap.add_argument('--reference-csv', action='store_true',
+                    help='also write each clip\'s Vicon joint centres as a reference CSV on the '
+                         'Vicon\'s own clock and frame (<clip>.reference.csv, not registered) and '
+                         'a manifest pairs.csv (bag, reference, subject, session = subject and '
+                         'movement): the input of build_correction --pairs, as a lab\'s own pairs')
     ap.add_argument('--quiet', action='store_true', help='no progress bar')
     return ap
 
@@ -131,6 +142,7 @@ def main(argv=None):
             from tqdm import tqdm
             it = tqdm(clips, desc='writing', unit='bag')
         start_ns = int(round(args.start_sec * 1e9))
+        pairs = ['bag,reference,subject,session']
         for rc in it:
             path = out / f'{rc.clip.name}.mcap'
             try:
@@ -138,9 +150,24 @@ def main(argv=None):
             except Exception as e:  # one bad clip must not stop the import
                 skipped.append((str(path), f'cannot write bag: {e}'))
                 continue
+            # (the tracking-failure clips stay out of the manifest, as the UI-PRMD path
+            # leaves them out of the fit)
+            if args.reference_csv and rc.reference is not None \
+                    and not rc.clip.is_tracking_failure:
+                from skeleton_data import vicon
+                from skeleton_data.reference import write_csv
+                ref = vicon.load_reference(vicon.vicon_path_for(src, rc.clip.name))
+                csv_path = write_csv(out / f'{rc.clip.name}.reference.csv',
+                                     np.arange(len(ref)) / vicon.FRAME_RATE, ref)
+                pairs.append(f'{path.name},{csv_path.name},s{rc.clip.subject:02d},'
+                             f's{rc.clip.subject:02d}_m{rc.clip.movement:02d}')
             written.append({'clip': rc.clip.name, 'bag': str(path), 'skeletons': n_sk,
                             'ground_truth': n_gt,
                             'lag_s': None if rc.lag is None else round(rc.lag, 3)})
+        if args.reference_csv:
+            (out / 'pairs.csv').write_text('\n'.join(pairs) + '\n')
+            print(f'import_uiprmd: {len(pairs) - 1} bag + reference CSV pairs in '
+                  f'{out / "pairs.csv"}')
     report = {
         'src': str(src), 'frame_id': args.frame_id, 'sensor_height_m': args.sensor_height,
         'clips_read': len(clips), 'bags': written,

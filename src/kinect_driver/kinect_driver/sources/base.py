@@ -53,6 +53,9 @@ class Source:
     recorded = False  # stamps are recorded ones (replay): no capture-to-output latency
     has_truth = False  # outputs may carry the ground truth (SourceOutput.truth)
     retry_s = 0.0     # > 0: a retryable SourceError at open() is retried this often (s)
+    # the skeleton tracker the frames come from (skeleton_core.tracker.TRACKERS; '' = unknown),
+    # published by the node on /kinect/tracker (latched) once the source is open
+    tracker = ''
 
     @classmethod
     def from_config(cls, config, frame_id: str, log: Optional[Callable[[str], None]] = None,

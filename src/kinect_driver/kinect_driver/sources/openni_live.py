@@ -240,6 +240,7 @@ def load_nite2(nite2_path: str):
 # --------------------------------------------------------------------------------------------
 class LiveSource(Source):
     name = 'live'
+    tracker = 'nite2'
     config_class = LiveConfig
 
     def __init__(self, config: Optional[LiveConfig] = None, frame_id: str = 'kinect_link',

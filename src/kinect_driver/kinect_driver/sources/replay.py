@@ -8,6 +8,10 @@
   with ``ros2 bag convert`` to MCAP.
 * **CSV** (``.csv``): the format of :mod:`kinect_driver.csv_format`; timing follows ``stamp_ns``.
 
+The skeleton tracker a bag declares (``/kinect/tracker``, :mod:`skeleton_core.tracker`) becomes
+the source's ``tracker``: the node publishes it latched before the first frame, so the
+reconstruction picks the correction learned for it. A CSV file declares none.
+
 Every other topic of the bag is replayed too, as ``ros2 bag play`` would (ground truth on
 ``/kinect/ground_truth`` included), at its recorded time among the skeletons, except the topics
 in ``replay_skip_topics`` (by default those the node graph produces itself from the skeletons:
@@ -28,6 +32,7 @@ from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
+from skeleton_core import tracker as T
 from skeleton_core.bagio import BagError, bag_topics, read_messages
 from skeleton_core.conversions import stamp_to_ns
 from skeleton_core.params import param
@@ -139,9 +144,18 @@ class ReplaySource(Source):
             raise SourceError(f'replay bag {p}: {topic} holds {topics[topic][0]}, not '
                               f'{SKELETON_ARRAY}')
         self.topic = topic
+        # the tracker the bag declares: the node publishes it latched before the first frame
+        try:
+            self.tracker = T.from_bag(p, warn=self._warn)
+            T.check(self.tracker)
+        except BagError as e:
+            raise SourceError(str(e)) from None
+        except T.TrackerError as e:
+            raise SourceError(f'replay bag {p}: {e}') from None
         if self.play_other_topics:
             self.other_topics = {t: ty for t, (ty, n) in sorted(topics.items())
-                                 if t != topic and t not in self.skip_topics and n > 0 and ty}
+                                 if t not in (topic, T.TOPIC) and t not in self.skip_topics
+                                 and n > 0 and ty}
         items = []
         try:
             for m in read_messages(p, topics=[topic, *self.other_topics], decode=[topic],

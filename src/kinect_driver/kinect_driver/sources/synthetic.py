@@ -100,6 +100,7 @@ class SyntheticConfig:
 
 class SyntheticSource(Source):
     name = 'synthetic'
+    tracker = 'sensor_model'
     config_class = SyntheticConfig
     has_truth = True
 
