@@ -66,7 +66,8 @@ class LiveConfig:
     device_uri: str = param('', "OpenNI2 device URI ('' = first device) or an .oni recording path")
     nite2_path: str = param('', 'NiTE2 Redist directory (holding libNiTE2.so)')
     openni2_path: str = param('', "directory of libOpenNI2.so ('' = system libraries)")
-    max_users: int = param(MAX_USERS, 'most users published per frame', range=(1, MAX_USERS))
+    max_users: int = param(MAX_USERS, 'most users published per frame', range=(1, MAX_USERS),
+                           public=False)   # NiTE's own limit; labs do not lower it
     tracked_confidence: float = param(0.5, 'NiTE joint confidence >= this -> TRACKED',
                                       range=(0.0, 1.0), public=False)
     inferred_confidence: float = param(0.0, 'NiTE joint confidence > this -> INFERRED (else '

@@ -95,7 +95,7 @@ class SyntheticConfig:
     view_pose: str = param('', "several sensors: this sensor's pose in the first sensor's frame, "
                            '"x y z yaw pitch roll" (m, deg; the people face the first sensor; '
                            "set by driver.launch.py sensors:=N); '' = the only sensor",
-                           validator=lambda v: _pose_error(v), public=False)
+                           validator=lambda v: _pose_error(v))
 
 
 class SyntheticSource(Source):
