@@ -90,10 +90,27 @@ def rclpy_context():
     ctx = rclpy.Context()
     rclpy.init(context=ctx)
     yield ctx
+    destroy_nodes_of(ctx)
     try:
         rclpy.shutdown(context=ctx)
     except Exception:
         pass
+
+
+def destroy_nodes_of(ctx):
+    """Destroy every node a test left alive in ``ctx``: shutting a context down does not remove
+    its nodes from the graph while they exist, and a left-over ``/driver`` answers the next test's
+    ``/driver/change_state`` discovery without ever serving it (a launched node then stays
+    unconfigured)."""
+    import gc
+
+    from rclpy.node import Node
+    for obj in gc.get_objects():
+        try:
+            if isinstance(obj, Node) and obj.context is ctx and obj.handle is not None:
+                obj.destroy_node()
+        except Exception:
+            pass
 
 
 sys.path.insert(0, str(ROOT / 'tests'))

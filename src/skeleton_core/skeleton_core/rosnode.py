@@ -60,14 +60,21 @@ class Parameters:
         self.values: Dict[str, Any] = {s.name: s.default for s in every if not s.public}
         self._validate = validate
         self._apply = apply
-        check_overrides(node, self.specs, {s.name for s in every if not s.public})
-        for s in self.specs.values():
-            p = node.declare_parameter(s.name, s.default, descriptor(s))
-            value = self._typed(s, p.value)
-            err = s.check(value)
-            if err is not None:
-                raise ValueError(f'invalid parameter: {err}')
-            self.values[s.name] = value
+        try:
+            check_overrides(node, self.specs, {s.name for s in every if not s.public})
+            for s in self.specs.values():
+                p = node.declare_parameter(s.name, s.default, descriptor(s))
+                value = self._typed(s, p.value)
+                err = s.check(value)
+                if err is not None:
+                    raise ValueError(f'invalid parameter: {err}')
+                self.values[s.name] = value
+        except Exception:
+            # the constructor fails: nobody will ever hold this node to destroy it, and an
+            # undestroyed node stays on the graph (its services still discoverable, answering
+            # nothing) for as long as the process lives
+            node.destroy_node()
+            raise
         node.add_on_set_parameters_callback(self._on_set)
         node.add_post_set_parameters_callback(self._post_set)
 
