@@ -8,7 +8,7 @@ pytest.importorskip('skeleton_msgs.msg', reason='skeleton_msgs not built (run sc
 
 import yaml  # noqa: E402
 
-from kinect_bringup import param_docs  # noqa: E402
+from kinect_experiments import param_docs  # noqa: E402
 from kinect_bringup.graph import NODES  # noqa: E402
 
 from conftest import ROOT  # noqa: E402

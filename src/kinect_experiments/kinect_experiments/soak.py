@@ -1,7 +1,7 @@
 """``soak``: run the graph (one process per node) for a long time under abuse and check it survives.
 
-    ros2 run kinect_bringup soak                 # 10 minutes (make soak)
-    ros2 run kinect_bringup soak --duration 45   # the shortened soak the test suite runs
+    ros2 run kinect_experiments soak                 # 10 minutes (make soak)
+    ros2 run kinect_experiments soak --duration 45   # the shortened soak the test suite runs
 
 While the synthetic driver streams one user, an injector publishes on /kinect/skeletons: visitors
 appearing and vanishing, bursts and gaps, and malformed messages of every kind (fuzz.MUTATIONS);
@@ -37,8 +37,8 @@ from typing import Dict, List
 
 import numpy as np
 
-from .graph import repo_root
-from .processes import Graph
+from kinect_bringup.graph import repo_root
+from kinect_bringup.processes import Graph
 from skeleton_data.database import build_default
 from .fuzz import MUTATIONS, malformed, valid_array
 from skeleton_core.bagio import BagError, read_messages, recover, truncation
