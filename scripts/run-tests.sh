@@ -14,7 +14,8 @@ cd "$root"
 # each run gets its own DDS domain (conftest.py refines this per worker)
 export ROS_DOMAIN_ID="${KP_TEST_DOMAIN_ID:-$(( 1 + $$ % 100 ))}"
 set +e
-python -m pytest tests src/*/test "$@"
+# no path given: pytest.ini's testpaths (tests/ and every package's src/<pkg>/test/); a path runs only that
+python -m pytest "$@"
 rc=$?
 set -e
 [ "$rc" = 5 ] && { echo "pytest: no tests were collected"; exit 1; }
