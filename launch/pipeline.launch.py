@@ -58,6 +58,10 @@ ARGS = [
      'overrides sensor_pose'),
     ('static_tf', 'true', 'publish the sensor frame on /tf_static (false: another launch does, '
      'e.g. driver.launch.py on the sensor PC)'),
+    ('record_split_size', '', 'record: start a new piece every this many MB (the recording '
+     'becomes a folder of complete bags; "" = the recorder.yaml value, 0 = no size limit)'),
+    ('record_split_duration', '', 'record: start a new piece every this many seconds ("" = the '
+     'recorder.yaml value, 0 = no duration limit)'),
     ('namespace', '', 'namespace for all nodes'),
     ('config_dir', '', 'directory with <node>.yaml parameter files ("" = the installed config)'),
     ('log_level', 'info', 'log level of all nodes'),
@@ -67,6 +71,17 @@ ARGS = [
 def _nodes(context):
     def arg(name):
         return LaunchConfiguration(name).perform(context)
+
+    def _split():
+        out = {}
+        for a, p in (('record_split_size', 'split_size_mb'),
+                     ('record_split_duration', 'split_duration_s')):
+            if arg(a):
+                try:
+                    out[p] = float(arg(a))
+                except ValueError:
+                    raise RuntimeError(f'{a}:={arg(a)!r} is not a number') from None
+        return out
 
     config_dir = arg('config_dir') or os.path.join(
         get_package_share_directory('kinect_bringup'), 'config')
@@ -159,7 +174,8 @@ def _nodes(context):
                           parameters=params('viz'), **common))
     if arg('record'):
         nodes.append(managed_node(package='kinect_bringup', executable='recorder', name='recorder',
-                          parameters=params('recorder', output=arg('record')), **common))
+                                  parameters=params('recorder', output=arg('record'), **_split()),
+                                  **common))
     if arg('static_tf').lower() in ('true', '1', 'yes'):
         # the sensor frame on TF (/tf_static is absolute: the namespace does not move it)
         from skeleton_core.tf import parse_pose

@@ -147,16 +147,18 @@ def test_process_bag_picks_the_correction_of_the_bags_tracker(tmp_path, monkeypa
     b = rng.normal(scale=0.02, size=(NUM_JOINTS, 3))
     corr = C.SensorCorrection('nite2', b, np.zeros((C.NUM_FEATURES, 3 * NUM_JOINTS)),
                               np.zeros(C.NUM_FEATURES))
+    from skeleton_data.database import default_path as default_database
+    db = str(default_database())   # the session's database (conftest builds it), before the cache moves
     monkeypatch.setenv('KINECT_POSTURE_CACHE', str(tmp_path / 'cache'))
     corr.save(C.default_path('nite2'))
     lines = []
-    s = process(tmp_path / 'in.mcap', tmp_path / 'out.mcap', 'C', progress=False,
+    s = process(tmp_path / 'in.mcap', tmp_path / 'out.mcap', 'C', database=db, progress=False,
                 info=lines.append, warn=lines.append)
     assert s['tracker'] == 'nite2' and s['correction'] and 'nite2' in s['correction']
     assert any('applied' in m for m in lines)
     # an explicit tracker overrides the bag's: the nite2 correction is then refused in one line
     lines.clear()
-    s = process(tmp_path / 'in.mcap', tmp_path / 'out2.mcap', 'C', progress=False,
+    s = process(tmp_path / 'in.mcap', tmp_path / 'out2.mcap', 'C', database=db, progress=False,
                 input_tracker='kinect_v1_sdk', correction=str(C.default_path('nite2')),
                 info=lines.append, warn=lines.append)
     assert s['correction'] is None

@@ -35,6 +35,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--no-physics', action='store_true')
     p.add_argument('--no-viz', action='store_true')
     p.add_argument('--record', default='', help='record the pipeline topics to this MCAP file')
+    p.add_argument('--record-split-size', type=float, default=None,
+                   help='with --record: a new piece every this many MB (a folder of bags)')
+    p.add_argument('--record-split-duration', type=float, default=None,
+                   help='with --record: a new piece every this many seconds')
     p.add_argument('--duration', type=float, default=0.0, help='stop after this many seconds (0 = run)')
     p.add_argument('--config-dir', default=None, help='directory of <node>.yaml files')
     p.add_argument('--sensor-pose', default=DEFAULT_SENSOR_POSE,
@@ -88,6 +92,10 @@ def node_overrides(args) -> Dict[str, Dict]:
                                           else '/posture/reconstructed')
     if args.record:
         over['recorder']['output'] = str(Path(args.record).resolve())
+        if args.record_split_size is not None:
+            over['recorder']['split_size_mb'] = args.record_split_size
+        if args.record_split_duration is not None:
+            over['recorder']['split_duration_s'] = args.record_split_duration
     return over
 
 

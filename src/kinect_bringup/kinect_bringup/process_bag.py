@@ -19,7 +19,8 @@ from pathlib import Path
 from typing import Dict, List, Optional
 
 import numpy as np
-from skeleton_core.bagio import BagWriter, bag_topics, read_messages
+from skeleton_core.bag_split import bag_pieces, pieces_topics, read_pieces
+from skeleton_core.bagio import BagError, BagWriter
 from skeleton_core.cdr import SKELETON_ARRAY, CdrError, frames_from_cdr, frames_to_cdr
 from skeleton_core.presence import Presence
 from pose_reconstruction.reconstructor import Reconstructor
@@ -42,13 +43,14 @@ def _progress(total: int, enabled: bool):
         return _Null()
 
 
-def process(bag: Path, out: Path, method: str = 'C', database: str = '', physics: bool = False,
+def process(bag, out: Path, method: str = 'C', database: str = '', physics: bool = False,
             input_topic: str = '/kinect/skeletons', user_timeout_s: float = 2.0,
             time_jump_reset_s: float = 1.0, progress: bool = True,
             params: Optional[Dict] = None, warn=None, correction: str = 'auto',
             input_tracker: str = '', info=None) -> Dict:
     """Process ``bag`` into ``out``; returns a summary (frames, wall time, users, refusals,
-    accuracy).
+    accuracy). ``bag``: one file, a folder of pieces (a split recording) or a list of pieces,
+    processed in order as one recording.
 
     Users come and go as they do live, in the bag's time (the messages' header stamps, the log
     time when unstamped): a user unseen for ``user_timeout_s`` (the reconstruction node's
@@ -70,7 +72,13 @@ def process(bag: Path, out: Path, method: str = 'C', database: str = '', physics
     if warn is None:
         def warn(text):
             print(f'process_bag: warning: {text}', file=sys.stderr, flush=True)
-    topics = bag_topics(str(bag))
+    try:
+        pieces = bag_pieces(bag)
+        topics = pieces_topics(pieces)
+    except BagError as e:
+        raise ValueError(str(e)) from None
+    if not isinstance(bag, (str, Path)):
+        bag = f'{pieces[0]} (+{len(pieces) - 1} pieces)'
     if input_topic not in topics:
         raise ValueError(f'{bag}: no {input_topic} in the bag (topics: {sorted(topics)})')
     n_in = topics[input_topic][1]
@@ -124,7 +132,7 @@ def process(bag: Path, out: Path, method: str = 'C', database: str = '', physics
     with BagWriter(str(out)) as writer:
         # SkeletonArray bytes are decoded and encoded by skeleton_core.cdr (numpy), not through
         # rclpy message objects: the I/O would otherwise cost as much as the reconstruction
-        for m in read_messages(str(bag), decode=False):
+        for m in read_pieces(pieces, decode=False):
             writer.write_raw(m.topic, m.data, m.stamp_ns, m.msgtype)
             if m.topic == '/kinect/ground_truth' and m.msgtype == SKELETONS:
                 try:
@@ -230,7 +238,8 @@ def main(argv=None) -> int:
     from skeleton_core.tracker import TRACKERS
     p = argparse.ArgumentParser(prog='process_bag', description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument('bag', help='input MCAP bag with skeleton_msgs/SkeletonArray')
+    p.add_argument('bag', nargs='+', help='input MCAP bag with skeleton_msgs/SkeletonArray: a '
+                   'file, a folder of pieces (a split recording) or several pieces in order')
     p.add_argument('--out', default=None, help='output bag (default: <input>_processed.mcap)')
     p.add_argument('--method', choices=['A', 'B', 'C'], default='C')
     p.add_argument('--database', default='', help='database file ("" = default)')
@@ -249,8 +258,9 @@ def main(argv=None) -> int:
     p.add_argument('--report', default=None, help='write the summary JSON here')
     p.add_argument('--no-progress', action='store_true')
     args = p.parse_args(argv)
-    bag = Path(args.bag)
-    out = Path(args.out) if args.out else bag.with_name(bag.stem + '_processed.mcap')
+    bag = [Path(b) for b in args.bag] if len(args.bag) > 1 else Path(args.bag[0])
+    first = Path(args.bag[0])
+    out = Path(args.out) if args.out else first.with_name(first.stem + '_processed.mcap')
     try:
         summary = process(bag, out, args.method, args.database, args.physics, args.topic,
                           user_timeout_s=args.user_timeout, progress=not args.no_progress,

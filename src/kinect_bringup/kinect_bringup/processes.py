@@ -92,6 +92,13 @@ class Graph:
         self.kill(name)
         self._start(name, cmd)
 
+    def start(self, name: str):
+        """Start a process that was killed again, with its command (a sensor replugged)."""
+        p = self.procs[name]
+        if p.poll() is None:
+            raise RuntimeError(f'{name} is running')
+        self._start(name, p.args)
+
     def kill(self, name: str, sig=signal.SIGKILL):
         p = self.procs[name]
         if p.poll() is None:

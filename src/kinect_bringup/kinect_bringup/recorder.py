@@ -5,7 +5,13 @@ time = receive time, publish time = the message's header stamp when it has one).
 Crash-safe: what was received is in the file within ``flush_period`` s (a timer flushes the chunk
 being filled even when the input pauses), so a recorder killed with SIGKILL, by the OOM killer or
 a power cut (``fsync``) leaves a bag that every reader reads up to its last complete message and
-``ros2 run kinect_bringup recover_bag`` rewrites into a complete, indexed one (docs/recovery.md)."""
+``ros2 run kinect_bringup recover_bag`` rewrites into a complete, indexed one (docs/recovery.md).
+
+Recordings that rotate: with ``split_size_mb`` and/or ``split_duration_s`` the recording
+``out/day.mcap`` becomes the folder ``out/day/`` of pieces ``day_0.mcap``, ``day_1.mcap``, ...,
+each a complete bag (closed when the next one starts; the one being written is crash-safe as
+above), which replay and ``process_bag`` play in order as one recording
+(:mod:`skeleton_core.bag_split`)."""
 from __future__ import annotations
 
 import importlib
@@ -15,6 +21,7 @@ from pathlib import Path
 
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
+from skeleton_core.bag_split import pieces_dir
 from skeleton_core.rosnode import ManagedNode, ParamSpec, Parameters, run_node
 from skeleton_core.tf_ros import STATIC_LISTENER_QOS, TF_STATIC_TOPIC
 
@@ -38,6 +45,14 @@ PARAMS = [
               read_only=True),
     ParamSpec('fsync', True, 'also force each flush onto the disk (survives a power cut)',
               read_only=True),
+    ParamSpec('split_size_mb', 0.0,
+              'start a new piece when the current one holds this many MB (2**20 bytes; within '
+              'one 1 MiB chunk): the recording becomes a folder of complete bags named after '
+              'output; 0 = no size limit', range=(0.0, 1e6), read_only=True),
+    ParamSpec('split_duration_s', 0.0,
+              'start a new piece when the next message comes this long after the first one of '
+              'the current piece (receive times); 0 = no duration limit', range=(0.0, 1e6),
+              read_only=True),
 ]
 
 
@@ -53,15 +68,18 @@ class RecorderNode(ManagedNode):
         self.params = Parameters(self, PARAMS)
 
     def configure(self) -> None:
-        from skeleton_core.bagio import BagWriter
+        from skeleton_core.bag_split import SplitBagWriter
         for topic in self.params['topics']:
             if topic not in TOPICS:
                 raise ValueError(f'recorder: unknown topic {topic!r} (known: {sorted(TOPICS)})')
         self.path = Path(self.params['output']).expanduser().resolve()
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._keep_unfinished()
-        self._writer = BagWriter(str(self.path), flush_period_s=self.params['flush_period'],
-                                 fsync=self.params['fsync'])
+        self._writer = SplitBagWriter(
+            self.path, split_size_bytes=int(self.params['split_size_mb'] * 2 ** 20),
+            split_duration_s=self.params['split_duration_s'], on_piece=self._piece_done,
+            flush_period_s=self.params['flush_period'], fsync=self.params['fsync'])
+        self.split = self._writer.policy.enabled
         self.counts = {topic: 0 for topic in self.params['topics']}
         self.diagnostics()
 
@@ -86,7 +104,12 @@ class RecorderNode(ManagedNode):
             self.subscription(_msg_class(msgtype), topic,
                               lambda data, t=topic, mt=msgtype: self._on_msg(t, mt, data),
                               topic_qos, raw=True)
-        self.get_logger().info(f'recording {len(self.counts)} topics to {self.path}')
+        where = (f'pieces in {pieces_dir(self.path)}/ (split at '
+                 + ' or '.join(x for x in (
+                     f'{self.params["split_size_mb"]:g} MB' if self.params['split_size_mb'] else '',
+                     f'{self.params["split_duration_s"]:g} s' if self.params['split_duration_s']
+                     else '') if x) + ')') if self.split else str(self.path)
+        self.get_logger().info(f'recording {len(self.counts)} topics to {where}')
 
     def cleanup(self) -> None:
         self.close()
@@ -101,10 +124,18 @@ class RecorderNode(ManagedNode):
             self.counts[topic] += 1
         self.health.on_publish()
 
+    def _piece_done(self, path):
+        self.get_logger().info(f'finished piece {path.name} ({path.stat().st_size / 2 ** 20:.1f} '
+                               'MB)')
+
     def _keep_unfinished(self):
         """An unfinished bag at the output path is the recording of a recorder that was killed
-        (a restarted node, a respawn): moved aside, never overwritten."""
+        (a restarted node, a respawn): moved aside, never overwritten. With splitting, the folder
+        of pieces: moved aside when a piece is unfinished, else its old pieces are replaced."""
         from skeleton_core.bagio import BagError, finished
+        if self.params['split_size_mb'] or self.params['split_duration_s']:
+            self._keep_unfinished_pieces()
+            return
         if not self.path.is_file():
             return
         try:
@@ -119,6 +150,26 @@ class RecorderNode(ManagedNode):
             f'{self.path.name} is an unfinished recording (a killed recorder\'s): kept as '
             f'{aside} (ros2 run kinect_bringup recover_bag {aside})')
 
+    def _keep_unfinished_pieces(self):
+        from skeleton_core.bagio import BagError, finished
+        d = pieces_dir(self.path)
+        if not d.is_dir():
+            return
+        old = sorted(d.glob(f'{d.name}_*.mcap'))
+        try:
+            cut = [p for p in old if not finished(p)]
+        except BagError:
+            cut = []
+        if not cut:
+            for p in old:
+                p.unlink()
+            return
+        aside = d.with_name(f'{d.name}.unfinished-{time.strftime("%Y%m%d-%H%M%S")}')
+        d.rename(aside)
+        self.get_logger().warning(
+            f'{d} holds an unfinished recording (a killed recorder\'s): kept as {aside} '
+            f'(ros2 run kinect_bringup recover_bag {aside})')
+
     def _poll(self):
         with self._lock:
             if self._writer is not None:
@@ -128,9 +179,12 @@ class RecorderNode(ManagedNode):
         with self._lock:
             if self._writer is not None:
                 self._writer.__exit__(None, None, None)
+                pieces = self._writer.pieces
                 self._writer = None
+                what = (f'{len(pieces)} pieces in {pieces_dir(self.path)}' if self.split
+                        else str(self.path))
                 self.get_logger().info(
-                    f'wrote {self.path}: ' + ', '.join(f'{t} {n}' for t, n in self.counts.items()))
+                    f'wrote {what}: ' + ', '.join(f'{t} {n}' for t, n in self.counts.items()))
 
 
 def main(args=None):

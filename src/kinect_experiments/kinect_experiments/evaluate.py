@@ -25,7 +25,7 @@ import sys
 from pathlib import Path
 
 from kinect_bringup.graph import preset_path, repo_root
-from . import real_loso
+from . import fusion_eval, real_loso
 from pose_reconstruction.methods import load_preset
 from skeleton_eval import perturb as P
 from skeleton_eval.evaluation import to_json
@@ -80,6 +80,10 @@ def _parser():
                    help='reconstruction preset (config/presets/NAME.yaml or a path, e.g. shum2013: '
                         'the papers\' variant) for methods A, B, C (and the C rows of --real); '
                         '--method-params override it')
+    p.add_argument('--sensors', type=int, default=1,
+                   help='N > 1: N sensor-model views (front, side at 90 deg, ...) fused '
+                        '(pose_reconstruction.fusion): single-sensor raw and C against fused raw '
+                        'and fused + C per class (docs/multi_sensor.md)')
     p.add_argument('--quiet', action='store_true', help='no progress lines')
     p.add_argument('--real', nargs='?', const='auto', default=None, metavar='UIPRMD_DIR',
                    help='real-data mode: raw, holt, one_euro, C and C with the learned sensor '
@@ -222,6 +226,8 @@ def run(argv=None) -> int:
             print(f'[evaluate] {method} {key} {clip}', file=sys.stderr)
 
     exp = args.experiment
+    if args.sensors > 1:
+        return fusion_eval.run(args, dev_clips)
     if args.perturb:
         return run_perturb(args, dev_clips, source)
     if exp == 'table4':

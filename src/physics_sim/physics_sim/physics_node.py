@@ -219,9 +219,16 @@ class PhysicsNode(ManagedNode):
         out['characters'] = len(self.sim.characters)
         out['objects'] = len(self.sim.objects)
         out['worlds'] = len(self.sim.worlds)
+        out['user_states'] = len(self._user_ids())
         if self._wall_in_step > 0:
             out['real_time_factor'] = self._sim_in_step / self._wall_in_step
         return out
+
+    def _user_ids(self) -> set:
+        """Every user the node or its simulation holds state for."""
+        sim = self.sim
+        return (set(self.presence.users) | set(self._user_stamp) | set(sim.characters)
+                | set(sim.engaged) | set(sim.grips))
 
     # ------------------------------------------------------------------ input
     def _on_intention(self, msg: Intention) -> None:

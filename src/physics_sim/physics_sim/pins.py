@@ -4,6 +4,7 @@ when the target lifts or slides away, or when the pin conflicts with the targets
 than ``pin_max_force`` or is stretched beyond ``conflict_release``)."""
 from __future__ import annotations
 
+import weakref
 from typing import List
 
 import numpy as np
@@ -14,14 +15,21 @@ class FootPins:
     """The foot pins of every character of one world."""
 
     def __init__(self, world):
-        """``world``: the :class:`~physics_sim.world.World` whose feet these are."""
-        self.world = world
+        """``world``: the :class:`~physics_sim.world.World` whose feet these are (held weakly: a
+        world and its pins in a reference cycle outlive the world until a full garbage
+        collection, and a world holds a MuJoCo model and data of several MB that Python's
+        collector does not see -- a world dropped per visitor piled up, issue 32)."""
+        self._world = weakref.ref(world)
         self.feet: List[tuple] = []    # (character index, joint, PinState)
         self.idx = np.zeros(0, int)    # stacked joint row of every foot
         self.eq = np.zeros(0, int)     # its pin equality id
         self.active = np.zeros(0, bool)
         self.manual = np.zeros(0, bool)
         self._pts = None
+
+    @property
+    def world(self):
+        return self._world()
 
     def pack(self) -> None:
         """After every rebuild (the PinState objects live as long as their characters)."""

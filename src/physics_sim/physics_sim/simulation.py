@@ -64,6 +64,9 @@ class Simulation:
     """The characters (one per user) and objects, in one or more MuJoCo worlds."""
 
     PART_AFTER = 1.0   # s apart before two characters sharing a world are split up
+    # compiled worlds kept for groups that may meet again (each a MuJoCo model and data, ~1-3 MB
+    # resident); a world holding a character that left is dropped at once (never reusable)
+    CACHE_SIZE = 16
 
     def __init__(self, config: Optional[SimConfig] = None, objects: Sequence[ObjectSpec] = (),
                  sensor_pose: Optional[Transform] = None):
@@ -163,18 +166,27 @@ class Simulation:
                 w.rebuild()
             new.append(w)
         for w in old:
-            if w not in new and w.chars and not self.objects:
+            if w in new:
+                continue
+            if w.chars and not self.objects:
+                replaced = self._cache.pop(tuple(sorted(w.user_ids())), None)
+                if replaced is not None and replaced is not w:
+                    replaced.close()
                 self._cache[tuple(sorted(w.user_ids()))] = w
-        while len(self._cache) > 16:
-            self._cache.pop(next(iter(self._cache)))
+            else:
+                w.close()
+        while len(self._cache) > self.CACHE_SIZE:
+            self._cache.pop(next(iter(self._cache))).close()
         self.worlds = new
         self._world_of = {u: w for w in new for u in w.user_ids()}
 
     def _cached(self, uids: List[int], with_objects: bool) -> Optional[World]:
         """The cached world of exactly these characters (the same Character objects), if any."""
         w = self._cache.pop(tuple(uids), None)
-        if (w is None or self.objects or
-                any(self.characters.get(ch.user_id) is not ch for ch in w.chars)):
+        if w is None:
+            return None
+        if self.objects or any(self.characters.get(ch.user_id) is not ch for ch in w.chars):
+            w.close()
             return None
         w.with_objects = with_objects
         return w
@@ -347,7 +359,12 @@ class Simulation:
         self.shared.grips.pop(int(user_id), None)
         self.pushes[:] = [p for p in self.pushes if p[0] != int(user_id)]
         self._world_of.pop(int(user_id), None)
+        self._apart = {k: v for k, v in self._apart.items() if int(user_id) not in k}
         self._rebuild()
+        # cached worlds with this character can never be taken back (a user who returns is a
+        # new Character): free them now instead of when 16 others have pushed them out
+        for key in [k for k in self._cache if int(user_id) in k]:
+            self._cache.pop(key).close()
         return True
 
     # ------------------------------------------------------------------ objects

@@ -159,6 +159,15 @@ class World:
         self.pack_targets()
         self.counters['rebuilds' if recompile else 'reused_models'] += 1
 
+    def close(self) -> None:
+        """Free the MuJoCo model and data now (the simulation calls it on a world it drops: a
+        model and data of a few characters are MBs that Python's collector does not count, so
+        they must not wait for it). The world is unusable afterwards."""
+        self.model = self.data = None
+        self.controller = None
+        self.chars = []
+        self.tg = self.ix = self._pts = None
+
     def obj_id(self, name: str) -> int:
         return mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_BODY, f'obj_{name}')
 

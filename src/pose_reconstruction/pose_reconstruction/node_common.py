@@ -139,7 +139,8 @@ class SkeletonArrayNode(ManagedNode):
 
     def diagnostics_extra(self) -> Dict[str, Any]:
         with self._lock:
-            return {'users': len(self._users)}
+            return {'users': len(self._users),
+                    'user_states': len(set(self._users) | set(self._last_seen))}
 
     # -- internals -------------------------------------------------------------------------------
     def _validate_change(self, values: Dict[str, Any], changed: Dict[str, Any]) -> Optional[str]:

@@ -235,6 +235,14 @@ class BagWriter:
         self.count = 0
         self.flushes = 0
 
+    @property
+    def bytes_written(self) -> int:
+        """Bytes of the file so far (the chunk being filled, at most ``chunk_size``, not
+        counted until it is flushed)."""
+        if self._closed:
+            return self.path.stat().st_size if self.path.exists() else 0
+        return self._file.tell()
+
     def __enter__(self) -> 'BagWriter':
         return self
 

@@ -20,6 +20,7 @@ from rclpy.parameter import Parameter
 
 from .cdr import CdrError, frames_from_cdr
 from .health import Health
+from .memory import open_files, rss_mb
 from .params import ParamSpec  # noqa: F401 (declared in params, re-exported for the nodes)
 
 
@@ -167,7 +168,10 @@ class InputDrops:
 
 
 class DiagnosticsPublisher:
-    """Publishes a node's :class:`Health` on ``/diagnostics`` (diagnostic_msgs/DiagnosticArray)."""
+    """Publishes a node's :class:`Health` on ``/diagnostics`` (diagnostic_msgs/DiagnosticArray),
+    with the process's resident memory (``rss_mb``) and open files (``open_files``) so that a lab
+    sees growth before it hurts; a node's ``extra`` adds ``user_states`` (the users it holds state
+    for: a count that grows while nobody is in view is per-user state never let go)."""
 
     def __init__(self, node: Node, health: Health, period_s: float = 1.0,
                  extra: Optional[Callable[[], Dict[str, Any]]] = None,
@@ -189,6 +193,8 @@ class DiagnosticsPublisher:
     def _publish(self) -> None:
         from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
         snap = self._health.snapshot()
+        snap['rss_mb'] = rss_mb()
+        snap['open_files'] = open_files()
         if self._extra is not None:
             snap.update(self._extra())
         st = DiagnosticStatus()

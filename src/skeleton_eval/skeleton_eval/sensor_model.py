@@ -335,6 +335,7 @@ class _Corrupter:
             self.truth_all = self._turned(self.truth_all, np.random.default_rng(seed))
             if time_shift_s:
                 self.truth_all = _shifted(self.truth_all, float(time_shift_s) * self.fps)
+            ref_truth = self.truth_all
             self.truth_all = view.inverse().apply(self.truth_all)
             self.height += float(view.translation[2])
         self.T = len(self.truth_all)
@@ -354,17 +355,30 @@ class _Corrupter:
         self.box = None
         obj = self.sc.get('object')
         if obj:
-            root = self.truth_all[:, HIP_CENTER]
-            near_x = float(np.min(self.truth_all[..., 0]))
-            gap = rng.uniform(*obj['gap_m'])
-            width = rng.uniform(*obj['width_m'])
-            top = rng.uniform(*obj['top_m']) - self.height
-            yc = float(np.median(root[:, 1])) + rng.uniform(*obj['lateral_m'])
-            floor = -self.height
+            # one object in the room: placed between the user and the *reference* sensor (drawn
+            # from the stream's seed, so every view has the same one) and seen by each view from
+            # its own place. Its box in a view's frame: the bounds of its corners there (exact for
+            # views turned by multiples of 90 deg about z, the evaluation's front + side)
+            orng = rng if view is None else np.random.default_rng(seed)
+            ref = self.truth_all if view is None else ref_truth
+            ref_height = float(self.p['placement']['sensor_height_m'])
+            root = ref[:, HIP_CENTER]
+            near_x = float(np.min(ref[..., 0]))
+            gap = orng.uniform(*obj['gap_m'])
+            width = orng.uniform(*obj['width_m'])
+            top = orng.uniform(*obj['top_m']) - ref_height
+            yc = float(np.median(root[:, 1])) + orng.uniform(*obj['lateral_m'])
+            floor = -ref_height
             x1 = near_x - 0.02 if gap < 0.5 else near_x - gap + float(obj['depth_m'])
             x1 = min(x1, near_x - 0.02)
             x0 = x1 - float(obj['depth_m'])
-            self.box = (np.array([x0, yc - width / 2, floor]), np.array([x1, yc + width / 2, top]))
+            lo, hi = np.array([x0, yc - width / 2, floor]), np.array([x1, yc + width / 2, top])
+            if view is not None:
+                corners = np.array([[a[0], b[1], c[2]] for a in (lo, hi) for b in (lo, hi)
+                                    for c in (lo, hi)])
+                corners = view.inverse().apply(corners)
+                lo, hi = corners.min(axis=0), corners.max(axis=0)
+            self.box = (lo, hi)
             self.proximity_fp = bool(obj.get('proximity_fp', False))
         else:
             self.proximity_fp = False

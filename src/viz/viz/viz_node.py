@@ -171,7 +171,8 @@ class VizNode(ManagedNode):
         self._objects_shown: Dict[tuple, str] = {}
         self._objects_new = False
         self._pub = self.publisher(MarkerArray, v['markers_topic'], 10)
-        self.diagnostics(extra=lambda: {'namespaces': len(self.scene.shown_namespaces())})
+        self.diagnostics(extra=lambda: {'namespaces': len(self.scene.shown_namespaces()),
+                                        'markers_cached': len(self._cache)})
 
     def activate(self) -> None:
         v = self.params.values

@@ -1,6 +1,7 @@
 """Replay source: a recorded bag or a CSV skeleton file, at recorded or scaled speed.
 
-* **Bag** (``.mcap`` file, or a rosbag2 directory holding one): the ``skeleton_msgs/msg/SkeletonArray``
+* **Bag** (``.mcap`` file; a folder of pieces -- a split recording, a rosbag2 directory -- or a
+  comma-separated list of pieces, played in order as one recording): the ``skeleton_msgs/msg/SkeletonArray``
   messages of ``topic`` (default ``/kinect/skeletons``; if the bag has exactly one SkeletonArray
   topic and ``topic`` is empty, that one). Messages are replayed as their recorded CDR bytes, so
   subscribers receive exactly what was recorded (the node re-stamps them only with ``restamp``).
@@ -33,7 +34,8 @@ from typing import Dict, List, Optional, Sequence, Tuple
 import numpy as np
 
 from skeleton_core import tracker as T
-from skeleton_core.bagio import BagError, bag_topics, read_messages
+from skeleton_core.bag_split import bag_pieces, pieces_topics, read_pieces
+from skeleton_core.bagio import BagError
 from skeleton_core.conversions import stamp_to_ns
 from skeleton_core.params import param
 
@@ -51,7 +53,9 @@ GRAPH_OUTPUTS = ('/kinect/skeletons_reliability', '/posture/completed', '/postur
 class ReplayConfig:
     """Parameters of :class:`ReplaySource`."""
 
-    replay_file: str = param('', 'bag (.mcap file or rosbag2 directory) or CSV file')
+    replay_file: str = param('', 'bag (.mcap file, a folder of pieces of a split recording '
+                             'or a rosbag2 directory, or comma-separated pieces in order) or CSV '
+                             'file')
     replay_topic: str = param('/kinect/skeletons', "SkeletonArray topic in the bag ('' = the "
                               "bag's only SkeletonArray topic)")
     rate: float = param(1.0, 'speed factor (2 = twice as fast)', range=(0.05, 20.0))
@@ -98,6 +102,7 @@ class ReplaySource(Source):
         self._lap = 0
         self._lap_ns = 0
         self.kind = ''
+        self.pieces: List[Path] = []
 
     # ------------------------------------------------------------------------------------
     def open(self) -> None:
@@ -105,6 +110,9 @@ class ReplaySource(Source):
             raise SourceError(f'rate must be > 0, got {self.rate}')
         if not self.path:
             raise SourceError('source:=replay needs replay_file:=<bag.mcap | skeletons.csv>')
+        if ',' in self.path:   # a list of pieces, in order
+            self._open_bag(self.path)
+            return self._timing()
         p = Path(self.path).expanduser()
         if not p.exists():
             raise SourceError(f'cannot read replay file {p}: no such file')
@@ -115,6 +123,10 @@ class ReplaySource(Source):
                               f'(convert it to MCAP with ros2 bag convert)')
         else:
             self._open_bag(p)
+        self._timing()
+
+    def _timing(self) -> None:
+        p = self.path
         if not self._items:
             raise SourceError(f'replay file {p} holds no skeleton frames'
                               + (f' on {self.topic}' if self.kind == 'bag' else ''))
@@ -127,10 +139,13 @@ class ReplaySource(Source):
         self._next = 0
         self._start_ns = None
 
-    def _open_bag(self, p: Path) -> None:
+    def _open_bag(self, p) -> None:
+        """A bag: one file, a folder of pieces (a split recording) or a comma-separated list of
+        pieces, played as one recording."""
         self.kind = 'bag'
         try:
-            topics = bag_topics(p, warn=self._warn)
+            self.pieces = bag_pieces(p)
+            topics = pieces_topics(self.pieces, warn=self._warn)
         except BagError as e:
             raise SourceError(str(e)) from None
         arrays = sorted(t for t, (ty, _) in topics.items() if ty == SKELETON_ARRAY)
@@ -146,7 +161,7 @@ class ReplaySource(Source):
         self.topic = topic
         # the tracker the bag declares: the node publishes it latched before the first frame
         try:
-            self.tracker = T.from_bag(p, warn=self._warn)
+            self.tracker = T.from_bag(self.pieces[0], warn=self._warn)
             T.check(self.tracker)
         except BagError as e:
             raise SourceError(str(e)) from None
@@ -158,8 +173,8 @@ class ReplaySource(Source):
                                  and n > 0 and ty}
         items = []
         try:
-            for m in read_messages(p, topics=[topic, *self.other_topics], decode=[topic],
-                                   warn=self._warn):
+            for m in read_pieces(self.pieces, topics=[topic, *self.other_topics],
+                                 decode=[topic], warn=self._warn):
                 if m.topic == topic:
                     items.append((m.stamp_ns, SourceOutput(
                         stamp_ns=stamp_to_ns(m.msg.header.stamp), raw=m.data,

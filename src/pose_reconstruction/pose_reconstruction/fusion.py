@@ -1,0 +1,298 @@
+"""Several Kinects, one skeleton: reliability-weighted multi-sensor fusion (issue 31 item 3). No rclpy.
+
+Each sensor publishes its users in its own frame (``kinect_k_link``); TF says where the sensor is
+(``world <- kinect_k_link``, :mod:`skeleton_core.tf`). :class:`MultiSensorFusion` turns the latest
+frames of N sensors into one list of skeletons in ``world``, which the reconstruction takes like
+one sensor's:
+
+1. **World.** Every frame is put in ``world`` through its sensor's placement (positions and
+   joint orientations).
+2. **Time.** The output stamp is the newest capture stamp seen. A sensor's user is interpolated
+   linearly between its two frames around that stamp; a sensor whose newest frame is older than the
+   stamp is held at that frame if it is at most ``max_age_ns`` (one frame period) old, and left out
+   otherwise: the fusion never waits for a late sensor.
+3. **Reliability.** Shum 2013 Eq. 1-8 (:class:`.reliability.ReliabilityEstimator`) per sensor and
+   user, on that sensor's own stream (a frame that carries a finite reliability keeps it).
+4. **Mirror.** A Kinect assumes the user faces it: seen from the back, left and right are swapped.
+   Each view's body facing in ``world`` (:func:`.posture_space.heading_yaw`) is compared with a
+   reference facing (the track's previous fused facing, else the most reliable view's); a view
+   facing the other way (cos < -``MIRROR_COS``) has its left/right joints swapped; in between
+   (a profile view) the labelling whose L/R joints lie nearer the reference skeleton wins.
+5. **Association.** Users of different sensors are the same person when their pelvises are within
+   ``gate`` in ``world``: Hungarian assignment of each sensor's users to the tracks on pelvis
+   distance, a pair that was together before being ``HYSTERESIS`` m cheaper (no flicker when two
+   people pass each other).
+6. **Fusion.** Per joint, the reliability-weighted mean of the views (weight = reliability x
+   tracking-state factor); the fused reliability is the best view's, the tracking state the best
+   view's, the orientation that of the view with the largest weight.
+
+One sensor alone passes through untouched: :meth:`MultiSensorFusion.fuse` returns its frames as
+they came (same arrays, same frame, same ids; the reconstruction and the physics take the sensor's
+frame from TF).
+"""
+from __future__ import annotations
+
+import itertools
+import time
+from dataclasses import dataclass, field
+from typing import Dict, List, Optional, Sequence, Tuple
+
+import numpy as np
+from scipy.optimize import linear_sum_assignment
+
+from skeleton_core.conversions import SkeletonFrame
+from skeleton_core.model import HIP_CENTER, MIRROR, NUM_JOINTS
+from skeleton_core.tf import Transform
+
+from .posture_space import heading_yaw
+from .reliability import ReliabilityEstimator
+
+WORLD_FRAME = 'world'
+FRAME_PERIOD_NS = 33_333_333          # Kinect v1/v2: 30 Hz; a late sensor is waited for at most this
+GATE_M = 0.6                          # two views of one person: pelvises closer than this (m); two
+#                                       people stand at least a shoulder width (~0.45 m) plus apart
+HYSTERESIS = 0.25                     # m: a view stays with its track unless another is this much nearer
+MIRROR_COS = 0.5                      # |cos| of the facing difference above which facing decides
+STATE_WEIGHT = np.array([0.0, 0.05, 1.0])   # NOT_TRACKED, INFERRED, TRACKED: an inferred joint
+#                                       is a guess (Eq. 7 gives it R_t = 0); it only counts when no
+#                                       view tracks the joint
+_EPS = 1e-9
+_MIRROR = np.asarray(MIRROR)
+_LR = np.array([j for j in range(NUM_JOINTS) if MIRROR[j] != j])   # joints with a mirror twin
+
+
+def to_world(frame: SkeletonFrame, pose: Transform, frame_id: str = WORLD_FRAME) -> SkeletonFrame:
+    """``frame`` in ``world`` through its sensor's placement (world <- sensor)."""
+    ori = None if frame.orientations is None else pose.apply_quat(frame.orientations)
+    return frame.copy(positions=pose.apply(frame.positions), orientations=ori, frame_id=frame_id)
+
+
+def mirror_labels(frame: SkeletonFrame) -> SkeletonFrame:
+    """Left and right joints swapped (the labelling of a Kinect that sees the user's back)."""
+    ori = None if frame.orientations is None else frame.orientations[_MIRROR]
+    return frame.copy(positions=frame.positions[_MIRROR], tracking_state=frame.tracking_state[_MIRROR],
+                      reliability=frame.reliability[_MIRROR], orientations=ori)
+
+
+def interpolate(f0: SkeletonFrame, f1: SkeletonFrame, stamp_ns: int) -> SkeletonFrame:
+    """The skeleton at ``stamp_ns`` between ``f0`` and ``f1`` (positions and reliability linear; the
+    tracking state and orientations of the nearer frame). Outside [f0, f1] the nearer frame."""
+    t0, t1 = f0.stamp_ns, f1.stamp_ns
+    if t1 <= t0 or stamp_ns >= t1:
+        return f1 if stamp_ns >= t1 or t1 < t0 else f0
+    if stamp_ns <= t0:
+        return f0
+    a = (stamp_ns - t0) / (t1 - t0)
+    near = f1 if a >= 0.5 else f0
+    return near.copy(positions=(1.0 - a) * f0.positions + a * f1.positions,
+                     reliability=((1.0 - a) * f0.reliability + a * f1.reliability).astype(np.float32),
+                     stamp_ns=int(stamp_ns))
+
+
+def facing(positions: np.ndarray, weights=None) -> np.ndarray:
+    """Unit horizontal body facing (x, y) in the positions' frame (hip and shoulder lines)."""
+    yaw = heading_yaw(positions, [1.0] * NUM_JOINTS if weights is None else weights)
+    return np.array([np.cos(yaw), np.sin(yaw)])
+
+
+def fuse_views(views: Sequence[SkeletonFrame], user_id: int = 0, stamp_ns: int = 0,
+               frame_id: str = WORLD_FRAME) -> SkeletonFrame:
+    """Per-joint reliability-weighted mean of views of one person in one frame (step 6)."""
+    if len(views) == 1:
+        return views[0].copy(user_id=user_id, stamp_ns=stamp_ns, frame_id=frame_id)
+    p = np.stack([v.positions for v in views])                      # (V, 20, 3)
+    ts = np.stack([v.tracking_state for v in views]).astype(np.intp)
+    r = np.nan_to_num(np.stack([v.reliability for v in views]).astype(float), nan=0.0)
+    sw = STATE_WEIGHT[np.clip(ts, 0, 2)]
+    w = np.clip(r, 0.0, 1.0) * sw
+    none = w.sum(axis=0) < _EPS                                     # no view trusts the joint
+    w[:, none] = sw[:, none] + _EPS                                 # tracking state alone, else all
+    w /= w.sum(axis=0, keepdims=True)
+    best = w.argmax(axis=0)
+    cols = np.arange(NUM_JOINTS)
+    ori = None
+    if all(v.orientations is not None for v in views):
+        ori = np.stack([v.orientations for v in views])[best, cols]
+    return SkeletonFrame(positions=np.einsum('vj,vjk->jk', w, p), tracking_state=ts.max(axis=0).astype(np.uint8),
+                         reliability=r.max(axis=0).astype(np.float32), orientations=ori,
+                         user_id=user_id, stamp_ns=stamp_ns, frame_id=frame_id)
+
+
+@dataclass
+class _Track:
+    track_id: int
+    pelvis: np.ndarray
+    facing: Optional[np.ndarray] = None
+    fused: Optional[SkeletonFrame] = None
+    last_ns: int = 0
+
+
+@dataclass
+class FusionStats:
+    frames: int = 0
+    late: int = 0          # views left out: older than one frame period
+    mirrored: int = 0      # views whose left/right labels were swapped
+    tracks: int = 0
+    reliability_s: float = 0.0   # time spent in Eq. 1-8 (the reconstruction then takes it as given)
+
+
+@dataclass
+class MultiSensorFusion:
+    """Streaming fusion of N sensors (see the module docstring). ``poses``: sensor name -> placement
+    world <- sensor. Call :meth:`add` per received message and :meth:`fuse` for the output."""
+
+    poses: Dict[str, Transform]
+    max_age_ns: int = FRAME_PERIOD_NS
+    gate: float = GATE_M
+    frame_id: str = WORLD_FRAME
+    stats: FusionStats = field(default_factory=FusionStats)
+
+    def __post_init__(self):
+        if not self.poses:
+            raise ValueError('fusion needs at least one sensor placement')
+        self._hist: Dict[str, Dict[int, List[SkeletonFrame]]] = {s: {} for s in self.poses}
+        self._latest: Dict[str, int] = {}
+        self._rel: Dict[Tuple[str, int], ReliabilityEstimator] = {}
+        self._raw: Dict[str, Tuple[List[SkeletonFrame], int]] = {}
+        self._tracks: List[_Track] = []
+        self._pair: Dict[Tuple[str, int], int] = {}     # (sensor, user) -> track id
+        self._ids = itertools.count(1)
+
+    @property
+    def single(self) -> bool:
+        return len(self.poses) == 1
+
+    def add(self, sensor: str, frames: Sequence[SkeletonFrame], stamp_ns: int) -> None:
+        """One message of ``sensor`` (its users at capture time ``stamp_ns``, in its frame)."""
+        if sensor not in self.poses:
+            raise KeyError(f'unknown sensor {sensor!r} (known: {sorted(self.poses)})')
+        self._latest[sensor] = int(stamp_ns)
+        if self.single:
+            self._raw[sensor] = (list(frames), int(stamp_ns))
+            return
+        hist = self._hist[sensor]
+        seen = set()
+        for f in frames:
+            rel = f.reliability
+            if not np.all(np.isfinite(rel)):
+                est = self._rel.get((sensor, f.user_id))
+                if est is None:
+                    est = self._rel[(sensor, f.user_id)] = ReliabilityEstimator()
+                t0 = time.perf_counter()
+                rel = est.update(f.positions, f.tracking_state).astype(np.float32)
+                self.stats.reliability_s += time.perf_counter() - t0
+            w = to_world(f.copy(reliability=rel, stamp_ns=int(stamp_ns)), self.poses[sensor], self.frame_id)
+            h = hist.setdefault(f.user_id, [])
+            h.append(w)
+            del h[:-2]
+            seen.add(f.user_id)
+        for uid in [u for u in hist if u not in seen]:      # a user the sensor lost
+            del hist[uid]
+            self._rel.pop((sensor, uid), None)
+            self._pair.pop((sensor, uid), None)
+
+    def _views(self, stamp_ns: int) -> List[Tuple[str, int, SkeletonFrame]]:
+        out = []
+        for sensor, hist in self._hist.items():
+            latest = self._latest.get(sensor)
+            if latest is None:
+                continue
+            if stamp_ns - latest > self.max_age_ns:
+                self.stats.late += len(hist)
+                continue
+            for uid, h in hist.items():
+                out.append((sensor, uid, interpolate(h[0], h[-1], stamp_ns) if len(h) > 1 else h[-1]))
+        return out
+
+    def _associate(self, views) -> Dict[int, List[Tuple[str, int, SkeletonFrame]]]:
+        groups: Dict[int, List] = {}
+        by_sensor: Dict[str, List] = {}
+        for v in views:
+            by_sensor.setdefault(v[0], []).append(v)
+        # sensors with the most users first: they seed the tracks of a new scene
+        for sensor in sorted(by_sensor, key=lambda s: -len(by_sensor[s])):
+            vs = by_sensor[sensor]
+            tracks = self._tracks
+            pel = np.array([v[2].positions[HIP_CENTER] for v in vs])
+            assigned = {}
+            if tracks:
+                tp = np.array([t.pelvis for t in tracks])
+                dist = np.linalg.norm(pel[:, None, :2] - tp[None, :, :2], axis=2)
+                prev = np.array([[self._pair.get((sensor, v[1])) == t.track_id for t in tracks]
+                                 for v in vs], float)
+                taken = np.array([t.track_id in groups and any(g[0] == sensor for g in groups[t.track_id])
+                                  for t in tracks])
+                cost = dist - HYSTERESIS * prev
+                cost[:, taken] = 1e6                       # one view per sensor and track
+                rows, cols = linear_sum_assignment(cost)
+                for i, k in zip(rows, cols):
+                    if not taken[k] and dist[i, k] < self.gate + HYSTERESIS * prev[i, k]:
+                        assigned[i] = tracks[k]
+            for i, v in enumerate(vs):
+                t = assigned.get(i)
+                if t is None:
+                    t = _Track(next(self._ids), pel[i].copy())
+                    self._tracks.append(t)
+                self._pair[(sensor, v[1])] = t.track_id
+                groups.setdefault(t.track_id, []).append(v)
+        return groups
+
+    def _resolve_mirror(self, track: _Track, views: List[Tuple[str, int, SkeletonFrame]]) -> List[SkeletonFrame]:
+        frames = [v[2] for v in views]
+        if len(frames) == 1 and track.facing is None:
+            return frames
+        ref_i = int(np.argmax([np.nanmean(f.reliability) for f in frames]))
+        ref_face = track.facing
+        if ref_face is None:
+            ref_face = facing(frames[ref_i].positions, frames[ref_i].reliability)
+        ref_pos = track.fused.positions if track.fused is not None else frames[ref_i].positions
+        out = []
+        for i, f in enumerate(frames):
+            if track.facing is None and i == ref_i:
+                out.append(f)
+                continue
+            c = float(facing(f.positions, f.reliability) @ ref_face)
+            if c > MIRROR_COS:
+                flip = False
+            elif c < -MIRROR_COS:
+                flip = True
+            else:   # a profile view: the labelling nearer the reference skeleton
+                keep = np.linalg.norm(f.positions[_LR] - ref_pos[_LR], axis=1).sum()
+                swap = np.linalg.norm(f.positions[_MIRROR][_LR] - ref_pos[_LR], axis=1).sum()
+                flip = swap < keep
+            if flip:
+                self.stats.mirrored += 1
+                f = mirror_labels(f)
+            out.append(f)
+        return out
+
+    def fuse(self, stamp_ns: Optional[int] = None) -> Tuple[List[SkeletonFrame], int, str]:
+        """(skeletons, stamp, frame_id) at ``stamp_ns`` (default: the newest capture stamp)."""
+        self.stats.frames += 1
+        if self.single:
+            (sensor,) = self.poses
+            frames, st = self._raw.get(sensor, ([], 0))
+            fid = frames[0].frame_id if frames else ''
+            return frames, st, fid
+        if stamp_ns is None:
+            stamp_ns = max(self._latest.values(), default=0)
+        groups = self._associate(self._views(stamp_ns))
+        out = []
+        alive = []
+        for t in self._tracks:
+            views = groups.get(t.track_id)
+            if not views:
+                continue
+            frames = self._resolve_mirror(t, views)
+            fused = fuse_views(frames, user_id=t.track_id, stamp_ns=stamp_ns, frame_id=self.frame_id)
+            t.pelvis = fused.positions[HIP_CENTER].copy()
+            t.facing = facing(fused.positions, fused.reliability)
+            t.fused = fused
+            t.last_ns = stamp_ns
+            alive.append(t)
+            out.append(fused)
+        self._tracks = alive
+        ids = {t.track_id for t in alive}
+        self._pair = {k: v for k, v in self._pair.items() if v in ids}
+        self.stats.tracks = len(alive)
+        return out, stamp_ns, self.frame_id
