@@ -87,7 +87,7 @@ def process(bag, out: Path, method: str = 'C', database: str = '', physics: bool
     if info is None:
         def info(text):
             print(f'process_bag: {text}', file=sys.stderr, flush=True)
-    streamed = tracker_mod.from_bag(str(bag))
+    streamed = tracker_mod.from_bag(pieces[0])   # declared once, at the start of the recording
     tracker = tracker_mod.resolve(input_tracker, streamed)
     corr = corr_mod.select(correction, tracker, log=info, warn=warn)
     params = dict(params or {})

@@ -102,16 +102,20 @@ class SplitBagWriter:
         """Bytes of the current piece on disk (and in the file's buffer)."""
         return self._writer.bytes_written
 
-    def write_raw(self, topic: str, data: bytes, stamp_ns: int, msgtype: Optional[str] = None) -> None:
+    def _piece_for(self, stamp_ns: int):
+        """The writer of the piece a message stamped ``stamp_ns`` goes to (a new piece when the
+        current one is full)."""
         if self._closed:
             raise BagError(f'{self.path}: bag already closed')
-        w = self._writer
-        if self.policy.full(w.count, self.piece_bytes(), self._start_ns, int(stamp_ns)):
+        if self.policy.full(self._writer.count, self.piece_bytes(), self._start_ns, int(stamp_ns)):
             self._finish_piece()
             self._open_piece()
-            w = self._writer
         if self._start_ns is None:
             self._start_ns = int(stamp_ns)
+        return self._writer
+
+    def write_raw(self, topic: str, data: bytes, stamp_ns: int, msgtype: Optional[str] = None) -> None:
+        w = self._piece_for(stamp_ns)
         if msgtype is None:
             w.write_raw(topic, data, stamp_ns)
         else:
@@ -119,16 +123,7 @@ class SplitBagWriter:
         self.count += 1
 
     def write(self, topic: str, msg, stamp_ns: int, msgtype: Optional[str] = None) -> None:
-        if self._closed:
-            raise BagError(f'{self.path}: bag already closed')
-        w = self._writer
-        if self.policy.full(w.count, self.piece_bytes(), self._start_ns, int(stamp_ns)):
-            self._finish_piece()
-            self._open_piece()
-            w = self._writer
-        if self._start_ns is None:
-            self._start_ns = int(stamp_ns)
-        w.write(topic, msg, stamp_ns, msgtype=msgtype)
+        self._piece_for(stamp_ns).write(topic, msg, stamp_ns, msgtype=msgtype)
         self.count += 1
 
     def _finish_piece(self) -> None:
