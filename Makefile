@@ -37,15 +37,15 @@ build-correction:
 	@$(RUN) ros2 run pose_reconstruction build_correction $(ARGS)
 
 evaluate:
-	@$(RUN) ros2 run kinect_bringup evaluate $(ARGS)
+	@$(RUN) ros2 run kinect_experiments evaluate $(ARGS)
 
 bench:
-	@$(RUN) ros2 run kinect_bringup bench $(ARGS)
+	@$(RUN) ros2 run kinect_experiments bench $(ARGS)
 
 soak:
-	@$(RUN) ros2 run kinect_bringup soak $(ARGS)
+	@$(RUN) ros2 run kinect_experiments soak $(ARGS)
 
 params:
-	@$(RUN) ros2 run kinect_bringup param_docs $(ARGS)
+	@$(RUN) ros2 run kinect_experiments param_docs $(ARGS)
 
 .PHONY: help setup test lint demo build-db build-correction evaluate bench soak params

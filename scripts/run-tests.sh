@@ -11,10 +11,11 @@ set +u
 source "$root/scripts/env.sh"
 set -u
 cd "$root"
-# each run gets its own DDS domain (tests/conftest.py refines this per worker)
+# each run gets its own DDS domain (conftest.py refines this per worker)
 export ROS_DOMAIN_ID="${KP_TEST_DOMAIN_ID:-$(( 1 + $$ % 100 ))}"
 set +e
-python -m pytest tests "$@"
+# no path given: pytest.ini's testpaths (tests/ and every package's src/<pkg>/test/); a path runs only that
+python -m pytest "$@"
 rc=$?
 set -e
 [ "$rc" = 5 ] && { echo "pytest: no tests were collected"; exit 1; }

@@ -10,7 +10,7 @@ from skeleton_core.bag_split import (SplitBagWriter, SplitPolicy, bag_pieces, pi
                                      read_pieces)
 from skeleton_core.bagio import BagError, truncation
 
-from kinect_bringup.fuzz import valid_array
+from kinect_experiments.fuzz import valid_array
 from kinect_bringup.recover_bag import main as recover_main
 from kinect_driver.sources.replay import ReplaySource
 

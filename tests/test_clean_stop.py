@@ -13,7 +13,7 @@ import pytest
 pytest.importorskip('rclpy')
 pytest.importorskip('skeleton_msgs.msg')
 
-from kinect_bringup import fuzz  # noqa: E402
+from kinect_experiments import fuzz  # noqa: E402
 from kinect_bringup.processes import Graph  # noqa: E402
 from ros_helpers import Probe  # noqa: E402
 

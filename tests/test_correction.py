@@ -184,7 +184,7 @@ def test_reconstructor_uses_the_profile_lengths_from_the_first_frame():
 
 
 def test_loso_never_puts_a_subject_on_both_sides():
-    from kinect_bringup import real_loso
+    from kinect_experiments import real_loso
 
     def clip(subject, movement, rep, ref=True):
         return SimpleNamespace(clip=SimpleNamespace(subject=subject, movement=movement,
@@ -201,7 +201,7 @@ def test_loso_never_puts_a_subject_on_both_sides():
 
 
 def test_profiles_never_use_the_scored_clip():
-    from kinect_bringup import real_loso
+    from kinect_experiments import real_loso
     rest = standard_body().rest_positions()
 
     def stream(name, scale):

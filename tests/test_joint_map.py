@@ -355,7 +355,7 @@ def test_vicon_posture_database_excludes_held_out_subject(tmp_path, capsys):
 
 
 def test_fold_database_trains_on_the_other_subjects_only(tmp_path):
-    from kinect_bringup.mocap_db_eval import fold_database
+    from kinect_experiments.mocap_db_eval import fold_database
     _uiprmd_vicon(tmp_path, subjects=(1, 2, 3, 4))
     for held in (1, 3):
         db = fold_database(tmp_path, held, subjects=(1, 2, 3, 4), source='none',

@@ -88,7 +88,7 @@ def test_soak_judges_slopes_not_percentages():
     """The soak's verdict per node: a steady 0.1 MB/s after warm-up fails even where it is only a
     few per cent of the process; a flat RSS that follows the load (visitors in the physics world)
     passes; open files and log volume that grow fail too."""
-    from kinect_bringup.soak import MAX_RSS_SLOPE, judge_process
+    from kinect_experiments.soak import MAX_RSS_SLOPE, judge_process
     t = np.arange(0.0, 600.0, 2.0)
     load = 20.0 * ((t // 40) % 2)                       # a visitor in, out, in, ...
 
@@ -112,7 +112,7 @@ def test_lab_day_people_come_and_go():
     """The lab-day profile: people every 10-60 s, 0-5 besides the driver's user, each a new id,
     occluded limbs now and then, the sensor unplugged every 7-13 minutes."""
     import random
-    from kinect_bringup.soak import LabDay
+    from kinect_experiments.soak import LabDay
     from skeleton_core.cdr import frames_from_cdr  # noqa: F401 (the message package is built)
     lab = LabDay(random.Random(1))
     counts, ids, states, unplugs = [], set(), set(), []

@@ -2,7 +2,8 @@
 
 The layers, bottom to top (docs/architecture.md): the run-time core every node imports, the offline
 data import and evaluation packages, then the node packages in the order a frame flows through the
-graph, and the bringup/offline-processing package on top, which may import every node's library.
+graph, the bringup/offline-processing package, which may import every node's library, and on top the
+evaluation and experiment tools (kinect_experiments), which may also use the bringup's graph.
 Every import counts, including those inside functions.
 """
 import ast
@@ -15,7 +16,7 @@ ROOT = Path(__file__).resolve().parents[1]
 # performance_control sits between the reconstruction and the physics in the graph but builds its
 # feature world with physics_sim's MJCF helpers and frames, so it ranks above physics_sim
 LAYERS = ['skeleton_core', 'skeleton_data', 'skeleton_eval', 'kinect_driver', 'pose_reconstruction',
-          'physics_sim', 'performance_control', 'viz', 'kinect_bringup']
+          'physics_sim', 'performance_control', 'viz', 'kinect_bringup', 'kinect_experiments']
 RANK = {p: i for i, p in enumerate(LAYERS)}
 PYTHON_PACKAGES = sorted(p.parent.name for p in (ROOT / 'src').glob('*/setup.py'))
 

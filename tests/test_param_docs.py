@@ -1,6 +1,8 @@
 """The parameter reference and the YAML files are generated from the parameter declarations:
 they must be current (``make params`` rewrites them), say what every node declares, and the YAML
 files must read back as exactly the declared defaults."""
+from pathlib import Path
+
 import pytest
 
 pytest.importorskip('rclpy')
@@ -8,10 +10,10 @@ pytest.importorskip('skeleton_msgs.msg', reason='skeleton_msgs not built (run sc
 
 import yaml  # noqa: E402
 
-from kinect_bringup import param_docs  # noqa: E402
+from kinect_experiments import param_docs  # noqa: E402
 from kinect_bringup.graph import NODES  # noqa: E402
 
-from conftest import ROOT  # noqa: E402
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def test_generated_files_are_current():

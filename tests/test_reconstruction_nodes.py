@@ -4,6 +4,7 @@ raw ones; parameters are validated at run time; malformed input is dropped, not 
 import os
 import threading
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -199,7 +200,7 @@ def test_config_files_hold_every_parameter_with_its_default():
 
     from pose_reconstruction import completion_node, node_common, optimizer_node
     from skeleton_core.params import public
-    from conftest import ROOT
+    ROOT = Path(__file__).resolve().parents[1]
     common = node_common.common_specs('', '')
     for name, specs in (('reliability', common + node_common.RELIABILITY_SPECS),
                         ('completion', common + completion_node.SPECS

@@ -26,7 +26,7 @@ rclpy = pytest.importorskip('rclpy')
 pytest.importorskip('skeleton_msgs.msg')
 pytest.importorskip('diagnostic_msgs.msg')
 
-from kinect_bringup import fuzz  # noqa: E402
+from kinect_experiments import fuzz  # noqa: E402
 from kinect_bringup.processes import Graph  # noqa: E402
 from ros_helpers import Probe, wait_until as _wait  # noqa: E402
 

@@ -25,7 +25,7 @@ DURATION = 45
 def test_short_soak_passes(tmp_path):
     out = tmp_path / 'soak'
     # the graph comes up in a few seconds on an idle machine; a loaded one gets generous margins
-    proc = subprocess.run([sys.executable, '-m', 'kinect_bringup.soak', '--duration', str(DURATION),
+    proc = subprocess.run([sys.executable, '-m', 'kinect_experiments.soak', '--duration', str(DURATION),
                            '--kills', '1', '--out', str(out)],
                           capture_output=True, text=True, timeout=DURATION + 240)
     logs = '\n'.join(f'--- {p.name}\n{p.read_text(errors="replace")[-1500:]}'

@@ -13,7 +13,7 @@ PACKAGES = sorted(p.parent.name for p in (ROOT / 'src').glob('*/package.xml'))
 def test_expected_packages_exist():
     assert {'skeleton_msgs', 'skeleton_core', 'skeleton_data', 'skeleton_eval', 'kinect_driver',
             'pose_reconstruction',
-            'physics_sim', 'viz', 'kinect_bringup'} <= set(PACKAGES)
+            'physics_sim', 'viz', 'kinect_bringup', 'kinect_experiments'} <= set(PACKAGES)
 
 
 @pytest.mark.parametrize('pkg', PACKAGES)

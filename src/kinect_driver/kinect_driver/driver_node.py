@@ -86,7 +86,7 @@ def driver_params() -> List[ParamSpec]:
     return out
 
 
-node_params = driver_params   # what kinect_bringup.param_docs documents (the registry of now)
+node_params = driver_params   # what kinect_experiments.param_docs documents (the registry of now)
 
 
 def make_source(v, log=None, clock_ns=None):

@@ -1,6 +1,6 @@
 """Compiled kernels of the reconstruction's hot loops (numba where available, :mod:`skeleton_core.jit`;
 ``KINECT_NUMBA=0`` runs the numpy twins). Each kernel has a numpy twin computing the same numbers
-(tests/test_optimizer.py compares them).
+(src/pose_reconstruction/test/test_optimizer.py compares them).
 
 * :func:`energy_from_products` -- Eq. 15 of every stochastic sample from the one matrix product
   ``P = WT [z; 1]`` of :meth:`NaturalPostureOptimizer._energy_t` (the quadratic and linear part,

@@ -13,7 +13,7 @@ Everything else is derived from that declaration:
 * the node's ROS parameters (:func:`specs`: name, default, description, range / choices,
   read-only) -> ``skeleton_core.rosnode.Parameters`` declares them with descriptors;
 * the node's configuration object from its parameter values (:func:`build`);
-* the YAML files in ``config/`` and ``docs/parameters.md`` (``kinect_bringup.param_docs``);
+* the YAML files in ``config/`` and ``docs/parameters.md`` (``kinect_experiments.param_docs``);
 * the evaluation methods' defaults (:func:`defaults`).
 
 A field declared ``public=False`` stays a validated, documented field of its configuration but is

@@ -12,7 +12,7 @@ from skeleton_core.model import SEGMENT_NAMES, SEGMENTS
 from skeleton_eval.sensor_model import (DEFAULT_PARAMS, JOINT_GROUP, SCENARIOS, SensorModel,
                                         load_params, statistics)
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[3]
 
 
 def test_yaml_matches_builtin_defaults():

@@ -121,7 +121,7 @@ def test_fig8_sweeps_with_overrides():
 
 
 def test_evaluate_cli_writes_markdown_and_json(tmp_path, capsys):
-    ev = pytest.importorskip('kinect_bringup.evaluate')
+    ev = pytest.importorskip('kinect_experiments.evaluate')
     rc = ev.run(['--source', 'builtin', '--methods', 'raw,holt', '--max-frames', '15',
                  '--scenarios', 'a', '--out', str(tmp_path), '--quiet'])
     assert rc == 0
@@ -296,7 +296,7 @@ def test_method_c_takes_its_segment_lengths_from_the_calibration():
 
 
 def test_evaluate_cli_table3_states_the_calibration(tmp_path):
-    ev = pytest.importorskip('kinect_bringup.evaluate')
+    ev = pytest.importorskip('kinect_experiments.evaluate')
     for cal in ('none', 'tpose'):
         out = tmp_path / cal
         rc = ev.run(['--experiment', 'table3', '--source', 'builtin', '--methods', 'raw',

@@ -1,6 +1,6 @@
-"""kinect_bringup.bench: the nodes' /diagnostics become the 'where the time goes' table; the
+"""kinect_experiments.bench: the nodes' /diagnostics become the 'where the time goes' table; the
 pass-through floor beside every row and issue 23's targets judged against it."""
-from kinect_bringup.bench import NODE_LATENCY, _node_latencies, targets, to_markdown
+from kinect_experiments.bench import NODE_LATENCY, _node_latencies, targets, to_markdown
 
 
 def test_node_latencies_parse_diagnostics_and_fill_the_table():

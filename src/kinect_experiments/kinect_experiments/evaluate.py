@@ -1,4 +1,4 @@
-"""``ros2 run kinect_bringup evaluate`` / ``make evaluate``: accuracy of every method on sensor-model
+"""``ros2 run kinect_experiments evaluate`` / ``make evaluate``: accuracy of every method on sensor-model
 streams of the dev clips (Shum et al. 2013 Table III/IV, Fig. 8; Shum & Ho 2012 Fig. 5).
 
 Writes ``<out>/<experiment>.md`` and ``<out>/<experiment>.json`` and prints the Markdown table and
@@ -24,7 +24,7 @@ import os
 import sys
 from pathlib import Path
 
-from .graph import preset_path, repo_root
+from kinect_bringup.graph import preset_path, repo_root
 from . import fusion_eval, real_loso
 from pose_reconstruction.methods import load_preset
 from skeleton_eval import perturb as P
@@ -91,7 +91,7 @@ def _parser():
                         'their Vicon marker reference. Default dir ../shared/kinect/ui-prmd: '
                         'leave-one-subject-out; another dir (other subjects): the correction '
                         'learned from all development subjects (--methods: variants of '
-                        'kinect_bringup.real_loso)')
+                        'kinect_experiments.real_loso)')
     p.add_argument('--max-clips', type=int, default=0,
                    help='--real: clips per movement row, 0 = all')
     return p
@@ -100,7 +100,7 @@ def _parser():
 def run_real(args) -> int:
     """``--real``: the development subjects (default folder) leave-one-subject-out; another
     folder (other subjects, same layout) with the correction learned from every development
-    subject (kinect_bringup.real_loso)."""
+    subject (kinect_experiments.real_loso)."""
     src = args.real
     shared = os.environ.get('KP_SHARED') or str((repo_root() or Path.cwd()).parent / 'shared')
     dev = Path(shared) / 'kinect' / 'ui-prmd'

@@ -2,7 +2,7 @@
 same serialized bytes on another, doing nothing else. Its latency is what one DDS hop and one
 Python callback cost on this machine at this moment; the graph's outputs are judged against it.
 
-    python -m kinect_bringup.passthrough [--input /kinect/skeletons] [--output /bench/passthrough]
+    python -m kinect_experiments.passthrough [--input /kinect/skeletons] [--output /bench/passthrough]
 """
 from __future__ import annotations
 

@@ -16,7 +16,7 @@ names subject s). Nothing is tuned: C runs with its defaults.
 Rows: per movement (m01-m10) and ``overall`` (frame-weighted over the folds' clips, m03_s01, the
 tracking failure, excluded as in ``evaluate --real``).
 
-``python -m kinect_bringup.mocap_db_eval --folds 1,2,3,4,5 [--max-clips N] [--out out/mocap_db]``
+``python -m kinect_experiments.mocap_db_eval --folds 1,2,3,4,5 [--max-clips N] [--out out/mocap_db]``
 """
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Shared test setup: DDS on loopback, a private ROS_DOMAIN_ID, helpers to spin rclpy."""
+"""Shared test setup (tests/ and src/*/test/): DDS on loopback, a private ROS_DOMAIN_ID, helpers to spin rclpy."""
 import os
 import sys
 from pathlib import Path
@@ -18,7 +18,7 @@ import importlib  # noqa: E402
 
 import pytest  # noqa: E402
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parent
 SHARED = Path(os.environ.get('KP_SHARED', ROOT.parent / 'shared'))
 
 # What `make setup` installs is never optional: a test that needs it fails, naming the cure, instead
@@ -30,7 +30,7 @@ SETUP_PROVIDES = frozenset({
     'launch_testing_ros', 'ros2cli', 'tf2_msgs', 'diagnostic_msgs', 'geometry_msgs', 'sensor_msgs',
     'visualization_msgs', 'std_msgs', 'skeleton_msgs', 'skeleton_core', 'skeleton_data',
     'skeleton_eval', 'kinect_driver', 'pose_reconstruction', 'physics_sim', 'performance_control',
-    'viz', 'kinect_bringup', 'mcap', 'mcap_ros2', 'numba', 'mujoco', 'openni'})
+    'viz', 'kinect_bringup', 'kinect_experiments', 'mcap', 'mcap_ros2', 'numba', 'mujoco', 'openni'})
 _importorskip = pytest.importorskip
 
 

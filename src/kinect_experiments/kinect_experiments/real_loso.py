@@ -133,7 +133,7 @@ def training_clips(clips, held_out: int) -> list:
 def lab_database(src, held_out: int, clips):
     """The default database plus the Vicon postures of the training subjects of ``clips`` (those
     with a reference, never ``held_out``), through ``config/joint_maps/plug_in_gait.yaml``
-    (:func:`kinect_bringup.mocap_db_eval.fold_database`; cached in ``cache/``)."""
+    (:func:`kinect_experiments.mocap_db_eval.fold_database`; cached in ``cache/``)."""
     train = sorted({c.clip.subject for c in training_clips(clips, held_out)})
     return fold_database(src, held_out, subjects=train)
 
@@ -488,7 +488,7 @@ def main(argv=None) -> int:
             raise ValueError('--method-params: a JSON object of C parameters')
         if args.preset:
             from pose_reconstruction.methods import load_preset
-            from .graph import preset_path
+            from kinect_bringup.graph import preset_path
             over = {**load_preset(preset_path(args.preset)), **(over or {})}
         prog = None if args.quiet else (lambda v, c: print(f'  {v:15s} {c}', file=sys.stderr))
         res = evaluate(src, variants,

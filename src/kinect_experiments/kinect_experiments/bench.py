@@ -2,15 +2,15 @@
 through real DDS as a user runs it — for 1, 2, 4 and 6 users, as the one-process ``pipeline`` and as
 separate processes — plus the offline ``process_bag`` speed. Writes Markdown + JSON.
 
-    ros2 run kinect_bringup bench                       # full table (~3 min)
-    ros2 run kinect_bringup bench --users 1,2 --modes pipeline --seconds 8
+    ros2 run kinect_experiments bench                       # full table (~3 min)
+    ros2 run kinect_experiments bench --users 1,2 --modes pipeline --seconds 8
 
 Latency = probe receive time - the skeleton's capture stamp (the driver stamps each frame when it
 is captured; every node preserves the stamp), at its first arrival on the topic (the physics node's
 timer republishes the newest target's stamp while no new one arrives: counted as repeats). A
 frame is dropped when its capture stamp appears on /kinect/skeletons but never on the output topic.
 
-The floor: beside the graph, a pass-through node (``kinect_bringup.passthrough``: subscribe to
+The floor: beside the graph, a pass-through node (``kinect_experiments.passthrough``: subscribe to
 /kinect/skeletons, republish the same bytes on /bench/passthrough) runs in every case; its latency,
 measured by the same probe in the same seconds, is what one DDS hop and one Python callback cost at
 that moment, and every row prints it. The targets (issue 23) are judged against it: 2 users,
@@ -30,8 +30,8 @@ from typing import Dict, List
 
 import numpy as np
 
-from .graph import RECONSTRUCTION, graph_nodes, repo_root
-from .processes import Graph
+from kinect_bringup.graph import RECONSTRUCTION, graph_nodes, repo_root
+from kinect_bringup.processes import Graph
 from skeleton_core.cdr import frames_from_cdr
 from skeleton_core.bagio import bag_topics
 import signal
@@ -236,7 +236,7 @@ def _start_passthrough(log_dir: Path) -> subprocess.Popen:
     """The floor node, as a process of its own beside the graph (its CPU is not the graph's)."""
     log_dir.mkdir(parents=True, exist_ok=True)
     out = open(log_dir / 'passthrough.log', 'w')
-    return subprocess.Popen([sys.executable, '-m', 'kinect_bringup.passthrough'], stdout=out,
+    return subprocess.Popen([sys.executable, '-m', 'kinect_experiments.passthrough'], stdout=out,
                             stderr=subprocess.STDOUT)
 
 

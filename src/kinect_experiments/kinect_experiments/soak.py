@@ -1,7 +1,7 @@
 """``soak``: run the graph (one process per node) for a long time under abuse and check it survives.
 
-    ros2 run kinect_bringup soak                 # 10 minutes (make soak)
-    ros2 run kinect_bringup soak --duration 45   # the shortened soak the test suite runs
+    ros2 run kinect_experiments soak                 # 10 minutes (make soak)
+    ros2 run kinect_experiments soak --duration 45   # the shortened soak the test suite runs
 
 While the synthetic driver streams one user, an injector publishes on /kinect/skeletons: visitors
 appearing and vanishing, bursts and gaps, and malformed messages of every kind (fuzz.MUTATIONS);
@@ -16,7 +16,7 @@ with a report: crashes, NaN outputs, RSS growth after warm-up per process, recov
 exits non-zero when a target is missed (no crash, no NaN, every node's resources flat, every
 restart recovers, every parameter change accepted, every fault above recovered).
 
-    ros2 run kinect_bringup soak --profile lab-day --duration 3600   # a lab day in an hour
+    ros2 run kinect_experiments soak --profile lab-day --duration 3600   # a lab day in an hour
 
 ``--profile lab-day`` adds a lab day compressed (:class:`LabDay`): people arriving and leaving
 every 10-60 s, one to six at a time, occluded limbs, the sensor unplugged and replugged, and
@@ -44,8 +44,8 @@ from typing import Dict, List
 
 import numpy as np
 
-from .graph import repo_root
-from .processes import Graph
+from kinect_bringup.graph import repo_root
+from kinect_bringup.processes import Graph
 from skeleton_data.database import build_default
 from .fuzz import MUTATIONS, malformed, valid_array
 from skeleton_core.bagio import BagError, read_messages, recover, truncation
