@@ -1,3 +1,11 @@
+"""Baseline methods: the Kinect skeleton as reported and the two usual joint filters. They are
+registered in :mod:`.registry` as ``raw``, ``holt`` and ``one_euro``."""
+from __future__ import annotations
+
+from skeleton_core.conversions import SkeletonFrame
+from skeleton_core.filters import HOLT_DEFAULTS, ONE_EURO_DEFAULTS, HoltFilter, OneEuroFilter
+
+
 class RawMethod:
     """The Kinect skeleton unchanged."""
 

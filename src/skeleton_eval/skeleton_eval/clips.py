@@ -1,6 +1,19 @@
-# ------------------------------------------------------------------------------------------
-# Clips
-# ------------------------------------------------------------------------------------------
+"""The motion clips of the evaluation: the CMU database/dev split in ``../shared`` (or the
+built-in motions), and a small synthetic clip for tests and smoke runs."""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+from skeleton_core.model import (ELBOW_LEFT as EL, ELBOW_RIGHT as ER, HAND_LEFT, HAND_RIGHT,
+                                 NUM_JOINTS, SHOULDER_LEFT as SL, SHOULDER_RIGHT as SR,
+                                 WRIST_LEFT as WL, WRIST_RIGHT as WR, standard_body)
+from skeleton_data.mocap import MotionClip, cmu_split
+from skeleton_data.motions import builtin_split
+
+
 def shared_dir() -> Path:
     env = os.environ.get('KP_SHARED')
     if env:
@@ -18,7 +31,6 @@ def load_clips(source: str = 'auto', seed: int = 0):
         raise ValueError(f"source must be auto, cmu or builtin, got {source!r}")
     cmu = shared_dir() / 'mocap' / 'cmu'
     if source in ('auto', 'cmu') and cmu.is_dir():
-        from skeleton_data.mocap import cmu_split
         db, dev = cmu_split(cmu)
         return db, dev, f'cmu:{cmu}'
     if source == 'cmu':
@@ -46,5 +58,3 @@ def toy_clip(seconds: float = 10.0, fps: float = 30.0, name: str = 'toy_arm_swin
     quats[..., 3] = 1.0
     return MotionClip(name=name, motion_class='test', fps=fps, positions=pos, orientations=quats,
                       source='evaluation.toy_clip')
-
-

@@ -1,52 +1,36 @@
-"""Evaluation harness: run reconstruction methods on sensor-model streams and tabulate accuracy.
+"""Evaluation harness: run reconstruction methods on sensor-model streams and score them.
 
+* :func:`run_method` feeds one stream through one method (a :class:`~.registry.Method`);
+  :func:`evaluate_streams` every method on every stream, with the metrics (:mod:`.metrics`), the
+  "no harm" sums (:mod:`.no_harm`), the added latency and the processing time per class.
+* :func:`evaluate` — Shum et al. 2013 Table IV: every method on the scenario classes, Eq. 18 error
+  and more, with the sensor model's noise statistics.
 
-Experiments (Shum et al. 2013 Sec. VIII, Shum & Ho 2012 Sec. 8.4)
------------------------------------------------------------------
-* :func:`evaluate` / Table IV — every method on scenario classes a-c, Eq. 18 error and more.
-* :func:`table3` — reconstruction from joint subsets (a) left hand + foot ... (e) all parts: the
-  other joints are NOT_TRACKED (reliability 0, frozen at the first frame) on a noise-only stream.
-  ``calibration='tpose'`` (the paper's protocol: a calibrated user) first shows each method a
-  short, unscored segment of the same user standing in a T-pose (or ``'standing'``, arms down)
-  with every joint tracked; ``'none'`` hides the other joints from the very first frame.
-* :func:`fig5` — PCA dimensions 1..60 vs nearest-posture matching error (Shum & Ho Eq. 5-6) and
-  search time, on the motion database.
-* :func:`fig8` — a method's error and frame time vs one parameter (database size, K, PCA
-  dimensions, optimisation steps, samples), through factory keyword overrides.
+The other experiments build on these: :mod:`.table3` (joint subsets, Table III), :mod:`.figures`
+(Fig. 5 and Fig. 8); the methods come from :mod:`.registry`, the clips from :mod:`.clips`, and
+:mod:`.report` writes the results as JSON and Markdown.
 """
 from __future__ import annotations
 
-import importlib
-import json
 import os
 import platform
 import time
-from dataclasses import dataclass, replace
-from pathlib import Path
-from typing import Callable, Dict, Iterable, List, Optional, Protocol, Sequence, runtime_checkable
+from typing import Callable, Dict, Iterable, List, Optional
 
 import numpy as np
 
 from . import metrics as M
 from . import no_harm as NH
 from skeleton_core.conversions import SkeletonFrame
-from skeleton_core.filters import HOLT_DEFAULTS, ONE_EURO_DEFAULTS, HoltFilter, OneEuroFilter
-from skeleton_core.model import (ELBOW_LEFT, ELBOW_RIGHT, FOOT_LEFT, FOOT_RIGHT, HAND_LEFT,
-                    HAND_RIGHT, JOINT_NAMES, KNEE_LEFT, KNEE_RIGHT, NOT_TRACKED, NUM_JOINTS,
-                    TRACKED, standard_body)
-from .sensor_model import KinectStream, SensorModel, format_statistics, statistics
-from skeleton_data.motions import builtin_split
-from skeleton_data.mocap import MotionClip
-from skeleton_core.model import (ELBOW_LEFT as EL, ELBOW_RIGHT as ER, SHOULDER_LEFT as SL,
-                                 SHOULDER_RIGHT as SR, WRIST_LEFT as WL, WRIST_RIGHT as WR)
-from skeleton_core.geometry import normalize, retarget
+from skeleton_core.model import NUM_JOINTS
+from .registry import Method, make_method, method_info
+from .sensor_model import SensorModel
+from .sensor_statistics import statistics
+from .sensor_stream import KinectStream
 
 FRAME_ID = 'kinect_depth'
 
 
-# ------------------------------------------------------------------------------------------
-# Running methods
-# ------------------------------------------------------------------------------------------
 def stream_frames(stream: KinectStream, user_id: int = 1) -> Iterable[SkeletonFrame]:
     for i in range(len(stream)):
         yield SkeletonFrame(positions=stream.positions[i].copy(),
@@ -210,8 +194,7 @@ def evaluate_streams(methods, streams: Dict[str, List[KinectStream]],
     return {'results': results, 'method_params': params}
 
 
-
-def _meta(clips, seed, sensor: SensorModel, max_frames, data_source, extra=None) -> Dict:
+def run_meta(clips, seed, sensor: SensorModel, max_frames, data_source, extra=None) -> Dict:
     return {
         'data': {'source': data_source,
                  'clips': [{'name': c.name, 'class': getattr(c, 'motion_class', ''),
@@ -233,8 +216,8 @@ def evaluate(methods, clips, scenarios=('a', 'b', 'c'), seed: int = 0,
     streams = make_streams(clips, scenarios, seed, max_frames, sensor, repeats)
     res = evaluate_streams(methods, streams, progress=progress)
     res['experiment'] = 'table4'
-    res['meta'] = _meta(clips, seed, sensor, max_frames, data_source,
-                        {'scenarios': list(scenarios), 'repeats': int(repeats)})
+    res['meta'] = run_meta(clips, seed, sensor, max_frames, data_source,
+                           {'scenarios': list(scenarios), 'repeats': int(repeats)})
     res['sensor_statistics'] = statistics([s for lst in streams.values() for s in lst])
     return res
 

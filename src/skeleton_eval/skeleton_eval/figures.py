@@ -1,3 +1,19 @@
+"""Shum & Ho 2012 Fig. 5 (PCA dimensions vs nearest-posture matching error and search time, on
+the motion database) and Shum et al. 2013 Fig. 8 (a method's error and frame time vs one
+parameter: database size, K, PCA dimensions, optimisation steps, samples, through factory keyword
+overrides)."""
+from __future__ import annotations
+
+import time
+from typing import Dict, List, Optional, Sequence
+
+import numpy as np
+
+from skeleton_core.geometry import normalize, retarget
+from skeleton_core.model import NUM_JOINTS, standard_body
+from .evaluation import evaluate_streams, make_streams, run_meta
+from .registry import make_method
+from .sensor_model import SensorModel
 
 
 # ------------------------------------------------------------------------------------------
@@ -88,5 +104,4 @@ def fig8(method: str, clips, params: Sequence[str] = tuple(FIG8_SWEEPS), seed: i
                          'frame_ms': res['time']['mean_ms']})
         out[param] = rows
     return {'experiment': 'fig8', 'method': method, 'scenario': scenario, 'sweeps': out,
-            'meta': _meta(clips, seed, sensor, max_frames, data_source)}
-
+            'meta': run_meta(clips, seed, sensor, max_frames, data_source)}

@@ -1,15 +1,27 @@
+"""Reconstruction methods the evaluation runs: the plug-in interface and the registry.
+
 Plug-in interface
 -----------------
 A method is any object with ``name``, ``reset()`` and ``process(frame: SkeletonFrame) ->
 SkeletonFrame`` (streaming, one user, frames in the sensor frame as the driver publishes them;
 returning ``None`` means "no output yet" and counts as a missing frame). Factories are registered with
 :func:`register_method` (``factory(**params) -> Method``); :func:`available_methods` lists them.
-Registered here: ``raw`` (the Kinect skeleton as is), ``holt`` (Kinect SDK v1 joint filter) and
-``one_euro``. ``pose_reconstruction.methods`` registers A, B, C and ``physics_sim.methods`` its
-physics variants when imported (:func:`load_plugins`).
-# ------------------------------------------------------------------------------------------
-# Plug-in interface and registry
-# ------------------------------------------------------------------------------------------
+Registered here: the baselines of :mod:`.baselines`, ``raw`` (the Kinect skeleton as is),
+``holt`` (Kinect SDK v1 joint filter) and ``one_euro``. ``pose_reconstruction.methods``
+registers A, B, C and ``physics_sim.methods`` its physics variants when imported
+(:func:`load_plugins`).
+"""
+from __future__ import annotations
+
+import importlib
+from dataclasses import dataclass
+from typing import Callable, Dict, List, Optional, Protocol, Sequence, runtime_checkable
+
+from skeleton_core.conversions import SkeletonFrame
+from skeleton_core.filters import HOLT_DEFAULTS, ONE_EURO_DEFAULTS
+from .baselines import HoltMethod, OneEuroMethod, RawMethod
+
+
 @runtime_checkable
 class Method(Protocol):
     name: str
@@ -69,12 +81,8 @@ def load_plugins(modules: Sequence[str] = PLUGIN_MODULES) -> Dict[str, str]:
     return status
 
 
-
-
 register_method('raw', RawMethod, 'Kinect skeleton as reported (no processing)')
 register_method('holt', HoltMethod, 'Kinect SDK v1 joint filter (Holt double exponential)',
                 HOLT_DEFAULTS)
 register_method('one_euro', OneEuroMethod, 'One Euro filter (Casiez et al. 2012)',
                 ONE_EURO_DEFAULTS)
-
-

@@ -1,3 +1,17 @@
+"""Results of the evaluation (:mod:`.evaluation`, :mod:`.table3`, :mod:`.figures`) as JSON and
+Markdown tables."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Dict, List
+
+import numpy as np
+
+from . import no_harm as NH
+from skeleton_core.model import JOINT_NAMES, NUM_JOINTS
+from .sensor_statistics import format_statistics
+
 
 def json_safe(o):
     """``o`` with numpy numbers and arrays as Python ones and non-finite numbers as None (JSON)."""
@@ -25,9 +39,7 @@ def calibration_text(results: Dict) -> str:
             f'{cal["frames"]} frames of the same user in {what} with every joint tracked, '
             f'reliability 1, not scored)')
 
-# ------------------------------------------------------------------------------------------
-# Reports
-# ------------------------------------------------------------------------------------------
+
 def to_json(results: Dict, path=None) -> str:
     text = json.dumps(json_safe(results), indent=1)
     if path is not None:

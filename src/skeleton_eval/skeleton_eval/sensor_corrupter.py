@@ -1,7 +1,31 @@
-class _Corrupter:
-    """Per-frame state machine shared by :meth:`SensorModel.corrupt` and :meth:`SensorModel.stream`."""
+"""The sensor model's per-frame state machine (:class:`_Corrupter`), shared by
+:meth:`~.sensor_model.SensorModel.corrupt` and :meth:`~.sensor_model.SensorModel.stream`: the
+user turning away, noise (jitter, drift, systematic offsets), field of view and range, geometric
+and random occlusion, false positives and left/right confusion (classes a-c); the failure modes
+of classes d and e come from :class:`~.sensor_failures.FailureModes`."""
+from __future__ import annotations
 
-    def __init__(self, model: 'SensorModel', clip, scenario: str, seed: int, view=None,
+import zlib
+from typing import Dict, List, Optional
+
+import numpy as np
+
+from skeleton_core.geometry import facing_yaw, yaw_matrix
+from skeleton_core.model import (HIP_CENTER, HIP_LEFT, HIP_RIGHT, INFERRED, JOINT_INDEX, LIMB_JOINTS,
+                                 MIRROR, NOT_TRACKED, NUM_JOINTS, PARENTS, SEGMENT_CHILD_INDEX,
+                                 SEGMENT_PARENT_INDEX, SHOULDER_LEFT, SHOULDER_RIGHT, SPINE, TRACKED,
+                                 estimate_height, standard_body)
+from .sensor_failures import FailureModes
+from .sensor_geometry import (_OCCLUDABLE, _box_distance, _point_segment_2d, _ray_box, _shifted,
+                              _wrap)
+from .sensor_params import CONFIDENT_FAILURES, JOINT_GROUP, LIMBS, _group_array
+
+
+class _Corrupter(FailureModes):
+    """Per-frame state machine shared by :meth:`SensorModel.corrupt` and :meth:`SensorModel.stream`
+    (``model``: the :class:`~.sensor_model.SensorModel`)."""
+
+    def __init__(self, model, clip, scenario: str, seed: int, view=None,
                  time_shift_s: float = 0.0):
         if scenario not in model.params['scenarios']:
             raise ValueError(f'unknown scenario {scenario!r}; '
@@ -327,4 +351,3 @@ class _Corrupter:
         rad = self.radii[None] / np.maximum(xs, 1e-3)           # angular radius
         occ = (d < rad) & (xs + self.radii[None] * 0.5 < x[:, None]) & _OCCLUDABLE
         return occ.any(axis=1)
-

@@ -1,3 +1,20 @@
+"""The sensor model's failures of joints it still reports TRACKED: class d's confident failures
+(hand snaps, limb swaps, foot slides, jumps to another person) and class e's small persistent
+errors. A mixin of :class:`~.sensor_corrupter._Corrupter`, whose per-frame state (random
+generator, parameters, scenario, object box, noise terms, events) it uses."""
+from __future__ import annotations
+
+import numpy as np
+
+from skeleton_core.geometry import yaw_matrix
+from skeleton_core.model import (FOOT_LEFT, FOOT_RIGHT, HAND_LEFT, HAND_RIGHT, HIP_CENTER,
+                                 JOINT_INDEX, LIMB_JOINTS, NUM_JOINTS, PARENTS, TRACKED)
+from .sensor_geometry import _box_distance
+
+
+class FailureModes:
+    """Classes d and e of :class:`~.sensor_corrupter._Corrupter` (see the module)."""
+
     def _confident_failures(self, fi, i, truth, pos, state, clean, rel_deg):
         """Class d (``confident_failure`` parameters; rates in the scenario, per minute; the limb
         swap's per minute of side-on time): every mode keeps the joints TRACKED.
@@ -206,4 +223,3 @@
         e['left'] -= 1
         if e['left'] <= 0:
             self.cf[mode] = None
-

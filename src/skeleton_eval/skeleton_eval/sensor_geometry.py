@@ -1,3 +1,13 @@
+"""Geometry of the sensor model's corrupter: lines of sight (2-D point-segment distances, rays
+through the scenario's object), which body segments can hide which joint, angle wrapping and
+sub-frame time shifts."""
+from __future__ import annotations
+
+import numpy as np
+
+from skeleton_core.model import CHILDREN, NUM_JOINTS, PARENTS, SEGMENT_CHILDREN, SEGMENT_PARENTS
+
+
 def _wrap(a):
     return (np.asarray(a) + np.pi) % (2 * np.pi) - np.pi
 
@@ -49,5 +59,3 @@ def _shifted(positions: np.ndarray, frames: float) -> np.ndarray:
     i1 = np.minimum(i0 + 1, len(positions) - 1)
     w = (t - i0)[:, None, None]
     return positions[i0] * (1 - w) + positions[i1] * w
-
-

@@ -17,32 +17,30 @@ numbers are embedded here as :data:`DEFAULT_PARAMS` so it runs without the file)
 5. *Turning away* — smooth yaw excursions of the user; past ``degrade_deg`` the far limbs are
    INFERRED and jitter grows, past ``confusion_deg`` left and right are swapped.
 
-Offline: :meth:`SensorModel.corrupt` -> :class:`KinectStream`; live:
+Offline: :meth:`SensorModel.corrupt` -> :class:`~.sensor_stream.KinectStream`; live:
 :meth:`SensorModel.stream` yields ``(positions, tracking_state, truth)`` frame by frame. Both run the
 same per-frame state machine, so they have the same statistics. A clip is any object with ``name``,
 ``fps`` and ``positions`` (T, 20, 3) in a world frame (REP-103, floor at z = 0), e.g.
 ``skeleton_data.mocap.MotionClip``.
+
+The parts: the parameters (:mod:`.sensor_params`), the per-frame state machine
+(:mod:`.sensor_corrupter`, with the failure modes of classes d and e in :mod:`.sensor_failures`
+and its geometry in :mod:`.sensor_geometry`), the streams (:mod:`.sensor_stream`) and their
+statistics (:mod:`.sensor_statistics`).
 """
 from __future__ import annotations
 
-import copy
-import os
 import zlib
-from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Dict, Iterator, List, Optional, Sequence, Tuple, Union
+from typing import Dict, Iterator, Optional, Tuple, Union
 
 import numpy as np
 
 from skeleton_core.geometry import facing_yaw, yaw_matrix
-from skeleton_core.model import forward_kinematics, parent_relative
-from skeleton_core.model import (CHILDREN, FOOT_LEFT, FOOT_RIGHT, HAND_LEFT, HAND_RIGHT, HIP_CENTER,
-                                 HIP_LEFT, HIP_RIGHT, INFERRED, JOINT_INDEX,
-                                 JOINT_NAMES, LIMB_JOINTS, MIRROR, NOT_TRACKED, NUM_JOINTS, PARENTS,
-                                 SEGMENT_CHILDREN, SEGMENT_CHILD_INDEX, SEGMENT_PARENTS,
-                                 SEGMENT_PARENT_INDEX, SHOULDER_LEFT, SHOULDER_RIGHT, SPINE,
-                                 TRACKED, estimate_height, segment_lengths, standard_body)
-from skeleton_core.model import SEGMENT_NAMES
+from skeleton_core.model import HIP_CENTER, NUM_JOINTS
+from .sensor_corrupter import _Corrupter
+from .sensor_params import _group_array, load_params
+from .sensor_stream import KinectStream, loop_blend, resample
 
 
 class SensorModel:
@@ -171,5 +169,3 @@ class SensorModel:
         dz = float(self.params['jitter']['depth_coeff_mm']) * np.asarray(depth_m, float) ** 2
         var = (3 * base ** 2 + dz ** 2) / 3 + slow ** 2
         return np.sqrt(var)
-
-

@@ -1,3 +1,20 @@
+"""The sensor model's parameters: the built-in defaults (:data:`DEFAULT_PARAMS`, the same numbers
+as ``config/sensor_model.yaml``, so the model runs without the file), loading and merging a YAML
+file or overrides (:func:`load_params`), the scenario classes and the joint groups of the
+per-group noise tables."""
+from __future__ import annotations
+
+import copy
+import os
+from pathlib import Path
+from typing import Dict, Optional, Tuple, Union
+
+import numpy as np
+import yaml
+
+from skeleton_core.model import JOINT_NAMES
+
+
 SCENARIOS = ('clean', 'a', 'b', 'c', 'd', 'e')
 CONFIDENT_FAILURES = ('hand_snap', 'limb_swap', 'foot_slide', 'person_jump')
 
@@ -131,7 +148,6 @@ def load_params(params: Union[None, str, Path, Dict] = None) -> Dict:
             return copy.deepcopy(DEFAULT_PARAMS)
         params = path
     if isinstance(params, (str, Path)):
-        import yaml
         with open(params) as f:
             data = yaml.safe_load(f) or {}
         if '/**' in data:  # tolerate a ROS-style wrapper
@@ -142,8 +158,5 @@ def load_params(params: Union[None, str, Path, Dict] = None) -> Dict:
     raise TypeError(f'params must be None, a YAML path or a dict, got {type(params).__name__}')
 
 
-
 def _group_array(table: Dict[str, float]) -> np.ndarray:
     return np.array([float(table[g]) for g in JOINT_GROUP])
-
-

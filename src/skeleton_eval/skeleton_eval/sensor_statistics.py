@@ -1,3 +1,17 @@
+"""Noise statistics of sensor-model streams (:func:`statistics`, for the evaluation report and the
+calibration against real recordings) and their Markdown summary."""
+from __future__ import annotations
+
+from typing import Dict, Sequence
+
+import numpy as np
+
+from skeleton_core.model import (INFERRED, JOINT_NAMES, NOT_TRACKED, NUM_JOINTS, SEGMENT_CHILDREN,
+                                 SEGMENT_NAMES, SEGMENT_PARENTS, TRACKED, segment_lengths)
+from .sensor_params import GROUPS, JOINT_GROUP
+from .sensor_stream import KinectStream
+
+
 def statistics(streams: Sequence[KinectStream]) -> Dict:
     """Noise statistics of corrupted streams, for the report and the calibration test.
 

@@ -1,3 +1,16 @@
+"""What the sensor model produces and how a clip is timed for it: :class:`KinectStream` (a
+corrupted clip, offline), :func:`resample` to the sensor rate and :func:`loop_blend` (a clip
+played in a loop without a teleport)."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Dict, List
+
+import numpy as np
+
+from skeleton_core.model import HIP_CENTER, NUM_JOINTS, forward_kinematics, parent_relative
+
+
 @dataclass
 class KinectStream:
     """A corrupted clip in the sensor frame."""
@@ -15,7 +28,6 @@ class KinectStream:
 
     def __len__(self) -> int:
         return len(self.positions)
-
 
 
 def resample(positions: np.ndarray, fps_in: float, fps_out: float) -> np.ndarray:
@@ -59,5 +71,3 @@ def loop_blend(pos: np.ndarray, frames: int = LOOP_BLEND_FRAMES) -> np.ndarray:
         r[1:] = u
         p[i] = forward_kinematics(r, root)
     return p
-
-

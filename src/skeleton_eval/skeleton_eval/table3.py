@@ -1,6 +1,28 @@
-# ------------------------------------------------------------------------------------------
-# Table III: joint subsets
-# ------------------------------------------------------------------------------------------
+"""Shum et al. 2013 Table III: reconstruction from joint subsets, (a) left hand + foot ... (e) all
+parts. The other joints are NOT_TRACKED (reliability 0, frozen at the first frame) on a noise-only
+stream. ``calibration='tpose'`` (the paper's protocol: a calibrated user) first shows each method a
+short, unscored segment of the same user standing in a T-pose (or ``'standing'``, arms down) with
+every joint tracked; ``'none'`` hides the other joints from the very first frame.
+"""
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+from typing import Dict, List, Optional, Sequence
+
+import numpy as np
+
+from skeleton_core.conversions import SkeletonFrame
+from skeleton_core.model import (ELBOW_LEFT, ELBOW_RIGHT, FOOT_LEFT, FOOT_RIGHT, HAND_LEFT,
+                                 HAND_RIGHT, JOINT_NAMES, KNEE_LEFT, KNEE_RIGHT, NOT_TRACKED,
+                                 NUM_JOINTS, SHOULDER_LEFT, SHOULDER_RIGHT, TRACKED, WRIST_LEFT,
+                                 WRIST_RIGHT, estimate_height, standard_body)
+from skeleton_data.mocap import MotionClip, load_cmu_clip
+from .clips import shared_dir
+from .evaluation import evaluate_streams, make_streams, run_meta, stream_frames
+from .sensor_model import SensorModel
+from .sensor_stream import KinectStream
+
 TABLE3_SUBSETS = {
     'a': ('Left Hand, Left Foot', (HAND_LEFT, FOOT_LEFT)),
     'b': ('Hands', (HAND_LEFT, HAND_RIGHT)),
@@ -42,14 +64,11 @@ def calibration_pose(clip, pose: str = 'tpose', cmu_dir=None):
 
     ``pose='standing'``: the same skeleton with both arms hanging straight down from the
     shoulders (the reliability estimator's second reference posture)."""
-    from skeleton_core.model import (ELBOW_LEFT as EL, ELBOW_RIGHT as ER, SHOULDER_LEFT as SL,
-                        SHOULDER_RIGHT as SR, WRIST_LEFT as WL, WRIST_RIGHT as WR, estimate_height)
     if pose not in ('tpose', 'standing'):
         raise ValueError(f"calibration pose must be 'tpose' or 'standing', got {pose!r}")
     src = str(getattr(clip, 'source', '') or '')
     p = None
     if src.startswith('cmu:'):
-        from skeleton_data.mocap import load_cmu_clip
         folder = Path(cmu_dir) if cmu_dir is not None else shared_dir() / 'mocap' / 'cmu'
         path = folder / src[4:]
         if path.is_file():
@@ -62,7 +81,8 @@ def calibration_pose(clip, pose: str = 'tpose', cmu_dir=None):
         p, desc = standard_body(h).rest_positions(), f'standard body T-pose at {h:.2f} m'
     if pose == 'standing':
         p = p.copy()
-        for chain in ((SL, EL, WL, HAND_LEFT), (SR, ER, WR, HAND_RIGHT)):
+        for chain in ((SHOULDER_LEFT, ELBOW_LEFT, WRIST_LEFT, HAND_LEFT),
+                      (SHOULDER_RIGHT, ELBOW_RIGHT, WRIST_RIGHT, HAND_RIGHT)):
             lengths = [np.linalg.norm(p[b] - p[a]) for a, b in zip(chain[:-1], chain[1:])]
             for a, b, length in zip(chain[:-1], chain[1:], lengths):
                 p[b] = p[a] + (0.0, 0.0, -length)
@@ -154,5 +174,5 @@ def table3(methods, clips, seed: int = 0, max_frames: Optional[int] = None, sens
             'subsets': {k: {'parts': TABLE3_SUBSETS[k][0],
                             'joints': [JOINT_NAMES[j] for j in TABLE3_SUBSETS[k][1]]}
                         for k in subsets},
-            'meta': _meta(clips, seed, sensor, max_frames, data_source,
-                          {'scenarios': ['clean'], 'calibration': cal_meta})}
+            'meta': run_meta(clips, seed, sensor, max_frames, data_source,
+                             {'scenarios': ['clean'], 'calibration': cal_meta})}
