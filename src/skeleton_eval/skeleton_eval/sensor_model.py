@@ -141,7 +141,7 @@ class SensorModel:
     def stream(self, clip, scenario: str = 'a', loop: bool = True, seed: Optional[int] = None,
                view=None) -> Iterator[Tuple[np.ndarray, np.ndarray, np.ndarray]]:
         """Live: yields ``(positions, tracking_state, truth)`` per frame (forever if ``loop``;
-        then the clip's last :data:`LOOP_BLEND_FRAMES` turn into its first posture,
+        then the clip's last :data:`~.sensor_stream.LOOP_BLEND_FRAMES` turn into its first posture,
         :func:`loop_blend`: no teleport at the loop point).
 
         ``view`` (a :class:`skeleton_core.tf.Transform`, None = the one sensor): several sensors
