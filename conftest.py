@@ -129,6 +129,16 @@ def destroy_nodes(nodes) -> list:
 
 
 @pytest.fixture(autouse=True, scope='module')
+def environment_restored():
+    """A module that sets an environment variable for the processes it starts (e.g. the nodes'
+    cache directory) does not leak it into the next modules' nodes."""
+    saved = dict(os.environ)
+    yield
+    os.environ.clear()
+    os.environ.update(saved)
+
+
+@pytest.fixture(autouse=True, scope='module')
 def no_nodes_left_behind():
     """Nodes a test module left alive in this process are destroyed when the module ends (and
     named on stderr): each module starts on a graph without the previous module's nodes."""

@@ -168,7 +168,7 @@ def main(argv=None) -> int:
         'recorder': {'output': str(recording), 'topics': ['/kinect/skeletons']}})
     report: Dict = {'duration_s': args.duration, 'malformed_sent': {}, 'param_changes': [],
                     'kills': [], 'crashes': [], 'rss_mb': {}}
-    rss: Dict[str, List] = {n: [] for n in nodes}
+    rss: Dict[str, List] = {n: [] for n in graph.procs}   # every process (static_tf too)
     expected_dead = set()
     t_start = time.monotonic()
     try:
