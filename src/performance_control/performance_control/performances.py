@@ -90,6 +90,30 @@ def jump_stream(rng: np.random.Generator, n_jumps: int = 4, fps: float = FPS,
     return p
 
 
+def lift(p: np.ndarray, t0: float, flight: float, fps: float = FPS) -> np.ndarray:
+    """The poses (T, 20, 3) with a jump: from ``t0`` s the whole body flies ``flight`` s (a
+    parabola: the feet leave the floor by g flight^2 / 8 at the top)."""
+    tf = np.arange(len(p)) / fps - t0
+    up = np.where((tf >= 0) & (tf < flight), 0.5 * 9.81 * tf * (flight - tf), 0.0)
+    out = np.array(p, float)
+    out[..., 2] += up[:, None]
+    return out
+
+
+def jump_to_bars_stream(world, rng: np.random.Generator, jump: float = 1.5,
+                        flight: float = 0.45, stop: float = 7.0, total: float = 10.0,
+                        fps: float = FPS) -> np.ndarray:
+    """A user under the bars: raises the arms overhead, jumps at ``jump`` s (``flight`` s in the
+    air, the arms up: the reach/jump to engage), swings them like on the monkey bars until
+    ``stop`` s, then lowers them (the character lets go and drops). World poses (T, 20, 3)."""
+    body, style, tempo = performer(rng)
+    prm = dict(world.features['monkey_bars'].example.params)
+    prm['period'] = float(prm.get('period', 1.6)) * tempo
+    n = int(round(total * fps))
+    env = _envelope(n, [(jump - 0.7, stop)], 0.3, fps)
+    return lift(imitation('monkey_swing', prm, body, n, fps, style, active=env), jump, flight, fps)
+
+
 def _turn(p: np.ndarray, yaw: np.ndarray) -> np.ndarray:
     """Each frame (T, 20, 3) turned by ``yaw`` (T,) rad about the vertical through its hips."""
     c, s = np.cos(yaw), np.sin(yaw)
@@ -169,5 +193,6 @@ def to_sensor(positions: np.ndarray, name: str, seed: int, noise: bool = True,
 
 
 __all__ = ['PERFORMANCE_PLACEMENT', 'SENSOR_HEIGHT', 'imitation_stream', 'jump_stream',
+           'jump_to_bars_stream', 'lift',
            'continuous_stream', 'TURNING_PLACEMENT',
            'non_imitation_clips', 'to_sensor', 'performer']
