@@ -331,8 +331,9 @@ class PerformanceController:
                     # a foot on a rock (Sec. 8.4) lets go when the user lifts it to step higher
                     if self._hand_vz[e] > prm.regrab_speed:
                         dp.release(e)
-                elif not self._user_foot_down(p, e):
-                    dp.release(e)
+                elif not self._user_foot_down(p, e) or (f.kind == 'floor' and dp.in_water):
+                    dp.release(e)     # in the water the floor is the pool's bottom: a foot
+                    # that stood on it as the character walked in lets go (it swims)
                 continue
             for f in self.world.features.values():
                 if e not in f.engage.effectors:

@@ -125,30 +125,38 @@ def _turn(p: np.ndarray, yaw: np.ndarray) -> np.ndarray:
 
 
 def continuous_stream(world, rng: np.random.Generator, fps: float = FPS):
-    """One continuous performance (Sec. 8.3): stand, turn 45 deg right while walking in place (the
-    character walks and turns towards the water), walk in place until the character is in the
-    water, swim a breaststroke. Returns (positions (T, 20, 3) world, schedule
-    [(start s, what the user does)]) with the user's body, style and tempo drawn from ``rng``."""
+    """One continuous performance (Sec. 8.3, issue 30): stand; walk in place (the character
+    walks forward under the monkey bars); stop, raise the arms and jump (the character catches a
+    bar); swing like on the bars; lower the arms (the character lets go and drops); walk in
+    place turning 45 deg right (the character walks into the water); swim a breaststroke.
+    Returns (positions (T, 20, 3) world, schedule [(start s, what the user does)]) with the
+    user's body, style and tempo drawn from ``rng``."""
     body, style, tempo = performer(rng)
     walk = dict(world.features['floor'].example.params)
     walk['period'] = float(walk.get('period', 1.1)) * tempo
+    swing = dict(world.features['monkey_bars'].example.params)
+    swing['period'] = float(swing.get('period', 1.6)) * tempo
     swim = dict(world.features['water'].example.params)
     swim['period'] = float(swim.get('period', 1.5)) * tempo
-    sched = [(0.0, 'stand'), (1.0, 'walk'), (8.0, 'swim')]
-    total = 15.0
+    sched = [(0.0, 'stand'), (1.0, 'walk'), (3.7, 'raise the arms'), (4.5, 'jump'),
+             (5.0, 'swing'), (9.0, 'lower the arms'), (10.5, 'walk'), (18.0, 'swim')]
+    total = 24.0
     n = int(round(total * fps))
     t = np.arange(n) / fps
-    env_w = _envelope(n, [(1.0, 8.0)], 0.2, fps)
-    env_s = _envelope(n, [(8.3, total + 1.0)], 0.25, fps)
+    env_w = _envelope(n, [(1.0, 3.5), (10.5, 18.0)], 0.2, fps)
+    env_b = _envelope(n, [(3.7, 9.0)], 0.3, fps)
+    env_s = _envelope(n, [(18.3, total + 1.0)], 0.25, fps)
     pw = imitation('walk_cycle', walk, body, n, fps, style, active=env_w)
+    pb = imitation('monkey_swing', swing, body, n, fps, style, active=env_b)
     ps = imitation('breaststroke', swim, body, n, fps, style, active=env_s)
     arms = [j for j in range(pw.shape[1]) if j not in _LEG_JOINTS]
     p = pw.copy()
-    sw = (env_s > 0)[:, None]
-    p[:, arms] = np.where(sw[..., None], ps[:, arms], pw[:, arms])
-    yaw = -np.radians(45) * np.clip((t - 1.5) / 1.0, 0, 1)   # half turned: still tracked
+    for env, src in ((env_b, pb), (env_s, ps)):
+        on = (env > 0)[:, None, None]
+        p[:, arms] = np.where(on, src[:, arms], p[:, arms])
+    p = lift(p, 4.5, 0.45, fps)
+    yaw = -np.radians(45) * np.clip((t - 11.0) / 1.0, 0, 1)   # half turned: still tracked
     return _turn(p, yaw), sched
-
 
 
 def non_imitation_clips(seed: int) -> List[Tuple[str, np.ndarray]]:
