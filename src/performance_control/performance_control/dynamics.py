@@ -63,10 +63,11 @@ class Contact:
 
 # body weights: the largest force one hand exerts on the body (Eq. 2-4 clamped). A hang with a
 # swing needs about 1.6 (one hand: the weight plus the centripetal pull of a 2.4 m/s swing on a
-# 1 m pendulum); without a bound, a user lowering the arms while holding the bars drove the pitch
-# PD (the target direction turning ~8 rad/s) with over 13 kN and the release flung the body at
-# 12 m/s (issue 30, control2).
-ARM_STRENGTH = 3.0
+# 1 m pendulum), climbing the rope hand over hand more (2 sank the climber 0.6 m, 3 regrabbed too
+# rarely in test_climbing_hand_over_hand_regrabs_the_swinging_rope); without a bound, a user
+# lowering the arms while holding the bars drove the pitch PD (the target direction turning ~8
+# rad/s) with over 13 kN (18 body weights) and the release flung the body at 12 m/s (issue 30).
+ARM_STRENGTH = 4.0
 
 
 class DynamicProcess:
