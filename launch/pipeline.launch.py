@@ -20,6 +20,7 @@ from launch.actions import DeclareLaunchArgument, GroupAction, OpaqueFunction
 from launch.conditions import IfCondition
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node, PushRosNamespace
+from skeleton_core.tf import DEFAULT_SENSOR_POSE
 
 from kinect_bringup.launch_nodes import managed_node
 
@@ -52,7 +53,7 @@ ARGS = [
     ('viz', 'true', 'run the RViz marker node'),
     ('rviz', 'false', 'start RViz with the bundled config'),
     ('record', '', 'record every pipeline topic to this MCAP file ("" = no recording)'),
-    ('sensor_pose', '0 0 0.8 0 0 0', 'the sensor\'s pose in world, on TF as world -> kinect_link: '
+    ('sensor_pose', DEFAULT_SENSOR_POSE, 'the sensor\'s pose in world, on TF as world -> kinect_link: '
      '"x y z yaw pitch roll" (m, deg; positive pitch = tilted down)'),
     ('extrinsics', '', 'sensor-pose YAML (hand-measured or from calibrate_extrinsics); '
      'overrides sensor_pose'),
