@@ -38,6 +38,12 @@ HANDS = ('HandLeft', 'HandRight')
 # occluded, a step off the example's rhythm -- and the character should not stop and go)
 WALK_HOLD = 0.4
 FEET = ('FootLeft', 'FootRight')
+# m: how far above the character's hand a bar may be and still be caught when the user jumps
+# under it. Not a human jump (0.3-0.5 m): the character jumps as high as the bars need, as the
+# user's small space and modest jump ask (the playground's bars are 2.75 m up, for a hanging
+# 1.95 m user's feet to clear the floor; a 1.5-1.95 m character's hands, swinging overhead, are
+# at 1.75-2.2 m, measured on the bench's performers)
+JUMP_REACH = 1.0
 
 
 @dataclass
@@ -101,7 +107,9 @@ def build_models(world: World, params: RecognizerParams) -> Dict[str, ExampleMod
     """The PCA model of every feature's example motion."""
     return {f.name: ExampleModel(f.name, example_motion(f.example, fps=params.fps),
                                  f.example.effectors, f.example.components, params,
-                                 max_change_share=f.example.max_change_share)
+                                 max_change_share=f.example.max_change_share,
+                                 hang_joint=(f.engage.hand_above or 'Head') if f.kind == 'bars'
+                                 else None)
             for f in world.with_example()}
 
 
@@ -286,6 +294,19 @@ class PerformanceController:
         b = self.dp.rope_arc(HANDS[1 - HANDS.index(e)])
         return a is not None and b is not None and a < b
 
+    def _jump_catch(self, e: str, f: Feature, pt) -> bool:
+        """Reach/jump to engage (issue 30): under the bars, the user's feet leave their floor
+        with both hands above the bars' engage joint (a jump, or a real hang: :mod:`.support`);
+        the character's hand catches a bar within ``engage.distance`` horizontally and at most
+        :data:`JUMP_REACH` above it."""
+        if f.kind != 'bars' or pt is None or self.dp.in_water:
+            return False
+        if not self.recognizer.support.reaching(f.engage.hand_above or 'Head'):
+            return False
+        h = self.dp.effectors()[EFFECTORS.index(e)]
+        return bool(np.linalg.norm(pt[:2] - h[:2]) < f.engage.distance
+                    and 0.0 < pt[2] - h[2] < JUMP_REACH)
+
     def _update_contacts(self, p: np.ndarray, recs: Dict[str, Recognition], t: float) -> None:
         dp, prm = self.dp, self.params
         vel = dp.effector_velocities()
@@ -310,8 +331,9 @@ class PerformanceController:
                     # a foot on a rock (Sec. 8.4) lets go when the user lifts it to step higher
                     if self._hand_vz[e] > prm.regrab_speed:
                         dp.release(e)
-                elif not self._user_foot_down(p, e):
-                    dp.release(e)
+                elif not self._user_foot_down(p, e) or (f.kind == 'floor' and dp.in_water):
+                    dp.release(e)     # in the water the floor is the pool's bottom: a foot
+                    # that stood on it as the character walked in lets go (it swims)
                 continue
             for f in self.world.features.values():
                 if e not in f.engage.effectors:
@@ -336,6 +358,11 @@ class PerformanceController:
                 # climbing, the free hand grabs above the held one (along the rope)
                 above = dp.rope_arc(HANDS[1 - HANDS.index(e)]) if climbing else None
                 dist, body, pt = dp.feature_distance(e, f, above)
+                if e in HANDS and body is not None and self._jump_catch(e, f, pt):
+                    dp.move_effector(e, pt)          # the character jumps and catches the bar
+                    dp.engage(e, f, body, pt)
+                    dp.contacts[e].since_wall = t
+                    break
                 reach = max(f.engage.distance, prm.regrab_reach * self.height) if climbing \
                     else f.engage.distance
                 if body is not None and dist < reach:

@@ -2,12 +2,14 @@
 
     ros2 run performance_control demo_control                 # out/control_demo.{mcap,png}
 
-Five scenes, one simulated user each (user ids 1-5), 8 s apiece (the last 15 s), performed by a user of another
+Five scenes, one simulated user each (user ids 1-5), 8 s apiece (the last 24 s), performed by a user of another
 size and style than the examples and seen through the Kinect sensor model (the performance
 placement: 3.5 m away, sensor 1.2 m up): hanging from the monkey bars and swinging (imitation,
 then the arms drop at 6 s: the character falls), climbing the rope, jumping on the trampoline,
-swimming a breaststroke, and one continuous performance from the floor (Sec. 8.3: the user turns
-45 degrees and walks in place, the character walks into the water, then the user swims). Each
+swimming a breaststroke, and one continuous performance from the floor (Sec. 8.3: the user walks
+in place, the character walks under the monkey bars; the user jumps with the arms up, the
+character catches a bar, swings and drops; the user turns 45 degrees and walks in place, the
+character walks into the water, then the user swims). Each
 frame runs :class:`PerformanceController` and the physics character
 (:class:`physics_sim.simulation.Simulation`) tracking the composed pose, as the graph does with
 ``control:=true``. Writes
@@ -42,7 +44,7 @@ SCENES = ('monkey_bars', 'rope', 'trampoline', 'water', 'continuous')
 
 def scene_stream(world, name: str, seed: int, seconds: float = 8.0) -> np.ndarray:
     rng = np.random.default_rng(seed)
-    if name == 'continuous':      # floor -> walk (turning) -> into the water -> swim (15 s)
+    if name == 'continuous':      # floor -> walk -> bars -> drop -> walk -> water -> swim (24 s)
         p, _ = continuous_stream(world, np.random.default_rng(0))
         return to_sensor(p, 'cont0', 0, sensor_params=TURNING_PLACEMENT)   # the test's stream
     if name == 'trampoline':
@@ -125,7 +127,7 @@ def run(world, out_dir: Path, seconds: float = 8.0, physics: bool = True) -> Dic
 def _draw_world(ax, world, obstacles, scene: str) -> None:
     for f in world.features.values():
         if f.name not in (scene, 'floor') and not (scene == 'continuous'
-                                                    and f.kind == 'water'):
+                                                    and f.kind in ('water', 'bars')):
             continue
         for g in f.geoms:
             if g.type == 'plane':

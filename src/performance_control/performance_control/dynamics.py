@@ -61,6 +61,15 @@ class Contact:
     since_wall: float = 0.0   # caller's clock when it engaged
 
 
+# body weights: the largest force one hand exerts on the body (Eq. 2-4 clamped). A hang with a
+# swing needs about 1.6 (one hand: the weight plus the centripetal pull of a 2.4 m/s swing on a
+# 1 m pendulum), climbing the rope hand over hand more (2 sank the climber 0.6 m, 3 regrabbed too
+# rarely in test_climbing_hand_over_hand_regrabs_the_swinging_rope); without a bound, a user
+# lowering the arms while holding the bars drove the pitch PD (the target direction turning ~8
+# rad/s) with over 13 kN (18 body weights) and the release flung the body at 12 m/s (issue 30).
+ARM_STRENGTH = 4.0
+
+
 class DynamicProcess:
     """One character's dynamic model in a feature world."""
 
@@ -94,6 +103,10 @@ class DynamicProcess:
         self._free = np.stack([np.full(4, self.free_gain), kd, np.full(4, self.free_gain), kd,
                                np.full(4, self.free_gain), kd], 1)     # (4, 6) GAIN_KEYS order
         self._gains = self._free.copy()
+        # N: the most an arm pulls or pushes (ARM_STRENGTH body weights per hand); the feet
+        # unbounded (a landing takes 3-5 body weights)
+        self._fmax = np.array([ARM_STRENGTH * self.total_mass * 9.81 if e.startswith('Hand')
+                               else np.inf for e in EFFECTORS])
         self._yaw = 0.0
         self._r0 = np.array([offsets[e] for e in EFFECTORS], float)
         self._zero = np.zeros((4, 3))
@@ -340,7 +353,7 @@ class DynamicProcess:
         for _ in range(n):
             _apply_forces(xpos, qvel, xfrc, self.com_body, self.com_dof, self.eff_body,
                           self.eff_dof, self._r0, self._r1, self.time, self._t0, self._period,
-                          self._gains, self._yaw, self._buoy)
+                          self._gains, self._yaw, self._buoy, self._fmax)
             mujoco.mj_step(m, d)
             self.time = float(d.time)
         bad = int(d.warning[mujoco.mjtWarning.mjWARN_BADQACC].number)
@@ -404,10 +417,11 @@ def _contact_forces_jit(x, v, pe, ve, rh_w, rhd_w, g, yaw):  # pragma: no cover 
 
 @_jit.njit
 def _apply_forces_jit(xpos, qvel, xfrc, com_body, com_dof, eff_body, eff_dof, r0, r1, t, t0,
-                      period, gains, yaw, buoy):  # pragma: no cover - numba
+                      period, gains, yaw, buoy, fmax):  # pragma: no cover - numba
     """One step's forces into ``xfrc`` (MuJoCo's xfrc_applied): Eq. 2-4 on the effectors at
-    time ``t`` (targets interpolated from ``r0`` to ``r1`` over ``period`` from ``t0``), their
-    sum reversed on the COM (Eq. 1) with the buoyancy ``buoy`` (N, up)."""
+    time ``t`` (targets interpolated from ``r0`` to ``r1`` over ``period`` from ``t0``), each at
+    most ``fmax`` (4,) N, their sum reversed on the COM (Eq. 1) with the buoyancy ``buoy``
+    (N, up)."""
     s = min(max((t - t0) / period, 0.0), 1.0)
     rh = r0 + s * (r1 - r0)
     rhd = (r1 - r0) / period if s < 1.0 else np.zeros_like(r0)
@@ -420,6 +434,11 @@ def _apply_forces_jit(xpos, qvel, xfrc, com_body, com_dof, eff_body, eff_dof, r0
     x = xpos[com_body].copy()
     v = qvel[com_dof:com_dof + 3].copy()
     f = _contact_forces_jit(x, v, pe, ve, rh, rhd, gains, yaw)
+    for k in range(4):
+        n = math.sqrt(f[k, 0] * f[k, 0] + f[k, 1] * f[k, 1] + f[k, 2] * f[k, 2])
+        if n > fmax[k]:
+            for a in range(3):
+                f[k, a] *= fmax[k] / n
     for a in range(3):
         tot = 0.0
         for k in range(4):
@@ -460,7 +479,7 @@ def _contact_forces_np(x, v, pe, ve, rh_w, rhd_w, g, yaw):
 
 
 def _apply_forces_np(xpos, qvel, xfrc, com_body, com_dof, eff_body, eff_dof, r0, r1, t, t0,
-                     period, gains, yaw, buoy):
+                     period, gains, yaw, buoy, fmax):
     """The numpy twin of :func:`_apply_forces_jit`."""
     s = min(max((t - t0) / period, 0.0), 1.0)
     rh = r0 + s * (r1 - r0)
@@ -469,6 +488,8 @@ def _apply_forces_np(xpos, qvel, xfrc, com_body, com_dof, eff_body, eff_dof, r0,
     dofs = np.asarray(eff_dof)[:, None] + np.arange(3)
     f = _contact_forces_np(xpos[com_body].copy(), qvel[com_dof:com_dof + 3].copy(),
                            xpos[eff_body], qvel[dofs], rh, rhd, gains, yaw)
+    n = np.linalg.norm(f, axis=1)
+    f = f * np.where(n > fmax, fmax / np.maximum(n, 1e-300), 1.0)[:, None]
     xfrc[eff_body, :3] = f
     xfrc[com_body, :3] = -f.sum(axis=0)
     xfrc[com_body, 2] += buoy

@@ -42,6 +42,8 @@ from skeleton_core.params import check, param
 from skeleton_core.model import (JOINT_INDEX, SEGMENT_CHILDREN, SEGMENT_MASS_FRACTION,
                                  SEGMENT_PARENTS, JOINT_NAMES, TRACKED, estimate_height)
 
+from .support import HangDetector
+
 _SEG_W = np.array([SEGMENT_MASS_FRACTION[JOINT_NAMES[c]] for c in SEGMENT_CHILDREN])
 _SEG_W = _SEG_W / _SEG_W.sum()
 
@@ -244,8 +246,11 @@ class ExampleModel:
 
     def __init__(self, name: str, positions: np.ndarray, effectors: Sequence[str],
                  components: int, params: RecognizerParams, height: Optional[float] = None,
-                 max_change_share: float = 1.0):
+                 max_change_share: float = 1.0, hang_joint: Optional[str] = None):
         self.name = name
+        # a feature held from above (the bars): the user hanging -- off the floor longer than a
+        # jump, both hands above this joint (:mod:`.support`) -- is recognised as it too
+        self.hang_joint = hang_joint
         self.max_change_share = float(max_change_share)
         self.effectors = tuple(JOINT_INDEX[e] for e in effectors)
         self.params = params
@@ -304,6 +309,7 @@ class Recognition:
     activity: float
     w: Optional[np.ndarray] = None   # the user's feature vector for this feature's effectors
     change_share: float = 0.0        # share of the recent displacement outside the example's
+    hanging: bool = False            # recognised by the user's support (:mod:`.support`)
 
 
 class IntentionRecognizer:
@@ -321,8 +327,10 @@ class IntentionRecognizer:
         self._avg: Dict[str, list] = {}
         self._last_t: Optional[float] = None
         self._tracked_run: Optional[np.ndarray] = None   # TRACKED frames in a row per joint
+        self.support = HangDetector()
 
     def reset(self) -> None:
+        self.support.reset()
         self._tracked_run = None
         self._hist = []
         self._thist = []
@@ -345,6 +353,7 @@ class IntentionRecognizer:
             tr = np.asarray(tracking_state).reshape(-1) == TRACKED
             run = self._tracked_run if self._tracked_run is not None else np.full(len(tr), 10 ** 6)
             self._tracked_run = np.where(tr, run + 1, 0)
+        self.support.update(p, t)
         yaw = facing_yaw(p)
         com = center_of_mass(p)
         rot = yaw_rotation(yaw)
@@ -433,8 +442,11 @@ class IntentionRecognizer:
             conf = 1.0 / (1.0 + ratio * ratio)
             if act < prm.min_activity:
                 conf *= act / max(prm.min_activity, 1e-9)
+            hang = bool(getattr(m, 'hang_joint', None) and self.support.hanging(m.hang_joint))
+            if hang:          # held from above: the feature whatever the hands' motion
+                imitating, conf = True, max(conf, 1.0 / (1.0 + min(ratio, 1.0) ** 2))
             out[m.name] = Recognition(m.name, imitating, float(conf), float(a[0]), float(a[1]),
-                                      act, w, float(share))
+                                      act, w, float(share), hang)
         return out
 
     def best(self, recs: Dict[str, Recognition]) -> Optional[Recognition]:

@@ -90,6 +90,30 @@ def jump_stream(rng: np.random.Generator, n_jumps: int = 4, fps: float = FPS,
     return p
 
 
+def lift(p: np.ndarray, t0: float, flight: float, fps: float = FPS) -> np.ndarray:
+    """The poses (T, 20, 3) with a jump: from ``t0`` s the whole body flies ``flight`` s (a
+    parabola: the feet leave the floor by g flight^2 / 8 at the top)."""
+    tf = np.arange(len(p)) / fps - t0
+    up = np.where((tf >= 0) & (tf < flight), 0.5 * 9.81 * tf * (flight - tf), 0.0)
+    out = np.array(p, float)
+    out[..., 2] += up[:, None]
+    return out
+
+
+def jump_to_bars_stream(world, rng: np.random.Generator, jump: float = 1.5,
+                        flight: float = 0.45, stop: float = 7.0, total: float = 10.0,
+                        fps: float = FPS) -> np.ndarray:
+    """A user under the bars: raises the arms overhead, jumps at ``jump`` s (``flight`` s in the
+    air, the arms up: the reach/jump to engage), swings them like on the monkey bars until
+    ``stop`` s, then lowers them (the character lets go and drops). World poses (T, 20, 3)."""
+    body, style, tempo = performer(rng)
+    prm = dict(world.features['monkey_bars'].example.params)
+    prm['period'] = float(prm.get('period', 1.6)) * tempo
+    n = int(round(total * fps))
+    env = _envelope(n, [(jump - 0.7, stop)], 0.3, fps)
+    return lift(imitation('monkey_swing', prm, body, n, fps, style, active=env), jump, flight, fps)
+
+
 def _turn(p: np.ndarray, yaw: np.ndarray) -> np.ndarray:
     """Each frame (T, 20, 3) turned by ``yaw`` (T,) rad about the vertical through its hips."""
     c, s = np.cos(yaw), np.sin(yaw)
@@ -101,30 +125,38 @@ def _turn(p: np.ndarray, yaw: np.ndarray) -> np.ndarray:
 
 
 def continuous_stream(world, rng: np.random.Generator, fps: float = FPS):
-    """One continuous performance (Sec. 8.3): stand, turn 45 deg right while walking in place (the
-    character walks and turns towards the water), walk in place until the character is in the
-    water, swim a breaststroke. Returns (positions (T, 20, 3) world, schedule
-    [(start s, what the user does)]) with the user's body, style and tempo drawn from ``rng``."""
+    """One continuous performance (Sec. 8.3, issue 30): stand; walk in place (the character
+    walks forward under the monkey bars); stop, raise the arms and jump (the character catches a
+    bar); swing like on the bars; lower the arms (the character lets go and drops); walk in
+    place turning 45 deg right (the character walks into the water); swim a breaststroke.
+    Returns (positions (T, 20, 3) world, schedule [(start s, what the user does)]) with the
+    user's body, style and tempo drawn from ``rng``."""
     body, style, tempo = performer(rng)
     walk = dict(world.features['floor'].example.params)
     walk['period'] = float(walk.get('period', 1.1)) * tempo
+    swing = dict(world.features['monkey_bars'].example.params)
+    swing['period'] = float(swing.get('period', 1.6)) * tempo
     swim = dict(world.features['water'].example.params)
     swim['period'] = float(swim.get('period', 1.5)) * tempo
-    sched = [(0.0, 'stand'), (1.0, 'walk'), (8.0, 'swim')]
-    total = 15.0
+    sched = [(0.0, 'stand'), (1.0, 'walk'), (3.7, 'raise the arms'), (4.5, 'jump'),
+             (5.0, 'swing'), (9.0, 'lower the arms'), (10.5, 'walk'), (18.0, 'swim')]
+    total = 24.0
     n = int(round(total * fps))
     t = np.arange(n) / fps
-    env_w = _envelope(n, [(1.0, 8.0)], 0.2, fps)
-    env_s = _envelope(n, [(8.3, total + 1.0)], 0.25, fps)
+    env_w = _envelope(n, [(1.0, 3.5), (10.5, 18.0)], 0.2, fps)
+    env_b = _envelope(n, [(3.7, 9.0)], 0.3, fps)
+    env_s = _envelope(n, [(18.3, total + 1.0)], 0.25, fps)
     pw = imitation('walk_cycle', walk, body, n, fps, style, active=env_w)
+    pb = imitation('monkey_swing', swing, body, n, fps, style, active=env_b)
     ps = imitation('breaststroke', swim, body, n, fps, style, active=env_s)
     arms = [j for j in range(pw.shape[1]) if j not in _LEG_JOINTS]
     p = pw.copy()
-    sw = (env_s > 0)[:, None]
-    p[:, arms] = np.where(sw[..., None], ps[:, arms], pw[:, arms])
-    yaw = -np.radians(45) * np.clip((t - 1.5) / 1.0, 0, 1)   # half turned: still tracked
+    for env, src in ((env_b, pb), (env_s, ps)):
+        on = (env > 0)[:, None, None]
+        p[:, arms] = np.where(on, src[:, arms], p[:, arms])
+    p = lift(p, 4.5, 0.45, fps)
+    yaw = -np.radians(45) * np.clip((t - 11.0) / 1.0, 0, 1)   # half turned: still tracked
     return _turn(p, yaw), sched
-
 
 
 def non_imitation_clips(seed: int) -> List[Tuple[str, np.ndarray]]:
@@ -169,5 +201,6 @@ def to_sensor(positions: np.ndarray, name: str, seed: int, noise: bool = True,
 
 
 __all__ = ['PERFORMANCE_PLACEMENT', 'SENSOR_HEIGHT', 'imitation_stream', 'jump_stream',
+           'jump_to_bars_stream', 'lift',
            'continuous_stream', 'TURNING_PLACEMENT',
            'non_imitation_clips', 'to_sensor', 'performer']

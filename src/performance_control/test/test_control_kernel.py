@@ -42,13 +42,18 @@ def test_numpy_twin_equals_numba_applied_forces():
     eff_dof = np.array([3, 6, 9, 12])
     r0, r1 = rng.normal(0, 0.5, (4, 3)), rng.normal(0, 0.5, (4, 3))
     g = rng.uniform(0, 9000, (4, 6))
+    fmax = np.array([1.0, np.inf, 1e6, np.inf])   # the first clamped (its force is > 1 N)
     for t in (0.0, 0.01, 0.05):           # inside and after the interpolation period
         outs = []
         for fn in (dynamics._apply_forces_jit, dynamics._apply_forces_np):
             xfrc = np.zeros((nb, 6))
-            fn(xpos, qvel, xfrc, 1, 0, eff_body, eff_dof, r0, r1, t, 0.0, 1 / 30, g, 0.7, 123.0)
+            fn(xpos, qvel, xfrc, 1, 0, eff_body, eff_dof, r0, r1, t, 0.0, 1 / 30, g, 0.7, 123.0,
+               fmax)
             outs.append(xfrc)
         np.testing.assert_allclose(outs[1], outs[0], rtol=1e-9, atol=1e-7)
+        # each effector's force at most fmax (the arms' strength), the others untouched
+        n = np.linalg.norm(outs[1][eff_body, :3], axis=1)
+        assert np.all(n <= fmax + 1e-6) and np.isclose(n[0], fmax[0])
         # Eq. 1: the COM gets the effectors' sum reversed plus the buoyancy
         np.testing.assert_allclose(outs[1][1, :3] + outs[1][eff_body, :3].sum(axis=0),
                                    [0, 0, 123.0], atol=1e-6)

@@ -68,24 +68,40 @@ def test_walking_in_place_walks_the_character_forward_and_it_stops_with_the_user
     assert np.all(np.abs(com[:, 2] - com[0, 2]) < 0.2)      # upright on the floor throughout
 
 
-def test_continuous_performance_walks_turning_into_the_water_and_swims():
+def test_continuous_performance_walks_to_the_bars_jumps_swings_drops_walks_into_the_water():
+    """floor -> walk -> under the bars, jump to catch one -> swing -> drop -> walk (turning 45
+    deg right) -> into the water -> swim (issue 30; the rope is not in it yet)."""
     p, sched = continuous_stream(WORLD, np.random.default_rng(0))
     s, st = to_sensor(p, 'cont0', 0, True, TURNING_PLACEMENT, states=True)
     ctl = PerformanceController(WORLD, ControlParams(sensor_height=SENSOR_HEIGHT))
-    rows = [ctl.step(s[i], i / 30.0, st[i]) for i in range(len(s))]
-    feats = [o.feature for o in rows]
-    seq = [x for k, x in enumerate(feats) if x and (k == 0 or x != feats[k - 1])]
-    assert seq[0] == 'floor' and seq[-1] == 'water'
-    assert 'water' not in feats[:int(4 * 30)]
-    first = feats.index('water')
-    assert all(x == 'water' for x in feats[first:])          # stays in once in
+    phase, rows = [], []
+    for i in range(len(s)):
+        o = ctl.step(s[i], i / 30.0, st[i])
+        rows.append(o)
+        phase.append('bars' if any(f == 'monkey_bars' for e, f in o.contacts.items()
+                                   if e.startswith('Hand'))
+                     else 'water' if ctl.dp.in_water else 'walk' if ctl.walking else '')
+    seq = [x for k, x in enumerate(phase) if x and x != next(
+        (y for y in reversed(phase[:k]) if y), '')]
+    assert seq == ['walk', 'bars', 'walk', 'water'], seq
+    t = np.arange(len(rows)) / 30.0
+    ph = np.array(phase)
+    jump = dict((w, a) for a, w in sched)['jump']
+    assert not (ph[t < jump] == 'bars').any()                 # caught with the jump, not before
+    assert (ph[(t > jump + 0.5) & (t < 8.5)] == 'bars').mean() > 0.9   # hangs while swinging
+    first = phase.index('water')
+    assert all(x == 'water' for x in phase[first:])           # stays in once in
     com = np.array([o.com for o in rows])
-    # the user turned 45 deg right: the character walked forward and to the right (-y)
-    d = com[first] - com[0]
-    assert d[0] > 1.0 and d[1] < -1.0 and abs(abs(np.degrees(np.arctan2(d[1], d[0]))) - 45) < 20
     stand = com[0, 2]
-    assert np.all(com[:first, 2] > stand - 0.2)              # no fall on the way
+    walking = ph == 'walk'
+    assert np.all(com[walking, 2] > stand - 0.2)              # upright on the walks: no fall
+    assert np.all(com[t > 11.0][walking[t > 11.0], 2] < stand + 0.2)   # landed from the bars
+    # the second walk turned 45 deg right: from where it landed forward and to the right (-y)
+    second = np.nonzero(walking & (t > 9.0))[0]
+    d = com[first] - com[second[0]]
+    assert d[0] > 1.0 and d[1] < -1.0 and abs(abs(np.degrees(np.arctan2(d[1], d[0]))) - 45) < 20
     water = WORLD.features['water'].geoms[0]
     assert np.all(np.abs(com[-1] - water.vec('center')) <= water.vec('half'))
     # swimming, not standing on the pool's bottom: no foot holds the floor
     assert not any(e.startswith('Foot') for o in rows[-60:] for e in o.contacts)
+    assert ctl.dp.unstable_steps == 0
