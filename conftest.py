@@ -15,6 +15,7 @@ os.environ['ROS_DOMAIN_ID'] = os.environ.get('KP_TEST_DOMAIN_ID', str(1 + os.get
 os.environ.setdefault('MPLBACKEND', 'Agg')
 
 import importlib  # noqa: E402
+import itertools  # noqa: E402
 
 import pytest  # noqa: E402
 
@@ -128,11 +129,22 @@ def destroy_nodes(nodes) -> list:
     return names
 
 
+_MODULES = itertools.count()
+
+
 @pytest.fixture(autouse=True, scope='module')
 def environment_restored():
-    """A module that sets an environment variable for the processes it starts (e.g. the nodes'
-    cache directory) does not leak it into the next modules' nodes."""
+    """Each test module on its own DDS domain, and with its own environment:
+
+    * a node of an earlier module can stay on the graph after it was destroyed (rclpy finalizes
+      it, and its context's participant, only once nothing refers to it any more), and a stale
+      ``/control`` or ``/driver`` answers a later module's ``change_state`` discovery without
+      ever serving it: the launched node then never configures;
+    * a module that sets a variable for the processes it starts (e.g. the nodes' cache directory)
+      does not leak it into the next modules' nodes."""
     saved = dict(os.environ)
+    base = int(saved['ROS_DOMAIN_ID'])
+    os.environ['ROS_DOMAIN_ID'] = str(1 + (base - 1 + next(_MODULES)) % 101)   # 1..101
     yield
     os.environ.clear()
     os.environ.update(saved)
