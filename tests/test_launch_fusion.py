@@ -59,7 +59,6 @@ def test_two_sensors_fused_in_world_reach_the_reconstruction():
             return [probe.message(t, i).header.stamp.sec * 10**9
                     + probe.message(t, i).header.stamp.nanosec for t, i in probe.indices(topic)]
         sensor1 = set(stamps_of('/kinect_1/skeletons'))
-        sensor2 = set(stamps_of('/kinect_2/skeletons'))
         for topic in ('/kinect/skeletons', '/posture/reconstructed'):
             msgs = [probe.message(t, i) for t, i in probe.indices(topic)]
             assert {m.header.frame_id for m in msgs} == {'world'}, topic
