@@ -90,27 +90,56 @@ def rclpy_context():
     ctx = rclpy.Context()
     rclpy.init(context=ctx)
     yield ctx
-    destroy_nodes_of(ctx)
+    destroy_nodes(live_nodes(ctx))
     try:
         rclpy.shutdown(context=ctx)
     except Exception:
         pass
 
 
-def destroy_nodes_of(ctx):
-    """Destroy every node a test left alive in ``ctx``: shutting a context down does not remove
-    its nodes from the graph while they exist, and a left-over ``/driver`` answers the next test's
-    ``/driver/change_state`` discovery without ever serving it (a launched node then stays
-    unconfigured)."""
+def live_nodes(ctx=None) -> list:
+    """The rclpy nodes of this process not destroyed yet (of ``ctx`` only, when given)."""
     import gc
 
     from rclpy.node import Node
+    found = []
     for obj in gc.get_objects():
         try:
-            if isinstance(obj, Node) and obj.context is ctx and obj.handle is not None:
-                obj.destroy_node()
+            if isinstance(obj, Node) and (ctx is None or obj.context is ctx):
+                obj.get_name()   # raises once the node is destroyed
+                found.append(obj)
         except Exception:
             pass
+    return found
+
+
+def destroy_nodes(nodes) -> list:
+    """Destroy ``nodes``: shutting a context down does not remove its nodes from the graph while
+    they exist, and a left-over ``/driver`` answers the next test's ``/driver/change_state``
+    discovery without ever serving it (a launched node then stays unconfigured). Returns the
+    names of the nodes destroyed."""
+    names = []
+    for node in nodes:
+        try:
+            names.append(node.get_fully_qualified_name())
+            node.destroy_node()
+        except Exception:
+            pass
+    return names
+
+
+@pytest.fixture(autouse=True, scope='module')
+def no_nodes_left_behind():
+    """Nodes a test module left alive in this process are destroyed when the module ends (and
+    named on stderr): each module starts on a graph without the previous module's nodes."""
+    before = {id(n) for n in live_nodes()} if 'rclpy' in sys.modules else set()
+    yield
+    if 'rclpy' not in sys.modules:
+        return
+    names = destroy_nodes(n for n in live_nodes() if id(n) not in before)
+    if names:
+        print(f'\n[conftest] destroyed nodes the module left alive: {", ".join(names)}',
+              file=sys.stderr)
 
 
 sys.path.insert(0, str(ROOT / 'tests'))

@@ -56,7 +56,9 @@ def test_node_controls_a_performance_over_dds(graph):
         fr = SkeletonFrame(positions=p, tracking_state=np.full(NUM_JOINTS, 2, np.uint8),
                            user_id=3, stamp_ns=st, frame_id='kinect_link')
         pub.publish(frames_to_array_msg([fr], st, 'kinect_link'))
-        time.sleep(1 / 30)
+        # lockstep, not a rate: this is about what the node computes, and a loaded machine must
+        # not turn a slow callback into dropped input
+        assert wait_until(lambda: len(out) > i, 5), f'no output for frame {i}'
     assert wait_until(lambda: out and frames_from_array_msg(out[-1])[0].stamp_ns == stamps[-1], 10)
     last = frames_from_array_msg(out[-1])[0]
     assert out[-1].header.frame_id == 'kinect_link' and last.user_id == 3
@@ -64,7 +66,7 @@ def test_node_controls_a_performance_over_dds(graph):
     bar_z = f.geoms[0].vec('from')[2]
     hands = last.positions[[7, 11]]
     assert np.all(np.abs(hands[:, 2] - (bar_z - 0.8)) < 0.08), hands
-    assert wait_until(lambda: len(intent) >= 50, 5)
+    assert wait_until(lambda: len(intent) >= len(clip), 5)   # one per output frame
     m = intent[-1]
     assert m.user_id == 3 and m.feature == 'monkey_bars'
     assert set(m.engaged_effectors) >= {'HandLeft', 'HandRight'}
