@@ -2,7 +2,6 @@
 (frame and stamps kept), skeleton_msgs/Intention with the engaged feature and e1/e2, feature and
 contact markers; parameters validated."""
 import math
-import time
 
 import numpy as np
 import pytest

@@ -75,7 +75,6 @@ def test_two_sensors_fused_in_world_reach_the_reconstruction():
         ours = set(window) & sensor1
         assert len(ours) >= 0.6 * len(window), (len(ours), len(window), len(sensor1))
         assert len(window) <= 1.1 * len(sensor1) + 2, (len(window), len(sensor1))
-        assert probe.rate('/kinect/skeletons', 2.0) >= 20.0
         # in world: the floor at z = 0 (the sensors are 0.8 m up): the feet near it
         feet = [s.positions[j].z for m in fused[-10:] for s in m.skeletons for j in (15, 19)]
         assert min(feet) > -0.2 and max(feet) < 0.4, feet
