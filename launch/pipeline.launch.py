@@ -28,10 +28,10 @@ from launch.actions import DeclareLaunchArgument, GroupAction, OpaqueFunction
 from launch.conditions import IfCondition
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node, PushRosNamespace
+from skeleton_core.tf import DEFAULT_SENSOR_POSE
 
 from kinect_bringup.launch_nodes import managed_node
 
-SENSOR_POSE = '0 0 0.8 0 0 0'
 ARGS = [
     # '' = keep the value from config/<node>.yaml
     ('source', '', 'skeleton source: synthetic | replay | live (default: driver.yaml)'),
@@ -66,9 +66,9 @@ ARGS = [
      'skeletons in world on /kinect/skeletons'),
     ('drivers', 'true', 'run the driver(s) and publish their sensor frames here (false: they run '
      'on the sensor PCs, e.g. driver.launch.py sensors:=N, same ROS_DOMAIN_ID)'),
-    ('sensor_pose', SENSOR_POSE, 'the sensor\'s pose in world, on TF as world -> kinect_link: '
-     '"x y z yaw pitch roll" (m, deg; positive pitch = tilted down); sensors:=N: ";" between '
-     'the N poses (default: as driver.launch.py sensors:=N)'),
+    ('sensor_pose', DEFAULT_SENSOR_POSE, 'the sensor\'s pose in world, on TF as world -> '
+     'kinect_link: "x y z yaw pitch roll" (m, deg; positive pitch = tilted down); sensors:=N: ";" '
+     'between the N poses (default: as driver.launch.py sensors:=N)'),
     ('extrinsics', '', 'sensor-pose YAML (hand-measured or from calibrate_extrinsics); '
      'overrides sensor_pose'),
     ('static_tf', 'true', 'publish the sensor frame(s) on /tf_static with the drivers (false: '
@@ -229,7 +229,7 @@ def _drivers(arg, sensors: int):
     from launch.actions import IncludeLaunchDescription
     from launch.launch_description_sources import PythonLaunchDescriptionSource
     over = {'sensors': str(sensors), 'static_tf': arg('static_tf'), 'extrinsics': arg('extrinsics')}
-    if arg('sensor_pose') != SENSOR_POSE:   # else driver.launch.py's N default poses
+    if arg('sensor_pose') != DEFAULT_SENSOR_POSE:   # else driver.launch.py's N default poses
         over['sensor_pose'] = arg('sensor_pose')
     for name in ('source', 'replay_file', 'scenario', 'num_users', 'device_uri', 'nite2_path'):
         if arg(name):   # '' = driver.yaml's value

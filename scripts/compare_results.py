@@ -11,9 +11,9 @@ import sys
 
 # wall-clock fields (processing time per frame, dates); figures computed from the data, e.g. the
 # cross-correlation latency_ms, are compared
-TIMING = re.compile(r'^(time|times|timings|timings_ms|ms_per_frame|correction_ms|'
-                    r'correction_ms_per_frame|seconds|wall_s|elapsed_s|date|date_utc|commit|'
-                    r'code)$|wall', re.I)
+TIMING = re.compile(r'^(time|times|timings|timings_ms|ms_per_frame|frame_ms|correction_ms|'
+                    r'correction_ms_per_frame|search_ms_per_query|seconds|wall_s|elapsed_s|date|'
+                    r'date_utc|commit|code)$|wall', re.I)
 
 
 def walk(a, b, path, out, count):

@@ -9,6 +9,9 @@ from skeleton_core.conversions import SkeletonFrame
 from skeleton_core.model import (HAND_LEFT, HAND_RIGHT, HIP_CENTER, INFERRED, MIRROR, NUM_JOINTS,
                                  TRACKED, standard_body)
 from skeleton_core.tf import Transform
+from skeleton_eval.clips import toy_clip
+from skeleton_eval.sensor_corrupter import _Corrupter
+from skeleton_eval.sensor_model import SensorModel
 
 FRONT = Transform.from_xyz_ypr(0.0, 0.0, 0.8)                              # at the origin, looking +x
 SIDE = Transform.from_xyz_ypr(2.5, -2.5, 0.8, yaw=90.0)               # 90 deg: looking +y
@@ -167,8 +170,6 @@ def test_unknown_sensor_and_no_sensor_are_one_line_errors():
 def test_sensor_model_views_share_one_object():
     """Class b's table is one object in the room: each view sees it where it stands (before, every
     view drew its own table in front of itself and the side view lost the same legs)."""
-    from skeleton_eval.evaluation import toy_clip
-    from skeleton_eval.sensor_model import SensorModel, _Corrupter
     model = SensorModel(seed=0)
     clip = toy_clip(2.0)
     side = Transform.from_xyz_ypr(2.5, -2.5, 0.0, yaw=90.0)

@@ -19,6 +19,8 @@ from launch.launch_description_sources import PythonLaunchDescriptionSource  # n
 from skeleton_core.bagio import BagWriter, read_messages  # noqa: E402
 from skeleton_core.cdr import SKELETON_ARRAY, frames_to_cdr  # noqa: E402
 from skeleton_core.conversions import SkeletonFrame  # noqa: E402
+from skeleton_eval.clips import toy_clip  # noqa: E402
+from skeleton_eval.sensor_model import SensorModel  # noqa: E402
 
 pytestmark = [pytest.mark.launch_tooling, pytest.mark.slow]
 
@@ -29,8 +31,6 @@ FRAMES = 90
 
 
 def _write_input(path):
-    from skeleton_eval.evaluation import toy_clip
-    from skeleton_eval.sensor_model import SensorModel
     s = SensorModel(seed=2).corrupt(toy_clip(seconds=FRAMES / 30.0), 'b', seed=2)
     with BagWriter(path) as bag:
         for i in range(FRAMES):

@@ -25,6 +25,8 @@ from skeleton_core import tracker as T  # noqa: E402
 from skeleton_core.bagio import BagWriter, read_messages  # noqa: E402
 from skeleton_core.cdr import SKELETON_ARRAY, frames_from_cdr, frames_to_cdr  # noqa: E402
 from skeleton_core.conversions import SkeletonFrame  # noqa: E402
+from skeleton_eval.clips import toy_clip  # noqa: E402
+from skeleton_eval.sensor_model import SensorModel  # noqa: E402
 
 pytestmark = [pytest.mark.launch_tooling, pytest.mark.slow]
 
@@ -38,8 +40,6 @@ SHIFT = 0.10   # m, forward in the body frame
 
 def _write_inputs():
     from pose_reconstruction import correction as C
-    from skeleton_eval.evaluation import toy_clip
-    from skeleton_eval.sensor_model import SensorModel
     s = SensorModel(seed=2).corrupt(toy_clip(seconds=FRAMES / 30.0), 'a', seed=2)
     with BagWriter(INPUT) as bag:
         t0 = int(s.stamps_ns[0]) + 1_700_000_000_000_000_000

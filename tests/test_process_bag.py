@@ -13,7 +13,7 @@ from skeleton_msgs.msg import SkeletonArray  # noqa: E402
 from skeleton_core.bagio import BagWriter, bag_topics, read_messages  # noqa: E402
 from skeleton_core.cdr import SKELETON_ARRAY, frames_to_cdr  # noqa: E402
 from skeleton_core.conversions import SkeletonFrame, frames_from_array_msg  # noqa: E402
-from skeleton_eval.evaluation import toy_clip  # noqa: E402
+from skeleton_eval.clips import toy_clip  # noqa: E402
 from skeleton_eval.sensor_model import SensorModel  # noqa: E402
 
 from kinect_bringup.process_bag import process  # noqa: E402

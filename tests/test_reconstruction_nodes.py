@@ -182,13 +182,13 @@ def test_state_per_user_dropped_after_timeout(rclpy_context, case):
 
 
 def test_methods_register_with_the_evaluation_harness(case):
-    evaluation = pytest.importorskip('skeleton_eval.evaluation')
+    registry = pytest.importorskip('skeleton_eval.registry')
     import pose_reconstruction.methods as methods
 
     db = case[0]
     assert methods.register()
     for name in ('A', 'B', 'C'):
-        assert name in evaluation.available_methods()
+        assert name in registry.available_methods()
     m = methods.make_method_c(db=db, db_size=300, k=12, steps=5)
     assert m.name == 'C' and m.db.size == 300 and m.core.k == 12 and m.core.steps == 5
     with pytest.raises(ValueError):

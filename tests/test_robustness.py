@@ -275,7 +275,8 @@ def test_a_big_jump_back_in_time_restarts_the_users_not_the_node(running):
     time.sleep(1.0)
     pub.publish(fuzz.valid_array(time.time_ns() - 5_000_000_000, (FUZZ_USER,)))  # a bag loop
     t0 = time.monotonic()
-    assert probe.wait_user(list(SKELETON_TOPICS.values()), t0 + 0.5, user, count=10, timeout=60)
+    assert probe.wait_user(list(SKELETON_TOPICS.values()), t0 + 0.5, user, count=10, timeout=60), \
+        {t: probe.user_seen_since(t, t0 + 0.5, user) for t in SKELETON_TOPICS.values()}
     assert 'time jumped back' in _logs(running['log_dir'], 'reliability')
     assert all(v == 0 for v in probe.nan.values()), probe.nan
     probe.node.destroy_publisher(pub)

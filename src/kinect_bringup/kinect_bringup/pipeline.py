@@ -14,6 +14,8 @@ import threading
 from pathlib import Path
 from typing import Dict, List, Optional
 
+from skeleton_core.tf import DEFAULT_SENSOR_POSE
+
 from .graph import (RECONSTRUCTION, config_dir, graph_nodes, load_params, node_class, params_file,
                     skeleton_subscribers)
 
@@ -56,7 +58,6 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 EXECUTORS = ('single', 'multi', 'events')
-DEFAULT_SENSOR_POSE = '0 0 0.8 0 0 0'   # the sensor model's placement: 0.8 m above the floor
 
 
 def make_executor(kind: str, threads: Optional[int] = None):

@@ -10,12 +10,20 @@ import time
 from pathlib import Path
 from typing import Dict, List, Optional, Sequence
 
-from .graph import NODES, config_dir, graph_nodes, load_params
+from skeleton_core.tf import DEFAULT_SENSOR_POSE, SENSOR_FRAME
+
+from .graph import NODES, NodeInfo, config_dir, graph_nodes, load_params
+
+# nodes that look their input's frame up on TF: a graph with one of them gets the sensor frame
+# on /tf_static, as the launch files' static_tf does
+TF_USERS = {'physics', 'viz', 'control'}
+STATIC_TF = NodeInfo('static_tf', 'kinect_driver', 'static_tf', 'kinect_driver.static_tf_node')
 
 
-def executable(node: str) -> List[str]:
-    """Command that runs one node's console script (installed by colcon), or its module."""
-    info = NODES[node]
+def executable(node) -> List[str]:
+    """Command that runs one node's console script (installed by colcon), or its module
+    (``node``: a name of :data:`NODES` or a :class:`NodeInfo`)."""
+    info = NODES[node] if isinstance(node, str) else node
     prefix = os.environ.get('COLCON_PREFIX_PATH', '').split(os.pathsep)[0] or None
     candidates = []
     if prefix:
@@ -62,7 +70,8 @@ class Graph:
 
     def __init__(self, mode: str = 'pipeline', nodes: Optional[List[str]] = None,
                  overrides: Optional[Dict[str, Dict]] = None, pipeline_args: Optional[List[str]] = None,
-                 log_dir: Optional[Path] = None, env: Optional[Dict[str, str]] = None):
+                 log_dir: Optional[Path] = None, env: Optional[Dict[str, str]] = None,
+                 sensor_pose: str = DEFAULT_SENSOR_POSE):
         self.mode = mode
         self.procs: Dict[str, subprocess.Popen] = {}
         self._logs = []
@@ -73,7 +82,12 @@ class Graph:
             cmd = [sys.executable, '-m', 'kinect_bringup.pipeline'] + list(pipeline_args or [])
             self._start('pipeline', cmd)
         elif mode == 'processes':
-            for name in nodes or graph_nodes():
+            names = list(nodes or graph_nodes())
+            if TF_USERS & set(names):
+                self._start('static_tf', executable(STATIC_TF) + [
+                    '--pose', sensor_pose, '--child', SENSOR_FRAME,
+                    '--ros-args', '-r', '__node:=static_tf'])
+            for name in names:
                 self._start(name, node_command(name, (overrides or {}).get(name)))
         else:
             raise ValueError(f'unknown mode {mode!r} (pipeline | processes)')

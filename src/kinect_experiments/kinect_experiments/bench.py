@@ -207,7 +207,8 @@ def _add_sensors(graph: Graph, users: int, sensors: int) -> None:
             '-r', f'__ns:=/{ns}', '-r', f'/kinect/skeletons:=/{ns}/skeletons',
             '-r', f'/kinect/ground_truth:=/{ns}/ground_truth']))
         tf_cmd += ['--pose', format_pose(poses[k - 1]), '--child', sensor_frame(k, sensors)]
-    graph.add('static_tf', tf_cmd)
+    # (beside the Graph's own static_tf, which publishes the one-sensor frame kinect_link)
+    graph.add('static_tf_sensors', tf_cmd + ['--ros-args', '-r', '__node:=static_tf_sensors'])
 
 
 def run_case(probe: LatencyProbe, mode: str, users: int, seconds: float, warmup: float,

@@ -24,12 +24,21 @@ import os
 import sys
 from pathlib import Path
 
+import numpy as np
+
 from kinect_bringup.graph import preset_path, repo_root
+from skeleton_core.geometry import normalize, retarget
+from skeleton_core.model import standard_body
 from . import fusion_eval, real_loso
 from pose_reconstruction.methods import load_preset
 from skeleton_eval import perturb as P
-from skeleton_eval.evaluation import to_json
 from skeleton_eval import evaluation as E
+from skeleton_eval.clips import load_clips
+from skeleton_eval.figures import FIG8_SWEEPS, _database_postures, fig5, fig8
+from skeleton_eval.registry import available_methods, load_plugins
+from skeleton_eval.report import calibration_text, to_json, to_markdown
+from skeleton_eval.sensor_model import SensorModel
+from skeleton_eval.table3 import table3
 
 
 def _parser():
@@ -201,10 +210,10 @@ def run(argv=None) -> int:
     if args.real:
         return run_real(args)
 
-    plugins = E.load_plugins()
+    plugins = load_plugins()
     for mod, st in plugins.items():
         print(f'[evaluate] plug-in {mod}: {st}', file=sys.stderr)
-    avail = E.available_methods()
+    avail = available_methods()
     methods = [m for m in args.methods.split(',') if m] or avail
     unknown = [m for m in methods if m not in avail]
     if unknown:
@@ -214,7 +223,7 @@ def run(argv=None) -> int:
     scenarios = [s for s in args.scenarios.split(',') if s]
     max_frames = args.max_frames if args.max_frames and args.max_frames > 0 else None
     try:
-        db_clips, dev_clips, source = E.load_clips(args.source, args.seed)
+        db_clips, dev_clips, source = load_clips(args.source, args.seed)
     except (FileNotFoundError, ValueError) as exc:
         print(f'evaluate: {exc}', file=sys.stderr)
         return 1
@@ -245,16 +254,13 @@ def run(argv=None) -> int:
         except ValueError as exc:
             print(f'evaluate: {exc}', file=sys.stderr)
             return 2
-        res = E.table3(methods, dev_clips, seed=args.seed, max_frames=max_frames,
+        res = table3(methods, dev_clips, seed=args.seed, max_frames=max_frames,
                        sensor_params=args.sensor_params, data_source=source, progress=progress,
                        repeats=args.repeats, reference=args.reference,
                        calibration=args.calibration,
                        calibration_seconds=args.calibration_seconds)
-        print(f'[evaluate] table3 {E.calibration_text(res)}', file=sys.stderr)
+        print(f'[evaluate] table3 {calibration_text(res)}', file=sys.stderr)
     elif exp == 'fig5':
-        import numpy as np
-        from skeleton_core.geometry import normalize, retarget
-        from skeleton_core.model import standard_body
         db = None
         try:
             from skeleton_data.database import load_or_build_default
@@ -262,29 +268,29 @@ def run(argv=None) -> int:
         except Exception as exc:  # database module absent or failing: use the clips directly
             print(f'[evaluate] no motion database ({type(exc).__name__}: {exc}); '
                   f'using the database clips', file=sys.stderr)
-        postures = E._database_postures(db, db_clips)
+        postures = _database_postures(db, db_clips)
         streams = E.make_streams(dev_clips, scenarios[:1], args.seed, max_frames,
-                                 E.SensorModel(args.sensor_params, seed=args.seed))
+                                 SensorModel(args.sensor_params, seed=args.seed))
         q = np.concatenate([s.positions for lst in streams.values() for s in lst])
         # queries as the database holds postures: normalised, retargeted to the standard body
-        res = E.fig5(postures, retarget(normalize(q)[0], standard_body()))
-        res['meta'] = E._meta(dev_clips, args.seed, E.SensorModel(args.sensor_params),
+        res = fig5(postures, retarget(normalize(q)[0], standard_body()))
+        res['meta'] = E.run_meta(dev_clips, args.seed, SensorModel(args.sensor_params),
                               max_frames, source, {'query_scenario': scenarios[0]})
     else:  # fig8
-        params = [p for p in args.params.split(',') if p] or list(E.FIG8_SWEEPS)
-        bad = [p for p in params if p not in E.FIG8_SWEEPS]
+        params = [p for p in args.params.split(',') if p] or list(FIG8_SWEEPS)
+        bad = [p for p in params if p not in FIG8_SWEEPS]
         if bad:
-            print(f'evaluate: unknown sweep(s) {bad}; known: {list(E.FIG8_SWEEPS)}', file=sys.stderr)
+            print(f'evaluate: unknown sweep(s) {bad}; known: {list(FIG8_SWEEPS)}', file=sys.stderr)
             return 2
         method = methods[0] if args.methods else ('C' if 'C' in avail else avail[-1])
-        res = E.fig8(method, dev_clips, params, seed=args.seed,
+        res = fig8(method, dev_clips, params, seed=args.seed,
                      max_frames=max_frames or 300, scenario=scenarios[0],
                      sensor_params=args.sensor_params, data_source=source, progress=progress)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    md = E.to_markdown(res)
+    md = to_markdown(res)
     (out / f'{exp}.md').write_text(md)
-    E.to_json(res, out / f'{exp}.json')
+    to_json(res, out / f'{exp}.json')
     print(md)
     print(f'[evaluate] wrote {out / (exp + ".md")} and {out / (exp + ".json")}', file=sys.stderr)
     return 0

@@ -31,12 +31,14 @@ import numpy as np
 from skeleton_data.database import load_or_build_default, uiprmd_vicon_source
 from pose_reconstruction.methods import default_database
 from skeleton_eval import evaluation as E
+from skeleton_eval.clips import load_clips
+from skeleton_eval.registry import load_plugins, make_method
 from skeleton_eval import metrics as M
 from skeleton_eval.paired import load_dataset
 from skeleton_eval.real_eval import make_streams
-from skeleton_eval.sensor_model import load_params
+from skeleton_eval.sensor_params import load_params
 from skeleton_data.database import default_shared_dir
-from skeleton_eval.evaluation import json_safe
+from skeleton_eval.report import json_safe
 
 SUBJECTS = (1, 2, 3, 4, 5)
 VARIANTS = ('raw', 'C (CMU)', 'C (CMU+vicon)')
@@ -84,7 +86,7 @@ class _TrustProbe:
 def evaluate(src, folds: Sequence[int] = SUBJECTS, max_clips: int = 0, progress=None,
              params: Optional[Dict] = None) -> Dict:
     """``params``: overrides of C's parameters, the same for both databases."""
-    E.load_plugins()
+    load_plugins()
     height = float(load_params(None)['placement']['sensor_height_m'])
     db_cmu = default_database()
     parts: Dict[str, Dict[str, list]] = {v: {} for v in VARIANTS}
@@ -100,9 +102,9 @@ def evaluate(src, folds: Sequence[int] = SUBJECTS, max_clips: int = 0, progress=
         rows.pop('m03_s01', None)
         info = {'held_out': s, 'db_cmu': len(db_cmu), 'db_mix': len(db_mix),
                 'db_mix_path': st.get('path'), 'clips': 0, 'frames': 0}
-        methods = {'raw': E.make_method('raw'),
-                   'C (CMU)': _TrustProbe(E.make_method('C', db=db_cmu, **(params or {}))),
-                   'C (CMU+vicon)': _TrustProbe(E.make_method('C', db=db_mix, **(params or {})))}
+        methods = {'raw': make_method('raw'),
+                   'C (CMU)': _TrustProbe(make_method('C', db=db_cmu, **(params or {}))),
+                   'C (CMU+vicon)': _TrustProbe(make_method('C', db=db_mix, **(params or {})))}
         for row in sorted(rows):
             for stream in _pick(rows[row], max_clips):
                 info['clips'] += 1
@@ -134,8 +136,8 @@ def evaluate_synthetic(src, subjects: Sequence[int] = SUBJECTS, max_frames: int 
     """The other side of the trade: C with CMU vs CMU + every listed subject's Vicon postures on
     the sensor-model streams of the CMU dev clips (``evaluate``'s Table IV: scenarios a, b, c).
     {variant: {scenario: Eq. 18 cm}}."""
-    E.load_plugins()
-    _, dev_clips, _ = E.load_clips('auto', 0)
+    load_plugins()
+    _, dev_clips, _ = load_clips('auto', 0)
     mix = load_or_build_default(mapped=[uiprmd_vicon_source(src, subjects=subjects)])
     p = dict(params or {})
     res = E.evaluate([('C', dict(p, db=default_database()), VARIANTS[1]),

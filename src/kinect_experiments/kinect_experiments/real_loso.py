@@ -48,15 +48,17 @@ from pose_reconstruction.profile import measure
 from skeleton_data.uiprmd import TRACKING_FAILURE_CASES
 from .mocap_db_eval import fold_database
 from skeleton_eval import evaluation as E
+from skeleton_eval.registry import load_plugins, make_method
 from skeleton_eval import metrics as M
 from skeleton_eval import no_harm as NH
 from skeleton_eval.registration import apply_transform, kabsch
 from skeleton_eval.real_eval import added_latency_ms, tracked_xcorr
-from skeleton_eval.evaluation import json_safe
-from pose_reconstruction.correction import build_from_clips
-from pose_reconstruction.methods import default_database
+from skeleton_eval.report import json_safe
+from pose_reconstruction.correction import build_from_clips, digest
+from pose_reconstruction.methods import default_database, load_preset
+from kinect_bringup.graph import preset_path
 from skeleton_eval.real_eval import make_streams
-from skeleton_eval.sensor_model import load_params
+from skeleton_eval.sensor_params import load_params
 from skeleton_eval.paired import load_dataset
 from skeleton_eval.real_eval import to_markdown as base
 import argparse
@@ -143,12 +145,12 @@ def _make(variant: str, correction, db, method_params: Optional[Dict] = None):
         return _Corrected(correction)
     base = variant.split('+')[0]
     if base != 'C':
-        return E.make_method(base)
+        return make_method(base)
     kw = {}
     if '+corr' in variant:
         kw.update(correction=correction, input_tracker=TRACKER,
                   correction_stage='reliable' if variant.endswith('@reliable') else 'input')
-    return E.make_method('C', db=db, **kw, **(method_params or {}))
+    return make_method('C', db=db, **kw, **(method_params or {}))
 
 
 def session_registered_mpjpe(outputs: Dict[str, np.ndarray], truths: Dict[str, np.ndarray],
@@ -250,7 +252,7 @@ def evaluate(src, variants: Sequence[str] = DEFAULT_VARIANTS, loso: bool = True,
     plus ``protocol``, ``folds`` and ``correction_ms``. ``method_params``: parameter overrides of
     method C in the ``C...`` variants (e.g. earlier defaults, for a before/after table)."""
     t_start = time.time()
-    E.load_plugins()
+    load_plugins()
     bad = [v for v in variants if v not in VARIANTS]
     if bad:
         raise ValueError(f'unknown variant(s) {bad}; known: {", ".join(VARIANTS)}')
@@ -304,7 +306,6 @@ def evaluate(src, variants: Sequence[str] = DEFAULT_VARIANTS, loso: bool = True,
         folds.append({'held_out': f's{subj:02d}', 'clips': len(fold_streams),
                       'trained_on': None if corr is None else corr.meta.get('subjects'),
                       'ridge_alpha': None if corr is None else corr.meta.get('ridge_alpha')})
-        from pose_reconstruction.correction import digest
         cdig = None if corr is None else digest(corr)
         for v in variants:
             prof = None
@@ -487,8 +488,6 @@ def main(argv=None) -> int:
         if over is not None and not isinstance(over, dict):
             raise ValueError('--method-params: a JSON object of C parameters')
         if args.preset:
-            from pose_reconstruction.methods import load_preset
-            from kinect_bringup.graph import preset_path
             over = {**load_preset(preset_path(args.preset)), **(over or {})}
         prog = None if args.quiet else (lambda v, c: print(f'  {v:15s} {c}', file=sys.stderr))
         res = evaluate(src, variants,

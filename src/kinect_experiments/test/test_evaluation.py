@@ -1,12 +1,21 @@
 """Evaluation harness: registry, baselines on a tiny clip, an oracle scoring 0, reports."""
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
 
-from skeleton_eval import evaluation as E
 from skeleton_core.model import HAND_LEFT, NOT_TRACKED, NUM_JOINTS, TRACKED
+from skeleton_eval import evaluation as E
+from skeleton_eval.baselines import HoltMethod, RawMethod
+from skeleton_eval.clips import toy_clip
+from skeleton_eval.figures import _database_postures, fig5, fig8
+from skeleton_eval.registry import (Method, available_methods, load_plugins, make_method, method_info,
+                                    register_method)
+from skeleton_eval.report import json_safe, to_json, to_markdown
 from skeleton_eval.sensor_model import SensorModel
+from skeleton_eval.table3 import (TABLE3_SUBSETS, calibration_frames, calibration_stream, subset_frames,
+                                  table3)
 
 
 class Oracle:
@@ -30,21 +39,21 @@ class Oracle:
 
 
 def test_registry_has_the_baselines_and_accepts_plugins():
-    assert {'raw', 'holt', 'one_euro'} <= set(E.available_methods())
-    E.register_method('test_raw', E.RawMethod, 'test', {'x': 1})
-    assert 'test_raw' in E.available_methods()
-    assert E.method_info('test_raw')['defaults'] == {'x': 1}
-    assert isinstance(E.make_method('test_raw'), E.Method)
+    assert {'raw', 'holt', 'one_euro'} <= set(available_methods())
+    register_method('test_raw', RawMethod, 'test', {'x': 1})
+    assert 'test_raw' in available_methods()
+    assert method_info('test_raw')['defaults'] == {'x': 1}
+    assert isinstance(make_method('test_raw'), Method)
     with pytest.raises(KeyError):
-        E.make_method('no_such_method')
-    st = E.load_plugins(('no_such_package_xyz.methods',))
+        make_method('no_such_method')
+    st = load_plugins(('no_such_package_xyz.methods',))
     assert st['no_such_package_xyz.methods'].startswith('skipped')
-    holt = E.make_method('holt', smoothing=0.7)
+    holt = make_method('holt', smoothing=0.7)
     assert holt.params['smoothing'] == 0.7 and holt.params['prediction'] == 0.5
 
 
 def test_harness_raw_filters_and_oracle():
-    clip = E.toy_clip(4.0)
+    clip = toy_clip(4.0)
     streams = E.make_streams([clip], ('a', 'c'), seed=0, sensor=SensorModel(seed=0))
     flat = [s for lst in streams.values() for s in lst]
     res = E.evaluate_streams(['raw', 'holt', 'one_euro', lambda: Oracle(flat)], streams)
@@ -61,40 +70,40 @@ def test_harness_raw_filters_and_oracle():
         assert r['one_euro'][sc]['metrics']['jitter_ms2']['overall'] < raw['jitter_ms2']['overall']
         assert r['holt'][sc]['time']['mean_ms'] > 0
     res['experiment'] = 'table4'
-    md = E.to_markdown(res)
+    md = to_markdown(res)
     assert '| raw |' in md and '| oracle |' in md and 'Eq. 18' in md
-    back = json.loads(E.to_json(res))
+    back = json.loads(to_json(res))
     assert back['results']['oracle']['a']['metrics']['eq18_cm']['overall'] == 0.0
 
 
 def test_evaluate_states_data_seed_and_parameters():
-    clip = E.toy_clip(2.0)
+    clip = toy_clip(2.0)
     res = E.evaluate(['raw'], [clip], scenarios=('b',), seed=3, data_source='toy')
     meta = res['meta']
     assert meta['seed'] == 3 and meta['data']['source'] == 'toy'
     assert meta['data']['clips'][0]['name'] == clip.name
     assert meta['sensor_params']['placement']['distance_m'] == 2.5
     assert 'b' in res['sensor_statistics']['scenarios']
-    md = E.to_markdown(res)
+    md = to_markdown(res)
     assert 'seed 3' in md and 'Sensor model noise statistics' in md
 
 
 def test_table3_subsets():
-    clip = E.toy_clip(2.0)
+    clip = toy_clip(2.0)
     s = SensorModel(seed=0).corrupt(clip, 'clean')
-    frames = E.subset_frames(s, E.TABLE3_SUBSETS['b'][1])
+    frames = subset_frames(s, TABLE3_SUBSETS['b'][1])
     f = frames[10]
     assert f.tracking_state[HAND_LEFT] == TRACKED and f.reliability[HAND_LEFT] == 1.0
-    others = [j for j in range(NUM_JOINTS) if j not in E.TABLE3_SUBSETS['b'][1]]
+    others = [j for j in range(NUM_JOINTS) if j not in TABLE3_SUBSETS['b'][1]]
     assert np.all(f.tracking_state[others] == NOT_TRACKED) and np.all(f.reliability[others] == 0)
     assert np.allclose(f.positions[others], s.positions[0][others])
-    res = E.table3(['raw'], [clip], subsets=('b', 'e'))
+    res = table3(['raw'], [clip], subsets=('b', 'e'))
     assert res['results']['raw']['b']['metrics']['eq18_cm']['overall'] > 1.0
     # against the input skeleton (the paper's reference) raw with all parts is exact
     assert res['results']['raw']['e']['metrics']['eq18_cm']['overall'] == pytest.approx(0.0)
-    res_t = E.table3(['raw'], [clip], subsets=('e',), reference='truth')
+    res_t = table3(['raw'], [clip], subsets=('e',), reference='truth')
     assert res_t['results']['raw']['e']['metrics']['eq18_cm']['overall'] > 1.0
-    assert 'Table III' in E.to_markdown(res)
+    assert 'Table III' in to_markdown(res)
 
 
 def test_fig5_pca_matching():
@@ -103,20 +112,20 @@ def test_fig5_pca_matching():
     basis = rng.standard_normal((3, 60))
     db = (rng.standard_normal((300, 3)) @ basis + 0.001 * rng.standard_normal((300, 60)))
     q = db[:50] + 0.001 * rng.standard_normal((50, 60))
-    res = E.fig5(db.reshape(-1, 20, 3), q.reshape(-1, 20, 3), dims=(1, 3, 10, 60), repeats=1)
+    res = fig5(db.reshape(-1, 20, 3), q.reshape(-1, 20, 3), dims=(1, 3, 10, 60), repeats=1)
     pct = {r['dims']: r['error_pct'] for r in res['rows']}
     assert pct[60] == 0.0
     assert pct[1] > pct[3] and abs(pct[3]) < 5.0
-    assert 'Fig. 5' in E.to_markdown(res)
+    assert 'Fig. 5' in to_markdown(res)
 
 
 def test_fig8_sweeps_with_overrides():
-    E.register_method('holt_sweep', lambda k=1, **kw: E.HoltMethod(smoothing=min(0.9, 0.1 * k)))
-    res = E.fig8('holt_sweep', [E.toy_clip(2.0)], params=('k',), sweeps={'k': (1, 5)},
+    register_method('holt_sweep', lambda k=1, **kw: HoltMethod(smoothing=min(0.9, 0.1 * k)))
+    res = fig8('holt_sweep', [toy_clip(2.0)], params=('k',), sweeps={'k': (1, 5)},
                  max_frames=40)
     rows = res['sweeps']['k']
     assert [r['value'] for r in rows] == [1, 5] and all('eq18_cm' in r for r in rows)
-    res = E.fig8('raw', [E.toy_clip(1.0)], params=('k',), sweeps={'k': (3,)}, max_frames=10)
+    res = fig8('raw', [toy_clip(1.0)], params=('k',), sweeps={'k': (3,)}, max_frames=10)
     assert 'skipped' in res['sweeps']['k'][0]  # RawMethod takes no k
 
 
@@ -152,10 +161,10 @@ class Recorder:
 
 def test_calibration_stream_is_the_same_user_in_a_tpose_all_tracked():
     from skeleton_core.model import ELBOW_LEFT, SHOULDER_LEFT, SHOULDER_RIGHT, segment_lengths
-    clip = E.toy_clip(2.0)
+    clip = toy_clip(2.0)
     sensor = SensorModel(seed=0)
     s = sensor.corrupt(clip, 'clean', seed=0)
-    cs = E.calibration_stream(sensor, clip, 'tpose', seed=0, seconds=1.0,
+    cs = calibration_stream(sensor, clip, 'tpose', seed=0, seconds=1.0,
                               start_ns=int(s.stamps_ns[0]))
     assert len(cs) == 30 and cs.scenario == 'clean'
     # stamps: 30 Hz, ending one frame before the subset stream starts
@@ -170,12 +179,12 @@ def test_calibration_stream_is_the_same_user_in_a_tpose_all_tracked():
     # noisy like the stream (cm level), every joint reported
     err = np.linalg.norm(cs.positions - cs.truth, axis=-1)
     assert 0.002 < err.mean() < 0.10
-    frames = E.calibration_frames(cs)
+    frames = calibration_frames(cs)
     assert len(frames) == 30
     for f in frames:
         assert np.all(f.tracking_state == TRACKED) and np.all(f.reliability == 1.0)
     # standing: the same skeleton with the arms hanging down
-    st = E.calibration_stream(sensor, clip, 'standing', seed=0, seconds=0.5)
+    st = calibration_stream(sensor, clip, 'standing', seed=0, seconds=0.5)
     assert len(st) == 15
     assert st.truth[0, HAND_LEFT, 2] < st.truth[0, SHOULDER_LEFT, 2] - 0.4
     assert np.allclose(segment_lengths(st.truth[0]), segment_lengths(s.truth[0]), atol=1e-6)
@@ -184,7 +193,7 @@ def test_calibration_stream_is_the_same_user_in_a_tpose_all_tracked():
 
 
 def test_calibration_is_the_same_session_with_independent_noise():
-    clip = E.toy_clip(2.0)
+    clip = toy_clip(2.0)
     quiet = SensorModel({'jitter': {'depth_coeff_mm': 0.0,
                                     'base_mm': {g: 0.0 for g in ('torso', 'head', 'shoulder',
                                                                  'elbow', 'wrist', 'hand', 'hip',
@@ -193,7 +202,7 @@ def test_calibration_is_the_same_session_with_independent_noise():
                              'torso', 'head', 'shoulder', 'elbow', 'wrist', 'hand', 'hip', 'knee',
                              'ankle', 'foot')}}}, seed=0)
     s = quiet.corrupt(clip, 'clean', seed=4)
-    cs = E.calibration_stream(quiet, clip, 'tpose', seed=4)
+    cs = calibration_stream(quiet, clip, 'tpose', seed=4)
     # only the systematic joint-centre offsets are left: the same per joint (rotated with the
     # body, so compare lengths) as in the clip's stream
     off_s = np.linalg.norm(s.positions - s.truth, axis=-1)
@@ -201,22 +210,22 @@ def test_calibration_is_the_same_session_with_independent_noise():
     assert off_s.mean() > 0.01
     assert np.allclose(off_c, off_s[0][None], atol=1e-9)
     # another seed is another session
-    other = E.calibration_stream(quiet, clip, 'tpose', seed=5)
+    other = calibration_stream(quiet, clip, 'tpose', seed=5)
     assert not np.allclose(np.linalg.norm(other.positions - other.truth, axis=-1), off_c, atol=1e-3)
     # with the default noise, the calibration's random noise is not the stream's first second
     noisy = SensorModel(seed=0)
     s = noisy.corrupt(clip, 'clean', seed=0)
-    cs = E.calibration_stream(noisy, clip, 'tpose', seed=0)
+    cs = calibration_stream(noisy, clip, 'tpose', seed=0)
     de = (cs.positions - cs.truth) - (s.positions[:30] - s.truth[:30])
     assert np.abs(de).max() > 0.005
 
 
 def test_table3_calibration_frames_are_fed_first_and_not_scored():
-    clip = E.toy_clip(2.0)  # 60 frames
+    clip = toy_clip(2.0)  # 60 frames
     runs = {}
     for cal in ('none', 'tpose'):
         Recorder.seen = []
-        res = E.table3([Recorder, 'raw'], [clip], subsets=('c', 'e'), calibration=cal)
+        res = table3([Recorder, 'raw'], [clip], subsets=('c', 'e'), calibration=cal)
         runs[cal] = (list(Recorder.seen), res)
     seen_none, res_none = runs['none']
     seen_cal, res_cal = runs['tpose']
@@ -245,29 +254,29 @@ def test_table3_calibration_frames_are_fed_first_and_not_scored():
     assert res_cal['calibration'] == {**res_cal['calibration'], 'pose': 'tpose', 'frames': 30,
                                       'seconds': 1.0, 'scored': False}
     assert res_cal['meta']['calibration']['pose'] == 'tpose'
-    md_none, md_cal = E.to_markdown(res_none), E.to_markdown(res_cal)
+    md_none, md_cal = to_markdown(res_none), to_markdown(res_cal)
     assert 'calibration: none' in md_none and 'calibration: tpose' in md_none.replace(
         'none', 'tpose') and '| method (calibration: none) |' in md_none
     assert '| method (calibration: tpose) |' in md_cal and '30 frames' in md_cal
-    assert json.loads(E.to_json(res_cal))['calibration']['pose'] == 'tpose'
+    assert json.loads(to_json(res_cal))['calibration']['pose'] == 'tpose'
     with pytest.raises(ValueError):
-        E.table3(['raw'], [clip], subsets=('e',), calibration='sitting')
+        table3(['raw'], [clip], subsets=('e',), calibration='sitting')
 
 
 def test_table3_none_is_the_old_protocol():
     """calibration='none' runs exactly what table3 ran before the option existed."""
-    clip = E.toy_clip(2.0)
-    res = E.table3(['holt'], [clip], subsets=('b',), calibration='none', seed=2)
+    clip = toy_clip(2.0)
+    res = table3(['holt'], [clip], subsets=('b',), calibration='none', seed=2)
     sensor = SensorModel(None, seed=2)
     base = E.make_streams([clip], ('clean',), 2, None, sensor)['clean']
-    base = [E.replace(s, truth=s.positions.copy()) for s in base]
+    base = [replace(s, truth=s.positions.copy()) for s in base]
     old = E.evaluate_streams(['holt'], {'b': base},
-                             frame_transform=lambda s: E.subset_frames(s, E.TABLE3_SUBSETS['b'][1]))
+                             frame_transform=lambda s: subset_frames(s, TABLE3_SUBSETS['b'][1]))
     # bit for bit (NaN -> None: the root has no Eq. 18 term)
-    assert (E.json_safe(res['results']['holt']['b']['metrics']) ==
-            E.json_safe(old['results']['holt']['b']['metrics']))
+    assert (json_safe(res['results']['holt']['b']['metrics']) ==
+            json_safe(old['results']['holt']['b']['metrics']))
     # the calibration changes a stateful method's output (the filter starts from the T-pose)
-    cal = E.table3(['holt'], [clip], subsets=('b',), calibration='tpose', seed=2)
+    cal = table3(['holt'], [clip], subsets=('b',), calibration='tpose', seed=2)
     a = cal['results']['holt']['b']['metrics']['eq18_cm']['overall']
     b = res['results']['holt']['b']['metrics']['eq18_cm']['overall']
     assert a != b and abs(a - b) < 0.5 * b
@@ -276,14 +285,14 @@ def test_table3_none_is_the_old_protocol():
 def test_method_c_takes_its_segment_lengths_from_the_calibration():
     rc = pytest.importorskip('pose_reconstruction.reconstructor')
     from skeleton_core.model import SEGMENT_CHILDREN, MIRROR, segment_lengths
-    clip = E.toy_clip(2.0)
-    db = E._database_postures(clips=[E.toy_clip(4.0, name='db')])
+    clip = toy_clip(2.0)
+    db = _database_postures(clips=[toy_clip(4.0, name='db')])
     sensor = SensorModel(seed=0)
     s = sensor.corrupt(clip, 'clean', seed=0, max_frames=20)
-    cs = E.calibration_stream(sensor, clip, 'tpose', seed=0, start_ns=int(s.stamps_ns[0]))
+    cs = calibration_stream(sensor, clip, 'tpose', seed=0, start_ns=int(s.stamps_ns[0]))
     m = rc.Reconstructor(db, method='C', k=5, steps=2, samples=10)
-    out, _ = E.run_method(m, s, E.subset_frames(s, E.TABLE3_SUBSETS['c'][1]),
-                          warmup=E.calibration_frames(cs))
+    out, _ = E.run_method(m, s, subset_frames(s, TABLE3_SUBSETS['c'][1]),
+                          warmup=calibration_frames(cs))
     # frozen after length_frames (15) calibration frames: their mean, left/right averaged
     cal = segment_lengths(cs.positions[:m.segment_output.length_frames]).mean(axis=0)
     mirror = [SEGMENT_CHILDREN.index(MIRROR[c]) for c in SEGMENT_CHILDREN]
@@ -291,7 +300,7 @@ def test_method_c_takes_its_segment_lengths_from_the_calibration():
     got = segment_lengths(out)
     assert np.allclose(got, want[None], atol=1e-9)
     # without the calibration the hidden segments cannot have these lengths
-    out0, _ = E.run_method(m, s, E.subset_frames(s, E.TABLE3_SUBSETS['c'][1]))
+    out0, _ = E.run_method(m, s, subset_frames(s, TABLE3_SUBSETS['c'][1]))
     assert np.abs(segment_lengths(out0)[-1] - want).max() > 0.005
 
 

@@ -6,7 +6,7 @@ character of ``frame.user_id``; the simulation advances by the stamp difference 
 frame (1/30 s when unknown) and the simulated joint positions/orientations are returned in the
 input's frame, with the input's stamp, user id and frame id.
 
-:func:`register` adds it to ``skeleton_eval.evaluation`` (import guarded: this module works
+:func:`register` adds it to ``skeleton_eval.registry`` (import guarded: this module works
 without the harness). The evaluation harness's
 frames arrive in the sensor frame (sensor 0.8 m above the floor, ``sensor_model.yaml``);
 ``auto_floor`` instead puts the floor under the first frame's lowest foot.
@@ -136,10 +136,10 @@ def make_physics(upstream: Optional[str] = 'C', **params) -> PhysicsMethod:
     cfg = build(SimConfig, {'controller': EVAL_CONTROLLER, **sim_values})
     up = None
     if upstream:
-        from skeleton_eval import evaluation
-        if upstream not in evaluation.available_methods():
-            evaluation.load_plugins(('pose_reconstruction.methods',))
-        up = evaluation.make_method(upstream, **upstream_params)
+        from skeleton_eval.registry import available_methods, load_plugins, make_method
+        if upstream not in available_methods():
+            load_plugins(('pose_reconstruction.methods',))
+        up = make_method(upstream, **upstream_params)
     name = 'physics' if upstream == 'C' else (f'physics_{upstream}' if upstream else 'physics_raw')
     return PhysicsMethod(upstream=up, config=cfg, name=name)
 
@@ -148,7 +148,7 @@ def register() -> bool:
     """Register ``physics`` (method C -> physics), ``physics_A`` (A -> physics) and
     ``physics_raw`` (raw stream -> physics) with the evaluation harness; False without it."""
     try:
-        from skeleton_eval.evaluation import register_method
+        from skeleton_eval.registry import register_method
     except ImportError:
         return False
     register_method('physics', functools.partial(make_physics, 'C'),

@@ -194,10 +194,10 @@ def test_physics_method_processes_frames_and_registers():
     assert np.linalg.norm(out.positions[7] - tpose_sensor()[7]) < 0.1
     m.reset()
     assert not m.sim.characters
-    evaluation = pytest.importorskip('skeleton_eval.evaluation')
+    registry = pytest.importorskip('skeleton_eval.registry')
     assert register()
-    assert {'physics', 'physics_raw'} <= set(evaluation.available_methods())
-    raw = evaluation.make_method('physics_raw')
+    assert {'physics', 'physics_raw'} <= set(registry.available_methods())
+    raw = registry.make_method('physics_raw')
     assert raw.name == 'physics_raw' and raw.process(f) is not None
 
 

@@ -6,7 +6,7 @@ Each factory returns a streaming, one-user :class:`~.reconstructor.Reconstructor
 parameters, ...) and an optional ``db`` (a MotionDatabase or (N, 20, 3) array; default: the built-in
 / CMU database from ``skeleton_data.database.load_or_build_default``).
 
-:func:`register` registers them with ``skeleton_eval.evaluation.register_method`` when that
+:func:`register` registers them with ``skeleton_eval.registry.register_method`` when that
 harness is available (it is called on import, guarded).
 """
 from __future__ import annotations
@@ -114,7 +114,7 @@ FACTORIES: Dict[str, Callable[..., Reconstructor]] = {
 def register() -> bool:
     """Register A, B, C with the evaluation harness; False when the harness is not there."""
     try:
-        from skeleton_eval.evaluation import register_method
+        from skeleton_eval.registry import register_method
     except ImportError:
         return False
     for name, factory in FACTORIES.items():

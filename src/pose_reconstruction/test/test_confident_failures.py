@@ -11,9 +11,10 @@ from skeleton_core.model import (ELBOW_LEFT, FOOT_LEFT, HAND_LEFT, HAND_RIGHT, H
                                  LIMB_JOINTS, MIRROR, NUM_JOINTS, SHOULDER_LEFT, TRACKED,
                                  WRIST_LEFT, standard_body)
 from skeleton_eval import perturb as P
-from skeleton_eval.evaluation import toy_clip
+from skeleton_eval.clips import toy_clip
 from skeleton_eval.metrics import added_latency_ms, latency_curve, signed_latency_from_curves
-from skeleton_eval.sensor_model import CONFIDENT_FAILURES, DEFAULT_PARAMS, SensorModel
+from skeleton_eval.sensor_params import CONFIDENT_FAILURES, DEFAULT_PARAMS
+from skeleton_eval.sensor_model import SensorModel
 
 FPS = 30.0
 ONLY = {'occlusion_per_min': 0.0, 'false_positive_per_min': 0.0, 'turn_per_min': 0.0,

@@ -10,8 +10,9 @@ from pose_reconstruction.synthetic import random_database
 from skeleton_core.conversions import SkeletonFrame
 from skeleton_core.model import (HIP_CENTER, INFERRED, NUM_JOINTS, SPINE, TRACKED,
                                  segment_lengths, standard_body)
-from skeleton_eval.evaluation import toy_clip
-from skeleton_eval.sensor_model import LOOP_BLEND_FRAMES, SensorModel, loop_blend
+from skeleton_eval.clips import toy_clip
+from skeleton_eval.sensor_stream import LOOP_BLEND_FRAMES, loop_blend
+from skeleton_eval.sensor_model import SensorModel
 
 
 def _standing(n=40, seed=0):

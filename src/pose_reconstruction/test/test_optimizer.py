@@ -359,7 +359,7 @@ def test_scale_invariant_knn_matches_brute_force(small_db):
 
 def _ends_only(p, frozen, ends):
     """A frame of a static posture ``p`` where only ``ends`` are tracked (reliability 1, as
-    evaluation.subset_frames); the other joints NOT_TRACKED (0) at the positions of ``frozen``."""
+    table3.subset_frames); the other joints NOT_TRACKED (0) at the positions of ``frozen``."""
     from skeleton_core.model import NOT_TRACKED
     ts = np.full(NUM_JOINTS, NOT_TRACKED, np.uint8)
     ts[list(ends)] = TRACKED
@@ -508,7 +508,7 @@ def test_anchored_filled_segments_keep_the_speed_term():
     # the whole One Euro cutoff made the body trail the tracked hands and feet. With
     # smooth_anchored_speed (default) a segment with a tracked joint below it keeps the speed
     # term: the output follows the unsmoothed reconstruction more closely when the arms move.
-    from skeleton_eval.evaluation import toy_clip
+    from skeleton_eval.clips import toy_clip
     from skeleton_core.geometry import normalize
     from skeleton_core.model import (FOOT_LEFT, FOOT_RIGHT, HAND_RIGHT, NOT_TRACKED,
                                      SEGMENT_CHILDREN, SEGMENT_PARENTS)

@@ -35,6 +35,9 @@ import numpy as np
 from .geometry import quat_conjugate, quat_multiply
 
 WORLD_FRAME = 'world'
+# the one sensor's frame and pose in world when nothing else is given (launch files' sensor_pose)
+SENSOR_FRAME = 'kinect_link'
+DEFAULT_SENSOR_POSE = '0 0 0.8 0 0 0'   # x y z (m) yaw pitch roll (deg): 0.8 m up, level
 
 
 def _quat_normalised(q) -> np.ndarray:

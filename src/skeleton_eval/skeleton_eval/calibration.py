@@ -6,7 +6,7 @@ real Kinect streams:
 * **high-frequency jitter** per joint: RMS (per axis) of the trajectory minus its own
   Savitzky-Golay smoothing (9 frames, order 2, at 30 Hz) — reference-free;
 * **random error** per joint against the marker reference: std of (Kinect - reference) about its
-  per-clip mean, RMS over axes (the definition of ``sensor_model.statistics()['jitter_mm']``; on
+  per-clip mean, RMS over axes (the definition of ``sensor_statistics.statistics()['jitter_mm']``; on
   real data it also holds pose-dependent joint-centre differences, so it is an upper bound);
 * **systematic offset** per joint: RMS over clips of the per-clip mean error, per axis (as
   ``offset_mm``), and the mean offset vector per session in the sensor frame (x towards the
@@ -25,20 +25,22 @@ like. Hands are excluded (not in the recordings).
 """
 from __future__ import annotations
 
+import copy
 import json
 from pathlib import Path
 from types import SimpleNamespace
 from typing import Dict, List, Optional, Sequence
 
 import numpy as np
+from scipy.signal import savgol_filter
 
-from skeleton_core.model import (HAND_LEFT, HAND_RIGHT, JOINT_NAMES, NUM_JOINTS, SEGMENT_CHILDREN,
-                    SEGMENT_NAMES, segment_lengths)
 from skeleton_core.geometry import retarget
-from skeleton_core.model import standard_body
+from skeleton_data.vicon import load_reference, vicon_path_for
+from skeleton_core.model import (HAND_LEFT, HAND_RIGHT, JOINT_NAMES, NUM_JOINTS, SEGMENT_CHILDREN,
+                                 SEGMENT_NAMES, segment_lengths, standard_body)
 from .sensor_model import SensorModel
-import copy
-from .sensor_model import JOINT_GROUP
+from .sensor_params import JOINT_GROUP
+from .sensor_statistics import statistics as model_statistics
 
 SG_WINDOW, SG_ORDER = 9, 2
 FAIL_REL = 0.25
@@ -56,7 +58,6 @@ CORE_SEGMENTS = tuple(k for k, n in enumerate(SEGMENT_NAMES)
 # ------------------------------------------------------------------------------------------
 def hf_residual(positions: np.ndarray) -> np.ndarray:
     """Trajectory minus its Savitzky-Golay smoothing, (T, J, 3); NaN rows when T < window."""
-    from scipy.signal import savgol_filter
     p = np.asarray(positions, dtype=float)
     if len(p) < SG_WINDOW:
         return np.full_like(p, np.nan)
@@ -174,7 +175,6 @@ def _reference_clips(with_ref, src, max_clips):
     for rc in pick:
         r, fps = None, 100.0
         if src is not None:
-            from skeleton_data.vicon import load_reference, vicon_path_for
             try:
                 r = load_reference(vicon_path_for(src, rc.clip.name))
             except Exception:
@@ -273,7 +273,6 @@ def calibrate(clips, registrations=None, src=None, max_model_clips: int = 60,
         ref_clips = _reference_clips(with_ref, src, max_model_clips)
         model_m, truth_m, model, streams = model_measure(ref_clips, params)
         if streams:
-            from .sensor_model import statistics as model_statistics
             result['model'] = {k: v.tolist() for k, v in model_m.items()}
             result['model_truth_hf_jitter_mm'] = truth_m['hf_jitter_mm'].tolist()
             result['model_truth_bone_length_std_mm'] = truth_m['bone_length_std_mm'].tolist()

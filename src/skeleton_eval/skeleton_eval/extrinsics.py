@@ -21,7 +21,7 @@ The transform from the world to B is then ``world->A * T``. ROS-free; the comman
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Dict, Optional, Sequence
 
 import numpy as np
@@ -29,6 +29,9 @@ import numpy as np
 from skeleton_core.geometry import facing_yaw
 from skeleton_core.model import NUM_JOINTS, TRACKED
 from skeleton_core.tf import Transform
+from skeleton_data.motions import builtin_clips
+from .sensor_model import SensorModel
+from .sensor_params import _merge, load_params
 
 MAX_OFFSET_S = 2.0        # the sensors' clocks agree to this much (NTP-synchronised PCs: far less)
 RANSAC_ITERATIONS = 300
@@ -423,7 +426,6 @@ def walk_in_circle(clip, radius: float = CIRCLE_RADIUS_M, wobble: float = CIRCLE
     along the path. The calibration walk: the user faces every way and the joints sweep the
     shared view, which the rotation needs (walking on the spot leaves it weak). The asymmetry
     matters: on a perfect circle a time shift and a rotation about the vertical look alike."""
-    from dataclasses import replace
     p = np.asarray(clip.positions, float)
     root = p[:, 0, :2]
     d = root[-1] - root[0]
@@ -463,13 +465,9 @@ def synthetic_tracks(view: Transform, seed: int = 0, scenario: str = 'a', durati
     ``phase_s`` later in the motion (0 to one period) and stamping with a clock ``clock_offset_s``
     ahead of A's. ``clip``: default the built-in walk of ``seed``, walked round a circle
     (:func:`walk_in_circle`; ``circle=False``: on the spot, facing A). Returns (A, B, truth of A)."""
-    from skeleton_data.motions import builtin_clips
-
-    from .sensor_model import SensorModel
     if clip is None:
         clip = builtin_clips(seed, duration=duration_s + 1.0)[0]
     if circle:
-        from .sensor_model import _merge, load_params
         clip = walk_in_circle(clip)
         sensor_params = _merge(load_params(sensor_params), WALK_PLACEMENT)
     model = SensorModel(sensor_params, seed=seed)

@@ -19,9 +19,12 @@ import numpy as np
 
 from skeleton_core.model import SEGMENT_CHILDREN, SEGMENT_PARENTS
 
-from .sensor_model import CONFIDENT_FAILURES, KinectStream
-from .evaluation import run_method
 from . import evaluation as E
+from .clips import load_clips
+from .evaluation import run_method
+from .registry import load_plugins, make_method
+from .sensor_params import CONFIDENT_FAILURES
+from .sensor_stream import KinectStream
 
 _SC = np.array(SEGMENT_CHILDREN)
 _SP = np.array(SEGMENT_PARENTS)
@@ -75,13 +78,13 @@ def main(argv=None) -> int:
     p.add_argument('--config', action='append', default=[], metavar='LABEL=JSON',
                    help='C parameter overrides under a label (repeatable; default after={})')
     args = p.parse_args(argv)
-    E.load_plugins()
-    _, dev, _ = E.load_clips('auto')
+    load_plugins()
+    _, dev, _ = load_clips('auto')
     configs = [c.split('=', 1) for c in (args.config or ['after={}'])]
-    methods = [('raw', lambda: E.make_method('raw'))]
+    methods = [('raw', lambda: make_method('raw'))]
     for label, text in configs:
         params = json.loads(text)
-        methods.append((label, lambda p=params: E.make_method('C', **p)))
+        methods.append((label, lambda p=params: make_method('C', **p)))
     modes = list(CONFIDENT_FAILURES) + ['all']
     print('| seed | method | ' + ' | '.join(modes) + ' |')
     print('|---|---|' + '---:|' * len(modes))

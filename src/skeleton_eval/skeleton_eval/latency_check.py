@@ -21,6 +21,9 @@ from typing import Dict
 import numpy as np
 
 from . import evaluation as E
+from .clips import load_clips
+from .registry import load_plugins, make_method
+from .report import json_safe
 from . import metrics as M
 from . import perturb as P
 from .sensor_model import SensorModel
@@ -78,7 +81,7 @@ def main(argv=None) -> int:
     p.add_argument('--max-frames', type=int, default=300)
     p.add_argument('--json', default='', help='also write the results here')
     a = p.parse_args(argv)
-    E.load_plugins()
+    load_plugins()
     try:
         variants = []
         for v in a.variants.split(','):
@@ -93,10 +96,10 @@ def main(argv=None) -> int:
     except ValueError as exc:
         print(f'latency_check: {exc}', file=sys.stderr)
         return 2
-    _, dev, _ = E.load_clips('auto', 0)
+    _, dev, _ = load_clips('auto', 0)
     try:
         over = json.loads(a.method_params) if a.method_params else {}
-        method = E.make_method(a.method, **over)
+        method = make_method(a.method, **over)
     except (ValueError, TypeError) as exc:
         print(f'latency_check: --method-params: {exc}', file=sys.stderr)
         return 2
@@ -114,7 +117,7 @@ def main(argv=None) -> int:
                       for sc, v in r.items() if sc != 'all'), flush=True)
     if a.json:
         with open(a.json, 'w') as fh:
-            json.dump(E.json_safe(res), fh, indent=1)
+            json.dump(json_safe(res), fh, indent=1)
     return 0
 
 

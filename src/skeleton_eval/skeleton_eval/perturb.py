@@ -25,8 +25,9 @@ from typing import Callable, Dict, List, Optional, Sequence
 
 import numpy as np
 
+from . import evaluation
 from . import no_harm as NH
-from .sensor_model import CONFIDENT_FAILURES, load_params
+from .sensor_params import CONFIDENT_FAILURES, load_params
 
 GROUPS = ('noise', 'offset', 'occlusion', 'failure', 'tracked')
 OCCLUDED_CLASSES = ('a', 'b', 'c')
@@ -40,7 +41,7 @@ def _scale_table(t: Dict, f: float) -> None:
 
 
 def perturbed_params(group: str, factor: float, base=None) -> Dict:
-    """The sensor model parameters (``base``: as :func:`~.sensor_model.load_params` takes) with
+    """The sensor model parameters (``base``: as :func:`~.sensor_params.load_params` takes) with
     one group scaled by ``factor`` (module docstring)."""
     if group not in GROUPS:
         raise ValueError(f'unknown perturbation group {group!r}; known: {GROUPS}')
@@ -93,7 +94,7 @@ def run(methods, clips, scenarios=('a', 'b', 'c', 'd', 'e'), seeds: Sequence[int
     ``{'rows': [{'variant', 'group', 'factor', 'seed', 'results': {method: {class: {...}}}}]}``
     with, per method and class, Eq. 18, bone-direction error, MPJPE, jitter and added latency."""
     if evaluate is None:
-        from .evaluation import evaluate
+        evaluate = evaluation.evaluate
     rows = []
     for label, group, factor in variants(factors, groups):
         params = (load_params(base_params) if group is None

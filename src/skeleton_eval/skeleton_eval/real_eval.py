@@ -32,14 +32,15 @@ from typing import Dict, Optional, Sequence
 
 import numpy as np
 
-from .evaluation import json_safe
+from .report import json_safe
 from .metrics import MAX_LATENCY_FRAMES, added_latency_ms  # noqa: F401 (public here too)
 from skeleton_core.model import HAND_LEFT, HAND_RIGHT, NUM_JOINTS
 from skeleton_core.model import TRACKED
 from . import metrics as M
-from .sensor_model import KinectStream
+from .sensor_stream import KinectStream
 from . import evaluation as E
-from .sensor_model import load_params
+from .registry import available_methods, load_plugins, make_method
+from .sensor_params import load_params
 from .paired import load_dataset
 
 DEFAULT_METHODS = ('raw', 'holt', 'one_euro', 'A', 'B', 'C')
@@ -92,9 +93,9 @@ def make_streams(clips, fps: float = 30.0) -> Dict[str, list]:
 
 
 def _select_methods(methods):
-    if not methods or any(m not in E.available_methods() for m in methods):
-        E.load_plugins()
-    avail = E.available_methods()
+    if not methods or any(m not in available_methods() for m in methods):
+        load_plugins()
+    avail = available_methods()
     wanted = list(methods) if methods else [m for m in DEFAULT_METHODS if m in avail]
     missing = [m for m in wanted if m not in avail]
     return [m for m in wanted if m in avail], missing
@@ -123,7 +124,7 @@ def evaluate_real(src, methods: Optional[Sequence[str]] = None, subjects=None, m
     names, missing = _select_methods(methods)
     results: Dict[str, Dict] = {}
     for name in names:
-        method = E.make_method(name)
+        method = make_method(name)
         results[name] = {}
         K2 = 2 * M.MAX_LATENCY_FRAMES + 1
         all_parts, all_w, all_lat, all_t = [], [], [np.zeros(K2), np.zeros(K2)], []

@@ -6,8 +6,12 @@ import pytest
 from skeleton_core.model import (ELBOW_LEFT, INFERRED, KNEE_RIGHT, NUM_JOINTS, NUM_SEGMENTS,
                                  SEGMENT_CHILD_INDEX, SEGMENT_CHILDREN, TRACKED, WRIST_LEFT,
                                  standard_body)
+from skeleton_eval import evaluation as E
 from skeleton_eval import metrics as M
 from skeleton_eval import no_harm as NH
+from skeleton_eval.clips import toy_clip
+from skeleton_eval.report import to_markdown
+from skeleton_eval.sensor_model import SensorModel
 
 
 def _seq(T=6):
@@ -102,9 +106,7 @@ def test_compare_flags_a_segment_more_than_half_a_degree_worse():
 def test_evaluate_streams_reports_the_no_harm_sums_per_method():
     """Through the harness: raw on a stream scores its own errors on the masked segments; the
     truth as a method scores zero there, and the report prints the table."""
-    from skeleton_eval import evaluation as E
-    from skeleton_eval.sensor_model import SensorModel
-    clip = E.toy_clip(seconds=3.0)
+    clip = toy_clip(seconds=3.0)
     streams = E.make_streams([clip], ('a',), seed=0, sensor=SensorModel(seed=0))
     s = streams['a'][0]
 
@@ -124,7 +126,7 @@ def test_evaluate_streams_reports_the_no_harm_sums_per_method():
     mask = NH.segment_mask(s.tracking_state, s.clean)
     assert nh_raw['count'] == list(mask.sum(axis=0))
     assert NH.overall(nh_raw) > 1.0 and NH.overall(nh_c) == pytest.approx(0.0, abs=1e-6)
-    md = E.to_markdown({'experiment': 'table4', 'results': res['results']})
+    md = to_markdown({'experiment': 'table4', 'results': res['results']})
     assert 'No harm: C against raw' in md and '0 of 19 segment-class cells' in md
 
 

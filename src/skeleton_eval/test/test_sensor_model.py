@@ -5,12 +5,14 @@ import numpy as np
 import pytest
 import yaml
 
-from skeleton_eval.evaluation import toy_clip
+from skeleton_eval.clips import toy_clip
 from skeleton_core.model import (FOOT_LEFT, FOOT_RIGHT, HAND_LEFT, HAND_RIGHT, HIP_CENTER, INFERRED,
                                  NOT_TRACKED, TRACKED)
 from skeleton_core.model import SEGMENT_NAMES, SEGMENTS
-from skeleton_eval.sensor_model import (DEFAULT_PARAMS, JOINT_GROUP, SCENARIOS, SensorModel,
-                                        load_params, statistics)
+from skeleton_eval.sensor_params import DEFAULT_PARAMS, JOINT_GROUP, SCENARIOS, load_params
+from skeleton_eval.sensor_model import SensorModel
+from skeleton_eval.sensor_statistics import statistics
+from skeleton_eval.sensor_stream import LOOP_BLEND_FRAMES
 
 ROOT = Path(__file__).resolve().parents[3]
 
@@ -154,8 +156,7 @@ def test_live_stream_equals_offline():
         assert np.array_equal(p, s.positions[i]) and np.array_equal(st, s.tracking_state[i])
         assert np.array_equal(tr, s.truth[i])
     # looping: the same until the clip's last LOOP_BLEND_FRAMES, which turn into its first
-    # posture (sensor_model.loop_blend)
-    from skeleton_eval.sensor_model import LOOP_BLEND_FRAMES
+    # posture (sensor_stream.loop_blend)
     gen = m.stream(clip, 'c', loop=True)
     for i in range(len(s)):
         p, st, tr = next(gen)

@@ -7,7 +7,7 @@ plays the same clip, user k starts k/num_users of the way into it.
 
 Each of ``num_users`` (1-6) users gets its own sensor-model stream (``SensorModel.stream``,
 scenario a-e, seed ``seed + user``; a clip's last 0.5 s turn into its first posture, so the loop
-has no teleport: ``sensor_model.loop_blend``), placed side by side ``user_spacing`` metres apart across the
+has no teleport: ``sensor_stream.loop_blend``), placed side by side ``user_spacing`` metres apart across the
 field of view (the model's ``placement.lateral_offset_m``). User ids are 1..num_users.
 
 Several sensors (``driver.launch.py sensors:=N``): one driver per sensor, each with ``view_pose``
@@ -42,7 +42,9 @@ from skeleton_core.tf import parse_pose
 from .base import Source, SourceError, SourceOutput
 from skeleton_data.motions import builtin_clips
 from skeleton_data.mocap import load_cmu_clip
-from skeleton_eval import sensor_model
+from skeleton_eval.sensor_model import SensorModel
+from skeleton_eval.sensor_params import load_params
+from skeleton_eval.sensor_stream import resample
 
 MAX_USERS = 6
 MAX_CATCHUP = 15  # frames (0.5 s at 30 Hz)
@@ -136,7 +138,7 @@ class SyntheticSource(Source):
         if self.sensor_params and not Path(self.sensor_params).is_file():
             raise SourceError(f'sensor model parameter file {self.sensor_params} not found')
         try:
-            base = sensor_model.load_params(self.sensor_params or None)
+            base = load_params(self.sensor_params or None)
         except Exception as e:
             raise SourceError(f'cannot load sensor model parameters '
                               f'{self.sensor_params or "(default)"}: {e}') from None
@@ -157,10 +159,10 @@ class SyntheticSource(Source):
             params['placement']['lateral_offset_m'] = (
                 float(base['placement'].get('lateral_offset_m', 0.0))
                 + (k - (n - 1) / 2.0) * self.user_spacing)
-            model = sensor_model.SensorModel(params=params, seed=self.seed + k)
+            model = SensorModel(params=params, seed=self.seed + k)
             self._streams.append(model.stream(clip, self.scenario, loop=True, view=self.view))
             self.clip_names.append(clip.name)
-            self._lengths.append(len(sensor_model.resample(
+            self._lengths.append(len(resample(
                 np.asarray(clip.positions, float)[:, :1], float(clip.fps), model.fps)))
 
     def poll(self, now_ns: int) -> List[SourceOutput]:
