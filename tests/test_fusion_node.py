@@ -96,10 +96,11 @@ def test_two_sensors_fused_in_world_one_per_capture(rclpy_context, peer):
         ids = {f.user_id for _, _, fs in out for f in fs}
         assert all(len(fs) == 1 for _, _, fs in out) and len(ids) == 1   # one person
         # the side view's hand replaces the front's wrong guess (in every frame the side view
-        # reached in time: a loaded machine may publish a frame without it, counted in forced)
+        # reached in time: the first comes before the side sensor was ever heard, and a loaded
+        # machine may publish a frame without it, counted in forced)
         good = [np.linalg.norm(fs[0].positions - truth, axis=1).max() < 0.02
-                and fs[0].tracking_state[HAND_RIGHT] == TRACKED for _, _, fs in out]
-        assert sum(good) >= n - fusion.clock.forced and sum(good) >= n // 2, good
+                and fs[0].tracking_state[HAND_RIGHT] == TRACKED for _, _, fs in out[1:]]
+        assert sum(good) >= n - 1 - fusion.clock.forced and sum(good) >= n // 2, good
         assert all(np.all(np.isfinite(fs[0].reliability)) for _, _, fs in out)
     finally:
         spinner.stop()
