@@ -7,6 +7,7 @@ the rest of the graph elsewhere).
     ros2 launch kinect_bringup driver.launch.py sensors:=2                          # front + side
     ros2 launch kinect_bringup driver.launch.py sensors:=2 calibrate:=cache/extrinsics.yaml
     ros2 launch kinect_bringup driver.launch.py sensors:=2 extrinsics:=cache/extrinsics.yaml
+    ros2 launch kinect_bringup driver.launch.py sensors:=2 sensor:=2   # only sensor 2 (its PC)
 
 One sensor (``sensors:=1``, the default): node ``/driver`` on ``/kinect/skeletons``, frame
 ``kinect_link``. N sensors: node ``/kinect_k/driver`` on ``/kinect_k/skeletons`` (and
@@ -32,6 +33,8 @@ DRIVER_ARGS = ('source', 'replay_file', 'scenario', 'num_users', 'device_uri', '
 FRAME_ARGS = [
     ('sensors', '1', 'number of sensors (one driver each; 1 keeps /kinect/skeletons and '
      'kinect_link, N puts driver k in namespace /kinect_k with frame kinect_k_link)'),
+    ('sensor', '', 'sensors:=N: run only sensor k of the N (its driver and its frame on TF), e.g. '
+     'one per PC: sensor:=1 on the first sensor PC, sensor:=2 on the second ("" = all N)'),
     ('sensor_pose', '', 'pose of each sensor in world: "x y z yaw pitch roll" (m, deg; positive '
      'pitch = tilted down), ";" between sensors; "" = 0.8 m above the floor at the origin, and '
      'for N sensors the others 90 deg apart around the play space (front + side)'),
@@ -58,6 +61,14 @@ def _sensors(context):
         raise RuntimeError(f"sensors:={arg('sensors')} is not a number") from None
     if not 1 <= n <= 8:
         raise RuntimeError(f'sensors:={n} must be 1 to 8')
+    mine = list(range(1, n + 1))
+    if arg('sensor'):
+        try:
+            mine = [int(arg('sensor'))]
+        except ValueError:
+            raise RuntimeError(f"sensor:={arg('sensor')} is not a number") from None
+        if not 1 <= mine[0] <= n:
+            raise RuntimeError(f'sensor:={mine[0]} must be 1 to sensors:={n}')
     text = arg('sensor_pose').strip()
     if text:
         parts = [p for p in text.split(';') if p.strip()]
@@ -80,7 +91,7 @@ def _sensors(context):
         raise RuntimeError(f'replay_file needs {n} files (";"-separated) for sensors:={n}')
     actions = []
     first_inv = poses[0].inverse()
-    for k in range(1, n + 1):
+    for k in mine:
         frame = sensor_frame(k, n)
         params = dict(over, frame_id=frame,
                       replay_file=replays[k - 1] if len(replays) >= k else replays[0])
@@ -103,11 +114,13 @@ def _sensors(context):
                                        '--out', arg('calibrate')]))
     if arg('static_tf').lower() in ('true', '1', 'yes'):
         tf_args = []
-        for k in range(1, n + 1):
+        for k in mine:
             tf_args += ['--pose', format_pose(poses[k - 1]), '--child', sensor_frame(k, n)]
         if arg('extrinsics'):
             tf_args += ['--file', arg('extrinsics')]
-        actions.append(Node(package='kinect_driver', executable='static_tf', name='static_tf',
+        # (one per PC with sensor:=k: a name of its own)
+        name = f'static_tf_{mine[0]}' if arg('sensor') else 'static_tf'
+        actions.append(Node(package='kinect_driver', executable='static_tf', name=name,
                             output='screen', emulate_tty=True, arguments=tf_args))
     return actions
 

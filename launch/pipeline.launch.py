@@ -4,6 +4,8 @@
     ros2 launch kinect_bringup pipeline.launch.py source:=replay replay_file:=out/demo.mcap
     ros2 launch kinect_bringup pipeline.launch.py source:=live method:=A physics:=false rviz:=true
     ros2 launch kinect_bringup pipeline.launch.py control:=true world:=playground   # Ishigaki 2009
+    ros2 launch kinect_bringup pipeline.launch.py sensors:=2                      # front + side, fused
+    ros2 launch kinect_bringup pipeline.launch.py sensors:=2 drivers:=false       # drivers elsewhere
 
 The reconstruction is one node (`reconstruction`: reliability, completion and optimizer without DDS
 hops between them) or, with reconstruction:=split, the three nodes `reliability`, `completion` and
@@ -11,6 +13,12 @@ hops between them) or, with reconstruction:=split, the three nodes `reliability`
 files (the same files the one-process `pipeline` executable reads); launch arguments override the
 few that users change most. The sensor frame is on TF: ``static_tf`` publishes ``world ->
 kinect_link`` from ``sensor_pose`` or an ``extrinsics`` file; the physics character is in ``world``.
+
+Several sensors (``sensors:=N``): the drivers of ``driver.launch.py sensors:=N`` (``/kinect_k``,
+frames ``kinect_k_link`` on TF) and the ``fusion`` node, which publishes their fused skeletons in
+``world`` on ``/kinect/skeletons`` for the reconstruction. ``drivers:=false`` runs the graph
+without the drivers and their frames: they run on the sensors' PCs (``driver.launch.py
+sensors:=N``, same ROS_DOMAIN_ID), which publish the frames on TF.
 """
 import os
 
@@ -53,12 +61,18 @@ ARGS = [
     ('viz', 'true', 'run the RViz marker node'),
     ('rviz', 'false', 'start RViz with the bundled config'),
     ('record', '', 'record every pipeline topic to this MCAP file ("" = no recording)'),
-    ('sensor_pose', DEFAULT_SENSOR_POSE, 'the sensor\'s pose in world, on TF as world -> kinect_link: '
-     '"x y z yaw pitch roll" (m, deg; positive pitch = tilted down)'),
+    ('sensors', '1', 'number of sensors: N > 1 starts N drivers (driver.launch.py sensors:=N: '
+     '/kinect_k/skeletons, frames kinect_k_link) and the fusion node, which publishes their fused '
+     'skeletons in world on /kinect/skeletons'),
+    ('drivers', 'true', 'run the driver(s) and publish their sensor frames here (false: they run '
+     'on the sensor PCs, e.g. driver.launch.py sensors:=N, same ROS_DOMAIN_ID)'),
+    ('sensor_pose', DEFAULT_SENSOR_POSE, 'the sensor\'s pose in world, on TF as world -> '
+     'kinect_link: "x y z yaw pitch roll" (m, deg; positive pitch = tilted down); sensors:=N: ";" '
+     'between the N poses (default: as driver.launch.py sensors:=N)'),
     ('extrinsics', '', 'sensor-pose YAML (hand-measured or from calibrate_extrinsics); '
      'overrides sensor_pose'),
-    ('static_tf', 'true', 'publish the sensor frame on /tf_static (false: another launch does, '
-     'e.g. driver.launch.py on the sensor PC)'),
+    ('static_tf', 'true', 'publish the sensor frame(s) on /tf_static with the drivers (false: '
+     'another launch does; with drivers:=false the drivers\' launch on the sensor PC does)'),
     ('record_split_size', '', 'record: start a new piece every this many MB (the recording '
      'becomes a folder of complete bags; "" = the recorder.yaml value, 0 = no size limit)'),
     ('record_split_duration', '', 'record: start a new piece every this many seconds ("" = the '
@@ -128,8 +142,25 @@ def _nodes(context):
     if arg('record'):
         readers.append('recorder')
     driver_over['wait_for_subscribers'] = skeleton_subscribers(readers, config_dir)
-    nodes = [managed_node(package='kinect_driver', executable='driver', name='driver',
-                  parameters=params('driver', **driver_over), **common)]
+    try:
+        sensors = int(arg('sensors'))
+    except ValueError:
+        raise RuntimeError(f"sensors:={arg('sensors')} is not a number") from None
+    if not 1 <= sensors <= 8:
+        raise RuntimeError(f'sensors:={sensors} must be 1 to 8')
+    drivers = arg('drivers').lower() in ('true', '1', 'yes')
+    nodes = []
+    if drivers and sensors == 1:
+        nodes.append(managed_node(package='kinect_driver', executable='driver', name='driver',
+                                  parameters=params('driver', **driver_over), **common))
+    elif drivers:
+        nodes.append(_drivers(arg, sensors))
+    if sensors > 1:
+        from skeleton_core.tf import sensor_namespace
+        topics = [f'/{sensor_namespace(k, sensors)}/skeletons' for k in range(1, sensors + 1)]
+        nodes.append(managed_node(package='pose_reconstruction', executable='fusion',
+                                  name='fusion', parameters=params('fusion', input_topics=topics),
+                                  **common))
     mode = arg('reconstruction')
     if mode == 'fused':
         from kinect_bringup.graph import load_params
@@ -177,7 +208,7 @@ def _nodes(context):
         nodes.append(managed_node(package='kinect_bringup', executable='recorder', name='recorder',
                                   parameters=params('recorder', output=arg('record'), **_split()),
                                   **common))
-    if arg('static_tf').lower() in ('true', '1', 'yes'):
+    if drivers and sensors == 1 and arg('static_tf').lower() in ('true', '1', 'yes'):
         # the sensor frame on TF (/tf_static is absolute: the namespace does not move it)
         from skeleton_core.tf import parse_pose
         try:
@@ -191,6 +222,21 @@ def _nodes(context):
                           arguments=tf_args, output='screen', emulate_tty=True))
     ns = arg('namespace')
     return [GroupAction(([PushRosNamespace(ns)] if ns else []) + nodes)]
+
+
+def _drivers(arg, sensors: int):
+    """driver.launch.py sensors:=N: the N drivers and their frames on TF."""
+    from launch.actions import IncludeLaunchDescription
+    from launch.launch_description_sources import PythonLaunchDescriptionSource
+    over = {'sensors': str(sensors), 'static_tf': arg('static_tf'), 'extrinsics': arg('extrinsics')}
+    if arg('sensor_pose') != DEFAULT_SENSOR_POSE:   # else driver.launch.py's N default poses
+        over['sensor_pose'] = arg('sensor_pose')
+    for name in ('source', 'replay_file', 'scenario', 'num_users', 'device_uri', 'nite2_path'):
+        if arg(name):   # '' = driver.yaml's value
+            over[name] = arg(name)
+    path = os.path.join(get_package_share_directory('kinect_bringup'), 'launch', 'driver.launch.py')
+    return IncludeLaunchDescription(PythonLaunchDescriptionSource(path),
+                                    launch_arguments=over.items())
 
 
 def generate_launch_description():

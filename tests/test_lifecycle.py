@@ -35,6 +35,7 @@ FILE_PARAMS = {
     'control': {'world': f'{MISSING}/world.yaml'},
     'physics': {},
     'viz': {},
+    'fusion': {},
     'reliability': {},
     'recorder': {},   # its output, in a temporary folder: made on configure, not before
 }

@@ -24,6 +24,7 @@ setup(
             'completion = pose_reconstruction.completion_node:main',
             'optimizer = pose_reconstruction.optimizer_node:main',
             'reconstruction = pose_reconstruction.reconstruction_node:main',
+            'fusion = pose_reconstruction.fusion_node:main',
             'bench_reconstruction = pose_reconstruction.bench:main',
             'build_correction = pose_reconstruction.correction_build:main',
             'build_profile = pose_reconstruction.profile:main',

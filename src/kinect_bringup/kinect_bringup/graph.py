@@ -27,6 +27,7 @@ class NodeInfo:
 
 NODES: Dict[str, NodeInfo] = {n.name: n for n in (
     NodeInfo('driver', 'kinect_driver', 'driver', 'kinect_driver.driver_node'),
+    NodeInfo('fusion', 'pose_reconstruction', 'fusion', 'pose_reconstruction.fusion_node'),
     NodeInfo('reliability', 'pose_reconstruction', 'reliability', 'pose_reconstruction.reliability_node'),
     NodeInfo('completion', 'pose_reconstruction', 'completion', 'pose_reconstruction.completion_node'),
     NodeInfo('optimizer', 'pose_reconstruction', 'optimizer', 'pose_reconstruction.optimizer_node'),

@@ -8,7 +8,7 @@ import subprocess
 import sys
 import time
 from pathlib import Path
-from typing import Dict, List, Optional
+from typing import Dict, List, Optional, Sequence
 
 from skeleton_core.tf import DEFAULT_SENSOR_POSE, SENSOR_FRAME
 
@@ -47,6 +47,24 @@ def _ros_value(v) -> str:
     return str(v)
 
 
+def node_command(node: str, values: Optional[Dict] = None, name: Optional[str] = None,
+                 ros_args: Sequence[str] = ()) -> List[str]:
+    """The command that runs graph node ``node`` as its own process, with its YAML file (or, for a
+    node without one, the values ``load_params`` maps onto it), ``values`` on top, node name
+    ``name`` (default: ``node``) and further ``--ros-args`` (``-r __ns:=/kinect_1``, remaps)."""
+    cdir = config_dir()
+    cmd = executable(node) + ['--ros-args', '-r', f'__node:={name or node}'] + list(ros_args)
+    pf = cdir / f'{node}.yaml'
+    values = dict(values or {})
+    if pf.is_file():
+        cmd += ['--params-file', str(pf)]
+    else:  # a node without a file of its own (the fused reconstruction)
+        values = {**load_params(node, cdir), **values}
+    for k, v in values.items():
+        cmd += ['-p', f'{k}:={_ros_value(v)}']
+    return cmd
+
+
 class Graph:
     """The node graph as running processes; ``stop()`` sends SIGINT like Ctrl-C."""
 
@@ -64,23 +82,13 @@ class Graph:
             cmd = [sys.executable, '-m', 'kinect_bringup.pipeline'] + list(pipeline_args or [])
             self._start('pipeline', cmd)
         elif mode == 'processes':
-            cdir = config_dir()
             names = list(nodes or graph_nodes())
             if TF_USERS & set(names):
                 self._start('static_tf', executable(STATIC_TF) + [
                     '--pose', sensor_pose, '--child', SENSOR_FRAME,
                     '--ros-args', '-r', '__node:=static_tf'])
             for name in names:
-                cmd = executable(name) + ['--ros-args', '-r', f'__node:={name}']
-                pf = cdir / f'{name}.yaml'
-                values = dict((overrides or {}).get(name, {}))
-                if pf.is_file():
-                    cmd += ['--params-file', str(pf)]
-                else:  # a node without a file of its own (the fused reconstruction)
-                    values = {**load_params(name, cdir), **values}
-                for k, v in values.items():
-                    cmd += ['-p', f'{k}:={_ros_value(v)}']
-                self._start(name, cmd)
+                self._start(name, node_command(name, (overrides or {}).get(name)))
         else:
             raise ValueError(f'unknown mode {mode!r} (pipeline | processes)')
 
@@ -98,6 +106,12 @@ class Graph:
             out = subprocess.DEVNULL
         self.procs[name] = subprocess.Popen(cmd, stdout=out, stderr=subprocess.STDOUT, env=self.env,
                                             start_new_session=True)
+
+    def add(self, name: str, cmd: List[str]):
+        """Start one more process (e.g. a second driver, a static_tf) as part of the graph."""
+        if name in self.procs:
+            raise ValueError(f'{name} is already part of the graph')
+        self._start(name, cmd)
 
     def restart(self, name: str):
         """Kill one process and start it again with the same command (robustness tests)."""

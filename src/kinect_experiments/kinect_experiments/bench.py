@@ -4,6 +4,15 @@ separate processes — plus the offline ``process_bag`` speed. Writes Markdown +
 
     ros2 run kinect_experiments bench                       # full table (~3 min)
     ros2 run kinect_experiments bench --users 1,2 --modes pipeline --seconds 8
+    ros2 run kinect_experiments bench --users 6 --modes processes --sensors 1,2   # fusion beside
+
+With ``--sensors 2`` (in the default list) every user count also runs with two sensors (issue
+31): two synthetic drivers in /kinect_1 and /kinect_2 (front + side, the same people seen from
+``driver.launch.py sensors:=2``'s default poses), their frames on TF, the ``fusion`` node, then
+the graph unchanged, as separate processes (``ros2 launch pipeline.launch.py sensors:=2``). The
+latency is then from sensor 1's capture (the fused frames carry its stamps); ``fused`` is the
+fusion's output on /kinect/skeletons, and a frame is dropped when a sensor-1 capture (counted per
+user: the fusion gives the people ids of its own) never comes out.
 
 Latency = probe receive time - the skeleton's capture stamp (the driver stamps each frame when it
 is captured; every node preserves the stamp), at its first arrival on the topic (the physics node's
@@ -41,8 +50,9 @@ PROCESS_BAG_MODULE = 'kinect_bringup.process_bag'
 
 BUDGET_MS = 1000.0 / 30.0
 FLOOR_TOPIC = '/bench/passthrough'
+SENSOR1_TOPIC = '/kinect_1/skeletons'
 TOPICS = {'/kinect/skeletons': 'input', '/posture/reconstructed': 'reconstructed',
-          '/character/skeletons': 'character', FLOOR_TOPIC: 'floor'}
+          '/character/skeletons': 'character', FLOOR_TOPIC: 'floor', SENSOR1_TOPIC: 'sensor1'}
 # issue 23's targets: (users, output) -> ms over the floor's p95; 6 users: absolute
 OVER_FLOOR_MS = {(2, 'reconstructed'): 5.0, (2, 'character'): 12.0}
 SIX_USERS_P95_MS, SIX_USERS_CPU_PCT = 33.0, 150.0
@@ -99,7 +109,7 @@ class LatencyProbe:
                     continue
                 self.stamps[topic].add(key)
                 self.lat[topic].append((now - f.stamp_ns) / 1e6)
-            if topic not in ('/kinect/skeletons', FLOOR_TOPIC):
+            if topic not in ('/kinect/skeletons', FLOOR_TOPIC, SENSOR1_TOPIC):
                 self.nan += sum(e.cause.startswith('non-finite') for e in errors)
 
     def _on_diag(self, msg):
@@ -182,18 +192,43 @@ def _physics_figures(diagnostics: Dict[str, Dict[str, str]]) -> Dict[str, float]
     return out
 
 
+def _add_sensors(graph: Graph, users: int, sensors: int) -> None:
+    """``driver.launch.py sensors:=N`` as processes: N synthetic drivers in /kinect_k (frames
+    kinect_k_link, the same people seen from the default poses) and one static_tf."""
+    from kinect_bringup.processes import node_command
+    from skeleton_core.tf import default_sensor_poses, format_pose, sensor_frame, sensor_namespace
+    poses = default_sensor_poses(sensors)
+    tf_cmd = [sys.executable, '-m', 'kinect_driver.static_tf_node']
+    for k in range(1, sensors + 1):
+        ns = sensor_namespace(k, sensors)
+        graph.add(f'driver_{k}', node_command('driver', {
+            'num_users': users, 'scenario': 'b', 'frame_id': sensor_frame(k, sensors),
+            'view_pose': format_pose(poses[0].inverse() * poses[k - 1])}, ros_args=[
+            '-r', f'__ns:=/{ns}', '-r', f'/kinect/skeletons:=/{ns}/skeletons',
+            '-r', f'/kinect/ground_truth:=/{ns}/ground_truth']))
+        tf_cmd += ['--pose', format_pose(poses[k - 1]), '--child', sensor_frame(k, sensors)]
+    # (beside the Graph's own static_tf, which publishes the one-sensor frame kinect_link)
+    graph.add('static_tf_sensors', tf_cmd + ['--ros-args', '-r', '__node:=static_tf_sensors'])
+
+
 def run_case(probe: LatencyProbe, mode: str, users: int, seconds: float, warmup: float,
-             physics: bool, log_dir: Path, reconstruction: str = 'fused') -> Dict:
+             physics: bool, log_dir: Path, reconstruction: str = 'fused', sensors: int = 1) -> Dict:
     overrides = {'driver': {'num_users': users, 'scenario': 'b'}}
     pipeline_args = ['--num-users', str(users), '--scenario', 'b', '--no-viz',
                      '--reconstruction', reconstruction]
     nodes = graph_nodes(physics=physics, viz=False, reconstruction=reconstruction)
     if not physics:
         pipeline_args.append('--no-physics')
-    case_dir = log_dir / f'{mode}_{reconstruction}_{users}'
+    case_dir = log_dir / (f'{mode}_{reconstruction}_{users}' + (f'_{sensors}s' if sensors > 1 else ''))
+    if sensors > 1:
+        if mode != 'processes':
+            raise ValueError('several sensors run as processes only (as ros2 launch runs them)')
+        nodes = ['fusion'] + [n for n in nodes if n != 'driver']
     floor = _start_passthrough(case_dir)
     graph = Graph(mode, nodes=nodes, overrides=overrides, pipeline_args=pipeline_args,
                   log_dir=case_dir)
+    if sensors > 1:
+        _add_sensors(graph, users, sensors)
     try:
         deadline = time.monotonic() + 90
         while probe.count['/kinect/skeletons'] == 0 and time.monotonic() < deadline:
@@ -211,25 +246,37 @@ def run_case(probe: LatencyProbe, mode: str, users: int, seconds: float, warmup:
         except subprocess.TimeoutExpired:
             floor.kill()
     with probe.lock:
-        res = {'mode': mode, 'reconstruction': reconstruction, 'users': users,
+        res = {'mode': mode, 'reconstruction': reconstruction, 'users': users, 'sensors': sensors,
                'seconds': seconds, 'processes': stats,
                'nan_outputs': probe.nan, 'nodes': _node_latencies(probe.diagnostics),
                'physics': _physics_figures(probe.diagnostics)}
-        src = probe.stamps['/kinect/skeletons']
+        # the captures: sensor 1's with several sensors (the fused frames carry its stamps)
+        src_topic = SENSOR1_TOPIC if sensors > 1 else '/kinect/skeletons'
+        src = _per_stamp(probe.stamps[src_topic])
         for topic, key in TOPICS.items():
             lat = np.array(probe.lat[topic])
             r = {'rate_hz': probe.count[topic] / seconds, 'skeletons': int(lat.size),
                  'repeated': probe.repeats[topic]}
             if lat.size:
                 r.update({f'p{q}_ms': float(np.percentile(lat, q)) for q in (50, 95, 99)})
-            if topic not in ('/kinect/skeletons', FLOOR_TOPIC) and src:
-                # frames captured in the window that never came out (allow the last 0.2 s in flight)
-                last = max(s for _, s in src) - 200_000_000
-                considered = {s for s in src if s[1] < last}
-                r['dropped'] = len(considered - probe.stamps[topic])
-                r['dropped_fraction'] = r['dropped'] / max(1, len(considered))
+            if topic not in (src_topic, FLOOR_TOPIC, SENSOR1_TOPIC) and src:
+                # user-frames captured in the window that never came out (allow the last 0.2 s
+                # in flight), counted per stamp: the fusion gives the people ids of its own
+                last = max(src) - 200_000_000
+                out = _per_stamp(probe.stamps[topic])
+                considered = {s: n for s, n in src.items() if s < last}
+                r['dropped'] = sum(max(0, n - out.get(s, 0)) for s, n in considered.items())
+                r['dropped_fraction'] = r['dropped'] / max(1, sum(considered.values()))
             res[key] = r
     return res
+
+
+def _per_stamp(keys) -> Dict[int, int]:
+    """(user id, stamp) keys -> users per stamp."""
+    out: Dict[int, int] = {}
+    for _, st in keys:
+        out[st] = out.get(st, 0) + 1
+    return out
 
 
 def _start_passthrough(log_dir: Path) -> subprocess.Popen:
@@ -288,7 +335,17 @@ def _time_process_bag(bag: Path, log_dir: Path, physics: bool) -> Dict:
 
 
 def _label(r: Dict) -> str:
-    return f"{r['mode']} ({r.get('reconstruction', 'split')})"
+    n = r.get('sensors', 1)
+    return f"{r['mode']} ({r.get('reconstruction', 'split')})" + (f', {n} sensors' if n > 1 else '')
+
+
+def _outputs(r: Dict) -> List[str]:
+    """The outputs judged: the fused skeletons too when there are several sensors."""
+    return (['input'] if r.get('sensors', 1) > 1 else []) + ['reconstructed', 'character']
+
+
+def _output_name(key: str) -> str:
+    return 'fused' if key == 'input' else key
 
 
 def graph_cpu(r: Dict) -> float:
@@ -309,13 +366,14 @@ def targets(results: List[Dict], bag_speed: Dict) -> List[Dict]:
                             f'{over:g} ms', 'figure': o['p95_ms'], 'limit': limit,
                             'met': o['p95_ms'] <= limit})
         if r['users'] == 6:
-            for key in ('reconstructed', 'character'):
+            for key in _outputs(r):
                 o = r.get(key, {})
+                name = _output_name(key)
                 if o.get('skeletons'):
-                    out.append({'case': _label(r), 'what': f'6 users {key} p95 <= '
+                    out.append({'case': _label(r), 'what': f'6 users {name} p95 <= '
                                 f'{SIX_USERS_P95_MS:g} ms', 'figure': o['p95_ms'],
                                 'limit': SIX_USERS_P95_MS, 'met': o['p95_ms'] <= SIX_USERS_P95_MS})
-                    out.append({'case': _label(r), 'what': f'6 users {key} dropped = 0',
+                    out.append({'case': _label(r), 'what': f'6 users {name} dropped = 0',
                                 'figure': o.get('dropped', 0), 'limit': 0,
                                 'met': o.get('dropped', 0) == 0})
             if r.get('reconstructed', {}).get('skeletons'):   # a graph that ran at all
@@ -343,18 +401,21 @@ def to_markdown(results: List[Dict], bag_speed: Dict, commit: str) -> str:
              'No viz node: nothing consumes /posture/completed, which the fused node then skips. '
              'Floor = a pass-through node beside the graph (/kinect/skeletons republished as is), '
              'measured in the same seconds: one DDS hop and one Python callback now; '
-             '"over floor" = p95 - floor p95.',
+             '"over floor" = p95 - floor p95. With 2 sensors: two drivers, their frames on TF and '
+             'the fusion node before the same graph; latency from sensor 1\'s capture, `fused` = '
+             'the fusion\'s output (/kinect/skeletons, which the floor then republishes: its '
+             'figure includes the fusion), dropped = sensor-1 user-frames that never came out.',
              '', '| mode | users | output | rate Hz | p50 ms | p95 ms | p99 ms | floor p50 / p95 ms '
              '| over floor ms | p95/budget | dropped |',
              '|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|']
     for r in results:
         fl = r.get('floor', {})
-        for key in ('reconstructed', 'character'):
+        for key in _outputs(r):
             o = r.get(key, {})
             if not o.get('skeletons'):
                 continue
             over = f"{o['p95_ms'] - fl['p95_ms']:+.1f}" if 'p95_ms' in fl else '-'
-            lines.append(f"| {_label(r)} | {r['users']} | {key} | {o['rate_hz']:.1f} | "
+            lines.append(f"| {_label(r)} | {r['users']} | {_output_name(key)} | {o['rate_hz']:.1f} | "
                          f"{o['p50_ms']:.1f} | {o['p95_ms']:.1f} | {o['p99_ms']:.1f} | "
                          f"{ms(fl, 'p50_ms')} / {ms(fl, 'p95_ms')} | {over} | "
                          f"{o['p95_ms'] / BUDGET_MS:.2f} | {o.get('dropped', 0)} "
@@ -422,6 +483,9 @@ def main(argv=None) -> int:
     p.add_argument('--reconstruction', default='fused',
                    help=f'comma list of {"/".join(RECONSTRUCTION)}: the reconstruction as one node '
                         'or as three')
+    p.add_argument('--sensors', default='1,2',
+                   help='comma list of sensor counts: 2 adds, per user count, the graph with two '
+                        'sensors and the fusion (as processes only)')
     p.add_argument('--seconds', type=float, default=10.0)
     p.add_argument('--warmup', type=float, default=4.0)
     p.add_argument('--no-physics', action='store_true')
@@ -444,9 +508,13 @@ def main(argv=None) -> int:
                 if rec not in RECONSTRUCTION:
                     p.error(f'--reconstruction {rec!r} is not one of {list(RECONSTRUCTION)}')
                 for users in [int(u) for u in args.users.split(',')]:
-                    print(f'[bench] {mode} ({rec}), {users} user(s) ...', flush=True)
-                    results.append(run_case(probe, mode, users, args.seconds, args.warmup,
-                                            not args.no_physics, out / 'logs', rec))
+                    for n in [int(k) for k in args.sensors.split(',')]:
+                        if n > 1 and mode != 'processes':
+                            continue   # several sensors: as processes (ros2 launch) only
+                        print(f'[bench] {mode} ({rec}), {users} user(s), {n} sensor(s) ...',
+                              flush=True)
+                        results.append(run_case(probe, mode, users, args.seconds, args.warmup,
+                                                not args.no_physics, out / 'logs', rec, n))
     finally:
         probe.close()
     bag_speed = {} if args.skip_bag else process_bag_speed(out / 'logs')
