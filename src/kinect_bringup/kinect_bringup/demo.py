@@ -16,6 +16,8 @@ import sys
 import time
 from pathlib import Path
 
+from skeleton_core.bagio import recover, truncation
+
 from .graph import repo_root
 from skeleton_data.database import build_default
 from viz.report import main as report_main
@@ -135,6 +137,14 @@ def main(argv=None) -> int:
     if not bag.exists():
         print(f'[demo] no bag was written at {bag}', file=sys.stderr)
         return 1
+    if truncation(bag) is not None:
+        # the recorder was stopped before it finished the file (launch escalates to SIGTERM and
+        # SIGKILL when a node takes longer than a few seconds to stop, e.g. on a loaded machine):
+        # every complete message is kept, as recover_bag does
+        fixed = bag.with_name('demo.recovered.mcap')
+        n, cut = recover(bag, fixed)
+        fixed.replace(bag)
+        print(f'[demo] the recording was not finished ({cut}); recovered {n} messages', flush=True)
 
     rc = report_main(['--bag', str(bag), '--out', str(out)])
     print(f'[demo] done. Outputs in {out}:')
