@@ -459,6 +459,21 @@ def run_node(node_factory: Callable[..., Node], args=None, executor=None) -> int
         print(node_help(node_factory, prog=argv[0].rsplit('/', 1)[-1] if argv else 'node'))
         return 0
     managed = MANAGED_FLAG in remove_ros_args(argv)
+    spinning = []
+
+    def _on_sigint(signum, frame):
+        # Starting up: Ctrl-C stops the start (KeyboardInterrupt, handled below). Spinning: rclpy's
+        # own handler (installed over this one, which it then calls) has already shut the context
+        # down and the executor returns; a KeyboardInterrupt raised at an arbitrary bytecode in
+        # the executor (e.g. half-way through constructing a Task) would only leave rclpy objects
+        # half-built, whose finalizers then print tracebacks at exit.
+        if not spinning:
+            raise KeyboardInterrupt
+
+    try:
+        signal.signal(signal.SIGINT, _on_sigint)
+    except ValueError:  # not the main thread (a test calling run_node): signals are not ours
+        pass
     rclpy.init(args=args)
     node = None
     try:
@@ -485,6 +500,7 @@ def run_node(node_factory: Callable[..., Node], args=None, executor=None) -> int
             node.destroy_node()
         rclpy.try_shutdown()
         return 0 if stopped else 1
+    spinning.append(True)
     try:
         if executor is None:
             rclpy.spin(node)
