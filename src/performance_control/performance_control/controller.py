@@ -302,6 +302,14 @@ class PerformanceController:
         b = self.dp.rope_arc(HANDS[1 - HANDS.index(e)])
         return a is not None and b is not None and a < b
 
+    def _climbing_rope(self) -> bool:
+        """A hand holds the rope: the character hangs from it, its feet off the ground (the
+        user imitates the climb standing: their feet on their floor do not stand the character
+        on it; with both hands needed, each regrab -- one hand free -- put the feet back on the
+        floor and the character never rose more than 0.3 m)."""
+        return any(c is not None and self.world.features[c.feature].kind == 'rope'
+                   for c in (self.dp.contacts.get(h) for h in HANDS))
+
     def _jump_catch(self, e: str, f: Feature, pt) -> bool:
         """Reach/jump to engage (issue 30): under the bars, the user's feet leave their floor
         with both hands above the bars' engage joint (a jump, or a real hang: :mod:`.support`);
@@ -339,9 +347,11 @@ class PerformanceController:
                     # a foot on a rock (Sec. 8.4) lets go when the user lifts it to step higher
                     if self._hand_vz[e] > prm.regrab_speed:
                         dp.release(e)
-                elif not self._user_foot_down(p, e) or (f.kind == 'floor' and dp.in_water):
+                elif (not self._user_foot_down(p, e) or (f.kind == 'floor' and dp.in_water)
+                      or (f.kind == 'floor' and self._climbing_rope())):
                     dp.release(e)     # in the water the floor is the pool's bottom: a foot
-                    # that stood on it as the character walked in lets go (it swims)
+                    # that stood on it as the character walked in lets go (it swims); on the
+                    # rope the character hangs from its hands (it climbs from the floor)
                 continue
             for f in self.world.features.values():
                 if e not in f.engage.effectors:
@@ -352,9 +362,10 @@ class PerformanceController:
                     continue      # climbing: grab at the top of the reach, not on the way up
                 if e in FEET and f.kind != 'rocks' and not self._user_foot_down(p, e):
                     continue      # on a rock the foot is held above its face, not on the floor
-                if e in FEET and f.kind == 'floor' and dp.in_water:
+                if e in FEET and f.kind == 'floor' and (dp.in_water or self._climbing_rope()):
                     continue      # swimming: the user's feet on their floor do not stand the
-                    # character on the pool's bottom (walked in, it would stay there)
+                    # character on the pool's bottom (walked in, it would stay there); climbing
+                    # the rope, not on the ground (the user imitates standing)
                 # hand over hand: the other hand holds the rope, this one is at the top of its
                 # reach -- it reaches for the rope where it is now (an arm's length), whatever
                 # its speed (the rope and the body swing)
