@@ -22,6 +22,11 @@ seeds stay disjoint (dev 0..., test 1000...).
    after the user stops and the COM dropped), jumping on the trampoline (peak COM rise), swimming
    (speed); the deepest penetration of the character's capsules into any feature (target <= 2 cm)
    and the control step time per user and frame (median, target <= 5 ms).
+3. ``--real`` / ``--real-only`` (needs ../shared): frames "imitating" on real movements that
+   imitate nothing -- UI-PRMD Kinect v2 leave-one-subject-out over s01-s05 (per fold the
+   bent-legs veto's constants picked on the other four, :func:`loso`; per fold, pooled per
+   exercise), CMU clips of every class through the sensor model (per class) -- and CMU subject
+   01's real hanging recognised as the monkey bars. Targets <= 2 % overall, <= 5 % each, >= 80 %.
 """
 from __future__ import annotations
 
