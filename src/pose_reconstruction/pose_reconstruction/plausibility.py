@@ -42,6 +42,7 @@ Terms (each 1 = plausible):
 """
 from __future__ import annotations
 
+import bisect
 import collections
 import dataclasses
 from dataclasses import dataclass
@@ -209,6 +210,8 @@ class PlausibilityCheck:
     def reset(self) -> None:
         self.heading: Optional[float] = None
         self._floor_z: collections.deque = collections.deque(maxlen=self.floor_window)
+        self._floor_sorted: list = []     # the window's finite values, sorted (running median)
+        self._floor_nan = 0               # NaNs in the window (np.median: NaN)
         self.floor: Optional[float] = None
         self._last_rel: Optional[np.ndarray] = None
         self._latch = np.zeros(NUM_SEGMENTS, int)
@@ -241,8 +244,13 @@ class PlausibilityCheck:
             self._anchor_ok = tracked.copy()
             return False
         both = tracked & self._anchor_ok
-        if both.sum() >= 3:
-            d = float(np.median(np.linalg.norm(p[both] - self._anchor[both], axis=1)))
+        if np.count_nonzero(both) >= 3:
+            diff = p[both] - self._anchor[both]
+            dist = np.sqrt((diff * diff).sum(axis=1))      # np.linalg.norm's arithmetic
+            dist.sort()
+            n = len(dist)
+            # np.median's value (the middle one, or the mean of the two), without its overhead
+            d = float(dist[n // 2]) if n % 2 else float((dist[n // 2 - 1] + dist[n // 2]) / 2.0)
             if d > self.jump_m and self._jumped < self.jump_frames:
                 self._jumped += 1
                 return True
@@ -256,14 +264,15 @@ class PlausibilityCheck:
             excess = np.abs(seg_len - ref) - (self.bone_tolerance * ref + self.bone_tolerance_m)
             score = 1.0 - np.maximum(excess, 0.0) / np.maximum(self.bone_reject * ref, 1e-6)
         # a segment without a profile length yet (NaN) is not judged
-        return np.where(both & np.isfinite(score), np.clip(score, 0.0, 1.0), 1.0)
+        return np.where(both & np.isfinite(score), np.minimum(np.maximum(score, 0.0), 1.0), 1.0)
 
     def _speed(self, rel, both) -> np.ndarray:
         """A segment whose child jumps faster than ``max_segment_speed_m_s`` relative to its parent
         is latched implausible until it jumps again (the snap ends) or ``latch_frames`` pass."""
         score = np.ones(NUM_SEGMENTS)
         if self._last_rel is not None:
-            step = np.linalg.norm(rel - self._last_rel, axis=1)
+            diff = rel - self._last_rel
+            step = np.sqrt((diff * diff).sum(axis=1))      # np.linalg.norm's arithmetic
             # TRACKED in both frames: a joint re-acquired after an occlusion may jump
             jump = both & self._last_both & (step > self.max_step)
             ended = jump & (self._latch > 0)          # the jump back
@@ -308,14 +317,37 @@ class PlausibilityCheck:
     def _floor(self, p, tracked) -> np.ndarray:
         feet = [j for j in (FOOT_LEFT, FOOT_RIGHT) if tracked[j]]
         if feet:
-            self._floor_z.append(float(min(p[j, 2] for j in feet)))
+            self._floor_push(float(min(p[j, 2] for j in feet)))
             if len(self._floor_z) >= 5:
-                self.floor = float(np.median(self._floor_z))
+                self.floor = self._floor_median()
         if self.floor is None:
             return np.ones(NUM_JOINTS)
         depth = self.floor - p[:, 2]
         score = 1.0 - (depth - self.floor_tolerance) / (self.floor_reject - self.floor_tolerance)
-        return np.clip(score, 0.0, 1.0)
+        return np.minimum(np.maximum(score, 0.0), 1.0)
+
+    def _floor_push(self, z: float) -> None:
+        """Append ``z`` to the floor window and to its sorted copy (the running median costs
+        O(window) list moves, not a sort of the window every frame)."""
+        if len(self._floor_z) == self._floor_z.maxlen:
+            old = self._floor_z[0]
+            if old != old:
+                self._floor_nan -= 1
+            else:
+                del self._floor_sorted[bisect.bisect_left(self._floor_sorted, old)]
+        self._floor_z.append(z)
+        if z != z:
+            self._floor_nan += 1
+        else:
+            bisect.insort(self._floor_sorted, z)
+
+    def _floor_median(self) -> float:
+        """``np.median(self._floor_z)`` (the same value; NaN when the window holds one)."""
+        if self._floor_nan:
+            return float('nan')
+        v = self._floor_sorted
+        n = len(v)
+        return v[n // 2] if n % 2 else (v[n // 2 - 1] + v[n // 2]) / 2.0
 
     def update(self, positions: np.ndarray, tracking_state: np.ndarray,
                reference_lengths: np.ndarray, seg: Optional[np.ndarray] = None,

@@ -291,3 +291,17 @@ def test_fast_column_median_equals_numpy():
         np.testing.assert_array_equal(_column_median(a), np.median(a, axis=0))
         a[0, 4] = np.nan
         np.testing.assert_array_equal(_column_median(a), np.median(a, axis=0))
+
+
+def test_plausibility_running_floor_median_is_np_median():
+    """The floor's running median (sorted window, bisect) gives np.median's value at every frame,
+    through the window's eviction and a NaN in it (np.median: NaN)."""
+    from pose_reconstruction.plausibility import PlausibilityCheck
+    pc = PlausibilityCheck(floor_window=7)
+    rng = np.random.default_rng(3)
+    vals = list(rng.normal(0.0, 0.05, 40).round(2))   # ties included
+    vals[12] = float('nan')
+    for z in vals:
+        pc._floor_push(float(z))
+        got, want = pc._floor_median(), float(np.median(pc._floor_z))
+        assert (np.isnan(got) and np.isnan(want)) or got == want
