@@ -57,6 +57,9 @@ STATE_WEIGHT = np.array([0.0, 0.05, 1.0])   # NOT_TRACKED, INFERRED, TRACKED: an
 #                                       is a guess (Eq. 7 gives it R_t = 0); it only counts when no
 #                                       view tracks the joint
 _EPS = 1e-9
+# STATE_WEIGHT of np.clip(state, 0, 2) for any uint8 state, in one lookup
+_STATE_WEIGHT8 = np.full(256, STATE_WEIGHT[2])
+_STATE_WEIGHT8[:3] = STATE_WEIGHT
 _MIRROR = np.asarray(MIRROR)
 _LR = np.array([j for j in range(NUM_JOINTS) if MIRROR[j] != j])   # joints with a mirror twin
 
@@ -89,6 +92,12 @@ def interpolate(f0: SkeletonFrame, f1: SkeletonFrame, stamp_ns: int) -> Skeleton
                      stamp_ns=int(stamp_ns))
 
 
+def _mean_reliability(r: np.ndarray) -> float:
+    """``np.nanmean(r)`` (the same value), without nanmean's overhead when nothing is NaN."""
+    m = r.mean()
+    return np.nanmean(r) if m != m else m
+
+
 def facing(positions: np.ndarray, weights=None) -> np.ndarray:
     """Unit horizontal body facing (x, y) in the positions' frame (hip and shoulder lines)."""
     yaw = heading_yaw(positions, [1.0] * NUM_JOINTS if weights is None else weights)
@@ -101,10 +110,13 @@ def fuse_views(views: Sequence[SkeletonFrame], user_id: int = 0, stamp_ns: int =
     if len(views) == 1:
         return views[0].copy(user_id=user_id, stamp_ns=stamp_ns, frame_id=frame_id)
     p = np.stack([v.positions for v in views])                      # (V, 20, 3)
-    ts = np.stack([v.tracking_state for v in views]).astype(np.intp)
-    r = np.nan_to_num(np.stack([v.reliability for v in views]).astype(float), nan=0.0)
-    sw = STATE_WEIGHT[np.clip(ts, 0, 2)]
-    w = np.clip(r, 0.0, 1.0) * sw
+    ts = np.stack([v.tracking_state for v in views])
+    r = np.stack([v.reliability for v in views]).astype(float)
+    r[np.isnan(r)] = 0.0                                            # np.nan_to_num(nan=0), in place
+    sw = (_STATE_WEIGHT8[ts] if ts.dtype == np.uint8
+          else STATE_WEIGHT[np.clip(ts.astype(np.intp), 0, 2)])
+    w = np.minimum(np.maximum(r, 0.0), 1.0)                         # np.clip(r, 0, 1)
+    w *= sw
     none = w.sum(axis=0) < _EPS                                     # no view trusts the joint
     w[:, none] = sw[:, none] + _EPS                                 # tracking state alone, else all
     w /= w.sum(axis=0, keepdims=True)
@@ -113,7 +125,8 @@ def fuse_views(views: Sequence[SkeletonFrame], user_id: int = 0, stamp_ns: int =
     ori = None
     if all(v.orientations is not None for v in views):
         ori = np.stack([v.orientations for v in views])[best, cols]
-    return SkeletonFrame(positions=np.einsum('vj,vjk->jk', w, p), tracking_state=ts.max(axis=0).astype(np.uint8),
+    return SkeletonFrame(positions=np.einsum('vj,vjk->jk', w, p),
+                         tracking_state=ts.max(axis=0).astype(np.uint8),
                          reliability=r.max(axis=0).astype(np.float32), orientations=ori,
                          user_id=user_id, stamp_ns=stamp_ns, frame_id=frame_id)
 
@@ -181,7 +194,11 @@ class MultiSensorFusion:
                 t0 = time.perf_counter()
                 rel = est.update(f.positions, f.tracking_state).astype(np.float32)
                 self.stats.reliability_s += time.perf_counter() - t0
-            w = to_world(f.copy(reliability=rel, stamp_ns=int(stamp_ns)), self.poses[sensor], self.frame_id)
+            # to_world(f.copy(reliability=rel, stamp_ns=...)) in one copy
+            pose = self.poses[sensor]
+            w = f.copy(positions=pose.apply(f.positions), reliability=rel, stamp_ns=int(stamp_ns),
+                       frame_id=self.frame_id,
+                       orientations=None if f.orientations is None else pose.apply_quat(f.orientations))
             h = hist.setdefault(f.user_id, [])
             h.append(w)
             del h[:-2]
@@ -241,7 +258,7 @@ class MultiSensorFusion:
         frames = [v[2] for v in views]
         if len(frames) == 1 and track.facing is None:
             return frames
-        ref_i = int(np.argmax([np.nanmean(f.reliability) for f in frames]))
+        ref_i = int(np.argmax([_mean_reliability(f.reliability) for f in frames]))
         ref_face = track.facing
         if ref_face is None:
             ref_face = facing(frames[ref_i].positions, frames[ref_i].reliability)

@@ -50,6 +50,7 @@ from typing import Dict, Optional
 
 import numpy as np
 
+from skeleton_core import jit
 from skeleton_core.params import check, defaults, names, param
 from skeleton_core.model import (FOOT_LEFT, FOOT_RIGHT, HIP_LEFT, HIP_RIGHT, LIMB_JOINTS,
                                  NUM_JOINTS, NUM_SEGMENTS, PARENTS, ROOT, SEGMENT_CHILDREN,
@@ -114,6 +115,8 @@ class PlausibilityConfig:
 
 PLAUSIBILITY_PARAMS = tuple(names(PlausibilityConfig))
 PLAUSIBILITY_DEFAULTS: Dict = defaults(PlausibilityConfig)
+
+from . import reliability_kernels as K  # noqa: E402  (after the model imports, which it does not need)
 
 _SEG_P = np.array(SEGMENT_PARENTS)
 _SEG_C = np.array(SEGMENT_CHILDREN)
@@ -205,6 +208,7 @@ class PlausibilityCheck:
         self.floor_window = int(cfg.floor_window)
         self.jump_m = float(cfg.jump_m)
         self.jump_frames = int(cfg.jump_frames)
+        self._jit = jit.enabled()        # the segment terms compiled (reliability_kernels)
         self.reset()
 
     def reset(self) -> None:
@@ -217,7 +221,7 @@ class PlausibilityCheck:
         self._latch = np.zeros(NUM_SEGMENTS, int)
         self._last_both = np.zeros(NUM_SEGMENTS, bool)
         self._anchor: Optional[np.ndarray] = None
-        self._jumped = 0
+        self._jumped_a = np.zeros(1, np.int64)   # frames of the current jump rejected
         self.skeleton_outlier = False
         self.swapped = {'arms': False, 'legs': False}
         self.terms: Dict[str, np.ndarray] = {}
@@ -243,6 +247,9 @@ class PlausibilityCheck:
             self._anchor = p.copy()
             self._anchor_ok = tracked.copy()
             return False
+        if self._jit:
+            return K.skeleton_jump(p, tracked, self._anchor, self._anchor_ok, self._jumped_a,
+                                   self.jump_m, self.jump_frames)
         both = tracked & self._anchor_ok
         if np.count_nonzero(both) >= 3:
             diff = p[both] - self._anchor[both]
@@ -251,10 +258,10 @@ class PlausibilityCheck:
             n = len(dist)
             # np.median's value (the middle one, or the mean of the two), without its overhead
             d = float(dist[n // 2]) if n % 2 else float((dist[n // 2 - 1] + dist[n // 2]) / 2.0)
-            if d > self.jump_m and self._jumped < self.jump_frames:
-                self._jumped += 1
+            if d > self.jump_m and self._jumped_a[0] < self.jump_frames:
+                self._jumped_a[0] += 1
                 return True
-        self._jumped = 0
+        self._jumped_a[0] = 0
         self._anchor[tracked] = p[tracked]
         self._anchor_ok |= tracked
         return False
@@ -368,9 +375,19 @@ class PlausibilityCheck:
             self.value = np.zeros(NUM_JOINTS)
             self.terms = {'jump': self.value}
             return self.value
-        seg_score = np.minimum(self._bones(seg_len, both, np.asarray(reference_lengths, float)),
-                               self._speed(seg, both))
-        blamed = np.where(BLAME, seg_score[:, None], 1.0).min(axis=0)
+        if self._jit:
+            has = self._last_rel is not None
+            blamed = K.segment_terms(seg, seg_len, both, np.asarray(reference_lengths, float),
+                                   self._last_rel if has else seg, has,
+                                   self._last_both, self._latch, BLAME, self.bone_tolerance,
+                                   self.bone_tolerance_m, self.bone_reject, self.max_step,
+                                   self.latch_frames)
+            self._last_rel = seg
+            self._last_both = both
+        else:
+            seg_score = np.minimum(self._bones(seg_len, both, np.asarray(reference_lengths, float)),
+                                   self._speed(seg, both))
+            blamed = np.where(BLAME, seg_score[:, None], 1.0).min(axis=0)
         lr = self._left_right(p)
         fl = self._floor(p, tracked)
         self.terms = {'segments': blamed, 'left_right': lr, 'floor': fl}

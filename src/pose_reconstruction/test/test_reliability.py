@@ -305,3 +305,36 @@ def test_plausibility_running_floor_median_is_np_median():
         pc._floor_push(float(z))
         got, want = pc._floor_median(), float(np.median(pc._floor_z))
         assert (np.isnan(got) and np.isnan(want)) or got == want
+
+
+@pytest.mark.parametrize('scenario', ['c', 'd'])
+def test_compiled_step_agrees_with_numpy(scenario):
+    """The compiled Eq. 1-8 / plausibility steps (reliability_kernels, numba) and the numpy twin
+    give the same reliability, terms and state on a sensor-model stream with occlusions (c) and
+    confident failures (d): jumps, snaps, floor, swapped limbs."""
+    from skeleton_core import jit
+    if not jit.enabled():
+        pytest.skip('numba off: the numpy twin is the only path')
+    from skeleton_eval.clips import toy_clip
+    from skeleton_eval.sensor_model import SensorModel
+    s = SensorModel(None, seed=2).corrupt(toy_clip(), scenario, seed=2)
+    pos = s.positions.copy()
+    pos[100:106] += (1.0, 0.0, 0.0)            # a whole-skeleton jump (another person)
+    pos[150:160, HAND_LEFT] += (0.0, 0.0, 0.5)  # a snapped hand (latched segment)
+    pos[200:210, FOOT_RIGHT, 2] -= 0.2          # a foot through the floor
+    est = {}
+    for compiled in (True, False):
+        e = ReliabilityEstimator()
+        e._jit = e.plausibility._jit = compiled
+        est[compiled] = e
+    outlier = latched = 0
+    for p, ts in zip(pos, s.tracking_state):
+        a, b = est[True].update(p, ts), est[False].update(p, ts)
+        np.testing.assert_allclose(a, b, rtol=0, atol=1e-12)
+        for ta, tb in zip(est[True].last_terms, est[False].last_terms):
+            np.testing.assert_allclose(ta, tb, rtol=0, atol=1e-12)
+        assert est[True].plausibility.skeleton_outlier == est[False].plausibility.skeleton_outlier
+        assert np.array_equal(est[True].plausibility._latch, est[False].plausibility._latch)
+        outlier += est[True].plausibility.skeleton_outlier
+        latched += int((est[True].plausibility._latch > 0).any())
+    assert outlier >= 3 and latched >= 3       # the stream exercises the jump and the latch
