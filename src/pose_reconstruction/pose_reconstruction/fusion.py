@@ -235,15 +235,18 @@ class MultiSensorFusion:
             if tracks:
                 tp = np.array([t.pelvis for t in tracks])
                 dist = np.linalg.norm(pel[:, None, :2] - tp[None, :, :2], axis=2)
-                prev = np.array([[self._pair.get((sensor, v[1])) == t.track_id for t in tracks]
-                                 for v in vs], float)
-                taken = np.array([t.track_id in groups and any(g[0] == sensor for g in groups[t.track_id])
-                                  for t in tracks])
+                index = {t.track_id: k for k, t in enumerate(tracks)}
+                prev = np.zeros(dist.shape)
+                for i, v in enumerate(vs):
+                    k = index.get(self._pair.get((sensor, v[1])))
+                    if k is not None:
+                        prev[i, k] = 1.0
+                # one view per sensor and track: the assignment gives each track at most one of
+                # this sensor's views, and no track holds one yet (each sensor is assigned once)
                 cost = dist - HYSTERESIS * prev
-                cost[:, taken] = 1e6                       # one view per sensor and track
                 rows, cols = linear_sum_assignment(cost)
-                for i, k in zip(rows, cols):
-                    if not taken[k] and dist[i, k] < self.gate + HYSTERESIS * prev[i, k]:
+                for i, k in zip(rows.tolist(), cols.tolist()):
+                    if dist[i, k] < self.gate + HYSTERESIS * prev[i, k]:
                         assigned[i] = tracks[k]
             for i, v in enumerate(vs):
                 t = assigned.get(i)
