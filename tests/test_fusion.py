@@ -182,3 +182,25 @@ def test_sensor_model_views_share_one_object():
     # the user (its y range, the side sensor's depth, overlaps the user's), not in front
     root = view.truth_all[:, HIP_CENTER]
     assert view.box[0][0] < np.median(root[:, 0]) < view.box[1][0] + 1.0
+
+
+def test_a_joint_no_view_tracks_is_held_relative_to_its_parent():
+    """A hand both sensors lose is reported by each at the place it left the room (the Kinect's
+    held INFERRED joint); the fused hand stays where the track last saw it *from its parent* and
+    moves with the body (here: the person walks 0.5 m while the hand is lost)."""
+    fu = MultiSensorFusion({'k1': FRONT, 'k2': SIDE})
+    for i in range(12):
+        truth = person(y=0.05 * i)
+        a, b = seen(truth, FRONT, stamp=i * DT), seen(truth, SIDE, stamp=i * DT)
+        if i >= 2:      # lost by both: each view holds the hand where it last saw it
+            for f, pose in ((a, FRONT), (b, SIDE)):
+                f.positions[HAND_RIGHT] = pose.inverse().apply(person(y=0.05)[None])[0, HAND_RIGHT]
+                f.tracking_state[HAND_RIGHT] = INFERRED
+                f.reliability[HAND_RIGHT] = 0.0
+        fu.add('k1', [a], i * DT)
+        fu.add('k2', [b], i * DT)
+        (f,), _, _ = fu.fuse()
+    assert f.tracking_state[HAND_RIGHT] == INFERRED and f.reliability[HAND_RIGHT] == 0.0
+    assert np.linalg.norm(f.positions[HAND_RIGHT] - truth[HAND_RIGHT]) < 1e-6
+    # the views' held hand is 0.5 m behind
+    assert np.linalg.norm(person(y=0.05)[HAND_RIGHT] - truth[HAND_RIGHT]) == pytest.approx(0.5)

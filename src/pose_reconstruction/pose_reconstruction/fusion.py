@@ -25,6 +25,12 @@ one sensor's:
 6. **Fusion.** Per joint, the reliability-weighted mean of the views (weight = reliability x
    tracking-state factor); the fused reliability is the best view's, the tracking state the best
    view's, the orientation that of the view with the largest weight.
+7. **Lost joints.** A joint no view tracks is, in every view, held where that sensor last saw it
+   *in the room* (the Kinect's INFERRED joint; the sensor model's ``hold``): it stays behind when
+   the person moves. The fused joint is put where the track last saw it *from its parent* (the
+   parent's fused position + the last segment vector with both ends tracked), so it moves with
+   the body; its state and reliability stay the views' (INFERRED, ~0: the reconstruction still
+   replaces it).
 
 One sensor alone passes through untouched: :meth:`MultiSensorFusion.fuse` returns its frames as
 they came (same arrays, same frame, same ids; the reconstruction and the physics take the sensor's
@@ -41,7 +47,7 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 
 from skeleton_core.conversions import SkeletonFrame
-from skeleton_core.model import HIP_CENTER, MIRROR, NUM_JOINTS
+from skeleton_core.model import HIP_CENTER, MIRROR, NUM_JOINTS, PARENTS, TRACKED
 from skeleton_core.tf import Transform
 
 from .posture_space import heading_yaw
@@ -57,6 +63,8 @@ STATE_WEIGHT = np.array([0.0, 0.05, 1.0])   # NOT_TRACKED, INFERRED, TRACKED: an
 #                                       is a guess (Eq. 7 gives it R_t = 0); it only counts when no
 #                                       view tracks the joint
 _EPS = 1e-9
+HOLD_RELATIVE = True    # step 7 (a module switch for the evaluation's with/without comparison)
+_PARENTS = np.asarray(PARENTS)
 # STATE_WEIGHT of np.clip(state, 0, 2) for any uint8 state, in one lookup
 _STATE_WEIGHT8 = np.full(256, STATE_WEIGHT[2])
 _STATE_WEIGHT8[:3] = STATE_WEIGHT
@@ -131,6 +139,24 @@ def fuse_views(views: Sequence[SkeletonFrame], user_id: int = 0, stamp_ns: int =
                          user_id=user_id, stamp_ns=stamp_ns, frame_id=frame_id)
 
 
+def hold_relative(track: '_Track', fused: SkeletonFrame) -> None:
+    """Step 7: joints no view tracks where the track last saw them relative to their parent
+    (``fused`` changed in place; ``track.rel`` learns the segments with both ends tracked)."""
+    ts = fused.tracking_state
+    p = fused.positions
+    tracked = ts == TRACKED
+    if track.rel is None:
+        track.rel = np.full((NUM_JOINTS, 3), np.nan)
+    rel = track.rel
+    for j in range(1, NUM_JOINTS):      # parents first: a held child follows its (held) parent
+        if not tracked[j] and rel[j, 0] == rel[j, 0]:
+            p[j] = p[_PARENTS[j]] + rel[j]
+    both = tracked.copy()
+    both[1:] &= tracked[_PARENTS[1:]]
+    both[0] = False
+    rel[both] = p[both] - p[_PARENTS[both]]
+
+
 @dataclass
 class _Track:
     track_id: int
@@ -138,6 +164,7 @@ class _Track:
     facing: Optional[np.ndarray] = None
     fused: Optional[SkeletonFrame] = None
     last_ns: int = 0
+    rel: Optional[np.ndarray] = None      # (20, 3) each joint from its parent when last tracked
 
 
 @dataclass
@@ -305,6 +332,8 @@ class MultiSensorFusion:
                 continue
             frames = self._resolve_mirror(t, views)
             fused = fuse_views(frames, user_id=t.track_id, stamp_ns=stamp_ns, frame_id=self.frame_id)
+            if HOLD_RELATIVE:
+                hold_relative(t, fused)
             t.pelvis = fused.positions[HIP_CENTER].copy()
             t.facing = facing(fused.positions, fused.reliability)
             t.fused = fused
