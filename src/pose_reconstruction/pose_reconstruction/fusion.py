@@ -148,9 +148,10 @@ def hold_relative(track: '_Track', fused: SkeletonFrame) -> None:
     if track.rel is None:
         track.rel = np.full((NUM_JOINTS, 3), np.nan)
     rel = track.rel
-    for j in range(1, NUM_JOINTS):      # parents first: a held child follows its (held) parent
-        if not tracked[j] and rel[j, 0] == rel[j, 0]:
-            p[j] = p[_PARENTS[j]] + rel[j]
+    held = ~tracked & ~np.isnan(rel[:, 0])
+    held[0] = False
+    for j in np.flatnonzero(held).tolist():   # ascending = parents first: a held child follows
+        p[j] = p[_PARENTS[j]] + rel[j]          # its (held) parent
     both = tracked.copy()
     both[1:] &= tracked[_PARENTS[1:]]
     both[0] = False

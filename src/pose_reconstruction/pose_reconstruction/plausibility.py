@@ -363,7 +363,7 @@ class PlausibilityCheck:
         ``seg`` (19, 3) / ``seg_len`` (19,): this frame's segment vectors and lengths if known."""
         if not self.enabled:
             return self.value
-        p = np.asarray(positions, float)
+        p = np.ascontiguousarray(positions, dtype=float)   # one compiled layout
         tracked = np.asarray(tracking_state) == TRACKED
         if seg is None:
             seg = p[_SEG_C] - p[_SEG_P]

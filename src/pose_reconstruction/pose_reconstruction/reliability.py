@@ -306,6 +306,8 @@ class ReliabilityEstimator:
         # the compiled step (reliability_kernels) when numba is on; row n of the table: weights
         # for n frames
         self._jit = jit.enabled()
+        if self._jit:
+            K.warm_up()   # the compiled step, once per process: not on a user's first frame
         self._gauss_table = np.zeros((f_total + 1, f_total))
         for n in range(1, f_total + 1):
             self._gauss_table[n, :n] = self._gauss[n]
@@ -465,7 +467,7 @@ class ReliabilityEstimator:
 
     def update(self, positions: np.ndarray, tracking_state: np.ndarray) -> np.ndarray:
         """Add one frame; return the reliability (20,) in [0, 1] (Eq. 8)."""
-        p = np.asarray(positions, float)
+        p = np.ascontiguousarray(positions, dtype=float)   # one compiled layout
         ts = np.asarray(tracking_state)
         seg = p.take(SEGMENT_CHILD_INDEX, axis=0)
         seg -= p.take(SEGMENT_PARENT_INDEX, axis=0)

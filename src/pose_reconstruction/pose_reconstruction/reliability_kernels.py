@@ -197,3 +197,37 @@ def _skeleton_jump(p, tracked, anchor, anchor_ok, jumped, jump_m, jump_frames):
 
 
 skeleton_jump = jit.njit(_skeleton_jump)
+
+
+_warm = False
+
+
+def warm_up() -> float:
+    """Compile (or load from the on-disk cache) every kernel of this module now, once per process:
+    at a node's start, not on a user's first frame (a cold compile takes seconds). Returns the
+    time taken (s); 0 when numba is off or already done."""
+    global _warm
+    if _warm or not jit.enabled():
+        return 0.0
+    import time
+    from skeleton_core.model import (NUM_JOINTS, NUM_SEGMENTS, SEGMENT_CHILD_INDEX,
+                                     SEGMENT_PARENT_INDEX)
+    t0 = time.perf_counter()
+    nj, ns = NUM_JOINTS, NUM_SEGMENTS
+    p = np.zeros((nj, 3))
+    ones_j, ones_s = np.ones(nj), np.ones(ns)
+    tracked = np.ones(nj, bool)
+    par = np.asarray(SEGMENT_PARENT_INDEX, np.int64)
+    child = np.asarray(SEGMENT_CHILD_INDEX, np.int64)
+    inc = np.zeros((nj, ns))
+    eq18_step(p, ones_s, ones_s, tracked, ones_j, ones_j, True, True, 0.03, 1.5, 2.3,
+              np.zeros((nj, 3)), np.zeros((nj, 3)), np.zeros(nj), np.zeros(1, np.int64),
+              np.zeros((3, nj)), np.zeros(1, np.int64), np.zeros((6, nj)), np.zeros(1, np.int64),
+              np.ones((7, 6)), inc, inc, par, child, np.empty(nj), np.empty(nj))
+    seg = np.zeros((ns, 3))
+    both = np.ones(ns, bool)
+    segment_terms(seg, ones_s, both, ones_s, seg, True, both, np.zeros(ns, np.int64),
+                  np.zeros((ns, nj), bool), 0.4, 0.03, 1.0, 0.27, 45)
+    skeleton_jump(p, tracked, np.zeros((nj, 3)), tracked.copy(), np.zeros(1, np.int64), 0.35, 15)
+    _warm = True
+    return time.perf_counter() - t0
