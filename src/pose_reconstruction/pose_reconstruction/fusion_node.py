@@ -78,6 +78,11 @@ class FusionNode(ManagedNode):
     def configure(self) -> None:
         self.sensors = list(self.params['input_topics'])
         self._new_state()
+        if len(self.sensors) > 1:   # the per-sensor Eq. 1-8, compiled now: not on the first frame
+            from .reliability_kernels import warm_up
+            warm_s = warm_up()
+            if warm_s > 0.5:
+                self.get_logger().info(f'compiled kernels ready in {warm_s:.1f} s (cached from now on)')
         self.tf = TfBuffer()
         self.tf_listener = StaticTfListener(self, self.tf)
         self._configured.append(('subscription', self.tf_listener.sub))
