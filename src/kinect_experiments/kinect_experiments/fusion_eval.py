@@ -149,6 +149,7 @@ def fusion_cost(streams, poses: List[Transform], users: int = 6, spacing: float 
     t = np.array(times[10:]) / users
     r = t - np.array(rel[10:]) / users
     c = np.array(cpu[10:]) / users
-    return {'cpu_mean_ms': float(c.mean()), 'tracks_mean': float(np.mean(tracks[10:])), 'users': users, 'sensors': len(streams), 'frames': len(t),
+    return {'cpu_mean_ms': float(c.mean()), 'tracks_mean': float(np.mean(tracks[10:])),
+            'users': users, 'sensors': len(streams), 'frames': len(t),
             'mean_ms': float(t.mean()), 'p95_ms': float(np.percentile(t, 95)),
             'no_eq8_mean_ms': float(r.mean()), 'no_eq8_p95_ms': float(np.percentile(r, 95))}
