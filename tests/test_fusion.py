@@ -204,3 +204,29 @@ def test_a_joint_no_view_tracks_is_held_relative_to_its_parent():
     assert np.linalg.norm(f.positions[HAND_RIGHT] - truth[HAND_RIGHT]) < 1e-6
     # the views' held hand is 0.5 m behind
     assert np.linalg.norm(person(y=0.05)[HAND_RIGHT] - truth[HAND_RIGHT]) == pytest.approx(0.5)
+
+
+def test_evaluation_layouts_place_the_two_sensors_90_deg_apart():
+    """evaluate --sensors 2: front-side = the front sensor itself + one on the user's side;
+    diagonal = both 2.5 m from the user, 90 deg apart, 45 deg either side of the front, facing
+    the user; an unknown layout is a one-line error."""
+    from kinect_experiments.fusion_eval import view_poses
+    sensor = SensorModel(None, seed=0)
+    d = sensor.params['placement']['distance_m']
+    user = np.array([d, sensor.params['placement']['lateral_offset_m'], 0.0])
+    fs = view_poses(sensor, 2, 'front-side')
+    assert fs[0].is_identity()
+    for poses, off in ((fs, (0.0, 90.0)), (view_poses(sensor, 2, 'diagonal'), (45.0, 45.0))):
+        dirs = []
+        for pose, o in zip(poses, off):
+            to_user = user - pose.translation
+            assert np.linalg.norm(to_user) == pytest.approx(d)
+            x = pose.apply(np.array([[1.0, 0.0, 0.0]]))[0] - pose.translation
+            assert np.dot(x, to_user) / d == pytest.approx(1.0)      # it faces the user
+            dirs.append(to_user / d)
+            # the angle from the user's front (the user faces the front sensor, -x)
+            ang = np.degrees(np.arccos(np.clip(dirs[-1] @ [1.0, 0.0, 0.0], -1, 1)))
+            assert ang == pytest.approx(o)
+        assert np.degrees(np.arccos(np.clip(dirs[0] @ dirs[1], -1, 1))) == pytest.approx(90.0)
+    with pytest.raises(ValueError, match='unknown layout'):
+        view_poses(sensor, 2, 'ring')

@@ -3,8 +3,10 @@
 Every dev clip x class x seed is seen by N sensor-model views (skeleton_eval.sensor_model, ``view``:
 the same motion and turns, per-view noise, occlusion and failures): sensor 1 is the reference
 placement (its frame is ``world`` here), sensor 2 at 90 deg on the user's side (front + side),
-further sensors around the user. Rows per class: single-sensor raw and C (sensor 1 alone), fused
-raw (:class:`pose_reconstruction.fusion.MultiSensorFusion`) and fused + C (the reconstruction
+further sensors around the user; ``--layout diagonal`` turns that ring by 45 deg (two sensors at
+45 deg either side of the front; the single-sensor rows stay the front sensor alone). Rows per
+class: single-sensor raw and C (sensor 1 alone), fused raw
+(:class:`pose_reconstruction.fusion.MultiSensorFusion`) and fused + C (the reconstruction
 unchanged, fed the fused skeletons). Eq. 18 error (cm) against the truth, and MPJPE.
 """
 from __future__ import annotations
