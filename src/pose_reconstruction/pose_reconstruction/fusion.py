@@ -50,6 +50,7 @@ from skeleton_core.conversions import SkeletonFrame
 from skeleton_core.model import HIP_CENTER, MIRROR, NUM_JOINTS, PARENTS, TRACKED
 from skeleton_core.tf import Transform
 
+from .plausibility import unswap_permutation
 from .posture_space import heading_yaw
 from .reliability import ReliabilityEstimator
 
@@ -173,6 +174,7 @@ class FusionStats:
     frames: int = 0
     late: int = 0          # views left out: older than one frame period
     mirrored: int = 0      # views whose left/right labels were swapped
+    unswapped: int = 0     # views with limbs swapped back (the per-sensor plausibility's swaps)
     tracks: int = 0
     reliability_s: float = 0.0   # time spent in Eq. 1-8 (the reconstruction then takes it as given)
 
@@ -222,6 +224,18 @@ class MultiSensorFusion:
                 t0 = time.perf_counter()
                 rel = est.update(f.positions, f.tracking_state).astype(np.float32)
                 self.stats.reliability_s += time.perf_counter() - t0
+                plaus = est.plausibility
+                perm = unswap_permutation(plaus.swapped) if plaus.lr_unswap else None
+                if perm is not None:
+                    # the sensor swapped this view's left and right arms or legs (plausibility.py,
+                    # which then keeps their reliability): swapped back, as the reconstruction
+                    # does with one sensor -- else the weighted mean would average a left limb
+                    # with the other view's right one
+                    self.stats.unswapped += 1
+                    f = f.copy(positions=np.asarray(f.positions, float)[perm],
+                               tracking_state=f.tracking_state[perm],
+                               orientations=None if f.orientations is None else f.orientations[perm])
+                    rel = rel[perm]
             # to_world(f.copy(reliability=rel, stamp_ns=...)) in one copy
             pose = self.poses[sensor]
             w = f.copy(positions=pose.apply(f.positions), reliability=rel, stamp_ns=int(stamp_ns),
