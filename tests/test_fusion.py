@@ -230,3 +230,27 @@ def test_evaluation_layouts_place_the_two_sensors_90_deg_apart():
         assert np.degrees(np.arccos(np.clip(dirs[0] @ dirs[1], -1, 1))) == pytest.approx(90.0)
     with pytest.raises(ValueError, match='unknown layout'):
         view_poses(sensor, 2, 'ring')
+
+
+def test_limbs_a_view_swapped_are_swapped_back_before_the_mean():
+    """A sensor that swaps the user's left and right arms (a confident failure, TRACKED): its
+    Eq. 1-8 plausibility flags the swap and keeps the arms' reliability (the reconstruction swaps
+    them back); the fusion swaps them back too, so the fused left hand is the left hand, not the
+    mean of one view's left and the other's right."""
+    from skeleton_core.model import LIMB_JOINTS
+    arms_l, arms_r = list(LIMB_JOINTS['left_arm']), list(LIMB_JOINTS['right_arm'])
+    fu = MultiSensorFusion({'k1': FRONT, 'k2': SIDE})
+    for i in range(20):
+        truth = person(y=0.01 * i)
+        views = [seen(truth, FRONT, stamp=i * DT), seen(truth, SIDE, stamp=i * DT)]
+        for v in views:
+            v.reliability = np.full(NUM_JOINTS, np.nan, np.float32)    # the fusion computes Eq. 1-8
+        if i == 19:
+            p = views[0].positions
+            p[arms_l + arms_r] = p[arms_r + arms_l]
+        fu.add('k1', [views[0]], i * DT)
+        fu.add('k2', [views[1]], i * DT)
+        (f,), _, _ = fu.fuse()
+    assert fu.stats.unswapped == 1
+    assert np.linalg.norm(f.positions[HAND_LEFT] - truth[HAND_LEFT]) < 1e-6
+    assert np.linalg.norm(truth[HAND_LEFT] - truth[HAND_RIGHT]) > 1.0
