@@ -120,7 +120,8 @@ class FusionNode(ManagedNode):
             return {}
         st = self.fusion.stats
         return {'sensors': len(self.sensors), 'tracks': st.tracks, 'late_views': st.late,
-                'mirrored_views': st.mirrored, 'published_without_late_sensor': self.clock.forced,
+                'mirrored_views': st.mirrored, 'unswapped_views': st.unswapped,
+                'published_without_late_sensor': self.clock.forced,
                 'user_states': sum(len(h) for h in self.fusion._hist.values())}
 
     # ------------------------------------------------------------------ input
