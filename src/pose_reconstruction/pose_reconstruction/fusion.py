@@ -199,6 +199,7 @@ class MultiSensorFusion:
         self._raw: Dict[str, Tuple[List[SkeletonFrame], int]] = {}
         self._tracks: List[_Track] = []
         self._pair: Dict[Tuple[str, int], int] = {}     # (sensor, user) -> track id
+        self._swap: Dict[Tuple[str, int], np.ndarray] = {}   # (sensor, user) -> limb swap flagged
         self._ids = itertools.count(1)
 
     @property
@@ -226,16 +227,13 @@ class MultiSensorFusion:
                 self.stats.reliability_s += time.perf_counter() - t0
                 plaus = est.plausibility
                 perm = unswap_permutation(plaus.swapped) if plaus.lr_unswap else None
-                if perm is not None:
-                    # the sensor swapped this view's left and right arms or legs (plausibility.py,
-                    # which then keeps their reliability): swapped back, as the reconstruction
-                    # does with one sensor -- else the weighted mean would average a left limb
-                    # with the other view's right one
-                    self.stats.unswapped += 1
-                    f = f.copy(positions=np.asarray(f.positions, float)[perm],
-                               tracking_state=f.tracking_state[perm],
-                               orientations=None if f.orientations is None else f.orientations[perm])
-                    rel = rel[perm]
+                # the sensor swapped this view's left and right arms or legs (plausibility.py,
+                # which then keeps their reliability, for the reconstruction swaps them back): a
+                # candidate, confirmed against the track's fused skeleton in _resolve_mirror
+                if perm is None:
+                    self._swap.pop((sensor, f.user_id), None)
+                else:
+                    self._swap[(sensor, f.user_id)] = perm
             # to_world(f.copy(reliability=rel, stamp_ns=...)) in one copy
             pose = self.poses[sensor]
             w = f.copy(positions=pose.apply(f.positions), reliability=rel, stamp_ns=int(stamp_ns),
@@ -248,6 +246,7 @@ class MultiSensorFusion:
         for uid in [u for u in hist if u not in seen]:      # a user the sensor lost
             del hist[uid]
             self._rel.pop((sensor, uid), None)
+            self._swap.pop((sensor, uid), None)
             self._pair.pop((sensor, uid), None)
 
     def _views(self, stamp_ns: int) -> List[Tuple[str, int, SkeletonFrame]]:
@@ -325,6 +324,20 @@ class MultiSensorFusion:
             if flip:
                 self.stats.mirrored += 1
                 f = mirror_labels(f)
+            perm = self._swap.get(views[i][:2])
+            if perm is not None:
+                # a limb swap the view's plausibility flagged: swapped back when the swapped
+                # labelling lies nearer the track's last fused skeleton (a profile view's noisy
+                # girdles flag swaps that are not), or when there is none yet -- else the mean
+                # would average one view's left limb with the other's right
+                moved = np.flatnonzero(perm != np.arange(NUM_JOINTS))
+                if track.fused is None or (
+                        np.linalg.norm(f.positions[perm][moved] - ref_pos[moved], axis=1).sum()
+                        < np.linalg.norm(f.positions[moved] - ref_pos[moved], axis=1).sum()):
+                    self.stats.unswapped += 1
+                    f = f.copy(positions=f.positions[perm], tracking_state=f.tracking_state[perm],
+                               reliability=f.reliability[perm],
+                               orientations=None if f.orientations is None else f.orientations[perm])
             out.append(f)
         return out
 
