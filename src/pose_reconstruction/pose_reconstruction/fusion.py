@@ -25,7 +25,7 @@ one sensor's:
 6. **Fusion.** Per joint, the reliability-weighted mean of the views (weight = reliability x
    tracking-state factor); the fused reliability is the best view's, the tracking state the best
    view's, the orientation that of the view with the largest weight.
-7. **Lost joints.** A joint no view tracks is, in every view, held where that sensor last saw it
+7. **Lost joints** (``HOLD_RELATIVE``, off: see its comment). A joint no view tracks is, in every view, held where that sensor last saw it
    *in the room* (the Kinect's INFERRED joint; the sensor model's ``hold``): it stays behind when
    the person moves. The fused joint is put where the track last saw it *from its parent* (the
    parent's fused position + the last segment vector with both ends tracked), so it moves with
@@ -64,7 +64,9 @@ STATE_WEIGHT = np.array([0.0, 0.05, 1.0])   # NOT_TRACKED, INFERRED, TRACKED: an
 #                                       is a guess (Eq. 7 gives it R_t = 0); it only counts when no
 #                                       view tracks the joint
 _EPS = 1e-9
-HOLD_RELATIVE = True    # step 7 (a module switch for the evaluation's with/without comparison)
+# step 7, off: it lowered the front + side raw error 1-3 points on seeds 1 and 3 but raised it on
+# class c seed 4 (9.02 -> 9.44 cm) and fused + C there 4.50 -> 5.19 cm (docs/multi_sensor.md)
+HOLD_RELATIVE = False
 _PARENTS = np.asarray(PARENTS)
 # STATE_WEIGHT of np.clip(state, 0, 2) for any uint8 state, in one lookup
 _STATE_WEIGHT8 = np.full(256, STATE_WEIGHT[2])
