@@ -185,9 +185,10 @@ def test_sensor_model_views_share_one_object():
 
 
 def test_a_joint_no_view_tracks_is_held_relative_to_its_parent(monkeypatch):
-    """Step 7 (off by default; the evaluation's switch): A hand both sensors lose is reported by each at the place it left the room (the Kinect's
-    held INFERRED joint); the fused hand stays where the track last saw it *from its parent* and
-    moves with the body (here: the person walks 0.5 m while the hand is lost)."""
+    """Step 7 (off by default; the evaluation's switch): A hand both sensors lose is reported by
+    each at the place it left the room (the Kinect's held INFERRED joint); the fused hand
+    stays where the track last saw it *from its parent* and moves with the body (here: the
+    person walks 0.5 m while the hand is lost)."""
     from pose_reconstruction import fusion
     monkeypatch.setattr(fusion, 'HOLD_RELATIVE', True)
     fu = MultiSensorFusion({'k1': FRONT, 'k2': SIDE})

@@ -25,12 +25,12 @@ one sensor's:
 6. **Fusion.** Per joint, the reliability-weighted mean of the views (weight = reliability x
    tracking-state factor); the fused reliability is the best view's, the tracking state the best
    view's, the orientation that of the view with the largest weight.
-7. **Lost joints** (``HOLD_RELATIVE``, off: see its comment). A joint no view tracks is, in every view, held where that sensor last saw it
-   *in the room* (the Kinect's INFERRED joint; the sensor model's ``hold``): it stays behind when
-   the person moves. The fused joint is put where the track last saw it *from its parent* (the
-   parent's fused position + the last segment vector with both ends tracked), so it moves with
-   the body; its state and reliability stay the views' (INFERRED, ~0: the reconstruction still
-   replaces it).
+7. **Lost joints** (``HOLD_RELATIVE``, off: see its comment). A joint no view tracks is, in every
+   view, held where that sensor last saw it *in the room* (the Kinect's INFERRED joint; the
+   sensor model's ``hold``): it stays behind when the person moves. The fused joint is put where
+   the track last saw it *from its parent* (the parent's fused position + the last segment vector
+   with both ends tracked), so it moves with the body; its state and reliability stay the views'
+   (INFERRED, ~0: the reconstruction still replaces it).
 
 One sensor alone passes through untouched: :meth:`MultiSensorFusion.fuse` returns its frames as
 they came (same arrays, same frame, same ids; the reconstruction and the physics take the sensor's
