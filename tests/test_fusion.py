@@ -184,13 +184,10 @@ def test_sensor_model_views_share_one_object():
     assert view.box[0][0] < np.median(root[:, 0]) < view.box[1][0] + 1.0
 
 
-def test_a_joint_no_view_tracks_is_held_relative_to_its_parent(monkeypatch):
-    """Step 7 (off by default; the evaluation's switch): A hand both sensors lose is reported by
-    each at the place it left the room (the Kinect's held INFERRED joint); the fused hand
-    stays where the track last saw it *from its parent* and moves with the body (here: the
-    person walks 0.5 m while the hand is lost)."""
-    from pose_reconstruction import fusion
-    monkeypatch.setattr(fusion, 'HOLD_RELATIVE', True)
+def test_a_joint_no_view_tracks_is_held_relative_to_its_parent():
+    """A hand both sensors lose is reported by each at the place it left the room (the Kinect's
+    held INFERRED joint); the fused hand stays where the track last saw it *from its parent* and
+    moves with the body (here: the person walks 0.5 m while the hand is lost)."""
     fu = MultiSensorFusion({'k1': FRONT, 'k2': SIDE})
     for i in range(12):
         truth = person(y=0.05 * i)

@@ -25,12 +25,12 @@ one sensor's:
 6. **Fusion.** Per joint, the reliability-weighted mean of the views (weight = reliability x
    tracking-state factor); the fused reliability is the best view's, the tracking state the best
    view's, the orientation that of the view with the largest weight.
-7. **Lost joints** (``HOLD_RELATIVE``, off: see its comment). A joint no view tracks is, in every
-   view, held where that sensor last saw it *in the room* (the Kinect's INFERRED joint; the
-   sensor model's ``hold``): it stays behind when the person moves. The fused joint is put where
-   the track last saw it *from its parent* (the parent's fused position + the last segment vector
-   with both ends tracked), so it moves with the body; its state and reliability stay the views'
-   (INFERRED, ~0: the reconstruction still replaces it).
+7. **Lost joints.** A joint no view tracks is, in every view, held where that sensor last saw it
+   *in the room* (the Kinect's INFERRED joint; the sensor model's ``hold``): it stays behind when
+   the person moves. The fused joint is put where the track last saw it *from its parent* (the
+   parent's fused position + the last segment vector with both ends tracked), so it moves with
+   the body; its state and reliability stay the views' (INFERRED, ~0: the reconstruction still
+   replaces it).
 
 One sensor alone passes through untouched: :meth:`MultiSensorFusion.fuse` returns its frames as
 they came (same arrays, same frame, same ids; the reconstruction and the physics take the sensor's
@@ -64,9 +64,7 @@ STATE_WEIGHT = np.array([0.0, 0.05, 1.0])   # NOT_TRACKED, INFERRED, TRACKED: an
 #                                       is a guess (Eq. 7 gives it R_t = 0); it only counts when no
 #                                       view tracks the joint
 _EPS = 1e-9
-# step 7, off: it lowered the front + side raw error 1-3 points on seeds 1 and 3 but raised it on
-# class c seed 4 (9.02 -> 9.44 cm) and fused + C there 4.50 -> 5.19 cm (docs/multi_sensor.md)
-HOLD_RELATIVE = False
+HOLD_RELATIVE = True    # step 7 (a module switch for the evaluation's with/without comparison)
 _PARENTS = np.asarray(PARENTS)
 # STATE_WEIGHT of np.clip(state, 0, 2) for any uint8 state, in one lookup
 _STATE_WEIGHT8 = np.full(256, STATE_WEIGHT[2])
@@ -201,7 +199,6 @@ class MultiSensorFusion:
         self._raw: Dict[str, Tuple[List[SkeletonFrame], int]] = {}
         self._tracks: List[_Track] = []
         self._pair: Dict[Tuple[str, int], int] = {}     # (sensor, user) -> track id
-        self._swap: Dict[Tuple[str, int], np.ndarray] = {}   # (sensor, user) -> limb swap flagged
         self._ids = itertools.count(1)
 
     @property
@@ -229,13 +226,16 @@ class MultiSensorFusion:
                 self.stats.reliability_s += time.perf_counter() - t0
                 plaus = est.plausibility
                 perm = unswap_permutation(plaus.swapped) if plaus.lr_unswap else None
-                # the sensor swapped this view's left and right arms or legs (plausibility.py,
-                # which then keeps their reliability, for the reconstruction swaps them back): a
-                # candidate, confirmed against the track's fused skeleton in _resolve_mirror
-                if perm is None:
-                    self._swap.pop((sensor, f.user_id), None)
-                else:
-                    self._swap[(sensor, f.user_id)] = perm
+                if perm is not None:
+                    # the sensor swapped this view's left and right arms or legs (plausibility.py,
+                    # which then keeps their reliability): swapped back, as the reconstruction
+                    # does with one sensor -- else the weighted mean would average a left limb
+                    # with the other view's right one
+                    self.stats.unswapped += 1
+                    f = f.copy(positions=np.asarray(f.positions, float)[perm],
+                               tracking_state=f.tracking_state[perm],
+                               orientations=None if f.orientations is None else f.orientations[perm])
+                    rel = rel[perm]
             # to_world(f.copy(reliability=rel, stamp_ns=...)) in one copy
             pose = self.poses[sensor]
             w = f.copy(positions=pose.apply(f.positions), reliability=rel, stamp_ns=int(stamp_ns),
@@ -248,7 +248,6 @@ class MultiSensorFusion:
         for uid in [u for u in hist if u not in seen]:      # a user the sensor lost
             del hist[uid]
             self._rel.pop((sensor, uid), None)
-            self._swap.pop((sensor, uid), None)
             self._pair.pop((sensor, uid), None)
 
     def _views(self, stamp_ns: int) -> List[Tuple[str, int, SkeletonFrame]]:
@@ -326,20 +325,6 @@ class MultiSensorFusion:
             if flip:
                 self.stats.mirrored += 1
                 f = mirror_labels(f)
-            perm = self._swap.get(views[i][:2])
-            if perm is not None:
-                # a limb swap the view's plausibility flagged: swapped back when the swapped
-                # labelling lies nearer the track's last fused skeleton (a profile view's noisy
-                # girdles flag swaps that are not), or when there is none yet -- else the mean
-                # would average one view's left limb with the other's right
-                moved = np.flatnonzero(perm != np.arange(NUM_JOINTS))
-                if track.fused is None or (
-                        np.linalg.norm(f.positions[perm][moved] - ref_pos[moved], axis=1).sum()
-                        < np.linalg.norm(f.positions[moved] - ref_pos[moved], axis=1).sum()):
-                    self.stats.unswapped += 1
-                    f = f.copy(positions=f.positions[perm], tracking_state=f.tracking_state[perm],
-                               reliability=f.reliability[perm],
-                               orientations=None if f.orientations is None else f.orientations[perm])
             out.append(f)
         return out
 
