@@ -31,10 +31,11 @@ Terms (each 1 = plausible):
   (girdle joints included) get 0. (Both girdles off at once is a fast turn or a whole-body
   mirror: the heading is taken over.)
 * **floor penetration** — the floor height is a low quantile (``FLOOR_QUANTILE``), over the
-  last ``floor_window`` frames, of the lowest TRACKED foot or ankle (less its height; the floor is
-  where the feet are lowest: a foot lifted, or resting TRACKED on a step or an object, is above it on most frames -- the
-  median of such a window put the floor 25-30 cm too high and rejected a clean TRACKED ankle
-  below it for 20 frames, issue 34; a foot through the floor is a short event); a joint ``floor_tolerance_m`` below it starts losing plausibility,
+  last ``floor_window`` frames, of the lowest TRACKED foot or ankle (less its height). The floor
+  is where the feet are lowest: a foot lifted, or resting TRACKED on a step or an object, is
+  above it on most frames (the median of such a window put the floor 25-30 cm too high and
+  rejected a clean TRACKED ankle below it for 20 frames, issue 34); a foot through the floor is a
+  short event. A joint ``floor_tolerance_m`` below the floor starts losing plausibility,
   ``floor_reject_m`` below it has none.
 * **whole-skeleton jump** — the TRACKED joints moving, in the median, more than ``jump_m`` from
   where each was last plausibly makes every joint 0 (:attr:`PlausibilityCheck.skeleton_outlier`
