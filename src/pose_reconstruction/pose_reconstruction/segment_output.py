@@ -124,9 +124,8 @@ class SegmentOutputConfig:
         'everywhere', range=(0.01, 1.0), public=False)
     direction_fusion: bool = param(
         True, 'segments: the observed direction of a segment with two reliable ends weighted by '
-        'the expected errors of the observation and the database, measured on the user (per '
-        'segment; observation_weight until measured); false = observation_weight everywhere',
-        public=False)
+        "its expected error (the user's joint-centre offsets across the segment) against the "
+        "database solution's; false = observation_weight everywhere", public=False)
     smooth_anchored_speed: bool = param(
         True, 'segments, few reliable joints (hips, shoulders and every segment unreliable): a '
         'filled segment with a reliable joint at or below its child keeps the One Euro speed '
