@@ -30,8 +30,12 @@ Terms (each 1 = plausible):
   reconstructor swaps the two limbs back (:func:`unswap`) and keeps them, else both limbs
   (girdle joints included) get 0. (Both girdles off at once is a fast turn or a whole-body
   mirror: the heading is taken over.)
-* **floor penetration** — the floor height is the median, over the last ``floor_window`` frames,
-  of the lowest TRACKED foot; a joint ``floor_tolerance_m`` below it starts losing plausibility,
+* **floor penetration** — the floor height is a low quantile (``FLOOR_QUANTILE``), over the
+  last ``floor_window`` frames, of the lowest TRACKED foot or ankle (less its height). The floor
+  is where the feet are lowest: a foot lifted, or resting TRACKED on a step or an object, is
+  above it on most frames (the median of such a window put the floor 25-30 cm too high and
+  rejected a clean TRACKED ankle below it for 20 frames, issue 34); a foot through the floor is a
+  short event. A joint ``floor_tolerance_m`` below the floor starts losing plausibility,
   ``floor_reject_m`` below it has none.
 * **whole-skeleton jump** — the TRACKED joints moving, in the median, more than ``jump_m`` from
   where each was last plausibly makes every joint 0 (:attr:`PlausibilityCheck.skeleton_outlier`
@@ -44,6 +48,7 @@ from __future__ import annotations
 
 import bisect
 import collections
+import math
 import dataclasses
 from dataclasses import dataclass
 from typing import Dict, Optional
@@ -52,9 +57,10 @@ import numpy as np
 
 from skeleton_core import jit
 from skeleton_core.params import check, defaults, names, param
-from skeleton_core.model import (FOOT_LEFT, FOOT_RIGHT, HIP_LEFT, HIP_RIGHT, LIMB_JOINTS,
-                                 NUM_JOINTS, NUM_SEGMENTS, PARENTS, ROOT, SEGMENT_CHILDREN,
-                                 SEGMENT_PARENTS, SHOULDER_LEFT, SHOULDER_RIGHT, TRACKED)
+from skeleton_core.model import (ANKLE_LEFT, ANKLE_RIGHT, FOOT_LEFT, FOOT_RIGHT, HIP_LEFT,
+                                 HIP_RIGHT, LIMB_JOINTS, NUM_JOINTS, NUM_SEGMENTS, PARENTS, ROOT,
+                                 SEGMENT_CHILDREN, SEGMENT_PARENTS, SHOULDER_LEFT, SHOULDER_RIGHT,
+                                 TRACKED, standard_body)
 
 @dataclass
 class PlausibilityConfig:
@@ -97,7 +103,7 @@ class PlausibilityConfig:
         0.12, 'plausibility: depth (m) below the floor at which a joint has no plausibility '
         'left', range=(0.001, 5.0), public=False)
     floor_window: int = param(
-        150, 'plausibility: frames whose lowest TRACKED foot gives the floor (median)',
+        150, 'plausibility: frames whose lowest TRACKED foot gives the floor (a low quantile)',
         range=(1, 100000), public=False)
     jump_m: float = param(
         0.35, 'plausibility: median distance (m) of the TRACKED joints from their last plausible '
@@ -122,6 +128,14 @@ _SEG_P = np.array(SEGMENT_PARENTS)
 _SEG_C = np.array(SEGMENT_CHILDREN)
 _LIMB = set(LIMB_JOINTS['left_arm'][1:] + LIMB_JOINTS['right_arm'][1:]
             + LIMB_JOINTS['left_leg'][1:] + LIMB_JOINTS['right_leg'][1:])
+
+
+# the floor: this quantile of the lowest TRACKED foot over floor_window frames (module docstring)
+# (a foot through the floor stays rejected for floor_window * FLOOR_QUANTILE frames, 1.2 s);
+# a TRACKED ankle says the floor is at most _ANKLE_HEIGHT below it (the standard body's ankle
+# above its foot joint)
+FLOOR_QUANTILE = 0.25
+_ANKLE_HEIGHT = float(-standard_body().rest_offsets[FOOT_LEFT][2])
 
 
 def _below(j: int) -> np.ndarray:
@@ -322,11 +336,12 @@ class PlausibilityCheck:
         return out
 
     def _floor(self, p, tracked) -> np.ndarray:
-        feet = [j for j in (FOOT_LEFT, FOOT_RIGHT) if tracked[j]]
-        if feet:
-            self._floor_push(float(min(p[j, 2] for j in feet)))
+        low = [p[j, 2] for j in (FOOT_LEFT, FOOT_RIGHT) if tracked[j]]
+        low += [p[j, 2] - _ANKLE_HEIGHT for j in (ANKLE_LEFT, ANKLE_RIGHT) if tracked[j]]
+        if low:
+            self._floor_push(float(min(low)))
             if len(self._floor_z) >= 5:
-                self.floor = self._floor_median()
+                self.floor = self._floor_quantile(FLOOR_QUANTILE)
         if self.floor is None:
             return np.ones(NUM_JOINTS)
         depth = self.floor - p[:, 2]
@@ -348,13 +363,19 @@ class PlausibilityCheck:
         else:
             bisect.insort(self._floor_sorted, z)
 
-    def _floor_median(self) -> float:
-        """``np.median(self._floor_z)`` (the same value; NaN when the window holds one)."""
+    def _floor_quantile(self, q: float) -> float:
+        """``np.quantile(self._floor_z, q)`` (the same value: its 'linear' method and its
+        interpolation arithmetic, on the sorted window; NaN when the window holds one)."""
         if self._floor_nan:
             return float('nan')
         v = self._floor_sorted
-        n = len(v)
-        return v[n // 2] if n % 2 else (v[n // 2 - 1] + v[n // 2]) / 2.0
+        pos = (len(v) - 1) * q
+        lo = int(math.floor(pos))
+        hi = min(lo + 1, len(v) - 1)
+        t = pos - lo
+        a, b = v[lo], v[hi]
+        d = b - a
+        return b - d * (1.0 - t) if t >= 0.5 else a + d * t
 
     def update(self, positions: np.ndarray, tracking_state: np.ndarray,
                reference_lengths: np.ndarray, seg: Optional[np.ndarray] = None,

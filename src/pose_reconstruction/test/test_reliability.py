@@ -293,9 +293,9 @@ def test_fast_column_median_equals_numpy():
         np.testing.assert_array_equal(_column_median(a), np.median(a, axis=0))
 
 
-def test_plausibility_running_floor_median_is_np_median():
-    """The floor's running median (sorted window, bisect) gives np.median's value at every frame,
-    through the window's eviction and a NaN in it (np.median: NaN)."""
+def test_plausibility_running_floor_quantile_is_np_quantile():
+    """The floor's running quantile (sorted window, bisect) gives np.quantile's value at every
+    frame, through the window's eviction and a NaN in it (np.quantile: NaN)."""
     from pose_reconstruction.plausibility import PlausibilityCheck
     pc = PlausibilityCheck(floor_window=7)
     rng = np.random.default_rng(3)
@@ -303,8 +303,9 @@ def test_plausibility_running_floor_median_is_np_median():
     vals[12] = float('nan')
     for z in vals:
         pc._floor_push(float(z))
-        got, want = pc._floor_median(), float(np.median(pc._floor_z))
-        assert (np.isnan(got) and np.isnan(want)) or got == want
+        for q in (0.25, 0.5, 0.1, 0.9):
+            got, want = pc._floor_quantile(q), float(np.quantile(pc._floor_z, q))
+            assert (np.isnan(got) and np.isnan(want)) or got == want
 
 
 @pytest.mark.parametrize('scenario', ['c', 'd'])
