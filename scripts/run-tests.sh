@@ -11,6 +11,8 @@ set +u
 source "$root/scripts/env.sh"
 set -u
 cd "$root"
+# the numba kernels compiled once here, not by every node process of the first tests at once
+python -m kinect_bringup.warm_kernels || echo "warm_kernels failed: the nodes compile their kernels themselves"
 # each run gets its own DDS domain (conftest.py refines this per worker)
 export ROS_DOMAIN_ID="${KP_TEST_DOMAIN_ID:-$(( 1 + $$ % 100 ))}"
 set +e

@@ -182,3 +182,75 @@ def test_sensor_model_views_share_one_object():
     # the user (its y range, the side sensor's depth, overlaps the user's), not in front
     root = view.truth_all[:, HIP_CENTER]
     assert view.box[0][0] < np.median(root[:, 0]) < view.box[1][0] + 1.0
+
+
+def test_a_joint_no_view_tracks_is_held_relative_to_its_parent():
+    """A hand both sensors lose is reported by each at the place it left the room (the Kinect's
+    held INFERRED joint); the fused hand stays where the track last saw it *from its parent* and
+    moves with the body (here: the person walks 0.5 m while the hand is lost)."""
+    fu = MultiSensorFusion({'k1': FRONT, 'k2': SIDE})
+    for i in range(12):
+        truth = person(y=0.05 * i)
+        a, b = seen(truth, FRONT, stamp=i * DT), seen(truth, SIDE, stamp=i * DT)
+        if i >= 2:      # lost by both: each view holds the hand where it last saw it
+            for f, pose in ((a, FRONT), (b, SIDE)):
+                f.positions[HAND_RIGHT] = pose.inverse().apply(person(y=0.05)[None])[0, HAND_RIGHT]
+                f.tracking_state[HAND_RIGHT] = INFERRED
+                f.reliability[HAND_RIGHT] = 0.0
+        fu.add('k1', [a], i * DT)
+        fu.add('k2', [b], i * DT)
+        (f,), _, _ = fu.fuse()
+    assert f.tracking_state[HAND_RIGHT] == INFERRED and f.reliability[HAND_RIGHT] == 0.0
+    assert np.linalg.norm(f.positions[HAND_RIGHT] - truth[HAND_RIGHT]) < 1e-6
+    # the views' held hand is 0.5 m behind
+    assert np.linalg.norm(person(y=0.05)[HAND_RIGHT] - truth[HAND_RIGHT]) == pytest.approx(0.5)
+
+
+def test_evaluation_layouts_place_the_two_sensors_90_deg_apart():
+    """evaluate --sensors 2: front-side = the front sensor itself + one on the user's side;
+    diagonal = both 2.5 m from the user, 90 deg apart, 45 deg either side of the front, facing
+    the user; an unknown layout is a one-line error."""
+    from kinect_experiments.fusion_eval import view_poses
+    sensor = SensorModel(None, seed=0)
+    d = sensor.params['placement']['distance_m']
+    user = np.array([d, sensor.params['placement']['lateral_offset_m'], 0.0])
+    fs = view_poses(sensor, 2, 'front-side')
+    assert fs[0].is_identity()
+    for poses, off in ((fs, (0.0, 90.0)), (view_poses(sensor, 2, 'diagonal'), (45.0, 45.0))):
+        dirs = []
+        for pose, o in zip(poses, off):
+            to_user = user - pose.translation
+            assert np.linalg.norm(to_user) == pytest.approx(d)
+            x = pose.apply(np.array([[1.0, 0.0, 0.0]]))[0] - pose.translation
+            assert np.dot(x, to_user) / d == pytest.approx(1.0)      # it faces the user
+            dirs.append(to_user / d)
+            # the angle from the user's front (the user faces the front sensor, -x)
+            ang = np.degrees(np.arccos(np.clip(dirs[-1] @ [1.0, 0.0, 0.0], -1, 1)))
+            assert ang == pytest.approx(o)
+        assert np.degrees(np.arccos(np.clip(dirs[0] @ dirs[1], -1, 1))) == pytest.approx(90.0)
+    with pytest.raises(ValueError, match='unknown layout'):
+        view_poses(sensor, 2, 'ring')
+
+
+def test_limbs_a_view_swapped_are_swapped_back_before_the_mean():
+    """A sensor that swaps the user's left and right arms (a confident failure, TRACKED): its
+    Eq. 1-8 plausibility flags the swap and keeps the arms' reliability (the reconstruction swaps
+    them back); the fusion swaps them back too, so the fused left hand is the left hand, not the
+    mean of one view's left and the other's right."""
+    from skeleton_core.model import LIMB_JOINTS
+    arms_l, arms_r = list(LIMB_JOINTS['left_arm']), list(LIMB_JOINTS['right_arm'])
+    fu = MultiSensorFusion({'k1': FRONT, 'k2': SIDE})
+    for i in range(20):
+        truth = person(y=0.01 * i)
+        views = [seen(truth, FRONT, stamp=i * DT), seen(truth, SIDE, stamp=i * DT)]
+        for v in views:
+            v.reliability = np.full(NUM_JOINTS, np.nan, np.float32)    # the fusion computes Eq. 1-8
+        if i == 19:
+            p = views[0].positions
+            p[arms_l + arms_r] = p[arms_r + arms_l]
+        fu.add('k1', [views[0]], i * DT)
+        fu.add('k2', [views[1]], i * DT)
+        (f,), _, _ = fu.fuse()
+    assert fu.stats.unswapped == 1
+    assert np.linalg.norm(f.positions[HAND_LEFT] - truth[HAND_LEFT]) < 1e-6
+    assert np.linalg.norm(truth[HAND_LEFT] - truth[HAND_RIGHT]) > 1.0

@@ -93,6 +93,10 @@ def _parser():
                    help='N > 1: N sensor-model views (front, side at 90 deg, ...) fused '
                         '(pose_reconstruction.fusion): single-sensor raw and C against fused raw '
                         'and fused + C per class (docs/multi_sensor.md)')
+    p.add_argument('--layout', default='front-side', choices=('front-side', 'diagonal'),
+                   help='--sensors 2: front-side = sensor 1 in front of the user and sensor 2 on '
+                        'the side (90 deg); diagonal = the two 90 deg apart at 45 deg either side '
+                        'of the front (single-sensor rows: the front sensor alone either way)')
     p.add_argument('--quiet', action='store_true', help='no progress lines')
     p.add_argument('--real', nargs='?', const='auto', default=None, metavar='UIPRMD_DIR',
                    help='real-data mode: raw, holt, one_euro, C and C with the learned sensor '

@@ -25,6 +25,12 @@ one sensor's:
 6. **Fusion.** Per joint, the reliability-weighted mean of the views (weight = reliability x
    tracking-state factor); the fused reliability is the best view's, the tracking state the best
    view's, the orientation that of the view with the largest weight.
+7. **Lost joints.** A joint no view tracks is, in every view, held where that sensor last saw it
+   *in the room* (the Kinect's INFERRED joint; the sensor model's ``hold``): it stays behind when
+   the person moves. The fused joint is put where the track last saw it *from its parent* (the
+   parent's fused position + the last segment vector with both ends tracked), so it moves with
+   the body; its state and reliability stay the views' (INFERRED, ~0: the reconstruction still
+   replaces it).
 
 One sensor alone passes through untouched: :meth:`MultiSensorFusion.fuse` returns its frames as
 they came (same arrays, same frame, same ids; the reconstruction and the physics take the sensor's
@@ -41,9 +47,10 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 
 from skeleton_core.conversions import SkeletonFrame
-from skeleton_core.model import HIP_CENTER, MIRROR, NUM_JOINTS
+from skeleton_core.model import HIP_CENTER, MIRROR, NUM_JOINTS, PARENTS, TRACKED
 from skeleton_core.tf import Transform
 
+from .plausibility import unswap_permutation
 from .posture_space import heading_yaw
 from .reliability import ReliabilityEstimator
 
@@ -57,6 +64,11 @@ STATE_WEIGHT = np.array([0.0, 0.05, 1.0])   # NOT_TRACKED, INFERRED, TRACKED: an
 #                                       is a guess (Eq. 7 gives it R_t = 0); it only counts when no
 #                                       view tracks the joint
 _EPS = 1e-9
+HOLD_RELATIVE = True    # step 7 (a module switch for the evaluation's with/without comparison)
+_PARENTS = np.asarray(PARENTS)
+# STATE_WEIGHT of np.clip(state, 0, 2) for any uint8 state, in one lookup
+_STATE_WEIGHT8 = np.full(256, STATE_WEIGHT[2])
+_STATE_WEIGHT8[:3] = STATE_WEIGHT
 _MIRROR = np.asarray(MIRROR)
 _LR = np.array([j for j in range(NUM_JOINTS) if MIRROR[j] != j])   # joints with a mirror twin
 
@@ -89,6 +101,12 @@ def interpolate(f0: SkeletonFrame, f1: SkeletonFrame, stamp_ns: int) -> Skeleton
                      stamp_ns=int(stamp_ns))
 
 
+def _mean_reliability(r: np.ndarray) -> float:
+    """``np.nanmean(r)`` (the same value), without nanmean's overhead when nothing is NaN."""
+    m = r.mean()
+    return np.nanmean(r) if m != m else m
+
+
 def facing(positions: np.ndarray, weights=None) -> np.ndarray:
     """Unit horizontal body facing (x, y) in the positions' frame (hip and shoulder lines)."""
     yaw = heading_yaw(positions, [1.0] * NUM_JOINTS if weights is None else weights)
@@ -101,10 +119,13 @@ def fuse_views(views: Sequence[SkeletonFrame], user_id: int = 0, stamp_ns: int =
     if len(views) == 1:
         return views[0].copy(user_id=user_id, stamp_ns=stamp_ns, frame_id=frame_id)
     p = np.stack([v.positions for v in views])                      # (V, 20, 3)
-    ts = np.stack([v.tracking_state for v in views]).astype(np.intp)
-    r = np.nan_to_num(np.stack([v.reliability for v in views]).astype(float), nan=0.0)
-    sw = STATE_WEIGHT[np.clip(ts, 0, 2)]
-    w = np.clip(r, 0.0, 1.0) * sw
+    ts = np.stack([v.tracking_state for v in views])
+    r = np.stack([v.reliability for v in views]).astype(float)
+    r[np.isnan(r)] = 0.0                                            # np.nan_to_num(nan=0), in place
+    sw = (_STATE_WEIGHT8[ts] if ts.dtype == np.uint8
+          else STATE_WEIGHT[np.clip(ts.astype(np.intp), 0, 2)])
+    w = np.minimum(np.maximum(r, 0.0), 1.0)                         # np.clip(r, 0, 1)
+    w *= sw
     none = w.sum(axis=0) < _EPS                                     # no view trusts the joint
     w[:, none] = sw[:, none] + _EPS                                 # tracking state alone, else all
     w /= w.sum(axis=0, keepdims=True)
@@ -113,9 +134,29 @@ def fuse_views(views: Sequence[SkeletonFrame], user_id: int = 0, stamp_ns: int =
     ori = None
     if all(v.orientations is not None for v in views):
         ori = np.stack([v.orientations for v in views])[best, cols]
-    return SkeletonFrame(positions=np.einsum('vj,vjk->jk', w, p), tracking_state=ts.max(axis=0).astype(np.uint8),
+    return SkeletonFrame(positions=np.einsum('vj,vjk->jk', w, p),
+                         tracking_state=ts.max(axis=0).astype(np.uint8),
                          reliability=r.max(axis=0).astype(np.float32), orientations=ori,
                          user_id=user_id, stamp_ns=stamp_ns, frame_id=frame_id)
+
+
+def hold_relative(track: '_Track', fused: SkeletonFrame) -> None:
+    """Step 7: joints no view tracks where the track last saw them relative to their parent
+    (``fused`` changed in place; ``track.rel`` learns the segments with both ends tracked)."""
+    ts = fused.tracking_state
+    p = fused.positions
+    tracked = ts == TRACKED
+    if track.rel is None:
+        track.rel = np.full((NUM_JOINTS, 3), np.nan)
+    rel = track.rel
+    held = ~tracked & ~np.isnan(rel[:, 0])
+    held[0] = False
+    for j in np.flatnonzero(held).tolist():   # ascending = parents first: a held child follows
+        p[j] = p[_PARENTS[j]] + rel[j]          # its (held) parent
+    both = tracked.copy()
+    both[1:] &= tracked[_PARENTS[1:]]
+    both[0] = False
+    rel[both] = p[both] - p[_PARENTS[both]]
 
 
 @dataclass
@@ -125,6 +166,7 @@ class _Track:
     facing: Optional[np.ndarray] = None
     fused: Optional[SkeletonFrame] = None
     last_ns: int = 0
+    rel: Optional[np.ndarray] = None      # (20, 3) each joint from its parent when last tracked
 
 
 @dataclass
@@ -132,6 +174,7 @@ class FusionStats:
     frames: int = 0
     late: int = 0          # views left out: older than one frame period
     mirrored: int = 0      # views whose left/right labels were swapped
+    unswapped: int = 0     # views with limbs swapped back (the per-sensor plausibility's swaps)
     tracks: int = 0
     reliability_s: float = 0.0   # time spent in Eq. 1-8 (the reconstruction then takes it as given)
 
@@ -181,7 +224,23 @@ class MultiSensorFusion:
                 t0 = time.perf_counter()
                 rel = est.update(f.positions, f.tracking_state).astype(np.float32)
                 self.stats.reliability_s += time.perf_counter() - t0
-            w = to_world(f.copy(reliability=rel, stamp_ns=int(stamp_ns)), self.poses[sensor], self.frame_id)
+                plaus = est.plausibility
+                perm = unswap_permutation(plaus.swapped) if plaus.lr_unswap else None
+                if perm is not None:
+                    # the sensor swapped this view's left and right arms or legs (plausibility.py,
+                    # which then keeps their reliability): swapped back, as the reconstruction
+                    # does with one sensor -- else the weighted mean would average a left limb
+                    # with the other view's right one
+                    self.stats.unswapped += 1
+                    f = f.copy(positions=np.asarray(f.positions, float)[perm],
+                               tracking_state=f.tracking_state[perm],
+                               orientations=None if f.orientations is None else f.orientations[perm])
+                    rel = rel[perm]
+            # to_world(f.copy(reliability=rel, stamp_ns=...)) in one copy
+            pose = self.poses[sensor]
+            w = f.copy(positions=pose.apply(f.positions), reliability=rel, stamp_ns=int(stamp_ns),
+                       frame_id=self.frame_id,
+                       orientations=None if f.orientations is None else pose.apply_quat(f.orientations))
             h = hist.setdefault(f.user_id, [])
             h.append(w)
             del h[:-2]
@@ -218,15 +277,18 @@ class MultiSensorFusion:
             if tracks:
                 tp = np.array([t.pelvis for t in tracks])
                 dist = np.linalg.norm(pel[:, None, :2] - tp[None, :, :2], axis=2)
-                prev = np.array([[self._pair.get((sensor, v[1])) == t.track_id for t in tracks]
-                                 for v in vs], float)
-                taken = np.array([t.track_id in groups and any(g[0] == sensor for g in groups[t.track_id])
-                                  for t in tracks])
+                index = {t.track_id: k for k, t in enumerate(tracks)}
+                prev = np.zeros(dist.shape)
+                for i, v in enumerate(vs):
+                    k = index.get(self._pair.get((sensor, v[1])))
+                    if k is not None:
+                        prev[i, k] = 1.0
+                # one view per sensor and track: the assignment gives each track at most one of
+                # this sensor's views, and no track holds one yet (each sensor is assigned once)
                 cost = dist - HYSTERESIS * prev
-                cost[:, taken] = 1e6                       # one view per sensor and track
                 rows, cols = linear_sum_assignment(cost)
-                for i, k in zip(rows, cols):
-                    if not taken[k] and dist[i, k] < self.gate + HYSTERESIS * prev[i, k]:
+                for i, k in zip(rows.tolist(), cols.tolist()):
+                    if dist[i, k] < self.gate + HYSTERESIS * prev[i, k]:
                         assigned[i] = tracks[k]
             for i, v in enumerate(vs):
                 t = assigned.get(i)
@@ -241,7 +303,7 @@ class MultiSensorFusion:
         frames = [v[2] for v in views]
         if len(frames) == 1 and track.facing is None:
             return frames
-        ref_i = int(np.argmax([np.nanmean(f.reliability) for f in frames]))
+        ref_i = int(np.argmax([_mean_reliability(f.reliability) for f in frames]))
         ref_face = track.facing
         if ref_face is None:
             ref_face = facing(frames[ref_i].positions, frames[ref_i].reliability)
@@ -285,6 +347,8 @@ class MultiSensorFusion:
                 continue
             frames = self._resolve_mirror(t, views)
             fused = fuse_views(frames, user_id=t.track_id, stamp_ns=stamp_ns, frame_id=self.frame_id)
+            if HOLD_RELATIVE:
+                hold_relative(t, fused)
             t.pelvis = fused.positions[HIP_CENTER].copy()
             t.facing = facing(fused.positions, fused.reliability)
             t.fused = fused

@@ -78,6 +78,11 @@ class FusionNode(ManagedNode):
     def configure(self) -> None:
         self.sensors = list(self.params['input_topics'])
         self._new_state()
+        if len(self.sensors) > 1:   # the per-sensor Eq. 1-8, compiled now: not on the first frame
+            from .reliability_kernels import warm_up
+            warm_s = warm_up()
+            if warm_s > 0.5:
+                self.get_logger().info(f'compiled kernels ready in {warm_s:.1f} s (cached from now on)')
         self.tf = TfBuffer()
         self.tf_listener = StaticTfListener(self, self.tf)
         self._configured.append(('subscription', self.tf_listener.sub))
@@ -115,7 +120,8 @@ class FusionNode(ManagedNode):
             return {}
         st = self.fusion.stats
         return {'sensors': len(self.sensors), 'tracks': st.tracks, 'late_views': st.late,
-                'mirrored_views': st.mirrored, 'published_without_late_sensor': self.clock.forced,
+                'mirrored_views': st.mirrored, 'unswapped_views': st.unswapped,
+                'published_without_late_sensor': self.clock.forced,
                 'user_states': sum(len(h) for h in self.fusion._hist.values())}
 
     # ------------------------------------------------------------------ input

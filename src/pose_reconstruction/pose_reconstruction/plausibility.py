@@ -30,8 +30,12 @@ Terms (each 1 = plausible):
   reconstructor swaps the two limbs back (:func:`unswap`) and keeps them, else both limbs
   (girdle joints included) get 0. (Both girdles off at once is a fast turn or a whole-body
   mirror: the heading is taken over.)
-* **floor penetration** — the floor height is the median, over the last ``floor_window`` frames,
-  of the lowest TRACKED foot; a joint ``floor_tolerance_m`` below it starts losing plausibility,
+* **floor penetration** — the floor height is a low quantile (``FLOOR_QUANTILE``), over the
+  last ``floor_window`` frames, of the lowest TRACKED foot or ankle (less its height). The floor
+  is where the feet are lowest: a foot lifted, or resting TRACKED on a step or an object, is
+  above it on most frames (the median of such a window put the floor 25-30 cm too high and
+  rejected a clean TRACKED ankle below it for 20 frames, issue 34); a foot through the floor is a
+  short event. A joint ``floor_tolerance_m`` below the floor starts losing plausibility,
   ``floor_reject_m`` below it has none.
 * **whole-skeleton jump** — the TRACKED joints moving, in the median, more than ``jump_m`` from
   where each was last plausibly makes every joint 0 (:attr:`PlausibilityCheck.skeleton_outlier`
@@ -42,17 +46,21 @@ Terms (each 1 = plausible):
 """
 from __future__ import annotations
 
+import bisect
 import collections
+import math
 import dataclasses
 from dataclasses import dataclass
 from typing import Dict, Optional
 
 import numpy as np
 
+from skeleton_core import jit
 from skeleton_core.params import check, defaults, names, param
-from skeleton_core.model import (FOOT_LEFT, FOOT_RIGHT, HIP_LEFT, HIP_RIGHT, LIMB_JOINTS,
-                                 NUM_JOINTS, NUM_SEGMENTS, PARENTS, ROOT, SEGMENT_CHILDREN,
-                                 SEGMENT_PARENTS, SHOULDER_LEFT, SHOULDER_RIGHT, TRACKED)
+from skeleton_core.model import (ANKLE_LEFT, ANKLE_RIGHT, FOOT_LEFT, FOOT_RIGHT, HIP_LEFT,
+                                 HIP_RIGHT, LIMB_JOINTS, NUM_JOINTS, NUM_SEGMENTS, PARENTS, ROOT,
+                                 SEGMENT_CHILDREN, SEGMENT_PARENTS, SHOULDER_LEFT, SHOULDER_RIGHT,
+                                 TRACKED, standard_body)
 
 @dataclass
 class PlausibilityConfig:
@@ -95,7 +103,7 @@ class PlausibilityConfig:
         0.12, 'plausibility: depth (m) below the floor at which a joint has no plausibility '
         'left', range=(0.001, 5.0), public=False)
     floor_window: int = param(
-        150, 'plausibility: frames whose lowest TRACKED foot gives the floor (median)',
+        150, 'plausibility: frames whose lowest TRACKED foot gives the floor (a low quantile)',
         range=(1, 100000), public=False)
     jump_m: float = param(
         0.35, 'plausibility: median distance (m) of the TRACKED joints from their last plausible '
@@ -114,10 +122,20 @@ class PlausibilityConfig:
 PLAUSIBILITY_PARAMS = tuple(names(PlausibilityConfig))
 PLAUSIBILITY_DEFAULTS: Dict = defaults(PlausibilityConfig)
 
+from . import reliability_kernels as K  # noqa: E402  (after the model imports, which it does not need)
+
 _SEG_P = np.array(SEGMENT_PARENTS)
 _SEG_C = np.array(SEGMENT_CHILDREN)
 _LIMB = set(LIMB_JOINTS['left_arm'][1:] + LIMB_JOINTS['right_arm'][1:]
             + LIMB_JOINTS['left_leg'][1:] + LIMB_JOINTS['right_leg'][1:])
+
+
+# the floor: this quantile of the lowest TRACKED foot over floor_window frames (module docstring)
+# (a foot through the floor stays rejected for floor_window * FLOOR_QUANTILE frames, 1.2 s);
+# a TRACKED ankle says the floor is at most _ANKLE_HEIGHT below it (the standard body's ankle
+# above its foot joint)
+FLOOR_QUANTILE = 0.25
+_ANKLE_HEIGHT = float(-standard_body().rest_offsets[FOOT_LEFT][2])
 
 
 def _below(j: int) -> np.ndarray:
@@ -204,17 +222,20 @@ class PlausibilityCheck:
         self.floor_window = int(cfg.floor_window)
         self.jump_m = float(cfg.jump_m)
         self.jump_frames = int(cfg.jump_frames)
+        self._jit = jit.enabled()        # the segment terms compiled (reliability_kernels)
         self.reset()
 
     def reset(self) -> None:
         self.heading: Optional[float] = None
         self._floor_z: collections.deque = collections.deque(maxlen=self.floor_window)
+        self._floor_sorted: list = []     # the window's finite values, sorted (running median)
+        self._floor_nan = 0               # NaNs in the window (np.median: NaN)
         self.floor: Optional[float] = None
         self._last_rel: Optional[np.ndarray] = None
         self._latch = np.zeros(NUM_SEGMENTS, int)
         self._last_both = np.zeros(NUM_SEGMENTS, bool)
         self._anchor: Optional[np.ndarray] = None
-        self._jumped = 0
+        self._jumped_a = np.zeros(1, np.int64)   # frames of the current jump rejected
         self.skeleton_outlier = False
         self.swapped = {'arms': False, 'legs': False}
         self.terms: Dict[str, np.ndarray] = {}
@@ -240,13 +261,21 @@ class PlausibilityCheck:
             self._anchor = p.copy()
             self._anchor_ok = tracked.copy()
             return False
+        if self._jit:
+            return K.skeleton_jump(p, tracked, self._anchor, self._anchor_ok, self._jumped_a,
+                                   self.jump_m, self.jump_frames)
         both = tracked & self._anchor_ok
-        if both.sum() >= 3:
-            d = float(np.median(np.linalg.norm(p[both] - self._anchor[both], axis=1)))
-            if d > self.jump_m and self._jumped < self.jump_frames:
-                self._jumped += 1
+        if np.count_nonzero(both) >= 3:
+            diff = p[both] - self._anchor[both]
+            dist = np.sqrt((diff * diff).sum(axis=1))      # np.linalg.norm's arithmetic
+            dist.sort()
+            n = len(dist)
+            # np.median's value (the middle one, or the mean of the two), without its overhead
+            d = float(dist[n // 2]) if n % 2 else float((dist[n // 2 - 1] + dist[n // 2]) / 2.0)
+            if d > self.jump_m and self._jumped_a[0] < self.jump_frames:
+                self._jumped_a[0] += 1
                 return True
-        self._jumped = 0
+        self._jumped_a[0] = 0
         self._anchor[tracked] = p[tracked]
         self._anchor_ok |= tracked
         return False
@@ -256,14 +285,15 @@ class PlausibilityCheck:
             excess = np.abs(seg_len - ref) - (self.bone_tolerance * ref + self.bone_tolerance_m)
             score = 1.0 - np.maximum(excess, 0.0) / np.maximum(self.bone_reject * ref, 1e-6)
         # a segment without a profile length yet (NaN) is not judged
-        return np.where(both & np.isfinite(score), np.clip(score, 0.0, 1.0), 1.0)
+        return np.where(both & np.isfinite(score), np.minimum(np.maximum(score, 0.0), 1.0), 1.0)
 
     def _speed(self, rel, both) -> np.ndarray:
         """A segment whose child jumps faster than ``max_segment_speed_m_s`` relative to its parent
         is latched implausible until it jumps again (the snap ends) or ``latch_frames`` pass."""
         score = np.ones(NUM_SEGMENTS)
         if self._last_rel is not None:
-            step = np.linalg.norm(rel - self._last_rel, axis=1)
+            diff = rel - self._last_rel
+            step = np.sqrt((diff * diff).sum(axis=1))      # np.linalg.norm's arithmetic
             # TRACKED in both frames: a joint re-acquired after an occlusion may jump
             jump = both & self._last_both & (step > self.max_step)
             ended = jump & (self._latch > 0)          # the jump back
@@ -306,16 +336,46 @@ class PlausibilityCheck:
         return out
 
     def _floor(self, p, tracked) -> np.ndarray:
-        feet = [j for j in (FOOT_LEFT, FOOT_RIGHT) if tracked[j]]
-        if feet:
-            self._floor_z.append(float(min(p[j, 2] for j in feet)))
+        low = [p[j, 2] for j in (FOOT_LEFT, FOOT_RIGHT) if tracked[j]]
+        low += [p[j, 2] - _ANKLE_HEIGHT for j in (ANKLE_LEFT, ANKLE_RIGHT) if tracked[j]]
+        if low:
+            self._floor_push(float(min(low)))
             if len(self._floor_z) >= 5:
-                self.floor = float(np.median(self._floor_z))
+                self.floor = self._floor_quantile(FLOOR_QUANTILE)
         if self.floor is None:
             return np.ones(NUM_JOINTS)
         depth = self.floor - p[:, 2]
         score = 1.0 - (depth - self.floor_tolerance) / (self.floor_reject - self.floor_tolerance)
-        return np.clip(score, 0.0, 1.0)
+        return np.minimum(np.maximum(score, 0.0), 1.0)
+
+    def _floor_push(self, z: float) -> None:
+        """Append ``z`` to the floor window and to its sorted copy (the running median costs
+        O(window) list moves, not a sort of the window every frame)."""
+        if len(self._floor_z) == self._floor_z.maxlen:
+            old = self._floor_z[0]
+            if old != old:
+                self._floor_nan -= 1
+            else:
+                del self._floor_sorted[bisect.bisect_left(self._floor_sorted, old)]
+        self._floor_z.append(z)
+        if z != z:
+            self._floor_nan += 1
+        else:
+            bisect.insort(self._floor_sorted, z)
+
+    def _floor_quantile(self, q: float) -> float:
+        """``np.quantile(self._floor_z, q)`` (the same value: its 'linear' method and its
+        interpolation arithmetic, on the sorted window; NaN when the window holds one)."""
+        if self._floor_nan:
+            return float('nan')
+        v = self._floor_sorted
+        pos = (len(v) - 1) * q
+        lo = int(math.floor(pos))
+        hi = min(lo + 1, len(v) - 1)
+        t = pos - lo
+        a, b = v[lo], v[hi]
+        d = b - a
+        return b - d * (1.0 - t) if t >= 0.5 else a + d * t
 
     def update(self, positions: np.ndarray, tracking_state: np.ndarray,
                reference_lengths: np.ndarray, seg: Optional[np.ndarray] = None,
@@ -324,7 +384,7 @@ class PlausibilityCheck:
         ``seg`` (19, 3) / ``seg_len`` (19,): this frame's segment vectors and lengths if known."""
         if not self.enabled:
             return self.value
-        p = np.asarray(positions, float)
+        p = np.ascontiguousarray(positions, dtype=float)   # one compiled layout
         tracked = np.asarray(tracking_state) == TRACKED
         if seg is None:
             seg = p[_SEG_C] - p[_SEG_P]
@@ -336,9 +396,19 @@ class PlausibilityCheck:
             self.value = np.zeros(NUM_JOINTS)
             self.terms = {'jump': self.value}
             return self.value
-        seg_score = np.minimum(self._bones(seg_len, both, np.asarray(reference_lengths, float)),
-                               self._speed(seg, both))
-        blamed = np.where(BLAME, seg_score[:, None], 1.0).min(axis=0)
+        if self._jit:
+            has = self._last_rel is not None
+            blamed = K.segment_terms(seg, seg_len, both, np.asarray(reference_lengths, float),
+                                   self._last_rel if has else seg, has,
+                                   self._last_both, self._latch, BLAME, self.bone_tolerance,
+                                   self.bone_tolerance_m, self.bone_reject, self.max_step,
+                                   self.latch_frames)
+            self._last_rel = seg
+            self._last_both = both
+        else:
+            seg_score = np.minimum(self._bones(seg_len, both, np.asarray(reference_lengths, float)),
+                                   self._speed(seg, both))
+            blamed = np.where(BLAME, seg_score[:, None], 1.0).min(axis=0)
         lr = self._left_right(p)
         fl = self._floor(p, tracked)
         self.terms = {'segments': blamed, 'left_right': lr, 'floor': fl}

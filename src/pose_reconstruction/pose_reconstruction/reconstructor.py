@@ -221,6 +221,8 @@ class Reconstructor:
                                                   cfg.segments.symmetric_lengths)
         if self.length_prior is not None:
             self.segment_output.length_prior = self.length_prior.fuse
+            prior = self.length_prior
+            self.segment_output.offset_sigma = lambda: prior.offset_sigma
         self.length_window = int(cfg.length_window)
         self.timings_ms: Dict[str, float] = {}
         self.trust_sensor = 0.0

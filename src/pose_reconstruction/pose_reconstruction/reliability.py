@@ -52,6 +52,9 @@ from skeleton_core.model import (ANKLE_LEFT, ANKLE_RIGHT, ELBOW_LEFT, ELBOW_RIGH
                                  WRIST_LEFT, WRIST_RIGHT, estimate_height, segment_lengths,
                                  standard_body)
 
+from skeleton_core import jit
+
+from . import reliability_kernels as K
 from .plausibility import PLAUSIBILITY_PARAMS, PlausibilityCheck, PlausibilityConfig
 from .posture_space import heading_yaw
 
@@ -94,6 +97,8 @@ _HEIGHT_CHAIN = np.array([SEGMENT_OF_JOINT[j] for j in (SPINE, SHOULDER_CENTER, 
 _HEIGHT_REF = float(standard_body().segment_lengths[_HEIGHT_CHAIN].sum())
 _INCIDENCE_MEAN = INCIDENCE / INCIDENCE.sum(axis=1, keepdims=True)
 _SEG_COLS = np.arange(NUM_SEGMENTS)
+_SEG_PAR = np.asarray(SEGMENT_PARENT_INDEX, np.int64)
+_SEG_CHILD = np.asarray(SEGMENT_CHILD_INDEX, np.int64)
 
 
 def _column_nanmedian(obs: np.ndarray, count: np.ndarray) -> np.ndarray:
@@ -298,6 +303,14 @@ class ReliabilityEstimator:
         self._std_height: Optional[float] = None
         self._std_lengths: Optional[np.ndarray] = None
         self._gauss = [None] + [gaussian_weights(n, sigma_frames) for n in range(1, f_total + 1)]
+        # the compiled step (reliability_kernels) when numba is on; row n of the table: weights
+        # for n frames
+        self._jit = jit.enabled()
+        if self._jit:
+            K.warm_up()   # the compiled step, once per process: not on a user's first frame
+        self._gauss_table = np.zeros((f_total + 1, f_total))
+        for n in range(1, f_total + 1):
+            self._gauss_table[n, :n] = self._gauss[n]
         self.reference_frames = int(reference_frames)
         self.reference_mode = reference_mode
         self.observed_window = int(observed_window)
@@ -311,6 +324,15 @@ class ReliabilityEstimator:
         self._last_n: Optional[np.ndarray] = None
         self._theta: Deque[np.ndarray] = collections.deque(maxlen=self.f_b)
         self._minima: Deque[np.ndarray] = collections.deque(maxlen=self.f_total)
+        # the compiled step's state (the same quantities, as rings oldest first)
+        self._k_last_p = np.zeros((NUM_JOINTS, 3))
+        self._k_last_d = np.zeros((NUM_JOINTS, 3))
+        self._k_last_n = np.zeros(NUM_JOINTS)
+        self._k_stage = np.zeros(1, np.int64)
+        self._k_theta = np.zeros((self.f_b, NUM_JOINTS))
+        self._k_theta_n = np.zeros(1, np.int64)
+        self._k_minima = np.zeros((self.f_total, NUM_JOINTS))
+        self._k_minima_n = np.zeros(1, np.int64)
         self._heights: Deque[float] = collections.deque(maxlen=30)
         self._captured: Deque[np.ndarray] = collections.deque(maxlen=self.reference_frames)
         self.reference_source = 'standard'
@@ -427,9 +449,25 @@ class ReliabilityEstimator:
             self._reference = None
 
     # -- streaming -------------------------------------------------------------------------------
+    def _update_compiled(self, p, ts, tracked, ln, rp) -> np.ndarray:
+        """Eq. 1-8 of :meth:`update` in one compiled call (reliability_kernels.eq18_step)."""
+        rb = np.empty(NUM_JOINTS)
+        rk = np.empty(NUM_JOINTS)
+        rt = self._rt_lut8[ts]
+        judge = self.plausibility.enabled and not tracked.all()
+        r = K.eq18_step(p, ln, self.reference_lengths, tracked, rt,
+                        rt if rp is None else rp, rp is not None, judge, self.d_min,
+                        self.theta_floor, self.theta_roof, self._k_last_p, self._k_last_d,
+                        self._k_last_n, self._k_stage, self._k_theta, self._k_theta_n,
+                        self._k_minima, self._k_minima_n, self._gauss_table, INCIDENCE,
+                        _INCIDENCE_MEAN, _SEG_PAR, _SEG_CHILD, rb, rk)
+        self.last_terms = (rb, rk, rt)
+        self.reliability = r
+        return r
+
     def update(self, positions: np.ndarray, tracking_state: np.ndarray) -> np.ndarray:
         """Add one frame; return the reliability (20,) in [0, 1] (Eq. 8)."""
-        p = np.asarray(positions, float)
+        p = np.ascontiguousarray(positions, dtype=float)   # one compiled layout
         ts = np.asarray(tracking_state)
         seg = p.take(SEGMENT_CHILD_INDEX, axis=0)
         seg -= p.take(SEGMENT_PARENT_INDEX, axis=0)
@@ -446,6 +484,8 @@ class ReliabilityEstimator:
         if profile.all():
             self._observe_reference(p, seg, ln)
         self._observe_lengths(profile, ln)
+        if self._jit and ts.dtype == np.uint8:
+            return self._update_compiled(p, ts, tracked, ln, rp)
         # Eq. 1-4, one new angle per frame (as behaviour_term on the last f_b + 2 positions)
         if self._last_p is not None:
             d = p - self._last_p

@@ -1,8 +1,11 @@
 """Output stage ``'segments'`` of methods B/C: constant user lengths, blended and smoothed segments.
 
 Every segment's direction is a blend of the database solution's and the observed one; the
-weight of the observation is the larger of ``observation_weight`` (for a segment whose two ends
-are reliable, at or above ``reliable_threshold``; 0 otherwise) and the *trust in the sensor*
+weight of the observation is the larger of its expected-error weight (for a segment whose two ends
+are reliable, at or above ``reliable_threshold``; 0 otherwise: ``direction_fusion``, the
+observation's direction error from the user's joint-centre offsets and the segment's length
+against the database's, so a long segment the sensor sees follows it and a short one takes the
+database's direction; ``observation_weight`` when off) and the *trust in the sensor*
 (:mod:`.trust`) times min(1, reliability of the less reliable end / ``reliable_threshold``). The
 segments get constant user lengths (the mean observed length over the first ``length_frames``
 reliable observations of each segment, then frozen; with ``symmetric_lengths`` the left and right
@@ -58,6 +61,13 @@ _SEG_CHAIN = ANCESTORS[:, SEGMENT_CHILD_INDEX]
 _SEG_BELOW = np.ascontiguousarray(_SEG_CHAIN.T)
 # (20,) 1 / number of segments at each joint (position_fit's averaged corrections)
 _INV_DEGREE = 1.0 / np.abs(SEG_DIFF).sum(axis=0)
+# direction_fusion: the direction error of the database solution on a segment (deg): C's mean
+# direction error on the TRACKED, fault-free segment-frames of the dev clips is 10-11 deg (no-harm
+# table, sensor seed 0); 8, 10, 12 and 16 were tried on seed 0, 12 harmed fewest segments
+_DB_DIRECTION_VAR = np.radians(12.0) ** 2
+# direction_fusion without a length prior: the joint-centre offset of a tracked joint (m per
+# axis; length_offset_sigma's default, the sensor model's 2-4 cm)
+_OFFSET_SIGMA = 0.03
 
 
 @dataclass
@@ -112,6 +122,10 @@ class SegmentOutputConfig:
         0.2, 'segments: cutoff factor of a segment the database fills in (an end with '
         'reliability 0; 1 at or above reliable_threshold, linear between), 1 = same smoothing '
         'everywhere', range=(0.01, 1.0), public=False)
+    direction_fusion: bool = param(
+        True, 'segments: the observed direction of a segment with two reliable ends weighted by '
+        "its expected error (the user's joint-centre offsets across the segment) against the "
+        "database solution's; false = observation_weight everywhere", public=False)
     smooth_anchored_speed: bool = param(
         True, 'segments, few reliable joints (hips, shoulders and every segment unreliable): a '
         'filled segment with a reliable joint at or below its child keeps the One Euro speed '
@@ -143,12 +157,16 @@ class SegmentOutput:
         self.smooth_lead_accel = float(config.smooth_lead_accel)
         self.smooth_accel_cutoff = float(config.smooth_accel_cutoff)
         self.smooth_accel_beta = float(config.smooth_accel_beta)
+        self.direction_fusion = bool(config.direction_fusion)
         # the user's profile lengths (19,), used from the first frame when set (Reconstructor)
         self.profile_lengths: Optional[np.ndarray] = None
         # (observed lengths of each side (19,), reliable observation counts (19,)) -> lengths:
         # the length prior (length_prior.py), set by the Reconstructor; None = observed lengths
         # only
         self.length_prior: Optional[Callable[[np.ndarray, np.ndarray], np.ndarray]] = None
+        # () -> the joint-centre offset scale measured on the user (m per axis; the length
+        # prior's), set by the Reconstructor; None = _OFFSET_SIGMA
+        self.offset_sigma: Optional[Callable[[], float]] = None
         self.reset()
 
     def reset(self) -> None:
@@ -245,8 +263,11 @@ class SegmentOutput:
         thr = self.reliable_threshold
         rel_frac = np.minimum(wmin * (1.0 / max(thr, 1e-6)), 1.0)
         beta = rel_frac * trust
-        if self.observation_weight > 0.0:
-            np.maximum(beta, self.observation_weight * (wmin >= thr), out=beta)
+        reliable = wmin >= thr
+        if self.direction_fusion:
+            np.maximum(beta, self._fused_weight(L) * reliable, out=beta)
+        elif self.observation_weight > 0.0:
+            np.maximum(beta, self.observation_weight * reliable, out=beta)
         u = us + beta[:, None] * (uo - us)
         nu = np.sqrt(np.einsum('sk,sk->s', u, u))
         small = nu <= 1e-9
@@ -308,6 +329,20 @@ class SegmentOutput:
         else:
             v = vr[:NUM_SEGMENTS]
         return vr[NUM_SEGMENTS] + _SEG_CHAIN @ v
+
+    def _fused_weight(self, L: np.ndarray) -> np.ndarray:
+        """(19,) ``direction_fusion``: the weight of a reliable segment's observed direction,
+        ``var_db / (var_db + var_obs)`` (the blend of minimum expected error). ``var_obs``, the
+        observed direction's error variance (rad^2): the two ends' joint-centre offsets across a
+        segment of length ``L``, ``sigma`` per axis, two axes each: ``4 sigma^2 / L^2`` (``sigma``
+        the offset scale the length prior measures on the user from left/right length
+        differences; ``_OFFSET_SIGMA`` without it). ``var_db``: the database solution's direction
+        error, 12 deg (``_DB_DIRECTION_VAR``). A long segment the sensor sees (a shank, an upper arm: 5-8
+        deg) follows the sensor; a short one (the hips, the shoulders, the feet: 20-30 deg)
+        takes the database's direction."""
+        sigma = self.offset_sigma() if self.offset_sigma is not None else _OFFSET_SIGMA
+        var_obs = 4.0 * sigma * sigma / np.maximum(L, 1e-2) ** 2
+        return _DB_DIRECTION_VAR / (_DB_DIRECTION_VAR + var_obs)
 
     def _fit_positions(self, vr: np.ndarray, obs: np.ndarray, pull: np.ndarray,
                        L: np.ndarray, seg_rel: Optional[np.ndarray] = None) -> None:

@@ -291,3 +291,51 @@ def test_fast_column_median_equals_numpy():
         np.testing.assert_array_equal(_column_median(a), np.median(a, axis=0))
         a[0, 4] = np.nan
         np.testing.assert_array_equal(_column_median(a), np.median(a, axis=0))
+
+
+def test_plausibility_running_floor_quantile_is_np_quantile():
+    """The floor's running quantile (sorted window, bisect) gives np.quantile's value at every
+    frame, through the window's eviction and a NaN in it (np.quantile: NaN)."""
+    from pose_reconstruction.plausibility import PlausibilityCheck
+    pc = PlausibilityCheck(floor_window=7)
+    rng = np.random.default_rng(3)
+    vals = list(rng.normal(0.0, 0.05, 40).round(2))   # ties included
+    vals[12] = float('nan')
+    for z in vals:
+        pc._floor_push(float(z))
+        for q in (0.25, 0.5, 0.1, 0.9):
+            got, want = pc._floor_quantile(q), float(np.quantile(pc._floor_z, q))
+            assert (np.isnan(got) and np.isnan(want)) or got == want
+
+
+@pytest.mark.parametrize('scenario', ['c', 'd'])
+def test_compiled_step_agrees_with_numpy(scenario):
+    """The compiled Eq. 1-8 / plausibility steps (reliability_kernels, numba) and the numpy twin
+    give the same reliability, terms and state on a sensor-model stream with occlusions (c) and
+    confident failures (d): jumps, snaps, floor, swapped limbs."""
+    from skeleton_core import jit
+    if not jit.enabled():
+        pytest.skip('numba off: the numpy twin is the only path')
+    from skeleton_eval.clips import toy_clip
+    from skeleton_eval.sensor_model import SensorModel
+    s = SensorModel(None, seed=2).corrupt(toy_clip(), scenario, seed=2)
+    pos = s.positions.copy()
+    pos[100:106] += (1.0, 0.0, 0.0)            # a whole-skeleton jump (another person)
+    pos[150:160, HAND_LEFT] += (0.0, 0.0, 0.5)  # a snapped hand (latched segment)
+    pos[200:210, FOOT_RIGHT, 2] -= 0.2          # a foot through the floor
+    est = {}
+    for compiled in (True, False):
+        e = ReliabilityEstimator()
+        e._jit = e.plausibility._jit = compiled
+        est[compiled] = e
+    outlier = latched = 0
+    for p, ts in zip(pos, s.tracking_state):
+        a, b = est[True].update(p, ts), est[False].update(p, ts)
+        np.testing.assert_allclose(a, b, rtol=0, atol=1e-12)
+        for ta, tb in zip(est[True].last_terms, est[False].last_terms):
+            np.testing.assert_allclose(ta, tb, rtol=0, atol=1e-12)
+        assert est[True].plausibility.skeleton_outlier == est[False].plausibility.skeleton_outlier
+        assert np.array_equal(est[True].plausibility._latch, est[False].plausibility._latch)
+        outlier += est[True].plausibility.skeleton_outlier
+        latched += int((est[True].plausibility._latch > 0).any())
+    assert outlier >= 3 and latched >= 3       # the stream exercises the jump and the latch

@@ -1,0 +1,36 @@
+"""Compile the workspace's numba kernels once, into numba's on-disk cache, before anything runs.
+
+    python -m kinect_bringup.warm_kernels
+
+Every node compiles (or loads) its kernels when it starts; after a fresh build that first compile
+takes seconds per kernel module (10-25 s for Eq. 1-8 on a loaded 2-core machine), and the graph's
+processes would each pay it at once, side by side. ``scripts/run-tests.sh`` runs this first, so
+the test suite's nodes load compiled code. Nothing happens with ``KINECT_NUMBA=0`` or without numba.
+"""
+from __future__ import annotations
+
+import sys
+import time
+
+from physics_sim.simulation import warm_up as warm_physics
+from pose_reconstruction.kernels import warm_up as warm_optimizer
+from pose_reconstruction.reliability_kernels import warm_up as warm_reliability
+from skeleton_core import jit
+
+
+def main(argv=None) -> int:
+    if not jit.enabled():
+        print('warm_kernels: numba off (KINECT_NUMBA=0 or not installed): nothing to compile')
+        return 0
+    t0 = time.perf_counter()
+    for name, warm in (('reliability (Eq. 1-8)', warm_reliability),
+                       ('optimizer (Eq. 15)', warm_optimizer), ('physics (Eq. 1)', warm_physics)):
+        t = time.perf_counter()
+        warm()
+        print(f'warm_kernels: {name} {time.perf_counter() - t:.1f} s')
+    print(f'warm_kernels: compiled kernels ready in {time.perf_counter() - t0:.1f} s')
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
