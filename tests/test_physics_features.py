@@ -177,9 +177,11 @@ def test_hanging_on_the_rope_swings_it():
     """Both hands on the rope (a chain of bodies): they stay on it, the physics stays stable, and
     the character swaying forwards and back swings the rope with it."""
     sim = Simulation(SimConfig(body_height=1.75, feature_world=str(PLAYGROUND)))
-    target = hanging_pose(bar=(-2.65, 0.0, 3.6)) - [0, 0, SENSOR_H]   # the body behind the rope
-    target[HAND_LEFT, :2], target[HAND_RIGHT, :2] = [-2.5, 0.03], [-2.5, -0.03]
-    target[WRIST_LEFT, :2], target[WRIST_RIGHT, :2] = [-2.55, 0.08], [-2.55, -0.08]
+    rx, ry = yaml.safe_load(PLAYGROUND.read_text())['features']['rope']['geometry'][0]['top'][:2]
+    target = hanging_pose(bar=(rx - 0.15, ry, 3.6)) - [0, 0, SENSOR_H]   # the body behind it
+    target[HAND_LEFT, :2], target[HAND_RIGHT, :2] = [rx, ry + 0.03], [rx, ry - 0.03]
+    target[WRIST_LEFT, :2], target[WRIST_RIGHT, :2] = [rx - 0.05, ry + 0.08], [rx - 0.05,
+                                                                               ry - 0.08]
     sim.step({1: target})
     sim.set_engaged(1, ['HandLeft', 'HandRight'], ['rope', 'rope'])
     sim.step({1: target})

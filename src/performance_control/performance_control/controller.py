@@ -42,8 +42,16 @@ FEET = ('FootLeft', 'FootRight')
 # under it. Not a human jump (0.3-0.5 m): the character jumps as high as the bars need, as the
 # user's small space and modest jump ask (the playground's bars are 2.75 m up, for a hanging
 # 1.95 m user's feet to clear the floor; a 1.5-1.95 m character's hands, swinging overhead, are
-# at 1.75-2.2 m, measured on the bench's performers)
-JUMP_REACH = 1.0
+# at 1.75-2.2 m, measured on the bench's performers -- 1.61-1.65 m in the jump of the continuous
+# performance's seed 3, a 1.5 m performer with bent elbows, who missed the bar at 1.0 m)
+JUMP_REACH = 1.25
+# m: how far ahead (horizontally) of the character's hand a bar may be and still be caught in the
+# jump: the character leaps to it, as a child jumps forward to the first rung. The walk stops
+# where the user stops walking in place, not exactly under a bar (the 0.4 m between bars); without
+# it the catch needed the hand within the bars' 0.15 m engage distance, and the continuous
+# performance's seed 0 reached the bar only thanks to a false walk of the first 0.6 s (the
+# activity gate's start-up noise, removed: intention.py)
+JUMP_LEAP = 0.5
 
 
 @dataclass
@@ -294,17 +302,25 @@ class PerformanceController:
         b = self.dp.rope_arc(HANDS[1 - HANDS.index(e)])
         return a is not None and b is not None and a < b
 
+    def _climbing_rope(self) -> bool:
+        """A hand holds the rope: the character hangs from it, its feet off the ground (the
+        user imitates the climb standing: their feet on their floor do not stand the character
+        on it; with both hands needed, each regrab -- one hand free -- put the feet back on the
+        floor and the character never rose more than 0.3 m)."""
+        return any(c is not None and self.world.features[c.feature].kind == 'rope'
+                   for c in (self.dp.contacts.get(h) for h in HANDS))
+
     def _jump_catch(self, e: str, f: Feature, pt) -> bool:
         """Reach/jump to engage (issue 30): under the bars, the user's feet leave their floor
         with both hands above the bars' engage joint (a jump, or a real hang: :mod:`.support`);
-        the character's hand catches a bar within ``engage.distance`` horizontally and at most
+        the character's hand catches a bar within :data:`JUMP_LEAP` horizontally and at most
         :data:`JUMP_REACH` above it."""
         if f.kind != 'bars' or pt is None or self.dp.in_water:
             return False
         if not self.recognizer.support.reaching(f.engage.hand_above or 'Head'):
             return False
         h = self.dp.effectors()[EFFECTORS.index(e)]
-        return bool(np.linalg.norm(pt[:2] - h[:2]) < f.engage.distance
+        return bool(np.linalg.norm(pt[:2] - h[:2]) < max(f.engage.distance, JUMP_LEAP)
                     and 0.0 < pt[2] - h[2] < JUMP_REACH)
 
     def _update_contacts(self, p: np.ndarray, recs: Dict[str, Recognition], t: float) -> None:
@@ -331,9 +347,11 @@ class PerformanceController:
                     # a foot on a rock (Sec. 8.4) lets go when the user lifts it to step higher
                     if self._hand_vz[e] > prm.regrab_speed:
                         dp.release(e)
-                elif not self._user_foot_down(p, e) or (f.kind == 'floor' and dp.in_water):
+                elif (not self._user_foot_down(p, e) or (f.kind == 'floor' and dp.in_water)
+                      or (f.kind == 'floor' and self._climbing_rope())):
                     dp.release(e)     # in the water the floor is the pool's bottom: a foot
-                    # that stood on it as the character walked in lets go (it swims)
+                    # that stood on it as the character walked in lets go (it swims); on the
+                    # rope the character hangs from its hands (it climbs from the floor)
                 continue
             for f in self.world.features.values():
                 if e not in f.engage.effectors:
@@ -344,9 +362,10 @@ class PerformanceController:
                     continue      # climbing: grab at the top of the reach, not on the way up
                 if e in FEET and f.kind != 'rocks' and not self._user_foot_down(p, e):
                     continue      # on a rock the foot is held above its face, not on the floor
-                if e in FEET and f.kind == 'floor' and dp.in_water:
+                if e in FEET and f.kind == 'floor' and (dp.in_water or self._climbing_rope()):
                     continue      # swimming: the user's feet on their floor do not stand the
-                    # character on the pool's bottom (walked in, it would stay there)
+                    # character on the pool's bottom (walked in, it would stay there); climbing
+                    # the rope, not on the ground (the user imitates standing)
                 # hand over hand: the other hand holds the rope, this one is at the top of its
                 # reach -- it reaches for the rope where it is now (an arm's length), whatever
                 # its speed (the rope and the body swing)

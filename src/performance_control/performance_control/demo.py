@@ -2,14 +2,16 @@
 
     ros2 run performance_control demo_control                 # out/control_demo.{mcap,png}
 
-Five scenes, one simulated user each (user ids 1-5), 8 s apiece (the last 24 s), performed by a user of another
+Five scenes, one simulated user each (user ids 1-5), 8 s apiece (the last ~47 s), performed by a user of another
 size and style than the examples and seen through the Kinect sensor model (the performance
 placement: 3.5 m away, sensor 1.2 m up): hanging from the monkey bars and swinging (imitation,
 then the arms drop at 6 s: the character falls), climbing the rope, jumping on the trampoline,
 swimming a breaststroke, and one continuous performance from the floor (Sec. 8.3: the user walks
 in place, the character walks under the monkey bars; the user jumps with the arms up, the
-character catches a bar, swings and drops; the user turns 45 degrees and walks in place, the
-character walks into the water, then the user swims). Each
+character catches a bar, swings and drops; the user walks in place again until the character is
+at the rope (:func:`.performances.watched_performance`), climbs hand over hand, lowers the arms
+(the character drops), turns 45 degrees and walks in place, the character walks into the water,
+then the user swims). Each
 frame runs :class:`PerformanceController` and the physics character
 (:class:`physics_sim.simulation.Simulation`) tracking the composed pose, as the graph does with
 ``control:=true``. Writes
@@ -30,8 +32,8 @@ import numpy as np
 
 from .controller import ControlParams, PerformanceController, build_models
 from .features import load_world
-from .performances import (SENSOR_HEIGHT, TURNING_PLACEMENT, continuous_stream,
-                           imitation_stream, jump_stream, to_sensor)
+from .performances import (SENSOR_HEIGHT, imitation_stream, jump_stream, to_sensor,
+                           watched_performance)
 from skeleton_core.bagio import BagWriter
 from skeleton_core.cdr import frames_to_cdr
 from skeleton_core.conversions import SkeletonFrame
@@ -42,11 +44,19 @@ FPS = 30.0
 SCENES = ('monkey_bars', 'rope', 'trampoline', 'water', 'continuous')
 
 
-def scene_stream(world, name: str, seed: int, seconds: float = 8.0) -> np.ndarray:
+def scene_stream(world, name: str, seed: int, seconds: float = 8.0):
+    """(sensor frames (T, 20, 3), tracking states (T, 20) or None)."""
     rng = np.random.default_rng(seed)
-    if name == 'continuous':      # floor -> walk -> bars -> drop -> walk -> water -> swim (24 s)
-        p, _ = continuous_stream(world, np.random.default_rng(0))
-        return to_sensor(p, 'cont0', 0, sensor_params=TURNING_PLACEMENT)   # the test's stream
+    if name == 'continuous':      # floor -> bars -> walk -> rope -> walk -> water (the test's)
+        ctl = PerformanceController(world, ControlParams(sensor_height=SENSOR_HEIGHT))
+        frames, states = [], []
+
+        def step(s, st, t):       # the performer watches this character to stop at the rope
+            frames.append(s)
+            states.append(st)
+            return ctl.step(s, t, st).com
+        watched_performance(world, 0, step)
+        return np.array(frames), np.array(states)
     if name == 'trampoline':
         p = jump_stream(rng, n_jumps=5)
     else:
@@ -54,7 +64,7 @@ def scene_stream(world, name: str, seed: int, seconds: float = 8.0) -> np.ndarra
         p, _ = imitation_stream(world.features[name], rng, pattern=((-1.0, stop),),
                                 total=seconds, fade=0.25)
     p = p[:int(seconds * FPS)]
-    return to_sensor(p, f'demo_{name}', seed)
+    return to_sensor(p, f'demo_{name}', seed), None
 
 
 def run(world, out_dir: Path, seconds: float = 8.0, physics: bool = True) -> Dict:
@@ -77,7 +87,7 @@ def run(world, out_dir: Path, seconds: float = 8.0, physics: bool = True) -> Dic
     with BagWriter(str(bag)) as w:
         for k, name in enumerate(SCENES):
             uid = k + 1
-            s = scene_stream(world, name, 300 + k, seconds)
+            s, states = scene_stream(world, name, 300 + k, seconds)
             ctl = PerformanceController(world, cp, models,
                                         start='' if name == 'continuous' else name)
             sim = None
@@ -91,7 +101,7 @@ def run(world, out_dir: Path, seconds: float = 8.0, physics: bool = True) -> Dic
             grips[name] = []
             for i in range(len(s)):
                 st = t_base + int(round((k * seconds + i / FPS) * 1e9))
-                o = ctl.step(s[i], i / FPS)
+                o = ctl.step(s[i], i / FPS, None if states is None else states[i])
                 w.write_raw('/kinect/skeletons', frames_to_cdr([frame(s[i], uid, st)], st, 'kinect'), st)
                 w.write_raw('/control/target',
                             frames_to_cdr([frame(o.positions_sensor, uid, st)], st, 'kinect'), st)
@@ -127,7 +137,7 @@ def run(world, out_dir: Path, seconds: float = 8.0, physics: bool = True) -> Dic
 def _draw_world(ax, world, obstacles, scene: str) -> None:
     for f in world.features.values():
         if f.name not in (scene, 'floor') and not (scene == 'continuous'
-                                                    and f.kind in ('water', 'bars')):
+                                                    and f.kind in ('water', 'bars', 'rope')):
             continue
         for g in f.geoms:
             if g.type == 'plane':
@@ -173,7 +183,9 @@ def plot(result: Dict, world, path: Path) -> None:
         if name == 'continuous':      # the walk: the COM's path seen from above, shifted up
             ax.plot(com[:, 0], com[:, 1] + 6.0, color='C2', lw=1.5,
                     label='COM path, top view (y + 6 m)')
-            ax.axhline(2.0, color='C0', lw=0.8, ls='--', label="water's edge (top view)")
+            wv = next(g for f in world.features.values() for g in f.geoms if g.type == 'volume')
+            ax.axhline(wv.vec('center')[1] + wv.vec('half')[1] + 6.0, color='C0', lw=0.8,
+                       ls='--', label="water's edge (top view)")
             ax.legend(fontsize=7, loc='lower left')
             ax.set_xlim(float(com[:, 0].min()) - 1.0, float(com[:, 0].max()) + 1.0)
         ax.set_ylim(-0.1, max(3.8, float(com[:, 2].max()) + 1.4))   # a climber stays in view

@@ -328,6 +328,10 @@ class IntentionRecognizer:
         self._last_t: Optional[float] = None
         self._tracked_run: Optional[np.ndarray] = None   # TRACKED frames in a row per joint
         self.support = HangDetector()
+        # the legs at work (a squat, sitting, a lunge: :meth:`.support.HangDetector.legs_bent`)
+        # veto every example, all imitated standing; off only in the benchmark, which applies
+        # other constants offline (:func:`.support.bent_legs_mask`)
+        self.bent_legs_gate = True
 
     def reset(self) -> None:
         self.support.reset()
@@ -384,6 +388,7 @@ class IntentionRecognizer:
         ks = min(len(self._hist) - 1, int(prm.share_lag))
         old_s = self._hist[-1 - ks]
         gam = 1.0 if prm.share_window <= 0 else 1.0 - math.exp(-dt / prm.share_window)
+        legs_bent = self.bent_legs_gate and self.support.legs_bent()
         for m in self.models:
             idx = list(m.effectors)
             obs_e = None
@@ -437,11 +442,16 @@ class IntentionRecognizer:
                 act = min(act, math.sqrt(max(a[5], 0.0)))
             r1, r2 = a[0] / prm.e1_threshold, a[1] / prm.e2_threshold
             ratio = max(r1, r2)   # e1 and e2 both under their thresholds
+            # the activity is measured over activity_lag frames: until a user has been seen that
+            # long, a displacement over fewer frames is mostly sensor noise (x30 per frame)
             imitating = bool(ratio < 1.0 and act >= prm.min_activity and k >= lag
+                             and ka >= int(prm.activity_lag)
                              and share <= min(prm.max_change_share, m.max_change_share))
             conf = 1.0 / (1.0 + ratio * ratio)
             if act < prm.min_activity:
                 conf *= act / max(prm.min_activity, 1e-9)
+            if imitating and legs_bent:       # the legs move the body, not an imitation
+                imitating = False
             hang = bool(getattr(m, 'hang_joint', None) and self.support.hanging(m.hang_joint))
             if hang:          # held from above: the feature whatever the hands' motion
                 imitating, conf = True, max(conf, 1.0 / (1.0 + min(ratio, 1.0) ** 2))

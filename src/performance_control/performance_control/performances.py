@@ -124,11 +124,16 @@ def _turn(p: np.ndarray, yaw: np.ndarray) -> np.ndarray:
     return np.einsum('tij,tkj->tki', rot, p - piv) + piv
 
 
-def continuous_stream(world, rng: np.random.Generator, fps: float = FPS):
+def continuous_stream(world, rng: np.random.Generator, fps: float = FPS,
+                      rope_at: Optional[float] = None):
     """One continuous performance (Sec. 8.3, issue 30): stand; walk in place (the character
     walks forward under the monkey bars); stop, raise the arms and jump (the character catches a
     bar); swing like on the bars; lower the arms (the character lets go and drops); walk in
     place turning 45 deg right (the character walks into the water); swim a breaststroke.
+    With ``rope_at`` (s), the rope before the water: after the bars the user walks straight on
+    until ``rope_at`` -- when the character has arrived at the rope: the user watches it, see
+    :func:`rope_stop_time` --, climbs hand over hand 6 s, lowers the arms (the character drops),
+    then walks turning 45 deg right into the water and swims.
     Returns (positions (T, 20, 3) world, schedule [(start s, what the user does)]) with the
     user's body, style and tempo drawn from ``rng``."""
     body, style, tempo = performer(rng)
@@ -138,25 +143,75 @@ def continuous_stream(world, rng: np.random.Generator, fps: float = FPS):
     swing['period'] = float(swing.get('period', 1.6)) * tempo
     swim = dict(world.features['water'].example.params)
     swim['period'] = float(swim.get('period', 1.5)) * tempo
-    sched = [(0.0, 'stand'), (1.0, 'walk'), (3.7, 'raise the arms'), (4.5, 'jump'),
-             (5.0, 'swing'), (9.0, 'lower the arms'), (10.5, 'walk'), (18.0, 'swim')]
-    total = 24.0
+    if rope_at is None:
+        sched = [(0.0, 'stand'), (1.0, 'walk'), (3.7, 'raise the arms'), (4.5, 'jump'),
+                 (5.0, 'swing'), (9.0, 'lower the arms'), (10.5, 'walk'), (18.0, 'swim')]
+        total, walks, turn, climb = 24.0, [(1.0, 3.5), (10.5, 18.0)], 11.0, None
+    else:
+        r = float(rope_at)
+        sched = [(0.0, 'stand'), (1.0, 'walk'), (3.7, 'raise the arms'), (4.5, 'jump'),
+                 (5.0, 'swing'), (9.0, 'lower the arms'), (10.5, 'walk'), (r, 'climb'),
+                 (r + 6.5, 'lower the arms'), (r + 8.0, 'walk'), (r + 17.0, 'swim')]
+        # one length whatever rope_at (the sensor noise is drawn for the whole stream: the same
+        # frames get the same noise, so the performance up to rope_at is the one watched)
+        total = ROPE_LATEST + 23.0
+        # the walk fades out after rope_at (the stream is the same as any later stop's up to it)
+        walks, turn = [(1.0, 3.5), (10.5, r + 0.2), (r + 8.0, r + 17.0)], r + 8.5
+        climb = (r + 0.2, r + 6.5)
     n = int(round(total * fps))
     t = np.arange(n) / fps
-    env_w = _envelope(n, [(1.0, 3.5), (10.5, 18.0)], 0.2, fps)
+    env_w = _envelope(n, walks, 0.2, fps)
     env_b = _envelope(n, [(3.7, 9.0)], 0.3, fps)
-    env_s = _envelope(n, [(18.3, total + 1.0)], 0.25, fps)
+    env_s = _envelope(n, [(sched[-1][0] + 0.3, total + 1.0)], 0.25, fps)
     pw = imitation('walk_cycle', walk, body, n, fps, style, active=env_w)
     pb = imitation('monkey_swing', swing, body, n, fps, style, active=env_b)
     ps = imitation('breaststroke', swim, body, n, fps, style, active=env_s)
     arms = [j for j in range(pw.shape[1]) if j not in _LEG_JOINTS]
     p = pw.copy()
-    for env, src in ((env_b, pb), (env_s, ps)):
+    layers = [(env_b, pb), (env_s, ps)]
+    if climb is not None:
+        rope = dict(world.features['rope'].example.params)
+        rope['period'] = float(rope.get('period', 1.4)) * tempo
+        env_r = _envelope(n, [climb], 0.3, fps)
+        layers.append((env_r, imitation('rope_climb', rope, body, n, fps, style, active=env_r)))
+    for env, src in layers:
         on = (env > 0)[:, None, None]
         p[:, arms] = np.where(on, src[:, arms], p[:, arms])
     p = lift(p, 4.5, 0.45, fps)
-    yaw = -np.radians(45) * np.clip((t - 11.0) / 1.0, 0, 1)   # half turned: still tracked
+    yaw = -np.radians(45) * np.clip((t - turn) / 1.0, 0, 1)   # half turned: still tracked
     return _turn(p, yaw), sched
+
+
+# s: the latest the user may start to climb the rope (the stream's length is fixed by it)
+ROPE_LATEST = 24.0
+# m: the user stops walking when the character's COM is this close (horizontally) to the rope:
+# it walks on WALK_HOLD s (0.4 s, ~0.35 m at the scripted cadence) and the hands reach 0.3 m
+ROPE_STOP = 0.6
+
+
+def watched_performance(world, seed: int, step, noise: bool = True, fps: float = FPS):
+    """The continuous performance with the rope, performed by a user who watches the character:
+    after the bars they walk on until the character's COM is within :data:`ROPE_STOP` of the
+    rope, then climb (:func:`continuous_stream` with ``rope_at`` = that time). ``step(positions
+    (20, 3) sensor frame, tracking states (20,), t) -> the character's COM`` is called once per
+    frame (a controller of the caller's). Returns (schedule, rope_at or None: never arrived).
+    The sensor frames up to the stop are the walk-on stream's (the sensor model draws its noise
+    for a whole stream: a stream that stops earlier gets other noise from its first frame)."""
+    g = next(g for g in world.features['rope'].geoms if g.type == 'rope')
+    top = g.vec('top')
+    a, sched = continuous_stream(world, np.random.default_rng(seed), fps, rope_at=ROPE_LATEST)
+    sa, sta = to_sensor(a, f'cont{seed}', seed, noise, TURNING_PLACEMENT, states=True)
+    for i in range(len(sa)):
+        com = step(sa[i], sta[i], i / fps)
+        if i / fps > 10.5 and float(np.linalg.norm(np.asarray(com)[:2] - top[:2])) < ROPE_STOP:
+            break
+    else:
+        return sched, None
+    b, sched = continuous_stream(world, np.random.default_rng(seed), fps, rope_at=i / fps)
+    sb, stb = to_sensor(b, f'cont{seed}', seed, noise, TURNING_PLACEMENT, states=True)
+    for k in range(i + 1, len(sb)):
+        step(sb[k], stb[k], k / fps)
+    return sched, i / fps
 
 
 def non_imitation_clips(seed: int) -> List[Tuple[str, np.ndarray]]:

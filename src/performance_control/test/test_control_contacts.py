@@ -64,8 +64,8 @@ def test_user_swinging_the_arms_swings_the_character_about_the_bar():
 
 def test_rope_swings_under_the_characters_weight_and_the_trampoline_gives():
     rope = WORLD.features['rope']
-    dp = DynamicProcess(WORLD, 75.0, [-2.5 - 0.0, 0.0, 2.6 - 1.1], UP)
     top = rope.geoms[0].vec('top')
+    dp = DynamicProcess(WORLD, 75.0, [top[0], top[1], 2.6 - 1.1], UP)
     for e in ('HandLeft', 'HandRight'):
         dist, body, pt = dp.feature_distance(e, rope)
         assert body.startswith('f_rope_0_seg')

@@ -6,8 +6,8 @@ import numpy as np
 from performance_control.controller import ControlParams, PerformanceController
 from performance_control.features import load_world
 from performance_control.locomotion import Walker
-from performance_control.performances import (SENSOR_HEIGHT, TURNING_PLACEMENT,
-                                              continuous_stream, imitation_stream, to_sensor)
+from performance_control.performances import (SENSOR_HEIGHT, imitation_stream, to_sensor,
+                                              watched_performance)
 from skeleton_core.model import HAND_LEFT, HAND_RIGHT
 
 WORLD = load_world('playground')
@@ -68,37 +68,47 @@ def test_walking_in_place_walks_the_character_forward_and_it_stops_with_the_user
     assert np.all(np.abs(com[:, 2] - com[0, 2]) < 0.2)      # upright on the floor throughout
 
 
-def test_continuous_performance_walks_to_the_bars_jumps_swings_drops_walks_into_the_water():
-    """floor -> walk -> under the bars, jump to catch one -> swing -> drop -> walk (turning 45
-    deg right) -> into the water -> swim (issue 30; the rope is not in it yet)."""
-    p, sched = continuous_stream(WORLD, np.random.default_rng(0))
-    s, st = to_sensor(p, 'cont0', 0, True, TURNING_PLACEMENT, states=True)
+def test_continuous_performance_bars_rope_water():
+    """floor -> walk -> under the bars, jump to catch one -> swing -> drop -> walk -> rope ->
+    climb -> drop -> walk (turning 45 deg right) -> into the water -> swim (issue 30), by a
+    performer who stops walking when the character has arrived at the rope."""
     ctl = PerformanceController(WORLD, ControlParams(sensor_height=SENSOR_HEIGHT))
     phase, rows = [], []
-    for i in range(len(s)):
-        o = ctl.step(s[i], i / 30.0, st[i])
-        rows.append(o)
-        phase.append('bars' if any(f == 'monkey_bars' for e, f in o.contacts.items()
-                                   if e.startswith('Hand'))
+
+    def step(s, st, t):
+        o = ctl.step(s, t, st)
+        hands = {f for e, f in o.contacts.items() if e.startswith('Hand')}
+        phase.append('bars' if 'monkey_bars' in hands else 'rope' if 'rope' in hands
                      else 'water' if ctl.dp.in_water else 'walk' if ctl.walking else '')
+        rows.append(o)
+        return o.com
+
+    sched, rope_at = watched_performance(WORLD, 0, step)
+    assert rope_at is not None                                  # arrived at the rope
     seq = [x for k, x in enumerate(phase) if x and x != next(
         (y for y in reversed(phase[:k]) if y), '')]
-    assert seq == ['walk', 'bars', 'walk', 'water'], seq
+    assert seq == ['walk', 'bars', 'walk', 'rope', 'walk', 'water'], seq
     t = np.arange(len(rows)) / 30.0
     ph = np.array(phase)
-    jump = dict((w, a) for a, w in sched)['jump']
+    when = {}
+    for a, w in sched:
+        when.setdefault(w, []).append(a)
+    jump = when['jump'][0]
     assert not (ph[t < jump] == 'bars').any()                 # caught with the jump, not before
     assert (ph[(t > jump + 0.5) & (t < 8.5)] == 'bars').mean() > 0.9   # hangs while swinging
-    first = phase.index('water')
-    assert all(x == 'water' for x in phase[first:])           # stays in once in
     com = np.array([o.com for o in rows])
     stand = com[0, 2]
+    rope = ph == 'rope'
+    assert not rope[t < rope_at].any()
+    assert com[rope, 2].max() > stand + 1.0                     # climbed hand over hand
+    first = phase.index('water')
+    assert all(x == 'water' for x in phase[first:])           # stays in once in
     walking = ph == 'walk'
     assert np.all(com[walking, 2] > stand - 0.2)              # upright on the walks: no fall
-    assert np.all(com[t > 11.0][walking[t > 11.0], 2] < stand + 0.2)   # landed from the bars
-    # the second walk turned 45 deg right: from where it landed forward and to the right (-y)
-    second = np.nonzero(walking & (t > 9.0))[0]
-    d = com[first] - com[second[0]]
+    last = walking & (t > when['walk'][-1])
+    assert last.any() and np.all(com[last, 2] < stand + 0.2)  # landed from the rope
+    # the last walk turned 45 deg right: from the rope forward and to the right (-y)
+    d = com[first] - com[np.nonzero(last)[0][0]]
     assert d[0] > 1.0 and d[1] < -1.0 and abs(abs(np.degrees(np.arctan2(d[1], d[0]))) - 45) < 20
     water = WORLD.features['water'].geoms[0]
     assert np.all(np.abs(com[-1] - water.vec('center')) <= water.vec('half'))
