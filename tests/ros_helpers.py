@@ -22,6 +22,23 @@ def wait_until(cond, timeout: float, step: float = 0.02) -> bool:
     return bool(cond())
 
 
+def call_until_answered(client, request, timeout: float, every: float = 2.0):
+    """The response to a request that is harmless to repeat (a query, setting a value), sent
+    again every ``every`` s until answered: the first reply of a fresh client can be lost while
+    DDS is still matching the reply path (rmw: "failed to send response (timeout)")."""
+    from skeleton_core.lifecycle_client import call_once
+    deadline = time.monotonic() + timeout
+    if not client.wait_for_service(timeout_sec=timeout):
+        raise TimeoutError(f'service {client.srv_name} not available')
+    while True:
+        left = deadline - time.monotonic()
+        if left <= 0:
+            raise TimeoutError(f'service {client.srv_name} did not answer')
+        reply = call_once(client, request, min(every, left))
+        if reply is not None:
+            return reply
+
+
 def msg_class(msgtype: str):
     pkg, _, name = msgtype.split('/')
     return getattr(importlib.import_module(f'{pkg}.msg'), name)
@@ -142,15 +159,7 @@ class Probe:
     def _call(self, srv_type, name: str, request, timeout: float = 10.0):
         client = self.node.create_client(srv_type, name)
         try:
-            if not client.wait_for_service(timeout_sec=timeout):
-                raise TimeoutError(f'service {name} not available')
-            fut = client.call_async(request)
-            deadline = time.monotonic() + timeout
-            while not fut.done() and time.monotonic() < deadline:
-                time.sleep(0.02)
-            if not fut.done():
-                raise TimeoutError(f'service {name} did not answer')
-            return fut.result()
+            return call_until_answered(client, request, timeout)
         finally:
             self.node.destroy_client(client)
 

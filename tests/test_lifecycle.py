@@ -18,7 +18,8 @@ rclpy = pytest.importorskip('rclpy')
 from rclpy.parameter import Parameter  # noqa: E402
 
 from kinect_bringup.graph import NODES, node_class  # noqa: E402
-from ros_helpers import Spinner, wait_until  # noqa: E402
+from ros_helpers import Spinner, call_until_answered, wait_until  # noqa: E402
+from skeleton_core.lifecycle_client import call_once  # noqa: E402
 from skeleton_core.rosnode import MANAGED_FLAG, TransitionFailed, bring_up  # noqa: E402
 
 pytestmark = pytest.mark.ros
@@ -114,13 +115,6 @@ def test_a_default_correction_that_applies_but_is_missing_names_its_producer(
         node.destroy_node()
 
 
-def _call(node, client, req, timeout=30.0):
-    assert client.wait_for_service(timeout_sec=timeout), client.srv_name
-    fut = client.call_async(req)
-    assert wait_until(fut.done, timeout), f'no answer from {client.srv_name}'
-    return fut.result()
-
-
 @pytest.mark.slow
 def test_transitions_over_dds_a_failed_configure_is_retried_after_a_fix(tmp_path):
     """A reconstruction process started --managed (as the launch file starts it) stays
@@ -154,19 +148,23 @@ def test_transitions_over_dds_a_failed_configure_is_retried_after_a_fix(tmp_path
     get = client.create_client(GetState, f'{ns}/reconstruction/get_state')
     setp = client.create_client(SetParameters, f'{ns}/reconstruction/set_parameters')
 
-    def transition(tid):
-        return _call(client, change, ChangeState.Request(transition=Transition(id=tid))).success
-
     def state():
-        return _call(client, get, GetState.Request()).current_state.label
+        return call_until_answered(get, GetState.Request(), 30).current_state.label
+
+    def transition(tid, then):
+        """Whether the transition succeeded; when its reply is lost (a fresh reply path not
+        matched yet), whether the node reached ``then``: a transition is not repeated."""
+        assert change.wait_for_service(timeout_sec=30)
+        reply = call_once(change, ChangeState.Request(transition=Transition(id=tid)), 20)
+        return reply.success if reply is not None else state() == then
     try:
         assert state() == 'unconfigured'
-        assert not transition(Transition.TRANSITION_CONFIGURE)     # no database: refused
+        assert not transition(Transition.TRANSITION_CONFIGURE, 'inactive')     # no database: refused
         assert state() == 'unconfigured'
         req = SetParameters.Request(parameters=[
             Parameter('database', value=str(default_path())).to_parameter_msg()])
-        assert _call(client, setp, req).results[0].successful
-        assert transition(Transition.TRANSITION_CONFIGURE)
+        assert call_until_answered(setp, req, 30).results[0].successful
+        assert transition(Transition.TRANSITION_CONFIGURE, 'inactive')
         assert state() == 'inactive'
         clip = builtin_clips()[0].positions
         ts = np.full(20, 2, np.uint8)
@@ -180,7 +178,7 @@ def test_transitions_over_dds_a_failed_configure_is_retried_after_a_fix(tmp_path
             send(i)
             time.sleep(0.05)
         assert got == []                      # inactive: no input taken, nothing published
-        assert transition(Transition.TRANSITION_ACTIVATE)
+        assert transition(Transition.TRANSITION_ACTIVATE, 'active')
         assert state() == 'active'
         assert wait_until(lambda: pub.get_subscription_count() > 0, 20)
         i = 5
@@ -190,11 +188,11 @@ def test_transitions_over_dds_a_failed_configure_is_retried_after_a_fix(tmp_path
             i += 1
             time.sleep(0.05)
         assert got, 'no reconstruction while active'
-        assert transition(Transition.TRANSITION_DEACTIVATE)
+        assert transition(Transition.TRANSITION_DEACTIVATE, 'inactive')
         assert wait_until(lambda: pub.get_subscription_count() == 0, 20)   # input released
-        assert transition(Transition.TRANSITION_CLEANUP)
+        assert transition(Transition.TRANSITION_CLEANUP, 'unconfigured')
         assert state() == 'unconfigured'
-        assert transition(Transition.TRANSITION_UNCONFIGURED_SHUTDOWN)
+        assert transition(Transition.TRANSITION_UNCONFIGURED_SHUTDOWN, 'finalized')
         assert state() == 'finalized'
     finally:
         spinner.stop()

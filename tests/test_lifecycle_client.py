@@ -13,7 +13,7 @@ rclpy = pytest.importorskip('rclpy')
 
 from lifecycle_msgs.srv import GetState  # noqa: E402
 from ros_helpers import Spinner  # noqa: E402
-from skeleton_core.lifecycle_client import _call, drive_to_active  # noqa: E402
+from skeleton_core.lifecycle_client import call_once, drive_to_active  # noqa: E402
 from skeleton_core.rosnode import MANAGED_FLAG  # noqa: E402
 
 pytestmark = pytest.mark.ros
@@ -46,7 +46,7 @@ def test_drive_to_active(case, tmp_path):
         get = client.create_client(GetState, f'{full}/get_state')
         state = None
         while state is None and time.monotonic() < deadline:
-            reply = _call(get, GetState.Request(), 2.0)
+            reply = call_once(get, GetState.Request(), 2.0)
             state = reply.current_state.label if reply else None
         assert (result, state) == ((True, 'active') if case == 'ok' else (False, 'unconfigured'))
     finally:

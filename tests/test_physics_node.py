@@ -21,7 +21,7 @@ from skeleton_core.tf import Transform  # noqa: E402
 from skeleton_core.tf_ros import StaticTfBroadcaster  # noqa: E402
 from physics_sim.physics_node import PhysicsNode  # noqa: E402
 from skeleton_core.rosnode import bring_up  # noqa: E402
-from ros_helpers import Spinner, wait_until as _wait  # noqa: E402
+from ros_helpers import Spinner, call_until_answered, wait_until as _wait  # noqa: E402
 
 BODY = standard_body()
 SENSOR_HEIGHT = 0.8
@@ -117,17 +117,11 @@ def test_node_tracks_a_clip_over_dds(graph):
             and time.time() < deadline:
         time.sleep(0.02)
     req = ApplyPush.Request(user_id=4, segment='Spine', force=Vector3(x=300.0), duration=0.1)
-    fut = cli.call_async(req)
-    deadline = time.time() + 5
-    while not fut.done() and time.time() < deadline:
-        time.sleep(0.02)
-    assert fut.result().success, fut.result().message
-    fut = cli.call_async(ApplyPush.Request(user_id=4, segment='Tail', force=Vector3(x=1.0),
-                                           duration=0.1))
-    deadline = time.time() + 5
-    while not fut.done() and time.time() < deadline:
-        time.sleep(0.02)
-    assert not fut.result().success
+    res = call_until_answered(cli, req, 20)       # (a second push if the first reply is lost)
+    assert res.success, res.message
+    res = call_until_answered(cli, ApplyPush.Request(user_id=4, segment='Tail',
+                                                     force=Vector3(x=1.0), duration=0.1), 20)
+    assert not res.success
 
 
 def test_parameters_validated_on_set(graph):

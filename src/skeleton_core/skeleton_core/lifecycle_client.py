@@ -26,8 +26,9 @@ NEXT = {State.PRIMARY_STATE_UNCONFIGURED: (Transition.TRANSITION_CONFIGURE, 'con
         State.PRIMARY_STATE_INACTIVE: (Transition.TRANSITION_ACTIVATE, 'activate')}
 
 
-def _call(client, request, timeout_s: float):
-    """The response, or None when none came within ``timeout_s``."""
+def call_once(client, request, timeout_s: float):
+    """Send ``request`` once on ``client`` (its node spun by someone else): the response, or
+    None when none came within ``timeout_s`` (the pending request is dropped)."""
     done = threading.Event()
     future = client.call_async(request)
     future.add_done_callback(lambda _f: done.set())
@@ -53,7 +54,7 @@ def drive_to_active(node, name: str, stopped: Callable[[], bool],
         if not get.wait_for_service(timeout_sec=1.0) or \
                 not change.wait_for_service(timeout_sec=1.0):
             continue
-        reply = _call(get, GetState.Request(), STATE_TIMEOUT_S)
+        reply = call_once(get, GetState.Request(), STATE_TIMEOUT_S)
         if reply is None:
             continue
         state = reply.current_state.id
@@ -67,7 +68,7 @@ def drive_to_active(node, name: str, stopped: Callable[[], bool],
             time.sleep(0.2)
             continue
         tid, label = NEXT[state]
-        reply = _call(change, ChangeState.Request(transition=Transition(id=tid)),
+        reply = call_once(change, ChangeState.Request(transition=Transition(id=tid)),
                       TRANSITION_TIMEOUT_S)
         if reply is None:
             lost += 1                    # the state says what happened
@@ -80,4 +81,4 @@ def drive_to_active(node, name: str, stopped: Callable[[], bool],
     return False
 
 
-__all__ = ['drive_to_active']
+__all__ = ['call_once', 'drive_to_active']
