@@ -52,6 +52,15 @@ JUMP_REACH = 1.25
 # performance's seed 0 reached the bar only thanks to a false walk of the first 0.6 s (the
 # activity gate's start-up noise, removed: intention.py)
 JUMP_LEAP = 0.5
+# m/s: on a feature the hands do not climb (no engage.regrab: the bars) a held hand lets go when
+# the user lowers it faster than this relative to their COM -- the release read from the arm's
+# movement, before the hand is low enough for hand_release_margin. Lowering the arms while
+# holding turns the hands' target about the grip at ~8 rad/s and the contact's PD pulls the body
+# round the bar (issue 30: the COM left the bars at 6-8 m/s); the swings of the continuous
+# performance's seeds 0-9 lower a held hand at most ~0.6 m/s (0.1 s smoothed), the user's
+# arms coming down reach 1.2-1.4 m/s two frames before the hands pass the head. On the rope
+# and the rocks lowering a held hand is the pull of the climb.
+RELEASE_SPEED = 1.0
 
 
 @dataclass
@@ -132,7 +141,8 @@ class ControlOutput:
     contact_points: Dict[str, np.ndarray]
     com: np.ndarray
     penetration: float
-    compute_ms: float
+    compute_ms: float                # wall time of the step
+    cpu_ms: float                    # CPU time of the step (this thread: robust to the load)
     blend: float
 
 
@@ -340,8 +350,10 @@ class PerformanceController:
                     regrab = (f.engage.regrab and other in dp.contacts
                               and self._hand_vz[e] > prm.regrab_speed
                               and not self._above_other(e))
-                    if lost or regrab or not self._user_hand_raised(p, e, f,
-                                                                    prm.hand_release_margin):
+                    lowered = (not f.engage.regrab and f.engage.hand_above is not None
+                               and self._hand_vz[e] < -RELEASE_SPEED)
+                    if lost or regrab or lowered or not self._user_hand_raised(
+                            p, e, f, prm.hand_release_margin):
                         dp.release(e)
                 elif f.kind == 'rocks':
                     # a foot on a rock (Sec. 8.4) lets go when the user lifts it to step higher
@@ -397,6 +409,7 @@ class PerformanceController:
         """One sensor frame (20, 3) at time ``t`` (s); ``tracking_state`` (20,) the sensor's
         per-joint states (None: all TRACKED), used by the recognizer for occluded effectors."""
         t_start = time.perf_counter()
+        c_start = time.thread_time()
         p = self.sensor.to_world(np.asarray(positions_sensor, float))
         if p.shape != (20, 3) or not np.all(np.isfinite(p)):
             raise ValueError('positions must be 20 x 3 finite numbers')
@@ -483,13 +496,14 @@ class PerformanceController:
         pen = (self.obstacles.penetration(out_w, self.height, held)
                if self.params.compute_penetration else float('nan'))
         ms = (time.perf_counter() - t_start) * 1e3
+        cpu = (time.thread_time() - c_start) * 1e3
         shown = rec if rec is not None else self.recognizer.best(recs)
         return ControlOutput(
             positions_world=out_w, positions_sensor=self.sensor.to_sensor(out_w),
             feature=feature or (shown.feature if shown is not None and shown.imitating else ''),
             recognition=shown, imitating=bool(shown is not None and shown.imitating),
             contacts=held, contact_points=contacts, com=dp.com, penetration=pen, compute_ms=ms,
-            blend=self.blend)
+            cpu_ms=cpu, blend=self.blend)
 
 
 __all__ = ['PerformanceController', 'ControlParams', 'ControlOutput', 'build_models']

@@ -68,6 +68,16 @@ class Contact:
 # lowering the arms while holding the bars drove the pitch PD (the target direction turning ~8
 # rad/s) with over 13 kN (18 body weights) and the release flung the body at 12 m/s (issue 30).
 ARM_STRENGTH = 4.0
+# body weights: the largest force one hand exerts across the arm, turning the body about the grip
+# (the Eq. 3-4 part of its force, perpendicular to r; Shum & Ho 2012 bound their PD forces "to
+# avoid unexpected high control force while the target values are very different from the
+# current ones"). A hanging body is swung by the shoulders and a kip, not pulled along the arm:
+# the monkey-bar swings of the continuous performance (seeds 0-9) ask each hand for at most
+# ~0.9 body weight across the arm, while a user lowering the arms from the bars turned the target
+# direction at ~8 rad/s and the pitch PD's rate term (kad 600 N s/rad) asked for 4-6 kN per hand
+# for the 0.1-0.15 s before the hands were low enough to let go: the COM left the bars at 7-8 m/s
+# and landed 5 m behind (issue 30). The pull along the arm keeps ARM_STRENGTH (climbing).
+SWING_STRENGTH = 1.0
 
 
 class DynamicProcess:
@@ -103,10 +113,12 @@ class DynamicProcess:
         self._free = np.stack([np.full(4, self.free_gain), kd, np.full(4, self.free_gain), kd,
                                np.full(4, self.free_gain), kd], 1)     # (4, 6) GAIN_KEYS order
         self._gains = self._free.copy()
-        # N: the most an arm pulls or pushes (ARM_STRENGTH body weights per hand); the feet
-        # unbounded (a landing takes 3-5 body weights)
-        self._fmax = np.array([ARM_STRENGTH * self.total_mass * 9.81 if e.startswith('Hand')
-                               else np.inf for e in EFFECTORS])
+        # N: the most an arm pulls or pushes along itself (ARM_STRENGTH body weights per hand)
+        # and across itself (SWING_STRENGTH); the feet unbounded (a landing takes 3-5 body
+        # weights)
+        w = self.total_mass * 9.81
+        self._fmax = np.array([[ARM_STRENGTH * w, SWING_STRENGTH * w] if e.startswith('Hand')
+                               else [np.inf, np.inf] for e in EFFECTORS])
         self._yaw = 0.0
         self._r0 = np.array([offsets[e] for e in EFFECTORS], float)
         self._zero = np.zeros((4, 3))
@@ -419,9 +431,10 @@ def _contact_forces_jit(x, v, pe, ve, rh_w, rhd_w, g, yaw):  # pragma: no cover 
 def _apply_forces_jit(xpos, qvel, xfrc, com_body, com_dof, eff_body, eff_dof, r0, r1, t, t0,
                       period, gains, yaw, buoy, fmax):  # pragma: no cover - numba
     """One step's forces into ``xfrc`` (MuJoCo's xfrc_applied): Eq. 2-4 on the effectors at
-    time ``t`` (targets interpolated from ``r0`` to ``r1`` over ``period`` from ``t0``), each at
-    most ``fmax`` (4,) N, their sum reversed on the COM (Eq. 1) with the buoyancy ``buoy``
-    (N, up)."""
+    time ``t`` (targets interpolated from ``r0`` to ``r1`` over ``period`` from ``t0``), each
+    effector's component along r (effector - COM) at most ``fmax[k, 0]`` N and the component
+    across r at most ``fmax[k, 1]`` N, their sum reversed on the COM (Eq. 1) with the buoyancy
+    ``buoy`` (N, up)."""
     s = min(max((t - t0) / period, 0.0), 1.0)
     rh = r0 + s * (r1 - r0)
     rhd = (r1 - r0) / period if s < 1.0 else np.zeros_like(r0)
@@ -435,10 +448,16 @@ def _apply_forces_jit(xpos, qvel, xfrc, com_body, com_dof, eff_body, eff_dof, r0
     v = qvel[com_dof:com_dof + 3].copy()
     f = _contact_forces_jit(x, v, pe, ve, rh, rhd, gains, yaw)
     for k in range(4):
-        n = math.sqrt(f[k, 0] * f[k, 0] + f[k, 1] * f[k, 1] + f[k, 2] * f[k, 2])
-        if n > fmax[k]:
-            for a in range(3):
-                f[k, a] *= fmax[k] / n
+        r0_, r1_, r2_ = pe[k, 0] - x[0], pe[k, 1] - x[1], pe[k, 2] - x[2]
+        ln = max(math.sqrt(r0_ * r0_ + r1_ * r1_ + r2_ * r2_), 1e-6)
+        u = (r0_ / ln, r1_ / ln, r2_ / ln)
+        fr = f[k, 0] * u[0] + f[k, 1] * u[1] + f[k, 2] * u[2]
+        ft = (f[k, 0] - fr * u[0], f[k, 1] - fr * u[1], f[k, 2] - fr * u[2])
+        nt = math.sqrt(ft[0] * ft[0] + ft[1] * ft[1] + ft[2] * ft[2])
+        sr = fmax[k, 0] / abs(fr) if abs(fr) > fmax[k, 0] else 1.0
+        st = fmax[k, 1] / nt if nt > fmax[k, 1] else 1.0
+        for a in range(3):
+            f[k, a] = sr * fr * u[a] + st * ft[a]
     for a in range(3):
         tot = 0.0
         for k in range(4):
@@ -486,10 +505,18 @@ def _apply_forces_np(xpos, qvel, xfrc, com_body, com_dof, eff_body, eff_dof, r0,
     rhd = (r1 - r0) / period if s < 1.0 else np.zeros_like(r0)
     eff_body = np.asarray(eff_body)
     dofs = np.asarray(eff_dof)[:, None] + np.arange(3)
-    f = _contact_forces_np(xpos[com_body].copy(), qvel[com_dof:com_dof + 3].copy(),
+    x = xpos[com_body].copy()
+    f = _contact_forces_np(x, qvel[com_dof:com_dof + 3].copy(),
                            xpos[eff_body], qvel[dofs], rh, rhd, gains, yaw)
-    n = np.linalg.norm(f, axis=1)
-    f = f * np.where(n > fmax, fmax / np.maximum(n, 1e-300), 1.0)[:, None]
+    r = xpos[eff_body] - x
+    u = r / np.maximum(np.linalg.norm(r, axis=1), 1e-6)[:, None]
+    fr = np.sum(f * u, axis=1)
+    ft = f - fr[:, None] * u
+    nt = np.linalg.norm(ft, axis=1)
+    fmax = np.asarray(fmax, float)
+    sr = np.where(np.abs(fr) > fmax[:, 0], fmax[:, 0] / np.maximum(np.abs(fr), 1e-300), 1.0)
+    st = np.where(nt > fmax[:, 1], fmax[:, 1] / np.maximum(nt, 1e-300), 1.0)
+    f = (sr * fr)[:, None] * u + st[:, None] * ft
     xfrc[eff_body, :3] = f
     xfrc[com_body, :3] = -f.sum(axis=0)
     xfrc[com_body, 2] += buoy
@@ -500,4 +527,4 @@ _contact_forces = _jit.pick(_contact_forces_jit, _contact_forces_np)
 _apply_forces = _jit.pick(_apply_forces_jit, _apply_forces_np)
 
 
-__all__ = ['DynamicProcess', 'Contact', 'GAIN_KEYS']
+__all__ = ['DynamicProcess', 'Contact', 'GAIN_KEYS', 'ARM_STRENGTH', 'SWING_STRENGTH']

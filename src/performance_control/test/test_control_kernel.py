@@ -42,7 +42,8 @@ def test_numpy_twin_equals_numba_applied_forces():
     eff_dof = np.array([3, 6, 9, 12])
     r0, r1 = rng.normal(0, 0.5, (4, 3)), rng.normal(0, 0.5, (4, 3))
     g = rng.uniform(0, 9000, (4, 6))
-    fmax = np.array([1.0, np.inf, 1e6, np.inf])   # the first clamped (its force is > 1 N)
+    # along / across r: the first clamped both ways, the third across only
+    fmax = np.array([[1.0, 1.0], [np.inf, np.inf], [1e6, 1.0], [np.inf, np.inf]])
     for t in (0.0, 0.01, 0.05):           # inside and after the interpolation period
         outs = []
         for fn in (dynamics._apply_forces_jit, dynamics._apply_forces_np):
@@ -51,9 +52,21 @@ def test_numpy_twin_equals_numba_applied_forces():
                fmax)
             outs.append(xfrc)
         np.testing.assert_allclose(outs[1], outs[0], rtol=1e-9, atol=1e-7)
-        # each effector's force at most fmax (the arms' strength), the others untouched
-        n = np.linalg.norm(outs[1][eff_body, :3], axis=1)
-        assert np.all(n <= fmax + 1e-6) and np.isclose(n[0], fmax[0])
+        # each effector's force along r (effector - COM) and across it at most fmax (the arms'
+        # strength: pull, swing), the unbounded ones untouched
+        f = outs[1][eff_body, :3]
+        r = xpos[eff_body] - xpos[1]
+        u = r / np.linalg.norm(r, axis=1)[:, None]
+        fr = np.sum(f * u, axis=1)
+        ft = np.linalg.norm(f - fr[:, None] * u, axis=1)
+        assert np.all(np.abs(fr) <= fmax[:, 0] + 1e-6) and np.all(ft <= fmax[:, 1] + 1e-6)
+        assert np.isclose(abs(fr[0]), 1.0) and np.isclose(ft[0], 1.0) and np.isclose(ft[2], 1.0)
+        assert abs(fr[2]) > 1.0                              # the third's pull is not clamped
+        rh = r0 + min(t * 30, 1.0) * (r1 - r0)
+        rhd = (r1 - r0) * 30 if t * 30 < 1 else np.zeros((4, 3))
+        free = dynamics._contact_forces_np(xpos[1], qvel[0:3], xpos[eff_body],
+                                           qvel[eff_dof[:, None] + np.arange(3)], rh, rhd, g, 0.7)
+        np.testing.assert_allclose(f[[1, 3]], free[[1, 3]], rtol=1e-9)
         # Eq. 1: the COM gets the effectors' sum reversed plus the buoyancy
         np.testing.assert_allclose(outs[1][1, :3] + outs[1][eff_body, :3].sum(axis=0),
                                    [0, 0, 123.0], atol=1e-6)
