@@ -125,7 +125,7 @@ def _turn(p: np.ndarray, yaw: np.ndarray) -> np.ndarray:
 
 
 def continuous_stream(world, rng: np.random.Generator, fps: float = FPS,
-                      rope_at: Optional[float] = None):
+                      rope_at: Optional[float] = None, steer: float = 0.0):
     """One continuous performance (Sec. 8.3, issue 30): stand; walk in place (the character
     walks forward under the monkey bars); stop, raise the arms and jump (the character catches a
     bar); swing like on the bars; lower the arms (the character lets go and drops); walk in
@@ -133,7 +133,10 @@ def continuous_stream(world, rng: np.random.Generator, fps: float = FPS,
     With ``rope_at`` (s), the rope before the water: after the bars the user walks straight on
     until ``rope_at`` -- when the character has arrived at the rope: the user watches it, see
     :func:`rope_stop_time` --, climbs hand over hand 6 s, lowers the arms (the character drops),
-    then walks turning 45 deg right into the water and swims.
+    then walks turning 45 deg right into the water and swims. ``steer`` (rad, left positive):
+    with the rope, the user turns by this much as they start the walk after the bars (toward the
+    rope, :func:`watched_performance`), and from the rope turns to 45 deg right of where they
+    first faced.
     Returns (positions (T, 20, 3) world, schedule [(start s, what the user does)]) with the
     user's body, style and tempo drawn from ``rng``."""
     body, style, tempo = performer(rng)
@@ -179,36 +182,80 @@ def continuous_stream(world, rng: np.random.Generator, fps: float = FPS,
         p[:, arms] = np.where(on, src[:, arms], p[:, arms])
     p = lift(p, 4.5, 0.45, fps)
     yaw = -np.radians(45) * np.clip((t - turn) / 1.0, 0, 1)   # half turned: still tracked
+    if climb is not None and steer:
+        aim = float(steer) * np.clip((t - STEER_AT) / 1.0, 0, 1)
+        yaw = aim + (-np.radians(45) - aim) * np.clip((t - turn) / 1.0, 0, 1)
     return _turn(p, yaw), sched
 
 
 # s: the latest the user may start to climb the rope (the stream's length is fixed by it)
 ROPE_LATEST = 24.0
-# m: the user stops walking when the character's COM is this close (horizontally) to the rope:
-# it walks on WALK_HOLD s (0.4 s, ~0.35 m at the scripted cadence) and the hands reach 0.3 m
-ROPE_STOP = 0.6
+# m: the user stops walking when the character will come to rest this close (horizontally) to
+# the rope: the hands reach 0.3 m (the rope's engage distance)
+ROPE_STOP = 0.3
+# s: how long the character walks on after the user stops -- the user anticipates it: WALK_HOLD
+# (0.4 s) and the walk's 0.2 s fade. Stopping when the COM itself was 0.6 m from the rope, a
+# fast walker (seed 3, ~1 m/s) came to rest 0.3 m past the rope, its hands behind it
+COAST = 0.6
+# s: when the user, who has watched the character land from the bars, starts walking again and
+# turns toward the rope (the character lands 0.1-2 m from where it let go, up to 0.6 m to the side
+# of the rope's line: walking straight on it passed the rope, seeds 3 and 6)
+STEER_AT = 10.5
+# rad: the most the user turns toward the rope (a user turned further away from the sensor is
+# tracked badly; the last walk turns 45 deg too)
+MAX_STEER = np.radians(45)
+
+
+def _watched_sensor(p: np.ndarray, seed: int, noise: bool):
+    """The continuous performance through the sensor model, placed so that a frame's placement
+    does not depend on the rest of the stream: the user starts facing the sensor (the clip, facing
+    +x, turned to -x) and the model does not turn the clip to its mean facing (``face_sensor``:
+    the mean of a stream that turns toward the rope or climbs earlier differs, and the
+    continuation stream of :func:`watched_performance` was turned by up to 16 deg against the
+    watched prefix -- a turn of the character the user did not make)."""
+    q = np.array(p, float)
+    q[..., :2] *= -1.0
+    return to_sensor(q, f'cont{seed}', seed, noise, WATCHED_PLACEMENT, states=True)
 
 
 def watched_performance(world, seed: int, step, noise: bool = True, fps: float = FPS):
     """The continuous performance with the rope, performed by a user who watches the character:
-    after the bars they walk on until the character's COM is within :data:`ROPE_STOP` of the
-    rope, then climb (:func:`continuous_stream` with ``rope_at`` = that time). ``step(positions
+    after the bars they turn toward the rope (:data:`STEER_AT`) and walk on until the character,
+    which walks on :data:`COAST` s after they stop, would come to rest within :data:`ROPE_STOP`
+    of the rope, then climb (:func:`continuous_stream` with ``rope_at`` = that time). ``step(positions
     (20, 3) sensor frame, tracking states (20,), t) -> the character's COM`` is called once per
     frame (a controller of the caller's). Returns (schedule, rope_at or None: never arrived).
-    The sensor frames up to the stop are the walk-on stream's (the sensor model draws its noise
-    for a whole stream: a stream that stops earlier gets other noise from its first frame)."""
+    The sensor frames up to the stop are the walk-on stream's (the same frames: the sensor
+    model's noise and, with :func:`_watched_sensor`, its placement do not depend on the rest of
+    the stream)."""
     g = next(g for g in world.features['rope'].geoms if g.type == 'rope')
     top = g.vec('top')
     a, sched = continuous_stream(world, np.random.default_rng(seed), fps, rope_at=ROPE_LATEST)
-    sa, sta = to_sensor(a, f'cont{seed}', seed, noise, TURNING_PLACEMENT, states=True)
-    for i in range(len(sa)):
+    sa, sta = _watched_sensor(a, seed, noise)
+    i0 = int(round(STEER_AT * fps))
+    com = None
+    for i in range(i0):
         com = step(sa[i], sta[i], i / fps)
-        if i / fps > 10.5 and float(np.linalg.norm(np.asarray(com)[:2] - top[:2])) < ROPE_STOP:
+    # the user looks where the character stands and turns toward the rope as they walk (the
+    # character heads where the user faces, +x at the start)
+    d = top[:2] - np.asarray(com)[:2]
+    steer = float(np.clip(np.arctan2(d[1], d[0]), -MAX_STEER, MAX_STEER))
+    a, sched = continuous_stream(world, np.random.default_rng(seed), fps, rope_at=ROPE_LATEST,
+                                 steer=steer)
+    sa, sta = _watched_sensor(a, seed, noise)
+    seen = []
+    for i in range(i0, len(sa)):
+        seen.append(np.asarray(step(sa[i], sta[i], i / fps), float)[:2])
+        # where the character will stop if the user stops now (its speed over 0.3 s)
+        n = int(round(0.3 * fps))
+        v = (seen[-1] - seen[-1 - n]) * fps / n if len(seen) > n else np.zeros(2)
+        if float(np.linalg.norm(seen[-1] + COAST * v - top[:2])) < ROPE_STOP:
             break
     else:
         return sched, None
-    b, sched = continuous_stream(world, np.random.default_rng(seed), fps, rope_at=i / fps)
-    sb, stb = to_sensor(b, f'cont{seed}', seed, noise, TURNING_PLACEMENT, states=True)
+    b, sched = continuous_stream(world, np.random.default_rng(seed), fps, rope_at=i / fps,
+                                 steer=steer)
+    sb, stb = _watched_sensor(b, seed, noise)
     for k in range(i + 1, len(sb)):
         step(sb[k], stb[k], k / fps)
     return sched, i / fps
@@ -238,6 +285,9 @@ PERFORMANCE_PLACEMENT = {'placement': {'distance_m': 3.5, 'sensor_height_m': 1.2
 # otherwise keeps every user facing the screen)
 TURNING_PLACEMENT = {'placement': {**PERFORMANCE_PLACEMENT['placement'], 'keep_facing': False}}
 SENSOR_HEIGHT = 1.2
+# The watched performance's sensor: the turning placement with the clip's own facing kept (see
+# performances._watched_sensor)
+WATCHED_PLACEMENT = {'placement': {**TURNING_PLACEMENT['placement'], 'face_sensor': False}}
 
 
 def to_sensor(positions: np.ndarray, name: str, seed: int, noise: bool = True,
