@@ -59,7 +59,10 @@ JUMP_LEAP = 0.5
 # round the bar (issue 30: the COM left the bars at 6-8 m/s); the swings of the continuous
 # performance's seeds 0-9 lower a held hand at most ~0.6 m/s (0.1 s smoothed), the user's
 # arms coming down reach 1.2-1.4 m/s two frames before the hands pass the head. On the rope
-# and the rocks lowering a held hand is the pull of the climb.
+# and the rocks lowering a held hand is the pull of the climb: there both held hands lowered
+# together let go (climbing, seeds 0-9, the less lowered of two held hands went down at most
+# 0.13 m/s; lowering both arms from the rope pulled the body up along them and it rose 0.6-0.7 m
+# after letting go, seeds 16 and 17).
 RELEASE_SPEED = 1.0
 
 
@@ -336,6 +339,9 @@ class PerformanceController:
     def _update_contacts(self, p: np.ndarray, recs: Dict[str, Recognition], t: float) -> None:
         dp, prm = self.dp, self.params
         vel = dp.effector_velocities()
+        # both held hands lowered together: the release on a feature the hands climb (the climb
+        # pulls with one hand while the other holds still or reaches up)
+        both_lowered = all(h in dp.contacts and self._hand_vz[h] < -RELEASE_SPEED for h in HANDS)
         for k, e in enumerate(EFFECTORS):
             c = dp.contacts.get(e)
             if c is not None:
@@ -350,8 +356,8 @@ class PerformanceController:
                     regrab = (f.engage.regrab and other in dp.contacts
                               and self._hand_vz[e] > prm.regrab_speed
                               and not self._above_other(e))
-                    lowered = (not f.engage.regrab and f.engage.hand_above is not None
-                               and self._hand_vz[e] < -RELEASE_SPEED)
+                    lowered = f.engage.hand_above is not None and (
+                        both_lowered if f.engage.regrab else self._hand_vz[e] < -RELEASE_SPEED)
                     if lost or regrab or lowered or not self._user_hand_raised(
                             p, e, f, prm.hand_release_margin):
                         dp.release(e)
