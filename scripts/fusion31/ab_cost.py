@@ -35,6 +35,12 @@ for r in range(rounds):
             c = FE.fusion_cost(streams, poses, users=users)
             res.setdefault((users, name), []).append(c)
 print('users version  wall_ms  no_eq8_wall_ms  cpu_ms   (median of', rounds, 'rounds, per frame and user)')
+
+
+def med(cs, k):
+    return float(np.median([c[k] for c in cs]))
+
+
 for (users, name), cs in sorted(res.items()):
-    med = lambda k: float(np.median([c[k] for c in cs]))
-    print(f'{users:5d} {name:7s} {med("mean_ms"):8.3f} {med("no_eq8_mean_ms"):15.3f} {med("cpu_mean_ms"):7.3f}')
+    print(f'{users:5d} {name:7s} {med(cs, "mean_ms"):8.3f} {med(cs, "no_eq8_mean_ms"):15.3f} '
+          f'{med(cs, "cpu_mean_ms"):7.3f}')

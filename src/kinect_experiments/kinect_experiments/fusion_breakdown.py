@@ -4,6 +4,17 @@ the fusion and the per-segment oracle (the better view), and each category's sha
 mean; then per joint the share of frames each view (and both) does not track.
 
     python -m kinect_experiments.fusion_breakdown --seeds 1 --scenarios b,c --layout front-side
+
+``--oracle`` prints instead what no fusion of the two views' raw observations can beat (issue 31
+(a)): Eq. 18 of the fused raw skeleton and of oracles that know the truth, against the front
+sensor alone:
+
+* joint select: per joint and frame, the view whose joint is nearer the truth;
+* joint convex: per joint and frame, the point of the segment between the two views' joints
+  nearest the truth (the best per-joint convex weight);
+* segment select / segment convex: the same per segment of Eq. 18 (its vector from view 1, from
+  view 2, or the best convex combination of the two): lower bounds of any per-joint choice or
+  weight, since a joint's choice is then free for each of its segments.
 """
 from __future__ import annotations
 
@@ -73,6 +84,56 @@ def breakdown(seed: int, scenario: str, layout: str = 'front-side', max_frames: 
     return lines
 
 
+def _nearest_on_segment(a: np.ndarray, b: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """The point of the segment [a, b] nearest ``t`` (arrays (..., 3))."""
+    d = b - a
+    dd = np.einsum('...k,...k->...', d, d)
+    w = np.einsum('...k,...k->...', t - a, d) / np.maximum(dd, 1e-18)
+    return a + np.clip(w, 0.0, 1.0)[..., None] * d
+
+
+def oracle(seed: int, scenario: str, layout: str = 'front-side', max_frames: int = 200,
+           sensor_params=None) -> dict:
+    """Mean Eq. 18 (cm) over the dev clips: the front sensor alone, view 1, view 2, the fused raw
+    skeleton and the oracles of the module docstring."""
+    _, dev, _ = load_clips('auto', seed)
+    sensor = SensorModel(sensor_params, seed=seed)
+    poses = view_poses(sensor, 2, layout)
+    front = poses[0] if layout == 'front-side' else None
+    acc: dict = {}
+    n = 0
+    for clip in dev:
+        views = [sensor.corrupt(clip, scenario, seed=seed, max_frames=max_frames, view=p)
+                 for p in poses]
+        if front is None:
+            from skeleton_core.tf import Transform
+            single = sensor.corrupt(clip, scenario, seed=seed, max_frames=max_frames,
+                                    view=Transform.identity()).positions
+        else:
+            single = views[0].positions
+        truth = poses[0].apply(views[0].truth)
+        a, b = (poses[k].apply(v.positions) for k, v in enumerate(views))
+        fused = np.stack([f.positions for f in fused_frames(views, poses)])
+        da, db = np.linalg.norm(a - truth, axis=-1), np.linalg.norm(b - truth, axis=-1)
+        sel = np.where((da <= db)[..., None], a, b)
+        # per segment: the error vectors of the two views' segment vectors
+        ea = (a[:, _CH] - a[:, _PA]) - (truth[:, _CH] - truth[:, _PA])
+        eb = (b[:, _CH] - b[:, _PA]) - (truth[:, _CH] - truth[:, _PA])
+        rows = {'single': segment_error_cm(single, poses[0].inverse().apply(truth)
+                                           if front is None else views[0].truth),
+                'view 1': segment_error_cm(a, truth), 'view 2': segment_error_cm(b, truth),
+                'fused raw': segment_error_cm(fused, truth),
+                'joint select': segment_error_cm(sel, truth),
+                'joint convex': segment_error_cm(_nearest_on_segment(a, b, truth), truth)}
+        rows['segment select'] = np.minimum(rows['view 1'], rows['view 2'])
+        rows['segment convex'] = np.linalg.norm(
+            _nearest_on_segment(ea, eb, np.zeros_like(ea)), axis=-1) * 100.0
+        for k, e in rows.items():
+            acc[k] = acc.get(k, 0.0) + float(e.sum())
+        n += rows['view 1'].size
+    return {k: v / n for k, v in acc.items()}
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     p.add_argument('--seeds', default='1')
@@ -80,9 +141,18 @@ def main(argv=None) -> int:
     p.add_argument('--layout', default='front-side', choices=LAYOUTS)
     p.add_argument('--max-frames', type=int, default=200)
     p.add_argument('--sensor-params', default=None, help='sensor-model YAML (overrides)')
+    p.add_argument('--oracle', action='store_true',
+                   help='the oracle bounds against the front sensor alone (module docstring)')
     a = p.parse_args(argv)
     for seed in (int(s) for s in a.seeds.split(',') if s):
         for sc in (s for s in a.scenarios.split(',') if s):
+            if a.oracle:
+                r = oracle(seed, sc, a.layout, a.max_frames, a.sensor_params)
+                base = r['single']
+                print(f'seed {seed} class {sc} layout {a.layout} params {a.sensor_params}: '
+                      + ', '.join(f'{k} {v:.2f} cm ({100 * (v - base) / base:+.1f} %)'
+                                  for k, v in r.items()), flush=True)
+                continue
             print('\n'.join(breakdown(seed, sc, a.layout, a.max_frames, a.sensor_params)))
     return 0
 
