@@ -12,9 +12,13 @@ sensor alone:
 * joint select: per joint and frame, the view whose joint is nearer the truth;
 * joint convex: per joint and frame, the point of the segment between the two views' joints
   nearest the truth (the best per-joint convex weight);
-* segment select / segment convex: the same per segment of Eq. 18 (its vector from view 1, from
-  view 2, or the best convex combination of the two): lower bounds of any per-joint choice or
-  weight, since a joint's choice is then free for each of its segments.
+* tree convex: per frame, the per-joint convex weights that minimise Eq. 18 itself (a convex
+  problem over the 20 weights, L-BFGS-B): the best any per-joint weighting of the two views'
+  raw joints can do;
+* segment select: per segment of Eq. 18, the better of the two views' segment vectors (a lower
+  bound of any per-joint *choice*: a joint's choice is then free for each of its segments);
+* segment convex: per segment, the best convex combination of the two views' segment vectors
+  (the same weight at both ends: not a bound of tree convex, whose ends' weights differ).
 """
 from __future__ import annotations
 
@@ -92,6 +96,33 @@ def _nearest_on_segment(a: np.ndarray, b: np.ndarray, t: np.ndarray) -> np.ndarr
     return a + np.clip(w, 0.0, 1.0)[..., None] * d
 
 
+def _tree_convex(a: np.ndarray, b: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """(T, J, 3): per frame, ``w a + (1 - w) b`` with the per-joint weights w in [0, 1] that
+    minimise the sum of Eq. 18's segment errors (convex; L-BFGS-B over all frames at once)."""
+    from scipy.optimize import minimize
+    d = a - b
+    ts = t[:, _CH] - t[:, _PA]
+    bs = b[:, _CH] - b[:, _PA] - ts
+    shape = a.shape[:2]
+
+    def f(x):
+        w = x.reshape(shape)
+        e = w[:, _CH, None] * d[:, _CH] - w[:, _PA, None] * d[:, _PA] + bs
+        n = np.linalg.norm(e, axis=-1)
+        u = e / np.maximum(n, 1e-12)[..., None]
+        g = np.zeros(shape)
+        g[:, _CH] += np.einsum('tsk,tsk->ts', u, d[:, _CH])
+        np.add.at(g, (slice(None), _PA), -np.einsum('tsk,tsk->ts', u, d[:, _PA]))
+        return float(n.sum()), g.ravel()
+
+    x0 = np.clip(np.einsum('tjk,tjk->tj', t - b, d) / np.maximum(np.einsum('tjk,tjk->tj', d, d),
+                                                                 1e-18), 0.0, 1.0)
+    r = minimize(f, x0.ravel(), jac=True, method='L-BFGS-B', bounds=[(0.0, 1.0)] * x0.size,
+                 options={'maxiter': 2000})
+    w = r.x.reshape(shape)[..., None]
+    return w * a + (1.0 - w) * b
+
+
 def oracle(seed: int, scenario: str, layout: str = 'front-side', max_frames: int = 200,
            sensor_params=None) -> dict:
     """Mean Eq. 18 (cm) over the dev clips: the front sensor alone, view 1, view 2, the fused raw
@@ -107,10 +138,10 @@ def oracle(seed: int, scenario: str, layout: str = 'front-side', max_frames: int
                  for p in poses]
         if front is None:
             from skeleton_core.tf import Transform
-            single = sensor.corrupt(clip, scenario, seed=seed, max_frames=max_frames,
-                                    view=Transform.identity()).positions
+            one = sensor.corrupt(clip, scenario, seed=seed, max_frames=max_frames,
+                                 view=Transform.identity())
         else:
-            single = views[0].positions
+            one = views[0]
         truth = poses[0].apply(views[0].truth)
         a, b = (poses[k].apply(v.positions) for k, v in enumerate(views))
         fused = np.stack([f.positions for f in fused_frames(views, poses)])
@@ -119,12 +150,12 @@ def oracle(seed: int, scenario: str, layout: str = 'front-side', max_frames: int
         # per segment: the error vectors of the two views' segment vectors
         ea = (a[:, _CH] - a[:, _PA]) - (truth[:, _CH] - truth[:, _PA])
         eb = (b[:, _CH] - b[:, _PA]) - (truth[:, _CH] - truth[:, _PA])
-        rows = {'single': segment_error_cm(single, poses[0].inverse().apply(truth)
-                                           if front is None else views[0].truth),
+        rows = {'single': segment_error_cm(one.positions, one.truth),
                 'view 1': segment_error_cm(a, truth), 'view 2': segment_error_cm(b, truth),
                 'fused raw': segment_error_cm(fused, truth),
                 'joint select': segment_error_cm(sel, truth),
-                'joint convex': segment_error_cm(_nearest_on_segment(a, b, truth), truth)}
+                'joint convex': segment_error_cm(_nearest_on_segment(a, b, truth), truth),
+                'tree convex': segment_error_cm(_tree_convex(a, b, truth), truth)}
         rows['segment select'] = np.minimum(rows['view 1'], rows['view 2'])
         rows['segment convex'] = np.linalg.norm(
             _nearest_on_segment(ea, eb, np.zeros_like(ea)), axis=-1) * 100.0
