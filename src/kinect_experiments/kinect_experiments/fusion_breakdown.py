@@ -132,6 +132,7 @@ def oracle(seed: int, scenario: str, layout: str = 'front-side', max_frames: int
     poses = view_poses(sensor, 2, layout)
     front = poses[0] if layout == 'front-side' else None
     acc: dict = {}
+    cats: dict = {}
     n = 0
     for clip in dev:
         views = [sensor.corrupt(clip, scenario, seed=seed, max_frames=max_frames, view=p)
@@ -161,8 +162,20 @@ def oracle(seed: int, scenario: str, layout: str = 'front-side', max_frames: int
             _nearest_on_segment(ea, eb, np.zeros_like(ea)), axis=-1) * 100.0
         for k, e in rows.items():
             acc[k] = acc.get(k, 0.0) + float(e.sum())
+        # where the error is: segments both views track, one view, neither (share of the mean)
+        seg_t = [(v.tracking_state[:, _CH] == TRACKED) & (v.tracking_state[:, _PA] == TRACKED)
+                 for v in views]
+        cat = seg_t[0].astype(int) + seg_t[1]
+        for c, name in ((2, 'both'), (1, 'one'), (0, 'neither')):
+            m = cat == c
+            cats['n ' + name] = cats.get('n ' + name, 0) + int(m.sum())
+            for k in ('fused raw', 'joint convex', 'tree convex'):
+                cats[f'{k} {name}'] = cats.get(f'{k} {name}', 0.0) + float(rows[k][m].sum())
         n += rows['view 1'].size
-    return {k: v / n for k, v in acc.items()}
+    out = {k: v / n for k, v in acc.items()}
+    out['categories'] = {k: (v / n if not k.startswith('n ') else 100.0 * v / n)
+                         for k, v in cats.items()}
+    return out
 
 
 def main(argv=None) -> int:
@@ -179,10 +192,14 @@ def main(argv=None) -> int:
         for sc in (s for s in a.scenarios.split(',') if s):
             if a.oracle:
                 r = oracle(seed, sc, a.layout, a.max_frames, a.sensor_params)
+                cats = r.pop('categories')
                 base = r['single']
                 print(f'seed {seed} class {sc} layout {a.layout} params {a.sensor_params}: '
                       + ', '.join(f'{k} {v:.2f} cm ({100 * (v - base) / base:+.1f} %)'
                                   for k, v in r.items()), flush=True)
+                print('  segments tracked by both / one / neither view: share %, then each '
+                      'row\'s cm of the mean from them: ' + ', '.join(
+                          f'{k} {v:.2f}' for k, v in cats.items()), flush=True)
                 continue
             print('\n'.join(breakdown(seed, sc, a.layout, a.max_frames, a.sensor_params)))
     return 0
