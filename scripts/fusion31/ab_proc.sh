@@ -19,6 +19,6 @@ for u in (1, 3, 6):
     c = FE.fusion_cost(streams, poses, users=u)
     print(sys.argv[1], u, round(c["mean_ms"], 3), round(c["no_eq8_mean_ms"], 3), round(c["cpu_mean_ms"], 3), flush=True)'
 for r in $(seq "$rounds"); do
-  PYTHONPATH="$oldpath$PYTHONPATH" python -c "$py" old "$frames"
+  KP_SHARED="$(cd ../shared && pwd)" PYTHONPATH="$oldpath$PYTHONPATH" python -c "$py" old "$frames"
   python -c "$py" new "$frames"
 done

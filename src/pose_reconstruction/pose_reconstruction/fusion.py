@@ -287,7 +287,8 @@ class MultiSensorFusion:
             assigned = {}
             if tracks:
                 tp = np.array([t.pelvis for t in tracks])
-                dist = np.linalg.norm(pel[:, None, :2] - tp[None, :, :2], axis=2)
+                diff = pel[:, None, :2] - tp[None, :, :2]
+                dist = np.sqrt(np.einsum('vtk,vtk->vt', diff, diff))   # np.linalg.norm's value
                 index = {t.track_id: k for k, t in enumerate(tracks)}
                 prev = np.zeros(dist.shape)
                 for i, v in enumerate(vs):
@@ -297,7 +298,10 @@ class MultiSensorFusion:
                 # one view per sensor and track: the assignment gives each track at most one of
                 # this sensor's views, and no track holds one yet (each sensor is assigned once)
                 cost = dist - HYSTERESIS * prev
-                rows, cols = linear_sum_assignment(cost)
+                if len(vs) == 1:     # one view: the assignment is the cheapest track
+                    rows, cols = np.zeros(1, np.intp), np.argmin(cost, axis=1)
+                else:
+                    rows, cols = linear_sum_assignment(cost)
                 for i, k in zip(rows.tolist(), cols.tolist()):
                     if dist[i, k] < self.gate + HYSTERESIS * prev[i, k]:
                         assigned[i] = tracks[k]
