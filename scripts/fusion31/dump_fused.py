@@ -33,7 +33,7 @@ for seed in (5, 6):
             key = f'{seed}_{sc}_{ci}'
             m = max(len(x) for x in P)      # the number of tracks varies (class d: jumps)
 
-            def pad(xs, fill):
+            def pad(xs, fill, m=m):
                 return np.stack([np.concatenate([x, np.full((m - len(x),) + x.shape[1:], fill, x.dtype)])
                                  for x in xs])
             out[key + '_p'], out[key + '_r'], out[key + '_t'] = pad(P, np.nan), pad(R, np.nan), pad(T, 255)
