@@ -15,8 +15,9 @@ sensor alone:
 * tree convex: per frame, the per-joint convex weights that minimise Eq. 18 itself (a convex
   problem over the 20 weights, L-BFGS-B): the best any per-joint weighting of the two views'
   raw joints can do;
-* segment select: per segment of Eq. 18, the better of the two views' segment vectors (a lower
-  bound of any per-joint *choice*: a joint's choice is then free for each of its segments);
+* segment select: per segment of Eq. 18, the better of the two views' segment vectors (both ends
+  from one view; a joint may then take a different view for each of its segments: no skeleton
+  has that, and it is no bound either, a per-joint choice can mix the views along a segment);
 * segment convex: per segment, the best convex combination of the two views' segment vectors
   (the same weight at both ends: not a bound of tree convex, whose ends' weights differ).
 """
