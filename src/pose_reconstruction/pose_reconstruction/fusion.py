@@ -48,7 +48,7 @@ from scipy.optimize import linear_sum_assignment
 
 from skeleton_core import jit
 from skeleton_core.conversions import SkeletonFrame
-from skeleton_core.model import HEADING_JOINTS, HIP_CENTER, MIRROR, NUM_JOINTS, PARENTS, TRACKED
+from skeleton_core.model import HIP_CENTER, MIRROR, NUM_JOINTS, PARENTS, TRACKED
 from skeleton_core.tf import Transform
 
 from . import fusion_kernels as K
@@ -74,10 +74,7 @@ _STATE_WEIGHT8[:3] = STATE_WEIGHT
 _MIRROR = np.asarray(MIRROR)
 _LR = np.array([j for j in range(NUM_JOINTS) if MIRROR[j] != j])   # joints with a mirror twin
 # the compiled step's index arrays (fusion_kernels.fuse_track)
-_MIRROR_I = _MIRROR.astype(np.int64)
-_LR_I = _LR.astype(np.int64)
-_PARENTS_I = _PARENTS.astype(np.int64)
-_HEADING_I = np.asarray(HEADING_JOINTS, np.int64)
+_MIRROR_I, _LR_I, _PARENTS_I, _HEADING_I = K.MIRROR_I, K.LR_I, K.PARENTS_I, K.HEADING_I
 
 
 def to_world(frame: SkeletonFrame, pose: Transform, frame_id: str = WORLD_FRAME) -> SkeletonFrame:

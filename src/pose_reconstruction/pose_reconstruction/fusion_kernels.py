@@ -19,6 +19,14 @@ import math
 import numpy as np
 
 from skeleton_core import jit
+from skeleton_core.model import HEADING_JOINTS, MIRROR, NUM_JOINTS, PARENTS
+
+# the kernel's index arrays: each joint's mirror twin, the joints that have one, the parents, the
+# hip and shoulder joints of the facing
+MIRROR_I = np.asarray(MIRROR, np.int64)
+LR_I = np.array([j for j in range(NUM_JOINTS) if MIRROR[j] != j], np.int64)
+PARENTS_I = np.asarray(PARENTS, np.int64)
+HEADING_I = np.asarray(HEADING_JOINTS, np.int64)
 
 
 def _max(a, b):
@@ -203,14 +211,12 @@ def warm_up() -> float:
     if _warm or not jit.enabled():
         return 0.0
     import time
-    from skeleton_core.model import NUM_JOINTS
-    from . import fusion as F
     t0 = time.perf_counter()
     nj = NUM_JOINTS
     fuse_track(np.zeros((2, nj, 3)), np.full((2, nj), 2, np.uint8), np.ones((2, nj), np.float32),
                False, np.zeros(2), False, np.zeros((nj, 3)), True, np.full((nj, 3), np.nan),
-               F._MIRROR_I, F._LR_I, F._PARENTS_I, F._HEADING_I, F.STATE_WEIGHT, F.MIRROR_COS,
-               F._EPS, np.empty((nj, 3)), np.empty(nj, np.uint8), np.empty(nj, np.float32),
+               MIRROR_I, LR_I, PARENTS_I, HEADING_I, np.array([0.0, 0.05, 1.0]), 0.5, 1e-9,
+               np.empty((nj, 3)), np.empty(nj, np.uint8), np.empty(nj, np.float32),
                np.empty(nj, np.int64), np.empty(2, np.uint8), np.empty(2))
     _warm = True
     return time.perf_counter() - t0
