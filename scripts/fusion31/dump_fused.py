@@ -31,6 +31,11 @@ for seed in (5, 6):
                 R.append(np.stack([f.reliability for f in fr]))
                 T.append(np.stack([f.tracking_state for f in fr]))
             key = f'{seed}_{sc}_{ci}'
-            out[key + '_p'], out[key + '_r'], out[key + '_t'] = np.stack(P), np.stack(R), np.stack(T)
+            m = max(len(x) for x in P)      # the number of tracks varies (class d: jumps)
+
+            def pad(xs, fill, m=m):
+                return np.stack([np.concatenate([x, np.full((m - len(x),) + x.shape[1:], fill, x.dtype)])
+                                 for x in xs])
+            out[key + '_p'], out[key + '_r'], out[key + '_t'] = pad(P, np.nan), pad(R, np.nan), pad(T, 255)
 np.savez(sys.argv[1], **out)
 print('saved', len(out))

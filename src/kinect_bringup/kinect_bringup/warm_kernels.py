@@ -13,6 +13,7 @@ import sys
 import time
 
 from physics_sim.simulation import warm_up as warm_physics
+from pose_reconstruction.fusion_kernels import warm_up as warm_fusion
 from pose_reconstruction.kernels import warm_up as warm_optimizer
 from pose_reconstruction.reliability_kernels import warm_up as warm_reliability
 from skeleton_core import jit
@@ -24,7 +25,8 @@ def main(argv=None) -> int:
         return 0
     t0 = time.perf_counter()
     for name, warm in (('reliability (Eq. 1-8)', warm_reliability),
-                       ('optimizer (Eq. 15)', warm_optimizer), ('physics (Eq. 1)', warm_physics)):
+                       ('optimizer (Eq. 15)', warm_optimizer), ('physics (Eq. 1)', warm_physics),
+                       ('multi-sensor fusion', warm_fusion)):
         t = time.perf_counter()
         warm()
         print(f'warm_kernels: {name} {time.perf_counter() - t:.1f} s')

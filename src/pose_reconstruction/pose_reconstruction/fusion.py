@@ -46,10 +46,12 @@ from typing import Dict, List, Optional, Sequence, Tuple
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
+from skeleton_core import jit
 from skeleton_core.conversions import SkeletonFrame
 from skeleton_core.model import HIP_CENTER, MIRROR, NUM_JOINTS, PARENTS, TRACKED
 from skeleton_core.tf import Transform
 
+from . import fusion_kernels as K
 from .plausibility import unswap_permutation
 from .posture_space import heading_yaw
 from .reliability import ReliabilityEstimator
@@ -71,6 +73,8 @@ _STATE_WEIGHT8 = np.full(256, STATE_WEIGHT[2])
 _STATE_WEIGHT8[:3] = STATE_WEIGHT
 _MIRROR = np.asarray(MIRROR)
 _LR = np.array([j for j in range(NUM_JOINTS) if MIRROR[j] != j])   # joints with a mirror twin
+# the compiled step's index arrays (fusion_kernels.fuse_track)
+_MIRROR_I, _LR_I, _PARENTS_I, _HEADING_I = K.MIRROR_I, K.LR_I, K.PARENTS_I, K.HEADING_I
 
 
 def to_world(frame: SkeletonFrame, pose: Transform, frame_id: str = WORLD_FRAME) -> SkeletonFrame:
@@ -200,6 +204,10 @@ class MultiSensorFusion:
         self._tracks: List[_Track] = []
         self._pair: Dict[Tuple[str, int], int] = {}     # (sensor, user) -> track id
         self._ids = itertools.count(1)
+        # steps 4, 6, 7 compiled (fusion_kernels) when numba is on; the numpy code is the twin
+        self._jit = jit.enabled() and not self.single
+        if self._jit:
+            K.warm_up()
 
     @property
     def single(self) -> bool:
@@ -276,7 +284,8 @@ class MultiSensorFusion:
             assigned = {}
             if tracks:
                 tp = np.array([t.pelvis for t in tracks])
-                dist = np.linalg.norm(pel[:, None, :2] - tp[None, :, :2], axis=2)
+                diff = pel[:, None, :2] - tp[None, :, :2]
+                dist = np.sqrt(np.einsum('vtk,vtk->vt', diff, diff))   # np.linalg.norm's value
                 index = {t.track_id: k for k, t in enumerate(tracks)}
                 prev = np.zeros(dist.shape)
                 for i, v in enumerate(vs):
@@ -286,7 +295,10 @@ class MultiSensorFusion:
                 # one view per sensor and track: the assignment gives each track at most one of
                 # this sensor's views, and no track holds one yet (each sensor is assigned once)
                 cost = dist - HYSTERESIS * prev
-                rows, cols = linear_sum_assignment(cost)
+                if len(vs) == 1:     # one view: the assignment is the cheapest track
+                    rows, cols = np.zeros(1, np.intp), np.argmin(cost, axis=1)
+                else:
+                    rows, cols = linear_sum_assignment(cost)
                 for i, k in zip(rows.tolist(), cols.tolist()):
                     if dist[i, k] < self.gate + HYSTERESIS * prev[i, k]:
                         assigned[i] = tracks[k]
@@ -328,6 +340,42 @@ class MultiSensorFusion:
             out.append(f)
         return out
 
+    def _fuse_compiled(self, track: _Track, views, stamp_ns: int) -> SkeletonFrame:
+        """Steps 4, 6 and 7 and the track's new facing in one compiled call
+        (fusion_kernels.fuse_track: the arithmetic of _resolve_mirror, fuse_views, hold_relative
+        and facing); ``track.facing`` is set."""
+        frames = [v[2] for v in views]
+        P = np.array([f.positions for f in frames], float)
+        TS = np.array([f.tracking_state for f in frames], np.uint8)
+        R = np.array([f.reliability for f in frames], np.float32)
+        has_face = track.facing is not None
+        fused = track.fused
+        if track.rel is None:
+            track.rel = np.full((NUM_JOINTS, 3), np.nan)
+        out_p = np.empty((NUM_JOINTS, 3))
+        out_ts = np.empty(NUM_JOINTS, np.uint8)
+        out_r = np.empty(NUM_JOINTS, np.float32)
+        best = np.empty(NUM_JOINTS, np.int64)
+        flips = np.empty(len(frames), np.uint8)
+        face = np.empty(2)
+        K.fuse_track(P, TS, R, has_face, track.facing if has_face else face,
+                     fused is not None, out_p if fused is None else fused.positions,
+                     HOLD_RELATIVE, track.rel, _MIRROR_I, _LR_I, _PARENTS_I, _HEADING_I,
+                     STATE_WEIGHT, MIRROR_COS, _EPS, out_p, out_ts, out_r, best, flips, face)
+        track.facing = face
+        ori = None
+        if all(f.orientations is not None for f in frames):
+            o = np.array([f.orientations for f in frames])
+            for i in np.flatnonzero(flips).tolist():
+                o[i] = o[i][_MIRROR]
+            ori = o[best, np.arange(NUM_JOINTS)]
+        nflip = int(flips.sum())
+        if nflip:
+            self.stats.mirrored += nflip
+        return SkeletonFrame(positions=out_p, tracking_state=out_ts, reliability=out_r,
+                             orientations=ori, user_id=track.track_id, stamp_ns=stamp_ns,
+                             frame_id=self.frame_id)
+
     def fuse(self, stamp_ns: Optional[int] = None) -> Tuple[List[SkeletonFrame], int, str]:
         """(skeletons, stamp, frame_id) at ``stamp_ns`` (default: the newest capture stamp)."""
         self.stats.frames += 1
@@ -345,12 +393,16 @@ class MultiSensorFusion:
             views = groups.get(t.track_id)
             if not views:
                 continue
-            frames = self._resolve_mirror(t, views)
-            fused = fuse_views(frames, user_id=t.track_id, stamp_ns=stamp_ns, frame_id=self.frame_id)
-            if HOLD_RELATIVE:
-                hold_relative(t, fused)
+            if self._jit:
+                fused = self._fuse_compiled(t, views, stamp_ns)
+            else:
+                frames = self._resolve_mirror(t, views)
+                fused = fuse_views(frames, user_id=t.track_id, stamp_ns=stamp_ns,
+                                   frame_id=self.frame_id)
+                if HOLD_RELATIVE:
+                    hold_relative(t, fused)
+                t.facing = facing(fused.positions, fused.reliability)
             t.pelvis = fused.positions[HIP_CENTER].copy()
-            t.facing = facing(fused.positions, fused.reliability)
             t.fused = fused
             t.last_ns = stamp_ns
             alive.append(t)

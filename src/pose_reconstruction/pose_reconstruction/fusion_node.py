@@ -77,12 +77,13 @@ class FusionNode(ManagedNode):
     # ------------------------------------------------------------------ lifecycle
     def configure(self) -> None:
         self.sensors = list(self.params['input_topics'])
-        self._new_state()
-        if len(self.sensors) > 1:   # the per-sensor Eq. 1-8, compiled now: not on the first frame
-            from .reliability_kernels import warm_up
-            warm_s = warm_up()
+        if len(self.sensors) > 1:   # the per-sensor Eq. 1-8 and the per-track fusion step,
+            #                         compiled now: not on the first frame
+            from . import fusion_kernels, reliability_kernels
+            warm_s = reliability_kernels.warm_up() + fusion_kernels.warm_up()
             if warm_s > 0.5:
                 self.get_logger().info(f'compiled kernels ready in {warm_s:.1f} s (cached from now on)')
+        self._new_state()
         self.tf = TfBuffer()
         self.tf_listener = StaticTfListener(self, self.tf)
         self._configured.append(('subscription', self.tf_listener.sub))

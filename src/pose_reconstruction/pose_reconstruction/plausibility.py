@@ -161,6 +161,8 @@ for _s, _c in enumerate(SEGMENT_CHILDREN):
         BLAME[_s] = _below(_c)
     else:
         BLAME[_s, _c] = True
+_GIRDLES = np.array([SHOULDER_LEFT, SHOULDER_RIGHT, HIP_LEFT, HIP_RIGHT], np.int64)
+_FEET = np.array([FOOT_LEFT, FOOT_RIGHT, ANKLE_LEFT, ANKLE_RIGHT], np.int64)
 _ARMS = np.zeros(NUM_JOINTS, bool)
 _ARMS[list(LIMB_JOINTS['left_arm'] + LIMB_JOINTS['right_arm'])] = True
 _LEGS = np.zeros(NUM_JOINTS, bool)
@@ -244,6 +246,15 @@ class PlausibilityCheck:
         self.swapped = {'arms': False, 'legs': False}
         self.terms: Dict[str, np.ndarray] = {}
         self.value = np.ones(NUM_JOINTS)
+        # the compiled step's state (reliability_kernels.plausibility_step): heading [known,
+        # value], the floor window as a ring and its sorted finite values, [start, length,
+        # sorted length, NaNs], the floor [known, value], the step's flags
+        self._k_lr = np.zeros(2)
+        self._k_ring = np.zeros(self.floor_window)
+        self._k_sorted = np.zeros(self.floor_window)
+        self._k_meta = np.zeros(4, np.int64)
+        self._k_floor = np.zeros(2)
+        self._k_flags = np.zeros(4, np.int64)
 
     def lengths_plausible(self) -> np.ndarray:
         """(20,) bool: the joints whose segments were plausible in the last frame (length and
@@ -387,6 +398,44 @@ class PlausibilityCheck:
         d = b - a
         return b - d * (1.0 - t) if t >= 0.5 else a + d * t
 
+    def _update_compiled(self, p, tracked, seg, seg_len, both, reference_lengths) -> np.ndarray:
+        """:meth:`update`'s terms in one compiled call (reliability_kernels.plausibility_step:
+        the arithmetic of _jump, the segment terms, _left_right and _floor)."""
+        first = self._anchor is None
+        if first:
+            self._anchor = p.copy()
+            self._anchor_ok = tracked.copy()
+        has = self._last_rel is not None
+        out_seg = np.empty(NUM_JOINTS)
+        out_lr = np.empty(NUM_JOINTS)
+        out_fl = np.empty(NUM_JOINTS)
+        v = np.empty(NUM_JOINTS)
+        flags = self._k_flags
+        jump = K.plausibility_step(
+            p, tracked, seg, seg_len, both, np.asarray(reference_lengths, float),
+            self._anchor, self._anchor_ok, self._jumped_a, self.jump_m, self.jump_frames,
+            not first, self._last_rel if has else seg, has, self._last_both, self._latch, BLAME,
+            self.bone_tolerance, self.bone_tolerance_m, self.bone_reject, self.max_step,
+            self.latch_frames, self._k_lr, _GIRDLES, _ARMS, _LEGS, self.lr_flip,
+            self.heading_rate, self.lr_unswap, self._k_ring, self._k_sorted, self._k_meta,
+            self._k_floor, _FEET, _ANKLE_HEIGHT, self.floor_tolerance, self.floor_reject,
+            FLOOR_QUANTILE, out_seg, out_lr, out_fl, v, flags)
+        self.skeleton_outlier = jump
+        if jump:
+            self.value = np.zeros(NUM_JOINTS)
+            self.terms = {'jump': self.value}
+            return self.value
+        self._last_rel = seg
+        self._last_both = both
+        if flags[1]:
+            self.swapped = {'arms': bool(flags[2]), 'legs': bool(flags[3])}
+        self.heading = float(self._k_lr[1])
+        if self._k_floor[0]:
+            self.floor = float(self._k_floor[1])
+        self.terms = {'segments': out_seg, 'left_right': out_lr, 'floor': out_fl}
+        self.value = v
+        return v
+
     def update(self, positions: np.ndarray, tracking_state: np.ndarray,
                reference_lengths: np.ndarray, seg: Optional[np.ndarray] = None,
                seg_len: Optional[np.ndarray] = None) -> np.ndarray:
@@ -400,6 +449,8 @@ class PlausibilityCheck:
             seg = p[_SEG_C] - p[_SEG_P]
             seg_len = np.linalg.norm(seg, axis=1)
         both = tracked[_SEG_P] & tracked[_SEG_C]
+        if self._jit:
+            return self._update_compiled(p, tracked, seg, seg_len, both, reference_lengths)
         jump = self._jump(p, tracked)
         self.skeleton_outlier = jump
         if jump:

@@ -233,5 +233,171 @@ def warm_up() -> float:
     segment_terms(seg, ones_s, both, ones_s, seg, True, both, np.zeros(ns, np.int64),
                   np.ones(ns), np.zeros((ns, nj), bool), 0.4, 0.03, 1.0, 0.27, 45)
     skeleton_jump(p, tracked, np.zeros((nj, 3)), tracked.copy(), np.zeros(1, np.int64), 0.35, 15)
+    idx4 = np.arange(4, dtype=np.int64)
+    out = [np.empty(nj) for _ in range(4)]
+    plausibility_step(p, tracked, seg, ones_s, both, ones_s, np.zeros((nj, 3)), tracked.copy(),
+                      np.zeros(1, np.int64), 0.35, 15, True, seg, True, both,
+                      np.zeros(ns, np.int64), np.zeros((ns, nj), bool), 0.4, 0.03, 1.0, 0.27, 45,
+                      np.zeros(2), idx4, tracked.copy(), tracked.copy(), 1.9, 0.3, True,
+                      np.zeros(150), np.zeros(150), np.zeros(4, np.int64), np.zeros(2), idx4,
+                      0.08, 0.05, 0.12, 0.25, out[0], out[1], out[2], out[3],
+                      np.zeros(4, np.int64))
     _warm = True
     return time.perf_counter() - t0
+
+
+def _wrap(a):
+    """plausibility._wrap: the angle in [-pi, pi) (Python's float modulo)."""
+    return (a + math.pi) % (2.0 * math.pi) - math.pi
+
+
+def _nmin(a, b):
+    """np.minimum of two floats (NaN propagates)."""
+    if a != a or b != b:
+        return a + b
+    return a if a <= b else b
+
+
+def _plausibility_step(p, tracked, seg, seg_len, both, ref,
+                       anchor, anchor_ok, jumped, jump_m, jump_frames, check_jump,
+                       last_rel, has_last, last_both, latch, blame, tol, tol_m, reject,
+                       max_step, latch_frames,
+                       lr_state, girdles, arms, legs, lr_flip, heading_rate, lr_unswap,
+                       fl_ring, fl_sorted, fl_meta, fl_state, feet, ankle_height,
+                       floor_tolerance, floor_reject, floor_quantile,
+                       out_seg, out_lr, out_fl, out_v, flags):
+    """PlausibilityCheck.update after its first frame, in one call: the whole-skeleton jump
+    (flags[0]), the segment terms (``out_seg``; ``latch`` updated; the caller keeps ``seg`` /
+    ``both`` as the next frame's ``last_rel`` / ``last_both``), left/right against the heading
+    (``out_lr``; ``lr_state`` = [heading known, heading]; flags[1] = the swap flags were set,
+    flags[2] / flags[3] = arms / legs swapped), the floor (``out_fl``; the window as a ring
+    ``fl_ring`` and its finite values sorted in ``fl_sorted``, ``fl_meta`` = [ring start, ring
+    length, sorted length, NaNs in the ring], ``fl_state`` = [floor known, floor]) and their
+    minimum (``out_v``). ``girdles``: (shoulder_l, shoulder_r, hip_l, hip_r); ``feet``: (foot_l,
+    foot_r, ankle_l, ankle_r). Returns True on a jump (then nothing else is updated);
+    ``check_jump`` False: the first frame (the anchor was just set), no jump test."""
+    nj = p.shape[0]
+    flags[1] = 0
+    if check_jump and skeleton_jump(p, tracked, anchor, anchor_ok, jumped, jump_m, jump_frames):
+        flags[0] = 1
+        return True
+    flags[0] = 0
+    blamed = segment_terms(seg, seg_len, both, ref, last_rel, has_last, last_both, latch, blame,
+                           tol, tol_m, reject, max_step, latch_frames)
+    for j in range(nj):
+        out_seg[j] = blamed[j]
+        out_lr[j] = 1.0
+    # left/right against the heading (PlausibilityCheck._left_right)
+    sl, sr, hl, hr = girdles[0], girdles[1], girdles[2], girdles[3]
+    hs = math.atan2(-(p[sl, 0] - p[sr, 0]), p[sl, 1] - p[sr, 1])
+    hh = math.atan2(-(p[hl, 0] - p[hr, 0]), p[hl, 1] - p[hr, 1])
+    if lr_state[0] == 0.0:
+        lr_state[1] = math.atan2(math.sin(hs) + math.sin(hh), math.cos(hs) + math.cos(hh))
+        lr_state[0] = 1.0
+    else:
+        heading = lr_state[1]
+        ds = abs(_wrap_j(hs - heading))
+        dh = abs(_wrap_j(hh - heading))
+        apart = abs(_wrap_j(hs - hh)) > lr_flip
+        a_sw = apart and ds > lr_flip and dh <= lr_flip
+        l_sw = apart and dh > lr_flip and ds <= lr_flip
+        flags[1] = 1
+        flags[2] = 1 if a_sw else 0
+        flags[3] = 1 if l_sw else 0
+        taken = False
+        if a_sw:
+            if not lr_unswap:
+                for j in range(nj):
+                    if arms[j]:
+                        out_lr[j] = 0.0
+            target = hh
+        elif l_sw:
+            if not lr_unswap:
+                for j in range(nj):
+                    if legs[j]:
+                        out_lr[j] = 0.0
+            target = hs
+        else:
+            target = math.atan2(math.sin(hs) + math.sin(hh), math.cos(hs) + math.cos(hh))
+            if ds > lr_flip and dh > lr_flip:
+                lr_state[1] = target
+                taken = True
+        if not taken:
+            lr_state[1] = _wrap_j(heading + heading_rate * _wrap_j(target - heading))
+    # the floor (PlausibilityCheck._floor, _floor_push, _floor_quantile)
+    low = 0.0
+    have = False
+    for k in range(4):
+        j = feet[k]
+        if tracked[j]:
+            z = p[j, 2] - (ankle_height if k >= 2 else 0.0)
+            if not have or z < low:     # Python's min over the list: the first of equals
+                low = z
+                have = True
+    if have:
+        w = fl_ring.shape[0]
+        start, n, ns, nan = fl_meta[0], fl_meta[1], fl_meta[2], fl_meta[3]
+        if n == w:                      # evict the oldest
+            old = fl_ring[start]
+            if old != old:
+                nan -= 1
+            else:
+                i = 0
+                while i < ns and fl_sorted[i] < old:      # bisect_left
+                    i += 1
+                for k in range(i, ns - 1):
+                    fl_sorted[k] = fl_sorted[k + 1]
+                ns -= 1
+            fl_ring[start] = low
+            start = (start + 1) % w
+        else:
+            fl_ring[(start + n) % w] = low
+            n += 1
+        if low != low:
+            nan += 1
+        else:
+            i = ns
+            while i > 0 and fl_sorted[i - 1] > low:       # insort (bisect_right)
+                fl_sorted[i] = fl_sorted[i - 1]
+                i -= 1
+            fl_sorted[i] = low
+            ns += 1
+        fl_meta[0], fl_meta[1], fl_meta[2], fl_meta[3] = start, n, ns, nan
+        if n >= 5:
+            if nan > 0:
+                fl_state[1] = np.nan
+            else:
+                pos = (ns - 1) * floor_quantile
+                lo = int(math.floor(pos))
+                hi = min(lo + 1, ns - 1)
+                t = pos - lo
+                a = fl_sorted[lo]
+                b = fl_sorted[hi]
+                d = b - a
+                fl_state[1] = b - d * (1.0 - t) if t >= 0.5 else a + d * t
+            fl_state[0] = 1.0
+    if fl_state[0] == 0.0:
+        for j in range(nj):
+            out_fl[j] = 1.0
+    else:
+        fl = fl_state[1]
+        span = floor_reject - floor_tolerance
+        for j in range(nj):
+            score = 1.0 - ((fl - p[j, 2]) - floor_tolerance) / span
+            out_fl[j] = _nmin(_nmax(score, 0.0), 1.0)
+    for j in range(nj):
+        out_v[j] = _nmin(_nmin(out_seg[j], out_lr[j]), out_fl[j])
+    return False
+
+
+def _nmax(a, b):
+    """np.maximum of two floats (NaN propagates)."""
+    if a != a or b != b:
+        return a + b
+    return a if a >= b else b
+
+
+_wrap_j = jit.njit(_wrap)
+_nmin = jit.njit(_nmin)
+_nmax = jit.njit(_nmax)
+plausibility_step = jit.njit(_plausibility_step)

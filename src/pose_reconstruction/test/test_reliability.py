@@ -312,7 +312,8 @@ def test_plausibility_running_floor_quantile_is_np_quantile():
 def test_compiled_step_agrees_with_numpy(scenario):
     """The compiled Eq. 1-8 / plausibility steps (reliability_kernels, numba) and the numpy twin
     give the same reliability, terms and state on a sensor-model stream with occlusions (c) and
-    confident failures (d): jumps, snaps, floor, swapped limbs."""
+    confident failures (d): jumps, snaps, floor (its window evicting), swapped limbs; heading,
+    floor and swap flags included."""
     from skeleton_core import jit
     if not jit.enabled():
         pytest.skip('numba off: the numpy twin is the only path')
@@ -323,12 +324,14 @@ def test_compiled_step_agrees_with_numpy(scenario):
     pos[100:106] += (1.0, 0.0, 0.0)            # a whole-skeleton jump (another person)
     pos[150:160, HAND_LEFT] += (0.0, 0.0, 0.5)  # a snapped hand (latched segment)
     pos[200:210, FOOT_RIGHT, 2] -= 0.2          # a foot through the floor
+    from pose_reconstruction.plausibility import unswap_permutation
+    pos[240:250] = pos[240:250][:, unswap_permutation({'arms': True})]   # arms swapped L/R
     est = {}
     for compiled in (True, False):
         e = ReliabilityEstimator()
         e._jit = e.plausibility._jit = compiled
         est[compiled] = e
-    outlier = latched = 0
+    outlier = latched = swaps = 0
     for p, ts in zip(pos, s.tracking_state):
         a, b = est[True].update(p, ts), est[False].update(p, ts)
         np.testing.assert_allclose(a, b, rtol=0, atol=1e-12)
@@ -336,6 +339,16 @@ def test_compiled_step_agrees_with_numpy(scenario):
             np.testing.assert_allclose(ta, tb, rtol=0, atol=1e-12)
         assert est[True].plausibility.skeleton_outlier == est[False].plausibility.skeleton_outlier
         assert np.array_equal(est[True].plausibility._latch, est[False].plausibility._latch)
+        pa, pb = est[True].plausibility, est[False].plausibility
+        assert pa.swapped == pb.swapped
+        assert (pa.heading is None) == (pb.heading is None)
+        if pa.heading is not None:
+            assert abs(pa.heading - pb.heading) < 1e-12
+        assert (pa.floor is None) == (pb.floor is None)
+        if pa.floor is not None:
+            assert abs(pa.floor - pb.floor) < 1e-12
+        swaps += int(pa.swapped['arms'] or pa.swapped['legs'])
         outlier += est[True].plausibility.skeleton_outlier
         latched += int((est[True].plausibility._latch > 0).any())
     assert outlier >= 3 and latched >= 3       # the stream exercises the jump and the latch
+    assert swaps >= 3                          # ... and the left/right swap
