@@ -414,8 +414,8 @@ class PlausibilityCheck:
         jump = K.plausibility_step(
             p, tracked, seg, seg_len, both, np.asarray(reference_lengths, float),
             self._anchor, self._anchor_ok, self._jumped_a, self.jump_m, self.jump_frames,
-            not first, self._last_rel if has else seg, has, self._last_both, self._latch, BLAME,
-            self.bone_tolerance, self.bone_tolerance_m, self.bone_reject, self.max_step,
+            not first, self._last_rel if has else seg, has, self._last_both, self._latch,
+            self._last_bone, BLAME, self.bone_tolerance, self.bone_tolerance_m, self.bone_reject, self.max_step,
             self.latch_frames, self._k_lr, _GIRDLES, _ARMS, _LEGS, self.lr_flip,
             self.heading_rate, self.lr_unswap, self._k_ring, self._k_sorted, self._k_meta,
             self._k_floor, _FEET, _ANKLE_HEIGHT, self.floor_tolerance, self.floor_reject,

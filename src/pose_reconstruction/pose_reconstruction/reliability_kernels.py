@@ -237,8 +237,8 @@ def warm_up() -> float:
     out = [np.empty(nj) for _ in range(4)]
     plausibility_step(p, tracked, seg, ones_s, both, ones_s, np.zeros((nj, 3)), tracked.copy(),
                       np.zeros(1, np.int64), 0.35, 15, True, seg, True, both,
-                      np.zeros(ns, np.int64), np.zeros((ns, nj), bool), 0.4, 0.03, 1.0, 0.27, 45,
-                      np.zeros(2), idx4, tracked.copy(), tracked.copy(), 1.9, 0.3, True,
+                      np.zeros(ns, np.int64), np.ones(ns), np.zeros((ns, nj), bool), 0.4, 0.03,
+                      1.0, 0.27, 45, np.zeros(2), idx4, tracked.copy(), tracked.copy(), 1.9, 0.3, True,
                       np.zeros(150), np.zeros(150), np.zeros(4, np.int64), np.zeros(2), idx4,
                       0.08, 0.05, 0.12, 0.25, out[0], out[1], out[2], out[3],
                       np.zeros(4, np.int64))
@@ -260,14 +260,14 @@ def _nmin(a, b):
 
 def _plausibility_step(p, tracked, seg, seg_len, both, ref,
                        anchor, anchor_ok, jumped, jump_m, jump_frames, check_jump,
-                       last_rel, has_last, last_both, latch, blame, tol, tol_m, reject,
-                       max_step, latch_frames,
+                       last_rel, has_last, last_both, latch, last_bone, blame, tol, tol_m,
+                       reject, max_step, latch_frames,
                        lr_state, girdles, arms, legs, lr_flip, heading_rate, lr_unswap,
                        fl_ring, fl_sorted, fl_meta, fl_state, feet, ankle_height,
                        floor_tolerance, floor_reject, floor_quantile,
                        out_seg, out_lr, out_fl, out_v, flags):
     """PlausibilityCheck.update after its first frame, in one call: the whole-skeleton jump
-    (flags[0]), the segment terms (``out_seg``; ``latch`` updated; the caller keeps ``seg`` /
+    (flags[0]), the segment terms (``out_seg``; ``latch`` and ``last_bone`` updated; the caller keeps ``seg`` /
     ``both`` as the next frame's ``last_rel`` / ``last_both``), left/right against the heading
     (``out_lr``; ``lr_state`` = [heading known, heading]; flags[1] = the swap flags were set,
     flags[2] / flags[3] = arms / legs swapped), the floor (``out_fl``; the window as a ring
@@ -282,8 +282,8 @@ def _plausibility_step(p, tracked, seg, seg_len, both, ref,
         flags[0] = 1
         return True
     flags[0] = 0
-    blamed = segment_terms(seg, seg_len, both, ref, last_rel, has_last, last_both, latch, blame,
-                           tol, tol_m, reject, max_step, latch_frames)
+    blamed = segment_terms(seg, seg_len, both, ref, last_rel, has_last, last_both, latch,
+                           last_bone, blame, tol, tol_m, reject, max_step, latch_frames)
     for j in range(nj):
         out_seg[j] = blamed[j]
         out_lr[j] = 1.0
