@@ -22,7 +22,10 @@ Terms (each 1 = plausible):
 * **segment speed** — a segment's child moving faster than ``max_segment_speed_m_s`` relative to
   its parent between two frames (a snap onset) blames it and what hangs from it, latched until
   it jumps again (the snap ends) or ``latch_frames`` pass: a wrist and hand snapped together
-  onto a point their own lengths allow keeps every bone length.
+  onto a point their own lengths allow keeps every bone length. A jump from a length the bone
+  term rejects to one it accepts is a failure ending, not a snap onset (issue 34: a wrist that
+  slid onto an object slower than the speed limit, rejected by its forearm length, jumped back
+  and was then latched for 1.5 s on the right place, the forearm filled by the database).
 * **left/right against the heading** — the shoulder and the hip lines each give a heading; the
   body heading follows the girdles that agree with it at ``heading_rate`` per frame. A girdle
   more than ``lr_flip_deg`` off the body heading while the other girdle agrees with it has its
@@ -236,6 +239,7 @@ class PlausibilityCheck:
         self._last_rel: Optional[np.ndarray] = None
         self._latch = np.zeros(NUM_SEGMENTS, int)
         self._last_both = np.zeros(NUM_SEGMENTS, bool)
+        self._last_bone = np.ones(NUM_SEGMENTS)   # last frame's bone-length score per segment
         self._anchor: Optional[np.ndarray] = None
         self._jumped_a = np.zeros(1, np.int64)   # frames of the current jump rejected
         self.skeleton_outlier = False
@@ -298,16 +302,21 @@ class PlausibilityCheck:
         # a segment without a profile length yet (NaN) is not judged
         return np.where(both & np.isfinite(score), np.minimum(np.maximum(score, 0.0), 1.0), 1.0)
 
-    def _speed(self, rel, both) -> np.ndarray:
+    def _speed(self, rel, both, bone=None) -> np.ndarray:
         """A segment whose child jumps faster than ``max_segment_speed_m_s`` relative to its parent
-        is latched implausible until it jumps again (the snap ends) or ``latch_frames`` pass."""
+        is latched implausible until it jumps again (the snap ends) or ``latch_frames`` pass.
+        ``bone`` (19,): this frame's bone-length score; a jump from a length the bone term
+        rejected to one it accepts is the end of a failure, not a snap onset (module docstring)."""
         score = np.ones(NUM_SEGMENTS)
+        if bone is None:
+            bone = np.ones(NUM_SEGMENTS)
         if self._last_rel is not None:
             diff = rel - self._last_rel
             step = np.sqrt((diff * diff).sum(axis=1))      # np.linalg.norm's arithmetic
             # TRACKED in both frames: a joint re-acquired after an occlusion may jump
             jump = both & self._last_both & (step > self.max_step)
-            ended = jump & (self._latch > 0)          # the jump back
+            # the jump back (a latched snap ending, or a wrong length becoming right)
+            ended = jump & ((self._latch > 0) | ((self._last_bone < 1.0) & (bone >= 1.0)))
             self._latch[jump & ~ended] = 1
             self._latch[ended] = 0
             on = self._latch > 0
@@ -316,6 +325,7 @@ class PlausibilityCheck:
             score[(self._latch > 0) | jump] = 0.0
         self._last_rel = rel
         self._last_both = both
+        self._last_bone = bone
         return score
 
     def _left_right(self, p) -> np.ndarray:
@@ -404,8 +414,8 @@ class PlausibilityCheck:
         jump = K.plausibility_step(
             p, tracked, seg, seg_len, both, np.asarray(reference_lengths, float),
             self._anchor, self._anchor_ok, self._jumped_a, self.jump_m, self.jump_frames,
-            not first, self._last_rel if has else seg, has, self._last_both, self._latch, BLAME,
-            self.bone_tolerance, self.bone_tolerance_m, self.bone_reject, self.max_step,
+            not first, self._last_rel if has else seg, has, self._last_both, self._latch,
+            self._last_bone, BLAME, self.bone_tolerance, self.bone_tolerance_m, self.bone_reject, self.max_step,
             self.latch_frames, self._k_lr, _GIRDLES, _ARMS, _LEGS, self.lr_flip,
             self.heading_rate, self.lr_unswap, self._k_ring, self._k_sorted, self._k_meta,
             self._k_floor, _FEET, _ANKLE_HEIGHT, self.floor_tolerance, self.floor_reject,
@@ -451,14 +461,15 @@ class PlausibilityCheck:
             has = self._last_rel is not None
             blamed = K.segment_terms(seg, seg_len, both, np.asarray(reference_lengths, float),
                                    self._last_rel if has else seg, has,
-                                   self._last_both, self._latch, BLAME, self.bone_tolerance,
+                                   self._last_both, self._latch, self._last_bone, BLAME,
+                                   self.bone_tolerance,
                                    self.bone_tolerance_m, self.bone_reject, self.max_step,
                                    self.latch_frames)
             self._last_rel = seg
             self._last_both = both
         else:
-            seg_score = np.minimum(self._bones(seg_len, both, np.asarray(reference_lengths, float)),
-                                   self._speed(seg, both))
+            bone = self._bones(seg_len, both, np.asarray(reference_lengths, float))
+            seg_score = np.minimum(bone, self._speed(seg, both, bone))
             blamed = np.where(BLAME, seg_score[:, None], 1.0).min(axis=0)
         lr = self._left_right(p)
         fl = self._floor(p, tracked)

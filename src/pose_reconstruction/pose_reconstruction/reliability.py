@@ -17,10 +17,14 @@ TRACKED at a wrong place — are caught by :mod:`.plausibility` (bone lengths ag
 profile, segment speed, left/right against the heading, floor penetration, whole-skeleton jumps);
 the reliability is ``min(Eq. 8, R_p)``, so an implausible joint is unreliable from the frame it
 becomes implausible, and the length profile learns only from plausible segments. With it, Eq. 6
-judges a TRACKED joint by its segments to other TRACKED joints only: a segment whose other end is
-INFERRED (held at a stale place) or NOT_TRACKED has R_t = 0 there already and must not make the
-tracked end unreliable too (the paper's Eq. 6 averaged it in: a tracked spine above a hidden hip
-centre read R_k <= 0.5 and was replaced by the database; issue 34).
+judges a TRACKED joint by its segments to other TRACKED joints only (none: R_k = 1): a segment
+whose other end is INFERRED (held at a stale place) or NOT_TRACKED has R_t = 0 there already and
+must not make the tracked end unreliable too (the paper's Eq. 6 averaged it in: a tracked spine
+above a hidden hip centre read R_k <= 0.5 and was replaced by the database; issue 34). Nor does a
+segment to an end joint (head, hand, foot) judge its parent when the parent has other segments:
+the end joint has only that segment to be judged by, so a wrong length there is the end's (a hand
+resting TRACKED on an object 10-20 cm off put the wrist beside it at R_k ~ 0.5 and handed the
+well-seen forearm to the database).
 
 Reference segment lengths (Sec. IV-B) are captured automatically whenever every joint is tracked
 and the posture is close to one of the two reference postures (T-pose, standing with arms down),
@@ -96,6 +100,17 @@ _HEIGHT_CHAIN = np.array([SEGMENT_OF_JOINT[j] for j in (SPINE, SHOULDER_CENTER, 
                                                         ANKLE_LEFT, KNEE_RIGHT, ANKLE_RIGHT)])
 _HEIGHT_REF = float(standard_body().segment_lengths[_HEIGHT_CHAIN].sum())
 _INCIDENCE_MEAN = INCIDENCE / INCIDENCE.sum(axis=1, keepdims=True)
+# (20, 19): the segments a TRACKED joint is judged by with the plausibility stage (Eq. 6 without
+# blaming a neighbour): its own, less a segment to an end joint (head, hand, foot) when the joint
+# has others -- an end joint has only that segment to be judged by, so a wrong length there is
+# the end's (a hand resting on an object 10-20 cm off; issue 34), not its parent's
+_END = INCIDENCE.sum(axis=1) == 1
+_JUDGED_BY = INCIDENCE.copy()
+for _s in range(NUM_SEGMENTS):
+    for _a, _b in ((SEGMENT_PARENT_INDEX[_s], SEGMENT_CHILD_INDEX[_s]),
+                   (SEGMENT_CHILD_INDEX[_s], SEGMENT_PARENT_INDEX[_s])):
+        if _END[_b] and not _END[_a]:
+            _JUDGED_BY[_a, _s] = 0.0
 _SEG_COLS = np.arange(NUM_SEGMENTS)
 _SEG_PAR = np.asarray(SEGMENT_PARENT_INDEX, np.int64)
 _SEG_CHILD = np.asarray(SEGMENT_CHILD_INDEX, np.int64)
@@ -454,12 +469,12 @@ class ReliabilityEstimator:
         rb = np.empty(NUM_JOINTS)
         rk = np.empty(NUM_JOINTS)
         rt = self._rt_lut8[ts]
-        judge = self.plausibility.enabled and not tracked.all()
+        judge = self.plausibility.enabled
         r = K.eq18_step(p, ln, self.reference_lengths, tracked, rt,
                         rt if rp is None else rp, rp is not None, judge, self.d_min,
                         self.theta_floor, self.theta_roof, self._k_last_p, self._k_last_d,
                         self._k_last_n, self._k_stage, self._k_theta, self._k_theta_n,
-                        self._k_minima, self._k_minima_n, self._gauss_table, INCIDENCE,
+                        self._k_minima, self._k_minima_n, self._gauss_table, _JUDGED_BY,
                         _INCIDENCE_MEAN, _SEG_PAR, _SEG_CHILD, rb, rk)
         self.last_terms = (rb, rk, rt)
         self.reliability = r
@@ -511,17 +526,19 @@ class ReliabilityEstimator:
         ds /= np.maximum(ref, 1e-6)
         np.minimum(ds, 1.0, out=ds)
         rk = 1.0 - _INCIDENCE_MEAN @ ds
-        if self.plausibility.enabled and not tracked.all():
+        if self.plausibility.enabled:
             # blame where it belongs: a segment with an end the sensor does not track (R_t = 0
             # there already; an INFERRED joint is held at a stale place) says nothing about its
             # TRACKED end. Eq. 6 averages it in, so a tracked spine above a table-hidden hip
             # centre, or a tracked knee below a hidden hip, reads R_k <= 0.5 and is handed to the
-            # database although the sensor sees it (issue 34). A tracked joint is judged by its
-            # segments to other tracked joints only (none: R_k = 1; bone lengths of confident
-            # failures are the plausibility term's).
+            # database although the sensor sees it (issue 34); likewise a tracked wrist beside a
+            # tracked hand resting 10-20 cm off on an object. A tracked joint is judged by its
+            # segments to other tracked joints only, less a segment to an end joint when it has
+            # others (_JUDGED_BY; none left: R_k = 1; bone lengths of confident failures are the
+            # plausibility term's).
             both = (tracked.take(SEGMENT_PARENT_INDEX) & tracked.take(SEGMENT_CHILD_INDEX))
-            cnt = INCIDENCE @ both
-            rk_t = 1.0 - (INCIDENCE @ (ds * both)) / np.maximum(cnt, 1.0)
+            cnt = _JUDGED_BY @ both
+            rk_t = 1.0 - (_JUDGED_BY @ (ds * both)) / np.maximum(cnt, 1.0)
             rk = np.where(tracked, rk_t, rk)
         # Eq. 7
         if ts.dtype == np.uint8:

@@ -72,7 +72,8 @@ def _eq18_step(p, ln, ref, tracked, rt, rp, use_rp, judge_tracked, d_min, theta_
             out_rb[j] = 1.0 - max(min(m, theta_roof) - theta_floor, 0.0) / span
         else:
             out_rb[j] = 1.0
-    # Eq. 5-6 (a TRACKED joint judged by its segments to TRACKED joints when judge_tracked)
+    # Eq. 5-6 (a TRACKED joint judged by its segments to TRACKED joints when judge_tracked;
+    # ``inc``: the segments each joint is judged by, reliability._JUDGED_BY)
     ds = np.empty(ns)
     both = np.empty(ns)
     for s in range(ns):
@@ -115,10 +116,11 @@ def _eq18_step(p, ln, ref, tracked, rt, rp, use_rp, judge_tracked, d_min, theta_
     return out
 
 
-def _segment_terms(seg, seg_len, both, ref, last_rel, has_last, last_both, latch, blame,
-                   tol, tol_m, reject, max_step, latch_frames):
+def _segment_terms(seg, seg_len, both, ref, last_rel, has_last, last_both, latch, last_bone,
+                   blame, tol, tol_m, reject, max_step, latch_frames):
     """PlausibilityCheck's bone-length and segment-speed terms and their blame (its ``_bones``,
-    ``_speed`` and the min over BLAME): returns the per-joint value (J,); ``latch`` is updated."""
+    ``_speed`` and the min over BLAME): returns the per-joint value (J,); ``latch`` and
+    ``last_bone`` (the bone-length scores) are updated."""
     ns = seg.shape[0]
     nj = blame.shape[1]
     score = np.empty(ns)
@@ -138,7 +140,8 @@ def _segment_terms(seg, seg_len, both, ref, last_rel, has_last, last_both, latch
                 st += dd * dd
             st = math.sqrt(st)
             jump = both[s] and last_both[s] and st > max_step
-            ended = jump and latch[s] > 0
+            # the jump back: a latched snap ending, or a rejected length becoming right
+            ended = jump and (latch[s] > 0 or (last_bone[s] < 1.0 and b >= 1.0))
             if jump and not ended:
                 latch[s] = 1
             if ended:
@@ -150,6 +153,7 @@ def _segment_terms(seg, seg_len, both, ref, last_rel, has_last, last_both, latch
             if latch[s] > 0 or jump:
                 sp = 0.0
         score[s] = min(b, sp)
+        last_bone[s] = b
     out = np.ones(nj)
     for s in range(ns):
         for j in range(nj):
@@ -227,14 +231,14 @@ def warm_up() -> float:
     seg = np.zeros((ns, 3))
     both = np.ones(ns, bool)
     segment_terms(seg, ones_s, both, ones_s, seg, True, both, np.zeros(ns, np.int64),
-                  np.zeros((ns, nj), bool), 0.4, 0.03, 1.0, 0.27, 45)
+                  np.ones(ns), np.zeros((ns, nj), bool), 0.4, 0.03, 1.0, 0.27, 45)
     skeleton_jump(p, tracked, np.zeros((nj, 3)), tracked.copy(), np.zeros(1, np.int64), 0.35, 15)
     idx4 = np.arange(4, dtype=np.int64)
     out = [np.empty(nj) for _ in range(4)]
     plausibility_step(p, tracked, seg, ones_s, both, ones_s, np.zeros((nj, 3)), tracked.copy(),
                       np.zeros(1, np.int64), 0.35, 15, True, seg, True, both,
-                      np.zeros(ns, np.int64), np.zeros((ns, nj), bool), 0.4, 0.03, 1.0, 0.27, 45,
-                      np.zeros(2), idx4, tracked.copy(), tracked.copy(), 1.9, 0.3, True,
+                      np.zeros(ns, np.int64), np.ones(ns), np.zeros((ns, nj), bool), 0.4, 0.03,
+                      1.0, 0.27, 45, np.zeros(2), idx4, tracked.copy(), tracked.copy(), 1.9, 0.3, True,
                       np.zeros(150), np.zeros(150), np.zeros(4, np.int64), np.zeros(2), idx4,
                       0.08, 0.05, 0.12, 0.25, out[0], out[1], out[2], out[3],
                       np.zeros(4, np.int64))
@@ -256,14 +260,14 @@ def _nmin(a, b):
 
 def _plausibility_step(p, tracked, seg, seg_len, both, ref,
                        anchor, anchor_ok, jumped, jump_m, jump_frames, check_jump,
-                       last_rel, has_last, last_both, latch, blame, tol, tol_m, reject,
-                       max_step, latch_frames,
+                       last_rel, has_last, last_both, latch, last_bone, blame, tol, tol_m,
+                       reject, max_step, latch_frames,
                        lr_state, girdles, arms, legs, lr_flip, heading_rate, lr_unswap,
                        fl_ring, fl_sorted, fl_meta, fl_state, feet, ankle_height,
                        floor_tolerance, floor_reject, floor_quantile,
                        out_seg, out_lr, out_fl, out_v, flags):
     """PlausibilityCheck.update after its first frame, in one call: the whole-skeleton jump
-    (flags[0]), the segment terms (``out_seg``; ``latch`` updated; the caller keeps ``seg`` /
+    (flags[0]), the segment terms (``out_seg``; ``latch`` and ``last_bone`` updated; the caller keeps ``seg`` /
     ``both`` as the next frame's ``last_rel`` / ``last_both``), left/right against the heading
     (``out_lr``; ``lr_state`` = [heading known, heading]; flags[1] = the swap flags were set,
     flags[2] / flags[3] = arms / legs swapped), the floor (``out_fl``; the window as a ring
@@ -278,8 +282,8 @@ def _plausibility_step(p, tracked, seg, seg_len, both, ref,
         flags[0] = 1
         return True
     flags[0] = 0
-    blamed = segment_terms(seg, seg_len, both, ref, last_rel, has_last, last_both, latch, blame,
-                           tol, tol_m, reject, max_step, latch_frames)
+    blamed = segment_terms(seg, seg_len, both, ref, last_rel, has_last, last_both, latch,
+                           last_bone, blame, tol, tol_m, reject, max_step, latch_frames)
     for j in range(nj):
         out_seg[j] = blamed[j]
         out_lr[j] = 1.0

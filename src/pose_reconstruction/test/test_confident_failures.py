@@ -116,6 +116,28 @@ def test_tracked_joint_snapped_away_is_unreliable_within_3_frames(joints):
         assert R0[onset + 3:, HAND_LEFT].mean() > 0.5
 
 
+@pytest.mark.parametrize('jit', [True, False])
+def test_a_jump_back_to_a_right_length_ends_a_failure_not_starts_one(jit):
+    """Class c: a wrist and hand slide onto an object slower than the speed limit (no snap onset
+    seen), the forearm length rejected by the bone term; then they jump back to the body. The
+    jump is the failure's end: the wrist is reliable again after the Eq. 8 delay, not latched
+    implausible for ``latch_frames`` (1.5 s) on its right place (issue 34: the forearm was
+    handed to the database, 40 deg off, against the sensor's 20)."""
+    pos, st = _standing()
+    start, end = 60, 100
+    for k, f in enumerate(range(start, end)):
+        off = np.array([0.0, -0.6, 0.0]) * min(1.0, (k + 1) / 12.0)   # 1.5 m/s, then held
+        pos[f, [WRIST_LEFT, HAND_LEFT]] += off
+    r = ReliabilityEstimator()
+    if not jit:
+        r._jit = False
+        r.plausibility._jit = False
+    R = np.array([r.update(p, s) for p, s in zip(pos, st)])
+    assert R[start + 15:end, WRIST_LEFT].max() < 0.5          # rejected by its forearm length
+    assert R[end + 4:end + 40, WRIST_LEFT].min() > 0.8         # back: reliable within 4 frames
+    assert R[:start, WRIST_LEFT].min() > 0.8
+
+
 def test_swapped_arms_detected_and_swapped_back():
     pos, st = _standing()
     onset = 90
