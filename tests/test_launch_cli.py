@@ -63,3 +63,16 @@ def test_ros2_launch_and_pipeline_run_the_same_configuration():
     assert 'Traceback' not in out_pipe, out_pipe[-3000:]
     for node in NODES:
         assert p_launch[node] == p_pipe[node], node
+
+
+def test_pipeline_on_the_events_executor_flows_and_stops_on_sigint():
+    """`pipeline --executor events`: rclpy's EventsExecutor spins in C++, where Python's signal
+    handlers never run; Ctrl-C must still stop it cleanly (it ran on, past Ctrl-C and
+    --duration, until the pipeline spun it in slices)."""
+    pytest.importorskip('rclpy.experimental', reason='no EventsExecutor in this ROS 2 (Humble)')
+    _, rc, out = _params_of_running_graph(
+        [sys.executable, '-m', 'kinect_bringup.pipeline', '--executor', 'events'],
+        'probe_events', _private_domain(83))
+    assert rc == 0, out[-3000:]
+    assert 'Traceback' not in out and '[FATAL]' not in out, out[-3000:]
+    assert '[pipeline] stopped' in out, out[-3000:]

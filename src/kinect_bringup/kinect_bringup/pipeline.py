@@ -138,6 +138,25 @@ def create_nodes(names: List[str], overrides: Dict[str, Dict], directory: Option
     return nodes
 
 
+def spin(executor, kind: str) -> None:
+    """Spin until shut down; Ctrl-C (and ``--duration``'s SIGINT) raises KeyboardInterrupt here.
+    The events executor's ``spin`` runs in C++ and does not return to Python, where signal
+    handlers run (nor does its ``shutdown`` from another thread end it): it is spun in slices
+    and SIGINT only asks it to stop (raised inside a callback, the C++ layer would log the
+    KeyboardInterrupt as a fatal callback error)."""
+    if kind != 'events':
+        executor.spin()
+        return
+    import rclpy
+    stop = threading.Event()
+    previous = signal.signal(signal.SIGINT, lambda *_: stop.set())
+    try:
+        while rclpy.ok() and not stop.is_set():
+            executor.spin_once(timeout_sec=0.1)
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv if argv is not None else sys.argv[1:])
     import rclpy
@@ -183,7 +202,7 @@ def main(argv=None) -> int:
         timer.daemon = True
         timer.start()
     try:
-        executor.spin()
+        spin(executor, args.executor)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
