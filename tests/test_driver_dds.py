@@ -107,9 +107,13 @@ def test_synthetic_three_users_at_30hz(dds):
     print(f'synthetic 3 users: {rate_stamps:.2f} Hz by stamps, {rate_recv:.2f} Hz received '
           f'({len(got)} msgs; rates are benchmark figures, not asserted here)')
     # the schedule, not the machine's speed (a loaded machine may skip a tick): every stamp on
-    # the 30 Hz grid, most of them one period apart
+    # the 30 Hz grid, most of them one period apart -- but for a move back to the timer's grid
+    # (0.5-1 period) when a late poll had anchored the schedule late (synthetic.py: a loaded
+    # machine; a CI run saw one step of 0.79 period), at most twice
     periods = np.diff(stamps) / (1e9 / 30)
-    assert np.allclose(periods, np.round(periods), atol=0.1), periods
+    on_grid = np.isclose(periods, np.round(periods), atol=0.1)
+    moved_back = (periods > 0.5) & (periods < 1.0)
+    assert np.all(on_grid | moved_back) and np.count_nonzero(~on_grid) <= 2, periods
     assert np.median(periods) == pytest.approx(1.0, abs=0.05)
     for _, m in got:
         errors = []
