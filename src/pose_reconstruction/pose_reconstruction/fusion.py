@@ -48,7 +48,7 @@ from scipy.optimize import linear_sum_assignment
 
 from skeleton_core import jit
 from skeleton_core.conversions import SkeletonFrame
-from skeleton_core.model import HIP_CENTER, MIRROR, NUM_JOINTS, PARENTS, TRACKED
+from skeleton_core.model import HIP_CENTER, NUM_JOINTS, PARENTS, TRACKED
 from skeleton_core.tf import Transform
 
 from . import fusion_kernels as K
@@ -71,10 +71,8 @@ _PARENTS = np.asarray(PARENTS)
 # STATE_WEIGHT of np.clip(state, 0, 2) for any uint8 state, in one lookup
 _STATE_WEIGHT8 = np.full(256, STATE_WEIGHT[2])
 _STATE_WEIGHT8[:3] = STATE_WEIGHT
-_MIRROR = np.asarray(MIRROR)
-_LR = np.array([j for j in range(NUM_JOINTS) if MIRROR[j] != j])   # joints with a mirror twin
-# the compiled step's index arrays (fusion_kernels.fuse_track)
-_MIRROR_I, _LR_I, _PARENTS_I, _HEADING_I = K.MIRROR_I, K.LR_I, K.PARENTS_I, K.HEADING_I
+# the mirror table and the joints with a mirror twin: one copy, shared with the compiled step
+_MIRROR, _LR = K.MIRROR_I, K.LR_I
 
 
 def to_world(frame: SkeletonFrame, pose: Transform, frame_id: str = WORLD_FRAME) -> SkeletonFrame:
@@ -360,7 +358,7 @@ class MultiSensorFusion:
         face = np.empty(2)
         K.fuse_track(P, TS, R, has_face, track.facing if has_face else face,
                      fused is not None, out_p if fused is None else fused.positions,
-                     HOLD_RELATIVE, track.rel, _MIRROR_I, _LR_I, _PARENTS_I, _HEADING_I,
+                     HOLD_RELATIVE, track.rel, K.MIRROR_I, K.LR_I, K.PARENTS_I, K.HEADING_I,
                      STATE_WEIGHT, MIRROR_COS, _EPS, out_p, out_ts, out_r, best, flips, face)
         track.facing = face
         ori = None
