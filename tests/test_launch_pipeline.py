@@ -93,11 +93,13 @@ def test_parameter_changed_at_run_time_takes_effect(probe):
     assert probe.wait_for(['/viz/markers'], count=1, timeout=60)
 
     def raw_namespaces():
+        # viz publishes only the layers whose input changed since its last tick: a raw layer
+        # drawn is an ADD in any array of the window, not necessarily in the newest one
         probe.reset()
-        assert probe.wait_for(['/viz/markers'], count=3, timeout=10)
-        time.sleep(0.5)
-        m = probe.last('/viz/markers')
-        return {mk.ns for mk in m.markers if mk.ns.startswith('raw') and mk.action == 0}
+        assert probe.wait_for(['/viz/markers'], count=10, timeout=20)
+        arrays = [probe.message(t, i) for t, i in probe.indices('/viz/markers')]
+        return {mk.ns for m in arrays for mk in m.markers
+                if mk.ns.startswith('raw') and mk.action == 0}
 
     assert raw_namespaces(), 'raw skeleton layer not drawn'
     res = probe.set_parameter('/viz', 'show_raw', False)
