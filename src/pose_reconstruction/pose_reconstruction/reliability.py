@@ -339,6 +339,8 @@ class ReliabilityEstimator:
         self._last_n: Optional[np.ndarray] = None
         self._theta: Deque[np.ndarray] = collections.deque(maxlen=self.f_b)
         self._minima: Deque[np.ndarray] = collections.deque(maxlen=self.f_total)
+        # Eq. 8's window of min(R_b, R_k) alone (_reacquired)
+        self._bk: Deque[np.ndarray] = collections.deque(maxlen=self.f_total)
         # the compiled step's state (the same quantities, as rings oldest first)
         self._k_last_p = np.zeros((NUM_JOINTS, 3))
         self._k_last_d = np.zeros((NUM_JOINTS, 3))
@@ -500,7 +502,7 @@ class ReliabilityEstimator:
             self._observe_reference(p, seg, ln)
         self._observe_lengths(profile, ln)
         if self._jit and ts.dtype == np.uint8:
-            return self._update_compiled(p, ts, tracked, ln, rp)
+            return self._reacquired(self._update_compiled(p, ts, tracked, ln, rp), rp)
         # Eq. 1-4, one new angle per frame (as behaviour_term on the last f_b + 2 positions)
         if self._last_p is not None:
             d = p - self._last_p
@@ -559,4 +561,27 @@ class ReliabilityEstimator:
         np.maximum(r, 0.0, out=r)
         np.minimum(r, 1.0, out=r)
         self.reliability = r
-        return r
+        return self._reacquired(r, rp)
+
+    def _reacquired(self, r: np.ndarray, rp: Optional[np.ndarray]) -> np.ndarray:
+        """With the plausibility stage: a joint the sensor tracks again is not held down by the
+        frames in which it was INFERRED or NOT_TRACKED. Eq. 8 smooths ``min(R_b, R_k, R_t)`` over
+        its window, so a joint re-acquired TRACKED read 0.33, 0.61, 0.81 on its first three
+        frames and its segments were filled by the database although the sensor saw them (issue
+        34: the re-acquired shanks of classes b, c, e). The tracking state is the SDK's statement
+        about this frame, not a noisy measurement: the reliability is at least ``min(Eq. 8 of
+        min(R_b, R_k), R_t now)`` -- the behaviour and length terms keep their window, a
+        vibrating or wrong-length joint stays unreliable -- and still at most ``R_p``. Losing a
+        joint is unchanged (R_t 0 now: Eq. 8 as the paper)."""
+        if not self.plausibility.enabled or self.last_terms is None:
+            return r
+        rb, rk, rt = self.last_terms
+        self._bk.append(np.minimum(rb, rk))
+        now = self._gauss[len(self._bk)] @ np.asarray(self._bk)
+        np.minimum(now, rt, out=now)
+        out = np.maximum(r, now)
+        if rp is not None:
+            np.minimum(out, rp, out=out)
+        np.clip(out, 0.0, 1.0, out=out)
+        self.reliability = out
+        return out

@@ -8,8 +8,9 @@ from pose_reconstruction.reconstructor import Reconstructor
 from pose_reconstruction.reliability import ReliabilityEstimator
 from pose_reconstruction.synthetic import random_database
 from skeleton_core.conversions import SkeletonFrame
-from skeleton_core.model import (ELBOW_LEFT, HAND_LEFT, HIP_CENTER, INFERRED, NUM_JOINTS, SPINE,
-                                 TRACKED, WRIST_LEFT, segment_lengths, standard_body)
+from skeleton_core.model import (ANKLE_RIGHT, ELBOW_LEFT, FOOT_RIGHT, HAND_LEFT, HIP_CENTER,
+                                 INFERRED, KNEE_RIGHT, NUM_JOINTS, SPINE, TRACKED, WRIST_LEFT,
+                                 segment_lengths, standard_body)
 from skeleton_eval.clips import toy_clip
 from skeleton_eval.sensor_stream import LOOP_BLEND_FRAMES, loop_blend
 from skeleton_eval.sensor_model import SensorModel
@@ -38,6 +39,51 @@ def test_tracked_spine_above_a_hidden_hip_centre_stays_reliable(plausibility):
         assert r[SPINE] > 0.9
     else:
         assert r[SPINE] < 0.5
+
+
+@pytest.mark.parametrize('jit', [True, False])
+@pytest.mark.parametrize('plausibility', [True, False])
+def test_a_reacquired_tracked_ankle_is_reliable_at_once(jit, plausibility):
+    """Class b: an object hides the shank for 20 frames (ankle and foot INFERRED, held where they
+    were last seen, 15 cm off), then the sensor tracks them again at the right place. Eq. 8 as
+    printed smooths min(R_b, R_k, R_t) over 6 frames, so the past INFERRED frames held the
+    re-acquired ankle at 0.33, 0.61, 0.81 (its shank filled by the database although seen);
+    with the plausibility stage the tracking state is taken for this frame: reliable at once.
+    Losing the joint is unchanged (Eq. 8's delay, both modes)."""
+    pos = _standing(80)
+    st = np.full((len(pos), NUM_JOINTS), TRACKED, np.uint8)
+    st[40:60, [ANKLE_RIGHT, FOOT_RIGHT]] = INFERRED
+    pos[40:60, [ANKLE_RIGHT, FOOT_RIGHT]] += np.array([0.0, 0.0, 0.15])
+    est = ReliabilityEstimator(plausibility=plausibility)
+    if not jit:
+        est._jit = False
+    r = np.array([est.update(p, s) for p, s in zip(pos, st)])
+    assert r[39, ANKLE_RIGHT] > 0.9
+    assert 0.5 < r[40, ANKLE_RIGHT] < 0.9        # losing it: Eq. 8's delay either way
+    assert r[45:60, ANKLE_RIGHT].max() == pytest.approx(0.0, abs=1e-9)
+    first = r[60:63, ANKLE_RIGHT]
+    if plausibility:
+        # reliable from the first frame (the length term still remembers the stale frames)
+        assert first.min() > 0.8
+        assert r[60:, KNEE_RIGHT].min() > 0.9
+    else:
+        assert first[0] < 0.5 and first[2] < 0.9   # the paper's ramp
+
+
+@pytest.mark.parametrize('jit', [True, False])
+def test_a_vibrating_reacquired_joint_stays_unreliable(jit):
+    """The rule takes the tracking state at once, not the behaviour term: a joint re-acquired
+    TRACKED but vibrating (a false positive's 30 mm jitter, Eq. 1-4) stays unreliable."""
+    rng = np.random.default_rng(3)
+    pos = _standing(80)
+    st = np.full((len(pos), NUM_JOINTS), TRACKED, np.uint8)
+    st[40:60, ANKLE_RIGHT] = INFERRED
+    pos[40:, ANKLE_RIGHT] += rng.normal(0.0, 0.06, (40, 3))
+    est = ReliabilityEstimator()
+    if not jit:
+        est._jit = False
+    r = np.array([est.update(p, s) for p, s in zip(pos, st)])
+    assert r[60:70, ANKLE_RIGHT].mean() < 0.5
 
 
 @pytest.mark.parametrize('jit', [True, False])

@@ -79,21 +79,25 @@ def test_tracking_state_term():
 def test_gaussian_weighted_minimum():
     w = gaussian_weights(6, 2.0)
     assert w.sum() == pytest.approx(1.0) and np.all(np.diff(w) > 0)  # most recent largest
-    est = ReliabilityEstimator(sigma_frames=2.0)
     p = rest()
     ts = np.full(NUM_JOINTS, TRACKED, np.uint8)
-    states = []
-    for f in range(6):
-        t = ts.copy()
-        if f == 3:
-            t[ELBOW_LEFT] = INFERRED  # min(R_b, R_k, R_t) = 0 in that frame only
-        r = est.update(p, t)
-        states.append(r[ELBOW_LEFT])
-    # Eq. 8 by hand: sum of the weights of the frames whose minimum is 1 (all but frame 3;
-    # w is oldest first, so frame f has weight w[f])
-    expected = 1.0 - w[3]
-    assert states[-1] == pytest.approx(expected)
-    assert r[SHOULDER_LEFT] == pytest.approx(1.0)
+    for plausibility in (False, True):
+        # the paper's Eq. 8 (plausibility stage off); with it, a joint tracked again is not held
+        # down by its INFERRED frame (ReliabilityEstimator._reacquired), losing it is the same
+        est = ReliabilityEstimator(sigma_frames=2.0, plausibility=plausibility)
+        states = []
+        for f in range(6):
+            t = ts.copy()
+            if f == 3:
+                t[ELBOW_LEFT] = INFERRED  # min(R_b, R_k, R_t) = 0 in that frame only
+            r = est.update(p, t)
+            states.append(r[ELBOW_LEFT])
+        # Eq. 8 by hand: sum of the weights of the frames whose minimum is 1 (all but frame 3;
+        # w is oldest first, so frame f has weight w[f])
+        expected = 1.0 if plausibility else 1.0 - w[3]
+        assert states[-1] == pytest.approx(expected)
+        assert states[3] == pytest.approx(1.0 - gaussian_weights(4, 2.0)[3])
+        assert r[SHOULDER_LEFT] == pytest.approx(1.0)
     # the minimum of the three terms is used: a stretched, tracked segment lowers reliability
     est2 = ReliabilityEstimator(reference_lengths=segment_lengths(p))
     q = p.copy()
