@@ -24,7 +24,10 @@ above a hidden hip centre read R_k <= 0.5 and was replaced by the database; issu
 segment to an end joint (head, hand, foot) judge its parent when the parent has other segments:
 the end joint has only that segment to be judged by, so a wrong length there is the end's (a hand
 resting TRACKED on an object 10-20 cm off put the wrist beside it at R_k ~ 0.5 and handed the
-well-seen forearm to the database).
+well-seen forearm to the database). And a joint the sensor tracks again is not held down by the
+frames of the window in which it was INFERRED: its reliability is at least Eq. 8 of
+``min(R_b, R_k)`` with this frame's R_t (``_reacquired``; the paper's window held a re-acquired
+shank at 0.33, 0.61, 0.81 and handed it to the database for 2-3 frames).
 
 Reference segment lengths (Sec. IV-B) are captured automatically whenever every joint is tracked
 and the posture is close to one of the two reference postures (T-pose, standing with arms down),
