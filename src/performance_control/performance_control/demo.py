@@ -54,7 +54,7 @@ def scene_stream(world, name: str, seed: int, seconds: float = 8.0):
         def step(s, st, t):       # the performer watches this character to stop at the rope
             frames.append(s)
             states.append(st)
-            return ctl.step(s, t, st).com
+            return ctl.step(s, t, st)
         watched_performance(world, 0, step)
         return np.array(frames), np.array(states)
     if name == 'trampoline':

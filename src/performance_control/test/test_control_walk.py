@@ -81,7 +81,7 @@ def test_continuous_performance_bars_rope_water():
         phase.append('bars' if 'monkey_bars' in hands else 'rope' if 'rope' in hands
                      else 'water' if ctl.dp.in_water else 'walk' if ctl.walking else '')
         rows.append(o)
-        return o.com
+        return o
 
     sched, rope_at = watched_performance(WORLD, 0, step)
     assert rope_at is not None                                  # arrived at the rope
@@ -95,7 +95,7 @@ def test_continuous_performance_bars_rope_water():
         when.setdefault(w, []).append(a)
     jump = when['jump'][0]
     assert not (ph[t < jump] == 'bars').any()                 # caught with the jump, not before
-    assert (ph[(t > jump + 0.5) & (t < 8.5)] == 'bars').mean() > 0.9   # hangs while swinging
+    assert (ph[(t > jump + 0.5) & (t < when['lower the arms'][0] - 0.5)] == 'bars').mean() > 0.9
     com = np.array([o.com for o in rows])
     stand = com[0, 2]
     rope = ph == 'rope'
