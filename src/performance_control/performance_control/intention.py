@@ -46,13 +46,16 @@ from .support import HangDetector
 
 _SEG_W = np.array([SEGMENT_MASS_FRACTION[JOINT_NAMES[c]] for c in SEGMENT_CHILDREN])
 _SEG_W = _SEG_W / _SEG_W.sum()
+_PARENTS, _CHILDREN = np.array(SEGMENT_PARENTS), np.array(SEGMENT_CHILDREN)
 
 
 def center_of_mass(positions: np.ndarray) -> np.ndarray:
     """Whole-body COM (..., 3) of joint positions (..., 20, 3): segment midpoints weighted by
     the standard body's mass fractions (Winter 2009)."""
     p = np.asarray(positions, float)
-    mid = 0.5 * (p[..., list(SEGMENT_PARENTS), :] + p[..., list(SEGMENT_CHILDREN), :])
+    mid = 0.5 * (p[..., _PARENTS, :] + p[..., _CHILDREN, :])
+    if mid.ndim == 2:       # one pose (every control step, several times): no einsum parsing
+        return _SEG_W @ mid
     return np.einsum('k,...kd->...d', _SEG_W, mid)
 
 
@@ -323,6 +326,7 @@ class IntentionRecognizer:
         self.height: Optional[float] = None
         self._hist = []      # the last lag + 1 relative joint arrays
         self._thist = []     # the same, trunk-relative (:func:`trunk_relative`)
+        self._trunk_joints = sorted({j for m in self.models for j in m.effectors})
         self._whist: Dict[str, list] = {}   # the last lag + 1 feature vectors per model
         self._avg: Dict[str, list] = {}
         self._last_t: Optional[float] = None
@@ -366,7 +370,8 @@ class IntentionRecognizer:
         g = 1.0 - math.exp(-dt_f / prm.prefilter) if prm.prefilter > 0 else 1.0
         if self._hist and prm.prefilter > 0:
             rel = self._hist[-1] + g * (rel - self._hist[-1])
-        trunk = trunk_relative(p, range(len(p))) / self.height
+        trunk = np.zeros_like(p)       # only the compared effectors' rows are used
+        trunk[self._trunk_joints] = trunk_relative(p, self._trunk_joints) / self.height
         if self._thist and prm.prefilter > 0:
             trunk = self._thist[-1] + g * (trunk - self._thist[-1])
         self._hist.append(rel)

@@ -127,7 +127,8 @@ def _turn(p: np.ndarray, yaw: np.ndarray) -> np.ndarray:
 
 def continuous_stream(world, rng: np.random.Generator, fps: float = FPS,
                       rope_at: Optional[float] = None, steer: float = 0.0,
-                      bars_at: float = 3.5, rope_stops: Tuple[float, ...] = ()):
+                      bars_at: float = 3.5, rope_stops: Tuple[float, ...] = (),
+                      approach: Tuple[Tuple[float, float], ...] = ()):
     """One continuous performance (Sec. 8.3, issue 30): stand; walk in place (the character
     walks forward under the monkey bars) until ``bars_at`` s; stop, raise the arms and jump (the
     character catches a bar); swing like on the bars; lower the arms (the character lets go and
@@ -140,7 +141,8 @@ def continuous_stream(world, rng: np.random.Generator, fps: float = FPS,
     character come to rest short of it and walked on (from ``stop`` + :data:`ROPE_WAIT`).
     ``steer`` (rad, left positive): with the rope, the user turns by this much as they start the
     walk after the bars (toward the rope, :func:`watched_performance`), and from the rope turns
-    to 45 deg right of where they first faced.
+    to 45 deg right of where they first faced. ``approach`` ((s, rad), ...): turns on the walk to
+    the bars, each to the given heading (left positive, from where they first faced) over 1 s.
     Returns (positions (T, 20, 3) world, schedule [(start s, what the user does)]) with the
     user's body, style and tempo drawn from ``rng``."""
     body, style, tempo = performer(rng)
@@ -196,10 +198,16 @@ def continuous_stream(world, rng: np.random.Generator, fps: float = FPS,
         on = (env > 0)[:, None, None]
         p[:, arms] = np.where(on, src[:, arms], p[:, arms])
     p = lift(p, 4.5 + d, 0.45, fps)
-    yaw = -np.radians(45) * np.clip((t - turn) / 1.0, 0, 1)   # half turned: still tracked
+    # the user's heading: each turn toward its aim over 1 s, the last to 45 deg right (half
+    # turned: still tracked)
+    aims = [(float(a), float(y)) for a, y in approach]
     if climbs and steer:
-        aim = float(steer) * np.clip((t - STEER_AT - d) / 1.0, 0, 1)
-        yaw = aim + (-np.radians(45) - aim) * np.clip((t - turn) / 1.0, 0, 1)
+        aims.append((STEER_AT + d, float(steer)))
+    yaw, prev = np.zeros(n), 0.0
+    for a, y in aims:
+        yaw = yaw + (y - prev) * np.clip((t - a) / 1.0, 0, 1)
+        prev = y
+    yaw = yaw + (-np.radians(45) - prev) * np.clip((t - turn) / 1.0, 0, 1)
     return _turn(p, yaw), sched
 
 
@@ -225,6 +233,12 @@ COAST = 0.6
 # 10 rested 0.5-0.57 m short) makes the user walk on (at most ROPE_TRIES stops)
 ROPE_WAIT = 1.2
 ROPE_TRIES = 3
+# s, rad: on the walk to the bars the user looks every APPROACH_EVERY s where the character is
+# and, when the bars' middle is more than APPROACH_TOLERANCE off the way they face, turns toward
+# it (at most MAX_STEER). The sensor model's turn episodes (the user turning away, up to ~90 deg
+# for 1-2 s) turn the character with the user: seed 14's walked 1.5 m to the side of the bars
+APPROACH_EVERY = 1.0
+APPROACH_TOLERANCE = np.radians(15)
 # s: when the user, who has watched the character land from the bars, starts walking again and
 # turns toward the rope (the character lands 0.1-2 m from where it let go, up to 0.6 m to the side
 # of the rope's line: walking straight on it passed the rope, seeds 3 and 6); with the bars later
@@ -233,6 +247,13 @@ STEER_AT = 10.5
 # rad: the most the user turns toward the rope (a user turned further away from the sensor is
 # tracked badly; the last walk turns 45 deg too)
 MAX_STEER = np.radians(45)
+
+
+def _bars_centre(world) -> np.ndarray:
+    """The middle (x, y) of the world's bars (their capsules' midpoints averaged)."""
+    mids = [0.5 * (g.vec('from')[:2] + g.vec('to')[:2]) for f in world.features.values()
+            if f.kind == 'bars' for g in f.geoms if g.type == 'capsule']
+    return np.mean(mids, axis=0)
 
 
 def _bar_distance(world, xy: np.ndarray) -> float:
@@ -302,18 +323,32 @@ def watched_performance(world, seed: int, step, noise: bool = True, fps: float =
         sa, sta = _watched_sensor(a, seed, noise)
         return sched, sa, sta
 
-    # the bars: walk until the character will rest under them
+    # the bars: walk until the character will rest under them, turning toward them when it
+    # heads elsewhere
+    bars = _bars_centre(world)
+    approach: List[Tuple[float, float]] = []
+    aim = 0.0
     sched, sa, sta = stream(bars_at=BARS_LATEST, rope_at=ROPE_LATEST)
     seen: List[np.ndarray] = []
     nxt, bars_at = 0, BARS_LATEST        # nxt: the next frame to perform
+    every = int(round(APPROACH_EVERY * fps))
     while nxt < int(round(BARS_LATEST * fps)):
         seen.append(perform(nxt))
         nxt += 1
         if nxt / fps > 1.5 and _bar_distance(world, _predicted_rest(seen, fps)) < BARS_STOP:
             bars_at = (nxt - 1) / fps
             break
+        to = bars - seen[-1]
+        if nxt >= 2 * fps and nxt % every == 0 and float(np.linalg.norm(to)) > 1.0:
+            want = float(np.clip(np.arctan2(to[1], to[0]), -MAX_STEER, MAX_STEER))
+            if abs(want - aim) > APPROACH_TOLERANCE:     # off course: turn toward the bars
+                aim = want
+                approach.append(((nxt - 1) / fps, aim))
+                sched, sa, sta = stream(bars_at=BARS_LATEST, rope_at=ROPE_LATEST,
+                                        approach=tuple(approach))
     d = bars_at - 3.5
-    sched, sa, sta = stream(bars_at=bars_at, rope_at=ROPE_LATEST)
+    kw = dict(bars_at=bars_at, approach=tuple(approach))
+    sched, sa, sta = stream(rope_at=ROPE_LATEST, **kw)
     while nxt < int(round((STEER_AT + d) * fps)):
         seen.append(perform(nxt))
         nxt += 1
@@ -322,7 +357,7 @@ def watched_performance(world, seed: int, step, noise: bool = True, fps: float =
     to = top[:2] - seen[-1]
     steer = float(np.clip(np.arctan2(to[1], to[0]), -MAX_STEER, MAX_STEER))
     heading = np.array([math.cos(steer), math.sin(steer)])
-    kw = dict(bars_at=bars_at, steer=steer)
+    kw['steer'] = steer
     sched, sa, sta = stream(rope_at=ROPE_LATEST, **kw)
     stops: List[float] = []
     while True:
