@@ -5,8 +5,8 @@
 Records one stream first (the continuous performance's seed 0 through the sensor model, the
 first ``--frames`` frames, into out/cpu_ab_stream.npz), then steps a fresh PerformanceController
 over the same frames in a subprocess per checkout -- main, branch, main, branch, ... -- with
-``performance_control`` imported from that checkout's src (the other packages from the
-environment), and prints the CPU time (time.thread_time) per step: median and p95, and the
+``performance_control`` and ``physics_sim`` imported from that checkout's src (the others
+from the environment), and prints the CPU time (time.thread_time) per step: median and p95, and the
 sum of the per-step figures over the run. ``--profile`` prints the branch's cProfile instead.
 """
 import argparse
@@ -22,6 +22,7 @@ HERE = Path(__file__).resolve().parents[2]
 CHILD = r'''
 import sys, time, numpy as np
 from performance_control import __file__ as where
+import physics_sim.feature_geometry as fg
 from performance_control.features import load_world
 from performance_control.controller import ControlParams, PerformanceController
 z = np.load(sys.argv[1])
@@ -40,7 +41,7 @@ if len(sys.argv) > 2:
 else:
     run()
 c = 1e3 * np.array(cpu[5:])
-print(f'{where}: {len(c)} steps, CPU median {np.median(c):.2f} ms, p95 '
+print(f'{where} ({fg.__file__}): {len(c)} steps, CPU median {np.median(c):.2f} ms, p95 '
       f'{np.percentile(c, 95):.2f} ms, mean {c.mean():.2f} ms', flush=True)
 '''
 
@@ -71,8 +72,9 @@ def main() -> None:
     for _ in range(a.rounds):
         for label, root in trees:
             env = dict(os.environ)
-            env['PYTHONPATH'] = (str(root / 'src' / 'performance_control') + os.pathsep
-                                 + env.get('PYTHONPATH', ''))
+            env['PYTHONPATH'] = os.pathsep.join(
+                [str(root / 'src' / pkg) for pkg in ('performance_control', 'physics_sim')]
+                + [env.get('PYTHONPATH', '')])
             args = [sys.executable, '-c', CHILD, str(stream)]
             if a.profile:
                 args.append(str(out / 'cpu_ab.prof'))

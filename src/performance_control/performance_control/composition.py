@@ -46,6 +46,9 @@ _SEG_R = np.array([SEGMENT_RADIUS_FRACTION[JOINT_NAMES[c]] for c in SEGMENT_CHIL
 # the arms from the shoulder joint on)
 _BODY_SEGS = [(a, b) for a, b in zip(SEGMENT_PARENTS, SEGMENT_CHILDREN)
               if b not in subtree(ELBOW_LEFT) + subtree(ELBOW_RIGHT)]
+_BODY_PAR = np.array([i for i, _ in _BODY_SEGS])
+_BODY_CHI = np.array([j for _, j in _BODY_SEGS])
+_BODY_R = np.array([_SEG_R[SEGMENT_CHILDREN.index(j)] for _, j in _BODY_SEGS])
 # the limbs' segments from the shoulder and hip joints on (parent, child)
 _LIMB_SEGS = [(a, b) for a, b in zip(SEGMENT_PARENTS, SEGMENT_CHILDREN)
               if b in subtree(ELBOW_LEFT) + subtree(ELBOW_RIGHT) + subtree(KNEE_LEFT)
@@ -141,6 +144,9 @@ def _two_bone(a, b, c, target):
     return mid, end
 
 
+# body heights: the obstacles within this distance of the COM are all the body can touch in a frame
+# (a raised hand is ~0.75 heights from the COM)
+NEAR = 1.5
 # the samples of a segment tested by Obstacles.clear_segments and trunk_clearance
 _T9 = np.linspace(0.0, 1.0, 9)
 _T5 = np.linspace(0.0, 1.0, 5)   # the penetration metric's samples
@@ -155,7 +161,7 @@ def _swivel_clear(p: np.ndarray, chain, obstacles: 'Obstacles', height: float) -
     swivel angle nearest the current one whose upper arm and forearm clear the obstacles
     (every angle's depth in one array operation)."""
     a, b, c, _ = chain
-    ca, cb, rc, _ = obstacles._caps()
+    rc = obstacles._caps()[2]
     if not len(rc):
         return
     ax = p[c] - p[a]
@@ -170,7 +176,7 @@ def _swivel_clear(p: np.ndarray, chain, obstacles: 'Obstacles', height: float) -
         pts = np.concatenate([p[a] + _SWIVEL_T[None] * (elbows[:, None] - p[a]),
                               elbows[:, None] + _SWIVEL_T[None] * (p[c] - elbows[:, None])],
                              axis=1)                                     # (E, 10, 3)
-        d, _ = Obstacles._dist(pts.reshape(-1, 3), ca, cb)
+        d, _ = obstacles._d(pts.reshape(-1, 3))
         return (rad[None, :, None] + rc[None, None] - d.reshape(len(elbows), 10, -1)).reshape(
             len(elbows), -1).max(axis=1)
     if depth(p[b][None])[0] <= 0:
@@ -194,7 +200,7 @@ def integrate_motion(pose: np.ndarray, com_target: np.ndarray,
     p = np.array(pose, float)
     p += np.asarray(com_target, float) - center_of_mass(p)
     if obstacles is not None:     # only what the body can reach this frame
-        obstacles = obstacles.near(com_target, 1.5 * height)
+        obstacles = obstacles.near(com_target, NEAR * height)
     if contacts:
         shift = np.zeros(3)
         for e, tgt in contacts.items():
@@ -258,6 +264,8 @@ class Obstacles:
         self._arr = (np.array([x[0] for x in c]).reshape(-1, 3),
                      np.array([x[1] for x in c]).reshape(-1, 3),
                      np.array([x[2] for x in c], float), [x[3] for x in c])
+        ab = self._arr[1] - self._arr[0]
+        self._axes = (ab, np.maximum((ab * ab).sum(axis=1), 1e-12))   # for _d
         return self
 
     def near(self, point: np.ndarray, radius: float) -> 'Obstacles':
@@ -267,7 +275,7 @@ class Obstacles:
         out = Obstacles()
         out.boxes, out.floor = self.boxes, self.floor
         if len(rc):
-            d, _ = self._dist(np.asarray(point, float)[None], a, b)
+            d, _ = self._d(np.asarray(point, float)[None])
             keep = np.nonzero(d[0] - rc < radius)[0]
             out.capsules = [self.capsules[k] for k in keep]
         return out.freeze()
@@ -276,6 +284,18 @@ class Obstacles:
         if self._arr is None or len(self._arr[2]) != len(self.capsules):
             self.freeze()
         return self._arr
+
+    def _d(self, pts):
+        """:meth:`_dist` of points (P, 3) to this set's capsule axes, with the axes' vectors
+        and squared lengths computed once per set (:meth:`freeze`)."""
+        a = self._caps()[0]
+        ab, den = self._axes
+        diff = pts[:, None, :] - a[None]
+        t = (diff * ab).sum(axis=2) / den
+        np.clip(t, 0.0, 1.0, out=t)
+        cp = a[None] + t[..., None] * ab[None]
+        r = pts[:, None, :] - cp
+        return np.sqrt((r * r).sum(axis=2)), cp
 
     @staticmethod
     def _dist(pts, a, b):
@@ -300,10 +320,10 @@ class Obstacles:
         if not len(rc):
             return np.zeros(3), direction
         ts = _T9   # a superset of the metric's 5 samples
-        segs = _BODY_SEGS
-        pts = np.concatenate([p[i] + ts[:, None] * (p[j] - p[i]) for i, j in segs])
-        rad = np.repeat([_SEG_R[SEGMENT_CHILDREN.index(j)] * height for _, j in segs], len(ts))
-        d, cp = self._dist(pts, a, b)
+        pts = (p[_BODY_PAR][:, None, :]
+               + ts[None, :, None] * (p[_BODY_CHI] - p[_BODY_PAR])[:, None, :]).reshape(-1, 3)
+        rad = np.repeat(_BODY_R * height, len(ts))
+        d, cp = self._d(pts)
         depth = rad[:, None] + rc[None] - d
         i, k = np.unravel_index(np.argmax(depth), depth.shape)
         if depth[i, k] <= 0:
@@ -340,7 +360,7 @@ class Obstacles:
                 p[j, ax] = c[ax] + sgn * (h[ax] + r_joint[j])
         a, b, rc, _ = self._caps()
         if len(rc):
-            d, cp = self._dist(p, a, b)
+            d, cp = self._d(p)
             viol = (d < rc[None] + r_joint[:, None]) & keep[:, None]
             for j, k in zip(*np.nonzero(viol)):
                 n = p[j] - cp[j, k]
@@ -368,7 +388,7 @@ class Obstacles:
             # every free segment's samples at once: nothing inside any obstacle (the usual
             # frame), nothing to move -- the loop below would move nothing either
             pts = (p[par][:, None, :] + ts[None, :, None] * (p[chi] - p[par])[:, None, :])
-            d, _ = self._dist(pts.reshape(-1, 3), a, b)
+            d, _ = self._d(pts.reshape(-1, 3))
             if float(np.max(rad_all[:, None] + rc[None] - d)) <= 0:
                 return
             moved = False
@@ -377,7 +397,7 @@ class Obstacles:
                     continue
                 pts = p[i] + ts[:, None] * (p[j] - p[i])
                 rad = _SEG_R[SEGMENT_CHILDREN.index(j)] * height
-                d, cp = self._dist(pts, a, b)
+                d, cp = self._d(pts)
                 depth = rad + rc[None] - d
                 q, k = np.unravel_index(np.argmax(depth), depth.shape)
                 if depth[q, k] <= 0 or ts[q] < 1e-6:
@@ -435,7 +455,7 @@ class Obstacles:
                 worst = max(worst, float(np.max((c[2] + h[2] + rad - pts[:, 2])[inside])))
         a, b, rc, feats = self._caps()
         if len(rc):
-            d, _ = self._dist(pts, a, b)
+            d, _ = self._d(pts)
             depth = rad[:, None] + rc[None] - d
             for f in set(feats):
                 if f in excl:

@@ -24,7 +24,7 @@ from skeleton_core.geometry import facing_yaw
 from skeleton_core.params import check, nested, param
 from skeleton_core.model import (FOOT_LEFT, FOOT_RIGHT, JOINT_INDEX, estimate_height)
 
-from .composition import Obstacles, PoseComposer, integrate_motion, integrate_rule
+from .composition import NEAR, Obstacles, PoseComposer, integrate_motion, integrate_rule
 from .dynamics import DynamicProcess
 from .examples import example_motion
 from .features import EFFECTORS, Feature, World
@@ -522,8 +522,10 @@ class PerformanceController:
         eff = dp.effectors()
         contacts = {e: eff[EFFECTORS.index(e)] for e in dp.contacts}
         held = {e: c.feature for e, c in dp.contacts.items()}
-        out_w = integrate_motion(q_world_rel, dp.com, contacts, self.obstacles, held, self.height)
-        pen = (self.obstacles.penetration(out_w, self.height, held)
+        # the features near enough to touch: the constraints and the metric test only these
+        near = self.obstacles.near(dp.com, NEAR * self.height)
+        out_w = integrate_motion(q_world_rel, dp.com, contacts, near, held, self.height)
+        pen = (near.penetration(out_w, self.height, held)
                if self.params.compute_penetration else float('nan'))
         ms = (time.perf_counter() - t_start) * 1e3
         cpu = (time.thread_time() - c_start) * 1e3
