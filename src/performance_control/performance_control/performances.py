@@ -215,9 +215,12 @@ def continuous_stream(world, rng: np.random.Generator, fps: float = FPS,
 # ROPE_LATEST); the blind script stopped at 3.5 s, where the characters of slow walkers (seeds 12
 # and 14: 0.6-0.9 m short of the first bar) could not reach a bar with their jump
 BARS_LATEST = 8.0
-# m: the user stops walking when the character will come to rest this close (horizontally) to a
-# bar: half the bars' spacing, under the bars
-BARS_STOP = 0.2
+# m: the user stops walking when the character will come to rest this close (horizontally) to the
+# middle of the bars (one bar spacing): aiming at the first bar (within half a spacing of it), the
+# anticipated coast's error -- the walk slows as the user's swing fades -- left seed 9's character
+# 0.5 m short of it, its hands out of the jump's reach; from the middle, a coast off by +-0.6 m
+# still rests under a bar
+BARS_STOP = 0.4
 # s: the latest the user may start to climb the rope (the stream's length is fixed by it)
 ROPE_LATEST = 24.0 + (BARS_LATEST - 3.5)
 # m: the user stops walking when the character will come to rest this close (horizontally) to
@@ -256,22 +259,6 @@ def _bars_centre(world) -> np.ndarray:
     return np.mean(mids, axis=0)
 
 
-def _bar_distance(world, xy: np.ndarray) -> float:
-    """Horizontal distance (m) of a point to the nearest bar of the world's bars."""
-    best = math.inf
-    for f in world.features.values():
-        if f.kind != 'bars':
-            continue
-        for g in f.geoms:
-            if g.type != 'capsule':
-                continue
-            a, b = g.vec('from')[:2], g.vec('to')[:2]
-            ab = b - a
-            u = float(np.clip((xy - a) @ ab / max(float(ab @ ab), 1e-12), 0.0, 1.0))
-            best = min(best, float(np.linalg.norm(xy - (a + u * ab))))
-    return best
-
-
 def _watched_sensor(p: np.ndarray, seed: int, noise: bool):
     """The continuous performance through the sensor model, placed so that a frame's placement
     does not depend on the rest of the stream: the user starts facing the sensor (the clip, facing
@@ -295,7 +282,7 @@ def _predicted_rest(seen: List[np.ndarray], fps: float) -> np.ndarray:
 def watched_performance(world, seed: int, step, noise: bool = True, fps: float = FPS):
     """The continuous performance with the rope, performed by a user who watches the character:
     they walk in place until the character, which walks on :data:`COAST` s after they stop, would
-    come to rest under the bars (within :data:`BARS_STOP` of a bar), then jump; after the bars
+    come to rest under the bars (within :data:`BARS_STOP` of their middle), then jump; after the bars
     they turn toward the rope (:data:`STEER_AT`) and walk on until it would come to rest within
     :data:`ROPE_STOP` of the rope, reach up for it and, should it rest farther
     (:data:`ROPE_WAIT` s later), walk on again; then climb (:func:`continuous_stream` with
@@ -335,7 +322,8 @@ def watched_performance(world, seed: int, step, noise: bool = True, fps: float =
     while nxt < int(round(BARS_LATEST * fps)):
         seen.append(perform(nxt))
         nxt += 1
-        if nxt / fps > 1.5 and _bar_distance(world, _predicted_rest(seen, fps)) < BARS_STOP:
+        rest = _predicted_rest(seen, fps)
+        if nxt / fps > 1.5 and float(np.linalg.norm(rest - bars)) < BARS_STOP:
             bars_at = (nxt - 1) / fps
             break
         to = bars - seen[-1]
