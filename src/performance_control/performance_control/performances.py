@@ -152,17 +152,19 @@ def continuous_stream(world, rng: np.random.Generator, fps: float = FPS,
     swing['period'] = float(swing.get('period', 1.6)) * tempo
     swim = dict(world.features['water'].example.params)
     swim['period'] = float(swim.get('period', 1.5)) * tempo
-    d = float(bars_at) - 3.5          # the bars' part of the performance starts this much later
+    # the bars' part starts this much later (the walk fades out over 0.2 s after bars_at, the
+    # arms rise from bars_at + 0.2: the stream up to bars_at is the same as any later stop's)
+    d = float(bars_at) - 3.5
     bars = [(0.0, 'stand'), (1.0, 'walk'), (3.7 + d, 'raise the arms'), (4.5 + d, 'jump'),
             (5.0 + d, 'swing'), (9.0 + d, 'lower the arms'), (10.5 + d, 'walk')]
     if rope_at is None:
         sched = bars + [(18.0 + d, 'swim')]
-        total, walks, turn, climbs = 24.0 + d, [(1.0, bars_at), (10.5 + d, 18.0 + d)], 11.0 + d, []
+        total, walks, turn, climbs = 24.0 + d, [(1.0, bars_at + 0.2), (10.5 + d, 18.0 + d)], 11.0 + d, []
     else:
         r = float(rope_at)
         stops = [float(x) for x in rope_stops]
         sched = list(bars)
-        walks = [(1.0, bars_at)]
+        walks = [(1.0, bars_at + 0.2)]     # fades out after bars_at (as the rope's walks)
         climbs = []
         start = 10.5 + d
         for s_ in stops:        # reached up at the stop, saw the character short, walked on
