@@ -40,6 +40,7 @@ from typing import Dict, List
 import numpy as np
 
 from kinect_bringup.graph import RECONSTRUCTION, graph_nodes, repo_root
+from kinect_bringup.pipeline import EXECUTORS
 from kinect_bringup.processes import Graph
 from skeleton_core.cdr import frames_from_cdr
 from skeleton_core.bagio import bag_topics
@@ -212,14 +213,16 @@ def _add_sensors(graph: Graph, users: int, sensors: int) -> None:
 
 
 def run_case(probe: LatencyProbe, mode: str, users: int, seconds: float, warmup: float,
-             physics: bool, log_dir: Path, reconstruction: str = 'fused', sensors: int = 1) -> Dict:
+             physics: bool, log_dir: Path, reconstruction: str = 'fused', sensors: int = 1,
+             executor: str = 'auto') -> Dict:
     overrides = {'driver': {'num_users': users, 'scenario': 'b'}}
     pipeline_args = ['--num-users', str(users), '--scenario', 'b', '--no-viz',
-                     '--reconstruction', reconstruction]
+                     '--reconstruction', reconstruction, '--executor', executor]
     nodes = graph_nodes(physics=physics, viz=False, reconstruction=reconstruction)
     if not physics:
         pipeline_args.append('--no-physics')
-    case_dir = log_dir / (f'{mode}_{reconstruction}_{users}' + (f'_{sensors}s' if sensors > 1 else ''))
+    case_dir = log_dir / (f'{mode}_{reconstruction}_{users}' + (f'_{sensors}s' if sensors > 1 else '')
+                          + (f'_{executor}' if mode == 'pipeline' else ''))
     if sensors > 1:
         if mode != 'processes':
             raise ValueError('several sensors run as processes only (as ros2 launch runs them)')
@@ -247,6 +250,7 @@ def run_case(probe: LatencyProbe, mode: str, users: int, seconds: float, warmup:
             floor.kill()
     with probe.lock:
         res = {'mode': mode, 'reconstruction': reconstruction, 'users': users, 'sensors': sensors,
+               'executor': executor if mode == 'pipeline' else None,
                'seconds': seconds, 'processes': stats,
                'nan_outputs': probe.nan, 'nodes': _node_latencies(probe.diagnostics),
                'physics': _physics_figures(probe.diagnostics)}
@@ -335,8 +339,9 @@ def _time_process_bag(bag: Path, log_dir: Path, physics: bool) -> Dict:
 
 
 def _label(r: Dict) -> str:
-    n = r.get('sensors', 1)
-    return f"{r['mode']} ({r.get('reconstruction', 'split')})" + (f', {n} sensors' if n > 1 else '')
+    n, ex = r.get('sensors', 1), r.get('executor')
+    return (f"{r['mode']} ({r.get('reconstruction', 'split')}" + (f', {ex} executor' if ex else '')
+            + ')' + (f', {n} sensors' if n > 1 else ''))
 
 
 def _outputs(r: Dict) -> List[str]:
@@ -486,12 +491,18 @@ def main(argv=None) -> int:
     p.add_argument('--sensors', default='1,2',
                    help='comma list of sensor counts: 2 adds, per user count, the graph with two '
                         'sensors and the fusion (as processes only)')
+    p.add_argument('--executors', default='auto',
+                   help='comma list: the one-process pipeline\'s executors to run (pipeline '
+                        '--executor; e.g. single,events side by side)')
     p.add_argument('--seconds', type=float, default=10.0)
     p.add_argument('--warmup', type=float, default=4.0)
     p.add_argument('--no-physics', action='store_true')
     p.add_argument('--skip-bag', action='store_true')
     p.add_argument('--out', default=str(root / 'out' / 'bench'))
     args = p.parse_args(argv)
+    for ex in args.executors.split(','):
+        if ex not in EXECUTORS:
+            p.error(f'--executors: {ex!r} is not one of {list(EXECUTORS)}')
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     try:
@@ -511,10 +522,12 @@ def main(argv=None) -> int:
                     for n in [int(k) for k in args.sensors.split(',')]:
                         if n > 1 and mode != 'processes':
                             continue   # several sensors: as processes (ros2 launch) only
-                        print(f'[bench] {mode} ({rec}), {users} user(s), {n} sensor(s) ...',
-                              flush=True)
-                        results.append(run_case(probe, mode, users, args.seconds, args.warmup,
-                                                not args.no_physics, out / 'logs', rec, n))
+                        for ex in (args.executors.split(',') if mode == 'pipeline' else ['auto']):
+                            print(f'[bench] {mode} ({rec}{", " + ex if mode == "pipeline" else ""}'
+                                  f'), {users} user(s), {n} sensor(s) ...', flush=True)
+                            results.append(run_case(probe, mode, users, args.seconds,
+                                                    args.warmup, not args.no_physics,
+                                                    out / 'logs', rec, n, ex))
     finally:
         probe.close()
     bag_speed = {} if args.skip_bag else process_bag_speed(out / 'logs')
