@@ -7,7 +7,9 @@ first ``--frames`` frames, into out/cpu_ab_stream.npz), then steps a fresh Perfo
 over the same frames in a subprocess per checkout -- main, branch, main, branch, ... -- with
 ``performance_control`` and ``physics_sim`` imported from that checkout's src (the others
 from the environment), and prints the CPU time (time.thread_time) per step: median and p95, and the
-sum of the per-step figures over the run. ``--profile`` prints the branch's cProfile instead.
+sum of the per-step figures over the run. ``--profile`` prints the branch's cProfile instead;
+``--bench`` times the steps of ``bench_control``'s physics runs (bars, rope, trampoline, water on
+the test seeds: the figure ``bench_control`` prints) instead of the recorded stream.
 """
 import argparse
 import os
@@ -46,6 +48,26 @@ print(f'{where} ({fg.__file__}): {len(c)} steps, CPU median {np.median(c):.2f} m
 '''
 
 
+BENCH = r'''
+import time, numpy as np
+from performance_control import __file__ as where, bench, controller
+from performance_control.features import load_world
+cpu = []
+orig = controller.PerformanceController.step
+def step(self, *a, **k):
+    c = time.thread_time()
+    o = orig(self, *a, **k)
+    cpu.append(time.thread_time() - c)
+    return o
+controller.PerformanceController.step = step
+bench.PerformanceController.step = step
+bench.physics(load_world('playground'), controller.ControlParams(sensor_height=1.2), 1000)
+c = 1e3 * np.array(cpu[1:])
+print(f'{where} bench.physics: {len(c)} steps, CPU median {np.median(c):.2f} ms, p95 '
+      f'{np.percentile(c, 95):.2f} ms, mean {c.mean():.2f} ms', flush=True)
+'''
+
+
 def record(path: Path, frames: int) -> None:
     from performance_control.features import load_world
     from performance_control.performances import continuous_stream, _watched_sensor
@@ -61,6 +83,7 @@ def main() -> None:
     ap.add_argument('--rounds', type=int, default=2)
     ap.add_argument('--frames', type=int, default=900)
     ap.add_argument('--profile', action='store_true')
+    ap.add_argument('--bench', action='store_true')
     a = ap.parse_args()
     out = HERE / 'out'
     out.mkdir(exist_ok=True)
@@ -75,7 +98,7 @@ def main() -> None:
             env['PYTHONPATH'] = os.pathsep.join(
                 [str(root / 'src' / pkg) for pkg in ('performance_control', 'physics_sim')]
                 + [env.get('PYTHONPATH', '')])
-            args = [sys.executable, '-c', CHILD, str(stream)]
+            args = [sys.executable, '-c', BENCH if a.bench else CHILD, str(stream)]
             if a.profile:
                 args.append(str(out / 'cpu_ab.prof'))
             r = subprocess.run(args, env=env, capture_output=True, text=True)
