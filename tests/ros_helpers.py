@@ -139,15 +139,14 @@ class Probe:
         with self._lock:
             return {t: len(v) for t, v in self.times.items()}
 
-    def indices(self, topic: str):
-        with self._lock:
-            return [(topic, i) for i in range(len(self.messages[topic]))]
-
-    def message(self, topic: str, index: int):
+    def messages_of(self, topic: str) -> List:
+        """Every kept message of ``topic``, oldest first, deserialized from one snapshot taken
+        under the lock (the spin thread keeps appending, and drops the oldest beyond ``keep``:
+        indices taken before reading would shift under a reader on a loaded machine)."""
         from rclpy.serialization import deserialize_message
         with self._lock:
-            data = self.messages[topic][index]
-        return deserialize_message(data, self._types[topic])
+            raw = list(self.messages[topic])
+        return [deserialize_message(d, self._types[topic]) for d in raw]
 
     def last(self, topic: str):
         from rclpy.serialization import deserialize_message

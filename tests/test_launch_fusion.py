@@ -49,27 +49,29 @@ def split_graph():
 
 @pytest.mark.launch(fixture=split_graph)
 def test_two_sensors_fused_in_world_reach_the_reconstruction():
-    probe = Probe(TOPICS, name='fusion_launch_probe', keep=200)
+    # keep: every message of the test's seconds (none dropped from the front while it reads)
+    probe = Probe(TOPICS, name='fusion_launch_probe', keep=5000)
     try:
         assert probe.wait_for(TOPICS, count=30, timeout=90), probe.counts()
         probe.reset()
         assert probe.wait_for(TOPICS, count=30, timeout=20), probe.counts()
         time.sleep(0.5)
-        def stamps_of(topic):
-            return [probe.message(t, i).header.stamp.sec * 10**9
-                    + probe.message(t, i).header.stamp.nanosec for t, i in probe.indices(topic)]
-        sensor1 = set(stamps_of('/kinect_1/skeletons'))
+        got = {topic: probe.messages_of(topic) for topic in TOPICS}   # one snapshot each
+
+        def stamps_of(msgs):
+            return [m.header.stamp.sec * 10**9 + m.header.stamp.nanosec for m in msgs]
+        sensor1 = set(stamps_of(got['/kinect_1/skeletons']))
         for topic in ('/kinect/skeletons', '/posture/reconstructed'):
-            msgs = [probe.message(t, i) for t, i in probe.indices(topic)]
+            msgs = got[topic]
             assert {m.header.frame_id for m in msgs} == {'world'}, topic
             # the two people once each (four views), stable ids
             assert {len(m.skeletons) for m in msgs[-10:]} == {2}, topic
             assert len({s.user_id for m in msgs[-10:] for s in m.skeletons}) == 2, topic
-        fused = [probe.message(t, i) for t, i in probe.indices('/kinect/skeletons')]
+        fused = got['/kinect/skeletons']
         # one fused frame per capture of sensor 1, stamped with it (sensor 2's only while sensor 1
         # delivered nothing for 1/3 s: a loaded machine): increasing, not one per message of
         # either sensor (the probe itself may miss a message on a loaded machine: the bounds)
-        stamps = stamps_of('/kinect/skeletons')
+        stamps = stamps_of(fused)
         assert stamps == sorted(set(stamps))
         window = [s for s in stamps if min(sensor1) <= s <= max(sensor1)]
         ours = set(window) & sensor1

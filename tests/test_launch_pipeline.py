@@ -58,7 +58,7 @@ def test_messages_flow_on_every_topic_at_expected_rates(probe):
     print(f'rates (Hz; benchmark figures, not asserted): {rates}')
     # the driver captures at 30 Hz: its capture stamps on the 30 Hz grid (a loaded machine may
     # skip a tick; the rate itself is a benchmark figure)
-    msgs = [probe.message(t, i) for t, i in probe.indices('/kinect/skeletons')]
+    msgs = probe.messages_of('/kinect/skeletons')
     stamps = sorted({m.header.stamp.sec * 10**9 + m.header.stamp.nanosec for m in msgs})
     periods = np.diff(stamps) / (1e9 / 30)
     assert np.allclose(periods, np.round(periods), atol=0.1), periods
@@ -97,7 +97,7 @@ def test_parameter_changed_at_run_time_takes_effect(probe):
         # drawn is an ADD in any array of the window, not necessarily in the newest one
         probe.reset()
         assert probe.wait_for(['/viz/markers'], count=10, timeout=20)
-        arrays = [probe.message(t, i) for t, i in probe.indices('/viz/markers')]
+        arrays = probe.messages_of('/viz/markers')
         return {mk.ns for m in arrays for mk in m.markers
                 if mk.ns.startswith('raw') and mk.action == 0}
 

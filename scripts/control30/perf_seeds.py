@@ -67,7 +67,7 @@ def run(seed):
         ft_.append(max(ftr))
         vz_.append(min(vzr))
         vz2.append(max(vzr) if all(e in dp.contacts for e in ("HandLeft", "HandRight")) else 0.0)
-        return o.com
+        return o
 
     sched, rope_at = watched_performance(WORLD, seed, step)
     seq = [

@@ -46,6 +46,9 @@ _SEG_R = np.array([SEGMENT_RADIUS_FRACTION[JOINT_NAMES[c]] for c in SEGMENT_CHIL
 # the arms from the shoulder joint on)
 _BODY_SEGS = [(a, b) for a, b in zip(SEGMENT_PARENTS, SEGMENT_CHILDREN)
               if b not in subtree(ELBOW_LEFT) + subtree(ELBOW_RIGHT)]
+_BODY_PAR = np.array([i for i, _ in _BODY_SEGS])
+_BODY_CHI = np.array([j for _, j in _BODY_SEGS])
+_BODY_R = np.array([_SEG_R[SEGMENT_CHILDREN.index(j)] for _, j in _BODY_SEGS])
 # the limbs' segments from the shoulder and hip joints on (parent, child)
 _LIMB_SEGS = [(a, b) for a, b in zip(SEGMENT_PARENTS, SEGMENT_CHILDREN)
               if b in subtree(ELBOW_LEFT) + subtree(ELBOW_RIGHT) + subtree(KNEE_LEFT)
@@ -141,45 +144,50 @@ def _two_bone(a, b, c, target):
     return mid, end
 
 
-def _rotate_about(v: np.ndarray, axis: np.ndarray, ang: float) -> np.ndarray:
-    """Rodrigues' rotation of ``v`` about the unit ``axis``."""
-    c, s_ = math.cos(ang), math.sin(ang)
-    return v * c + np.cross(axis, v) * s_ + axis * (axis @ v) * (1.0 - c)
+# body heights: the obstacles within this distance of the COM are all the body can touch in a frame
+# (a raised hand is ~0.75 heights from the COM)
+NEAR = 1.5
+# the samples of a segment tested by Obstacles.clear_segments and trunk_clearance
+_T9 = np.linspace(0.0, 1.0, 9)
+_T5 = np.linspace(0.0, 1.0, 5)   # the penetration metric's samples
+# the samples of an arm's two segments tested by :func:`_swivel_clear` (5 per segment)
+_SWIVEL_T = np.linspace(0.0, 1.0, 5)[:, None]
+# the swivel angles tried, nearest the current one first (a stable sort of -180..160 deg by |angle|)
+_SWIVEL_ANGLES = np.array(sorted(np.radians(np.arange(-180, 180, 20)), key=abs))
 
 
 def _swivel_clear(p: np.ndarray, chain, obstacles: 'Obstacles', height: float) -> None:
     """Turn an arm's elbow about the shoulder-wrist line (the hand stays where it is) to the
-    swivel angle nearest the current one whose upper arm and forearm clear the obstacles."""
+    swivel angle nearest the current one whose upper arm and forearm clear the obstacles
+    (every angle's depth in one array operation)."""
     a, b, c, _ = chain
+    rc = obstacles._caps()[2]
+    if not len(rc):
+        return
     ax = p[c] - p[a]
-    n = np.linalg.norm(ax)
+    n = math.sqrt(float(ax @ ax))
     if n < 1e-6:
         return
     ax = ax / n
-    k_up, k_fore = SEGMENT_CHILDREN.index(b), SEGMENT_CHILDREN.index(c)
+    rad = np.repeat([_SEG_R[SEGMENT_CHILDREN.index(b)] * height,
+                     _SEG_R[SEGMENT_CHILDREN.index(c)] * height], 5)
 
-    def depth(elbow):
-        pts = np.concatenate([p[a] + np.linspace(0, 1, 5)[:, None] * (elbow - p[a]),
-                              elbow + np.linspace(0, 1, 5)[:, None] * (p[c] - elbow)])
-        rad = np.repeat([_SEG_R[k_up] * height, _SEG_R[k_fore] * height], 5)
-        ca, cb, rc, _ = obstacles._caps()
-        if not len(rc):
-            return 0.0
-        d, _ = obstacles._dist(pts, ca, cb)
-        return float(np.max(rad[:, None] + rc[None] - d))
-    if depth(p[b]) <= 0:
+    def depth(elbows):          # (E, 3) candidate elbows -> (E,) deepest penetration of each
+        pts = np.concatenate([p[a] + _SWIVEL_T[None] * (elbows[:, None] - p[a]),
+                              elbows[:, None] + _SWIVEL_T[None] * (p[c] - elbows[:, None])],
+                             axis=1)                                     # (E, 10, 3)
+        d, _ = obstacles._d(pts.reshape(-1, 3))
+        return (rad[None, :, None] + rc[None, None] - d.reshape(len(elbows), 10, -1)).reshape(
+            len(elbows), -1).max(axis=1)
+    if depth(p[b][None])[0] <= 0:
         return
     rel = p[b] - p[a]
-    best = None
-    for ang in sorted(np.radians(np.arange(-180, 180, 20)), key=abs):
-        elbow = p[a] + _rotate_about(rel, ax, float(ang))
-        dd = depth(elbow)
-        if dd <= 0:
-            p[b] = elbow
-            return
-        if best is None or dd < best[0]:
-            best = (dd, elbow)
-    p[b] = best[1]
+    cs, sn = np.cos(_SWIVEL_ANGLES)[:, None], np.sin(_SWIVEL_ANGLES)[:, None]
+    # Rodrigues' rotation of rel about ax by every angle
+    elbows = p[a] + rel * cs + np.cross(ax, rel) * sn + ax * float(ax @ rel) * (1.0 - cs)
+    dd = depth(elbows)
+    clear = np.nonzero(dd <= 0)[0]
+    p[b] = elbows[clear[0] if len(clear) else int(np.argmin(dd))]
 
 
 def integrate_motion(pose: np.ndarray, com_target: np.ndarray,
@@ -192,7 +200,7 @@ def integrate_motion(pose: np.ndarray, com_target: np.ndarray,
     p = np.array(pose, float)
     p += np.asarray(com_target, float) - center_of_mass(p)
     if obstacles is not None:     # only what the body can reach this frame
-        obstacles = obstacles.near(com_target, 1.5 * height)
+        obstacles = obstacles.near(com_target, NEAR * height)
     if contacts:
         shift = np.zeros(3)
         for e, tgt in contacts.items():
@@ -256,6 +264,8 @@ class Obstacles:
         self._arr = (np.array([x[0] for x in c]).reshape(-1, 3),
                      np.array([x[1] for x in c]).reshape(-1, 3),
                      np.array([x[2] for x in c], float), [x[3] for x in c])
+        ab = self._arr[1] - self._arr[0]
+        self._axes = (ab, np.maximum((ab * ab).sum(axis=1), 1e-12))   # for _d
         return self
 
     def near(self, point: np.ndarray, radius: float) -> 'Obstacles':
@@ -265,7 +275,7 @@ class Obstacles:
         out = Obstacles()
         out.boxes, out.floor = self.boxes, self.floor
         if len(rc):
-            d, _ = self._dist(np.asarray(point, float)[None], a, b)
+            d, _ = self._d(np.asarray(point, float)[None])
             keep = np.nonzero(d[0] - rc < radius)[0]
             out.capsules = [self.capsules[k] for k in keep]
         return out.freeze()
@@ -275,15 +285,28 @@ class Obstacles:
             self.freeze()
         return self._arr
 
+    def _d(self, pts):
+        """:meth:`_dist` of points (P, 3) to this set's capsule axes, with the axes' vectors
+        and squared lengths computed once per set (:meth:`freeze`)."""
+        a = self._caps()[0]
+        ab, den = self._axes
+        diff = pts[:, None, :] - a[None]
+        t = (diff * ab).sum(axis=2) / den
+        np.clip(t, 0.0, 1.0, out=t)
+        cp = a[None] + t[..., None] * ab[None]
+        r = pts[:, None, :] - cp
+        return np.sqrt((r * r).sum(axis=2)), cp
+
     @staticmethod
     def _dist(pts, a, b):
         """Distances (P, K) and closest points (P, K, 3) of points to capsule axes."""
         ab = b - a                                              # (K, 3)
-        t = np.einsum('pkd,kd->pk', pts[:, None, :] - a[None], ab) / np.maximum(
-            np.einsum('kd,kd->k', ab, ab), 1e-12)
-        t = np.clip(t, 0.0, 1.0)
+        diff = pts[:, None, :] - a[None]                        # (P, K, 3)
+        t = (diff * ab).sum(axis=2) / np.maximum((ab * ab).sum(axis=1), 1e-12)
+        np.clip(t, 0.0, 1.0, out=t)
         cp = a[None] + t[..., None] * ab[None]
-        return np.linalg.norm(pts[:, None, :] - cp, axis=2), cp
+        r = pts[:, None, :] - cp
+        return np.sqrt((r * r).sum(axis=2)), cp
 
     def trunk_clearance(self, p: np.ndarray, height: float,
                         direction: Optional[np.ndarray] = None, fixed: bool = True):
@@ -296,11 +319,11 @@ class Obstacles:
         a, b, rc, _ = self._caps()
         if not len(rc):
             return np.zeros(3), direction
-        ts = np.linspace(0.0, 1.0, 9)   # a superset of the metric's 5 samples
-        segs = _BODY_SEGS
-        pts = np.concatenate([p[i] + ts[:, None] * (p[j] - p[i]) for i, j in segs])
-        rad = np.repeat([_SEG_R[SEGMENT_CHILDREN.index(j)] * height for _, j in segs], len(ts))
-        d, cp = self._dist(pts, a, b)
+        ts = _T9   # a superset of the metric's 5 samples
+        pts = (p[_BODY_PAR][:, None, :]
+               + ts[None, :, None] * (p[_BODY_CHI] - p[_BODY_PAR])[:, None, :]).reshape(-1, 3)
+        rad = np.repeat(_BODY_R * height, len(ts))
+        d, cp = self._d(pts)
         depth = rad[:, None] + rc[None] - d
         i, k = np.unravel_index(np.argmax(depth), depth.shape)
         if depth[i, k] <= 0:
@@ -337,7 +360,7 @@ class Obstacles:
                 p[j, ax] = c[ax] + sgn * (h[ax] + r_joint[j])
         a, b, rc, _ = self._caps()
         if len(rc):
-            d, cp = self._dist(p, a, b)
+            d, cp = self._d(p)
             viol = (d < rc[None] + r_joint[:, None]) & keep[:, None]
             for j, k in zip(*np.nonzero(viol)):
                 n = p[j] - cp[j, k]
@@ -355,15 +378,26 @@ class Obstacles:
         a, b, rc, _ = self._caps()
         if not len(rc):
             return
-        ts = np.linspace(0.0, 1.0, 9)
+        ts = _T9
+        segs = [(i, j) for i, j in _LIMB_SEGS if j not in skip]
+        if not segs:
+            return
+        par, chi = [i for i, _ in segs], [j for _, j in segs]
+        rad_all = np.repeat(_SEG_R[[SEGMENT_CHILDREN.index(j) for j in chi]] * height, len(ts))
         for _ in range(iters):
+            # every free segment's samples at once: nothing inside any obstacle (the usual
+            # frame), nothing to move -- the loop below would move nothing either
+            pts = (p[par][:, None, :] + ts[None, :, None] * (p[chi] - p[par])[:, None, :])
+            d, _ = self._d(pts.reshape(-1, 3))
+            if float(np.max(rad_all[:, None] + rc[None] - d)) <= 0:
+                return
             moved = False
             for i, j in _LIMB_SEGS:
                 if j in skip:
                     continue
                 pts = p[i] + ts[:, None] * (p[j] - p[i])
                 rad = _SEG_R[SEGMENT_CHILDREN.index(j)] * height
-                d, cp = self._dist(pts, a, b)
+                d, cp = self._d(pts)
                 depth = rad + rc[None] - d
                 q, k = np.unravel_index(np.argmax(depth), depth.shape)
                 if depth[q, k] <= 0 or ts[q] < 1e-6:
@@ -390,7 +424,7 @@ class Obstacles:
         standard body scaled to ``height``) into the obstacles; the engaged effectors' last two
         segments are not tested against the feature they hold (a hand grips its bar)."""
         engaged = engaged or {}
-        ts = np.linspace(0.0, 1.0, 5)
+        ts = _T5
         pa, ch = list(SEGMENT_PARENTS), list(SEGMENT_CHILDREN)
         pts = (p[pa][:, None, :] + ts[None, :, None] * (p[ch] - p[pa])[:, None, :]).reshape(-1, 3)
         rad = np.repeat(_SEG_R * height, len(ts))
@@ -421,7 +455,7 @@ class Obstacles:
                 worst = max(worst, float(np.max((c[2] + h[2] + rad - pts[:, 2])[inside])))
         a, b, rc, feats = self._caps()
         if len(rc):
-            d, _ = self._dist(pts, a, b)
+            d, _ = self._d(pts)
             depth = rad[:, None] + rc[None] - d
             for f in set(feats):
                 if f in excl:

@@ -24,7 +24,7 @@ from skeleton_core.geometry import facing_yaw
 from skeleton_core.params import check, nested, param
 from skeleton_core.model import (FOOT_LEFT, FOOT_RIGHT, JOINT_INDEX, estimate_height)
 
-from .composition import Obstacles, PoseComposer, integrate_motion, integrate_rule
+from .composition import NEAR, Obstacles, PoseComposer, integrate_motion, integrate_rule
 from .dynamics import DynamicProcess
 from .examples import example_motion
 from .features import EFFECTORS, Feature, World
@@ -180,6 +180,7 @@ class PerformanceController:
         self.blend = 0.0
         self.blend_feature = ''
         self.obstacles = Obstacles()
+        self._plan = None      # the features' geometry for the obstacles (_obstacle_plan)
         self.frames = 0
         self._stand_z = 1.0
         self._hand_z: Dict[str, float] = {}
@@ -248,6 +249,7 @@ class PerformanceController:
         feet_z = min(rel[FOOT_LEFT, 2], rel[FOOT_RIGHT, 2])
         self._stand_z = float(-feet_z + 0.04)     # the COM's height standing on the floor
         self.dp = DynamicProcess(self.world, mass, com, self._offsets(rel), self.params.free_gain)
+        self._plan = None
         if self.start:
             f = self.world.features[self.start]
             for e in f.engage.effectors:
@@ -264,30 +266,52 @@ class PerformanceController:
         return rel @ _rotz(-self.yaw0).T
 
     # ------------------------------------------------------------------ obstacles
-    def _refresh_obstacles(self) -> None:
+    def _obstacle_plan(self):
+        """(floor feature or None, [(kind, data)]): the features' solid geometry in the world
+        file's order, read once -- static capsules and boxes as arrays, the moving rope segments
+        and the trampoline by their MuJoCo body ids (:meth:`_refresh_obstacles` reads their pose
+        every frame)."""
         import mujoco
-        ob = Obstacles()
-        d, m = self.dp.data, self.dp.model
+        floor, plan = None, []
+        m = self.dp.model
         for f in self.world.features.values():
             for i, g in enumerate(f.geoms):
                 n = f'f_{f.name}_{i}'
                 if g.type == 'plane':
-                    ob.floor = f.name
+                    floor = f.name
                 elif g.type == 'capsule':
-                    ob.capsules.append((g.vec('from'), g.vec('to'), g.num('radius'), f.name))
+                    plan.append(('capsule', (g.vec('from'), g.vec('to'), g.num('radius'), f.name)))
                 elif g.type == 'box':
                     if 'stiffness' in g.data:
                         b = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, n)
-                        ob.boxes.append((d.xpos[b].copy(), g.vec('half'), f.name))
+                        plan.append(('moving box', (b, g.vec('half'), f.name)))
                     else:
-                        ob.boxes.append((g.vec('center'), g.vec('half'), f.name))
+                        plan.append(('box', (g.vec('center'), g.vec('half'), f.name)))
                 elif g.type == 'rope':
                     seg, r = g.num('length'), g.num('radius')
                     for s in range(int(g.data['segments'])):
                         b = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, f'{n}_seg{s}')
-                        a0 = d.xpos[b].copy()
-                        ob.capsules.append((a0, a0 + d.xmat[b].reshape(3, 3) @ [0, 0, -seg], r,
-                                            f.name))
+                        plan.append(('segment', (b, np.array([0.0, 0.0, -seg]), r, f.name)))
+        return floor, plan
+
+    def _refresh_obstacles(self) -> None:
+        if self._plan is None:
+            self._plan = self._obstacle_plan()
+        floor, plan = self._plan
+        ob = Obstacles()
+        ob.floor = floor
+        d = self.dp.data
+        for kind, x in plan:
+            if kind == 'capsule':
+                ob.capsules.append(x)
+            elif kind == 'segment':
+                b, down, r, name = x
+                a0 = d.xpos[b].copy()
+                ob.capsules.append((a0, a0 + d.xmat[b].reshape(3, 3) @ down, r, name))
+            elif kind == 'box':
+                ob.boxes.append(x)
+            else:
+                ob.boxes.append((d.xpos[x[0]].copy(), x[1], x[2]))
         self.obstacles = ob.freeze()
 
     # ------------------------------------------------------------------ rules
@@ -498,8 +522,10 @@ class PerformanceController:
         eff = dp.effectors()
         contacts = {e: eff[EFFECTORS.index(e)] for e in dp.contacts}
         held = {e: c.feature for e, c in dp.contacts.items()}
-        out_w = integrate_motion(q_world_rel, dp.com, contacts, self.obstacles, held, self.height)
-        pen = (self.obstacles.penetration(out_w, self.height, held)
+        # the features near enough to touch: the constraints and the metric test only these
+        near = self.obstacles.near(dp.com, NEAR * self.height)
+        out_w = integrate_motion(q_world_rel, dp.com, contacts, near, held, self.height)
+        pen = (near.penetration(out_w, self.height, held)
                if self.params.compute_penetration else float('nan'))
         ms = (time.perf_counter() - t_start) * 1e3
         cpu = (time.thread_time() - c_start) * 1e3

@@ -2,7 +2,7 @@
 
     ros2 run performance_control demo_control                 # out/control_demo.{mcap,png}
 
-Five scenes, one simulated user each (user ids 1-5), 8 s apiece (the last ~47 s), performed by a user of another
+Five scenes, one simulated user each (user ids 1-5), 8 s apiece (the last ~52 s), performed by a user of another
 size and style than the examples and seen through the Kinect sensor model (the performance
 placement: 3.5 m away, sensor 1.2 m up): hanging from the monkey bars and swinging (imitation,
 then the arms drop at 6 s: the character falls), climbing the rope, jumping on the trampoline,
@@ -54,7 +54,7 @@ def scene_stream(world, name: str, seed: int, seconds: float = 8.0):
         def step(s, st, t):       # the performer watches this character to stop at the rope
             frames.append(s)
             states.append(st)
-            return ctl.step(s, t, st).com
+            return ctl.step(s, t, st)
         watched_performance(world, 0, step)
         return np.array(frames), np.array(states)
     if name == 'trampoline':

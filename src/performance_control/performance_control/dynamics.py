@@ -213,6 +213,13 @@ class DynamicProcess:
         return self._r0 + s * (self._r1 - self._r0)
 
     # ------------------------------------------------------------------ contacts
+    def _body_id(self, name: str) -> int:
+        """The MuJoCo id of a body of the model, looked up once."""
+        ids = self.__dict__.setdefault('_body_ids', {})
+        if name not in ids:
+            ids[name] = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_BODY, name)
+        return ids[name]
+
     def feature_distance(self, effector: str, feature: Feature, max_arc: Optional[float] = None):
         """(distance to the feature's surface, anchor body, contact point in the world) for an
         effector; the contact point is where the effector's centre is held (on a bar's axis for a
@@ -233,8 +240,7 @@ class DynamicProcess:
                 cand = [(float(np.linalg.norm(p - c)) - g.num('radius'), 'world', c)]
             elif g.type == 'box':
                 if 'stiffness' in g.data:
-                    b = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_BODY, n)
-                    ctr, body = d.xpos[b], n
+                    ctr, body = d.xpos[self._body_id(n)], n
                 else:
                     ctr, body = g.vec('center'), 'world'
                 half = g.vec('half')
@@ -257,7 +263,7 @@ class DynamicProcess:
                     top = max_arc - s * seg if max_arc is not None else seg
                     if top <= 0.0:
                         break                 # this segment and the ones below: out of range
-                    b = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_BODY, f'{n}_seg{s}')
+                    b = self._body_id(f'{n}_seg{s}')
                     a0 = d.xpos[b]
                     a1 = a0 + d.xmat[b].reshape(3, 3) @ np.array([0.0, 0.0, -min(seg, top)])
                     c = _closest_on_segment(p, a0, a1)

@@ -46,13 +46,16 @@ from .support import HangDetector
 
 _SEG_W = np.array([SEGMENT_MASS_FRACTION[JOINT_NAMES[c]] for c in SEGMENT_CHILDREN])
 _SEG_W = _SEG_W / _SEG_W.sum()
+_PARENTS, _CHILDREN = np.array(SEGMENT_PARENTS), np.array(SEGMENT_CHILDREN)
 
 
 def center_of_mass(positions: np.ndarray) -> np.ndarray:
     """Whole-body COM (..., 3) of joint positions (..., 20, 3): segment midpoints weighted by
     the standard body's mass fractions (Winter 2009)."""
     p = np.asarray(positions, float)
-    mid = 0.5 * (p[..., list(SEGMENT_PARENTS), :] + p[..., list(SEGMENT_CHILDREN), :])
+    mid = 0.5 * (p[..., _PARENTS, :] + p[..., _CHILDREN, :])
+    if mid.ndim == 2:       # one pose (every control step, several times): no einsum parsing
+        return _SEG_W @ mid
     return np.einsum('k,...kd->...d', _SEG_W, mid)
 
 
@@ -323,6 +326,7 @@ class IntentionRecognizer:
         self.height: Optional[float] = None
         self._hist = []      # the last lag + 1 relative joint arrays
         self._thist = []     # the same, trunk-relative (:func:`trunk_relative`)
+        self._trunk_joints = sorted({j for m in self.models for j in m.effectors})
         self._whist: Dict[str, list] = {}   # the last lag + 1 feature vectors per model
         self._avg: Dict[str, list] = {}
         self._last_t: Optional[float] = None
@@ -366,7 +370,8 @@ class IntentionRecognizer:
         g = 1.0 - math.exp(-dt_f / prm.prefilter) if prm.prefilter > 0 else 1.0
         if self._hist and prm.prefilter > 0:
             rel = self._hist[-1] + g * (rel - self._hist[-1])
-        trunk = trunk_relative(p, range(len(p))) / self.height
+        trunk = np.zeros_like(p)       # only the compared effectors' rows are used
+        trunk[self._trunk_joints] = trunk_relative(p, self._trunk_joints) / self.height
         if self._thist and prm.prefilter > 0:
             trunk = self._thist[-1] + g * (trunk - self._thist[-1])
         self._hist.append(rel)
@@ -389,6 +394,7 @@ class IntentionRecognizer:
         old_s = self._hist[-1 - ks]
         gam = 1.0 if prm.share_window <= 0 else 1.0 - math.exp(-dt / prm.share_window)
         legs_bent = self.bent_legs_gate and self.support.legs_bent()
+        shared: Dict[tuple, tuple] = {}
         for m in self.models:
             idx = list(m.effectors)
             obs_e = None
@@ -396,9 +402,20 @@ class IntentionRecognizer:
                 obs_e = self._tracked_run[idx] >= int(prm.track_settle)
                 if obs_e.all() or 6 * int(obs_e.sum()) <= m.A.shape[1]:
                     obs_e = None      # all observed, or too few to test the subspace
-            r = rel[idx].reshape(-1)
-            v = (r - old[idx].reshape(-1)) * (prm.fps / k) if k else np.zeros_like(r)
-            w = np.concatenate([r, prm.tau * v])
+            key = tuple(idx)
+            if key not in shared:     # the same effectors (the hands, every playground
+                # feature): their vectors once per frame
+                r = rel[idx].reshape(-1)
+                v = (r - old[idx].reshape(-1)) * (prm.fps / k) if k else np.zeros_like(r)
+                va = (r - old_a[idx].reshape(-1)) * (prm.fps / ka) if ka else np.zeros_like(r)
+                old_t = self._thist[-1 - ka]
+                vt = ((trunk[idx] - old_t[idx]).reshape(-1) * (prm.fps / ka) if ka
+                      else np.zeros_like(r))
+                vs = r - old_s[idx].reshape(-1)
+                shared[key] = (r, np.concatenate([r, prm.tau * v]), va, vt, vs,
+                               float(np.sum(va * va)), float(np.sum(vt * vt)),
+                               float(np.sum(vs * vs)))
+            r, w, va, vt, vs, va2, vt2, vs2 = shared[key]
             wh = self._whist.setdefault(m.name, [])
             wh.append(w)
             if len(wh) > lag + 1:
@@ -406,17 +423,12 @@ class IntentionRecognizer:
             dw = w - wh[0]
             obs_w = None if obs_e is None else np.tile(np.repeat(obs_e, 3), 2)
             e1, e2 = m.errors(w, dw, obs_w)
-            va = (r - old_a[idx].reshape(-1)) * (prm.fps / ka) if ka else np.zeros_like(r)
-            old_t = self._thist[-1 - ka]
-            vt = ((trunk[idx] - old_t[idx]).reshape(-1) * (prm.fps / ka) if ka
-                  else np.zeros_like(r))
-            # the share of the displacement over share_lag frames outside the example's
+            # the share of the displacement over share_lag frames (vs) outside the example's
             # position subspace (energies averaged over share_window, then divided)
-            vs = r - old_s[idx].reshape(-1)
             if obs_e is None:
-                sp2 = float(np.sum(va * va)) / max(m.rms_speed, 1e-9) ** 2
-                arm2 = float(np.sum(vt * vt)) / max(float(m.ms_arm_speed.sum()), 1e-18)
-                out2, all2 = float(reconstruction_error(vs, m.A_pos)), float(np.sum(vs * vs))
+                sp2 = va2 / max(m.rms_speed, 1e-9) ** 2
+                arm2 = vt2 / max(float(m.ms_arm_speed.sum()), 1e-18)
+                out2, all2 = float(reconstruction_error(vs, m.A_pos)), vs2
             else:     # the observed effectors against the example's speed of the same ones
                 obs_p = np.repeat(obs_e, 3)
                 sp2 = float(np.sum(va[obs_p] ** 2)) / max(float(m.ms_speed[obs_e].sum()), 1e-18)

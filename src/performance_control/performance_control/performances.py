@@ -10,6 +10,7 @@ does, optionally through the Kinect sensor model.
 """
 from __future__ import annotations
 
+import math
 from types import SimpleNamespace
 from typing import Dict, List, Optional, Tuple
 
@@ -125,18 +126,23 @@ def _turn(p: np.ndarray, yaw: np.ndarray) -> np.ndarray:
 
 
 def continuous_stream(world, rng: np.random.Generator, fps: float = FPS,
-                      rope_at: Optional[float] = None, steer: float = 0.0):
+                      rope_at: Optional[float] = None, steer: float = 0.0,
+                      bars_at: float = 3.5, rope_stops: Tuple[float, ...] = (),
+                      approach: Tuple[Tuple[float, float], ...] = ()):
     """One continuous performance (Sec. 8.3, issue 30): stand; walk in place (the character
-    walks forward under the monkey bars); stop, raise the arms and jump (the character catches a
-    bar); swing like on the bars; lower the arms (the character lets go and drops); walk in
-    place turning 45 deg right (the character walks into the water); swim a breaststroke.
-    With ``rope_at`` (s), the rope before the water: after the bars the user walks straight on
-    until ``rope_at`` -- when the character has arrived at the rope: the user watches it, see
-    :func:`rope_stop_time` --, climbs hand over hand 6 s, lowers the arms (the character drops),
-    then walks turning 45 deg right into the water and swims. ``steer`` (rad, left positive):
-    with the rope, the user turns by this much as they start the walk after the bars (toward the
-    rope, :func:`watched_performance`), and from the rope turns to 45 deg right of where they
-    first faced.
+    walks forward under the monkey bars) until ``bars_at`` s; stop, raise the arms and jump (the
+    character catches a bar); swing like on the bars; lower the arms (the character lets go and
+    drops); walk in place turning 45 deg right (the character walks into the water); swim a
+    breaststroke. With ``rope_at`` (s), the rope before the water: after the bars the user walks
+    straight on until ``rope_at`` -- when the character has arrived at the rope: the user watches
+    it, see :func:`watched_performance` --, climbs hand over hand 6 s, lowers the arms (the
+    character drops), then walks turning 45 deg right into the water and swims. ``rope_stops``
+    (s, before ``rope_at``): earlier stops at which the user reached up for the rope, saw the
+    character come to rest short of it and walked on (from ``stop`` + :data:`ROPE_WAIT`).
+    ``steer`` (rad, left positive): with the rope, the user turns by this much as they start the
+    walk after the bars (toward the rope, :func:`watched_performance`), and from the rope turns
+    to 45 deg right of where they first faced. ``approach`` ((s, rad), ...): turns on the walk to
+    the bars, each to the given heading (left positive, from where they first faced) over 1 s.
     Returns (positions (T, 20, 3) world, schedule [(start s, what the user does)]) with the
     user's body, style and tempo drawn from ``rng``."""
     body, style, tempo = performer(rng)
@@ -146,25 +152,38 @@ def continuous_stream(world, rng: np.random.Generator, fps: float = FPS,
     swing['period'] = float(swing.get('period', 1.6)) * tempo
     swim = dict(world.features['water'].example.params)
     swim['period'] = float(swim.get('period', 1.5)) * tempo
+    # the bars' part starts this much later (the walk fades out over 0.2 s after bars_at, the
+    # arms rise from bars_at + 0.2: the stream up to bars_at is the same as any later stop's)
+    d = float(bars_at) - 3.5
+    bars = [(0.0, 'stand'), (1.0, 'walk'), (3.7 + d, 'raise the arms'), (4.5 + d, 'jump'),
+            (5.0 + d, 'swing'), (9.0 + d, 'lower the arms'), (10.5 + d, 'walk')]
     if rope_at is None:
-        sched = [(0.0, 'stand'), (1.0, 'walk'), (3.7, 'raise the arms'), (4.5, 'jump'),
-                 (5.0, 'swing'), (9.0, 'lower the arms'), (10.5, 'walk'), (18.0, 'swim')]
-        total, walks, turn, climb = 24.0, [(1.0, 3.5), (10.5, 18.0)], 11.0, None
+        sched = bars + [(18.0 + d, 'swim')]
+        total, walks, turn, climbs = 24.0 + d, [(1.0, bars_at + 0.2), (10.5 + d, 18.0 + d)], 11.0 + d, []
     else:
         r = float(rope_at)
-        sched = [(0.0, 'stand'), (1.0, 'walk'), (3.7, 'raise the arms'), (4.5, 'jump'),
-                 (5.0, 'swing'), (9.0, 'lower the arms'), (10.5, 'walk'), (r, 'climb'),
-                 (r + 6.5, 'lower the arms'), (r + 8.0, 'walk'), (r + 17.0, 'swim')]
+        stops = [float(x) for x in rope_stops]
+        sched = list(bars)
+        walks = [(1.0, bars_at + 0.2)]     # fades out after bars_at (as the rope's walks)
+        climbs = []
+        start = 10.5 + d
+        for s_ in stops:        # reached up at the stop, saw the character short, walked on
+            walks.append((start, s_ + 0.2))
+            climbs.append((s_ + 0.2, s_ + ROPE_WAIT + 0.3))
+            sched += [(s_, 'reach for the rope'), (s_ + ROPE_WAIT, 'walk')]
+            start = s_ + ROPE_WAIT
+        sched += [(r, 'climb'), (r + 6.5, 'lower the arms'), (r + 8.0, 'walk'), (r + 17.0, 'swim')]
         # one length whatever rope_at (the sensor noise is drawn for the whole stream: the same
         # frames get the same noise, so the performance up to rope_at is the one watched)
         total = ROPE_LATEST + 23.0
         # the walk fades out after rope_at (the stream is the same as any later stop's up to it)
-        walks, turn = [(1.0, 3.5), (10.5, r + 0.2), (r + 8.0, r + 17.0)], r + 8.5
-        climb = (r + 0.2, r + 6.5)
+        walks += [(start, r + 0.2), (r + 8.0, r + 17.0)]
+        turn = r + 8.5
+        climbs.append((r + 0.2, r + 6.5))
     n = int(round(total * fps))
     t = np.arange(n) / fps
     env_w = _envelope(n, walks, 0.2, fps)
-    env_b = _envelope(n, [(3.7, 9.0)], 0.3, fps)
+    env_b = _envelope(n, [(3.7 + d, 9.0 + d)], 0.3, fps)
     env_s = _envelope(n, [(sched[-1][0] + 0.3, total + 1.0)], 0.25, fps)
     pw = imitation('walk_cycle', walk, body, n, fps, style, active=env_w)
     pb = imitation('monkey_swing', swing, body, n, fps, style, active=env_b)
@@ -172,24 +191,42 @@ def continuous_stream(world, rng: np.random.Generator, fps: float = FPS,
     arms = [j for j in range(pw.shape[1]) if j not in _LEG_JOINTS]
     p = pw.copy()
     layers = [(env_b, pb), (env_s, ps)]
-    if climb is not None:
+    if climbs:
         rope = dict(world.features['rope'].example.params)
         rope['period'] = float(rope.get('period', 1.4)) * tempo
-        env_r = _envelope(n, [climb], 0.3, fps)
+        env_r = _envelope(n, climbs, 0.3, fps)
         layers.append((env_r, imitation('rope_climb', rope, body, n, fps, style, active=env_r)))
     for env, src in layers:
         on = (env > 0)[:, None, None]
         p[:, arms] = np.where(on, src[:, arms], p[:, arms])
-    p = lift(p, 4.5, 0.45, fps)
-    yaw = -np.radians(45) * np.clip((t - turn) / 1.0, 0, 1)   # half turned: still tracked
-    if climb is not None and steer:
-        aim = float(steer) * np.clip((t - STEER_AT) / 1.0, 0, 1)
-        yaw = aim + (-np.radians(45) - aim) * np.clip((t - turn) / 1.0, 0, 1)
+    p = lift(p, 4.5 + d, 0.45, fps)
+    # the user's heading: each turn toward its aim over 1 s, the last to 45 deg right (half
+    # turned: still tracked)
+    aims = [(float(a), float(y)) for a, y in approach]
+    if climbs and steer:
+        aims.append((STEER_AT + d, float(steer)))
+    yaw, prev = np.zeros(n), 0.0
+    for a, y in aims:
+        yaw = yaw + (y - prev) * np.clip((t - a) / 1.0, 0, 1)
+        prev = y
+    yaw = yaw + (-np.radians(45) - prev) * np.clip((t - turn) / 1.0, 0, 1)
     return _turn(p, yaw), sched
 
 
+# s: the latest the user stops walking for the bars (the stream's length is fixed by it and
+# ROPE_LATEST); the blind script stopped at 3.5 s, where the characters of slow walkers (seeds 12
+# and 14: 0.6-0.9 m short of the first bar) could not reach a bar with their jump
+BARS_LATEST = 8.0
+# m: the user stops walking when the character will come to rest this close (horizontally) to the
+# middle bar (one bar spacing): aiming at the first bar (within half a spacing of it), the
+# anticipated coast's error -- the walk slows as the user's swing fades -- left dev seed 9's
+# character 0.5 m short of it, its hands out of the jump's reach; from the middle bar, a coast off
+# by +-0.6 m still rests under a bar. The whole bar, not its midpoint: aiming at the midpoint
+# (within 0.4 m), held-out seed 23's character passed under the bars 0.45-0.5 m to the side of it
+# and walked on
+BARS_STOP = 0.4
 # s: the latest the user may start to climb the rope (the stream's length is fixed by it)
-ROPE_LATEST = 24.0
+ROPE_LATEST = 24.0 + (BARS_LATEST - 3.5)
 # m: the user stops walking when the character will come to rest this close (horizontally) to
 # the rope: the hands reach 0.3 m (the rope's engage distance)
 ROPE_STOP = 0.3
@@ -197,13 +234,49 @@ ROPE_STOP = 0.3
 # (0.4 s) and the walk's 0.2 s fade. Stopping when the COM itself was 0.6 m from the rope, a
 # fast walker (seed 3, ~1 m/s) came to rest 0.3 m past the rope, its hands behind it
 COAST = 0.6
+# s: after stopping for the rope the user reaches up for it and watches the character come to
+# rest; this long after the stop, a character still farther than ROPE_STOP from the rope (the
+# anticipated coast is only a guess: the walk slows down as the user's swing fades -- seeds 2 and
+# 10 rested 0.5-0.57 m short) makes the user walk on (at most ROPE_TRIES stops)
+ROPE_WAIT = 1.2
+ROPE_TRIES = 3
+# s, rad: on the walk to the bars the user looks every APPROACH_EVERY s where the character is
+# and, when the bars' middle is more than APPROACH_TOLERANCE off the way they face, turns toward
+# it (at most MAX_STEER). The sensor model's turn episodes (the user turning away, up to ~90 deg
+# for 1-2 s) turn the character with the user: seed 14's walked 1.5 m to the side of the bars
+APPROACH_EVERY = 1.0
+APPROACH_TOLERANCE = np.radians(15)
 # s: when the user, who has watched the character land from the bars, starts walking again and
 # turns toward the rope (the character lands 0.1-2 m from where it let go, up to 0.6 m to the side
-# of the rope's line: walking straight on it passed the rope, seeds 3 and 6)
+# of the rope's line: walking straight on it passed the rope, seeds 3 and 6); with the bars later
+# (``bars_at``), as much later
 STEER_AT = 10.5
 # rad: the most the user turns toward the rope (a user turned further away from the sensor is
 # tracked badly; the last walk turns 45 deg too)
 MAX_STEER = np.radians(45)
+
+
+def _bars_centre(world) -> np.ndarray:
+    """The middle (x, y) of the world's bars (their capsules' midpoints averaged)."""
+    mids = [0.5 * (g.vec('from')[:2] + g.vec('to')[:2]) for f in world.features.values()
+            if f.kind == 'bars' for g in f.geoms if g.type == 'capsule']
+    return np.mean(mids, axis=0)
+
+
+def _middle_bar(world, centre: np.ndarray):
+    """(from, to) (x, y) of the bar nearest the middle of the world's bars."""
+    caps = [g for f in world.features.values() if f.kind == 'bars' for g in f.geoms
+            if g.type == 'capsule']
+    g = min(caps, key=lambda g: float(np.linalg.norm(
+        0.5 * (g.vec('from')[:2] + g.vec('to')[:2]) - centre)))
+    return g.vec('from')[:2], g.vec('to')[:2]
+
+
+def _segment_distance(xy: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
+    """Distance (m) of a point to the segment a-b (all (x, y))."""
+    ab = b - a
+    u = float(np.clip((xy - a) @ ab / max(float(ab @ ab), 1e-12), 0.0, 1.0))
+    return float(np.linalg.norm(xy - (a + u * ab)))
 
 
 def _watched_sensor(p: np.ndarray, seed: int, noise: bool):
@@ -218,47 +291,109 @@ def _watched_sensor(p: np.ndarray, seed: int, noise: bool):
     return to_sensor(q, f'cont{seed}', seed, noise, WATCHED_PLACEMENT, states=True)
 
 
+def _predicted_rest(seen: List[np.ndarray], fps: float) -> np.ndarray:
+    """Where the character (its COM's horizontal positions ``seen``, one per frame) comes to rest
+    if the user stops now: its speed over 0.3 s carried on for :data:`COAST` s."""
+    n = int(round(0.3 * fps))
+    v = (seen[-1] - seen[-1 - n]) * fps / n if len(seen) > n else np.zeros(2)
+    return seen[-1] + COAST * v
+
+
 def watched_performance(world, seed: int, step, noise: bool = True, fps: float = FPS):
     """The continuous performance with the rope, performed by a user who watches the character:
-    after the bars they turn toward the rope (:data:`STEER_AT`) and walk on until the character,
-    which walks on :data:`COAST` s after they stop, would come to rest within :data:`ROPE_STOP`
-    of the rope, then climb (:func:`continuous_stream` with ``rope_at`` = that time). ``step(positions
-    (20, 3) sensor frame, tracking states (20,), t) -> the character's COM`` is called once per
-    frame (a controller of the caller's). Returns (schedule, rope_at or None: never arrived).
-    The sensor frames up to the stop are the walk-on stream's (the same frames: the sensor
-    model's noise and, with :func:`_watched_sensor`, its placement do not depend on the rest of
-    the stream)."""
+    they walk in place until the character, which walks on :data:`COAST` s after they stop, would
+    come to rest under the bars (within :data:`BARS_STOP` of the middle bar), then jump; after the bars
+    they turn toward the rope (:data:`STEER_AT`) and walk on until it would come to rest within
+    :data:`ROPE_STOP` of the rope, reach up for it and, should it rest farther
+    (:data:`ROPE_WAIT` s later), walk on again; then climb (:func:`continuous_stream` with
+    ``bars_at``, ``rope_stops`` and ``rope_at``). ``step(positions (20, 3) sensor frame, tracking
+    states (20,), t) -> the character's COM`` (or the controller's output: its ``com`` and
+    ``contacts``, so that the user also sees a hand on the rope) is called once per frame (a
+    controller of the caller's). Returns (schedule, rope_at or None: never arrived).
+    Each decision changes the script only after the frame it was taken on: the sensor frames up
+    to it are the previous stream's (the sensor model's noise and, with :func:`_watched_sensor`,
+    its placement do not depend on the rest of the stream)."""
     g = next(g for g in world.features['rope'].geoms if g.type == 'rope')
     top = g.vec('top')
-    a, sched = continuous_stream(world, np.random.default_rng(seed), fps, rope_at=ROPE_LATEST)
-    sa, sta = _watched_sensor(a, seed, noise)
-    i0 = int(round(STEER_AT * fps))
-    com = None
-    for i in range(i0):
-        com = step(sa[i], sta[i], i / fps)
+    rng = np.random.default_rng
+
+    held = {}
+
+    def perform(i):       # one frame: the character's COM (x, y); what its hands hold
+        r = step(sa[i], sta[i], i / fps)
+        held.clear()
+        held.update(getattr(r, 'contacts', {}))
+        return np.asarray(getattr(r, 'com', r), float)[:2]
+
+    def stream(**kw):
+        a, sched = continuous_stream(world, rng(seed), fps, **kw)
+        sa, sta = _watched_sensor(a, seed, noise)
+        return sched, sa, sta
+
+    # the bars: walk until the character will rest under them, turning toward them when it
+    # heads elsewhere
+    bars = _bars_centre(world)
+    middle = _middle_bar(world, bars)
+    approach: List[Tuple[float, float]] = []
+    aim = 0.0
+    sched, sa, sta = stream(bars_at=BARS_LATEST, rope_at=ROPE_LATEST)
+    seen: List[np.ndarray] = []
+    nxt, bars_at = 0, BARS_LATEST        # nxt: the next frame to perform
+    every = int(round(APPROACH_EVERY * fps))
+    while nxt < int(round(BARS_LATEST * fps)):
+        seen.append(perform(nxt))
+        nxt += 1
+        rest = _predicted_rest(seen, fps)
+        if nxt / fps > 1.5 and _segment_distance(rest, *middle) < BARS_STOP:
+            bars_at = (nxt - 1) / fps
+            break
+        to = bars - seen[-1]
+        if nxt >= 2 * fps and nxt % every == 0 and float(np.linalg.norm(to)) > 1.0:
+            want = float(np.clip(np.arctan2(to[1], to[0]), -MAX_STEER, MAX_STEER))
+            if abs(want - aim) > APPROACH_TOLERANCE:     # off course: turn toward the bars
+                aim = want
+                approach.append(((nxt - 1) / fps, aim))
+                sched, sa, sta = stream(bars_at=BARS_LATEST, rope_at=ROPE_LATEST,
+                                        approach=tuple(approach))
+    d = bars_at - 3.5
+    kw = dict(bars_at=bars_at, approach=tuple(approach))
+    sched, sa, sta = stream(rope_at=ROPE_LATEST, **kw)
+    while nxt < int(round((STEER_AT + d) * fps)):
+        seen.append(perform(nxt))
+        nxt += 1
     # the user looks where the character stands and turns toward the rope as they walk (the
     # character heads where the user faces, +x at the start)
-    d = top[:2] - np.asarray(com)[:2]
-    steer = float(np.clip(np.arctan2(d[1], d[0]), -MAX_STEER, MAX_STEER))
-    a, sched = continuous_stream(world, np.random.default_rng(seed), fps, rope_at=ROPE_LATEST,
-                                 steer=steer)
-    sa, sta = _watched_sensor(a, seed, noise)
-    seen = []
-    for i in range(i0, len(sa)):
-        seen.append(np.asarray(step(sa[i], sta[i], i / fps), float)[:2])
-        # where the character will stop if the user stops now (its speed over 0.3 s)
-        n = int(round(0.3 * fps))
-        v = (seen[-1] - seen[-1 - n]) * fps / n if len(seen) > n else np.zeros(2)
-        if float(np.linalg.norm(seen[-1] + COAST * v - top[:2])) < ROPE_STOP:
+    to = top[:2] - seen[-1]
+    steer = float(np.clip(np.arctan2(to[1], to[0]), -MAX_STEER, MAX_STEER))
+    heading = np.array([math.cos(steer), math.sin(steer)])
+    kw['steer'] = steer
+    sched, sa, sta = stream(rope_at=ROPE_LATEST, **kw)
+    stops: List[float] = []
+    while True:
+        rope_at = None
+        while nxt < len(sa):
+            seen.append(perform(nxt))
+            nxt += 1
+            if (nxt - 1) / fps <= ROPE_LATEST and float(np.linalg.norm(
+                    _predicted_rest(seen, fps) - top[:2])) < ROPE_STOP:
+                rope_at = (nxt - 1) / fps
+                break
+        if rope_at is None:
+            return sched, None
+        sched, sa, sta = stream(rope_at=rope_at, rope_stops=tuple(stops), **kw)
+        while nxt < min(int(round((rope_at + ROPE_WAIT) * fps)), len(sa)):
+            seen.append(perform(nxt))
+            nxt += 1
+        to = top[:2] - seen[-1]
+        short = (float(np.linalg.norm(to)) > ROPE_STOP and float(to @ heading) > 0.0
+                 and 'rope' not in held.values())
+        if not short or len(stops) + 1 >= ROPE_TRIES or rope_at + ROPE_WAIT >= ROPE_LATEST:
             break
-    else:
-        return sched, None
-    b, sched = continuous_stream(world, np.random.default_rng(seed), fps, rope_at=i / fps,
-                                 steer=steer)
-    sb, stb = _watched_sensor(b, seed, noise)
-    for k in range(i + 1, len(sb)):
-        step(sb[k], stb[k], k / fps)
-    return sched, i / fps
+        stops.append(rope_at)     # short of the rope (ahead): walk on
+        sched, sa, sta = stream(rope_at=ROPE_LATEST, rope_stops=tuple(stops), **kw)
+    for k in range(nxt, len(sa)):
+        perform(k)
+    return sched, rope_at
 
 
 def non_imitation_clips(seed: int) -> List[Tuple[str, np.ndarray]]:

@@ -81,7 +81,7 @@ def test_continuous_performance_bars_rope_water():
         phase.append('bars' if 'monkey_bars' in hands else 'rope' if 'rope' in hands
                      else 'water' if ctl.dp.in_water else 'walk' if ctl.walking else '')
         rows.append(o)
-        return o.com
+        return o
 
     sched, rope_at = watched_performance(WORLD, 0, step)
     assert rope_at is not None                                  # arrived at the rope
@@ -95,7 +95,7 @@ def test_continuous_performance_bars_rope_water():
         when.setdefault(w, []).append(a)
     jump = when['jump'][0]
     assert not (ph[t < jump] == 'bars').any()                 # caught with the jump, not before
-    assert (ph[(t > jump + 0.5) & (t < 8.5)] == 'bars').mean() > 0.9   # hangs while swinging
+    assert (ph[(t > jump + 0.5) & (t < when['lower the arms'][0] - 0.5)] == 'bars').mean() > 0.9
     com = np.array([o.com for o in rows])
     stand = com[0, 2]
     rope = ph == 'rope'
@@ -115,3 +115,36 @@ def test_continuous_performance_bars_rope_water():
     # swimming, not standing on the pool's bottom: no foot holds the floor
     assert not any(e.startswith('Foot') for o in rows[-60:] for e in o.contacts)
     assert ctl.dp.unstable_steps == 0
+
+
+def test_the_watched_performers_decisions_change_the_stream_only_after_they_are_taken():
+    """The closed loop of :func:`watched_performance` (issue 30, control5): each decision -- stop
+    for the bars, turn toward them, stop for the rope, walk on when the character rests short of
+    it -- regenerates the stream; the frames the controller has already seen, through the sensor
+    model, must be the same in the new stream (else the user would have done something else
+    before deciding), and the decision must change what follows."""
+    from performance_control.performances import (BARS_LATEST, ROPE_LATEST, ROPE_WAIT,
+                                                  _watched_sensor, continuous_stream)
+    seed = 3
+
+    def frames(**kw):
+        a, sched = continuous_stream(WORLD, np.random.default_rng(seed), rope_at=ROPE_LATEST,
+                                     **kw)
+        return _watched_sensor(a, seed, True)[0], sched
+
+    walk_on, _ = frames(bars_at=BARS_LATEST)
+    turned, _ = frames(bars_at=BARS_LATEST, approach=((2.5, -0.4),))
+    stopped, _ = frames(bars_at=4.0, approach=((2.5, -0.4),))
+    for before, after, t in ((walk_on, turned, 2.5), (turned, stopped, 4.0)):
+        k = int(round(t * 30))
+        assert np.array_equal(before[:k + 1], after[:k + 1])
+        assert not np.allclose(before[k + 31], after[k + 31], atol=0.05)
+    # stopped for the rope at r, then (the character rested short) walks on from r + ROPE_WAIT
+    r, kw = 14.0, dict(bars_at=4.0, steer=0.3)
+    a, s1 = continuous_stream(WORLD, np.random.default_rng(seed), rope_at=r, **kw)
+    b, s2 = continuous_stream(WORLD, np.random.default_rng(seed), rope_at=ROPE_LATEST,
+                              rope_stops=(r,), **kw)
+    k = int(round((r + ROPE_WAIT) * 30))
+    assert np.array_equal(a[:k + 1], b[:k + 1])
+    assert ('climb' in [w for _, w in s1]) and (r, 'reach for the rope') in s2
+    assert (r + ROPE_WAIT, 'walk') in s2

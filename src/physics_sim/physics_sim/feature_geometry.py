@@ -15,7 +15,7 @@ collided as a small sphere of ``size``, default 0.04 m).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Dict, List, Optional
 
@@ -32,11 +32,18 @@ class Geom:
 
     type: str
     data: Dict
+    # validated vectors by key (the control step reads them every frame): (source, array)
+    _vecs: Dict = field(default_factory=dict, repr=False, compare=False)
 
     def vec(self, key: str, n: int = 3) -> np.ndarray:
-        v = np.asarray(self.data[key], float)
+        src = self.data[key]
+        hit = self._vecs.get((key, n))
+        if hit is not None and hit[0] is src:
+            return hit[1].copy()
+        v = np.asarray(src, float)
         if v.shape != (n,) or not np.all(np.isfinite(v)):
             raise ValueError(f'{self.type}.{key} must be {n} finite numbers')
+        self._vecs[(key, n)] = (src, v.copy())
         return v
 
     def num(self, key: str, default: Optional[float] = None, positive: bool = True) -> float:
