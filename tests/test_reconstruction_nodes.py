@@ -143,6 +143,39 @@ def test_missing_database_is_one_clear_error(tmp_path):
         assert 'Traceback' not in p.stderr
 
 
+_WARM_PROBE = """
+import sys
+import rclpy
+from pose_reconstruction import kernels, reliability_kernels
+from pose_reconstruction.{module} import {cls}
+rclpy.init()
+node = {cls}()
+before = (reliability_kernels._warm, kernels._warm[0])
+node.trigger_configure()
+print(before, (reliability_kernels._warm, kernels._warm[0]))
+node.destroy_node()
+rclpy.try_shutdown()
+"""
+
+
+@pytest.mark.parametrize('module,cls', [('reconstruction_node', 'ReconstructionNode'),
+                                        ('optimizer_node', 'OptimizerNode')])
+def test_configure_loads_the_compiled_kernels_before_the_first_frame(module, cls):
+    """Loading the kernels from numba's cache takes 0.5-0.7 s even on a quiet machine: on a
+    user's first frame it stalled the node, and a rate-1 replay lost the frames behind it
+    (frames 1-19 of 60, a depth-10 queue). Configure loads them (a fresh process: the flags are
+    per process)."""
+    import subprocess
+    import sys
+    from skeleton_core import jit
+    if not jit.enabled():
+        pytest.skip('numba off (KINECT_NUMBA=0): no compiled kernels to load')
+    p = subprocess.run([sys.executable, '-c', _WARM_PROBE.format(module=module, cls=cls)],
+                       capture_output=True, text=True, timeout=120)
+    assert p.returncode == 0, p.stderr[-2000:]
+    assert p.stdout.strip().splitlines()[-1] == '(False, False) (True, True)', p.stdout + p.stderr
+
+
 def test_state_per_user_dropped_after_timeout(rclpy_context, case):
     from rclpy.parameter import Parameter
 

@@ -9,6 +9,8 @@
 """
 from __future__ import annotations
 
+import time
+
 import numpy as np
 from skeleton_core import jit
 from skeleton_core.model import NUM_JOINTS, NUM_SEGMENTS
@@ -68,17 +70,20 @@ energy_from_products = jit.pick(_energy_numba, _energy_numpy)
 _warm = [False]
 
 
-def warm_up() -> None:
+def warm_up() -> float:
     """Compile (or load from numba's cache) the kernels now, with the argument types of the real
-    calls, rather than on a user's first frame; once per process, nothing without numba."""
+    calls, rather than on a user's first frame; once per process, nothing without numba. Returns
+    the time taken (s; 0 when numba is off or already done)."""
     if _warm[0] or energy_from_products is not _energy_numba:
-        return
+        return 0.0
     _warm[0] = True
+    t0 = time.perf_counter()
     d, m, k = 2, 4, 3
     P, ZT = np.ones((d + 3 * NUM_SEGMENTS + k, m)), np.ones((d + 1, m))
     L, sq = np.ones(NUM_SEGMENTS), np.empty((3 * NUM_SEGMENTS, m))
     for work in (None, sq):   # energy() passes no work array, the stochastic search one
         _energy_numba(P, ZT, d, 0.0, L, 1.0, 1.0, work)
+    return time.perf_counter() - t0
 
 
 __all__ = ['energy_from_products', 'warm_up']

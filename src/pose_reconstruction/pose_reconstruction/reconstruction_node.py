@@ -19,7 +19,7 @@ from typing import Any, Dict, Optional
 from skeleton_core.params import specs
 from skeleton_core.rosnode import ParamSpec, run_node
 
-from . import completion_node, optimizer_node
+from . import completion_node, kernels, optimizer_node, reliability_kernels
 from .node_common import (CORRECTION_SPECS, DATABASE_SPEC, RELIABILITY_SPECS, DatabaseNode,
                           check_reliability_params, common_specs)
 from .fused import FusedProcessor, section
@@ -78,6 +78,9 @@ class ReconstructionNode(DatabaseNode):
 
     def make_processor(self, values: Dict[str, Any]):
         return FusedProcessor(self.db, values, self.user_terms)
+
+    def kernels(self):
+        return [reliability_kernels.warm_up, kernels.warm_up]   # Eq. 1-8, Eq. 15
 
     def diagnostics_extra(self) -> Dict[str, Any]:
         extra = super().diagnostics_extra()

@@ -10,6 +10,7 @@ import numpy as np
 
 from skeleton_core.rosnode import run_node
 
+from . import reliability_kernels
 from .node_common import (RELIABILITY_NAMES, RELIABILITY_SPECS, SkeletonArrayNode,
                           check_reliability_params, common_specs)
 from .reliability import ReliabilityEstimator
@@ -39,6 +40,9 @@ class ReliabilityNode(SkeletonArrayNode):
 
     def make_processor(self, values: Dict[str, Any]):
         return _ReliabilityProcessor(**{k: values[k] for k in RELIABILITY_NAMES})
+
+    def kernels(self):
+        return [reliability_kernels.warm_up]   # Eq. 1-8
 
 
 def main(args=None) -> int:
