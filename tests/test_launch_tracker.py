@@ -97,10 +97,9 @@ def test_a_replayed_bag_gets_the_correction_of_its_declared_tracker():
     # the reconstruction after the replay has started (DDS still matching); its users are then
     # rebuilt with the correction and one frame around that switch has been seen missing (once,
     # Jazzy fresh clone, 59 of 60). Once (Kilted, two clean-clone CI runs side by side) frames
-    # 1-19 were missing: the reconstruction stalled >= 0.6 s after the first frame while the
-    # replay played on at rate 1, and its depth-10 reliable queue kept only the newest ten (a
-    # rate-1 replay is as lossy as live input for a stalled reader; open). Every frame of a
-    # replay is test_launch_replay's assertion.
+    # 1-19 were missing: the reconstruction stalled on its first frame (it loaded its compiled
+    # kernels there; now on configure) while the replay played on at rate 1, and its depth-10
+    # queue kept only the newest ten. Every frame of a replay is test_launch_replay's assertion.
     assert len(rec) >= FRAMES - 1, len(rec)
     from pose_reconstruction.correction import body_frame
     keys = sorted(rec)[10:]        # after the first frames (the tracker arrives with them)
