@@ -132,12 +132,15 @@ def main(argv=None) -> int:
                '/kinect/skeletons_reliability': []}
     nan_outputs = {t: 0 for t in outputs}
     characters: List = []    # (monotonic time, user ids) of every /character/skeletons message
+    reconstructed: List = []  # the same of /posture/reconstructed (what the physics is given)
     refusals: Dict[str, int] = {}   # physics diagnostics: dropped[too many users ...]
 
     def on_out(topic, msg):
         outputs[topic].append(time.monotonic())
         if topic == '/character/skeletons':
             characters.append((time.monotonic(), [sk.user_id for sk in msg.skeletons]))
+        elif topic == '/posture/reconstructed':
+            reconstructed.append((time.monotonic(), [sk.user_id for sk in msg.skeletons]))
         for sk in msg.skeletons:
             if not all(np.isfinite([p.x + p.y + p.z for p in sk.positions])):
                 nan_outputs[topic] += 1
@@ -286,7 +289,7 @@ def main(argv=None) -> int:
             graph.start('driver')
             expected_dead.discard('driver')
         report['faults'] = _faults(graph, recording, out, spin_for, characters, rnd,
-                                   expected_dead)
+                                   expected_dead, reconstructed)
         # recovery after each kill: the restarted node's own output, then the end of the graph
         for k in report['kills']:
             own = [t for t in outputs[OUTPUT_TOPIC[k['node']]] if t > k['_t'] + IN_FLIGHT_S]
@@ -537,7 +540,8 @@ def _users_phase(pub, spin_for, characters, refusals) -> Dict:
     return out
 
 
-def _faults(graph, recording: Path, out: Path, spin_for, characters, rnd, expected_dead) -> Dict:
+def _faults(graph, recording: Path, out: Path, spin_for, characters, rnd, expected_dead,
+            reconstructed=()) -> Dict:
     """The recorder killed with SIGKILL and its bag recovered; the physics node killed and
     restarted (the driver's user gets its character back); the recording cut at a random byte
     and replayed by the replay source."""
@@ -578,8 +582,11 @@ def _faults(graph, recording: Path, out: Path, spin_for, characters, rnd, expect
     while back is None and time.monotonic() < deadline:
         spin_for(0.2)
         back = next((tc - t for tc, us in characters if tc > t_up and 1 in us), None)
+    # (for reading: whether the physics was given user 1 at all once the new process was up)
+    given = sum(1 for tc, us in reconstructed if tc > t_up and 1 in us)
     res['physics_restart'] = {'character_back_after_s': None if back is None else round(back, 2),
-                              'ok': back is not None}
+                              'up_after_s': round(t_up - t, 2),
+                              'user_1_reconstructed_after_up': given, 'ok': back is not None}
     # 3. the recording cut at a random byte, replayed (every complete frame played)
     try:
         from kinect_driver.sources.replay import ReplaySource
