@@ -286,23 +286,12 @@ class Obstacles:
         return self._arr
 
     def _d(self, pts):
-        """:meth:`_dist` of points (P, 3) to this set's capsule axes, with the axes' vectors
-        and squared lengths computed once per set (:meth:`freeze`)."""
+        """Distances (P, K) and closest points (P, K, 3) of points (P, 3) to this set's capsule
+        axes, with the axes' vectors and squared lengths computed once per set (:meth:`freeze`)."""
         a = self._caps()[0]
         ab, den = self._axes
         diff = pts[:, None, :] - a[None]
         t = (diff * ab).sum(axis=2) / den
-        np.clip(t, 0.0, 1.0, out=t)
-        cp = a[None] + t[..., None] * ab[None]
-        r = pts[:, None, :] - cp
-        return np.sqrt((r * r).sum(axis=2)), cp
-
-    @staticmethod
-    def _dist(pts, a, b):
-        """Distances (P, K) and closest points (P, K, 3) of points to capsule axes."""
-        ab = b - a                                              # (K, 3)
-        diff = pts[:, None, :] - a[None]                        # (P, K, 3)
-        t = (diff * ab).sum(axis=2) / np.maximum((ab * ab).sum(axis=1), 1e-12)
         np.clip(t, 0.0, 1.0, out=t)
         cp = a[None] + t[..., None] * ab[None]
         r = pts[:, None, :] - cp

@@ -92,6 +92,7 @@ class DynamicProcess:
         self.xml, self.anchors = world_model_xml(world, com, total_mass, offsets)
         self.model = mujoco.MjModel.from_xml_string(self.xml)
         self.data = mujoco.MjData(self.model)
+        self._body_ids: Dict[str, int] = {}   # MuJoCo body ids by name (_body_id)
         m = self.model
         bid = lambda n: mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, n)  # noqa: E731
         self.com_body = bid('com')
@@ -215,10 +216,9 @@ class DynamicProcess:
     # ------------------------------------------------------------------ contacts
     def _body_id(self, name: str) -> int:
         """The MuJoCo id of a body of the model, looked up once."""
-        ids = self.__dict__.setdefault('_body_ids', {})
-        if name not in ids:
-            ids[name] = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_BODY, name)
-        return ids[name]
+        if name not in self._body_ids:
+            self._body_ids[name] = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_BODY, name)
+        return self._body_ids[name]
 
     def feature_distance(self, effector: str, feature: Feature, max_arc: Optional[float] = None):
         """(distance to the feature's surface, anchor body, contact point in the world) for an
