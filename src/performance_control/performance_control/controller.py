@@ -402,6 +402,12 @@ class PerformanceController:
                     continue
                 if e in HANDS and f.engage.regrab and self._hand_vz[e] > 0.1:
                     continue      # climbing: grab at the top of the reach, not on the way up
+                held = dp.contacts.get(HANDS[1 - HANDS.index(e)]) if e in HANDS else None
+                if (held is not None and held.feature != f.name
+                        and self.world.features[held.feature].engage.regrab):
+                    continue      # hand over hand: the free hand climbs the rope the other
+                    # holds (the rope swinging back under the last bar hung a climbing
+                    # character by one hand from the bar, seed 23 of the watched performance)
                 if e in FEET and f.kind != 'rocks' and not self._user_foot_down(p, e):
                     continue      # on a rock the foot is held above its face, not on the floor
                 if e in FEET and f.kind == 'floor' and (dp.in_water or self._climbing_rope()):

@@ -128,7 +128,8 @@ def _turn(p: np.ndarray, yaw: np.ndarray) -> np.ndarray:
 def continuous_stream(world, rng: np.random.Generator, fps: float = FPS,
                       rope_at: Optional[float] = None, steer: float = 0.0,
                       bars_at: float = 3.5, rope_stops: Tuple[float, ...] = (),
-                      approach: Tuple[Tuple[float, float], ...] = ()):
+                      approach: Tuple[Tuple[float, float], ...] = (),
+                      rope_approach: Tuple[Tuple[float, float], ...] = ()):
     """One continuous performance (Sec. 8.3, issue 30): stand; walk in place (the character
     walks forward under the monkey bars) until ``bars_at`` s; stop, raise the arms and jump (the
     character catches a bar); swing like on the bars; lower the arms (the character lets go and
@@ -142,7 +143,8 @@ def continuous_stream(world, rng: np.random.Generator, fps: float = FPS,
     ``steer`` (rad, left positive): with the rope, the user turns by this much as they start the
     walk after the bars (toward the rope, :func:`watched_performance`), and from the rope turns
     to 45 deg right of where they first faced. ``approach`` ((s, rad), ...): turns on the walk to
-    the bars, each to the given heading (left positive, from where they first faced) over 1 s.
+    the bars, each to the given heading (left positive, from where they first faced) over 1 s;
+    ``rope_approach`` the same on the walk to the rope (after ``steer``).
     Returns (positions (T, 20, 3) world, schedule [(start s, what the user does)]) with the
     user's body, style and tempo drawn from ``rng``."""
     body, style, tempo = performer(rng)
@@ -205,6 +207,8 @@ def continuous_stream(world, rng: np.random.Generator, fps: float = FPS,
     aims = [(float(a), float(y)) for a, y in approach]
     if climbs and steer:
         aims.append((STEER_AT + d, float(steer)))
+    if climbs:
+        aims += [(float(a), float(y)) for a, y in rope_approach]
     yaw, prev = np.zeros(n), 0.0
     for a, y in aims:
         yaw = yaw + (y - prev) * np.clip((t - a) / 1.0, 0, 1)
@@ -291,6 +295,25 @@ def _watched_sensor(p: np.ndarray, seed: int, noise: bool):
     return to_sensor(q, f'cont{seed}', seed, noise, WATCHED_PLACEMENT, states=True)
 
 
+def _course_error(seen: List[np.ndarray], target: np.ndarray, fps: float) -> Optional[float]:
+    """The turn (rad, left positive) that points the character's course (its COM's horizontal
+    motion over the last 0.5 s) at ``target`` (x, y), when that course passes beside it -- farther
+    than half of :data:`ROPE_STOP` (the hands reach ROPE_STOP) -- and the target is ahead and at
+    least 1 m away (a turn takes the user 1 s); else None (standing, on course, or too close)."""
+    n = int(round(0.5 * fps))
+    if len(seen) <= n:
+        return None
+    v = (seen[-1] - seen[-1 - n]) * fps / n
+    speed = float(np.linalg.norm(v))
+    to = np.asarray(target, float) - seen[-1]
+    if speed < 0.3 or float(np.linalg.norm(to)) < 1.0 or float(to @ v) <= 0.0:
+        return None
+    if abs(float(v[0] * to[1] - v[1] * to[0])) / speed <= 0.5 * ROPE_STOP:
+        return None
+    turn = math.atan2(to[1], to[0]) - math.atan2(v[1], v[0])
+    return float((turn + math.pi) % (2 * math.pi) - math.pi)
+
+
 def _predicted_rest(seen: List[np.ndarray], fps: float) -> np.ndarray:
     """Where the character (its COM's horizontal positions ``seen``, one per frame) comes to rest
     if the user stops now: its speed over 0.3 s carried on for :data:`COAST` s."""
@@ -369,15 +392,29 @@ def watched_performance(world, seed: int, step, noise: bool = True, fps: float =
     kw['steer'] = steer
     sched, sa, sta = stream(rope_at=ROPE_LATEST, **kw)
     stops: List[float] = []
+    fixes: List[Tuple[float, float]] = []      # course corrections on the way to the rope
+    aim = steer
     while True:
         rope_at = None
         while nxt < len(sa):
             seen.append(perform(nxt))
             nxt += 1
-            if (nxt - 1) / fps <= ROPE_LATEST and float(np.linalg.norm(
+            now = (nxt - 1) / fps
+            if now <= ROPE_LATEST and float(np.linalg.norm(
                     _predicted_rest(seen, fps) - top[:2])) < ROPE_STOP:
-                rope_at = (nxt - 1) / fps
+                rope_at = now
                 break
+            # on the way the user watches where the character heads and, when it would pass
+            # beside the rope, turns by the character's course error (their facing and the
+            # character's heading differ by the sensor's yaw: correcting the course, not the aim)
+            if now <= ROPE_LATEST and now >= STEER_AT + d + 1.0 and nxt % every == 0:
+                turn = _course_error(seen, top[:2], fps)
+                if turn is not None:
+                    aim = float(np.clip(aim + turn, -MAX_STEER, MAX_STEER))
+                    heading = np.array([math.cos(aim), math.sin(aim)])
+                    fixes.append((now, aim))
+                    kw['rope_approach'] = tuple(fixes)
+                    sched, sa, sta = stream(rope_at=ROPE_LATEST, rope_stops=tuple(stops), **kw)
         if rope_at is None:
             return sched, None
         sched, sa, sta = stream(rope_at=rope_at, rope_stops=tuple(stops), **kw)
