@@ -104,3 +104,38 @@ def test_no_unstable_step_while_one_hand_holds_the_rope():
     assert ctl.dp.data.warning[mujoco.mjtWarning.mjWARN_BADQACC].number == 0
     assert ctl.dp.unstable_steps == 0
     assert spin < 300.0, spin
+
+
+def test_a_hand_climbing_the_rope_grabs_the_rope_not_a_bar_beside_it():
+    """Hand over hand (control6): while one hand holds the rope, the free hand grabs only the rope.
+    The rope swinging back under the last bar brought a climber's free hand within the bars'
+    engage distance and it hung by one hand from the bar (seed 23 of the watched performance).
+    Without the held rope the same hand at the same place does catch the bar."""
+    from performance_control.examples import imitation
+    from skeleton_core.model import JOINT_INDEX, standard_body
+    bars = WORLD.features['monkey_bars']
+    user = imitation('rope_climb', dict(ROPE.example.params), standard_body(1.75), 3, 30.0,
+                     active=np.zeros(3))[0]
+    head = user[JOINT_INDEX['Head'], 2]
+    for h in ('HandLeft', 'HandRight'):       # both hands raised above the head, still
+        user[JOINT_INDEX[h]] = user[JOINT_INDEX['ShoulderCenter']] + [0.0, 0.0, 0.0]
+        user[JOINT_INDEX[h], 2] = head + 0.3
+    sensor = to_sensor(user[None].repeat(2, 0), 'still', 1, noise=False)
+    results = {}
+    for holds_rope in (True, False):
+        ctl = PerformanceController(WORLD, ControlParams(sensor_height=SENSOR_HEIGHT))
+        for i in range(2):
+            ctl.step(sensor[i], i / 30.0)
+        dp = ctl.dp
+        dp.release_all()
+        if holds_rope:
+            dp.move_effector('HandLeft', [5.0, 0.05, 2.6])
+            _, body, pt = dp.feature_distance('HandLeft', ROPE)
+            dp.engage('HandLeft', ROPE, body, pt)
+        dp.move_effector('HandRight', [4.2, 0.2, 2.68])      # 7 cm under the last bar
+        p = ctl.sensor.to_world(sensor[1])
+        ctl._update_contacts(p, {}, 2 / 30.0)
+        c = dp.contacts.get('HandRight')
+        results[holds_rope] = None if c is None else c.feature
+    assert results[False] == bars.name          # the setting reaches the bar
+    assert results[True] is None                # climbing: the free hand does not take it

@@ -148,3 +148,37 @@ def test_the_watched_performers_decisions_change_the_stream_only_after_they_are_
     assert np.array_equal(a[:k + 1], b[:k + 1])
     assert ('climb' in [w for _, w in s1]) and (r, 'reach for the rope') in s2
     assert (r + ROPE_WAIT, 'walk') in s2
+    # on the way to the rope, a course correction at 13 s (control6)
+    c, _ = continuous_stream(WORLD, np.random.default_rng(seed), rope_at=ROPE_LATEST,
+                             rope_approach=((13.0, 0.5),), **kw)
+    d, _ = continuous_stream(WORLD, np.random.default_rng(seed), rope_at=ROPE_LATEST, **kw)
+    k = int(round(13.0 * 30))
+    assert np.array_equal(c[:k + 1], d[:k + 1])
+    assert not np.allclose(c[k + 31], d[k + 31], atol=0.05)
+
+
+def test_the_watched_performer_corrects_the_course_when_the_character_would_pass_the_rope():
+    """On the way to the rope the user turns by the character's course error when its course
+    passes beside the rope (held-out seed 23 of control4 walked past it 0.35 m to the side:
+    its heading differed from the user's aim by ~7 deg and the user never corrected it)."""
+    from performance_control.performances import ROPE_STOP, _course_error
+    target = np.array([5.0, 0.0])
+
+    def walked(start, heading_deg, speed=1.0, seconds=1.0):
+        h = np.radians(heading_deg)
+        return [np.asarray(start, float) + speed * k / 30 * np.array([np.cos(h), np.sin(h)])
+                for k in range(int(seconds * 30))]
+
+    seen = walked((2.5, -0.5), 4.5)                  # seed 23: would pass ~0.35 m beside it
+    turn = _course_error(seen, target, 30.0)
+    to = target - seen[-1]
+    assert turn is not None
+    assert abs(np.degrees(turn) - (np.degrees(np.arctan2(to[1], to[0])) - 4.5)) < 0.5
+    ahead = np.degrees(np.arctan2(*(target - [2.5, -0.5])[::-1]))
+    assert _course_error(walked((2.5, -0.5), ahead), target, 30.0) is None     # on course
+    # passing within half the hands' reach: no correction; too close, past it or standing: none
+    miss = 0.4 * ROPE_STOP
+    assert _course_error(walked((2.0, miss), 0.0), target, 30.0) is None
+    assert _course_error(walked((4.3, -0.5), 0.0, 0.5), target, 30.0) is None
+    assert _course_error(walked((6.0, -0.5), 0.0), target, 30.0) is None
+    assert _course_error(walked((2.5, -0.5), 0.0, 0.0), target, 30.0) is None
