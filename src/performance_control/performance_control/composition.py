@@ -31,6 +31,7 @@ from skeleton_core.model import (ANKLE_LEFT, ANKLE_RIGHT, ELBOW_LEFT, ELBOW_RIGH
                                  WRIST_RIGHT, subtree)
 
 from .intention import ExampleModel, center_of_mass, pca_columns, yaw_rotation
+from skeleton_core import jit as _jit
 from skeleton_core.geometry import facing_yaw
 
 # chains for the IK: effector -> (root, mid, end) joints; the effector rides rigidly on ``end``
@@ -287,15 +288,10 @@ class Obstacles:
 
     def _d(self, pts):
         """Distances (P, K) and closest points (P, K, 3) of points (P, 3) to this set's capsule
-        axes, with the axes' vectors and squared lengths computed once per set (:meth:`freeze`)."""
-        a = self._caps()[0]
+        axes, with the axes' vectors and squared lengths computed once per set (:meth:`freeze`);
+        the compiled kernel (:func:`_capsule_d_jit`) or its numpy twin."""
         ab, den = self._axes
-        diff = pts[:, None, :] - a[None]
-        t = (diff * ab).sum(axis=2) / den
-        np.clip(t, 0.0, 1.0, out=t)
-        cp = a[None] + t[..., None] * ab[None]
-        r = pts[:, None, :] - cp
-        return np.sqrt((r * r).sum(axis=2)), cp
+        return _capsule_d(np.ascontiguousarray(pts, dtype=float), self._caps()[0], ab, den)
 
     def trunk_clearance(self, p: np.ndarray, height: float,
                         direction: Optional[np.ndarray] = None, fixed: bool = True):
@@ -452,6 +448,47 @@ class Obstacles:
                     depth[np.ix_(~allowed(f), cols)] = 0.0
             worst = max(worst, float(depth.max()))
         return max(worst, 0.0)
+
+
+def _capsule_d_np(pts, a, ab, den):
+    """Distances (P, K) and closest points (P, K, 3) of points ``pts`` (P, 3) to the segments
+    a + t ab, t in [0, 1] (K, 3); ``den`` (K,) = |ab|^2 (floored): the numpy twin."""
+    diff = pts[:, None, :] - a[None]
+    t = (diff * ab).sum(axis=2) / den
+    np.clip(t, 0.0, 1.0, out=t)
+    cp = a[None] + t[..., None] * ab[None]
+    r = pts[:, None, :] - cp
+    return np.sqrt((r * r).sum(axis=2)), cp
+
+
+@_jit.njit
+def _capsule_d_jit(pts, a, ab, den):  # pragma: no cover - numba
+    """:func:`_capsule_d_np` compiled: the same operations in the same order per pair (the
+    constraints call it ~8 times a frame on a few points and capsules, where numpy's per-call
+    overhead was most of its time: control6, docs/control.md)."""
+    n, k = pts.shape[0], a.shape[0]
+    d = np.empty((n, k))
+    cp = np.empty((n, k, 3))
+    for i in range(n):
+        for j in range(k):
+            t = ((pts[i, 0] - a[j, 0]) * ab[j, 0] + (pts[i, 1] - a[j, 1]) * ab[j, 1]
+                 + (pts[i, 2] - a[j, 2]) * ab[j, 2]) / den[j]
+            if t < 0.0:
+                t = 0.0
+            elif t > 1.0:
+                t = 1.0
+            r2 = 0.0
+            for c in range(3):
+                q = a[j, c] + t * ab[j, c]
+                cp[i, j, c] = q
+                r = pts[i, c] - q
+                r2 += r * r
+            d[i, j] = math.sqrt(r2)
+    return d, cp
+
+
+# numba when installed and not switched off (KINECT_NUMBA=0), the numpy twin otherwise
+_capsule_d = _jit.pick(_capsule_d_jit, _capsule_d_np)
 
 
 __all__ = ['PoseComposer', 'integrate_rule', 'integrate_motion', 'Obstacles', 'CHAINS',

@@ -73,10 +73,39 @@ def test_numpy_twin_equals_numba_applied_forces():
 
 
 def test_kinect_numba_0_selects_numpy_twin():
-    code = ('from performance_control import dynamics as d; '
-            'print(d._apply_forces is d._apply_forces_np, d._contact_forces is d._contact_forces_np)')
+    code = ('from performance_control import composition as c, dynamics as d; '
+            'print(d._apply_forces is d._apply_forces_np, d._contact_forces is d._contact_forces_np,'
+            ' c._capsule_d is c._capsule_d_np)')
     env = dict(os.environ, KINECT_NUMBA='0')
     out = subprocess.run([sys.executable, '-c', code], env=env, capture_output=True, text=True,
                          timeout=120)
     assert out.returncode == 0, out.stderr
-    assert out.stdout.split() == ['True', 'True']
+    assert out.stdout.split() == ['True', 'True', 'True']
+
+
+def test_numpy_twin_equals_numba_capsule_distances():
+    """The capsule-axis distances of the pose constraints (composition.Obstacles._d): the
+    compiled kernel and its numpy twin, on points before, along and past the segments and a
+    degenerate (zero-length) axis."""
+    pytest.importorskip('numba')
+    from performance_control import composition
+    rng = np.random.default_rng(5)
+    a = rng.normal(0, 1, (6, 3))
+    b = a + rng.normal(0, 1, (6, 3))
+    b[3] = a[3]                                        # a point-like capsule
+    ab = b - a
+    den = np.maximum((ab * ab).sum(axis=1), 1e-12)
+    pts = rng.normal(0, 2, (40, 3))
+    pts[0] = a[0] + 0.5 * ab[0]                        # on an axis: distance 0
+    d1, c1 = composition._capsule_d_jit(pts, a, ab, den)
+    d2, c2 = composition._capsule_d_np(pts, a, ab, den)
+    np.testing.assert_allclose(d1, d2, rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(c1, c2, rtol=1e-12, atol=1e-15)
+    assert d1[0, 0] < 1e-12
+    # by hand: the distance to a segment clips to its ends
+    d, cp = composition._capsule_d_jit(np.array([[2.0, 1.0, 0.0]]), np.zeros((1, 3)),
+                                       np.array([[1.0, 0.0, 0.0]]), np.array([1.0]))
+    assert d[0, 0] == pytest.approx(np.sqrt(2.0)) and np.allclose(cp[0, 0], [1.0, 0.0, 0.0])
+    # no capsule: empty results
+    d, cp = composition._capsule_d_jit(pts, np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0))
+    assert d.shape == (40, 0) and cp.shape == (40, 0, 3)
