@@ -223,25 +223,6 @@ def test_an_untestable_change_share_gate_does_not_pass():
     assert any(rec.update(q[i], t[i])['water'].imitating for i in range(len(q)))
 
 
-@pytest.mark.parametrize('elbow_deg', [0.0, 12.0, 24.0])
-def test_walking_in_place_with_bent_elbows_is_recognised(elbow_deg):
-    """The floor's example spans the elbow bends people walk with (``elbow_sweep_deg``): a walker
-    in place with the elbows bent 24 deg more than the example's 15 deg (the continuous
-    performance's seed 1) is imitating the walk, no sensor noise. With one bend in the example
-    the constant offset of the hands put e1 at 0.88 x its threshold and the walk was recognised
-    in ~60 % of the frames (control6, docs/control.md)."""
-    prm = RecognizerParams()
-    models = build_models(WORLD, prm)
-    f = WORLD.features['floor']
-    rec = IntentionRecognizer([models['floor']], prm)
-    style = {'flex_offset': math.radians(10.8), 'abd_offset': math.radians(-5.1),
-             'elbow': math.radians(elbow_deg), 'asym': -0.03}
-    p = imitation('walk_cycle', dict(f.example.params), standard_body(1.7), 150, 30.0, style)
-    rows = [rec.update(p[i], i / 30.0)['floor'] for i in range(len(p))]
-    assert np.mean([r.imitating for r in rows[20:]]) > 0.95
-    assert np.median([r.e1 for r in rows[20:]]) < 0.6 * prm.e1_threshold
-
-
 def test_walk_example_elbow_sweep_is_validated():
     from performance_control.examples import walk_cycle
     with pytest.raises(ValueError, match='elbow_sweep_deg'):
