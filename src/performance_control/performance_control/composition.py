@@ -20,6 +20,7 @@ Poses here are joint positions relative to the COM in the body's yaw-removed fra
 from __future__ import annotations
 
 import math
+import time
 from typing import Dict, List, Optional, Sequence
 
 import numpy as np
@@ -489,7 +490,21 @@ def _capsule_d_jit(pts, a, ab, den):  # pragma: no cover - numba
 
 # numba when installed and not switched off (KINECT_NUMBA=0), the numpy twin otherwise
 _capsule_d = _jit.pick(_capsule_d_jit, _capsule_d_np)
+_warm = [False]
 
 
-__all__ = ['PoseComposer', 'integrate_rule', 'integrate_motion', 'Obstacles', 'CHAINS',
+def warm_up() -> float:
+    """Compile (or load from numba's cache) the capsule kernel now, with the argument types of
+    the real calls, rather than on a user's first control step; once per process. Returns the
+    time taken (s; 0 when numba is off or already done)."""
+    if _warm[0] or _capsule_d is not _capsule_d_jit:
+        return 0.0
+    _warm[0] = True
+    t0 = time.perf_counter()
+    a = np.zeros((1, 3))
+    _capsule_d_jit(np.zeros((2, 3)), a, np.ones((1, 3)), np.ones(1))
+    return time.perf_counter() - t0
+
+
+__all__ = ['warm_up', 'PoseComposer', 'integrate_rule', 'integrate_motion', 'Obstacles', 'CHAINS',
            'BRANCH']

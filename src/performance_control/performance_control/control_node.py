@@ -90,6 +90,12 @@ class ControlNode(ManagedNode):
         self.rp = self.cp.recognizer          # shared by every user's controller: live changes
         self.cp.validate()
         self.models = build_models(self.world, self.rp)
+        # the compiled kernel loaded now, not on a user's first control step (numba's cache:
+        # 0.5 s on a quiet machine, seconds under load)
+        from .composition import warm_up
+        warm_s = warm_up()
+        if warm_s > 0.5:
+            self.get_logger().info(f'compiled kernels ready in {warm_s:.1f} s (cached from now on)')
         self.frame_id = 'kinect'
         self.ms: List[float] = []
         self.pub = self.publisher(SkeletonArray, v['output_topic'], 10)

@@ -109,3 +109,23 @@ def test_numpy_twin_equals_numba_capsule_distances():
     # no capsule: empty results
     d, cp = composition._capsule_d_jit(pts, np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0))
     assert d.shape == (40, 0) and cp.shape == (40, 0, 3)
+
+
+def test_warm_up_compiles_the_capsule_kernel_for_the_real_calls():
+    """The control node calls composition.warm_up() on configure: afterwards a real distance
+    query compiles nothing more (no stall on a user's first control step)."""
+    pytest.importorskip('numba')
+    code = (
+        'import numpy as np\n'
+        'from performance_control import composition as c\n'
+        'assert c.warm_up() > 0 and c.warm_up() == 0\n'
+        'n = len(c._capsule_d_jit.signatures)\n'
+        'o = c.Obstacles()\n'
+        'o.capsules.append((np.array([0., 0, 2]), np.array([1., 0, 2]), 0.03, "bars"))\n'
+        'd, _ = o.freeze()._d(np.array([[0.5, 0.0, 1.0], [0.2, 0.1, 1.5]]))\n'
+        'assert abs(d[0, 0] - 1.0) < 1e-12, d\n'
+        'assert len(c._capsule_d_jit.signatures) == n, c._capsule_d_jit.signatures\n')
+    env = {k: v for k, v in os.environ.items() if k != 'KINECT_NUMBA'}
+    r = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True, env=env,
+                       timeout=300)
+    assert r.returncode == 0, r.stderr[-2000:]
