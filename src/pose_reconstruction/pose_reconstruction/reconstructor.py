@@ -217,8 +217,10 @@ class Reconstructor:
             self.body_fit.height_settled if self.body_fit else (lambda: True),
             self.reliable_threshold, self.output_scale, cfg.segments)
         self.segment_output.profile_lengths = profile_lengths(profile)
-        self.length_prior = LengthPrior.from_meta(cfg.lengths, getattr(db, 'meta', None),
-                                                  cfg.segments.symmetric_lengths)
+        # a correction maps the joints to its reference's layout: the prior takes its proportions
+        self.length_prior = LengthPrior.from_meta(
+            cfg.lengths, getattr(db, 'meta', None), cfg.segments.symmetric_lengths,
+            layout=getattr(correction, 'meta', None) if correction is not None else None)
         if self.length_prior is not None:
             self.segment_output.length_prior = self.length_prior.fuse
             prior = self.length_prior
