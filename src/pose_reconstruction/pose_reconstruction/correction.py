@@ -320,7 +320,7 @@ def reference_proportions(reference: Sequence[np.ndarray],
     its sequences of each sequence's median segment length, divided by the sum of the segments
     every group has; ``reference_length_ratio_mean`` / ``_std`` (19 numbers or None where the
     reference has no segment, e.g. the hands) the mean and the spread (ddof 1) over the groups,
-    ``reference_length_groups`` their number. Empty with fewer than two groups (no spread).
+    ``reference_length_groups`` their number (only that with fewer than two: no spread).
 
     Why: the corrected joints sit where the reference puts the joint centres (on UI-PRMD the
     Plug-in-Gait centres: hip segments ~10 cm, the Kinect's 7-9, the CMU database bodies' others
@@ -337,7 +337,7 @@ def reference_proportions(reference: Sequence[np.ndarray],
         med[have] = [np.median(L[ok[:, i], i]) for i in np.flatnonzero(have)]
         per.setdefault(g, []).append(med)
     if len(per) < 2:
-        return {}
+        return {'reference_length_groups': len(per)}
     Lg = np.full((len(per), NUM_SEGMENTS), np.nan)
     for k, v in enumerate(per.values()):
         v = np.array(v)
@@ -347,7 +347,7 @@ def reference_proportions(reference: Sequence[np.ndarray],
                 Lg[k, i] = np.median(f)
     common = np.isfinite(Lg).all(axis=0) & (Lg > 0).all(axis=0)
     if not common.any():
-        return {}
+        return {'reference_length_groups': len(per)}
     ratios = Lg[:, common] / Lg[:, common].sum(axis=1, keepdims=True)
     mean = np.full(NUM_SEGMENTS, np.nan)
     std = np.full(NUM_SEGMENTS, np.nan)
@@ -461,8 +461,11 @@ def load_or_build_default(src=None, rebuild: bool = False, log=None) -> Optional
     if path.is_file() and not rebuild:
         try:
             corr = load(path)
-            if corr.meta.get('source_digest') == dig:
+            if corr.meta.get('source_digest') == dig and 'reference_length_groups' in corr.meta:
                 return corr
+            if log and corr.meta.get('source_digest') == dig:
+                log(f'{path} was built before corrections stored their reference\'s segment '
+                    'proportions; rebuilding')
         except CorrectionFileError as e:
             if log:
                 log(f'{e}; rebuilding')

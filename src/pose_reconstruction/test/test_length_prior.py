@@ -149,7 +149,7 @@ def test_a_correction_carries_its_references_proportions():
     assert np.allclose(mean[have], L[have] / L[have].sum(), rtol=1e-9)  # scale-free
     std = np.array([np.nan if v is None else v for v in out['reference_length_ratio_std']])
     assert np.all(std[have] < 1e-9)
-    assert C.reference_proportions(refs[:1], groups[:1]) == {}  # one subject: no spread
+    assert C.reference_proportions(refs[:1], groups[:1]) == {'reference_length_groups': 1}
     # fit() stores them with the correction (the meta a Reconstructor reads)
     full = [np.where(np.isnan(r), 0.0, r) for r in refs]  # fit needs complete frames
     corr = C.fit(full, full, 'kinect_v2_sdk', groups=groups, posture=False)
