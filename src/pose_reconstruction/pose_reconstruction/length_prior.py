@@ -190,8 +190,8 @@ def layout_ratios(mean, std, layout: Optional[dict]) -> tuple:
     """(mean, std) (19,) of the database's ratios ``mean`` / ``std`` with the segments a
     correction's ``layout`` meta describes replaced by its reference's proportions, rescaled to
     the database's sum over those segments (the prior fits the user's size, so only proportions
-    matter); the database's values where the reference has no segment (the hands), and all of
-    them without a usable layout."""
+    matter), their spread at least the database's relative spread; the database's values where
+    the reference has no segment (the hands), and all of them without a usable layout."""
     mean = np.asarray(mean, float).reshape(NUM_SEGMENTS).copy()
     std = np.asarray(std, float).reshape(NUM_SEGMENTS).copy()
     if not layout:
@@ -205,6 +205,9 @@ def layout_ratios(mean, std, layout: Optional[dict]) -> tuple:
     if not have.any():
         return mean, std
     scale = mean[have].sum() / lm[have].sum()
+    rel = std / mean  # the database bodies' relative spread across people
     mean[have] = lm[have] * scale
-    std[have] = ls[have] * scale
+    # a correction's few training subjects underestimate how proportions vary between people:
+    # their spread, at least the database bodies' relative spread
+    std[have] = np.maximum(ls[have] * scale, mean[have] * rel[have])
     return mean, std

@@ -186,6 +186,8 @@ def test_the_prior_takes_the_corrections_layout_not_the_databases():
     # the hands, which the reference lacks, keep the database's proportion (rescaled)
     mean = with_corr.length_prior.mean
     assert np.all(np.isfinite(mean)) and np.all(mean > 0)
+    # two subjects of the same proportions (spread 0): the spread is the database bodies'
+    assert np.allclose(with_corr.length_prior.rel_var, plain.length_prior.rel_var)
     # a correction without proportions (built before they were stored): the database's
     bare = C.SensorCorrection('kinect_v2_sdk', np.zeros((NUM_JOINTS, 3)),
                               np.zeros((C.NUM_FEATURES, 3 * NUM_JOINTS)),
