@@ -205,9 +205,15 @@ def _nodes(context):
         nodes.append(managed_node(package='viz', executable='viz', name='viz',
                           parameters=params('viz'), **common))
     if arg('record'):
+        # the outputs of the nodes started here: the recorder's input waits for them
+        from kinect_bringup.graph import RECONSTRUCTION, TOPICS, load_params, recorded_outputs
+        started = RECONSTRUCTION[mode] + [n for n in ('physics', 'viz')
+                                          if arg(n).lower() in ('true', '1', 'yes')]
+        recorded = load_params('recorder', config_dir).get('topics', list(TOPICS))
+        rec_over = dict(output=arg('record'), **_split())
+        rec_over['wait_for_publishers'] = recorded_outputs(started, recorded) or ['']
         nodes.append(managed_node(package='kinect_bringup', executable='recorder', name='recorder',
-                                  parameters=params('recorder', output=arg('record'), **_split()),
-                                  **common))
+                                  parameters=params('recorder', **rec_over), **common))
     if drivers and sensors == 1 and arg('static_tf').lower() in ('true', '1', 'yes'):
         # the sensor frame on TF (/tf_static is absolute: the namespace does not move it)
         from skeleton_core.tf import parse_pose

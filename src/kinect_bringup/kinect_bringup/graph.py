@@ -53,6 +53,25 @@ TOPICS: Dict[str, str] = {
 }
 
 
+# The recorded topics each node publishes (the recorder waits for them before its input)
+OUTPUTS: Dict[str, List[str]] = {
+    'reliability': ['/kinect/skeletons_reliability'],
+    'completion': ['/posture/completed'],
+    'optimizer': ['/posture/reconstructed'],
+    'reconstruction': ['/kinect/skeletons_reliability', '/posture/completed',
+                       '/posture/reconstructed'],
+    'physics': ['/character/skeletons'],
+    'viz': ['/viz/markers'],
+}
+
+
+def recorded_outputs(names: List[str], recorded_topics: List[str]) -> List[str]:
+    """The topics of ``recorded_topics`` that the graph's nodes ``names`` publish, in the
+    recorder's order: its subscriptions to them match before it subscribes to the input."""
+    published = {t for n in names for t in OUTPUTS.get(n, [])}
+    return [t for t in recorded_topics if t in published]
+
+
 def repo_root() -> Optional[Path]:
     env = os.environ.get('KINECT_POSTURE_ROOT')
     if env and (Path(env) / 'config').is_dir():

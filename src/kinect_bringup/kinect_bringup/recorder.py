@@ -11,7 +11,14 @@ Recordings that rotate: with ``split_size_mb`` and/or ``split_duration_s`` the r
 ``out/day.mcap`` becomes the folder ``out/day/`` of pieces ``day_0.mcap``, ``day_1.mcap``, ...,
 each a complete bag (closed when the next one starts; the one being written is crash-safe as
 above), which replay and ``process_bag`` play in order as one recording
-(:mod:`skeleton_core.bag_split`)."""
+(:mod:`skeleton_core.bag_split`).
+
+Nothing of a replay lost while the graph comes up: with ``wait_for_publishers`` (the launch file
+names the recorded topics its nodes publish) the recorder subscribes to the graph's input (the
+driver's topics) only once its subscriptions to those topics have matched a publisher (at most
+:data:`PUBLISHERS_WAIT_S`). A replay waits for the recorder's subscription to its input before its
+first frame, so the reconstruction's output of that frame finds the recorder there: a publisher
+discovered late would otherwise take the first frames' outputs past the recorder."""
 from __future__ import annotations
 
 import importlib
@@ -26,6 +33,9 @@ from skeleton_core.rosnode import ManagedNode, ParamSpec, Parameters, run_node
 from skeleton_core.tf_ros import STATIC_LISTENER_QOS, TF_STATIC_TOPIC
 
 from .graph import TOPICS
+
+PUBLISHERS_WAIT_S = 10.0   # then the input is recorded anyway (with a warning naming the topics)
+LATCHED = (TF_STATIC_TOPIC, '/kinect/tracker')   # transient local: nothing lost by joining late
 
 
 def _msg_class(msgtype: str):
@@ -43,6 +53,9 @@ PARAMS = [
               'write what was received to the file at least this often (s): a killed recorder '
               'loses at most this much; 0 = only full 1 MiB chunks', range=(0.0, 60.0),
               read_only=True),
+    ParamSpec('wait_for_publishers', [''],
+              'recorded topics whose publishers the other topics wait for (set by the launch '
+              'file: the outputs of the nodes it starts; [""] = none)', read_only=True),
     ParamSpec('fsync', True, 'also force each flush onto the disk (survives a power cut)',
               read_only=True),
     ParamSpec('split_size_mb', 0.0,
@@ -86,24 +99,53 @@ class RecorderNode(ManagedNode):
     def activate(self) -> None:
         if self.params['flush_period'] > 0:
             self.timer(min(0.5, self.params['flush_period']), self._poll)
-        qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
-        for topic in self.params['topics']:
-            msgtype = TOPICS.get(topic)
-            if msgtype is None:
+        topics = list(self.params['topics'])
+        for topic in topics:
+            if topic not in TOPICS:
                 raise ValueError(f'recorder: unknown topic {topic!r} (known: {sorted(TOPICS)})')
-            # raw=True: the serialized bytes go to the bag as received (no decode/encode); the
-            # latched /tf_static as tf2 subscribes to it (every broadcaster's last message), and
-            # the stream's tracker, latched too (skeleton_core.tracker)
-            if topic == TF_STATIC_TOPIC:
-                topic_qos = STATIC_LISTENER_QOS
-            elif topic == '/kinect/tracker':
-                topic_qos = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                                       durability=DurabilityPolicy.TRANSIENT_LOCAL)
-            else:
-                topic_qos = qos
-            self.subscription(_msg_class(msgtype), topic,
-                              lambda data, t=topic, mt=msgtype: self._on_msg(t, mt, data),
-                              topic_qos, raw=True)
+        wait = [t for t in self.params['wait_for_publishers'] if t in topics]
+        self._outputs = {t: self._subscribe(t) for t in wait}
+        for topic in LATCHED:
+            if topic in topics and topic not in wait:
+                self._subscribe(topic)
+        self._inputs = [t for t in topics if t not in wait and t not in LATCHED]
+        self._wait_since = time.monotonic()
+        if wait:
+            self._wait_timer = self.timer(0.05, self._subscribe_inputs_when_ready)
+        else:
+            self._subscribe_inputs()
+
+    def _subscribe(self, topic: str):
+        msgtype = TOPICS[topic]
+        # raw=True: the serialized bytes go to the bag as received (no decode/encode); the
+        # latched /tf_static as tf2 subscribes to it (every broadcaster's last message), and
+        # the stream's tracker, latched too (skeleton_core.tracker)
+        if topic == TF_STATIC_TOPIC:
+            qos = STATIC_LISTENER_QOS
+        elif topic == '/kinect/tracker':
+            qos = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        else:
+            qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
+        return self.subscription(_msg_class(msgtype), topic,
+                                 lambda data, t=topic, mt=msgtype: self._on_msg(t, mt, data),
+                                 qos, raw=True)
+
+    def _subscribe_inputs_when_ready(self) -> None:
+        missing = [t for t, sub in self._outputs.items() if _publishers(sub) == 0]
+        waited = time.monotonic() - self._wait_since
+        if missing and waited < PUBLISHERS_WAIT_S:
+            return
+        self._wait_timer.cancel()
+        if missing:
+            self.get_logger().warning(
+                f'no publisher of {", ".join(missing)} after {waited:.0f} s: recording the input '
+                'anyway (the first frames\' outputs may be missing)')
+        self._subscribe_inputs()
+
+    def _subscribe_inputs(self) -> None:
+        for topic in self._inputs:
+            self._subscribe(topic)
         where = (f'pieces in {pieces_dir(self.path)}/ (split at '
                  + ' or '.join(x for x in (
                      f'{self.params["split_size_mb"]:g} MB' if self.params['split_size_mb'] else '',
@@ -185,6 +227,12 @@ class RecorderNode(ManagedNode):
                         else str(self.path))
                 self.get_logger().info(
                     f'wrote {what}: ' + ', '.join(f'{t} {n}' for t, n in self.counts.items()))
+
+
+def _publishers(sub) -> int:
+    """Publishers matched by ``sub`` (rclpy before Jazzy cannot tell: counted as one)."""
+    count = getattr(sub, 'get_publisher_count', None)
+    return count() if count is not None else 1
 
 
 def main(args=None):
