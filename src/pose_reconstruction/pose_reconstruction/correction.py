@@ -307,9 +307,55 @@ def fit(kinect: Sequence[np.ndarray], reference: Sequence[np.ndarray], tracker: 
         mean_f, b, W = _ridge(F, Y, alpha)
     info = {'frames': int(len(F)), 'pairs': len(kinect), 'ridge_alpha': alpha,
             'ridge_scores_m': {str(k): v for k, v in scores.items()},
-            'model': 'offset+ridge(bone directions)' if posture else 'offset'}
+            'model': 'offset+ridge(bone directions)' if posture else 'offset',
+            **reference_proportions(reference, groups)}
     return SensorCorrection(tracker=tracker, offset=b.reshape(NUM_JOINTS, 3), weights=W,
                             feature_mean=mean_f, meta={**info, **(meta or {})})
+
+
+def reference_proportions(reference: Sequence[np.ndarray],
+                          groups: Optional[Sequence] = None) -> Dict:
+    """The segment proportions of the layout the correction maps to (its reference's joint
+    centres), for the length prior (:mod:`.length_prior`): per group (subject) the median over
+    its sequences of each sequence's median segment length, divided by the sum of the segments
+    every group has; ``reference_length_ratio_mean`` / ``_std`` (19 numbers or None where the
+    reference has no segment, e.g. the hands) the mean and the spread (ddof 1) over the groups,
+    ``reference_length_groups`` their number (only that with fewer than two: no spread).
+
+    Why: the corrected joints sit where the reference puts the joint centres (on UI-PRMD the
+    Plug-in-Gait centres: hip segments ~10 cm, the Kinect's 7-9, the CMU database bodies' others
+    again), so the database bodies' proportions do not describe the corrected skeleton and a
+    prior built from them pulls its lengths away from what the sensor, corrected, measures."""
+    labels = list(range(len(reference))) if groups is None else list(groups)
+    per: Dict = {}
+    for g, r in zip(labels, reference):
+        r = np.asarray(r, float)
+        L = np.linalg.norm(r[:, _SC] - r[:, _SP], axis=-1)
+        ok = np.isfinite(L)
+        med = np.full(NUM_SEGMENTS, np.nan)
+        have = ok.any(axis=0)
+        med[have] = [np.median(L[ok[:, i], i]) for i in np.flatnonzero(have)]
+        per.setdefault(g, []).append(med)
+    if len(per) < 2:
+        return {'reference_length_groups': len(per)}
+    Lg = np.full((len(per), NUM_SEGMENTS), np.nan)
+    for k, v in enumerate(per.values()):
+        v = np.array(v)
+        for i in range(NUM_SEGMENTS):
+            f = v[np.isfinite(v[:, i]), i]
+            if len(f):
+                Lg[k, i] = np.median(f)
+    common = np.isfinite(Lg).all(axis=0) & (Lg > 0).all(axis=0)
+    if not common.any():
+        return {'reference_length_groups': len(per)}
+    ratios = Lg[:, common] / Lg[:, common].sum(axis=1, keepdims=True)
+    mean = np.full(NUM_SEGMENTS, np.nan)
+    std = np.full(NUM_SEGMENTS, np.nan)
+    mean[common] = ratios.mean(axis=0)
+    std[common] = ratios.std(axis=0, ddof=1)
+    as_list = lambda a: [float(x) if np.isfinite(x) else None for x in a]  # noqa: E731
+    return {'reference_length_ratio_mean': as_list(mean),
+            'reference_length_ratio_std': as_list(std), 'reference_length_groups': len(per)}
 
 
 def digest(correction: SensorCorrection) -> str:
@@ -415,8 +461,11 @@ def load_or_build_default(src=None, rebuild: bool = False, log=None) -> Optional
     if path.is_file() and not rebuild:
         try:
             corr = load(path)
-            if corr.meta.get('source_digest') == dig:
+            if corr.meta.get('source_digest') == dig and 'reference_length_groups' in corr.meta:
                 return corr
+            if log and corr.meta.get('source_digest') == dig:
+                log(f'{path} was built before corrections stored their reference\'s segment '
+                    'proportions; rebuilding')
         except CorrectionFileError as e:
             if log:
                 log(f'{e}; rebuilding')

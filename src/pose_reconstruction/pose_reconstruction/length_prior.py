@@ -27,6 +27,15 @@ observed segments. A sensor whose joints sit elsewhere on the body than the data
 skeleton layout: other proportions, the same on both sides) raises ``k`` and the prior loses its
 weight, where offsets (independent per side) do not.
 
+**The layout.** The proportions must be those of the joint centres the input has. With a
+learned sensor correction applied (:mod:`.correction`) the input's joints sit where the
+correction's reference puts them (the Vicon Plug-in-Gait centres on UI-PRMD), not where the
+database's bodies do; the correction then carries its reference's proportions (mean and spread
+over its training subjects, :func:`.correction.reference_proportions`) and they replace the
+database's (the hands, which that reference lacks, keep the database's). On the real UI-PRMD
+recordings the database's proportions moved the corrected lengths away from what the sensor
+measures (the hip segments by ~0.7 cm, the neck ~0.7 cm; docs/accuracy.md, fifth round).
+
 The output length is the inverse-variance (minimum expected error) combination::
 
     L = (L_obs * var_prior + r h * var_obs) / (var_obs + var_prior)
@@ -103,16 +112,21 @@ class LengthPrior:
 
     @classmethod
     def from_meta(cls, config: LengthPriorConfig, meta: Optional[dict],
-                  symmetric: bool = True) -> Optional['LengthPrior']:
-        """From a database's ``meta`` (None when off or the ratios are missing / unusable)."""
+                  symmetric: bool = True,
+                  layout: Optional[dict] = None) -> Optional['LengthPrior']:
+        """From a database's ``meta`` (None when off or the ratios are missing / unusable).
+        ``layout``: the meta of a sensor correction applied to the input; where it carries its
+        reference's proportions (:func:`.correction.reference_proportions`) they replace the
+        database's (module docstring, "The layout")."""
         if not config.length_prior or not meta:
             return None
         mean, std = meta.get('length_ratio_mean'), meta.get('length_ratio_std')
         if mean is None or std is None:
             return None
         try:
+            mean, std = layout_ratios(mean, std, layout)
             return cls(config, mean, std, symmetric)
-        except ValueError:
+        except (ValueError, TypeError):
             return None
 
     def offset_variance(self, sides: np.ndarray, seen: np.ndarray) -> float:
@@ -170,3 +184,30 @@ class LengthPrior:
         wp = np.where(use, var_obs / np.maximum(var_obs + var_prior, 1e-12), 0.0)
         wp = np.where(seen, wp, 1.0)
         return (1.0 - wp) * L + wp * (r * h)
+
+
+def layout_ratios(mean, std, layout: Optional[dict]) -> tuple:
+    """(mean, std) (19,) of the database's ratios ``mean`` / ``std`` with the segments a
+    correction's ``layout`` meta describes replaced by its reference's proportions, rescaled to
+    the database's sum over those segments (the prior fits the user's size, so only proportions
+    matter), their spread at least the database's relative spread; the database's values where
+    the reference has no segment (the hands), and all of them without a usable layout."""
+    mean = np.asarray(mean, float).reshape(NUM_SEGMENTS).copy()
+    std = np.asarray(std, float).reshape(NUM_SEGMENTS).copy()
+    if not layout:
+        return mean, std
+    lm, ls = layout.get('reference_length_ratio_mean'), layout.get('reference_length_ratio_std')
+    if lm is None or ls is None or len(lm) != NUM_SEGMENTS or len(ls) != NUM_SEGMENTS:
+        return mean, std
+    lm = np.array([np.nan if v is None else v for v in lm], float)
+    ls = np.array([np.nan if v is None else v for v in ls], float)
+    have = np.isfinite(lm) & (lm > 0) & np.isfinite(ls) & (ls >= 0)
+    if not have.any():
+        return mean, std
+    scale = mean[have].sum() / lm[have].sum()
+    rel = std / mean  # the database bodies' relative spread across people
+    mean[have] = lm[have] * scale
+    # a correction's few training subjects underestimate how proportions vary between people:
+    # their spread, at least the database bodies' relative spread
+    std[have] = np.maximum(ls[have] * scale, mean[have] * rel[have])
+    return mean, std

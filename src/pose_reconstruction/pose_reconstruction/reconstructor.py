@@ -20,7 +20,8 @@ Output stage of B/C, ``output_mode``:
   ``length_frames`` reliable observations of each segment, then frozen; with
   ``symmetric_lengths`` the left and right limbs share the mean of their two lengths; with
   ``length_prior`` and a database that stores its bodies' proportions, combined with those
-  proportions at the user's fitted size, each weighted by its expected error:
+  proportions at the user's fitted size, each weighted by its expected error -- with a
+  ``correction`` that carries them, its reference's proportions instead:
   :mod:`.length_prior`) and are chained from the observed root; the segment
   vectors and the root are smoothed by a One Euro filter (``smooth_min_cutoff`` Hz,
   ``smooth_beta`` s/m, ``smooth_d_cutoff`` Hz; ``smooth_min_cutoff`` 0 = off); a segment the
@@ -217,8 +218,10 @@ class Reconstructor:
             self.body_fit.height_settled if self.body_fit else (lambda: True),
             self.reliable_threshold, self.output_scale, cfg.segments)
         self.segment_output.profile_lengths = profile_lengths(profile)
-        self.length_prior = LengthPrior.from_meta(cfg.lengths, getattr(db, 'meta', None),
-                                                  cfg.segments.symmetric_lengths)
+        # a correction maps the joints to its reference's layout: the prior takes its proportions
+        self.length_prior = LengthPrior.from_meta(
+            cfg.lengths, getattr(db, 'meta', None), cfg.segments.symmetric_lengths,
+            layout=getattr(correction, 'meta', None) if correction is not None else None)
         if self.length_prior is not None:
             self.segment_output.length_prior = self.length_prior.fuse
             prior = self.length_prior

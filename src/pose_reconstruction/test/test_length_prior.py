@@ -122,3 +122,75 @@ def test_the_fusion_runs_again_only_when_an_observation_arrives():
     assert len(calls) == 1 and np.all(again > 0)
     out.lengths(p, seen)  # new observations: fused again
     assert len(calls) == 2
+
+
+def _two_subject_references():
+    """Two subjects' (T, 20, 3) reference sequences: a standard body scaled by 1.0 / 1.1 with the
+    hip segments 1.5x as wide as the database's body, the hands missing (NaN)."""
+    from skeleton_core.model import HAND_LEFT, HAND_RIGHT, HIP_LEFT, HIP_RIGHT, ROOT
+    p = np.asarray(builtin_clips()[0].positions[:40], float).copy()
+    for hip in (HIP_LEFT, HIP_RIGHT):
+        p[:, hip] = p[:, ROOT] + 1.5 * (p[:, hip] - p[:, ROOT])
+    p[:, [HAND_LEFT, HAND_RIGHT]] = np.nan
+    return [p, 1.1 * p, p], ['s01', 's02', 's01']
+
+
+def test_a_correction_carries_its_references_proportions():
+    from pose_reconstruction import correction as C
+    refs, groups = _two_subject_references()
+    out = C.reference_proportions(refs, groups)
+    p = refs[0]
+    L = np.median(np.linalg.norm(p[:, SEGMENT_CHILD_INDEX] - p[:, SEGMENT_PARENT_INDEX],
+                                 axis=-1), axis=0)
+    have = np.isfinite(L)
+    assert out['reference_length_groups'] == 2
+    mean = np.array([np.nan if v is None else v for v in out['reference_length_ratio_mean']])
+    assert np.array_equal(np.isfinite(mean), have)  # the hands: None
+    assert np.allclose(mean[have], L[have] / L[have].sum(), rtol=1e-9)  # scale-free
+    std = np.array([np.nan if v is None else v for v in out['reference_length_ratio_std']])
+    assert np.all(std[have] < 1e-9)
+    assert C.reference_proportions(refs[:1], groups[:1]) == {'reference_length_groups': 1}
+    # fit() stores them with the correction (the meta a Reconstructor reads)
+    full = [np.where(np.isnan(r), 0.0, r) for r in refs]  # fit needs complete frames
+    corr = C.fit(full, full, 'kinect_v2_sdk', groups=groups, posture=False)
+    assert corr.meta['reference_length_groups'] == 2
+    a = np.array(corr.meta['reference_length_ratio_mean'], float)[have]
+    assert np.allclose(a / a.sum(), mean[have], rtol=1e-9)  # the same proportions
+
+
+def test_the_prior_takes_the_corrections_layout_not_the_databases():
+    """With a correction applied, lengths measured in the correction's reference layout (here
+    hips 1.5x the database body's) stay as measured; the database's proportions pulled them."""
+    from pose_reconstruction import correction as C
+    from skeleton_core.model import NUM_JOINTS, SEGMENT_NAMES
+    refs, groups = _two_subject_references()
+    layout = C.reference_proportions(refs, groups)
+    db, _ = build_database(builtin_clips()[:2], progress=False)
+    corr = C.SensorCorrection('kinect_v2_sdk', np.zeros((NUM_JOINTS, 3)),
+                              np.zeros((C.NUM_FEATURES, 3 * NUM_JOINTS)),
+                              np.zeros(C.NUM_FEATURES), meta=dict(layout))
+    cfg = dict(method='C', length_offset_online=False, length_offset_sigma=0.03)
+    with_corr = Reconstructor(db, correction=corr, input_tracker='kinect_v2_sdk', **cfg)
+    plain = Reconstructor(db, **cfg)
+    p = refs[1][0]
+    L = np.linalg.norm(p[SEGMENT_CHILD_INDEX] - p[SEGMENT_PARENT_INDEX], axis=-1)
+    seen = np.isfinite(L)
+    L = np.where(seen, L, 0.0)
+    n = np.where(seen, 15, 0)
+    hips = [i for i, s in enumerate(SEGMENT_NAMES) if s in ('HipCenter-HipLeft',
+                                                            'HipCenter-HipRight')]
+    ours = with_corr.length_prior.fuse(L, n)
+    theirs = plain.length_prior.fuse(L, n)
+    assert np.allclose(ours[seen], L[seen], atol=1e-6)  # the layout's proportions: as measured
+    assert np.all(theirs[hips] < L[hips] - 0.005)  # the database's: pulled > 5 mm shorter
+    # the hands, which the reference lacks, keep the database's proportion (rescaled)
+    mean = with_corr.length_prior.mean
+    assert np.all(np.isfinite(mean)) and np.all(mean > 0)
+    # two subjects of the same proportions (spread 0): the spread is the database bodies'
+    assert np.allclose(with_corr.length_prior.rel_var, plain.length_prior.rel_var)
+    # a correction without proportions (built before they were stored): the database's
+    bare = C.SensorCorrection('kinect_v2_sdk', np.zeros((NUM_JOINTS, 3)),
+                              np.zeros((C.NUM_FEATURES, 3 * NUM_JOINTS)),
+                              np.zeros(C.NUM_FEATURES))
+    old = Reconstructor(db, correction=bare, input_tracker='kinect_v2_sdk', **cfg)
+    assert np.allclose(old.length_prior.mean, plain.length_prior.mean)
