@@ -70,7 +70,9 @@ def _wait_for(got, cond, pubs, timeout=10.0):
 def test_markers_cross_dds_and_hiding_a_layer_takes_effect(graph):
     viz, peer = graph
     got = []
-    peer.create_subscription(MarkerArray, TOPICS['markers_topic'], got.append, 10)
+    # a deep queue: the deletion below is one array among the 20 Hz stream, and a spin thread
+    # starved on a loaded machine would otherwise find it pushed out of a depth-10 queue
+    peer.create_subscription(MarkerArray, TOPICS['markers_topic'], got.append, 1000)
     raw = peer.create_publisher(SkeletonArray, TOPICS['raw_topic'], qos_profile_sensor_data)
     rel = peer.create_publisher(SkeletonArray, TOPICS['reliability_topic'],
                                 qos_profile_sensor_data)
