@@ -4,6 +4,7 @@ from __future__ import annotations
 import importlib
 import threading
 import time
+import traceback
 from typing import Dict, Iterable, List, Optional
 
 import rclpy
@@ -85,6 +86,7 @@ class Probe:
         self.messages: Dict[str, List] = {t: [] for t in topics}
         self._keep = keep
         self._lock = threading.Lock()
+        self.errors: List[str] = []   # exceptions raised while spinning (printed as they happen)
         qos = QoSProfile(depth=50, reliability=ReliabilityPolicy.RELIABLE)
         self._types = {t: msg_class(ty) for t, ty in topics.items()}
         for topic, cls in self._types.items():
@@ -102,8 +104,14 @@ class Probe:
         while self._running and self.context.ok():
             try:
                 self.executor.spin_once(timeout_sec=0.05)
-            except Exception:  # noqa: BLE001 - context shut down under us
-                break
+            except Exception as e:  # noqa: BLE001
+                if not (self._running and self.context.ok()):
+                    break   # shut down under us
+                # anything else (an exception in a callback): reported and spun on; a probe
+                # whose thread ended here would go deaf and fail every later test of its
+                # module with "no output", hiding the one error that mattered
+                self.errors.append(f'{type(e).__name__}: {e}')
+                traceback.print_exc()
 
     def _cb(self, topic, msg):
         with self._lock:

@@ -285,7 +285,8 @@ def test_a_big_jump_back_in_time_restarts_the_users_not_the_node(running):
     pub.publish(fuzz.valid_array(time.time_ns() - 5_000_000_000, (FUZZ_USER,)))  # a bag loop
     t0 = time.monotonic()
     assert probe.wait_user(list(SKELETON_TOPICS.values()), t0 + 0.5, user, count=10, timeout=60), \
-        {t: probe.user_seen_since(t, t0 + 0.5, user) for t in SKELETON_TOPICS.values()}
+        ({t: probe.user_seen_since(t, t0 + 0.5, user) for t in SKELETON_TOPICS.values()},
+         probe.errors)
     assert 'time jumped back' in _logs(running['log_dir'], 'reliability')
     assert all(v == 0 for v in probe.nan.values()), probe.nan
     probe.node.destroy_publisher(pub)
@@ -316,7 +317,7 @@ def test_killing_one_node_recovers_without_restarting_the_others(running, node):
         ok = probe.wait_user([topic], t0 + IN_FLIGHT_S, user, count=5)
         ok = ok and probe.wait_user(list(SKELETON_TOPICS.values()), time.monotonic(), user,
                                     count=3, timeout=60)
-    assert ok, f'no output on {topic} after restarting {node}:\n' + \
+    assert ok, f'no output on {topic} after restarting {node} (probe errors {probe.errors}):\n' + \
         _logs(running['log_dir'], node)[-2000:]
     now = {n: p.pid for g in running['graphs'].values() for n, p in g.procs.items() if n != node}
     assert now == others, 'another process was restarted'
