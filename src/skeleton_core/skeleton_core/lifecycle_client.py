@@ -22,6 +22,8 @@ STATE_TIMEOUT_S = 2.0
 # a transition may load files (a database, compiled kernels): after this long without an answer,
 # the node's state says whether it is still transitioning or the reply was lost
 TRANSITION_TIMEOUT_S = 10.0
+# the services there but no state reply for this long: the clients are made anew (and it is logged)
+SILENT_S = 20.0
 NEXT = {State.PRIMARY_STATE_UNCONFIGURED: (Transition.TRANSITION_CONFIGURE, 'configure'),
         State.PRIMARY_STATE_INACTIVE: (Transition.TRANSITION_ACTIVATE, 'activate')}
 
@@ -50,13 +52,30 @@ def drive_to_active(node, name: str, stopped: Callable[[], bool],
     get = node.create_client(GetState, f'{name}/get_state')
     change = node.create_client(ChangeState, f'{name}/change_state')
     lost = 0
+    silent_since = None   # the first of the state queries not answered since the last answer
+    warned = False
     while not stopped():
         if not get.wait_for_service(timeout_sec=1.0) or \
                 not change.wait_for_service(timeout_sec=1.0):
             continue
         reply = call_once(get, GetState.Request(), STATE_TIMEOUT_S)
         if reply is None:
+            now = time.monotonic()
+            silent_since = silent_since or now
+            if now - silent_since >= SILENT_S:
+                # the service is there but no reply comes back: a reply path DDS never
+                # matched stays unmatched for these clients; new ones are discovered anew
+                if log and not warned:
+                    log(f'{name}: its lifecycle services do not answer ({now - silent_since:.0f} '
+                        's; busy or a lost reply path): still trying, with new clients')
+                    warned = True
+                node.destroy_client(get)
+                node.destroy_client(change)
+                get = node.create_client(GetState, f'{name}/get_state')
+                change = node.create_client(ChangeState, f'{name}/change_state')
+                silent_since = None
             continue
+        silent_since = None
         state = reply.current_state.id
         if state == State.PRIMARY_STATE_ACTIVE:
             if lost and log:

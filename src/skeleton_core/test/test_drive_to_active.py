@@ -1,0 +1,75 @@
+"""drive_to_active without DDS: a node whose lifecycle services are there but never answer (a
+reply path DDS did not match) gets new clients after SILENT_S, with one warning, and is then
+driven to active."""
+import time
+
+import pytest
+
+pytest.importorskip('lifecycle_msgs')
+
+from lifecycle_msgs.msg import State  # noqa: E402
+from lifecycle_msgs.srv import GetState  # noqa: E402
+
+from skeleton_core import lifecycle_client as lc  # noqa: E402
+
+
+class _Future:
+    def __init__(self, result):
+        self._result = result
+
+    def add_done_callback(self, cb):
+        if self._result is not None:
+            cb(self)
+
+    def cancel(self):
+        pass
+
+    def exception(self):
+        return None
+
+    def result(self):
+        return self._result
+
+
+class _Client:
+    def __init__(self, srv_type, answers):
+        self.srv_type, self.answers = srv_type, answers
+
+    def wait_for_service(self, timeout_sec):
+        return True
+
+    def call_async(self, request):
+        if not self.answers:
+            return _Future(None)
+        reply = self.srv_type.Response()
+        if self.srv_type is GetState:
+            reply.current_state.id = State.PRIMARY_STATE_ACTIVE
+        return _Future(reply)
+
+    def remove_pending_request(self, future):
+        pass
+
+
+class _Node:
+    """The first pair of clients never hears back; the clients made after it do."""
+
+    def __init__(self):
+        self.made, self.destroyed = [], []
+
+    def create_client(self, srv_type, name):
+        c = _Client(srv_type, answers=len(self.made) >= 2)
+        self.made.append(c)
+        return c
+
+    def destroy_client(self, c):
+        self.destroyed.append(c)
+
+
+def test_clients_made_anew_when_the_services_never_answer(monkeypatch):
+    monkeypatch.setattr(lc, 'STATE_TIMEOUT_S', 0.01)
+    monkeypatch.setattr(lc, 'SILENT_S', 0.05)
+    node, logged = _Node(), []
+    deadline = time.monotonic() + 5.0
+    assert lc.drive_to_active(node, '/n', lambda: time.monotonic() > deadline, logged.append)
+    assert len(node.made) == 4 and node.destroyed == node.made[:2]
+    assert len(logged) == 1 and 'do not answer' in logged[0]
