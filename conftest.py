@@ -16,6 +16,7 @@ os.environ.setdefault('MPLBACKEND', 'Agg')
 
 import importlib  # noqa: E402
 import itertools  # noqa: E402
+import time  # noqa: E402
 
 import pytest  # noqa: E402
 
@@ -162,6 +163,46 @@ def no_nodes_left_behind():
     if names:
         print(f'\n[conftest] destroyed nodes the module left alive: {", ".join(names)}',
               file=sys.stderr)
+
+
+def _ros_children() -> dict:
+    """The ROS processes (``--ros-args`` on their command line) below this one: pid -> name."""
+    import psutil
+    out = {}
+    for p in psutil.Process().children(recursive=True):
+        try:
+            cmd = p.cmdline()
+            if '--ros-args' in cmd and p.status() != psutil.STATUS_ZOMBIE:
+                out[p.pid] = ' '.join(cmd)[-160:]
+        except psutil.Error:
+            pass
+    return out
+
+
+@pytest.fixture(autouse=True, scope='module')
+def no_processes_left_behind():
+    """ROS processes a module started and left running (a node that did not stop on SIGINT, a
+    test that failed before its clean-up) are killed when the module ends, and named on stderr:
+    a stray node would otherwise stay in the graph of every later module on its DDS domain (a
+    test's rerun, a module whose domain a private one repeats) and count as a subscriber or
+    answer for a node of the same name."""
+    before = set(_ros_children())
+    yield
+    import psutil
+    deadline = time.monotonic() + 5.0   # those stopping already get a moment
+    left = {}
+    while time.monotonic() < deadline:
+        left = {pid: c for pid, c in _ros_children().items() if pid not in before}
+        if not left:
+            return
+        time.sleep(0.2)
+    for pid in left:
+        try:
+            psutil.Process(pid).kill()
+        except psutil.Error:
+            pass
+    print('\n[conftest] killed ROS processes the module left running: '
+          + '; '.join(left.values()), file=sys.stderr)
 
 
 sys.path.insert(0, str(ROOT / 'tests'))

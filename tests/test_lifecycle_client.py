@@ -54,7 +54,12 @@ def test_drive_to_active(case, tmp_path):
         client.destroy_node()
         rclpy.try_shutdown(context=ctx)
         os.killpg(proc.pid, signal.SIGINT)
-        out = proc.communicate(timeout=30)[0].decode(errors='replace')
+        try:
+            out = proc.communicate(timeout=30)[0].decode(errors='replace')
+        except subprocess.TimeoutExpired:   # never left running for the modules after this one
+            os.killpg(proc.pid, signal.SIGKILL)
+            out = proc.communicate()[0].decode(errors='replace')
+            pytest.fail(f'{name} did not stop within 30 s of SIGINT:\n{out[-2000:]}')
     assert proc.returncode == 0, out[-2000:]
     if case == 'refused':
         assert 'make build-db' in out or 'build_db' in out, out[-2000:]
