@@ -37,6 +37,9 @@ CORRECTION_SPECS = specs(CorrectionConfig)
 CORRECTION_NAMES = [s.name for s in CORRECTION_SPECS]
 
 
+OUTPUT_MATCH_WAIT_S = 3.0   # then the input is taken anyway (with a warning naming the outputs)
+
+
 def tracker_qos():
     """Latched QoS of /kinect/tracker (skeleton_core.tracker): a late joiner still gets it."""
     from rclpy.qos import DurabilityPolicy, ReliabilityPolicy
@@ -104,11 +107,37 @@ class SkeletonArrayNode(ManagedNode):
         self.diagnostics(extra=self.diagnostics_extra)
 
     def activate(self) -> None:
+        self.timer(0.5, self._purge)
+        # the input is taken only once every output reaches the subscribers the graph already
+        # knows (at most OUTPUT_MATCH_WAIT_S): a subscriber this node's publisher has not met yet
+        # would miss the outputs of the first frames (a replay starts once the input has its
+        # readers), e.g. a recorder started before this node
+        self._wait_since = time.monotonic()
+        if self._unmatched_outputs():
+            self._wait_timer = self.timer(0.05, self._subscribe_when_matched)
+        else:
+            self._subscribe_input()
+
+    def _unmatched_outputs(self) -> List[str]:
+        return [p.topic_name for p in self._pubs
+                if p.get_subscription_count() < self.count_subscribers(p.topic_name)]
+
+    def _subscribe_when_matched(self) -> None:
+        short = self._unmatched_outputs()
+        waited = time.monotonic() - self._wait_since
+        if short and waited < OUTPUT_MATCH_WAIT_S:
+            return
+        self._wait_timer.cancel()
+        if short:
+            self.get_logger().warning(f'{", ".join(short)}: not every subscriber reached after '
+                                      f'{waited:.0f} s; taking the input anyway')
+        self._subscribe_input()
+
+    def _subscribe_input(self) -> None:
         from skeleton_msgs.msg import SkeletonArray
         # serialized in and out (skeleton_core.cdr): no rclpy message objects per joint
         self.subscription(SkeletonArray, self.params['input_topic'], self._on_msg,
                           QoSProfile(depth=self.params['qos_depth']), raw=True)
-        self.timer(0.5, self._purge)
         self.get_logger().info(f"{self.params['input_topic']} -> "
                                + ', '.join(p.topic_name for p in self._pubs))
 
