@@ -99,21 +99,17 @@ class RecorderNode(ManagedNode):
     def activate(self) -> None:
         if self.params['flush_period'] > 0:
             self.timer(min(0.5, self.params['flush_period']), self._poll)
-        topics = list(self.params['topics'])
-        for topic in topics:
-            if topic not in TOPICS:
-                raise ValueError(f'recorder: unknown topic {topic!r} (known: {sorted(TOPICS)})')
+        topics = list(self.params['topics'])   # (checked on configure)
         wait = [t for t in self.params['wait_for_publishers'] if t in topics]
-        self._outputs = {t: self._subscribe(t) for t in wait}
+        outputs = {t: self._subscribe(t) for t in wait}
         for topic in LATCHED:
             if topic in topics and topic not in wait:
                 self._subscribe(topic)
         self._inputs = [t for t in topics if t not in wait and t not in LATCHED]
-        self._wait_since = time.monotonic()
-        if wait:
-            self._wait_timer = self.timer(0.05, self._subscribe_inputs_when_ready)
-        else:
-            self._subscribe_inputs()
+        self.when_ready(lambda: [t for t, sub in outputs.items() if _publishers(sub) == 0],
+                        self._subscribe_inputs, PUBLISHERS_WAIT_S,
+                        'no publisher; recording the input anyway (the first frames\' outputs '
+                        'may be missing)')
 
     def _subscribe(self, topic: str):
         msgtype = TOPICS[topic]
@@ -130,18 +126,6 @@ class RecorderNode(ManagedNode):
         return self.subscription(_msg_class(msgtype), topic,
                                  lambda data, t=topic, mt=msgtype: self._on_msg(t, mt, data),
                                  qos, raw=True)
-
-    def _subscribe_inputs_when_ready(self) -> None:
-        missing = [t for t, sub in self._outputs.items() if _publishers(sub) == 0]
-        waited = time.monotonic() - self._wait_since
-        if missing and waited < PUBLISHERS_WAIT_S:
-            return
-        self._wait_timer.cancel()
-        if missing:
-            self.get_logger().warning(
-                f'no publisher of {", ".join(missing)} after {waited:.0f} s: recording the input '
-                'anyway (the first frames\' outputs may be missing)')
-        self._subscribe_inputs()
 
     def _subscribe_inputs(self) -> None:
         for topic in self._inputs:

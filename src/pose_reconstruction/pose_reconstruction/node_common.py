@@ -112,26 +112,12 @@ class SkeletonArrayNode(ManagedNode):
         # knows (at most OUTPUT_MATCH_WAIT_S): a subscriber this node's publisher has not met yet
         # would miss the outputs of the first frames (a replay starts once the input has its
         # readers), e.g. a recorder started before this node
-        self._wait_since = time.monotonic()
-        if self._unmatched_outputs():
-            self._wait_timer = self.timer(0.05, self._subscribe_when_matched)
-        else:
-            self._subscribe_input()
+        self.when_ready(self._unmatched_outputs, self._subscribe_input, OUTPUT_MATCH_WAIT_S,
+                        'not every subscriber reached; taking the input anyway')
 
     def _unmatched_outputs(self) -> List[str]:
         return [p.topic_name for p in self._pubs
                 if p.get_subscription_count() < self.count_subscribers(p.topic_name)]
-
-    def _subscribe_when_matched(self) -> None:
-        short = self._unmatched_outputs()
-        waited = time.monotonic() - self._wait_since
-        if short and waited < OUTPUT_MATCH_WAIT_S:
-            return
-        self._wait_timer.cancel()
-        if short:
-            self.get_logger().warning(f'{", ".join(short)}: not every subscriber reached after '
-                                      f'{waited:.0f} s; taking the input anyway')
-        self._subscribe_input()
 
     def _subscribe_input(self) -> None:
         from skeleton_msgs.msg import SkeletonArray

@@ -49,8 +49,10 @@ def drive_to_active(node, name: str, stopped: Callable[[], bool],
     """Take lifecycle node ``name`` (fully qualified) to ``active`` from ``node`` (spun by
     someone else). True once active; False when it refuses a transition, is finalized, or
     ``stopped()`` turns true first."""
-    get = node.create_client(GetState, f'{name}/get_state')
-    change = node.create_client(ChangeState, f'{name}/change_state')
+    def clients():
+        return (node.create_client(GetState, f'{name}/get_state'),
+                node.create_client(ChangeState, f'{name}/change_state'))
+    get, change = clients()
     lost = 0
     silent_since = None   # the first of the state queries not answered since the last answer
     warned = False
@@ -71,8 +73,7 @@ def drive_to_active(node, name: str, stopped: Callable[[], bool],
                     warned = True
                 node.destroy_client(get)
                 node.destroy_client(change)
-                get = node.create_client(GetState, f'{name}/get_state')
-                change = node.create_client(ChangeState, f'{name}/change_state')
+                get, change = clients()
                 silent_since = None
             continue
         silent_since = None

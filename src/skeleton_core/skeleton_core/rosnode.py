@@ -8,7 +8,7 @@ from __future__ import annotations
 import signal
 import sys
 import time
-from typing import Any, Callable, Dict, Iterable, Optional, Sequence
+from typing import Any, Callable, Dict, Iterable, List, Optional, Sequence
 
 import rclpy
 from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
@@ -318,6 +318,27 @@ class ManagedNode(LifecycleNode):
         t = self.create_timer(period_s, callback)
         self._active.append(('timer', t))
         return t
+
+    def when_ready(self, missing: Callable[[], List[str]], then: Callable[[], None],
+                   timeout_s: float, what: str) -> None:
+        """Call ``then`` once ``missing()`` (the names still waited for) is empty, polled every
+        50 ms without blocking the node, at most ``timeout_s``: then a warning names what is
+        still missing (``<names>: <what> after N s``) and ``then`` runs anyway. At once when
+        nothing is missing now. The poll is an activate-time timer (gone on deactivate)."""
+        if not missing():
+            then()
+            return
+        since = time.monotonic()
+
+        def poll():
+            left, waited = missing(), time.monotonic() - since
+            if left and waited < timeout_s:
+                return
+            timer.cancel()
+            if left:
+                self.get_logger().warning(f'{", ".join(left)}: {what} after {waited:.0f} s')
+            then()
+        timer = self.timer(0.05, poll)
 
     def service(self, *args, **kwargs):
         srv = self.create_service(*args, **kwargs)
