@@ -221,7 +221,7 @@ class Reconstructor:
         # a correction maps the joints to its reference's layout: the prior takes its proportions
         self.length_prior = LengthPrior.from_meta(
             cfg.lengths, getattr(db, 'meta', None), cfg.segments.symmetric_lengths,
-            layout=getattr(correction, 'meta', None) if correction is not None else None)
+            layout=getattr(correction, 'meta', None))
         if self.length_prior is not None:
             self.segment_output.length_prior = self.length_prior.fuse
             prior = self.length_prior
