@@ -136,6 +136,7 @@ def run(seed):
         ok=ok,
         seq=seq,
         rope_at=rope_at,
+        swim_at=next((round(a, 2) for a, w in reversed(sched) if w == "swim"), None),
         unstable=ctl.dp.unstable_steps,
         releases=ev,
         holds=stats,

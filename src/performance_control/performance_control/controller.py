@@ -129,7 +129,10 @@ def build_models(world: World, params: RecognizerParams) -> Dict[str, ExampleMod
                                  f.example.effectors, f.example.components, params,
                                  max_change_share=f.example.max_change_share,
                                  hang_joint=(f.engage.hand_above or 'Head') if f.kind == 'bars'
-                                 else None)
+                                 else None,
+                                 own_posture=(float(f.example.params.get('period', 1.5))
+                                              if getattr(f.example, 'own_posture', False)
+                                              else 0.0))
             for f in world.with_example()}
 
 

@@ -51,7 +51,10 @@ class Example:
     directions the example moves in (a one-handed punch against a two-handed stroke; 1 = off).
     ``bvh`` (optionally cut to ``frames``) is the real mocap example where the file exists (a
     relative path is looked up next to the world file, then in ``../shared``); without it the
-    ``generator`` makes one, so a world runs without ``../shared``."""
+    ``generator`` makes one, so a world runs without ``../shared``. ``own_posture`` (a cyclic
+    example: the walk): Eq. 5's e1 about the user's own mean posture (low-passed over the
+    example's ``period``) instead of the example's mean, so that a user's constant posture
+    offset -- elbows bent more, shoulders flexed -- is a style, not another motion."""
 
     generator: str = ''
     params: Dict = field(default_factory=dict)
@@ -60,6 +63,7 @@ class Example:
     bvh: str = ''
     max_change_share: float = 1.0   # the recognizer's change-share gate for this feature (1 = off)
     frames: Tuple[Tuple[int, int], ...] = ()   # [first, stop) segments of the BVH file used as Q
+    own_posture: bool = False       # e1 about the user's own mean posture (a cyclic example)
 
 
 @dataclass
@@ -173,7 +177,7 @@ def parse_world(doc: Dict, path: str = '<dict>') -> World:
                              tuple(xd.get('effectors', ('HandLeft', 'HandRight'))),
                              int(xd.get('components', 3)), str(xd.get('bvh', '')),
                              float(xd.get('max_change_share', 1.0)),
-                             _frames(xd.get('frames', ())))
+                             _frames(xd.get('frames', ())), bool(xd.get('own_posture', False)))
                 if not ex.generator and not ex.bvh:
                     raise ValueError('example needs a generator or a bvh file')
                 for e in ex.effectors:

@@ -75,6 +75,16 @@ def yaw_rotation(yaw) -> np.ndarray:
 ARM_ACTIVITY = True
 
 
+# body heights: the largest offset of a user's mean posture from the example's that
+# ``own_posture`` forgives (the effectors' mean positions, all coordinates; beyond it the excess
+# counts in e1 as a distance from the subspace). The offsets of the walking styles the project's
+# performers are drawn with (:func:`.examples.random_style`: elbows bent up to 25 deg more,
+# shoulders flexed +-12 deg, abducted -8..12 deg) reach 0.155 for every body height (1.5-1.95 m);
+# the continuous performance's seed 1 walks at 0.135. An assumption about people, not measured on
+# real walkers
+OWN_POSTURE_RANGE = 0.16
+
+
 def relative_effectors(positions: np.ndarray, effectors: Sequence[int],
                        yaw: Optional[np.ndarray] = None) -> np.ndarray:
     """r_j = d_j - COM (the paper's origin, the whole-body COM) in the yaw-removed body frame,
@@ -249,8 +259,14 @@ class ExampleModel:
 
     def __init__(self, name: str, positions: np.ndarray, effectors: Sequence[str],
                  components: int, params: RecognizerParams, height: Optional[float] = None,
-                 max_change_share: float = 1.0, hang_joint: Optional[str] = None):
+                 max_change_share: float = 1.0, hang_joint: Optional[str] = None,
+                 own_posture: float = 0.0):
         self.name = name
+        # > 0: e1 also about the user's own mean posture (the feature vector low-passed over
+        # this many s, the example's period), the lesser counts -- an oscillation compared with
+        # the example's, a user's constant posture offset (elbows bent more, shoulders flexed: a
+        # style) not counted (:meth:`IntentionRecognizer.update`)
+        self.own_posture = float(own_posture)
         # a feature held from above (the bars): the user hanging -- off the floor longer than a
         # jump, both hands above this joint (:mod:`.support`) -- is recognised as it too
         self.hang_joint = hang_joint
@@ -329,6 +345,7 @@ class IntentionRecognizer:
         self._trunk_joints = sorted({j for m in self.models for j in m.effectors})
         self._whist: Dict[str, list] = {}   # the last lag + 1 feature vectors per model
         self._avg: Dict[str, list] = {}
+        self._own_mean: Dict[str, np.ndarray] = {}   # the user's mean w per own-posture model
         self._last_t: Optional[float] = None
         self._tracked_run: Optional[np.ndarray] = None   # TRACKED frames in a row per joint
         self.support = HangDetector()
@@ -344,6 +361,7 @@ class IntentionRecognizer:
         self._thist = []
         self._whist = {}
         self._avg = {}
+        self._own_mean = {}
         self._last_t = None
 
     def update(self, positions: np.ndarray, t: float,
@@ -423,6 +441,20 @@ class IntentionRecognizer:
             dw = w - wh[0]
             obs_w = None if obs_e is None else np.tile(np.repeat(obs_e, 3), 2)
             e1, e2 = m.errors(w, dw, obs_w)
+            win = float(getattr(m, 'own_posture', 0.0))
+            e1_own = None
+            if win > 0:       # e1 about the user's own mean posture too
+                mu = self._own_mean.get(m.name)
+                if mu is None:
+                    mu = self._own_mean[m.name] = w.copy()
+                else:
+                    mu += (1.0 - math.exp(-dt / win)) * (w - mu)
+                # the user's posture offset beyond a walking style's counts (a boxer's guard,
+                # hands at the chin, is no walking style: CMU boxing took the walk otherwise)
+                npos = 3 * len(idx)
+                off = float(np.linalg.norm(mu[:npos] - m.mean[:npos]))
+                e1_own = (m.errors(w - mu + m.mean, dw, obs_w)[0]
+                          + max(0.0, off - OWN_POSTURE_RANGE) ** 2)
             # the share of the displacement over share_lag frames (vs) outside the example's
             # position subspace (energies averaged over share_window, then divided)
             if obs_e is None:
@@ -440,9 +472,15 @@ class IntentionRecognizer:
                         if int(obs_p.sum()) > m.A_pos.shape[1] else all2)
             a = self._avg.get(m.name)
             if a is None:
-                a = self._avg[m.name] = [e1, e2, sp2, out2, all2, arm2]
+                a = self._avg[m.name] = [e1, e2, sp2, out2, all2, arm2,
+                                         e1 if e1_own is None else e1_own]
             else:
                 a[0] += alpha * (e1 - a[0])
+                # about the user's own mean an oscillation outside the example's subspace (both
+                # arms swinging together) passes near zero error twice a cycle: its e1 is the
+                # average over half the example's period, the oscillation's energy outside
+                if e1_own is not None:
+                    a[6] += (1.0 - math.exp(-dt / (0.5 * win))) * (e1_own - a[6])
                 a[1] += alpha * (e2 - a[1])
                 a[2] += beta * (sp2 - a[2])
                 a[3] += gam * (out2 - a[3])
@@ -452,7 +490,11 @@ class IntentionRecognizer:
             act = math.sqrt(max(a[2], 0.0))
             if ARM_ACTIVITY:      # the arms themselves must move, not only the body carrying them
                 act = min(act, math.sqrt(max(a[5], 0.0)))
-            r1, r2 = a[0] / prm.e1_threshold, a[1] / prm.e2_threshold
+            # the user's pose near the example's subspace about the example's mean, or about the
+            # user's own mean posture (own_posture: a constant offset is a style; the example's
+            # mean still right after a change of posture, while the user's mean follows it)
+            e1_avg = a[0] if e1_own is None else min(a[0], a[6])
+            r1, r2 = e1_avg / prm.e1_threshold, a[1] / prm.e2_threshold
             ratio = max(r1, r2)   # e1 and e2 both under their thresholds
             # the activity is measured over activity_lag frames: until a user has been seen that
             # long, a displacement over fewer frames is mostly sensor noise (x30 per frame)
@@ -467,7 +509,7 @@ class IntentionRecognizer:
             hang = bool(getattr(m, 'hang_joint', None) and self.support.hanging(m.hang_joint))
             if hang:          # held from above: the feature whatever the hands' motion
                 imitating, conf = True, max(conf, 1.0 / (1.0 + min(ratio, 1.0) ** 2))
-            out[m.name] = Recognition(m.name, imitating, float(conf), float(a[0]), float(a[1]),
+            out[m.name] = Recognition(m.name, imitating, float(conf), float(e1_avg), float(a[1]),
                                       act, w, float(share), hang)
         return out
 

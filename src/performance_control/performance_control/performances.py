@@ -129,7 +129,8 @@ def continuous_stream(world, rng: np.random.Generator, fps: float = FPS,
                       rope_at: Optional[float] = None, steer: float = 0.0,
                       bars_at: float = 3.5, rope_stops: Tuple[float, ...] = (),
                       approach: Tuple[Tuple[float, float], ...] = (),
-                      rope_approach: Tuple[Tuple[float, float], ...] = ()):
+                      rope_approach: Tuple[Tuple[float, float], ...] = (),
+                      swim_at: Optional[float] = None):
     """One continuous performance (Sec. 8.3, issue 30): stand; walk in place (the character
     walks forward under the monkey bars) until ``bars_at`` s; stop, raise the arms and jump (the
     character catches a bar); swing like on the bars; lower the arms (the character lets go and
@@ -144,7 +145,10 @@ def continuous_stream(world, rng: np.random.Generator, fps: float = FPS,
     walk after the bars (toward the rope, :func:`watched_performance`), and from the rope turns
     to 45 deg right of where they first faced. ``approach`` ((s, rad), ...): turns on the walk to
     the bars, each to the given heading (left positive, from where they first faced) over 1 s;
-    ``rope_approach`` the same on the walk to the rope (after ``steer``).
+    ``rope_approach`` the same on the walk to the rope (after ``steer``). ``swim_at`` (s, with
+    the rope; default ``rope_at`` + 17): when the user stops walking and swims (the walk fades
+    out over the 0.2 s before it: the stream up to ``swim_at`` - 0.2 is the same as any later
+    one's).
     Returns (positions (T, 20, 3) world, schedule [(start s, what the user does)]) with the
     user's body, style and tempo drawn from ``rng``."""
     body, style, tempo = performer(rng)
@@ -174,12 +178,16 @@ def continuous_stream(world, rng: np.random.Generator, fps: float = FPS,
             climbs.append((s_ + 0.2, s_ + ROPE_WAIT + 0.3))
             sched += [(s_, 'reach for the rope'), (s_ + ROPE_WAIT, 'walk')]
             start = s_ + ROPE_WAIT
-        sched += [(r, 'climb'), (r + 6.5, 'lower the arms'), (r + 8.0, 'walk'), (r + 17.0, 'swim')]
+        sw = r + 17.0 if swim_at is None else float(swim_at)
+        if not r + 8.5 <= sw <= ROPE_LATEST + 23.0 - SWIM_MIN:
+            raise ValueError(f'swim_at {sw} s: after the walk from the rope and at least '
+                             f'{SWIM_MIN} s before the end of the stream')
+        sched += [(r, 'climb'), (r + 6.5, 'lower the arms'), (r + 8.0, 'walk'), (sw, 'swim')]
         # one length whatever rope_at (the sensor noise is drawn for the whole stream: the same
         # frames get the same noise, so the performance up to rope_at is the one watched)
         total = ROPE_LATEST + 23.0
         # the walk fades out after rope_at (the stream is the same as any later stop's up to it)
-        walks += [(start, r + 0.2), (r + 8.0, r + 17.0)]
+        walks += [(start, r + 0.2), (r + 8.0, sw)]
         turn = r + 8.5
         climbs.append((r + 0.2, r + 6.5))
     n = int(round(total * fps))
@@ -255,6 +263,11 @@ APPROACH_TOLERANCE = np.radians(15)
 # of the rope's line: walking straight on it passed the rope, seeds 3 and 6); with the bars later
 # (``bars_at``), as much later
 STEER_AT = 10.5
+# s: the least the user swims at the end of the stream; the user who sees the character still
+# short of the water when they would start to swim (the rope's swim_at, rope_at + 17 s) walks on
+# until it is in the water, at the latest this long before the stream ends (held-out seed 34's
+# character stood 1.2 m short of the water's edge when its blind script started to swim)
+SWIM_MIN = 4.0
 # rad: the most the user turns toward the rope (a user turned further away from the sensor is
 # tracked badly; the last walk turns 45 deg too)
 MAX_STEER = np.radians(45)
@@ -428,9 +441,32 @@ def watched_performance(world, seed: int, step, noise: bool = True, fps: float =
             break
         stops.append(rope_at)     # short of the rope (ahead): walk on
         sched, sa, sta = stream(rope_at=ROPE_LATEST, rope_stops=tuple(stops), **kw)
+    # the last walk: the user watches the character too -- still short of the water when they
+    # would start to swim (the walk's fade-out, 0.2 s before), they walk on until it is in it
+    kw = dict(kw, rope_at=rope_at, rope_stops=tuple(stops))
+    wet = _in_volume(world, 'water')
+    fade = int(round((rope_at + 17.0 - 0.2) * fps))
+    while nxt < min(fade, len(sa)):
+        seen.append(perform(nxt))
+        nxt += 1
+    if nxt < len(sa) and not wet(seen[-1]):
+        latest = int(round((ROPE_LATEST + 23.0 - SWIM_MIN - 0.2) * fps))
+        while nxt < latest and not wet(seen[-1]):
+            if nxt == fade:
+                sched, sa, sta = stream(swim_at=latest / fps + 0.2, **kw)
+            seen.append(perform(nxt))
+            nxt += 1
+        sched, sa, sta = stream(swim_at=nxt / fps + 0.2, **kw)
     for k in range(nxt, len(sa)):
         perform(k)
     return sched, rope_at
+
+
+def _in_volume(world, name: str):
+    """A test of an (x, y) against the horizontal extent of the feature's volumes."""
+    boxes = [(g.vec('center')[:2], g.vec('half')[:2]) for g in world.features[name].geoms
+             if g.type == 'volume']
+    return lambda xy: any(bool(np.all(np.abs(np.asarray(xy) - c) <= h)) for c, h in boxes)
 
 
 def non_imitation_clips(seed: int) -> List[Tuple[str, np.ndarray]]:

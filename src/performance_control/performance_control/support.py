@@ -8,9 +8,13 @@ hands' motion but the body's support: both feet have left the user's floor for l
 jump can keep them there, and the hands are above the head. A body off the floor for longer than
 a ballistic flight is held by something; with both hands overhead, by the hands.
 
-* the user's floor: the lowest foot height seen (the lowest foot, low-passed over ``FLOOR_TAU``
-  so that one noisy frame does not lower it), like the controller's first-frame floor but
-  following the user when the first frames are off the floor;
+* the user's floor: the lowest height seen of the *higher* foot (low-passed over ``FLOOR_TAU``
+  so that one noisy frame does not lower it) -- where both feet stand, like the controller's
+  first-frame floor but following the user when the first frames are off the floor. Not the
+  lower foot's: one foot's sensor error (held-out performer 37 of the continuous performance: a
+  foot reported 0.13-0.17 m through the floor for 1.4 s, TRACKED) lowered that floor for the
+  rest of the stream, standing then read as 0.1 m off it, and every frame with the arms raised
+  for the rope was a "jump" that caught the bar overhead;
 * airborne: the lowest foot more than ``CLEARANCE`` above that floor (a foot lifted to step or
   kick keeps the other down; standing on tiptoe raises a foot 0.05-0.08 m);
 * supported: airborne for longer than ``MAX_FLIGHT`` s -- the flight time of a 0.45 m standing
@@ -29,8 +33,8 @@ own motion -- the trunk pitching over the knees, the arms held out for balance -
 neither swimming nor climbing (real Kinect v2, UI-PRMD: sit-to-stand and the deep squat took the
 breaststroke and the rope).
 
-* the standing height: the hips above the lowest foot (low-passed over ``FLOOR_TAU``), its running
-  maximum (the user standing);
+* the standing height: the hips above the lowest foot -- not below the floor -- (low-passed over
+  ``FLOOR_TAU``), its running maximum while both feet are down (the user standing);
 * the depth: the share of that standing height the hips are lowered, while not airborne (legs
   tucked in a jump or dangling from a bar are not a squat);
 * legs bent: a depth above ``CROUCH``, or within ``CROUCH_HOLD`` s of one (the rise back to
@@ -100,12 +104,13 @@ class HangDetector:
     def update(self, positions: np.ndarray, t: float) -> None:
         p = np.asarray(positions, float)
         low = float(min(p[FOOT_LEFT, 2], p[FOOT_RIGHT, 2]))
+        high = float(max(p[FOOT_LEFT, 2], p[FOOT_RIGHT, 2]))
         dt = 1.0 / 30.0 if self._t_last is None else max(t - self._t_last, 1e-3)
         self._t_last = t
-        if self._low is None:
-            self._low = low
+        if self._low is None:       # the higher foot, low-passed: where both feet stand
+            self._low = high
         else:
-            self._low += (1.0 - math.exp(-dt / FLOOR_TAU)) * (low - self._low)
+            self._low += (1.0 - math.exp(-dt / FLOOR_TAU)) * (high - self._low)
         self.floor = self._low if self.floor is None else min(self.floor, self._low)
         self.airborne = low - self.floor > CLEARANCE
         if not self.airborne:
@@ -115,12 +120,19 @@ class HangDetector:
         self.supported = bool(self.airborne and t - self.airborne_since > MAX_FLIGHT)
         self._p = p
         self._t = t
-        hips = float(p[JOINT_INDEX['HipCenter'], 2]) - low
+        # above the lowest foot, but not below the floor: the same foot's error through the floor
+        # had made the standing height 0.15 m taller, and standing then read as legs bent
+        hips = float(p[JOINT_INDEX['HipCenter'], 2]) - max(low, self.floor)
         if self._hips is None:
             self._hips = hips
         else:
             self._hips += (1.0 - math.exp(-dt / FLOOR_TAU)) * (hips - self._hips)
-        self.standing = self._hips if self.standing is None else max(self.standing, self._hips)
+        # standing: both feet down (the higher one too within CLEARANCE of the floor) -- a jump
+        # with one foot still reported on the floor (performer 37: the same foot error) had made
+        # the standing height 0.2 m taller
+        if self.standing is None or (high - self.floor <= CLEARANCE
+                                     and self._hips > self.standing):
+            self.standing = self._hips
         self.depth = 1.0 - self._hips / self.standing if self.standing > 1e-3 else 0.0
         if self.depth > CROUCH and not self.airborne:
             self.bent_t = t

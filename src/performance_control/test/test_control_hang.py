@@ -63,6 +63,20 @@ def test_the_floor_follows_the_user_when_the_stream_starts_off_it():
     assert abs(det.floor - float(p[-1, [15, 19], 2].min())) < 0.02
 
 
+def test_one_foot_reported_through_the_floor_does_not_lower_it():
+    """The floor is where both feet stand (control7): held-out performer 37's left foot was
+    reported 0.13-0.17 m through the floor for 1.4 s; taken as the floor, standing read as 0.1 m
+    off it and raising the arms as a jump (the character's hands caught the bar overhead)."""
+    n = 150
+    p = np.array(_arms_up(n))
+    t = np.arange(n) / FPS
+    p[(t >= 1.0) & (t < 2.4), 15, 2] -= 0.15           # FootLeft (15) through the floor
+    det = HangDetector()
+    f = _run(det, p)
+    assert abs(det.floor - float(p[0, [15, 19], 2].max())) < 0.02
+    assert not f[:, 0].any() and not f[:, 3].any()      # never airborne, never reaching
+
+
 def test_a_real_hang_is_recognised_as_the_monkey_bars_with_still_arms():
     """Still arms overhead, 0.4 m off the floor for 2 s (the swing example's activity gate alone
     says no): the bars' recognizer says imitating, and only after a jump's flight time."""

@@ -231,3 +231,35 @@ def test_walk_example_elbow_sweep_is_validated():
     b = walk_cycle({'elbow_sweep_deg': 24.0}, standard_body(), 66)
     assert np.allclose(a[0], b[0])                       # the sweep starts at the example's bend
     assert not np.allclose(a[33], b[33], atol=0.02)      # and bends the elbows halfway through
+
+
+def test_walk_recognition_ignores_a_users_constant_posture_offset_not_an_in_phase_swing():
+    """The floor's walk is compared about the user's own mean posture (``own_posture``, control7):
+    a walker whose elbows are bent 24 deg more and shoulders flexed 11 deg more than the example's
+    (the continuous performance's seed 1, walk recognised only in bursts about the example's
+    mean) is as near the example's subspace as the example's own walker, within half the
+    threshold; both arms swinging together (a bilateral raise, what real shoulder exercises do)
+    is still no walk."""
+    prm = RecognizerParams()
+    own = build_models(WORLD, prm)['floor']
+    f = WORLD.features['floor']
+    assert own.own_posture == pytest.approx(f.example.params['period'])
+    plain = ExampleModel('floor', own.positions, f.example.effectors, f.example.components, prm,
+                         max_change_share=f.example.max_change_share)
+    body, n = standard_body(1.7), 180
+
+    def e1(model, style):
+        p = imitation('walk_cycle', f.example.params, body, n, style=style)
+        rec = IntentionRecognizer([model], prm)
+        rs = [rec.update(p[i], i / 30)['floor'] for i in range(n)][30:]
+        return (float(np.median([r.e1 for r in rs])) / prm.e1_threshold,
+                float(np.mean([r.imitating for r in rs])))
+
+    bent = {'elbow': math.radians(24), 'flex_offset': math.radians(10.8)}
+    e_plain, _ = e1(plain, bent)
+    e_own, rate = e1(own, bent)
+    assert e_plain > 0.8                 # about the example's mean: at the threshold's edge
+    assert e_own < 0.5 and e_own < 0.5 * e_plain and rate == 1.0
+    for style in ({'asym': 0.5}, {'asym': 0.5, **bent}):      # the arms in phase
+        e, rate = e1(own, style)
+        assert e > 1.0 and rate == 0.0

@@ -155,6 +155,15 @@ def test_the_watched_performers_decisions_change_the_stream_only_after_they_are_
     k = int(round(13.0 * 30))
     assert np.array_equal(c[:k + 1], d[:k + 1])
     assert not np.allclose(c[k + 31], d[k + 31], atol=0.05)
+    # the character still short of the water at r + 17 s: the user walks on, swims later
+    # (control7; d swims at r + 17 from the rope at ROPE_LATEST)
+    r = ROPE_LATEST
+    e, s3 = continuous_stream(WORLD, np.random.default_rng(seed), rope_at=r, swim_at=r + 19.0,
+                              **kw)
+    k = int(round((r + 16.8) * 30))
+    assert np.array_equal(d[:k + 1], e[:k + 1])
+    assert (r + 19.0, 'swim') in s3
+    assert not np.allclose(d[k + 36], e[k + 36], atol=0.05)
 
 
 def test_the_watched_performer_corrects_the_course_when_the_character_would_pass_the_rope():
