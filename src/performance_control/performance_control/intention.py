@@ -480,7 +480,7 @@ class IntentionRecognizer:
                 # arms swinging together) passes near zero error twice a cycle: its e1 is the
                 # average over half the example's period, the oscillation's energy outside
                 if e1_own is not None:
-                    a[6] += (1.0 - math.exp(-dt / (0.5 * win))) * (e1_own - a[6])
+                    a[6] += (1.0 - math.exp(-dt / win)) * (e1_own - a[6])
                 a[1] += alpha * (e2 - a[1])
                 a[2] += beta * (sp2 - a[2])
                 a[3] += gam * (out2 - a[3])
@@ -493,7 +493,11 @@ class IntentionRecognizer:
             # the user's pose near the example's subspace about the example's mean, or about the
             # user's own mean posture (own_posture: a constant offset is a style; the example's
             # mean still right after a change of posture, while the user's mean follows it)
-            e1_avg = a[0] if e1_own is None else min(a[0], a[6])
+            # (the user's own posture only with the legs' evidence of a walk: the feet alternate,
+            # :meth:`.support.HangDetector.stepping` -- a boxer's punches, which swing the hands
+            # fore-aft in anti-phase about a raised guard, did not step: CMU boxing)
+            e1_avg = (a[0] if e1_own is None or not self.support.stepping()
+                      else min(a[0], a[6]))
             r1, r2 = e1_avg / prm.e1_threshold, a[1] / prm.e2_threshold
             ratio = max(r1, r2)   # e1 and e2 both under their thresholds
             # the activity is measured over activity_lag frames: until a user has been seen that

@@ -234,7 +234,8 @@ def test_walk_example_elbow_sweep_is_validated():
 
 
 def test_walk_recognition_ignores_a_users_constant_posture_offset_not_an_in_phase_swing():
-    """The floor's walk is compared about the user's own mean posture (``own_posture``, control7):
+    """The floor's walk is compared also about the user's own mean posture (``own_posture``,
+    control7), while the feet alternate:
     a walker whose elbows are bent 24 deg more and shoulders flexed 11 deg more than the example's
     (the continuous performance's seed 1, walk recognised only in bursts about the example's
     mean) is as near the example's subspace as the example's own walker, within half the
@@ -248,8 +249,9 @@ def test_walk_recognition_ignores_a_users_constant_posture_offset_not_an_in_phas
                          max_change_share=f.example.max_change_share)
     body, n = standard_body(1.7), 180
 
-    def e1(model, style):
-        p = imitation('walk_cycle', f.example.params, body, n, style=style)
+    def e1(model, style, lift=35.0):
+        p = imitation('walk_cycle', dict(f.example.params, knee_lift_deg=lift), body, n,
+                      style=style)
         rec = IntentionRecognizer([model], prm)
         rs = [rec.update(p[i], i / 30)['floor'] for i in range(n)][30:]
         return (float(np.median([r.e1 for r in rs])) / prm.e1_threshold,
@@ -263,3 +265,7 @@ def test_walk_recognition_ignores_a_users_constant_posture_offset_not_an_in_phas
     for style in ({'asym': 0.5}, {'asym': 0.5, **bent}):      # the arms in phase
         e, rate = e1(own, style)
         assert e > 1.0 and rate == 0.0
+    # the user's own posture only while the feet alternate (the legs' evidence of a walk): the
+    # same arms over still legs are judged about the example's mean
+    e_still, _ = e1(own, bent, lift=1e-3)
+    assert e_still > 0.8 and e_still > 2.0 * e_own
