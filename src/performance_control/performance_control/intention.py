@@ -478,7 +478,7 @@ class IntentionRecognizer:
                 a[0] += alpha * (e1 - a[0])
                 # about the user's own mean an oscillation outside the example's subspace (both
                 # arms swinging together) passes near zero error twice a cycle: its e1 is the
-                # average over half the example's period, the oscillation's energy outside
+                # average over the example's period, the oscillation's energy outside
                 if e1_own is not None:
                     a[6] += (1.0 - math.exp(-dt / win)) * (e1_own - a[6])
                 a[1] += alpha * (e2 - a[1])
