@@ -212,19 +212,12 @@ def breaststroke(params: Dict, body: Body, n: int, fps: float = FPS) -> np.ndarr
 def walk_cycle(params: Dict, body: Body, n: int, fps: float = FPS) -> np.ndarray:
     """Walking (Sec. 8.3's Q, generated): one step per half ``period``, the legs swinging
     ``stride_deg`` at the hips, the knee bent in the swing, the arms swinging in anti-phase by
-    ``amplitude_deg``; the body moves forward (+x) one stride per step. ``elbow_sweep_deg``
-    (default 0): over the example's frames the elbows bend up to this much more and back
-    ((1 - cos) / 2 over the whole example), so that its subspace spans the arm postures people
-    walk with, not one elbow bend."""
+    ``amplitude_deg``; the body moves forward (+x) one stride per step."""
     ph = _phase(params, n, fps)
     amp = np.radians(_param(params, 'amplitude_deg', 22.0))
     hip = np.radians(_param(params, 'stride_deg', 22.0))
-    sweep = float(params.get('elbow_sweep_deg', 0.0))
-    if not np.isfinite(sweep) or not 0.0 <= sweep <= 90.0:
-        raise ValueError(f'example parameter elbow_sweep_deg must be in [0, 90], got {sweep}')
     local, aims = {}, {}
-    bend = np.radians(sweep) * (0.5 - 0.5 * np.cos(2 * np.pi * np.arange(n) / n))
-    l, r = _walk_arms(ph, amp, {'elbow': bend})
+    l, r = _walk_arms(ph, amp, {})
     _arm(aims, 'left', *l, n)
     _arm(aims, 'right', *r, n)
     sl = -np.sin(2 * np.pi * ph)                 # the left leg forward with the right arm

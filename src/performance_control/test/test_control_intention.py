@@ -223,16 +223,6 @@ def test_an_untestable_change_share_gate_does_not_pass():
     assert any(rec.update(q[i], t[i])['water'].imitating for i in range(len(q)))
 
 
-def test_walk_example_elbow_sweep_is_validated():
-    from performance_control.examples import walk_cycle
-    with pytest.raises(ValueError, match='elbow_sweep_deg'):
-        walk_cycle({'elbow_sweep_deg': -5.0}, standard_body(), 60)
-    a = walk_cycle({'elbow_sweep_deg': 0.0}, standard_body(), 66)
-    b = walk_cycle({'elbow_sweep_deg': 24.0}, standard_body(), 66)
-    assert np.allclose(a[0], b[0])                       # the sweep starts at the example's bend
-    assert not np.allclose(a[33], b[33], atol=0.02)      # and bends the elbows halfway through
-
-
 def test_walk_recognition_ignores_a_users_constant_posture_offset_not_an_in_phase_swing():
     """The floor's walk is compared also about the user's own mean posture (``own_posture``,
     control7), while the feet alternate:
