@@ -249,7 +249,8 @@ def xcorr_latency_ms(xc, fps: float = 30.0) -> float:
     return float((k - K + frac) * 1000.0 / fps)
 
 
-METRICS = ('eq18_cm', 'mpjpe_cm', 'mpjpe_rel_cm', 'jitter_ms2', 'bone_std_cm', 'bone_err_cm', 'bone_dir_deg')
+METRICS = ('eq18_cm', 'mpjpe_cm', 'mpjpe_rel_cm', 'jitter_ms2', 'bone_std_cm', 'bone_step_cm',
+           'bone_err_cm', 'bone_dir_deg')
 
 
 def compute_all(pred, truth, fps: float = 30.0) -> Dict[str, Dict]:
