@@ -9,7 +9,12 @@ database's direction; ``observation_weight`` when off) and the *trust in the sen
 (:mod:`.trust`) times min(1, reliability of the less reliable end / ``reliable_threshold``). The
 segments get constant user lengths (the mean observed length over the first ``length_frames``
 reliable observations of each segment, then frozen; with ``symmetric_lengths`` the left and right
-limbs share the mean of their two lengths) and are chained from the observed root. Chaining adds
+limbs share the mean of their two lengths) and are chained from the observed root. Where the
+sensor is trusted the lengths follow the observed ones' slow part (``length_follow_cutoff``: the
+deviation from the constant length, weighted by the trust times min(1, reliability /
+``reliable_threshold``), through a first-order low-pass; the corrected Kinect's joint centres, like
+the Vicon reference's, make lengths that change with the pose, and a constant length adds its
+difference down the chain; the frame-to-frame length noise is not followed). Chaining adds
 every segment's length and direction error down the chain (a spine 1 cm longer than the sensor's
 moves the head and both arms by 1 cm), so where the sensor is trusted ``position_fit`` places the
 constant-length skeleton nearest the observed joints instead: each joint pulled towards its
@@ -20,7 +25,9 @@ MPJPE; docs/real_recordings.md). The segment
 vectors and the root are smoothed by a One Euro filter (``smooth_min_cutoff`` Hz, ``smooth_beta``
 s/m, ``smooth_d_cutoff`` Hz; ``smooth_min_cutoff`` 0 = off); a segment the database fills in (an
 end with reliability 0) gets ``smooth_filled_scale`` times the cutoff (1 at or above
-``reliable_threshold``, linear between). ``smooth_anchored_speed``: see :mod:`.reconstructor`.
+``reliable_threshold``, linear between); where the sensor is trusted, the cutoff is up to
+``smooth_trusted_scale`` times higher (less lag on what the sensor gives right, in proportion to
+the trust times the reliability fraction). ``smooth_anchored_speed``: see :mod:`.reconstructor`.
 ``smooth_lead`` (prediction correction, default 1): on the reliable
 segments (in proportion to ``min(1, reliability / reliable_threshold)`` of the less reliable
 end) and the root, the low-pass lag is added back along the smoothed velocity
