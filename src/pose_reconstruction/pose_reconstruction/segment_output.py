@@ -25,9 +25,11 @@ MPJPE; docs/real_recordings.md). The segment
 vectors and the root are smoothed by a One Euro filter (``smooth_min_cutoff`` Hz, ``smooth_beta``
 s/m, ``smooth_d_cutoff`` Hz; ``smooth_min_cutoff`` 0 = off); a segment the database fills in (an
 end with reliability 0) gets ``smooth_filled_scale`` times the cutoff (1 at or above
-``reliable_threshold``, linear between); where the sensor is trusted, the cutoff is up to
-``smooth_trusted_scale`` times higher (less lag on what the sensor gives right, in proportion to
-the trust times the reliability fraction). ``smooth_anchored_speed``: see :mod:`.reconstructor`.
+``reliable_threshold``, linear between); a segment the output takes from the sensor gets up to
+``smooth_trusted_scale`` times the cutoff (in proportion to the observed direction's weight in
+it; the root: to the trust times its reliability fraction): the smoothing's lag no longer bends
+what the sensor gives right, the full smoothing stays on what the database fills in.
+``smooth_anchored_speed``: see :mod:`.reconstructor`.
 ``smooth_lead`` (prediction correction, default 1): on the reliable
 segments (in proportion to ``min(1, reliability / reliable_threshold)`` of the less reliable
 end) and the root, the low-pass lag is added back along the smoothed velocity
@@ -144,9 +146,10 @@ class SegmentOutputConfig:
         'its frame-to-frame noise is not; 0 = constant lengths', range=(0.0, 100.0),
         public=False)
     smooth_trusted_scale: float = param(
-        2.0, 'segments: cutoff factor of the segment and root smoothing where the sensor is '
-        'trusted (in proportion to the trust times min(1, reliability / reliable_threshold)); '
-        '1 = the same smoothing everywhere', range=(1.0, 100.0), public=False)
+        2.0, 'segments: cutoff factor of the smoothing of a segment the output takes from the '
+        'sensor (in proportion to the observed direction\'s weight in it) and of the root (to '
+        'the trust times its reliability fraction); 1 = the same smoothing everywhere',
+        range=(1.0, 100.0), public=False)
     smooth_anchored_speed: bool = param(
         True, 'segments, few reliable joints (hips, shoulders and every segment unreliable): a '
         'filled segment with a reliable joint at or below its child keeps the One Euro speed '
@@ -337,13 +340,16 @@ class SegmentOutput:
                     if anchored.any():
                         speed = scale.copy()
                         speed[:NUM_SEGMENTS] += anchored * (1.0 - scale[:NUM_SEGMENTS])
-            if self.smooth_trusted_scale != 1.0 and trust > 0.0:
-                # where the sensor is trusted, less smoothing (the cutoff times up to
-                # smooth_trusted_scale, in proportion to the trust and the reliability)
+            if self.smooth_trusted_scale != 1.0:
+                # less smoothing where the output follows the sensor: a segment's cutoff times up
+                # to smooth_trusted_scale in proportion to the observed direction's weight in it
+                # (beta: the trust times the reliability fraction, or direction_fusion's weight
+                # of a reliable segment), the root's in proportion to the trust times its
+                # reliability fraction; the full smoothing stays on what the database gives
                 ts = np.empty(NUM_SEGMENTS + 1)
-                ts[:NUM_SEGMENTS] = rel_frac
-                ts[NUM_SEGMENTS] = min(1.0, w[ROOT] / max(thr, 1e-6))
-                ts = 1.0 + (self.smooth_trusted_scale - 1.0) * trust * ts
+                ts[:NUM_SEGMENTS] = beta
+                ts[NUM_SEGMENTS] = trust * min(1.0, w[ROOT] / max(thr, 1e-6))
+                ts = 1.0 + (self.smooth_trusted_scale - 1.0) * ts
                 scale = ts if scale is None else scale * ts
                 if speed is not None:
                     speed = speed * ts
