@@ -383,8 +383,8 @@ class SegmentOutput:
         decays to 0 and the lengths are the constant ones. A deviation is bounded to
         ``_LENGTH_FOLLOW_MAX`` of the length."""
         fc = self.length_follow_cutoff
-        if fc <= 0.0:
-            return L
+        if fc <= 0.0 or self.output_scale != 'user':
+            return L  # off, or the output in the standard body's lengths
         target = follow * (len_obs - L)
         bad = zero | ~np.isfinite(target)
         if bad.any():

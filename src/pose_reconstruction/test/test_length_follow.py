@@ -22,15 +22,16 @@ def _observed(n=300, slow=0.03, noise=0.005, seed=3):
     return L, slow_len, slow_len + noise * rng.normal(size=slow_len.shape)
 
 
-def _run(L, lengths, trust, **kw):
+def _run(L, lengths, trust, scale='user', **kw):
     """The output's segment lengths (n, 19) for observed lengths ``lengths`` (fixed directions,
     every joint TRACKED and reliable, no smoothing: only the lengths are looked at)."""
     rng = np.random.default_rng(7)
     u = rng.normal(size=(NUM_SEGMENTS, 3))
     u /= np.linalg.norm(u, axis=1, keepdims=True)
-    so = SegmentOutput(None, np.full(NUM_SEGMENTS, 0.3), lambda: True, 0.5, 'user',
+    so = SegmentOutput(None, np.full(NUM_SEGMENTS, 0.3), lambda: True, 0.5, scale,
                        SegmentOutputConfig(smooth_min_cutoff=0.0, symmetric_lengths=False, **kw))
     so.profile_lengths = L
+    so._standard_lengths = L   # output_scale 'standard': the same lengths
     root = np.array([0.0, 0.1, 2.4])
     out = []
     for k, ln in enumerate(lengths):
@@ -58,9 +59,10 @@ def test_trusted_lengths_follow_the_slow_part_not_the_noise():
     assert step(out) < 0.25 * step(observed)
 
 
-def test_untrusted_or_off_lengths_are_constant():
+def test_untrusted_off_or_standard_scale_lengths_are_constant():
     L, _, observed = _observed()
-    for out in (_run(L, observed, 0.0), _run(L, observed, 1.0, length_follow_cutoff=0.0)):
+    for out in (_run(L, observed, 0.0), _run(L, observed, 1.0, length_follow_cutoff=0.0),
+                _run(L, observed, 1.0, scale='standard')):
         assert np.allclose(out, L[None, :], atol=1e-9)
 
 
