@@ -9,7 +9,12 @@ database's direction; ``observation_weight`` when off) and the *trust in the sen
 (:mod:`.trust`) times min(1, reliability of the less reliable end / ``reliable_threshold``). The
 segments get constant user lengths (the mean observed length over the first ``length_frames``
 reliable observations of each segment, then frozen; with ``symmetric_lengths`` the left and right
-limbs share the mean of their two lengths) and are chained from the observed root. Chaining adds
+limbs share the mean of their two lengths) and are chained from the observed root. Where the
+sensor is trusted the lengths follow the observed ones' slow part (``length_follow_cutoff``: the
+deviation from the constant length, weighted by the trust times min(1, reliability /
+``reliable_threshold``), through a first-order low-pass; the corrected Kinect's joint centres, like
+the Vicon reference's, make lengths that change with the pose, and a constant length adds its
+difference down the chain; the frame-to-frame length noise is not followed). Chaining adds
 every segment's length and direction error down the chain (a spine 1 cm longer than the sensor's
 moves the head and both arms by 1 cm), so where the sensor is trusted ``position_fit`` places the
 constant-length skeleton nearest the observed joints instead: each joint pulled towards its
@@ -20,7 +25,11 @@ MPJPE; docs/real_recordings.md). The segment
 vectors and the root are smoothed by a One Euro filter (``smooth_min_cutoff`` Hz, ``smooth_beta``
 s/m, ``smooth_d_cutoff`` Hz; ``smooth_min_cutoff`` 0 = off); a segment the database fills in (an
 end with reliability 0) gets ``smooth_filled_scale`` times the cutoff (1 at or above
-``reliable_threshold``, linear between). ``smooth_anchored_speed``: see :mod:`.reconstructor`.
+``reliable_threshold``, linear between); a segment the output takes from the sensor gets up to
+``smooth_trusted_scale`` times the cutoff (in proportion to the observed direction's weight in
+it; the root: to the trust times its reliability fraction): the smoothing's lag no longer bends
+what the sensor gives right, the full smoothing stays on what the database fills in.
+``smooth_anchored_speed``: see :mod:`.reconstructor`.
 ``smooth_lead`` (prediction correction, default 1): on the reliable
 segments (in proportion to ``min(1, reliability / reliable_threshold)`` of the less reliable
 end) and the root, the low-pass lag is added back along the smoothed velocity
@@ -68,6 +77,10 @@ _DB_DIRECTION_VAR = np.radians(12.0) ** 2
 # direction_fusion without a length prior: the joint-centre offset of a tracked joint (m per
 # axis; length_offset_sigma's default, the sensor model's 2-4 cm)
 _OFFSET_SIGMA = 0.03
+# length_follow_cutoff: the largest deviation from the constant length followed (fraction of it;
+# the corrected Kinect's lengths on UI-PRMD vary by 0.3-2.1 cm std within a clip, a few % of a
+# segment; a larger one is a failure the reliability missed, not the pose)
+_LENGTH_FOLLOW_MAX = 0.15
 
 
 @dataclass
@@ -126,6 +139,17 @@ class SegmentOutputConfig:
         True, 'segments: the observed direction of a segment with two reliable ends weighted by '
         "its expected error (the user's joint-centre offsets across the segment) against the "
         "database solution's; false = observation_weight everywhere", public=False)
+    length_follow_cutoff: float = param(
+        1.3, 'segments: where the sensor is trusted, the constant lengths follow the observed '
+        'ones through a low-pass of this cutoff (Hz; weight: the trust times min(1, reliability '
+        '/ reliable_threshold)): the slow, pose-dependent part of the sensor\'s lengths is kept, '
+        'its frame-to-frame noise is not; 0 = constant lengths', range=(0.0, 100.0),
+        public=False)
+    smooth_trusted_scale: float = param(
+        2.0, 'segments: cutoff factor of the smoothing of a segment the output takes from the '
+        'sensor (in proportion to the observed direction\'s weight in it) and of the root (to '
+        'the trust times its reliability fraction); 1 = the same smoothing everywhere',
+        range=(1.0, 100.0), public=False)
     smooth_anchored_speed: bool = param(
         True, 'segments, few reliable joints (hips, shoulders and every segment unreliable): a '
         'filled segment with a reliable joint at or below its child keeps the One Euro speed '
@@ -158,6 +182,8 @@ class SegmentOutput:
         self.smooth_accel_cutoff = float(config.smooth_accel_cutoff)
         self.smooth_accel_beta = float(config.smooth_accel_beta)
         self.direction_fusion = bool(config.direction_fusion)
+        self.length_follow_cutoff = float(config.length_follow_cutoff)
+        self.smooth_trusted_scale = float(config.smooth_trusted_scale)
         # the user's profile lengths (19,), used from the first frame when set (Reconstructor)
         self.profile_lengths: Optional[np.ndarray] = None
         # (observed lengths of each side (19,), reliable observation counts (19,)) -> lengths:
@@ -175,6 +201,8 @@ class SegmentOutput:
         self._seg_fallback = np.full(NUM_SEGMENTS, np.nan)
         self._frozen_lengths: Optional[np.ndarray] = None
         self._prior_cache: Optional[tuple] = None  # (prior, sides, counts, fused lengths)
+        # length_follow_cutoff: the low-passed deviation of the observed lengths from L (19,)
+        self._length_dev = np.zeros(NUM_SEGMENTS)
         mc, b, dc = self.smooth
         self._last_stamp: Optional[int] = None
         self._filter_clock_ns = 0
@@ -268,6 +296,13 @@ class SegmentOutput:
             np.maximum(beta, self._fused_weight(L) * reliable, out=beta)
         elif self.observation_weight > 0.0:
             np.maximum(beta, self.observation_weight * reliable, out=beta)
+        # filter clock: the stamps' steps where plausible (1 ms - 0.5 s), else 30 Hz
+        stamp = int(frame.stamp_ns or 0)
+        dt = 1.0 / 30.0
+        if self._last_stamp is not None and 1e6 <= stamp - self._last_stamp <= 5e8:
+            dt = (stamp - self._last_stamp) * 1e-9
+        self._last_stamp = stamp
+        L = self._followed_lengths(L, len_obs, rel_frac * trust, zero, dt)
         u = us + beta[:, None] * (uo - us)
         nu = np.sqrt(np.einsum('sk,sk->s', u, u))
         small = nu <= 1e-9
@@ -288,12 +323,6 @@ class SegmentOutput:
                 # observed direction is kept, the fit then places the skeleton
                 self._fit_positions(vr, obs, pull, L, rel_frac * (1.0 - beta))
         if self._seg_filter is not None:
-            # filter clock: the stamps' steps where plausible (1 ms - 0.5 s), else 30 Hz
-            stamp = int(frame.stamp_ns or 0)
-            dt = 1.0 / 30.0
-            if self._last_stamp is not None and 1e6 <= stamp - self._last_stamp <= 5e8:
-                dt = (stamp - self._last_stamp) * 1e-9
-            self._last_stamp = stamp
             self._filter_clock_ns += int(round(dt * 1e9))
             scale = speed = None
             if self.smooth_filled_scale != 1.0:
@@ -311,6 +340,19 @@ class SegmentOutput:
                     if anchored.any():
                         speed = scale.copy()
                         speed[:NUM_SEGMENTS] += anchored * (1.0 - scale[:NUM_SEGMENTS])
+            if self.smooth_trusted_scale != 1.0:
+                # less smoothing where the output follows the sensor: a segment's cutoff times up
+                # to smooth_trusted_scale in proportion to the observed direction's weight in it
+                # (beta: the trust times the reliability fraction, or direction_fusion's weight
+                # of a reliable segment), the root's in proportion to the trust times its
+                # reliability fraction; the full smoothing stays on what the database gives
+                ts = np.empty(NUM_SEGMENTS + 1)
+                ts[:NUM_SEGMENTS] = beta
+                ts[NUM_SEGMENTS] = trust * min(1.0, w[ROOT] / max(thr, 1e-6))
+                ts = 1.0 + (self.smooth_trusted_scale - 1.0) * ts
+                scale = ts if scale is None else scale * ts
+                if speed is not None:
+                    speed = speed * ts
             lead = None
             if self.smooth_lead > 0.0:
                 # prediction correction on what the sensor gives reliably and on the root
@@ -329,6 +371,29 @@ class SegmentOutput:
         else:
             v = vr[:NUM_SEGMENTS]
         return vr[NUM_SEGMENTS] + _SEG_CHAIN @ v
+
+    def _followed_lengths(self, L: np.ndarray, len_obs: np.ndarray, follow: np.ndarray,
+                          zero: np.ndarray, dt: float) -> np.ndarray:
+        """(19,) ``length_follow_cutoff``: the constant lengths ``L`` plus the observed lengths'
+        deviation from them, weighted by ``follow`` (19,: the trust times the reliability
+        fraction of the less reliable end) and low-passed (first order): where the sensor is
+        trusted the output keeps its slow, pose-dependent lengths (the corrected Kinect's move
+        its joint centres with the pose; chained constant lengths add each segment's length
+        error down the chain), not their frame-to-frame noise; where it is not, the deviation
+        decays to 0 and the lengths are the constant ones. A deviation is bounded to
+        ``_LENGTH_FOLLOW_MAX`` of the length."""
+        fc = self.length_follow_cutoff
+        if fc <= 0.0 or self.output_scale != 'user':
+            return L  # off, or the output in the standard body's lengths
+        target = follow * (len_obs - L)
+        bad = zero | ~np.isfinite(target)
+        if bad.any():
+            target = np.where(bad, 0.0, target)
+        lim = _LENGTH_FOLLOW_MAX * L
+        np.clip(target, -lim, lim, out=target)
+        a = 1.0 - np.exp(-2.0 * np.pi * fc * dt)
+        self._length_dev += a * (target - self._length_dev)
+        return L + self._length_dev
 
     def _fused_weight(self, L: np.ndarray) -> np.ndarray:
         """(19,) ``direction_fusion``: the weight of a reliable segment's observed direction,

@@ -14,6 +14,9 @@ where either input is NaN are skipped (per joint); a quantity with no valid fram
   non-root joints): where a method puts the whole body apart, how well the posture matches.
 * :func:`jitter` — mean magnitude of the joint acceleration by second differences, m/s^2.
 * :func:`bone_length_std` — std over time of each segment length, cm (19 segments);
+  :func:`bone_length_step` — its frame-to-frame part: the RMS change of each length from one
+  frame to the next over sqrt(2), cm (equal to the std for white length noise, near 0 for
+  lengths that change only slowly, e.g. with the pose);
   :func:`bone_length_error` — mean |length - true length|, cm.
 * :func:`bone_direction_error` — mean angle between estimated and true segment directions, deg
   (length-free).
@@ -104,6 +107,19 @@ def bone_length_std(pred) -> Tuple[np.ndarray, float]:
     dev = (L - mu) ** 2
     with np.errstate(invalid='ignore'):
         sd = np.sqrt(_nanmean0(dev))
+    return sd, _overall(sd)
+
+
+def bone_length_step(pred) -> Tuple[np.ndarray, float]:
+    """The frame-to-frame part of the bone-length std (cm), (19,) and their mean: RMS of each
+    segment length's change between consecutive frames, over sqrt(2)."""
+    p = _check(pred)
+    L = _lengths(p) * 100.0
+    if len(L) < 2:
+        sd = np.full(L.shape[1], np.nan)
+        return sd, _overall(sd)
+    with np.errstate(invalid='ignore'):
+        sd = np.sqrt(_nanmean0(np.diff(L, axis=0) ** 2) / 2.0)
     return sd, _overall(sd)
 
 
@@ -233,7 +249,8 @@ def xcorr_latency_ms(xc, fps: float = 30.0) -> float:
     return float((k - K + frac) * 1000.0 / fps)
 
 
-METRICS = ('eq18_cm', 'mpjpe_cm', 'mpjpe_rel_cm', 'jitter_ms2', 'bone_std_cm', 'bone_err_cm', 'bone_dir_deg')
+METRICS = ('eq18_cm', 'mpjpe_cm', 'mpjpe_rel_cm', 'jitter_ms2', 'bone_std_cm', 'bone_step_cm',
+           'bone_err_cm', 'bone_dir_deg')
 
 
 def compute_all(pred, truth, fps: float = 30.0) -> Dict[str, Dict]:
@@ -244,6 +261,7 @@ def compute_all(pred, truth, fps: float = 30.0) -> Dict[str, Dict]:
                              ('mpjpe_rel_cm', mpjpe_root_relative(pred, truth)),
                              ('jitter_ms2', jitter(pred, fps)),
                              ('bone_std_cm', bone_length_std(pred)),
+                             ('bone_step_cm', bone_length_step(pred)),
                              ('bone_err_cm', bone_length_error(pred, truth)),
                              ('bone_dir_deg', bone_direction_error(pred, truth))):
         out[name] = {'per_joint': [float(v) for v in per], 'overall': tot}

@@ -61,6 +61,24 @@ def test_bone_length_std_and_error():
     assert np.isclose(per[s], 1.0) and np.isclose(tot, 1.0 / 19)
 
 
+def test_bone_length_step_is_the_frame_to_frame_part():
+    s = SEGMENT_OF_JOINT[WRIST_LEFT]
+    # lengths L, L+2, L, L+2 cm (noise): steps of 2 cm, RMS 2 / sqrt(2)
+    noisy = _seq(4)
+    noisy[1::2, WRIST_LEFT, 1] += 0.02
+    noisy[1::2, HAND_LEFT, 1] += 0.02
+    assert np.isclose(M.bone_length_step(noisy)[0][s], 2.0 / np.sqrt(2))
+    # lengths L ... L+6 cm in 1 cm steps (slow change): std 2 cm, frame-to-frame part 0.71 cm
+    slow = _seq(7)
+    slow[:, WRIST_LEFT, 1] += 0.01 * np.arange(7)
+    slow[:, HAND_LEFT, 1] += 0.01 * np.arange(7)
+    assert np.isclose(M.bone_length_std(slow)[0][s], 2.0)
+    per, tot = M.bone_length_step(slow)
+    assert np.isclose(per[s], 1.0 / np.sqrt(2)) and np.isclose(per[SEGMENT_OF_JOINT[HAND_LEFT]], 0)
+    assert np.isnan(M.bone_length_step(slow[:1])[1])
+    assert 'bone_step_cm' in M.compute_all(slow, slow)
+
+
 def test_bone_direction_error_right_angle():
     truth = _seq(2)
     pred = truth.copy()
