@@ -376,7 +376,11 @@ def _open(path) -> Tuple[Path, Any]:
         f.seek(0)
     except OSError as e:
         raise BagError(f'cannot read bag {p}: {e.strerror or e}') from None
-    if magic != b'\x89MCAP0\r\n':
+    if len(magic) < len(_MAGIC) and _MAGIC.startswith(magic):
+        f.close()
+        raise BagError(f'cannot read bag {p}: it ends before its MCAP header ({len(magic)} bytes: '
+                       f'a recorder that has not written yet, or a file cut at once)')
+    if magic != _MAGIC:
         f.close()
         hint = ' (sqlite3 bags are not supported: convert with ros2 bag convert)' \
             if magic.startswith(b'SQLite') else ''
