@@ -153,7 +153,8 @@ def spin(executor, kind: str) -> None:
     and SIGINT only asks it to stop (raised inside a callback, the C++ layer would log the
     KeyboardInterrupt as a fatal callback error)."""
     if kind != 'events':
-        executor.spin()
+        from skeleton_core.rosnode import spin_until_shutdown
+        spin_until_shutdown(executor)
         return
     import rclpy
     stop = threading.Event()

@@ -28,7 +28,11 @@ def main(argv=None) -> int:
     node.create_subscription(SkeletonArray, args.input, pub.publish, QoSProfile(depth=args.depth),
                              raw=True)
     try:
-        rclpy.spin(node)
+        from rclpy.executors import SingleThreadedExecutor
+        from skeleton_core.rosnode import spin_until_shutdown
+        executor = SingleThreadedExecutor()
+        executor.add_node(node)
+        spin_until_shutdown(executor)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
