@@ -246,7 +246,6 @@ def ignore_further_interrupts() -> None:
         pass
 
 
-
 # spin_until_shutdown: the longest a process goes on after its context was shut down
 SPIN_SLICE_S = 0.25
 
@@ -261,6 +260,7 @@ def spin_until_shutdown(executor, context=None) -> None:
     ctx = context if context is not None else rclpy.get_default_context()
     while ctx.ok():
         executor.spin_once(timeout_sec=SPIN_SLICE_S)
+
 
 # What a configure step reports as one line (a missing or corrupt file, a value the library
 # refuses, a device that does not open): never a traceback
