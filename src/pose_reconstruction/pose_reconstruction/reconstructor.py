@@ -122,7 +122,8 @@ from .correction import CorrectionConfig, check_tracker
 from .profile import from_optional as profile_lengths
 from .length_prior import LengthPrior, LengthPriorConfig
 from .reliability import ReliabilityConfig, ReliabilityEstimator
-from .segment_output import SEG_DIFF, SegmentOutput, SegmentOutputConfig
+from .segment_output import (SEG_DIFF, SegmentOutput, SegmentOutputConfig,
+                             neighbour_direction_spread)
 from .trust import SensorTrust, TrustConfig
 
 METHODS = ('A', 'B', 'C')
@@ -358,9 +359,13 @@ class Reconstructor:
                 # database is trusted more than the sensor
                 root = obs[ROOT] - ((1.0 - alpha) / prep.scale) * (yaw_matrix(yaw) @ res.shift)
             if segments:
+                spread = None
+                if self.segment_output.direction_db_spread and res.neighbours is not None:
+                    Y = self.db.flat.take(res.neighbours, axis=0).reshape(-1, NUM_JOINTS, 3)
+                    spread = neighbour_direction_spread(Y, res.distances)
                 positions = self.segment_output.output(frame, res.positions, w, alpha, yaw=yaw,
                                                        seg_obs=seg_obs, len_obs=len_obs,
-                                                       root=root)
+                                                       root=root, db_spread=spread)
             else:
                 user_bones = user_bone_lengths(self.user_segment_lengths())
                 bones = user_bones if self.output_scale == 'user' else None

@@ -4,8 +4,10 @@ Every segment's direction is a blend of the database solution's and the observed
 weight of the observation is the larger of its expected-error weight (for a segment whose two ends
 are reliable, at or above ``reliable_threshold``; 0 otherwise: ``direction_fusion``, the
 observation's direction error from the user's joint-centre offsets and the segment's length
-against the database's, so a long segment the sensor sees follows it and a short one takes the
-database's direction; ``observation_weight`` when off) and the *trust in the sensor*
+against the database's -- a constant plus, with ``direction_db_spread``, the spread of the K
+neighbours' directions of that segment: where they disagree the database knows it less --, so a
+long segment the sensor sees follows it and a short one takes the database's direction;
+``observation_weight`` when off) and the *trust in the sensor*
 (:mod:`.trust`) times min(1, reliability of the less reliable end / ``reliable_threshold``). The
 segments get constant user lengths (the mean observed length over the first ``length_frames``
 reliable observations of each segment, then frozen; with ``symmetric_lengths`` the left and right
@@ -150,10 +152,26 @@ class SegmentOutputConfig:
         'sensor (in proportion to the observed direction\'s weight in it) and of the root (to '
         'the trust times its reliability fraction); 1 = the same smoothing everywhere',
         range=(1.0, 100.0), public=False)
+    direction_db_spread: bool = param(
+        True, 'segments, direction_fusion: the database solution\'s direction error of each '
+        'segment is the constant 12 deg plus the spread of the K neighbours\' directions (where '
+        'the neighbours disagree the database knows the segment less); false = the constant',
+        public=False)
     smooth_anchored_speed: bool = param(
         True, 'segments, few reliable joints (hips, shoulders and every segment unreliable): a '
         'filled segment with a reliable joint at or below its child keeps the One Euro speed '
         'term, so that the body does not trail the tracked hands and feet', public=False)
+
+
+def neighbour_direction_spread(Y: np.ndarray, dist: np.ndarray) -> np.ndarray:
+    """(19,) the spread of the K neighbours' segment directions (rad^2): ``1 - |m|^2`` of the
+    inverse-distance-weighted mean ``m`` of their unit directions (the mean squared chord to
+    the mean direction; ~ the mean squared angle for small spreads). ``Y`` (K, 20, 3)."""
+    v = Y[:, SEGMENT_CHILD_INDEX] - Y[:, SEGMENT_PARENT_INDEX]
+    u = v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-9)
+    wk = 1.0 / np.maximum(np.asarray(dist, float), 1e-9)
+    m = np.einsum('k,ksd->sd', wk / wk.sum(), u)
+    return 1.0 - np.einsum('sd,sd->s', m, m)
 
 
 class SegmentOutput:
@@ -184,6 +202,7 @@ class SegmentOutput:
         self.direction_fusion = bool(config.direction_fusion)
         self.length_follow_cutoff = float(config.length_follow_cutoff)
         self.smooth_trusted_scale = float(config.smooth_trusted_scale)
+        self.direction_db_spread = bool(config.direction_db_spread)
         # the user's profile lengths (19,), used from the first frame when set (Reconstructor)
         self.profile_lengths: Optional[np.ndarray] = None
         # (observed lengths of each side (19,), reliable observation counts (19,)) -> lengths:
@@ -268,7 +287,8 @@ class SegmentOutput:
                trust: float, yaw: Optional[float] = None,
                seg_obs: Optional[np.ndarray] = None,
                len_obs: Optional[np.ndarray] = None,
-               root: Optional[np.ndarray] = None) -> np.ndarray:
+               root: Optional[np.ndarray] = None,
+               db_spread: Optional[np.ndarray] = None) -> np.ndarray:
         """The output positions (20, 3), sensor frame (module docstring). ``solution`` (20, 3): in the sensor frame,
         or, with ``yaw``, the normalised solution (only its segment directions matter: they are
         turned by ``yaw``). ``seg_obs`` / ``len_obs``: the observed segment vectors (19, 3) and
@@ -292,16 +312,16 @@ class SegmentOutput:
         rel_frac = np.minimum(wmin * (1.0 / max(thr, 1e-6)), 1.0)
         beta = rel_frac * trust
         reliable = wmin >= thr
-        if self.direction_fusion:
-            np.maximum(beta, self._fused_weight(L) * reliable, out=beta)
-        elif self.observation_weight > 0.0:
-            np.maximum(beta, self.observation_weight * reliable, out=beta)
         # filter clock: the stamps' steps where plausible (1 ms - 0.5 s), else 30 Hz
         stamp = int(frame.stamp_ns or 0)
         dt = 1.0 / 30.0
         if self._last_stamp is not None and 1e6 <= stamp - self._last_stamp <= 5e8:
             dt = (stamp - self._last_stamp) * 1e-9
         self._last_stamp = stamp
+        if self.direction_fusion:
+            np.maximum(beta, self._fused_weight(L, db_spread) * reliable, out=beta)
+        elif self.observation_weight > 0.0:
+            np.maximum(beta, self.observation_weight * reliable, out=beta)
         L = self._followed_lengths(L, len_obs, rel_frac * trust, zero, dt)
         u = us + beta[:, None] * (uo - us)
         nu = np.sqrt(np.einsum('sk,sk->s', u, u))
@@ -395,19 +415,28 @@ class SegmentOutput:
         self._length_dev += a * (target - self._length_dev)
         return L + self._length_dev
 
-    def _fused_weight(self, L: np.ndarray) -> np.ndarray:
+    def _fused_weight(self, L: np.ndarray,
+                      db_spread: Optional[np.ndarray] = None) -> np.ndarray:
         """(19,) ``direction_fusion``: the weight of a reliable segment's observed direction,
         ``var_db / (var_db + var_obs)`` (the blend of minimum expected error). ``var_obs``, the
         observed direction's error variance (rad^2): the two ends' joint-centre offsets across a
         segment of length ``L``, ``sigma`` per axis, two axes each: ``4 sigma^2 / L^2`` (``sigma``
         the offset scale the length prior measures on the user from left/right length
         differences; ``_OFFSET_SIGMA`` without it). ``var_db``: the database solution's direction
-        error, 12 deg (``_DB_DIRECTION_VAR``). A long segment the sensor sees (a shank, an upper arm: 5-8
-        deg) follows the sensor; a short one (the hips, the shoulders, the feet: 20-30 deg)
-        takes the database's direction."""
+        error, 12 deg (``_DB_DIRECTION_VAR``) plus ``db_spread`` (19,) when given, the spread of
+        the K neighbours' directions (:func:`neighbour_direction_spread`): on the sensor-model
+        streams the solution's error grows with it (rms 6.6 deg where the neighbours agree within
+        1-3.5 deg, 21.6 deg where they spread 17-53 deg; docs/accuracy.md, seventh round). A long
+        segment the sensor sees (a shank, an upper arm: 5-8 deg) follows the sensor; a short one
+        (the hips, the shoulders, the feet: 20-30 deg) takes the database's direction."""
         sigma = self.offset_sigma() if self.offset_sigma is not None else _OFFSET_SIGMA
         var_obs = 4.0 * sigma * sigma / np.maximum(L, 1e-2) ** 2
-        return _DB_DIRECTION_VAR / (_DB_DIRECTION_VAR + var_obs)
+        var_db = _DB_DIRECTION_VAR
+        if db_spread is not None:
+            # the neighbours' disagreement adds to the database's error (db_spread: the
+            # reconstructor's neighbour_direction_spread, when direction_db_spread)
+            var_db = var_db + db_spread
+        return var_db / (var_db + var_obs)
 
     def _fit_positions(self, vr: np.ndarray, obs: np.ndarray, pull: np.ndarray,
                        L: np.ndarray, seg_rel: Optional[np.ndarray] = None) -> None:

@@ -2,11 +2,15 @@
 weighted by the expected errors of the sensor (joint-centre offsets across the segment) and of the
 database, so that a long segment the sensor sees follows it and a short one takes the database's."""
 import numpy as np
+import pytest
 
 from pose_reconstruction.segment_output import (_SEG_CHAIN, SEG_DIFF, SegmentOutput,
-                                                SegmentOutputConfig)
+                                                SegmentOutputConfig, neighbour_direction_spread)
+from skeleton_core.geometry import yaw_matrix
+from pose_reconstruction.reconstructor import Reconstructor
+from pose_reconstruction.synthetic import random_database
 from skeleton_core.conversions import SkeletonFrame
-from skeleton_core.model import NUM_JOINTS, NUM_SEGMENTS, TRACKED
+from skeleton_core.model import NUM_JOINTS, NUM_SEGMENTS, TRACKED, standard_body
 
 
 def _unit(rng, n):
@@ -14,7 +18,7 @@ def _unit(rng, n):
     return u / np.linalg.norm(u, axis=1, keepdims=True)
 
 
-def _run(L, sigma, **kw):
+def _run(L, sigma, db_spread=None, **kw):
     """One untrusted frame (trust 0, every joint reliable): the output's segment directions and
     the observed and database ones."""
     rng = np.random.default_rng(7)
@@ -27,7 +31,7 @@ def _run(L, sigma, **kw):
     obs = root + _SEG_CHAIN @ (uo * L[:, None])
     solution = root + _SEG_CHAIN @ (ud * L[:, None])
     f = SkeletonFrame(positions=obs, tracking_state=np.full(NUM_JOINTS, TRACKED, np.uint8))
-    out = so.output(f, solution, np.ones(NUM_JOINTS), 0.0)
+    out = so.output(f, solution, np.ones(NUM_JOINTS), 0.0, db_spread=db_spread)
     d = SEG_DIFF @ out
     return d / np.linalg.norm(d, axis=1, keepdims=True), uo, ud
 
@@ -63,3 +67,81 @@ def test_off_is_the_fixed_observation_weight():
     L = np.linspace(0.08, 0.45, NUM_SEGMENTS)
     b = _weight(*_run(L, 0.03, direction_fusion=False, observation_weight=0.3))
     assert np.allclose(b, 0.3, atol=1e-6)
+
+
+def test_neighbour_spread_is_the_mean_squared_angle_about_their_mean_direction():
+    # K neighbours whose every segment is the same direction turned about a perpendicular axis by
+    # +-theta (equal distances): the spread is 1 - cos^2 theta ~ theta^2
+    rng = np.random.default_rng(3)
+    L = np.linspace(0.1, 0.4, NUM_SEGMENTS)
+    base = _unit(rng, NUM_SEGMENTS) * L[:, None]
+    theta = np.radians(10.0)
+    Y = []
+    for sign in (1, -1, 1, -1):
+        v = np.empty_like(base)
+        for s in range(NUM_SEGMENTS):
+            axis = np.cross(base[s], [0.0, 0.0, 1.0])
+            axis /= np.linalg.norm(axis)
+            k = np.cross(axis, base[s])        # Rodrigues about `axis` (perpendicular to base)
+            v[s] = np.cos(theta) * base[s] + sign * np.sin(theta) * k
+        Y.append(_SEG_CHAIN @ v)
+    Y = np.array(Y)
+    sp = neighbour_direction_spread(Y, np.ones(len(Y)))
+    assert np.allclose(sp, np.sin(theta) ** 2, atol=1e-9)
+    # the directions do not depend on the heading: turning every neighbour changes nothing
+    turned = Y @ yaw_matrix(0.7).T
+    assert np.allclose(neighbour_direction_spread(turned, np.ones(len(Y))), sp, atol=1e-12)
+    # identical neighbours: no spread; a far neighbour (inverse-distance weight) counts little
+    assert np.allclose(neighbour_direction_spread(np.repeat(Y[:1], 5, axis=0), np.ones(5)), 0.0,
+                       atol=1e-12)
+    near_far = neighbour_direction_spread(Y[:2], np.array([1.0, 100.0]))
+    assert (near_far < 0.05 * sp).all()
+
+
+def test_where_the_neighbours_disagree_the_sensor_weighs_more():
+    # direction_db_spread: the database's error is the constant plus the neighbours' spread
+    L = np.linspace(0.08, 0.45, NUM_SEGMENTS)
+    sigma = 0.03
+    spread = np.linspace(0.0, np.radians(25.0) ** 2, NUM_SEGMENTS)
+    b = _weight(*_run(L, sigma, db_spread=spread))
+    var_obs = 4 * sigma ** 2 / L ** 2
+    var_db = np.radians(12.0) ** 2 + spread
+    assert np.allclose(b, var_db / (var_db + var_obs), atol=1e-6)
+    b0 = _weight(*_run(L, sigma))
+    assert (b[1:] > b0[1:] + 1e-3).all() and abs(b[0] - b0[0]) < 1e-9
+
+
+@pytest.mark.parametrize('on', [True, False])
+def test_the_reconstructor_gives_the_output_its_neighbours_spread(on, monkeypatch):
+    """Method C hands the segment output the spread of the K neighbours it solved with (the
+    database's own rows, by the optimizer's indices and distances); off: none."""
+    db = random_database(800, seed=5)
+    r = Reconstructor(db, method='C', direction_db_spread=on)
+    seen = []
+    orig = r.segment_output.output
+
+    def spy(*a, **kw):
+        seen.append(kw.get('db_spread'))
+        return orig(*a, **kw)
+
+    monkeypatch.setattr(r.segment_output, 'output', spy)
+    solve = r.core.solve
+    results = []
+
+    def spy_solve(*a, **kw):
+        res = solve(*a, **kw)
+        results.append(res)
+        return res
+
+    monkeypatch.setattr(r.core, 'solve', spy_solve)
+    rest = standard_body().rest_positions() + np.array([2.5, 0.0, -0.8])
+    r.process(SkeletonFrame(positions=rest, tracking_state=np.full(NUM_JOINTS, TRACKED, np.uint8),
+                            user_id=1, stamp_ns=0))
+    if not on:
+        assert seen == [None]
+        return
+    res = results[-1]
+    want = neighbour_direction_spread(db.flat[res.neighbours].reshape(-1, NUM_JOINTS, 3),
+                                      res.distances)
+    assert seen[0].shape == (NUM_SEGMENTS,) and np.allclose(seen[0], want)
+    assert (seen[0] > 0).all()   # random postures: the neighbours disagree
