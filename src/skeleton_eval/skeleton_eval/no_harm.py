@@ -127,7 +127,8 @@ def to_markdown(per_class: Dict[str, Dict[str, Dict]], method: str = 'C',
                 title: str = '') -> str:
     """The per-segment table: ``per_class`` ``{class: {method name: accumulator}}``; one row per
     segment, per class ``method / reference (difference)`` in deg, a difference above ``tol``
-    in bold; then the count of harmed segments."""
+    in bold; then the count of harmed segments, each with its number of segment-frames (a
+    cell seen on a few dozen frames, e.g. a limb the class's object hides, is a few events)."""
     classes = [k for k, v in per_class.items() if method in v and reference in v]
     if not classes:
         return ''
@@ -153,5 +154,6 @@ def to_markdown(per_class: Dict[str, Dict[str, Dict]], method: str = 'C',
     harmed = [(k, r) for k in classes for r in cmp[k] if r['harm']]
     lines += ['', f'{len(harmed)} of {len(classes) * NUM_SEGMENTS} segment-class cells more than '
               f'{tol:g} deg worse than {reference}' + (': ' + ', '.join(
-                  f'{k} {r["segment"]} +{r["diff"]:.1f}' for k, r in harmed) if harmed else '.')]
+                  f'{k} {r["segment"]} +{r["diff"]:.1f} ({r["count"]} frames)'
+                  for k, r in harmed) if harmed else '.')]
     return '\n'.join(lines) + '\n'
