@@ -25,7 +25,10 @@ Terms (each 1 = plausible):
   onto a point their own lengths allow keeps every bone length. A jump from a length the bone
   term rejects to one it accepts is a failure ending, not a snap onset (issue 34: a wrist that
   slid onto an object slower than the speed limit, rejected by its forearm length, jumped back
-  and was then latched for 1.5 s on the right place, the forearm filled by the database).
+  and was then latched for 1.5 s on the right place, the forearm filled by the database). So is
+  a jump away from a place the segment held for fewer than ``TRANSIENT_FRAMES`` frames (since
+  it was tracked, or since its last jump): that place was the transient (a real Kinect v2 leg
+  that starts a recording 36 cm off and is right a frame later).
 * **left/right against the heading** — the shoulder and the hip lines each give a heading; the
   body heading follows the girdles that agree with it at ``heading_rate`` per frame. A girdle
   more than ``lr_flip_deg`` off the body heading while the other girdle agrees with it has its
@@ -138,6 +141,11 @@ _LIMB = set(LIMB_JOINTS['left_arm'][1:] + LIMB_JOINTS['right_arm'][1:]
 # a TRACKED ankle says the floor is at most _ANKLE_HEIGHT below it (the standard body's ankle
 # above its foot joint)
 FLOOR_QUANTILE = 0.25
+# segment speed: a place a segment held for fewer frames than this (since it was tracked, or
+# since its last jump) is a transient; a jump away from it is a failure ending, not a snap onset
+# (issue 34: a Kinect v2 leg that starts a recording 36 cm off and jumps to the right place one
+# frame later was latched unreliable for 1.5 s)
+TRANSIENT_FRAMES = 3
 _ANKLE_HEIGHT = float(-standard_body().rest_offsets[FOOT_LEFT][2])
 
 
@@ -238,6 +246,8 @@ class PlausibilityCheck:
         self.floor: Optional[float] = None
         self._last_rel: Optional[np.ndarray] = None
         self._latch = np.zeros(NUM_SEGMENTS, int)
+        # frames each segment has stayed where it is (both ends TRACKED, no jump)
+        self._held = np.zeros(NUM_SEGMENTS, np.int64)
         self._last_both = np.zeros(NUM_SEGMENTS, bool)
         self._last_bone = np.ones(NUM_SEGMENTS)   # last frame's bone-length score per segment
         self._anchor: Optional[np.ndarray] = None
@@ -306,7 +316,8 @@ class PlausibilityCheck:
         """A segment whose child jumps faster than ``max_segment_speed_m_s`` relative to its parent
         is latched implausible until it jumps again (the snap ends) or ``latch_frames`` pass.
         ``bone`` (19,): this frame's bone-length score; a jump from a length the bone term
-        rejected to one it accepts is the end of a failure, not a snap onset (module docstring)."""
+        rejected to one it accepts, or from a place held fewer than ``TRANSIENT_FRAMES`` frames,
+        is the end of a failure, not a snap onset (module docstring)."""
         score = np.ones(NUM_SEGMENTS)
         if bone is None:
             bone = np.ones(NUM_SEGMENTS)
@@ -314,9 +325,13 @@ class PlausibilityCheck:
             diff = rel - self._last_rel
             step = np.sqrt((diff * diff).sum(axis=1))      # np.linalg.norm's arithmetic
             # TRACKED in both frames: a joint re-acquired after an occlusion may jump
-            jump = both & self._last_both & (step > self.max_step)
-            # the jump back (a latched snap ending, or a wrong length becoming right)
-            ended = jump & ((self._latch > 0) | ((self._last_bone < 1.0) & (bone >= 1.0)))
+            steady = both & self._last_both
+            jump = steady & (step > self.max_step)
+            # the jump back (a latched snap ending, a wrong length becoming right, or a jump
+            # away from a place just taken: the transient was that place)
+            ended = jump & ((self._latch > 0) | ((self._last_bone < 1.0) & (bone >= 1.0))
+                            | (self._held < TRANSIENT_FRAMES))
+            self._held = np.where(steady & ~jump, self._held + 1, 0)
             self._latch[jump & ~ended] = 1
             self._latch[ended] = 0
             on = self._latch > 0
@@ -416,7 +431,7 @@ class PlausibilityCheck:
             self._anchor, self._anchor_ok, self._jumped_a, self.jump_m, self.jump_frames,
             not first, self._last_rel if has else seg, has, self._last_both, self._latch,
             self._last_bone, BLAME, self.bone_tolerance, self.bone_tolerance_m, self.bone_reject, self.max_step,
-            self.latch_frames, self._k_lr, _GIRDLES, _ARMS, _LEGS, self.lr_flip,
+            self.latch_frames, self._held, TRANSIENT_FRAMES, self._k_lr, _GIRDLES, _ARMS, _LEGS, self.lr_flip,
             self.heading_rate, self.lr_unswap, self._k_ring, self._k_sorted, self._k_meta,
             self._k_floor, _FEET, _ANKLE_HEIGHT, self.floor_tolerance, self.floor_reject,
             FLOOR_QUANTILE, out_seg, out_lr, out_fl, v, flags)
@@ -464,7 +479,7 @@ class PlausibilityCheck:
                                    self._last_both, self._latch, self._last_bone, BLAME,
                                    self.bone_tolerance,
                                    self.bone_tolerance_m, self.bone_reject, self.max_step,
-                                   self.latch_frames)
+                                   self.latch_frames, self._held, TRANSIENT_FRAMES)
             self._last_rel = seg
             self._last_both = both
         else:

@@ -117,10 +117,12 @@ def _eq18_step(p, ln, ref, tracked, rt, rp, use_rp, judge_tracked, d_min, theta_
 
 
 def _segment_terms(seg, seg_len, both, ref, last_rel, has_last, last_both, latch, last_bone,
-                   blame, tol, tol_m, reject, max_step, latch_frames):
+                   blame, tol, tol_m, reject, max_step, latch_frames, held, transient):
     """PlausibilityCheck's bone-length and segment-speed terms and their blame (its ``_bones``,
-    ``_speed`` and the min over BLAME): returns the per-joint value (J,); ``latch`` and
-    ``last_bone`` (the bone-length scores) are updated."""
+    ``_speed`` and the min over BLAME): returns the per-joint value (J,); ``latch``,
+    ``last_bone`` (the bone-length scores) and ``held`` (frames each segment has stayed where it
+    is, TRACKED, without a jump) are updated; a jump from a place held fewer than ``transient``
+    frames is the end of a failure."""
     ns = seg.shape[0]
     nj = blame.shape[1]
     score = np.empty(ns)
@@ -139,9 +141,16 @@ def _segment_terms(seg, seg_len, both, ref, last_rel, has_last, last_both, latch
                 dd = seg[s, k] - last_rel[s, k]
                 st += dd * dd
             st = math.sqrt(st)
-            jump = both[s] and last_both[s] and st > max_step
-            # the jump back: a latched snap ending, or a rejected length becoming right
-            ended = jump and (latch[s] > 0 or (last_bone[s] < 1.0 and b >= 1.0))
+            steady = both[s] and last_both[s]
+            jump = steady and st > max_step
+            # the jump back: a latched snap ending, a rejected length becoming right, or a
+            # jump away from a place just taken (a transient)
+            ended = jump and (latch[s] > 0 or (last_bone[s] < 1.0 and b >= 1.0)
+                              or held[s] < transient)
+            if steady and not jump:
+                held[s] += 1
+            else:
+                held[s] = 0
             if jump and not ended:
                 latch[s] = 1
             if ended:
@@ -231,14 +240,16 @@ def warm_up() -> float:
     seg = np.zeros((ns, 3))
     both = np.ones(ns, bool)
     segment_terms(seg, ones_s, both, ones_s, seg, True, both, np.zeros(ns, np.int64),
-                  np.ones(ns), np.zeros((ns, nj), bool), 0.4, 0.03, 1.0, 0.27, 45)
+                  np.ones(ns), np.zeros((ns, nj), bool), 0.4, 0.03, 1.0, 0.27, 45,
+                  np.zeros(ns, np.int64), 3)
     skeleton_jump(p, tracked, np.zeros((nj, 3)), tracked.copy(), np.zeros(1, np.int64), 0.35, 15)
     idx4 = np.arange(4, dtype=np.int64)
     out = [np.empty(nj) for _ in range(4)]
     plausibility_step(p, tracked, seg, ones_s, both, ones_s, np.zeros((nj, 3)), tracked.copy(),
                       np.zeros(1, np.int64), 0.35, 15, True, seg, True, both,
                       np.zeros(ns, np.int64), np.ones(ns), np.zeros((ns, nj), bool), 0.4, 0.03,
-                      1.0, 0.27, 45, np.zeros(2), idx4, tracked.copy(), tracked.copy(), 1.9, 0.3, True,
+                      1.0, 0.27, 45, np.zeros(ns, np.int64), 3, np.zeros(2), idx4,
+                      tracked.copy(), tracked.copy(), 1.9, 0.3, True,
                       np.zeros(150), np.zeros(150), np.zeros(4, np.int64), np.zeros(2), idx4,
                       0.08, 0.05, 0.12, 0.25, out[0], out[1], out[2], out[3],
                       np.zeros(4, np.int64))
@@ -261,7 +272,7 @@ def _nmin(a, b):
 def _plausibility_step(p, tracked, seg, seg_len, both, ref,
                        anchor, anchor_ok, jumped, jump_m, jump_frames, check_jump,
                        last_rel, has_last, last_both, latch, last_bone, blame, tol, tol_m,
-                       reject, max_step, latch_frames,
+                       reject, max_step, latch_frames, held, transient,
                        lr_state, girdles, arms, legs, lr_flip, heading_rate, lr_unswap,
                        fl_ring, fl_sorted, fl_meta, fl_state, feet, ankle_height,
                        floor_tolerance, floor_reject, floor_quantile,
@@ -283,7 +294,8 @@ def _plausibility_step(p, tracked, seg, seg_len, both, ref,
         return True
     flags[0] = 0
     blamed = segment_terms(seg, seg_len, both, ref, last_rel, has_last, last_both, latch,
-                           last_bone, blame, tol, tol_m, reject, max_step, latch_frames)
+                           last_bone, blame, tol, tol_m, reject, max_step, latch_frames,
+                           held, transient)
     for j in range(nj):
         out_seg[j] = blamed[j]
         out_lr[j] = 1.0

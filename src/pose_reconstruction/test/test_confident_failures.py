@@ -117,6 +117,57 @@ def test_tracked_joint_snapped_away_is_unreliable_within_3_frames(joints):
 
 
 @pytest.mark.parametrize('jit', [True, False])
+@pytest.mark.parametrize('held', [1, 2, 40])
+def test_a_jump_away_from_a_place_just_taken_ends_a_failure(jit, held):
+    """A real Kinect v2 recording (UI-PRMD m08_s02_e02) starts with the left leg 36 cm off, one
+    frame later it is right: that jump is the end of a transient, not a snap onset, so the leg
+    is reliable after the Eq. 8 delay instead of latched for ``latch_frames`` (1.5 s) where the
+    sensor is right. A place held for ``TRANSIENT_FRAMES`` (3) frames or more is the user's:
+    a jump away from it is a snap onset, latched as before (held 40)."""
+    from skeleton_core.model import ANKLE_LEFT, HIP_LEFT, KNEE_LEFT
+    pos, st = _standing()
+    leg = [KNEE_LEFT, ANKLE_LEFT, FOOT_LEFT]
+    # the odd place: the whole leg turned 50 deg forward about the hip (the knee ~36 cm away,
+    # every length kept)
+    c, s_ = np.cos(np.radians(50.0)), np.sin(np.radians(50.0))
+    turn = np.array([[c, 0.0, -s_], [0.0, 1.0, 0.0], [s_, 0.0, c]])
+
+    def odd(p):
+        q = p.copy()
+        q[:, leg] = p[:, [HIP_LEFT]] + (p[:, leg] - p[:, [HIP_LEFT]]) @ turn.T
+        return q
+    start = 30                                  # tracked from frame 0; the odd place from 30
+    pos[start:start + held] = odd(pos[start:start + held])
+    # frames 0-29: the user's place; then 'held' frames 36 cm off; then back
+    r = ReliabilityEstimator()
+    if not jit:
+        r._jit = False
+        r.plausibility._jit = False
+    if held < 3:
+        # the odd place is the stream's first: the recording starts there
+        pos, st = pos[start:], st[start:]
+        back = held
+    else:
+        back = start + held
+    R = np.array([r.update(p, s) for p, s in zip(pos, st)])
+    after = R[back + 4:back + 40, KNEE_LEFT]
+    if held < 3:
+        assert after.min() > 0.8                # a transient's end: reliable within 4 frames
+    else:
+        assert R[start + 1:start + held, KNEE_LEFT].max() < 0.5   # the snap: rejected
+        assert after.min() > 0.8                # its jump back ends it (as before)
+        # and a snap onset after a steady place is latched: the same jump without the way back
+        pos2, st2 = _standing()
+        pos2[start:] = odd(pos2[start:])
+        r2 = ReliabilityEstimator()
+        if not jit:
+            r2._jit = False
+            r2.plausibility._jit = False
+        R2 = np.array([r2.update(p, s) for p, s in zip(pos2, st2)])
+        assert R2[start + 1:start + 40, KNEE_LEFT].max() < 0.5
+
+
+@pytest.mark.parametrize('jit', [True, False])
 def test_a_jump_back_to_a_right_length_ends_a_failure_not_starts_one(jit):
     """Class c: a wrist and hand slide onto an object slower than the speed limit (no snap onset
     seen), the forearm length rejected by the bone term; then they jump back to the body. The
