@@ -28,7 +28,11 @@ Terms (each 1 = plausible):
   and was then latched for 1.5 s on the right place, the forearm filled by the database). So is
   a jump away from a place the segment held for fewer than ``TRANSIENT_FRAMES`` frames (since
   it was tracked, or since its last jump): that place was the transient (a real Kinect v2 leg
-  that starts a recording 36 cm off and is right a frame later).
+  that starts a recording 36 cm off and is right a frame later). After its jump frame a latched
+  segment scores the trust in the sensor (:attr:`PlausibilityCheck.sensor_trust`, set by the
+  reconstructor from :mod:`.trust`; 0 without one): where the database explains the user the
+  snapped place is filled from it, where it does not its fill would be worse than the sensor's
+  new place (a real Kinect v2 knee catching up with a hurdle step was filled 70 cm off).
 * **left/right against the heading** — the shoulder and the hip lines each give a heading; the
   body heading follows the girdles that agree with it at ``heading_rate`` per frame. A girdle
   more than ``lr_flip_deg`` off the body heading while the other girdle agrees with it has its
@@ -246,6 +250,9 @@ class PlausibilityCheck:
         self.floor: Optional[float] = None
         self._last_rel: Optional[np.ndarray] = None
         self._latch = np.zeros(NUM_SEGMENTS, int)
+        # the trust in the sensor (trust.py), set by the owner after each frame: a latched
+        # segment (after its jump frame) scores the trust
+        self.sensor_trust = 0.0
         # frames each segment has stayed where it is (both ends TRACKED, no jump)
         self._held = np.zeros(NUM_SEGMENTS, np.int64)
         self._last_both = np.zeros(NUM_SEGMENTS, bool)
@@ -305,6 +312,12 @@ class PlausibilityCheck:
         self._anchor_ok |= tracked
         return False
 
+    def _latched_score(self) -> float:
+        """The speed term of a latched segment after its jump frame: the trust in the sensor (0
+        where the database explains the user: the snapped place is filled from it; up to 1 where
+        it does not: its fill would be worse than the sensor's new place)."""
+        return min(max(float(self.sensor_trust), 0.0), 1.0)
+
     def _bones(self, seg_len, both, ref) -> np.ndarray:
         with np.errstate(invalid='ignore'):
             excess = np.abs(seg_len - ref) - (self.bone_tolerance * ref + self.bone_tolerance_m)
@@ -337,7 +350,8 @@ class PlausibilityCheck:
             on = self._latch > 0
             self._latch[on] += 1
             self._latch[self._latch > self.latch_frames] = 0
-            score[(self._latch > 0) | jump] = 0.0
+            score[self._latch > 0] = self._latched_score()
+            score[jump] = 0.0
         self._last_rel = rel
         self._last_both = both
         self._last_bone = bone
@@ -431,7 +445,8 @@ class PlausibilityCheck:
             self._anchor, self._anchor_ok, self._jumped_a, self.jump_m, self.jump_frames,
             not first, self._last_rel if has else seg, has, self._last_both, self._latch,
             self._last_bone, BLAME, self.bone_tolerance, self.bone_tolerance_m, self.bone_reject, self.max_step,
-            self.latch_frames, self._held, TRANSIENT_FRAMES, self._k_lr, _GIRDLES, _ARMS, _LEGS, self.lr_flip,
+            self.latch_frames, self._held, TRANSIENT_FRAMES, self._latched_score(), self._k_lr,
+            _GIRDLES, _ARMS, _LEGS, self.lr_flip,
             self.heading_rate, self.lr_unswap, self._k_ring, self._k_sorted, self._k_meta,
             self._k_floor, _FEET, _ANKLE_HEIGHT, self.floor_tolerance, self.floor_reject,
             FLOOR_QUANTILE, out_seg, out_lr, out_fl, v, flags)
@@ -479,7 +494,8 @@ class PlausibilityCheck:
                                    self._last_both, self._latch, self._last_bone, BLAME,
                                    self.bone_tolerance,
                                    self.bone_tolerance_m, self.bone_reject, self.max_step,
-                                   self.latch_frames, self._held, TRANSIENT_FRAMES)
+                                   self.latch_frames, self._held, TRANSIENT_FRAMES,
+                                   self._latched_score())
             self._last_rel = seg
             self._last_both = both
         else:

@@ -152,6 +152,10 @@ class ReconstructorConfig(QueryConfig):
     float_root: bool = param(
         True, 'when the root joint is unreliable, match the database translation-invariantly '
         'and place the root (and the query) where the neighbours put it', public=False)
+    latch_trust: bool = param(
+        True, 'a segment the plausibility stage latched after a jump (a snap) scores the '
+        'trust in the sensor after its jump frame: where the database does not explain the '
+        'user its fill would be worse than the sensor\'s new place', public=False)
     trust: TrustConfig = nested(TrustConfig)
     lengths: LengthPriorConfig = nested(LengthPriorConfig)
     segments: SegmentOutputConfig = nested(SegmentOutputConfig)
@@ -190,6 +194,7 @@ class Reconstructor:
         self.config = cfg
         self.output_mode = cfg.output_mode
         self.float_root = bool(cfg.float_root)
+        self.latch_trust = bool(cfg.latch_trust)
         self.method = method
         self.name = method
         if correction_stage not in CORRECTION_STAGES:
@@ -353,6 +358,8 @@ class Reconstructor:
             rms = float(np.sqrt(res.distances[0] / max(wsum, 1e-6)))
             alpha = self.trust.update(obs, w, rms)
             self.trust_sensor = alpha
+            if self.latch_trust:
+                self.reliability.plausibility.sensor_trust = alpha
             root = None
             if res.shift is not None and alpha < 1.0:
                 # the root towards where the database neighbours place it, as far as the

@@ -117,12 +117,14 @@ def _eq18_step(p, ln, ref, tracked, rt, rp, use_rp, judge_tracked, d_min, theta_
 
 
 def _segment_terms(seg, seg_len, both, ref, last_rel, has_last, last_both, latch, last_bone,
-                   blame, tol, tol_m, reject, max_step, latch_frames, held, transient):
+                   blame, tol, tol_m, reject, max_step, latch_frames, held, transient,
+                   latched_score):
     """PlausibilityCheck's bone-length and segment-speed terms and their blame (its ``_bones``,
     ``_speed`` and the min over BLAME): returns the per-joint value (J,); ``latch``,
     ``last_bone`` (the bone-length scores) and ``held`` (frames each segment has stayed where it
     is, TRACKED, without a jump) are updated; a jump from a place held fewer than ``transient``
-    frames is the end of a failure."""
+    frames is the end of a failure; a latched segment (after its jump frame) scores
+    ``latched_score``."""
     ns = seg.shape[0]
     nj = blame.shape[1]
     score = np.empty(ns)
@@ -159,8 +161,10 @@ def _segment_terms(seg, seg_len, both, ref, last_rel, has_last, last_both, latch
                 latch[s] += 1
             if latch[s] > latch_frames:
                 latch[s] = 0
-            if latch[s] > 0 or jump:
+            if jump:
                 sp = 0.0
+            elif latch[s] > 0:
+                sp = latched_score
         score[s] = min(b, sp)
         last_bone[s] = b
     out = np.ones(nj)
@@ -241,14 +245,14 @@ def warm_up() -> float:
     both = np.ones(ns, bool)
     segment_terms(seg, ones_s, both, ones_s, seg, True, both, np.zeros(ns, np.int64),
                   np.ones(ns), np.zeros((ns, nj), bool), 0.4, 0.03, 1.0, 0.27, 45,
-                  np.zeros(ns, np.int64), 3)
+                  np.zeros(ns, np.int64), 3, 0.0)
     skeleton_jump(p, tracked, np.zeros((nj, 3)), tracked.copy(), np.zeros(1, np.int64), 0.35, 15)
     idx4 = np.arange(4, dtype=np.int64)
     out = [np.empty(nj) for _ in range(4)]
     plausibility_step(p, tracked, seg, ones_s, both, ones_s, np.zeros((nj, 3)), tracked.copy(),
                       np.zeros(1, np.int64), 0.35, 15, True, seg, True, both,
                       np.zeros(ns, np.int64), np.ones(ns), np.zeros((ns, nj), bool), 0.4, 0.03,
-                      1.0, 0.27, 45, np.zeros(ns, np.int64), 3, np.zeros(2), idx4,
+                      1.0, 0.27, 45, np.zeros(ns, np.int64), 3, 0.0, np.zeros(2), idx4,
                       tracked.copy(), tracked.copy(), 1.9, 0.3, True,
                       np.zeros(150), np.zeros(150), np.zeros(4, np.int64), np.zeros(2), idx4,
                       0.08, 0.05, 0.12, 0.25, out[0], out[1], out[2], out[3],
@@ -272,7 +276,7 @@ def _nmin(a, b):
 def _plausibility_step(p, tracked, seg, seg_len, both, ref,
                        anchor, anchor_ok, jumped, jump_m, jump_frames, check_jump,
                        last_rel, has_last, last_both, latch, last_bone, blame, tol, tol_m,
-                       reject, max_step, latch_frames, held, transient,
+                       reject, max_step, latch_frames, held, transient, latched_score,
                        lr_state, girdles, arms, legs, lr_flip, heading_rate, lr_unswap,
                        fl_ring, fl_sorted, fl_meta, fl_state, feet, ankle_height,
                        floor_tolerance, floor_reject, floor_quantile,
@@ -295,7 +299,7 @@ def _plausibility_step(p, tracked, seg, seg_len, both, ref,
     flags[0] = 0
     blamed = segment_terms(seg, seg_len, both, ref, last_rel, has_last, last_both, latch,
                            last_bone, blame, tol, tol_m, reject, max_step, latch_frames,
-                           held, transient)
+                           held, transient, latched_score)
     for j in range(nj):
         out_seg[j] = blamed[j]
         out_lr[j] = 1.0

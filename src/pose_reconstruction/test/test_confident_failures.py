@@ -168,6 +168,46 @@ def test_a_jump_away_from_a_place_just_taken_ends_a_failure(jit, held):
 
 
 @pytest.mark.parametrize('jit', [True, False])
+@pytest.mark.parametrize('trust', [0.0, 0.6, 1.0])
+def test_a_latched_segment_scores_the_trust_in_the_sensor(jit, trust):
+    """After its jump frame a latched segment (a snap onset) scores the trust in the sensor:
+    0 where the database explains the user (the snapped place is filled from it, as before),
+    up to 1 where it does not (its fill would be worse than the sensor's new place: a real
+    Kinect v2 knee that catches up with a hurdle step, latched 1.5 s and filled 70 cm off).
+    The jump frame itself scores 0 whatever the trust."""
+    pos, st = _standing()
+    onset = 60
+    pos[onset:, [WRIST_LEFT, HAND_LEFT]] += np.array([0.0, 0.0, 0.3])
+    p = PlausibilityCheck(fps=30.0)
+    p._jit = jit
+    p.sensor_trust = trust
+    from skeleton_core.model import segment_lengths, standard_body
+    ref = segment_lengths(standard_body().rest_positions())
+    v = np.array([p.update(q, s, ref) for q, s in zip(pos, st)])
+    assert v[onset, WRIST_LEFT] == 0.0
+    after = v[onset + 1:onset + 30, WRIST_LEFT]
+    # the speed term scores the trust; the other terms (the forearm's length, 30 cm moved) ~1
+    assert (after <= trust + 1e-12).all() and (after >= min(trust, 0.9)).all()
+    assert v[:onset, WRIST_LEFT].min() == 1.0
+
+
+def test_the_reconstructor_hands_its_trust_to_the_plausibility_stage():
+    from pose_reconstruction.reconstructor import Reconstructor
+    from pose_reconstruction.synthetic import random_database
+    from skeleton_core.conversions import SkeletonFrame
+    db = random_database(400, seed=2)
+    pos, st = _standing(n=20)
+    for on in (True, False):
+        r = Reconstructor(db, method='C', latch_trust=on)
+        for i, (q, s) in enumerate(zip(pos, st)):
+            r.process(SkeletonFrame(positions=q, tracking_state=s, user_id=1,
+                                    stamp_ns=i * 33_333_333))
+        assert r.trust_sensor > 0.0      # a random database is far from a standing user
+        got = r.reliability.plausibility.sensor_trust
+        assert got == (r.trust_sensor if on else 0.0)
+
+
+@pytest.mark.parametrize('jit', [True, False])
 def test_a_jump_back_to_a_right_length_ends_a_failure_not_starts_one(jit):
     """Class c: a wrist and hand slide onto an object slower than the speed limit (no snap onset
     seen), the forearm length rejected by the bone term; then they jump back to the body. The
