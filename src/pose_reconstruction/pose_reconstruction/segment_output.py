@@ -31,7 +31,12 @@ end with reliability 0) gets ``smooth_filled_scale`` times the cutoff (1 at or a
 ``smooth_trusted_scale`` times the cutoff (in proportion to the observed direction's weight in
 it; the root: to the trust times its reliability fraction): the smoothing's lag no longer bends
 what the sensor gives right, the full smoothing stays on what the database fills in.
-``smooth_anchored_speed``: see :mod:`.reconstructor`.
+``filled_memory_s``: a segment the database fills (an end below ``reliable_threshold``) starts
+from where the sensor last saw it reliably, in proportion to the trust in the sensor times its
+unreliable fraction, the memory fading as ``exp(-age / filled_memory_s)``: where the database
+does not explain the user (trust ~1, the real recordings) a glitch of a few frames keeps the last
+seen direction, not a fill from postures unlike the user's; where it does (trust ~0) nothing
+changes. ``smooth_anchored_speed``: see :mod:`.reconstructor`.
 ``smooth_lead`` (prediction correction, default 1): on the reliable
 segments (in proportion to ``min(1, reliability / reliable_threshold)`` of the less reliable
 end) and the root, the low-pass lag is added back along the smoothed velocity
@@ -157,6 +162,12 @@ class SegmentOutputConfig:
         'segment is the constant 12 deg plus the spread of the K neighbours\' directions (where '
         'the neighbours disagree the database knows the segment less); false = the constant',
         public=False)
+    filled_memory_s: float = param(
+        0.5, 'segments: a segment the database fills (an end below reliable_threshold) starts '
+        'from where the sensor last saw it, in proportion to the trust in the sensor, the '
+        'memory fading with this time constant (s); where the database does not explain the '
+        'user (trust ~1) a glitch of a few frames keeps the last seen direction instead of the '
+        'database\'s fill; 0 = off', range=(0.0, 100.0), public=False)
     smooth_anchored_speed: bool = param(
         True, 'segments, few reliable joints (hips, shoulders and every segment unreliable): a '
         'filled segment with a reliable joint at or below its child keeps the One Euro speed '
@@ -203,6 +214,7 @@ class SegmentOutput:
         self.length_follow_cutoff = float(config.length_follow_cutoff)
         self.smooth_trusted_scale = float(config.smooth_trusted_scale)
         self.direction_db_spread = bool(config.direction_db_spread)
+        self.filled_memory_s = float(config.filled_memory_s)
         # the user's profile lengths (19,), used from the first frame when set (Reconstructor)
         self.profile_lengths: Optional[np.ndarray] = None
         # (observed lengths of each side (19,), reliable observation counts (19,)) -> lengths:
@@ -222,6 +234,9 @@ class SegmentOutput:
         self._prior_cache: Optional[tuple] = None  # (prior, sides, counts, fused lengths)
         # length_follow_cutoff: the low-passed deviation of the observed lengths from L (19,)
         self._length_dev = np.zeros(NUM_SEGMENTS)
+        # filled_memory_s: each segment's last reliably observed direction and its age (s)
+        self._seen_u = np.zeros((NUM_SEGMENTS, 3))
+        self._seen_age = np.full(NUM_SEGMENTS, np.inf)
         mc, b, dc = self.smooth
         self._last_stamp: Optional[int] = None
         self._filter_clock_ns = 0
@@ -323,6 +338,8 @@ class SegmentOutput:
         elif self.observation_weight > 0.0:
             np.maximum(beta, self.observation_weight * reliable, out=beta)
         L = self._followed_lengths(L, len_obs, rel_frac * trust, zero, dt)
+        if self.filled_memory_s > 0.0:
+            us = self._remembered(us, uo, reliable & ~zero, rel_frac, trust, dt)
         u = us + beta[:, None] * (uo - us)
         nu = np.sqrt(np.einsum('sk,sk->s', u, u))
         small = nu <= 1e-9
@@ -391,6 +408,30 @@ class SegmentOutput:
         else:
             v = vr[:NUM_SEGMENTS]
         return vr[NUM_SEGMENTS] + _SEG_CHAIN @ v
+
+    def _remembered(self, us: np.ndarray, uo: np.ndarray, seen: np.ndarray,
+                    rel_frac: np.ndarray, trust: float, dt: float) -> np.ndarray:
+        """(19, 3) ``filled_memory_s``: the database directions ``us`` of the segments not seen
+        reliably now turned towards their last reliably observed direction, by ``trust`` times
+        ``exp(-age / filled_memory_s)`` times the unreliable fraction ``1 - rel_frac``; the
+        directions of ``seen`` (19,) segments are remembered (age 0)."""
+        self._seen_age += dt
+        if seen.any():
+            self._seen_u[seen] = uo[seen]
+            self._seen_age[seen] = 0.0
+        if trust <= 0.0:
+            return us
+        m = trust * np.exp(-self._seen_age / self.filled_memory_s) * (1.0 - rel_frac)
+        act = (m > 1e-3) & ~seen
+        if not act.any():
+            return us
+        out = us.copy()
+        v = us[act] + m[act, None] * (self._seen_u[act] - us[act])
+        n = np.linalg.norm(v, axis=1)
+        good = n > 1e-9
+        idx = np.nonzero(act)[0][good]
+        out[idx] = v[good] / n[good, None]
+        return out
 
     def _followed_lengths(self, L: np.ndarray, len_obs: np.ndarray, follow: np.ndarray,
                           zero: np.ndarray, dt: float) -> np.ndarray:
