@@ -153,7 +153,7 @@ class SegmentOutputConfig:
         'its frame-to-frame noise is not; 0 = constant lengths', range=(0.0, 100.0),
         public=False)
     smooth_trusted_scale: float = param(
-        2.0, 'segments: cutoff factor of the smoothing of a segment the output takes from the '
+        4.0, 'segments: cutoff factor of the smoothing of a segment the output takes from the '
         'sensor (in proportion to the observed direction\'s weight in it) and of the root (to '
         'the trust times its reliability fraction); 1 = the same smoothing everywhere',
         range=(1.0, 100.0), public=False)
