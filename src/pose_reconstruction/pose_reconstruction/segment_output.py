@@ -176,8 +176,9 @@ class SegmentOutputConfig:
 
 def neighbour_direction_spread(Y: np.ndarray, dist: np.ndarray) -> np.ndarray:
     """(19,) the spread of the K neighbours' segment directions (rad^2): ``1 - |m|^2`` of the
-    inverse-distance-weighted mean ``m`` of their unit directions (the mean squared chord to
-    the mean direction; ~ the mean squared angle for small spreads). ``Y`` (K, 20, 3)."""
+    mean ``m`` of their unit directions, weighted by the inverse of ``dist`` (K,: the search's
+    distances, as the optimizer returns them) (the mean squared chord to the mean direction;
+    ~ the mean squared angle for small spreads). ``Y`` (K, 20, 3)."""
     v = Y[:, SEGMENT_CHILD_INDEX] - Y[:, SEGMENT_PARENT_INDEX]
     u = v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-9)
     wk = 1.0 / np.maximum(np.asarray(dist, float), 1e-9)
