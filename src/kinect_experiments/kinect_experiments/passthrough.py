@@ -18,9 +18,10 @@ def main(argv=None) -> int:
     p.add_argument('--depth', type=int, default=10, help='queue depth (the graph nodes use 10)')
     args, ros_args = p.parse_known_args(argv if argv is not None else sys.argv[1:])
     import rclpy
-    from rclpy.executors import ExternalShutdownException
+    from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
     from rclpy.node import Node
     from rclpy.qos import QoSProfile
+    from skeleton_core.rosnode import spin_until_shutdown
     from skeleton_msgs.msg import SkeletonArray
     rclpy.init(args=[sys.argv[0]] + ros_args)
     node = Node('passthrough')
@@ -28,8 +29,6 @@ def main(argv=None) -> int:
     node.create_subscription(SkeletonArray, args.input, pub.publish, QoSProfile(depth=args.depth),
                              raw=True)
     try:
-        from rclpy.executors import SingleThreadedExecutor
-        from skeleton_core.rosnode import spin_until_shutdown
         executor = SingleThreadedExecutor()
         executor.add_node(node)
         spin_until_shutdown(executor)
