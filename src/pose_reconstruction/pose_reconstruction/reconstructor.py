@@ -372,7 +372,8 @@ class Reconstructor:
                     spread = neighbour_direction_spread(Y, res.distances)
                 positions = self.segment_output.output(frame, res.positions, w, alpha, yaw=yaw,
                                                        seg_obs=seg_obs, len_obs=len_obs,
-                                                       root=root, db_spread=spread)
+                                                       root=root, db_spread=spread,
+                                                       db_distance=rms)
             else:
                 user_bones = user_bone_lengths(self.user_segment_lengths())
                 bones = user_bones if self.output_scale == 'user' else None

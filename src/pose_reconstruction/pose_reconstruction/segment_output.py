@@ -162,6 +162,11 @@ class SegmentOutputConfig:
         'segment is the constant 12 deg plus the spread of the K neighbours\' directions (where '
         'the neighbours disagree the database knows the segment less); false = the constant',
         public=False)
+    direction_db_distance: float = param(
+        0.09, 'segments, direction_fusion: the database solution\'s direction error grows with '
+        'the nearest database posture\'s RMS distance per reliable joint (standard body, m): '
+        'its constant part is scaled by (distance / this)^2 where the distance is larger; '
+        '0 = off', range=(0.0, 10.0), public=False)
     filled_memory_s: float = param(
         0.5, 'segments: a segment the database fills (an end below reliable_threshold) starts '
         'from where the sensor last saw it, in proportion to the trust in the sensor, the '
@@ -215,6 +220,7 @@ class SegmentOutput:
         self.length_follow_cutoff = float(config.length_follow_cutoff)
         self.smooth_trusted_scale = float(config.smooth_trusted_scale)
         self.direction_db_spread = bool(config.direction_db_spread)
+        self.direction_db_distance = float(config.direction_db_distance)
         self.filled_memory_s = float(config.filled_memory_s)
         # the user's profile lengths (19,), used from the first frame when set (Reconstructor)
         self.profile_lengths: Optional[np.ndarray] = None
@@ -304,7 +310,8 @@ class SegmentOutput:
                seg_obs: Optional[np.ndarray] = None,
                len_obs: Optional[np.ndarray] = None,
                root: Optional[np.ndarray] = None,
-               db_spread: Optional[np.ndarray] = None) -> np.ndarray:
+               db_spread: Optional[np.ndarray] = None,
+               db_distance: Optional[float] = None) -> np.ndarray:
         """The output positions (20, 3), sensor frame (module docstring). ``solution`` (20, 3): in the sensor frame,
         or, with ``yaw``, the normalised solution (only its segment directions matter: they are
         turned by ``yaw``). ``seg_obs`` / ``len_obs``: the observed segment vectors (19, 3) and
@@ -335,7 +342,7 @@ class SegmentOutput:
             dt = (stamp - self._last_stamp) * 1e-9
         self._last_stamp = stamp
         if self.direction_fusion:
-            np.maximum(beta, self._fused_weight(L, db_spread) * reliable, out=beta)
+            np.maximum(beta, self._fused_weight(L, db_spread, db_distance) * reliable, out=beta)
         elif self.observation_weight > 0.0:
             np.maximum(beta, self.observation_weight * reliable, out=beta)
         L = self._followed_lengths(L, len_obs, rel_frac * trust, zero, dt)
@@ -458,7 +465,8 @@ class SegmentOutput:
         return L + self._length_dev
 
     def _fused_weight(self, L: np.ndarray,
-                      db_spread: Optional[np.ndarray] = None) -> np.ndarray:
+                      db_spread: Optional[np.ndarray] = None,
+                      db_distance: Optional[float] = None) -> np.ndarray:
         """(19,) ``direction_fusion``: the weight of a reliable segment's observed direction,
         ``var_db / (var_db + var_obs)`` (the blend of minimum expected error). ``var_obs``, the
         observed direction's error variance (rad^2): the two ends' joint-centre offsets across a
@@ -468,12 +476,21 @@ class SegmentOutput:
         error, 12 deg (``_DB_DIRECTION_VAR``) plus ``db_spread`` (19,) when given, the spread of
         the K neighbours' directions (:func:`neighbour_direction_spread`): on the sensor-model
         streams the solution's error grows with it (rms 6.6 deg where the neighbours agree within
-        1-3.5 deg, 21.6 deg where they spread 17-53 deg; docs/accuracy.md, seventh round). A long
+        1-3.5 deg, 21.6 deg where they spread 17-53 deg; docs/accuracy.md, seventh round). With
+        ``db_distance`` (the nearest database posture's RMS distance per reliable joint, standard
+        body, m) above ``direction_db_distance``, the constant part is scaled by
+        ``(db_distance / direction_db_distance)^2``: measured, the solution's direction error grows
+        in proportion to that distance (rms 8.6 deg at 0.02-0.07 m, 17.7 at 0.12-0.24; about
+        120-130 deg per m, i.e. 12 deg at 0.09 m), also where the neighbours agree: a posture the
+        database lacks has neighbours that agree and are all wrong (a sword fight's forearm). A long
         segment the sensor sees (a shank, an upper arm: 5-8 deg) follows the sensor; a short one
         (the hips, the shoulders, the feet: 20-30 deg) takes the database's direction."""
         sigma = self.offset_sigma() if self.offset_sigma is not None else _OFFSET_SIGMA
         var_obs = 4.0 * sigma * sigma / np.maximum(L, 1e-2) ** 2
         var_db = _DB_DIRECTION_VAR
+        d0 = self.direction_db_distance
+        if d0 > 0.0 and db_distance is not None and db_distance > d0:
+            var_db = var_db * (db_distance / d0) ** 2
         if db_spread is not None:
             # the neighbours' disagreement adds to the database's error (db_spread: the
             # reconstructor's neighbour_direction_spread, when direction_db_spread)

@@ -18,7 +18,7 @@ def _unit(rng, n):
     return u / np.linalg.norm(u, axis=1, keepdims=True)
 
 
-def _run(L, sigma, db_spread=None, **kw):
+def _run(L, sigma, db_spread=None, db_distance=None, **kw):
     """One untrusted frame (trust 0, every joint reliable): the output's segment directions and
     the observed and database ones."""
     rng = np.random.default_rng(7)
@@ -31,7 +31,8 @@ def _run(L, sigma, db_spread=None, **kw):
     obs = root + _SEG_CHAIN @ (uo * L[:, None])
     solution = root + _SEG_CHAIN @ (ud * L[:, None])
     f = SkeletonFrame(positions=obs, tracking_state=np.full(NUM_JOINTS, TRACKED, np.uint8))
-    out = so.output(f, solution, np.ones(NUM_JOINTS), 0.0, db_spread=db_spread)
+    out = so.output(f, solution, np.ones(NUM_JOINTS), 0.0, db_spread=db_spread,
+                    db_distance=db_distance)
     d = SEG_DIFF @ out
     return d / np.linalg.norm(d, axis=1, keepdims=True), uo, ud
 
@@ -117,11 +118,12 @@ def test_the_reconstructor_gives_the_output_its_neighbours_spread(on, monkeypatc
     database's own rows, by the optimizer's indices and distances); off: none."""
     db = random_database(800, seed=5)
     r = Reconstructor(db, method='C', direction_db_spread=on)
-    seen = []
+    seen, dist = [], []
     orig = r.segment_output.output
 
     def spy(*a, **kw):
         seen.append(kw.get('db_spread'))
+        dist.append(kw.get('db_distance'))
         return orig(*a, **kw)
 
     monkeypatch.setattr(r.segment_output, 'output', spy)
@@ -135,13 +137,34 @@ def test_the_reconstructor_gives_the_output_its_neighbours_spread(on, monkeypatc
 
     monkeypatch.setattr(r.core, 'solve', spy_solve)
     rest = standard_body().rest_positions() + np.array([2.5, 0.0, -0.8])
-    r.process(SkeletonFrame(positions=rest, tracking_state=np.full(NUM_JOINTS, TRACKED, np.uint8),
-                            user_id=1, stamp_ns=0))
+    out = r.process(SkeletonFrame(positions=rest,
+                                  tracking_state=np.full(NUM_JOINTS, TRACKED, np.uint8),
+                                  user_id=1, stamp_ns=0))
+    res = results[-1]
+    # the nearest posture's RMS distance per reliable joint (every joint reliable here)
+    wsum = float(np.asarray(out.reliability, float).sum())
+    assert dist[0] > 0.0 and np.isclose(dist[0], np.sqrt(res.distances[0] / wsum), rtol=1e-5)
     if not on:
         assert seen == [None]
         return
-    res = results[-1]
     want = neighbour_direction_spread(db.flat[res.neighbours].reshape(-1, NUM_JOINTS, 3),
                                       res.distances)
     assert seen[0].shape == (NUM_SEGMENTS,) and np.allclose(seen[0], want)
     assert (seen[0] > 0).all()   # random postures: the neighbours disagree
+
+
+def test_far_from_the_database_the_sensor_weighs_more():
+    # direction_db_distance: the database's constant error scaled by (distance / reference)^2
+    # where the nearest posture is farther than the reference, unchanged nearer
+    L = np.linspace(0.08, 0.45, NUM_SEGMENTS)
+    sigma = 0.03
+    b0 = _weight(*_run(L, sigma))
+    near = _weight(*_run(L, sigma, db_distance=0.05))
+    assert np.allclose(near, b0, atol=1e-9)
+    far = _weight(*_run(L, sigma, db_distance=0.18))
+    var_obs = 4 * sigma ** 2 / L ** 2
+    var_db = np.radians(12.0) ** 2 * (0.18 / 0.09) ** 2
+    assert np.allclose(far, var_db / (var_db + var_obs), atol=1e-6)
+    assert (far > b0 + 1e-3).all()
+    off = _weight(*_run(L, sigma, db_distance=0.18, direction_db_distance=0.0))
+    assert np.allclose(off, b0, atol=1e-9)
