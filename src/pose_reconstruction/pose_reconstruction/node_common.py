@@ -204,6 +204,8 @@ class SkeletonArrayNode(ManagedNode):
         except CdrError as e:  # undecodable: a dropped message, not a crash
             self._drop('malformed message', str(e))
             return
+        # a subscriber that appeared since activation is reached before this frame's output
+        self.reach_subscribers(self._pubs)
         with self._lock:
             if stamp != 0 and self._last_stamp_ns is not None and stamp <= self._last_stamp_ns:
                 back = (self._last_stamp_ns - stamp) * 1e-9

@@ -248,6 +248,9 @@ def ignore_further_interrupts() -> None:
 
 # spin_until_shutdown: the longest a process goes on after its context was shut down
 SPIN_SLICE_S = 0.25
+# ManagedNode.reach_subscribers: how long a publish waits, once per change of the graph's count,
+# for a subscriber the graph knows and the publisher has not reached yet
+REACH_WAIT_S = 0.5
 
 
 def spin_until_shutdown(executor, context=None) -> None:
@@ -334,6 +337,33 @@ class ManagedNode(LifecycleNode):
         t = self.create_timer(period_s, callback)
         self._active.append(('timer', t))
         return t
+
+    def reach_subscribers(self, publishers: Sequence) -> None:
+        """Before a publish: wait (at most :data:`REACH_WAIT_S`) until each publisher has
+        reached every subscriber the graph knows on its topic. A subscriber that appeared after
+        this node activated (a recorder started later) is known to the graph, and sees this
+        publisher, before this publisher has matched it: the discovery is two-sided, and a
+        message published in between is lost to it (under load, the first frame's output of a
+        replay). Waited once per change of the graph's count: a subscriber that never matches
+        (incompatible QoS) costs one wait, not one per message. A few us per publisher when
+        nothing is missing."""
+        gave_up = self.__dict__.setdefault('_reach_gave_up', {})
+        deadline = None
+        for p in publishers:
+            topic = p.topic_name
+            known = self.count_subscribers(topic)
+            if p.get_subscription_count() >= known or gave_up.get(topic) == known:
+                continue
+            if deadline is None:
+                deadline = time.monotonic() + REACH_WAIT_S
+            while p.get_subscription_count() < known and time.monotonic() < deadline:
+                time.sleep(0.002)
+                known = self.count_subscribers(topic)   # (one that left ends the wait)
+            if p.get_subscription_count() < known:
+                gave_up[topic] = known
+                self.get_logger().warning(
+                    f'{topic}: {known - p.get_subscription_count()} subscriber(s) the graph '
+                    f'knows not reached after {REACH_WAIT_S:g} s (incompatible QoS?)')
 
     def when_ready(self, missing: Callable[[], List[str]], then: Callable[[], None],
                    timeout_s: float, what: str) -> None:
