@@ -356,3 +356,27 @@ def test_perturb_targets_checked_per_class():
     assert t[('a', 'Eq.18 >= 35% below raw')] and t[('a', 'direction below raw')]
     assert t[('d', 'Eq.18 below raw')] and not t[('d', 'direction >= 25% below raw')]
     assert 'not met: nominal, seed 1, class d' in P.to_markdown({**res, 'scenarios': ['a', 'd']})
+
+
+def test_perturb_no_harm_miss_names_its_segment_frames_in_degrees():
+    # the worst segment's difference is reported in degrees, with the number of segment-frames
+    # it was measured on (a miss on a handful of frames reads as such)
+    from skeleton_eval import no_harm as NH
+
+    def acc(deg, n, seg):
+        a = NH.empty()
+        a['sum_deg'][seg] = deg * n
+        a['count'][seg] = n
+        return a
+    k = NH.SEGMENT_NAMES.index('KneeRight-AnkleRight')
+    base = {'eq18_cm': 10, 'bone_dir_deg': 20, 'mpjpe_cm': 1, 'jitter_ms2': 1, 'latency_ms': 0,
+            'frames': 10}
+    res = {'rows': [{'variant': 'offset x0.5', 'seed': 0, 'results': {
+        'raw': {'c': {**base, 'no_harm': acc(4.0, 37, k)}},
+        'C': {'c': {**base, 'eq18_cm': 6, 'bone_dir_deg': 10, 'no_harm': acc(5.2, 37, k)}}}}],
+        'scenarios': ['c']}
+    miss = [x for x in P.targets(res) if not x['met']]
+    assert len(miss) == 1 and miss[0]['value'] == pytest.approx(1.2)
+    md = P.to_markdown(res)
+    assert ('not met: offset x0.5, seed 0, class c: no harm per segment (worst '
+            'KneeRight-AnkleRight, 37 segment-frames) (+1.2 deg)') in md

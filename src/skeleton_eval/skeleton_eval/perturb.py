@@ -152,11 +152,13 @@ def targets(res: Dict, method: str = 'C', reference: str = 'raw') -> List[Dict]:
                 # issue 34: on TRACKED, fault-free segments no segment more than 0.5 deg worse
                 w = NH.worst(c['no_harm'], b['no_harm'])
                 if w is not None:
-                    checks.append((f'no harm per segment (worst {w["segment"]}, deg)',
-                                   w['diff'], w['diff'] <= NH.TOLERANCE_DEG))
+                    checks.append((f'no harm per segment (worst {w["segment"]}, '
+                                   f'{w["count"]} segment-frames)', w['diff'],
+                                   w['diff'] <= NH.TOLERANCE_DEG))
             for name, val, ok in checks:
                 out.append({'variant': row['variant'], 'seed': row['seed'], 'class': sc,
-                            'target': name, 'value': val, 'met': bool(ok)})
+                            'target': name, 'value': val, 'met': bool(ok),
+                            'unit': 'deg' if name.startswith('no harm') else '%'})
     return out
 
 
@@ -218,6 +220,7 @@ def to_markdown(res: Dict, method: str = 'C', reference: str = 'raw') -> str:
     missed = [x for x in t if not x['met']]
     lines += ['', f'Targets: {len(t) - len(missed)} of {len(t)} met.']
     for x in missed:
+        val = f'{x["value"]:+.1f} deg' if x['unit'] == 'deg' else f'{_f(x["value"])}%'
         lines.append(f'- not met: {x["variant"]}, seed {x["seed"]}, class {x["class"]}: '
-                     f'{x["target"]} ({_f(x["value"])}%)')
+                     f'{x["target"]} ({val})')
     return '\n'.join(lines) + '\n'
