@@ -173,6 +173,11 @@ for _s, _c in enumerate(SEGMENT_CHILDREN):
         BLAME[_s] = _below(_c)
     else:
         BLAME[_s, _c] = True
+# (19,) the segment above each segment (whose child is its parent joint; -1: none); segments are
+# ordered parents first
+PARENT_SEGMENT = np.array([SEGMENT_CHILDREN.index(_p) if _p in SEGMENT_CHILDREN else -1
+                           for _p in SEGMENT_PARENTS], np.int64)
+assert all(_q < _s for _s, _q in enumerate(PARENT_SEGMENT))
 _GIRDLES = np.array([SHOULDER_LEFT, SHOULDER_RIGHT, HIP_LEFT, HIP_RIGHT], np.int64)
 _FEET = np.array([FOOT_LEFT, FOOT_RIGHT, ANKLE_LEFT, ANKLE_RIGHT], np.int64)
 _ARMS = np.zeros(NUM_JOINTS, bool)
@@ -344,6 +349,14 @@ class PlausibilityCheck:
             # away from a place just taken: the transient was that place)
             ended = jump & ((self._latch > 0) | ((self._last_bone < 1.0) & (bone >= 1.0))
                             | (self._held < TRANSIENT_FRAMES))
+            # a segment's end moves relative to its parent when the parent jumps: where the
+            # segment above ended a failure in this frame (a knee back from where it hung behind
+            # an object), this segment's jump is that return, not a snap of its own child (the
+            # ankle, right all along, was latched for 1.5 s, issue 34)
+            for s in range(NUM_SEGMENTS):   # parents first
+                q = PARENT_SEGMENT[s]
+                if q >= 0 and jump[s] and ended[q]:
+                    ended[s] = True
             self._held = np.where(steady & ~jump, self._held + 1, 0)
             self._latch[jump & ~ended] = 1
             self._latch[ended] = 0
@@ -444,7 +457,8 @@ class PlausibilityCheck:
             p, tracked, seg, seg_len, both, np.asarray(reference_lengths, float),
             self._anchor, self._anchor_ok, self._jumped_a, self.jump_m, self.jump_frames,
             not first, self._last_rel if has else seg, has, self._last_both, self._latch,
-            self._last_bone, BLAME, self.bone_tolerance, self.bone_tolerance_m, self.bone_reject, self.max_step,
+            self._last_bone, BLAME, PARENT_SEGMENT, self.bone_tolerance, self.bone_tolerance_m,
+            self.bone_reject, self.max_step,
             self.latch_frames, self._held, TRANSIENT_FRAMES, self._latched_score(), self._k_lr,
             _GIRDLES, _ARMS, _LEGS, self.lr_flip,
             self.heading_rate, self.lr_unswap, self._k_ring, self._k_sorted, self._k_meta,
@@ -492,6 +506,7 @@ class PlausibilityCheck:
             blamed = K.segment_terms(seg, seg_len, both, np.asarray(reference_lengths, float),
                                    self._last_rel if has else seg, has,
                                    self._last_both, self._latch, self._last_bone, BLAME,
+                                   PARENT_SEGMENT,
                                    self.bone_tolerance,
                                    self.bone_tolerance_m, self.bone_reject, self.max_step,
                                    self.latch_frames, self._held, TRANSIENT_FRAMES,

@@ -117,17 +117,19 @@ def _eq18_step(p, ln, ref, tracked, rt, rp, use_rp, judge_tracked, d_min, theta_
 
 
 def _segment_terms(seg, seg_len, both, ref, last_rel, has_last, last_both, latch, last_bone,
-                   blame, tol, tol_m, reject, max_step, latch_frames, held, transient,
+                   blame, parent_seg, tol, tol_m, reject, max_step, latch_frames, held, transient,
                    latched_score):
     """PlausibilityCheck's bone-length and segment-speed terms and their blame (its ``_bones``,
     ``_speed`` and the min over BLAME): returns the per-joint value (J,); ``latch``,
     ``last_bone`` (the bone-length scores) and ``held`` (frames each segment has stayed where it
     is, TRACKED, without a jump) are updated; a jump from a place held fewer than ``transient``
-    frames is the end of a failure; a latched segment (after its jump frame) scores
-    ``latched_score``."""
+    frames is the end of a failure, and so is the jump of a segment whose segment above
+    (``parent_seg``, -1: none; parents first) ended a failure in this frame; a latched segment
+    (after its jump frame) scores ``latched_score``."""
     ns = seg.shape[0]
     nj = blame.shape[1]
     score = np.empty(ns)
+    ended_s = np.zeros(ns, np.bool_)
     for s in range(ns):
         b = 1.0
         if both[s]:
@@ -148,7 +150,9 @@ def _segment_terms(seg, seg_len, both, ref, last_rel, has_last, last_both, latch
             # the jump back: a latched snap ending, a rejected length becoming right, or a
             # jump away from a place just taken (a transient)
             ended = jump and (latch[s] > 0 or (last_bone[s] < 1.0 and b >= 1.0)
-                              or held[s] < transient)
+                              or held[s] < transient
+                              or (parent_seg[s] >= 0 and ended_s[parent_seg[s]]))
+            ended_s[s] = ended
             if steady and not jump:
                 held[s] += 1
             else:
@@ -244,15 +248,15 @@ def warm_up() -> float:
     seg = np.zeros((ns, 3))
     both = np.ones(ns, bool)
     segment_terms(seg, ones_s, both, ones_s, seg, True, both, np.zeros(ns, np.int64),
-                  np.ones(ns), np.zeros((ns, nj), bool), 0.4, 0.03, 1.0, 0.27, 45,
-                  np.zeros(ns, np.int64), 3, 0.0)
+                  np.ones(ns), np.zeros((ns, nj), bool), np.full(ns, -1, np.int64), 0.4,
+                  0.03, 1.0, 0.27, 45, np.zeros(ns, np.int64), 3, 0.0)
     skeleton_jump(p, tracked, np.zeros((nj, 3)), tracked.copy(), np.zeros(1, np.int64), 0.35, 15)
     idx4 = np.arange(4, dtype=np.int64)
     out = [np.empty(nj) for _ in range(4)]
     plausibility_step(p, tracked, seg, ones_s, both, ones_s, np.zeros((nj, 3)), tracked.copy(),
                       np.zeros(1, np.int64), 0.35, 15, True, seg, True, both,
-                      np.zeros(ns, np.int64), np.ones(ns), np.zeros((ns, nj), bool), 0.4, 0.03,
-                      1.0, 0.27, 45, np.zeros(ns, np.int64), 3, 0.0, np.zeros(2), idx4,
+                      np.zeros(ns, np.int64), np.ones(ns), np.zeros((ns, nj), bool),
+                      np.full(ns, -1, np.int64), 0.4, 0.03, 1.0, 0.27, 45, np.zeros(ns, np.int64), 3, 0.0, np.zeros(2), idx4,
                       tracked.copy(), tracked.copy(), 1.9, 0.3, True,
                       np.zeros(150), np.zeros(150), np.zeros(4, np.int64), np.zeros(2), idx4,
                       0.08, 0.05, 0.12, 0.25, out[0], out[1], out[2], out[3],
@@ -275,7 +279,8 @@ def _nmin(a, b):
 
 def _plausibility_step(p, tracked, seg, seg_len, both, ref,
                        anchor, anchor_ok, jumped, jump_m, jump_frames, check_jump,
-                       last_rel, has_last, last_both, latch, last_bone, blame, tol, tol_m,
+                       last_rel, has_last, last_both, latch, last_bone, blame, parent_seg,
+                       tol, tol_m,
                        reject, max_step, latch_frames, held, transient, latched_score,
                        lr_state, girdles, arms, legs, lr_flip, heading_rate, lr_unswap,
                        fl_ring, fl_sorted, fl_meta, fl_state, feet, ankle_height,
@@ -298,7 +303,8 @@ def _plausibility_step(p, tracked, seg, seg_len, both, ref,
         return True
     flags[0] = 0
     blamed = segment_terms(seg, seg_len, both, ref, last_rel, has_last, last_both, latch,
-                           last_bone, blame, tol, tol_m, reject, max_step, latch_frames,
+                           last_bone, blame, parent_seg, tol, tol_m, reject, max_step,
+                           latch_frames,
                            held, transient, latched_score)
     for j in range(nj):
         out_seg[j] = blamed[j]

@@ -117,6 +117,34 @@ def test_tracked_joint_snapped_away_is_unreliable_within_3_frames(joints):
 
 
 @pytest.mark.parametrize('jit', [True, False])
+def test_a_joint_back_from_a_failure_does_not_latch_the_joint_below(jit):
+    """A knee that hung behind an object (the sensor model's class b: TRACKED, drifting off as
+    the leg moves on; its thigh length rejected) jumps back: the shank's end moves relative to
+    the knee by that jump although the ankle, right all along, stays put. That jump is the
+    knee's return (the thigh's failure ending), not a snap of the ankle: the ankle is reliable
+    within the Eq. 8 delay, not latched for 1.5 s (sensor seed 16, class b, 03_03: the
+    database's shank 15-41 deg off where the sensor's was 11-15)."""
+    from skeleton_core.model import ANKLE_LEFT, KNEE_LEFT
+    pos, st = _standing()
+    start, drift, back = 30, 20, 50
+    # the knee turned about the ankle, 3 deg per frame (slower than a snap; the shank length
+    # kept, the thigh stretched beyond its tolerance), then back in one frame (a 0.43 m jump)
+    for k, f in enumerate(range(start, back)):
+        a = np.radians(3.0 * (k + 1))
+        c, s_ = np.cos(a), np.sin(a)
+        turn = np.array([[c, 0.0, -s_], [0.0, 1.0, 0.0], [s_, 0.0, c]])
+        pos[f, KNEE_LEFT] = pos[f, ANKLE_LEFT] + (pos[f, KNEE_LEFT] - pos[f, ANKLE_LEFT]) @ turn.T
+    r = ReliabilityEstimator()
+    if not jit:
+        r._jit = False
+        r.plausibility._jit = False
+    R = np.array([r.update(p, s) for p, s in zip(pos, st)])
+    assert R[back - 3:back, KNEE_LEFT].max() < 0.8          # the drifted knee: doubted
+    assert R[back + 4:back + 40, KNEE_LEFT].min() > 0.8     # back: reliable
+    assert R[back + 4:back + 40, ANKLE_LEFT].min() > 0.8    # and the ankle below it too
+
+
+@pytest.mark.parametrize('jit', [True, False])
 @pytest.mark.parametrize('held', [1, 2, 40])
 def test_a_jump_away_from_a_place_just_taken_ends_a_failure(jit, held):
     """A real Kinect v2 recording (UI-PRMD m08_s02_e02) starts with the left leg 36 cm off, one
