@@ -126,7 +126,7 @@ def test_a_joint_back_from_a_failure_does_not_latch_the_joint_below(jit):
     database's shank 15-41 deg off where the sensor's was 11-15)."""
     from skeleton_core.model import ANKLE_LEFT, KNEE_LEFT
     pos, st = _standing()
-    start, drift, back = 30, 20, 50
+    start, back = 30, 50
     # the knee turned about the ankle, 3 deg per frame (slower than a snap; the shank length
     # kept, the thigh stretched beyond its tolerance), then back in one frame (a 0.43 m jump)
     for k, f in enumerate(range(start, back)):
