@@ -145,6 +145,11 @@ _LIMB = set(LIMB_JOINTS['left_arm'][1:] + LIMB_JOINTS['right_arm'][1:]
 # a TRACKED ankle says the floor is at most _ANKLE_HEIGHT below it (the standard body's ankle
 # above its foot joint)
 FLOOR_QUANTILE = 0.25
+# the floor forgotten when no foot or ankle was TRACKED for more frames than this (1 s): the user
+# may have moved onto other ground meanwhile (a Kinect walk on uneven terrain: a foot re-acquired
+# 19 cm below the floor its window still held from 2.3 s before was rejected for 6 frames and
+# filled by the database, issue 34); a new floor from the next 5 tracked frames on
+FLOOR_STALE_FRAMES = 30
 # segment speed: a place a segment held for fewer frames than this (since it was tracked, or
 # since its last jump) is a transient; a jump away from it is a failure ending, not a snap onset
 # (issue 34: a Kinect v2 leg that starts a recording 36 cm off and jumps to the right place one
@@ -252,6 +257,7 @@ class PlausibilityCheck:
         self._floor_z: collections.deque = collections.deque(maxlen=self.floor_window)
         self._floor_sorted: list = []     # the window's finite values, sorted (running median)
         self._floor_nan = 0               # NaNs in the window (np.median: NaN)
+        self._floor_unseen = 0            # frames since a foot or ankle was last TRACKED
         self.floor: Optional[float] = None
         self._last_rel: Optional[np.ndarray] = None
         self._latch = np.zeros(NUM_SEGMENTS, int)
@@ -270,11 +276,12 @@ class PlausibilityCheck:
         self.value = np.ones(NUM_JOINTS)
         # the compiled step's state (reliability_kernels.plausibility_step): heading [known,
         # value], the floor window as a ring and its sorted finite values, [start, length,
-        # sorted length, NaNs], the floor [known, value], the step's flags
+        # sorted length, NaNs, frames since a foot was TRACKED], the floor [known, value], the
+        # step's flags
         self._k_lr = np.zeros(2)
         self._k_ring = np.zeros(self.floor_window)
         self._k_sorted = np.zeros(self.floor_window)
-        self._k_meta = np.zeros(4, np.int64)
+        self._k_meta = np.zeros(5, np.int64)
         self._k_floor = np.zeros(2)
         self._k_flags = np.zeros(4, np.int64)
 
@@ -402,9 +409,17 @@ class PlausibilityCheck:
         low = [p[j, 2] for j in (FOOT_LEFT, FOOT_RIGHT) if tracked[j]]
         low += [p[j, 2] - _ANKLE_HEIGHT for j in (ANKLE_LEFT, ANKLE_RIGHT) if tracked[j]]
         if low:
+            if self._floor_unseen > FLOOR_STALE_FRAMES:   # stale: other ground, perhaps
+                self._floor_z.clear()
+                self._floor_sorted.clear()
+                self._floor_nan = 0
+                self.floor = None
+            self._floor_unseen = 0
             self._floor_push(float(min(low)))
             if len(self._floor_z) >= 5:
                 self.floor = self._floor_quantile(FLOOR_QUANTILE)
+        else:
+            self._floor_unseen += 1
         if self.floor is None:
             return np.ones(NUM_JOINTS)
         depth = self.floor - p[:, 2]
@@ -462,7 +477,8 @@ class PlausibilityCheck:
             self.latch_frames, self._held, TRANSIENT_FRAMES, self._latched_score(), self._k_lr,
             _GIRDLES, _ARMS, _LEGS, self.lr_flip,
             self.heading_rate, self.lr_unswap, self._k_ring, self._k_sorted, self._k_meta,
-            self._k_floor, _FEET, _ANKLE_HEIGHT, self.floor_tolerance, self.floor_reject,
+            self._k_floor, _FEET, _ANKLE_HEIGHT, FLOOR_STALE_FRAMES, self.floor_tolerance,
+            self.floor_reject,
             FLOOR_QUANTILE, out_seg, out_lr, out_fl, v, flags)
         self.skeleton_outlier = jump
         if jump:
@@ -474,8 +490,7 @@ class PlausibilityCheck:
         if flags[1]:
             self.swapped = {'arms': bool(flags[2]), 'legs': bool(flags[3])}
         self.heading = float(self._k_lr[1])
-        if self._k_floor[0]:
-            self.floor = float(self._k_floor[1])
+        self.floor = float(self._k_floor[1]) if self._k_floor[0] else None
         self.terms = {'segments': out_seg, 'left_right': out_lr, 'floor': out_fl}
         self.value = v
         return v

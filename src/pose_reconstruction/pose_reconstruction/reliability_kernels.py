@@ -259,8 +259,8 @@ def warm_up() -> float:
                       np.full(ns, -1, np.int64), 0.4, 0.03, 1.0, 0.27, 45,
                       np.zeros(ns, np.int64), 3, 0.0, np.zeros(2), idx4,
                       tracked.copy(), tracked.copy(), 1.9, 0.3, True,
-                      np.zeros(150), np.zeros(150), np.zeros(4, np.int64), np.zeros(2), idx4,
-                      0.08, 0.05, 0.12, 0.25, out[0], out[1], out[2], out[3],
+                      np.zeros(150), np.zeros(150), np.zeros(5, np.int64), np.zeros(2), idx4,
+                      0.08, 30, 0.05, 0.12, 0.25, out[0], out[1], out[2], out[3],
                       np.zeros(4, np.int64))
     _warm = True
     return time.perf_counter() - t0
@@ -284,7 +284,7 @@ def _plausibility_step(p, tracked, seg, seg_len, both, ref,
                        tol, tol_m,
                        reject, max_step, latch_frames, held, transient, latched_score,
                        lr_state, girdles, arms, legs, lr_flip, heading_rate, lr_unswap,
-                       fl_ring, fl_sorted, fl_meta, fl_state, feet, ankle_height,
+                       fl_ring, fl_sorted, fl_meta, fl_state, feet, ankle_height, fl_stale,
                        floor_tolerance, floor_reject, floor_quantile,
                        out_seg, out_lr, out_fl, out_v, flags):
     """PlausibilityCheck.update after its first frame, in one call: the whole-skeleton jump
@@ -293,7 +293,8 @@ def _plausibility_step(p, tracked, seg, seg_len, both, ref,
     (``out_lr``; ``lr_state`` = [heading known, heading]; flags[1] = the swap flags were set,
     flags[2] / flags[3] = arms / legs swapped), the floor (``out_fl``; the window as a ring
     ``fl_ring`` and its finite values sorted in ``fl_sorted``, ``fl_meta`` = [ring start, ring
-    length, sorted length, NaNs in the ring], ``fl_state`` = [floor known, floor]) and their
+    length, sorted length, NaNs in the ring, frames since a foot was TRACKED: beyond
+    ``fl_stale`` the window is emptied], ``fl_state`` = [floor known, floor]) and their
     minimum (``out_v``). ``girdles``: (shoulder_l, shoulder_r, hip_l, hip_r); ``feet``: (foot_l,
     foot_r, ankle_l, ankle_r). Returns True on a jump (then nothing else is updated);
     ``check_jump`` False: the first frame (the anchor was just set), no jump test."""
@@ -357,7 +358,11 @@ def _plausibility_step(p, tracked, seg, seg_len, both, ref,
             if not have or z < low:     # Python's min over the list: the first of equals
                 low = z
                 have = True
+    if have and fl_meta[4] > fl_stale:   # no foot seen for long: the floor forgotten
+        fl_meta[0], fl_meta[1], fl_meta[2], fl_meta[3] = 0, 0, 0, 0
+        fl_state[0] = 0.0
     if have:
+        fl_meta[4] = 0
         w = fl_ring.shape[0]
         start, n, ns, nan = fl_meta[0], fl_meta[1], fl_meta[2], fl_meta[3]
         if n == w:                      # evict the oldest
@@ -399,6 +404,8 @@ def _plausibility_step(p, tracked, seg, seg_len, both, ref,
                 d = b - a
                 fl_state[1] = b - d * (1.0 - t) if t >= 0.5 else a + d * t
             fl_state[0] = 1.0
+    else:
+        fl_meta[4] += 1
     if fl_state[0] == 0.0:
         for j in range(nj):
             out_fl[j] = 1.0

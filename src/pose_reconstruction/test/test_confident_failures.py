@@ -117,6 +117,39 @@ def test_tracked_joint_snapped_away_is_unreliable_within_3_frames(joints):
 
 
 @pytest.mark.parametrize('jit', [True, False])
+@pytest.mark.parametrize('unseen', [12, 45])
+def test_a_floor_not_seen_for_a_second_is_forgotten(jit, unseen):
+    """Feet and ankles INFERRED for ``unseen`` frames while the user steps 20 cm down (uneven
+    ground), then TRACKED again: after more than FLOOR_STALE_FRAMES (30) the old floor is
+    forgotten and the re-acquired ankle is reliable at once (sensor seed 23, class e, 03_03: it
+    was rejected for 6 frames and filled by the database); after a short gap the same 20 cm
+    below the floor is a foot through it, rejected as before."""
+    from pose_reconstruction.plausibility import FLOOR_STALE_FRAMES
+    from skeleton_core.model import ANKLE_LEFT, ANKLE_RIGHT, FOOT_RIGHT, INFERRED
+    assert 12 < FLOOR_STALE_FRAMES < 45
+    pos, st = _standing(n=60 + unseen + 30)
+    legs = [ANKLE_LEFT, FOOT_LEFT, ANKLE_RIGHT, FOOT_RIGHT]
+    back = 60 + unseen
+    down = np.zeros(len(pos))
+    down[back:] = 0.2
+    if unseen > FLOOR_STALE_FRAMES:
+        down[60:back] = 0.2 * np.minimum(np.arange(unseen) / 15.0, 1.0)   # the body steps down
+        pos[:, :, 2] -= down[:, None]
+    else:
+        pos[back:, legs, 2] -= 0.2                                         # the feet alone
+    st[60:back, legs] = INFERRED
+    r = ReliabilityEstimator()
+    if not jit:
+        r._jit = False
+        r.plausibility._jit = False
+    R = np.array([r.update(p, s) for p, s in zip(pos, st)])
+    if unseen > FLOOR_STALE_FRAMES:
+        assert R[back + 1:back + 20, ANKLE_LEFT].min() > 0.7
+    else:
+        assert R[back + 1:back + 5, ANKLE_LEFT].max() < 0.3
+
+
+@pytest.mark.parametrize('jit', [True, False])
 def test_a_joint_back_from_a_failure_does_not_latch_the_joint_below(jit):
     """A knee that hung behind an object (the sensor model's class b: TRACKED, drifting off as
     the leg moves on; its thigh length rejected) jumps back: the shank's end moves relative to
