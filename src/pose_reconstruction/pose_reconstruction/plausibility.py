@@ -50,7 +50,10 @@ Terms (each 1 = plausible):
 * **whole-skeleton jump** — the TRACKED joints moving, in the median, more than ``jump_m`` from
   where each was last plausibly makes every joint 0 (:attr:`PlausibilityCheck.skeleton_outlier`
   True) until they are back within ``jump_m``, for at most ``jump_frames`` frames (then the new
-  place is accepted: a real re-acquisition).
+  place is accepted: a real re-acquisition). "Where each was" moves on with the body's velocity
+  before the jump (the median displacement per frame): a running user is 0.7 m on after the 6
+  frames the skeleton spent on someone else, and its return to the user is a return (issue 34:
+  9 frames of a running user's right skeleton were rejected as still jumped).
 
 ``plausibility=False`` turns the whole term off (R_p = 1: the paper's reliability).
 """
@@ -270,6 +273,7 @@ class PlausibilityCheck:
         self._last_bone = np.ones(NUM_SEGMENTS)   # last frame's bone-length score per segment
         self._anchor: Optional[np.ndarray] = None
         self._jumped_a = np.zeros(1, np.int64)   # frames of the current jump rejected
+        self._jump_vel = np.zeros(3)              # the body's velocity (m per frame)
         self.skeleton_outlier = False
         self.swapped = {'arms': False, 'legs': False}
         self.terms: Dict[str, np.ndarray] = {}
@@ -299,30 +303,16 @@ class PlausibilityCheck:
     # ------------------------------------------------------------------------------------
     def _jump(self, p: np.ndarray, tracked: np.ndarray) -> bool:
         """Whole-skeleton jump: the median distance of the joints TRACKED now and when last
-        plausible from where they were then (a held INFERRED root snapping back is not a jump;
-        fewer than 3 such joints: no judgement)."""
+        plausible from where they were then, moved on by the body's velocity since (a held
+        INFERRED root snapping back is not a jump; fewer than 3 such joints: no judgement;
+        :func:`.reliability_kernels._skeleton_jump`, compiled or not)."""
         if self._anchor is None:
             self._anchor = p.copy()
             self._anchor_ok = tracked.copy()
             return False
-        if self._jit:
-            return K.skeleton_jump(p, tracked, self._anchor, self._anchor_ok, self._jumped_a,
-                                   self.jump_m, self.jump_frames)
-        both = tracked & self._anchor_ok
-        if np.count_nonzero(both) >= 3:
-            diff = p[both] - self._anchor[both]
-            dist = np.sqrt((diff * diff).sum(axis=1))      # np.linalg.norm's arithmetic
-            dist.sort()
-            n = len(dist)
-            # np.median's value (the middle one, or the mean of the two), without its overhead
-            d = float(dist[n // 2]) if n % 2 else float((dist[n // 2 - 1] + dist[n // 2]) / 2.0)
-            if d > self.jump_m and self._jumped_a[0] < self.jump_frames:
-                self._jumped_a[0] += 1
-                return True
-        self._jumped_a[0] = 0
-        self._anchor[tracked] = p[tracked]
-        self._anchor_ok |= tracked
-        return False
+        step = K.skeleton_jump if self._jit else K._skeleton_jump
+        return bool(step(p, tracked, self._anchor, self._anchor_ok, self._jumped_a, self.jump_m,
+                         self.jump_frames, self._jump_vel))
 
     def _latched_score(self) -> float:
         """The speed term of a latched segment after its jump frame: the trust in the sensor (0
@@ -471,6 +461,7 @@ class PlausibilityCheck:
         jump = K.plausibility_step(
             p, tracked, seg, seg_len, both, np.asarray(reference_lengths, float),
             self._anchor, self._anchor_ok, self._jumped_a, self.jump_m, self.jump_frames,
+            self._jump_vel,
             not first, self._last_rel if has else seg, has, self._last_both, self._latch,
             self._last_bone, BLAME, PARENT_SEGMENT, self.bone_tolerance, self.bone_tolerance_m,
             self.bone_reject, self.max_step,

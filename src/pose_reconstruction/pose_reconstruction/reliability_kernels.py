@@ -183,31 +183,51 @@ eq18_step = jit.njit(_eq18_step)
 segment_terms = jit.njit(_segment_terms)
 
 
-def _skeleton_jump(p, tracked, anchor, anchor_ok, jumped, jump_m, jump_frames):
+def _median_sorted(v, n):
+    """The median of the first ``n`` values of ``v``, sorted in place (np.median's value)."""
+    w = np.sort(v[:n])
+    return w[n // 2] if n % 2 else (w[n // 2 - 1] + w[n // 2]) / 2.0
+
+
+_median_j = jit.njit(_median_sorted)
+
+
+def _skeleton_jump(p, tracked, anchor, anchor_ok, jumped, jump_m, jump_frames, vel):
     """PlausibilityCheck._jump after its first frame: True when the joints TRACKED now and when
-    last plausible moved, in the median, more than ``jump_m`` (at most ``jump_frames`` frames in a
-    row); else the anchor follows the tracked joints. ``jumped`` (1,) and the anchor updated."""
+    last plausible are, in the median, more than ``jump_m`` from where they were then moved on by
+    the body's velocity ``vel`` (3,: m per frame) for the frames since (at most ``jump_frames``
+    frames in a row); else the anchor follows the tracked joints and ``vel`` the component-wise
+    median of their displacement per frame (half new, half old). ``jumped`` (1,), the anchor and
+    ``vel`` updated."""
     nj = p.shape[0]
     cnt = 0
     for j in range(nj):
         if tracked[j] and anchor_ok[j]:
             cnt += 1
     if cnt >= 3:
+        since = jumped[0] + 1.0            # frames since the anchor was plausible
         dist = np.empty(cnt)
         i = 0
         for j in range(nj):
             if tracked[j] and anchor_ok[j]:
                 s = 0.0
                 for k in range(3):
-                    dd = p[j, k] - anchor[j, k]
+                    dd = p[j, k] - (anchor[j, k] + since * vel[k])
                     s += dd * dd
                 dist[i] = math.sqrt(s)
                 i += 1
-        dist.sort()
-        d = dist[cnt // 2] if cnt % 2 else (dist[cnt // 2 - 1] + dist[cnt // 2]) / 2.0
+        d = _median_j(dist, cnt)
         if d > jump_m and jumped[0] < jump_frames:
             jumped[0] += 1
             return True
+        comp = np.empty(cnt)
+        for k in range(3):
+            i = 0
+            for j in range(nj):
+                if tracked[j] and anchor_ok[j]:
+                    comp[i] = (p[j, k] - anchor[j, k]) / since
+                    i += 1
+            vel[k] = 0.5 * vel[k] + 0.5 * _median_j(comp, cnt)
     jumped[0] = 0
     for j in range(nj):
         if tracked[j]:
@@ -215,7 +235,6 @@ def _skeleton_jump(p, tracked, anchor, anchor_ok, jumped, jump_m, jump_frames):
                 anchor[j, k] = p[j, k]
             anchor_ok[j] = True
     return False
-
 
 skeleton_jump = jit.njit(_skeleton_jump)
 
@@ -250,11 +269,12 @@ def warm_up() -> float:
     segment_terms(seg, ones_s, both, ones_s, seg, True, both, np.zeros(ns, np.int64),
                   np.ones(ns), np.zeros((ns, nj), bool), np.full(ns, -1, np.int64), 0.4,
                   0.03, 1.0, 0.27, 45, np.zeros(ns, np.int64), 3, 0.0)
-    skeleton_jump(p, tracked, np.zeros((nj, 3)), tracked.copy(), np.zeros(1, np.int64), 0.35, 15)
+    skeleton_jump(p, tracked, np.zeros((nj, 3)), tracked.copy(), np.zeros(1, np.int64), 0.35, 15,
+                  np.zeros(3))
     idx4 = np.arange(4, dtype=np.int64)
     out = [np.empty(nj) for _ in range(4)]
     plausibility_step(p, tracked, seg, ones_s, both, ones_s, np.zeros((nj, 3)), tracked.copy(),
-                      np.zeros(1, np.int64), 0.35, 15, True, seg, True, both,
+                      np.zeros(1, np.int64), 0.35, 15, np.zeros(3), True, seg, True, both,
                       np.zeros(ns, np.int64), np.ones(ns), np.zeros((ns, nj), bool),
                       np.full(ns, -1, np.int64), 0.4, 0.03, 1.0, 0.27, 45,
                       np.zeros(ns, np.int64), 3, 0.0, np.zeros(2), idx4,
@@ -279,7 +299,7 @@ def _nmin(a, b):
 
 
 def _plausibility_step(p, tracked, seg, seg_len, both, ref,
-                       anchor, anchor_ok, jumped, jump_m, jump_frames, check_jump,
+                       anchor, anchor_ok, jumped, jump_m, jump_frames, jump_vel, check_jump,
                        last_rel, has_last, last_both, latch, last_bone, blame, parent_seg,
                        tol, tol_m,
                        reject, max_step, latch_frames, held, transient, latched_score,
@@ -288,8 +308,9 @@ def _plausibility_step(p, tracked, seg, seg_len, both, ref,
                        floor_tolerance, floor_reject, floor_quantile,
                        out_seg, out_lr, out_fl, out_v, flags):
     """PlausibilityCheck.update after its first frame, in one call: the whole-skeleton jump
-    (flags[0]), the segment terms (``out_seg``; ``latch`` and ``last_bone`` updated; the caller keeps ``seg`` /
-    ``both`` as the next frame's ``last_rel`` / ``last_both``), left/right against the heading
+    (flags[0]; ``jump_vel`` the body's velocity, :func:`_skeleton_jump`), the segment terms
+    (``out_seg``; ``latch`` and ``last_bone`` updated; the caller keeps ``seg`` / ``both`` as
+    the next frame's ``last_rel`` / ``last_both``), left/right against the heading
     (``out_lr``; ``lr_state`` = [heading known, heading]; flags[1] = the swap flags were set,
     flags[2] / flags[3] = arms / legs swapped), the floor (``out_fl``; the window as a ring
     ``fl_ring`` and its finite values sorted in ``fl_sorted``, ``fl_meta`` = [ring start, ring
@@ -300,7 +321,8 @@ def _plausibility_step(p, tracked, seg, seg_len, both, ref,
     ``check_jump`` False: the first frame (the anchor was just set), no jump test."""
     nj = p.shape[0]
     flags[1] = 0
-    if check_jump and skeleton_jump(p, tracked, anchor, anchor_ok, jumped, jump_m, jump_frames):
+    if check_jump and skeleton_jump(p, tracked, anchor, anchor_ok, jumped, jump_m, jump_frames,
+                                    jump_vel):
         flags[0] = 1
         return True
     flags[0] = 0

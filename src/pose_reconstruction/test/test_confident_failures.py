@@ -117,6 +117,28 @@ def test_tracked_joint_snapped_away_is_unreliable_within_3_frames(joints):
 
 
 @pytest.mark.parametrize('jit', [True, False])
+def test_a_running_user_is_found_again_after_a_whole_skeleton_jump(jit):
+    """A user running past the sensor (3 m/s) whose skeleton is on someone else 1 m aside for 6
+    frames, then on the user again, 0.6 m on: the return is a return, not more of the jump, so
+    the user's joints are reliable again within the Eq. 8 delay instead of rejected until
+    ``jump_frames`` (15) pass (sensor seed 1, class d, a running clip: 9 right frames were held
+    and filled). The other person's frames are rejected as before."""
+    pos, st = _standing(n=90)
+    run = np.zeros((len(pos), 1, 3))
+    run[:, 0, 1] = 0.1 * np.arange(len(pos))                # 0.1 m per frame, sideways
+    pos = pos + run
+    away, back = 30, 36
+    pos[away:back] += np.array([0.0, 0.0, 1.0]) + np.array([1.0, 0.0, 0.0])   # someone else
+    r = ReliabilityEstimator()
+    if not jit:
+        r._jit = False
+        r.plausibility._jit = False
+    R = np.array([r.update(p, s) for p, s in zip(pos, st)])
+    assert R[away:back].max() < 0.1                          # the other person: rejected
+    assert R[back + 3:back + 12, HIP_CENTER].min() > 0.8      # the user again
+
+
+@pytest.mark.parametrize('jit', [True, False])
 @pytest.mark.parametrize('unseen', [12, 45])
 def test_a_floor_not_seen_for_a_second_is_forgotten(jit, unseen):
     """Feet and ankles INFERRED for ``unseen`` frames while the user steps 20 cm down (uneven
