@@ -314,6 +314,17 @@ class PlausibilityCheck:
         return bool(step(p, tracked, self._anchor, self._anchor_ok, self._jumped_a, self.jump_m,
                          self.jump_frames, self._jump_vel))
 
+    def _skeleton_jumped(self) -> np.ndarray:
+        """R_p of a whole-skeleton jump frame: every joint 0. The segment-speed term does not
+        compare the first frame back with the last one before the jump: across the gap a
+        running user's limbs swing farther than a snap's step, and the right skeleton's return
+        was latched as a snap of its ankles for 1.5 s (issue 34); the return is judged as a
+        re-acquisition (no segment TRACKED in the last frame)."""
+        self._last_both = np.zeros(NUM_SEGMENTS, bool)
+        self.value = np.zeros(NUM_JOINTS)
+        self.terms = {'jump': self.value}
+        return self.value
+
     def _latched_score(self) -> float:
         """The speed term of a latched segment after its jump frame: the trust in the sensor (0
         where the database explains the user: the snapped place is filled from it; up to 1 where
@@ -473,9 +484,7 @@ class PlausibilityCheck:
             FLOOR_QUANTILE, out_seg, out_lr, out_fl, v, flags)
         self.skeleton_outlier = jump
         if jump:
-            self.value = np.zeros(NUM_JOINTS)
-            self.terms = {'jump': self.value}
-            return self.value
+            return self._skeleton_jumped()
         self._last_rel = seg
         self._last_both = both
         if flags[1]:
@@ -504,9 +513,7 @@ class PlausibilityCheck:
         jump = self._jump(p, tracked)
         self.skeleton_outlier = jump
         if jump:
-            self.value = np.zeros(NUM_JOINTS)
-            self.terms = {'jump': self.value}
-            return self.value
+            return self._skeleton_jumped()
         if self._jit:
             has = self._last_rel is not None
             blamed = K.segment_terms(seg, seg_len, both, np.asarray(reference_lengths, float),

@@ -122,8 +122,16 @@ def test_a_running_user_is_found_again_after_a_whole_skeleton_jump(jit):
     frames, then on the user again, 0.6 m on: the return is a return, not more of the jump, so
     the user's joints are reliable again within the Eq. 8 delay instead of rejected until
     ``jump_frames`` (15) pass (sensor seed 1, class d, a running clip: 9 right frames were held
-    and filled). The other person's frames are rejected as before."""
+    and filled), and the swinging leg is not taken for a snap across the gap. The other
+    person's frames are rejected as before."""
+    from skeleton_core.model import ANKLE_LEFT, HIP_LEFT, KNEE_LEFT
     pos, st = _standing(n=90)
+    leg = [KNEE_LEFT, ANKLE_LEFT, FOOT_LEFT]
+    for f in range(len(pos)):      # the left leg swings, 35 deg at 1.5 Hz, about the hip
+        a = np.radians(35.0) * np.sin(2 * np.pi * 1.5 * f / 30.0)
+        c, s_ = np.cos(a), np.sin(a)
+        turn = np.array([[c, 0.0, -s_], [0.0, 1.0, 0.0], [s_, 0.0, c]])
+        pos[f, leg] = pos[f, HIP_LEFT] + (pos[f, leg] - pos[f, HIP_LEFT]) @ turn.T
     run = np.zeros((len(pos), 1, 3))
     run[:, 0, 1] = 0.1 * np.arange(len(pos))                # 0.1 m per frame, sideways
     pos = pos + run
@@ -136,6 +144,9 @@ def test_a_running_user_is_found_again_after_a_whole_skeleton_jump(jit):
     R = np.array([r.update(p, s) for p, s in zip(pos, st)])
     assert R[away:back].max() < 0.1                          # the other person: rejected
     assert R[back + 3:back + 12, HIP_CENTER].min() > 0.8      # the user again
+    # and the swinging leg: its shank moved more than a snap's step across the gap, which is
+    # a re-acquisition, not a snap of the ankle (was latched for 1.5 s)
+    assert R[back + 3:back + 12, ANKLE_LEFT].min() > 0.8
 
 
 @pytest.mark.parametrize('jit', [True, False])
