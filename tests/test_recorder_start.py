@@ -11,7 +11,7 @@ rclpy = pytest.importorskip('rclpy')
 from rclpy.parameter import Parameter  # noqa: E402
 from rclpy.qos import QoSProfile  # noqa: E402
 
-from kinect_bringup.recorder import RecorderNode  # noqa: E402
+from kinect_bringup.recorder import MATCH_SETTLE_S, RecorderNode  # noqa: E402
 from ros_helpers import Spinner, wait_until  # noqa: E402
 from skeleton_core.rosnode import bring_up  # noqa: E402
 
@@ -31,8 +31,11 @@ def test_the_input_is_subscribed_after_the_outputs_have_publishers(rclpy_context
         assert wait_until(lambda: other.count_subscribers('/posture/reconstructed') == 1, 10.0)
         time.sleep(1.0)   # 20 polls of the recorder's wait: still no output publisher
         assert other.count_subscribers('/kinect/skeletons') == 0
+        made = time.monotonic()
         other.create_publisher(SkeletonArray, '/posture/reconstructed', QoSProfile(depth=10))
         assert wait_until(lambda: other.count_subscribers('/kinect/skeletons') == 1, 10.0)
+        # and not before the publisher's side of the match had MATCH_SETTLE_S to follow
+        assert time.monotonic() - made >= MATCH_SETTLE_S
     finally:
         spin.stop()
         rec.destroy_node()

@@ -18,7 +18,12 @@ names the recorded topics its nodes publish) the recorder subscribes to the grap
 driver's topics) only once its subscriptions to those topics have matched a publisher (at most
 :data:`PUBLISHERS_WAIT_S`). A replay waits for the recorder's subscription to its input before its
 first frame, so the reconstruction's output of that frame finds the recorder there: a publisher
-discovered late would otherwise take the first frames' outputs past the recorder."""
+discovered late would otherwise take the first frames' outputs past the recorder. Matching is
+two-sided: the recorder's subscription seeing a publisher does not mean that the publisher has
+met the subscription yet, and under load the publisher's side came later (the reconstruction's
+output of a replay's first frame lost, 1 clean-clone test run in 6): the input waits
+:data:`MATCH_SETTLE_S` more (the publishers reach every subscriber their graph knows before
+they publish, ``ManagedNode.reach_subscribers``)."""
 from __future__ import annotations
 
 import importlib
@@ -35,6 +40,9 @@ from skeleton_core.tf_ros import STATIC_LISTENER_QOS, TF_STATIC_TOPIC
 from .graph import TOPICS
 
 PUBLISHERS_WAIT_S = 10.0   # then the input is recorded anyway (with a warning naming the topics)
+# once every awaited publisher is seen, the input waits this much longer: the publishers' side of
+# the match (module docstring)
+MATCH_SETTLE_S = 0.5
 LATCHED = (TF_STATIC_TOPIC, '/kinect/tracker')   # transient local: nothing lost by joining late
 
 
@@ -106,8 +114,19 @@ class RecorderNode(ManagedNode):
             if topic in topics and topic not in wait:
                 self._subscribe(topic)
         self._inputs = [t for t in topics if t not in wait and t not in LATCHED]
-        self.when_ready(lambda: [t for t, sub in outputs.items() if _publishers(sub) == 0],
-                        self._subscribe_inputs, PUBLISHERS_WAIT_S,
+        seen_at = []
+
+        def missing():
+            left = [t for t, sub in outputs.items() if _publishers(sub) == 0]
+            if left or not outputs:
+                seen_at.clear()
+                return left
+            if not seen_at:
+                seen_at.append(time.monotonic())
+            if time.monotonic() - seen_at[0] < MATCH_SETTLE_S:
+                return ['(the publishers\' side of the match)']
+            return []
+        self.when_ready(missing, self._subscribe_inputs, PUBLISHERS_WAIT_S,
                         'no publisher; recording the input anyway (the first frames\' outputs '
                         'may be missing)')
 
