@@ -76,7 +76,9 @@ OUTPUT_TOPIC = {'reliability': '/kinect/skeletons_reliability', 'completion': '/
                 'optimizer': '/posture/reconstructed', 'reconstruction': '/posture/reconstructed',
                 'physics': '/character/skeletons'}
 SEQUENCE_USERS = list(range(100, 120))   # 20 users one after another
-SEQUENCE_S = 1.5                         # each in view this long (a spawn on a loaded machine takes ~1 s)
+# each in view this long: a spawn on a loaded machine takes ~1 s, and with two test suites on 2
+# cores one of 20 users in view for 1.5 s left before its character came
+SEQUENCE_S = 2.0
 CROWD_USERS = list(range(130, 137))      # 7 at once (with the driver's user: 8)
 CROWD_S = 3.0
 MAX_CHARACTERS = 6                       # physics.yaml max_characters (default)
