@@ -184,8 +184,10 @@ segment_terms = jit.njit(_segment_terms)
 
 
 def _median_sorted(v, n):
-    """The median of the first ``n`` values of ``v``, sorted in place (np.median's value)."""
-    w = np.sort(v[:n])
+    """The median of the first ``n`` values of ``v``, sorted in place (np.median's value; ``v``
+    is the caller's scratch array: no copy per frame)."""
+    w = v[:n]
+    w.sort()
     return w[n // 2] if n % 2 else (w[n // 2 - 1] + w[n // 2]) / 2.0
 
 

@@ -298,6 +298,8 @@ class ManagedNode(LifecycleNode):
         self._active: list = []       # made by activate, released on deactivate
         super().__init__(name, **kwargs)
         self.health = Health()
+        # reach_subscribers: per topic, the graph's subscriber count it last gave up waiting at
+        self._reach_gave_up: Dict[str, int] = {}
 
     # -- hooks -----------------------------------------------------------------------------------
     def configure(self) -> None:
@@ -347,7 +349,7 @@ class ManagedNode(LifecycleNode):
         replay). Waited once per change of the graph's count: a subscriber that never matches
         (incompatible QoS) costs one wait, not one per message. A few us per publisher when
         nothing is missing."""
-        gave_up = self.__dict__.setdefault('_reach_gave_up', {})
+        gave_up = self._reach_gave_up
         deadline = None
         for p in publishers:
             topic = p.topic_name

@@ -27,6 +27,7 @@ class _Node:
     def __init__(self, known):
         self.known = known
         self.log = _Log()
+        self._reach_gave_up = {}
 
     def count_subscribers(self, topic):
         return self.known
