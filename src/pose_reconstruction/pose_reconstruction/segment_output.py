@@ -128,6 +128,12 @@ class SegmentOutputConfig:
         'acceleration magnitude (Hz per m/s2; a One Euro filter on the acceleration: heavy '
         'smoothing where the acceleration is at its noise level, light in real accelerations)',
         range=(0.0, 1e6), public=False)
+    smooth_lead_speed: float = param(
+        0.1, 'segments: speed (m/s) below which the prediction correction fades (its gain '
+        '|v|^2 / (|v|^2 + this^2), v the velocity it leads along): a slow segment\'s lag is '
+        'small (at most the low-pass time constant times half this: 1.5 mm at the trusted '
+        'cutoff) and its velocity estimate mostly the sensor\'s slow noise; 0 = the full lead '
+        'at every speed', range=(0.0, 10.0), public=False)
     position_fit: float = param(
         1.0, 'segments: where the sensor is trusted, place the constant-length skeleton nearest '
         'the observed joints rather than chain it from the observed root (pull of each joint '
@@ -214,6 +220,7 @@ class SegmentOutput:
         self.position_fit = float(config.position_fit)
         self.position_fit_iterations = int(config.position_fit_iterations)
         self.smooth_lead_accel = float(config.smooth_lead_accel)
+        self.smooth_lead_speed = float(config.smooth_lead_speed)
         self.smooth_accel_cutoff = float(config.smooth_accel_cutoff)
         self.smooth_accel_beta = float(config.smooth_accel_beta)
         self.direction_fusion = bool(config.direction_fusion)
@@ -253,7 +260,8 @@ class SegmentOutput:
             mc, b, dc, num_joints=NUM_SEGMENTS + 1,
             lead_accel=self.smooth_lead_accel,
             accel_cutoff=self.smooth_accel_cutoff,
-            accel_beta=self.smooth_accel_beta) if mc > 0 else None
+            accel_beta=self.smooth_accel_beta,
+            lead_speed=self.smooth_lead_speed) if mc > 0 else None
 
     def lengths(self, positions: np.ndarray, R: np.ndarray,
                 lengths: Optional[np.ndarray] = None) -> np.ndarray:

@@ -124,11 +124,14 @@ class OneEuroFilter:
     def __init__(self, min_cutoff: float = 1.0, beta: float = 3.0, d_cutoff: float = 1.0,
                  num_joints: int = NUM_JOINTS, default_rate: float = 30.0,
                  lead_accel: float = 0.0,
-                 accel_cutoff: float = 0.0, accel_beta: float = 0.0):
+                 accel_cutoff: float = 0.0, accel_beta: float = 0.0,
+                 lead_speed: float = 0.0):
         if min_cutoff <= 0 or d_cutoff <= 0 or beta < 0:
             raise ValueError('cutoffs must be > 0 and beta >= 0')
         if lead_accel < 0 or accel_cutoff < 0 or accel_beta < 0:
             raise ValueError('lead_accel, accel_cutoff and accel_beta must be >= 0')
+        if lead_speed < 0:
+            raise ValueError('lead_speed must be >= 0')
         self.min_cutoff, self.beta, self.d_cutoff = min_cutoff, beta, d_cutoff
         # the lead's velocity: the low-pass output's, smoothed at d_cutoff; lead_accel: gain of
         # the acceleration term of the lead (see update)
@@ -136,6 +139,8 @@ class OneEuroFilter:
         # accel_cutoff > 0: a second low-pass stage (Hz) on that acceleration (0 = none)
         self.accel_cutoff = float(accel_cutoff)
         self.accel_beta = float(accel_beta)
+        # lead_speed > 0: the lead's gain |v|^2 / (|v|^2 + lead_speed^2) (see update)
+        self.lead_speed = float(lead_speed)
         self.n = num_joints
         self.default_dt = 1.0 / default_rate
         self.reset()
@@ -190,7 +195,12 @@ class OneEuroFilter:
         low-pass at ``accel_cutoff + accel_beta |acceleration|`` Hz (a One Euro filter on the
         acceleration): at rest and in slow motion it is smoothed heavily (little jitter), in a
         large acceleration it follows (little lag); on a constant acceleration the stage changes
-        nothing. The filter's state stays the uncorrected low-pass."""
+        nothing. ``lead_speed`` s > 0 scales the lead by ``|v|^2 / (|v|^2 + s^2)`` (``v`` the
+        velocity it leads along): a row moving much faster than ``s`` keeps the whole lead, a
+        slow one little of it. A slow row's lag is small (the low-pass lag times its speed: at
+        most ``tau s / 2`` is left, ``tau`` the row's low-pass time constant), while the velocity
+        estimate there is mostly the input's slow noise, which the full lead would add back.
+        The filter's state stays the uncorrected low-pass."""
         x = np.asarray(positions, float)
         dt = self.default_dt
         if stamp_ns is not None and self.t_ns is not None and stamp_ns > self.t_ns:
@@ -268,7 +278,12 @@ class OneEuroFilter:
     def _lead_velocity(self, a, al, dt, rows=slice(None)):
         """The velocity the lead multiplies the low-pass lag by (see :meth:`update`)."""
         if self.lead_accel <= 0.0:
-            return self.fdx[rows]
-        lag = ((1 - a) / a + (1 - al) / al) * dt
-        fdd = self.fdd2 if self.accel_cutoff > 0.0 else self.fdd
-        return self.fdx[rows] + (self.lead_accel * lag) * fdd[rows]
+            v = self.fdx[rows]
+        else:
+            lag = ((1 - a) / a + (1 - al) / al) * dt
+            fdd = self.fdd2 if self.accel_cutoff > 0.0 else self.fdd
+            v = self.fdx[rows] + (self.lead_accel * lag) * fdd[rows]
+        if self.lead_speed > 0.0:
+            m2 = np.einsum('jk,jk->j', v, v)
+            v = v * (m2 / (m2 + self.lead_speed * self.lead_speed))[:, None]
+        return v

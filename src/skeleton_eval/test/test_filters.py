@@ -209,3 +209,57 @@ def test_lead_parameters_are_validated():
         OneEuroFilter(accel_cutoff=-1.0)
     with pytest.raises(ValueError):
         OneEuroFilter(accel_beta=-1.0)
+
+
+def _trusted_lead(**kw):
+    # the segment output's smoothing of a segment it takes from the sensor (the cutoff times
+    # smooth_trusted_scale 4, the acceleration stage on)
+    return OneEuroFilter(1.3 * 4, 3.0, 2.0, num_joints=kw.pop('num_joints', 1), lead_accel=1.0,
+                         accel_cutoff=0.25, accel_beta=3.0, **kw)
+
+
+def test_lead_speed_fades_the_lead_on_slow_noise_and_bounds_the_lag_it_leaves():
+    from skeleton_eval.metrics import velocity_xcorr, xcorr_latency_ms
+    # a joint at rest with the sensor's slow wander (4 mm, correlated over 0.3 s) and 2 mm white
+    # noise: the full lead adds the wander's velocity back (further from the truth than the plain
+    # low-pass); faded below 0.1 m/s it is not
+    rng = np.random.default_rng(1)
+    n = 900
+    phi = np.exp(-1.0 / (30 * 0.3))
+    wander = np.zeros((n, 1, 3))
+    for i in range(1, n):
+        wander[i] = phi * wander[i - 1] + np.sqrt(1 - phi ** 2) * rng.normal(0.0, 0.004, (1, 3))
+    rest = wander + rng.normal(0.0, 0.002, (n, 1, 3))
+
+    def err(out):
+        return np.linalg.norm(out[30:], axis=-1).mean()
+
+    plain = err(_run(OneEuroFilter(1.3 * 4, 3.0, 2.0, num_joints=1), rest))
+    full = err(_run(_trusted_lead(), rest))
+    faded = err(_run(_trusted_lead(lead_speed=0.1), rest))
+    assert full > plain
+    assert faded < plain
+    # on a ramp the lag left is at most tau * lead_speed / 2 (tau = 1 / (2 pi 5.2 Hz)); the full
+    # lead leaves none
+    tau = 1.0 / (2 * np.pi * 1.3 * 4)
+    for v in (0.05, 0.1, 0.2, 1.0):
+        ramp = np.zeros((150, 1, 3))
+        ramp[:, 0, 0] = v * np.arange(150) / 30.0
+        gap = np.abs(_run(_trusted_lead(lead_speed=0.1), ramp)[90:] - ramp[90:]).max()
+        assert gap <= tau * 0.1 / 2 * 1.05
+        assert np.abs(_run(_trusted_lead(), ramp)[90:] - ramp[90:]).max() < 1e-4
+    # a 1 Hz swing of 0.2 m (up to 1.3 m/s) keeps its lead: not behind
+    t = np.arange(300) / 30.0
+    sw = np.zeros((300, 1, 3))
+    sw[:, 0, 0] = 0.2 * np.sin(2 * np.pi * 1.0 * t)
+    assert abs(xcorr_latency_ms(velocity_xcorr(_run(_trusted_lead(lead_speed=0.1), sw)[60:],
+                                               sw[60:]))) <= 5.0
+    # the numpy fast path (every row valid) and the masked path agree
+    f1, f2 = (_trusted_lead(lead_speed=0.1, num_joints=2) for _ in range(2))
+    xs = np.repeat(sw + rest[:300], 2, axis=1)
+    a = np.array([f1.update(x, None, int(i * 1e9 / 30), lead=np.ones(2)) for i, x in enumerate(xs)])
+    st = np.full(2, TRACKED)
+    b = np.array([f2.update(x, st, int(i * 1e9 / 30), lead=np.ones(2)) for i, x in enumerate(xs)])
+    assert np.allclose(a, b)
+    with pytest.raises(ValueError):
+        OneEuroFilter(lead_speed=-0.1)
