@@ -7,6 +7,9 @@ not receive response") and the event can be lost the same way; the node then sta
 good and nothing flows. :func:`drive_to_active` asks the node's state (``get_state``) and requests
 the next transition until the node is active, so a lost reply or event costs a retry, not the
 graph. A transition the node refuses (a failed configure: the node has logged why) stops it.
+Services not discovered, or discovered but silent, for ``SILENT_S`` get one warning and new
+clients; an error raised by a call is logged and retried: the bring-up thread never ends
+silently with the node left unconfigured.
 """
 from __future__ import annotations
 
@@ -22,8 +25,11 @@ STATE_TIMEOUT_S = 2.0
 # a transition may load files (a database, compiled kernels): after this long without an answer,
 # the node's state says whether it is still transitioning or the reply was lost
 TRANSITION_TIMEOUT_S = 10.0
-# the services there but no state reply for this long: the clients are made anew (and it is logged)
+# the services not discovered, or there but no state reply, for this long: the clients are made
+# anew (and it is logged)
 SILENT_S = 20.0
+# after an error raised by a call (logged), the next attempt
+RETRY_S = 1.0
 NEXT = {State.PRIMARY_STATE_UNCONFIGURED: (Transition.TRANSITION_CONFIGURE, 'configure'),
         State.PRIMARY_STATE_INACTIVE: (Transition.TRANSITION_ACTIVATE, 'activate')}
 
@@ -54,27 +60,52 @@ def drive_to_active(node, name: str, stopped: Callable[[], bool],
                 node.create_client(ChangeState, f'{name}/change_state'))
     get, change = clients()
     lost = 0
-    silent_since = None   # the first of the state queries not answered since the last answer
-    warned = False
+    # the first failed attempt (services not discovered or not answering) since the last answer
+    silent_since = None
+    warned = set()
+
+    def say(why: str, text: str):
+        if log and why not in warned:   # once per kind
+            log(text)
+            warned.add(why)
+
+    def renew():
+        nonlocal get, change, silent_since
+        for c in (get, change):
+            try:
+                node.destroy_client(c)
+            except Exception:   # noqa: BLE001 -- a client already gone is gone
+                pass
+        get, change = clients()
+        silent_since = None
+
     while not stopped():
-        if not get.wait_for_service(timeout_sec=1.0) or \
-                not change.wait_for_service(timeout_sec=1.0):
+        try:
+            seen = get.wait_for_service(timeout_sec=1.0) and \
+                change.wait_for_service(timeout_sec=1.0)
+            reply = call_once(get, GetState.Request(), STATE_TIMEOUT_S) if seen else None
+        except Exception as e:   # noqa: BLE001 -- the bring-up must not end silently
+            say(type(e).__name__, f'{name}: lifecycle bring-up: {type(e).__name__}: {e}; '
+                'retrying with new clients')
+            time.sleep(RETRY_S)
+            renew()
             continue
-        reply = call_once(get, GetState.Request(), STATE_TIMEOUT_S)
         if reply is None:
             now = time.monotonic()
             silent_since = silent_since or now
             if now - silent_since >= SILENT_S:
-                # the service is there but no reply comes back: a reply path DDS never
-                # matched stays unmatched for these clients; new ones are discovered anew
-                if log and not warned:
-                    log(f'{name}: its lifecycle services do not answer ({now - silent_since:.0f} '
-                        's; busy or a lost reply path): still trying, with new clients')
-                    warned = True
-                node.destroy_client(get)
-                node.destroy_client(change)
-                get, change = clients()
-                silent_since = None
+                # not discovered (is it running?), or there but no reply comes back (a reply
+                # path DDS never matched stays unmatched for these clients): new clients are
+                # discovered anew
+                if seen:
+                    say('silent', f'{name}: its lifecycle services do not answer '
+                        f'({now - silent_since:.0f} s; busy or a lost reply path): still '
+                        'trying, with new clients')
+                else:
+                    say('unseen', f'{name}: its lifecycle services not discovered after '
+                        f'{now - silent_since:.0f} s (is the process running? `ros2 node '
+                        'list`): still waiting, with new clients')
+                renew()
             continue
         silent_since = None
         state = reply.current_state.id
@@ -88,8 +119,14 @@ def drive_to_active(node, name: str, stopped: Callable[[], bool],
             time.sleep(0.2)
             continue
         tid, label = NEXT[state]
-        reply = call_once(change, ChangeState.Request(transition=Transition(id=tid)),
-                      TRANSITION_TIMEOUT_S)
+        try:
+            reply = call_once(change, ChangeState.Request(transition=Transition(id=tid)),
+                              TRANSITION_TIMEOUT_S)
+        except Exception as e:   # noqa: BLE001 -- the state says what happened
+            say(type(e).__name__, f'{name}: lifecycle bring-up: {type(e).__name__}: {e}; '
+                'retrying')
+            time.sleep(RETRY_S)
+            reply = None
         if reply is None:
             lost += 1                    # the state says what happened
             continue

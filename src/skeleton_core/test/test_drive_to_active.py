@@ -1,6 +1,6 @@
 """drive_to_active without DDS: a node whose lifecycle services are there but never answer (a
-reply path DDS did not match) gets new clients after SILENT_S, with one warning, and is then
-driven to active."""
+reply path DDS did not match) or are never discovered gets new clients after SILENT_S, with one
+warning, and is then driven to active; an error raised by a call is logged and retried."""
 import time
 
 import pytest
@@ -32,13 +32,15 @@ class _Future:
 
 
 class _Client:
-    def __init__(self, srv_type, answers):
-        self.srv_type, self.answers = srv_type, answers
+    def __init__(self, srv_type, answers, seen=True, raises=False):
+        self.srv_type, self.answers, self.seen, self.raises = srv_type, answers, seen, raises
 
     def wait_for_service(self, timeout_sec):
-        return True
+        return self.seen
 
     def call_async(self, request):
+        if self.raises:
+            raise RuntimeError('wait set index too big')
         if not self.answers:
             return _Future(None)
         reply = self.srv_type.Response()
@@ -51,13 +53,16 @@ class _Client:
 
 
 class _Node:
-    """The first pair of clients never hears back; the clients made after it do."""
+    """The first pair of clients never hears back (``first``: 'silent'), never finds the
+    services ('unseen') or raises on a call ('raises'); the clients made after it work."""
 
-    def __init__(self):
-        self.made, self.destroyed = [], []
+    def __init__(self, first='silent'):
+        self.made, self.destroyed, self.first = [], [], first
 
     def create_client(self, srv_type, name):
-        c = _Client(srv_type, answers=len(self.made) >= 2)
+        later = len(self.made) >= 2
+        c = _Client(srv_type, answers=later, seen=later or self.first != 'unseen',
+                    raises=not later and self.first == 'raises')
         self.made.append(c)
         return c
 
@@ -73,3 +78,21 @@ def test_clients_made_anew_when_the_services_never_answer(monkeypatch):
     assert lc.drive_to_active(node, '/n', lambda: time.monotonic() > deadline, logged.append)
     assert len(node.made) == 4 and node.destroyed == node.made[:2]
     assert len(logged) == 1 and 'do not answer' in logged[0]
+
+
+def test_clients_made_anew_when_the_services_are_never_discovered(monkeypatch):
+    monkeypatch.setattr(lc, 'SILENT_S', 0.05)
+    node, logged = _Node('unseen'), []
+    deadline = time.monotonic() + 10.0
+    assert lc.drive_to_active(node, '/n', lambda: time.monotonic() > deadline, logged.append)
+    assert len(node.made) == 4 and node.destroyed == node.made[:2]
+    assert len(logged) == 1 and 'not discovered' in logged[0] and '/n' in logged[0]
+
+
+def test_an_error_raised_by_a_call_is_logged_and_retried(monkeypatch):
+    monkeypatch.setattr(lc, 'RETRY_S', 0.01)
+    node, logged = _Node('raises'), []
+    deadline = time.monotonic() + 5.0
+    assert lc.drive_to_active(node, '/n', lambda: time.monotonic() > deadline, logged.append)
+    assert len(node.made) == 4
+    assert len(logged) == 1 and 'RuntimeError' in logged[0]
