@@ -48,6 +48,9 @@ accelerates either). That acceleration is where the
 noise is (it made the lead's jitter): it passes a second low-pass whose cutoff rises with its own
 magnitude (``smooth_accel_cutoff`` + ``smooth_accel_beta`` |acceleration|, a One Euro filter on
 the acceleration): heavily smoothed where it is at its noise level, followed where it is large.
+``smooth_lead_speed``: the lead fades on segments slower than that (gain ``|v|^2 / (|v|^2 +
+s^2)``): their lag is small, and their velocity estimate is mostly the sensor's slow wander,
+which the full lead put back (on the real recordings it cost the direction the smoothing gains).
 """
 from __future__ import annotations
 
