@@ -30,6 +30,12 @@ TRANSITION_TIMEOUT_S = 10.0
 SILENT_S = 20.0
 # after an error raised by a call (logged), the next attempt
 RETRY_S = 1.0
+TRANSITIONING = {State.TRANSITION_STATE_CONFIGURING: 'configuring',
+                 State.TRANSITION_STATE_CLEANINGUP: 'cleaning up',
+                 State.TRANSITION_STATE_SHUTTINGDOWN: 'shutting down',
+                 State.TRANSITION_STATE_ACTIVATING: 'activating',
+                 State.TRANSITION_STATE_DEACTIVATING: 'deactivating',
+                 State.TRANSITION_STATE_ERRORPROCESSING: 'processing an error'}
 NEXT = {State.PRIMARY_STATE_UNCONFIGURED: (Transition.TRANSITION_CONFIGURE, 'configure'),
         State.PRIMARY_STATE_INACTIVE: (Transition.TRANSITION_ACTIVATE, 'activate')}
 
@@ -58,10 +64,11 @@ def drive_to_active(node, name: str, stopped: Callable[[], bool],
     def clients():
         return (node.create_client(GetState, f'{name}/get_state'),
                 node.create_client(ChangeState, f'{name}/change_state'))
-    get, change = clients()
+    get = change = None   # made in the loop (an error there is retried like any other)
     lost = 0
     # the first failed attempt (services not discovered or not answering) since the last answer
     silent_since = None
+    busy_since = None      # the first state query answered with a transition since
     warned = set()
 
     def say(why: str, text: str):
@@ -73,14 +80,17 @@ def drive_to_active(node, name: str, stopped: Callable[[], bool],
         nonlocal get, change, silent_since
         for c in (get, change):
             try:
-                node.destroy_client(c)
+                if c is not None:
+                    node.destroy_client(c)
             except Exception:   # noqa: BLE001 -- a client already gone is gone
                 pass
-        get, change = clients()
+        get = change = None
         silent_since = None
 
     while not stopped():
         try:
+            if get is None:
+                get, change = clients()
             seen = get.wait_for_service(timeout_sec=1.0) and \
                 change.wait_for_service(timeout_sec=1.0)
             reply = call_once(get, GetState.Request(), STATE_TIMEOUT_S) if seen else None
@@ -116,8 +126,14 @@ def drive_to_active(node, name: str, stopped: Callable[[], bool],
         if state == State.PRIMARY_STATE_FINALIZED:
             return False
         if state not in NEXT:            # transitioning: wait for its end
+            now = time.monotonic()
+            busy_since = busy_since or now
+            if now - busy_since >= SILENT_S:
+                say('busy', f'{name}: still {TRANSITIONING.get(state, state)} after '
+                    f'{now - busy_since:.0f} s: waiting for the transition to end')
             time.sleep(0.2)
             continue
+        busy_since = None
         tid, label = NEXT[state]
         try:
             reply = call_once(change, ChangeState.Request(transition=Transition(id=tid)),

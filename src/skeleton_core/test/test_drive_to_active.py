@@ -45,7 +45,9 @@ class _Client:
             return _Future(None)
         reply = self.srv_type.Response()
         if self.srv_type is GetState:
-            reply.current_state.id = State.PRIMARY_STATE_ACTIVE
+            self.busy = getattr(self, 'busy', 0) - 1
+            reply.current_state.id = State.TRANSITION_STATE_CONFIGURING if self.busy >= 0 \
+                else State.PRIMARY_STATE_ACTIVE
         return _Future(reply)
 
     def remove_pending_request(self, future):
@@ -96,3 +98,31 @@ def test_an_error_raised_by_a_call_is_logged_and_retried(monkeypatch):
     assert lc.drive_to_active(node, '/n', lambda: time.monotonic() > deadline, logged.append)
     assert len(node.made) == 4
     assert len(logged) == 1 and 'RuntimeError' in logged[0]
+
+
+
+class _BusyNode:
+    """Its state answers 'configuring' ``busy`` times (0.2 s apart), then 'active'."""
+
+    def __init__(self, busy):
+        self.get = _Client(GetState, answers=True)
+        self.get.busy = busy
+
+    def create_client(self, srv_type, name):
+        return self.get if srv_type is GetState else _Client(srv_type, answers=True)
+
+    def destroy_client(self, c):
+        pass
+
+
+def test_a_transition_that_does_not_end_is_logged(monkeypatch):
+    monkeypatch.setattr(lc, 'SILENT_S', 0.5)
+    deadline = time.monotonic() + 5.0
+    logged = []
+    assert lc.drive_to_active(_BusyNode(6), '/n', lambda: time.monotonic() > deadline,
+                              logged.append)
+    assert len(logged) == 1 and 'still configuring' in logged[0], logged
+    logged.clear()   # a short transition says nothing
+    assert lc.drive_to_active(_BusyNode(1), '/n', lambda: time.monotonic() > deadline,
+                              logged.append)
+    assert logged == []
