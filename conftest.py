@@ -142,13 +142,18 @@ def environment_restored():
       ``/control`` or ``/driver`` answers a later module's ``change_state`` discovery without
       ever serving it: the launched node then never configures;
     * a module that sets a variable for the processes it starts (e.g. the nodes' cache directory)
-      does not leak it into the next modules' nodes."""
+      does not leak it into the next modules' nodes;
+    * a suite run at the same time on this machine (another clone, the other distro) never has
+      the module's domain: it is claimed with a lock (tests/domains.py)."""
     saved = dict(os.environ)
     base = int(saved['ROS_DOMAIN_ID'])
-    os.environ['ROS_DOMAIN_ID'] = str(1 + (base - 1 + next(_MODULES)) % 101)   # 1..101
+    # claimed (tests/domains.py): another suite on this machine never shares it
+    domain = domains.claim(base + next(_MODULES))
+    os.environ['ROS_DOMAIN_ID'] = str(domain)
     yield
     os.environ.clear()
     os.environ.update(saved)
+    domains.release(domain)
 
 
 @pytest.fixture(autouse=True, scope='module')
@@ -206,6 +211,7 @@ def no_processes_left_behind():
 
 
 sys.path.insert(0, str(ROOT / 'tests'))
+import domains  # noqa: E402  (tests/domains.py)
 
 
 # scripts/run-tests.sh reruns a few failed tests once, alone (a loaded machine's DDS timing), and

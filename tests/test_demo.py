@@ -7,6 +7,8 @@ import sys
 
 import pytest
 
+import domains  # noqa: E402  (tests/domains.py)
+
 pytest.importorskip('skeleton_msgs.msg')
 
 from skeleton_core import bagio  # noqa: E402
@@ -23,8 +25,8 @@ def test_demo_writes_bag_animation_and_plots(tmp_path):
                            '--duration', '5', '--num-users', '2'],
                           capture_output=True, text=True, timeout=400,
                           # a DDS domain of its own: nothing of this graph can reach later tests
-                          env=dict(os.environ, ROS_DOMAIN_ID=str(
-                              (int(os.environ.get('ROS_DOMAIN_ID', '0')) + 17) % 100 + 1)))
+                          env=domains.env_with(domains.claim(
+                              int(os.environ.get('ROS_DOMAIN_ID', '0')) + 17)))
     log = proc.stdout[-3000:] + proc.stderr[-3000:]
     assert proc.returncode == 0, log
     for name in ('demo.mcap', 'demo_animation.gif', 'demo_frame.png', 'demo_errors.png',

@@ -9,6 +9,8 @@ import time
 import numpy as np
 import pytest
 
+import domains  # noqa: E402  (tests/domains.py)
+
 rclpy = pytest.importorskip('rclpy')
 pytest.importorskip('skeleton_msgs.msg', reason='skeleton_msgs not built (run scripts/setup.sh)')
 
@@ -26,7 +28,7 @@ from kinect_driver.sources.openni_live import find_openni2_library  # noqa: E402
 NODE = [sys.executable, '-m', 'kinect_driver.driver_node']
 # A domain of our own: scripts/env.sh exports ROS_DOMAIN_ID=42, so concurrent test runs of other
 # shells would otherwise share one domain with us.
-DOMAIN = 60 + os.getpid() % 40
+DOMAIN = domains.claim(60 + os.getpid() % 40)   # claimed: tests/domains.py
 
 
 def _env():

@@ -7,6 +7,8 @@ import time
 import numpy as np
 import pytest
 
+import domains  # noqa: E402  (tests/domains.py)
+
 rclpy = pytest.importorskip('rclpy')
 pytest.importorskip('skeleton_msgs.msg', reason='skeleton_msgs not built (run scripts/setup.sh)')
 
@@ -18,7 +20,7 @@ from skeleton_core.conversions import frames_from_array_msg  # noqa: E402
 from skeleton_core.model import HAND_LEFT, NOT_TRACKED, TRACKED  # noqa: E402
 
 # A DDS domain of our own (scripts/env.sh exports ROS_DOMAIN_ID=42 for everybody)
-DOMAIN = 1 + (os.getpid() * 7 + 13) % 100
+DOMAIN = domains.claim(1 + (os.getpid() * 7 + 13) % 100)   # claimed: tests/domains.py
 
 
 def test_imported_real_clip_replays_over_dds(shared_dir, tmp_path):
