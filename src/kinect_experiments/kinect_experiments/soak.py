@@ -520,17 +520,17 @@ def _users_phase(pub, spin_for, characters, refusals) -> Dict:
             pub.publish(crowd_msg(time.time_ns(), uids))
             spin_for(1 / 30)
 
-    def has_character(u, since):
-        return any(u in us for t, us in characters if t >= since)
+    def first_character(u, since):
+        return min((t for t, us in characters if t >= since and u in us), default=None)
 
     start = time.monotonic()
     slowest = 0.0
     for u in SEQUENCE_USERS:
         t_u = time.monotonic()
         play((u,), SEQUENCE_S)
-        while not has_character(u, t_u) and time.monotonic() - t_u < SEQUENCE_MAX_S:
+        while first_character(u, t_u) is None and time.monotonic() - t_u < SEQUENCE_MAX_S:
             play((u,), 0.2)
-        first = min((t for t, us in characters if t >= t_u and u in us), default=None)
+        first = first_character(u, t_u)
         slowest = max(slowest, (first if first is not None else time.monotonic()) - t_u)
     spin_for(1.5)   # the last ones leave (physics user_timeout_s 1)
     seq_end = time.monotonic()

@@ -222,14 +222,13 @@ def _skeleton_jump(p, tracked, anchor, anchor_ok, jumped, jump_m, jump_frames, v
         if d > jump_m and jumped[0] < jump_frames:
             jumped[0] += 1
             return True
-        comp = np.empty(cnt)
-        for k in range(3):
+        for k in range(3):                 # dist is free now: the per-axis scratch
             i = 0
             for j in range(nj):
                 if tracked[j] and anchor_ok[j]:
-                    comp[i] = (p[j, k] - anchor[j, k]) / since
+                    dist[i] = (p[j, k] - anchor[j, k]) / since
                     i += 1
-            vel[k] = 0.5 * vel[k] + 0.5 * _median_j(comp, cnt)
+            vel[k] = 0.5 * vel[k] + 0.5 * _median_j(dist, cnt)
     jumped[0] = 0
     for j in range(nj):
         if tracked[j]:
