@@ -8,6 +8,11 @@ holds ground truth on /kinect/ground_truth).
 The output bag holds every input topic unchanged plus ``/posture/completed`` (method A) or
 ``/posture/reconstructed`` (B, C) and, with ``--physics``, ``/character/skeletons`` — the same
 topics and types the live graph publishes, so the report and replay tools take it like any bag.
+
+A recording of the Azure Kinect ROS driver (``ros2 bag record /body_tracking_data``: no
+SkeletonArray, one ``*body_tracking_data`` MarkerArray topic) is taken as it is: its markers are
+converted to skeletons (:mod:`skeleton_data.k4abt`), written to the output on
+``/kinect/skeletons`` with the tracker ``azure_kinect_bt``, and processed.
 """
 from __future__ import annotations
 
@@ -27,6 +32,7 @@ from pose_reconstruction.reconstructor import Reconstructor
 from skeleton_eval.metrics import eq18_error, mpjpe
 
 SKELETONS = 'skeleton_msgs/msg/SkeletonArray'
+CONVERTED_TOPIC = '/kinect/skeletons'   # where a recording of body markers is converted to
 
 
 def _progress(total: int, enabled: bool):
@@ -79,15 +85,22 @@ def process(bag, out: Path, method: str = 'C', database: str = '', physics: bool
         raise ValueError(str(e)) from None
     if not isinstance(bag, (str, Path)):
         bag = f'{pieces[0]} (+{len(pieces) - 1} pieces)'
-    if input_topic not in topics:
+    from skeleton_data import k4abt as K4
+    marker_topic = _marker_topic(bag, topics, input_topic)
+    if marker_topic is not None:   # an Azure Kinect ROS driver recording: converted as it is read
+        input_topic = CONVERTED_TOPIC
+    elif input_topic not in topics:
         raise ValueError(f'{bag}: no {input_topic} in the bag (topics: {sorted(topics)})')
-    n_in = topics[input_topic][1]
+    n_in = topics[marker_topic or input_topic][1]
     from pose_reconstruction import correction as corr_mod
     from skeleton_core import tracker as tracker_mod
     if info is None:
         def info(text):
             print(f'process_bag: {text}', file=sys.stderr, flush=True)
     streamed = tracker_mod.from_bag(pieces[0])   # declared once, at the start of the recording
+    declare = marker_topic is not None and not streamed
+    if declare:
+        streamed = K4.TRACKER
     tracker = tracker_mod.resolve(input_tracker, streamed)
     corr = corr_mod.select(correction, tracker, log=info, warn=warn)
     params = dict(params or {})
@@ -132,7 +145,10 @@ def process(bag, out: Path, method: str = 'C', database: str = '', physics: bool
     with BagWriter(str(out)) as writer:
         # SkeletonArray bytes are decoded and encoded by skeleton_core.cdr (numpy), not through
         # rclpy message objects: the I/O would otherwise cost as much as the reconstruction
-        for m in read_pieces(pieces, decode=False):
+        for m in _input_messages(pieces, marker_topic, warn):
+            if declare:   # the converted recording declares its tracker, as an imported one does
+                tracker_mod.write_to_bag(writer, streamed, m.stamp_ns)
+                declare = False
             writer.write_raw(m.topic, m.data, m.stamp_ns, m.msgtype)
             if m.topic == '/kinect/ground_truth' and m.msgtype == SKELETONS:
                 try:
@@ -218,6 +234,44 @@ def process(bag, out: Path, method: str = 'C', database: str = '', physics: bool
     if truth:
         summary['accuracy'] = accuracy(truth, {'raw': raw, method: rec, **({'physics': char} if char else {})})
     return summary
+
+
+def _marker_topic(bag, topics, input_topic: str) -> Optional[str]:
+    """The Azure Kinect ROS driver's body-marker topic to convert, if the input is one: the
+    topic named (a MarkerArray), or, when the bag has neither it nor any SkeletonArray, its only
+    ``*body_tracking_data`` topic."""
+    from skeleton_data import k4abt as K4
+    if input_topic in topics:
+        return input_topic if topics[input_topic][0] == K4.MARKER_ARRAY else None
+    if any(ty == SKELETONS for ty, _ in topics.values()):
+        return None
+    markers = K4.body_tracking_topics(topics)
+    if len(markers) > 1:
+        raise ValueError(f'{bag}: several body-marker topics ({", ".join(markers)}): name one '
+                         f'with --topic')
+    return markers[0] if markers else None
+
+
+def _input_messages(pieces, marker_topic: Optional[str], warn):
+    """The bag's messages in log order; with ``marker_topic``, each completed capture of the
+    body markers follows as a SkeletonArray on :data:`CONVERTED_TOPIC` (skeleton_data.k4abt)."""
+    if marker_topic is None:
+        yield from read_pieces(pieces, decode=False)
+        return
+    from skeleton_core.bagio import BagMessage
+    from skeleton_data import k4abt as K4
+    stream = K4.MarkerStream('kinect_link', warn=warn, live=False)
+
+    def converted(log_ns, stamp, frames):
+        return BagMessage(CONVERTED_TOPIC, log_ns, SKELETONS, None,
+                          frames_to_cdr(frames, stamp, 'kinect_link'))
+    for m in read_pieces(pieces, decode=False):
+        yield m
+        if m.topic == marker_topic:
+            for stamp, frames in stream.feed(m.data, m.stamp_ns):
+                yield converted(m.stamp_ns, stamp, frames)
+    for stamp, frames in stream.flush():
+        yield converted(stamp + stream._latency_ns, stamp, frames)
 
 
 def accuracy(truth: Dict, streams: Dict[str, Dict]) -> Dict:

@@ -12,6 +12,9 @@
   comes up.
 * ``live``: an OpenNI2 sensor or ``.oni`` recording with the NiTE2 user tracker
   (:mod:`kinect_driver.sources.openni_live`, docs/live_kinect.md).
+* ``azure_kinect``: the body markers of the Azure Kinect ROS driver (Azure Kinect, Orbbec Femto;
+  :mod:`kinect_driver.sources.azure_kinect`, docs/azure_kinect.md); the node subscribes to what
+  the source asks for and hands it the serialized messages.
 
 A timer runs at the source's rate (rcl timers are drift-free: each deadline is the previous one
 plus the period) and publishes what the source has due, stamped with the capture time. Optional TF
@@ -50,7 +53,7 @@ class DriverConfig:
     """The driver node's own parameters (each source adds its ``config_class``'s)."""
 
     source: str = param('synthetic', 'skeleton source (kinect_driver.sources: synthetic | replay '
-                        '| live, or a registered one)', read_only=True)
+                        '| live | azure_kinect, or a registered one)', read_only=True)
     frame_id: str = param('kinect_link', 'frame of the published skeletons (the sensor frame, '
                           'REP-103)', read_only=True, validator=_non_empty('frame_id'))
     publish_tf: bool = param(False, 'also broadcast one TF frame per NiTE joint and user '
@@ -146,11 +149,25 @@ class DriverNode(ManagedNode):
 
     def activate(self) -> None:
         self._retry_timer = None
+        self._subscribe_source()
         if self._opened:
             self._started()
         else:
             self._retry_timer = self.timer(self.source.retry_s, self._retry_open)
         self.timer(self.source.period_s, self._tick)
+
+    def _subscribe_source(self) -> None:
+        """The topics a source takes its input from (e.g. azure_kinect: the Azure Kinect ROS
+        driver's markers), as serialized messages handed to the source's callback."""
+        import importlib
+        for topic, msgtype, callback in getattr(self.source, 'subscriptions', lambda: [])():
+            pkg, kind, name = msgtype.split('/')
+            try:
+                cls = getattr(importlib.import_module(f'{pkg}.{kind}'), name)
+            except (ImportError, AttributeError):
+                self.get_logger().error(f'cannot subscribe to {topic}: {msgtype} is not installed')
+                continue
+            self.subscription(cls, topic, callback, QoSProfile(depth=30), raw=True)
 
     def cleanup(self) -> None:
         if self.source is not None:

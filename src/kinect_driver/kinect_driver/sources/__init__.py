@@ -1,4 +1,5 @@
-"""Skeleton sources of the driver node (no rclpy): synthetic, replay and live (OpenNI2/NiTE2),
+"""Skeleton sources of the driver node (no rclpy): synthetic, replay, live (OpenNI2/NiTE2) and
+azure_kinect (the Azure Kinect ROS driver's body markers),
 and the registry the node picks its ``source`` parameter's value from.
 
 Adding a source = one module with a :class:`~.base.Source` subclass (its parameters on a
@@ -21,6 +22,7 @@ BUILTIN: Dict[str, str] = {
     'synthetic': 'kinect_driver.sources.synthetic:SyntheticSource',
     'replay': 'kinect_driver.sources.replay:ReplaySource',
     'live': 'kinect_driver.sources.openni_live:LiveSource',
+    'azure_kinect': 'kinect_driver.sources.azure_kinect:AzureKinectSource',
 }
 _registered: Dict[str, Union[str, type]] = {}
 

@@ -8,6 +8,11 @@
   Timing follows the bag's receive (log) times. sqlite3 (``.db3``) bags are not read: convert them
   with ``ros2 bag convert`` to MCAP.
 * **CSV** (``.csv``): the format of :mod:`kinect_driver.csv_format`; timing follows ``stamp_ns``.
+* **Azure Kinect ROS driver recordings** (``ros2 bag record /body_tracking_data ...``): a bag
+  without a SkeletonArray topic whose ``*body_tracking_data`` topic holds the driver's
+  ``visualization_msgs/MarkerArray`` (or ``replay_topic`` naming such a topic) plays as skeletons,
+  converted by :mod:`skeleton_data.k4abt` at their recorded times, with the tracker
+  ``azure_kinect_bt``; nothing to set.
 
 The skeleton tracker a bag declares (``/kinect/tracker``, :mod:`skeleton_core.tracker`) becomes
 the source's ``tracker``: the node publishes it latched before the first frame, so the
@@ -38,6 +43,8 @@ from skeleton_core.bag_split import bag_pieces, pieces_topics, read_pieces
 from skeleton_core.bagio import BagError
 from skeleton_core.conversions import stamp_to_ns
 from skeleton_core.params import param
+
+from skeleton_data import k4abt as K4
 
 from ..csv_format import CsvFormatError, read_csv
 from .base import Source, SourceError, SourceOutput
@@ -152,6 +159,15 @@ class ReplaySource(Source):
         topic = self.topic
         if not topic and len(arrays) == 1:
             topic = arrays[0]
+        markers = K4.body_tracking_topics(topics)
+        # an Azure Kinect ROS driver recording (ros2 bag record /body_tracking_data)
+        if topic in topics and topics[topic][0] == K4.MARKER_ARRAY:
+            return self._open_markers(p, topics, topic)
+        if topic not in topics and not arrays and markers:
+            if len(markers) > 1:
+                raise SourceError(f'replay bag {p} has several body-marker topics '
+                                  f'({", ".join(markers)}): name one with replay_topic:=')
+            return self._open_markers(p, topics, markers[0])
         if topic not in topics:
             raise SourceError(f'replay bag {p} has no topic {topic!r} (SkeletonArray topics: '
                               f'{", ".join(arrays) or "none"})')
@@ -185,6 +201,45 @@ class ReplaySource(Source):
         except BagError as e:
             raise SourceError(str(e)) from None
         self._items = items
+        self.frames = sum(1 for _, o in items if not o.topic)
+        if not self.frames:
+            self._items = []
+
+    def _open_markers(self, p, topics, topic: str) -> None:
+        """The body markers of the Azure Kinect ROS driver (skeleton_data.k4abt), turned into
+        skeletons at their recorded times; the tracker is ``azure_kinect_bt`` unless the bag
+        declares one."""
+        self.topic = topic
+        try:
+            self.tracker = T.check(T.from_bag(self.pieces[0], warn=self._warn) or K4.TRACKER)
+        except T.TrackerError as e:
+            raise SourceError(f'replay bag {p}: {e}') from None
+        if self.play_other_topics:
+            self.other_topics = {t: ty for t, (ty, n) in sorted(topics.items())
+                                 if t not in (topic, T.TOPIC, '/kinect/skeletons')
+                                 and t not in self.skip_topics and n > 0 and ty}
+        items = []
+        warn = self._warn or (lambda text: None)
+        stream = K4.MarkerStream(self.frame_id, warn=lambda text: warn(f'replay: {text}'),
+                                 live=False)
+        try:
+            def marker_messages():
+                for m in read_pieces(self.pieces, topics=[topic, *self.other_topics], decode=False,
+                                     warn=self._warn):
+                    if m.topic == topic:
+                        yield m.data, m.stamp_ns
+                    else:
+                        items.append((m.stamp_ns, SourceOutput(stamp_ns=m.stamp_ns, raw=m.data,
+                                                               topic=m.topic, msgtype=m.msgtype)))
+            for log_ns, stamp, frames in K4.bag_captures(marker_messages(), stream=stream):
+                items.append((log_ns, SourceOutput(stamp_ns=stamp, frames=frames,
+                                                   frame_id=self.frame_id)))
+        except BagError as e:
+            raise SourceError(str(e)) from None
+        items.sort(key=lambda it: it[0])   # stable: a capture after the messages logged with it
+        self._items = items
+        self.kind = 'bag'
+        self.markers = stream.counts
         self.frames = sum(1 for _, o in items if not o.topic)
         if not self.frames:
             self._items = []
