@@ -110,3 +110,21 @@ def write_bag(path, t0_ns: int = 1_700_000_000_000_000_000, latency_ns: int = 45
                 imu.linear_acceleration.z = 9.81
                 bag.write('/imu', imu, log + 2000, 'sensor_msgs/msg/Imu')
     return stamps
+
+
+def users_of(path, topic) -> Dict[int, Dict[int, np.ndarray]]:
+    """{user: {stamp: positions}} of a SkeletonArray topic of a bag that may still be written."""
+    from skeleton_core.bagio import read_messages
+    from skeleton_core.cdr import frames_from_cdr
+    out: Dict[int, Dict[int, np.ndarray]] = {}
+    try:
+        for m in read_messages(path, topics=[topic], decode=False, warn=lambda s: None):
+            for f in frames_from_cdr(m.data)[2]:
+                out.setdefault(f.user_id, {})[f.stamp_ns] = f.positions
+    except Exception:  # noqa: BLE001 - missing, or its header not on disk yet
+        return {}
+    return out
+
+
+def user_frames(users) -> Dict[int, int]:
+    return {u: len(v) for u, v in users.items()}

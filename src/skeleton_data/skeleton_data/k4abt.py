@@ -47,7 +47,7 @@ import numpy as np
 
 from skeleton_core.conversions import SkeletonFrame
 from skeleton_core.marker_cdr import (ADD, SPHERE, Marker, MarkerArrayDecoder, MarkerCdrError)
-from skeleton_core.model import (INFERRED, JOINT_INDEX, JOINT_NAMES, NOT_TRACKED, NUM_JOINTS,
+from skeleton_core.model import (INFERRED, JOINT_NAMES, NOT_TRACKED, NUM_JOINTS,
                                  PARENTS, TRACKED)
 
 JOINTS: Tuple[str, ...] = (
@@ -214,9 +214,9 @@ class MarkerStream:
     joints (the driver's messages), or when :meth:`flush` finds nothing came for it for
     ``hold_ns``. So a bag (``live=False``) takes a capture split over messages in any way; live,
     the bodies of one capture must come in one message (as the driver sends them), its joints
-    may be split. A message
-    without markers (nobody seen) is an empty capture at its receive time less the stream's
-    largest recent latency (none before a body showed the latency). Markers of a capture already given out are dropped (``late_markers``).
+    may be split. A message without markers (nobody seen) is an empty capture at its receive
+    time less the stream's largest recent latency (none before a body showed the latency).
+    Markers of a capture already given out are dropped (``late_markers``).
 
     Malformed input never raises: a message that is not a MarkerArray (``malformed_messages``),
     a marker that is not a body joint (``malformed_markers``: not a SPHERE, an id whose joint is
