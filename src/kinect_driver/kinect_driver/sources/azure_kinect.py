@@ -8,9 +8,10 @@ the subscriptions a source asks for (:attr:`Source.subscriptions`) and hands it 
 messages -- and publishes every capture on ``/kinect/skeletons`` with the tracker
 ``azure_kinect_bt``.
 
-``azure_topic`` is resolved in the driver node's namespace: the default ``body_tracking_data``
-is ``/body_tracking_data`` for one camera and ``/kinect_k/body_tracking_data`` for driver k of
-``sensors:=N`` (start the Azure driver k in namespace ``kinect_k``). Bodies come and go as the
+The topic is resolved in the driver node's namespace: ``body_tracking_data`` is
+``/body_tracking_data`` for one camera and ``/kinect_k/body_tracking_data`` for driver k of
+``sensors:=N`` (start the Azure driver k in namespace ``kinect_k``); another name is a remapping
+(``-r body_tracking_data:=/camera/body_tracking_data``). Bodies come and go as the
 SDK sees them (user id = the SDK's body id); a capture's markers split over messages are joined;
 malformed input is counted and warned once (never raised).
 """
@@ -35,7 +36,8 @@ class AzureKinectConfig:
 
     azure_topic: str = param('body_tracking_data', "the Azure Kinect ROS driver's body markers "
                              '(visualization_msgs/MarkerArray), relative to the driver\'s '
-                             'namespace', validator=_topic_ok)
+                             'namespace (another name: remap it, -r body_tracking_data:=...)',
+                             validator=_topic_ok, public=False)
     azure_depth_tilt_deg: float = param(
         6.0, 'how far the depth camera looks down from the housing (deg; the Azure Kinect and '
         'Femto: 6)', range=(-30.0, 30.0), public=False)
