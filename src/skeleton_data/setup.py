@@ -20,7 +20,7 @@ setup(
     entry_points={
         'console_scripts': [
             'build_db = skeleton_data.database_cli:main',
-            'import_k4abt_json = skeleton_data.k4abt:main',
+            'import_azure_json = skeleton_data.k4abt:main',
         ],
     },
 )

@@ -495,10 +495,10 @@ def import_offline_json(src, out, frame_id: str = 'kinect_link') -> Dict:
 
 
 def main(argv=None) -> int:
-    """``import_k4abt_json SRC.json --out BAG.mcap``."""
+    """``import_azure_json SRC.json --out BAG.mcap``."""
     import argparse
     import sys
-    p = argparse.ArgumentParser(prog='import_k4abt_json', description=(
+    p = argparse.ArgumentParser(prog='import_azure_json', description=(
         "Import the Azure Kinect Body Tracking SDK's offline_processor JSON as a bag "
         '(/kinect/skeletons, tracker azure_kinect_bt) for replay and process_bag.'))
     p.add_argument('src', help='the JSON file written by offline_processor')
@@ -509,12 +509,12 @@ def main(argv=None) -> int:
     try:
         s = import_offline_json(a.src, out, a.frame_id)
     except (K4abtError, OSError) as e:
-        print(f'import_k4abt_json: error: {e}', file=sys.stderr)
+        print(f'import_azure_json: error: {e}', file=sys.stderr)
         return 1
     if not s['frames']:
-        print(f'import_k4abt_json: error: {a.src} holds no frames', file=sys.stderr)
+        print(f'import_azure_json: error: {a.src} holds no frames', file=sys.stderr)
         return 1
-    print(f"import_k4abt_json: {s['frames']} frames, {len(s['users'])} bodies "
+    print(f"import_azure_json: {s['frames']} frames, {len(s['users'])} bodies "
           f"({s['skipped']} malformed skipped) -> {out}")
     return 0
 
