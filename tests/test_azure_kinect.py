@@ -160,3 +160,40 @@ def test_the_azure_kinect_source_over_dds():
     assert stamps == sorted(stamps) and len(set(stamps)) == len(stamps)
     assert tracker == ['azure_kinect_bt']
     assert 'source azure_kinect started' in out and 'Traceback' not in out
+
+
+def test_reliability_without_tracking_states_comes_from_behaviour_and_lengths():
+    """The markers carry no tracking state (every joint there is TRACKED): a joint the tracker
+    shakes, or one placed at a wrong bone length, is still found unreliable (Eq. 1-6 and the
+    plausibility checks), the steady ones stay reliable."""
+    from pose_reconstruction.reliability import ReliabilityEstimator
+    from skeleton_core.model import ELBOW_RIGHT, HAND_LEFT, KNEE_LEFT
+    from skeleton_data import k4abt as K4
+    t = A.truth()[1]
+    stream = K4.MarkerStream(live=False)
+    est = ReliabilityEstimator()
+    cam = K4.camera_to_sensor()
+    rel = []
+    for i in range(5, 95):
+        k = K4.k4abt_from_model(t[i])
+        if i >= 60:   # the left hand shakes 8 cm back and forth every frame
+            k[K4.K4ABT_INDEX['HAND_LEFT']] += [0.0, 0.08 * (-1) ** i, 0.0]
+        if 70 <= i < 80:   # the left knee 20 cm up its thigh for a third of a second
+            k[K4.K4ABT_INDEX['KNEE_LEFT']] += [0.0, 0.0, 0.2]
+        bodies = [(1, k @ cam, np.ones(K4.NUM_K4ABT, bool))]
+        for _, frames in stream.add(_markers(bodies, i), 10**9 + i * 33_333_333):
+            f = frames[0]
+            assert (f.tracking_state == 2).all()
+            rel.append(est.update(f.positions, f.tracking_state))
+    rel = np.array(rel)          # rel[n]: capture 5 + n
+    late = rel[60:].mean(axis=0)
+    assert late[HAND_LEFT] < 0.3 and late[ELBOW_RIGHT] > 0.9, late
+    assert rel[66:75, KNEE_LEFT].mean() < 0.6 and rel[50:60, KNEE_LEFT].min() > 0.9, \
+        rel[:, KNEE_LEFT]
+
+
+def _markers(bodies, i, t0=10**9):
+    from skeleton_core.marker_cdr import Marker
+    stamp = t0 + i * 33_333_333
+    return [Marker(stamp, 'depth_camera_link', '', b * 100 + j, 2, 0, tuple(p[j]), (0, 0, 0, 1),
+                   250_000_000) for b, p, _ in bodies for j in range(32)]
