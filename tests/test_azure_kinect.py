@@ -106,6 +106,27 @@ def test_the_replay_source_plays_a_body_tracking_recording(bag):
     assert users == A.expected_user_frames()
 
 
+def test_a_bag_of_two_cameras_replays_one_per_driver(tmp_path):
+    from kinect_driver.sources.base import SourceError
+    from kinect_driver.sources.replay import ReplaySource
+    from skeleton_core.bagio import BagWriter
+    path = tmp_path / 'two.mcap'
+    caps = A.captures()[30:40]
+    with BagWriter(str(path)) as bag:
+        for i, bodies in enumerate(caps):
+            for k in (1, 2):
+                stamp = 10**18 + i * 33_333_333 + k
+                bag.write(f'/kinect_{k}/body_tracking_data', A.marker_array(bodies[:k], stamp),
+                          stamp, 'visualization_msgs/msg/MarkerArray')
+    for k in (1, 2):
+        src = ReplaySource(str(path), frame_id=f'kinect_{k}_link')
+        src.open()
+        assert src.topic == f'/kinect_{k}/body_tracking_data' and not src.other_topics
+        assert {len(o.frames) for _, o in src._items} == {k}
+    with pytest.raises(SourceError, match='replay_topic'):
+        ReplaySource(str(path)).open()
+
+
 def _env():
     return dict(os.environ, ROS_DOMAIN_ID=str(DOMAIN))
 

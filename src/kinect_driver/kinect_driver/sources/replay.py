@@ -12,7 +12,8 @@
   without a SkeletonArray topic whose ``*body_tracking_data`` topic holds the driver's
   ``visualization_msgs/MarkerArray`` (or ``replay_topic`` naming such a topic) plays as skeletons,
   converted by :mod:`skeleton_data.k4abt` at their recorded times, with the tracker
-  ``azure_kinect_bt``; nothing to set.
+  ``azure_kinect_bt``; nothing to set. A bag of several cameras' markers: driver k of
+  ``sensors:=N`` (frame ``kinect_k_link``) takes ``/kinect_k/body_tracking_data``.
 
 The skeleton tracker a bag declares (``/kinect/tracker``, :mod:`skeleton_core.tracker`) becomes
 the source's ``tracker``: the node publishes it latched before the first frame, so the
@@ -165,6 +166,11 @@ class ReplaySource(Source):
             return self._open_markers(p, topics, topic)
         if topic not in topics and not arrays and markers:
             if len(markers) > 1:
+                # several cameras in one bag: driver k of sensors:=N (frame kinect_k_link) takes
+                # /kinect_k/body_tracking_data
+                ns = self.frame_id[:-len('_link')] if self.frame_id.endswith('_link') else ''
+                markers = [t for t in markers if ns and t.startswith(f'/{ns}/')] or markers
+            if len(markers) > 1:
                 raise SourceError(f'replay bag {p} has several body-marker topics '
                                   f'({", ".join(markers)}): name one with replay_topic:=')
             return self._open_markers(p, topics, markers[0])
@@ -215,8 +221,10 @@ class ReplaySource(Source):
         except T.TrackerError as e:
             raise SourceError(f'replay bag {p}: {e}') from None
         if self.play_other_topics:
+            # (every camera's body markers are skeletons on a driver's /kinect/skeletons)
             self.other_topics = {t: ty for t, (ty, n) in sorted(topics.items())
                                  if t not in (topic, T.TOPIC, '/kinect/skeletons')
+                                 and not K4.is_body_tracking_topic(t, ty)
                                  and t not in self.skip_topics and n > 0 and ty}
         items = []
         warn = self._warn or (lambda text: None)
