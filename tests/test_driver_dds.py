@@ -214,7 +214,7 @@ def _run_fail(*params):
 
 def test_unknown_source_is_one_clear_error():
     line = _run_fail('source:=kinect2')
-    assert "source='kinect2' is not one of ['synthetic', 'replay', 'live']" in line
+    assert "source='kinect2' is not one of ['synthetic', 'replay', 'live', 'azure_kinect']" in line
 
 
 def test_unreadable_replay_file_is_one_clear_error(tmp_path):
