@@ -59,6 +59,15 @@ def from_euler_zyx(a: np.ndarray) -> np.ndarray:
     return rot_axis(_AXES[2], a[..., 0]) @ rot_axis(_AXES[1], a[..., 1]) @ rot_axis(_AXES[0], a[..., 2])
 
 
+def _rot_axes(axes: np.ndarray, angle: np.ndarray) -> np.ndarray:
+    """Rotations (U, n, 3, 3) about unit ``axes`` (n, 3) by ``angle`` (U, n) (Rodrigues)."""
+    k = np.zeros(axes.shape[:-1] + (3, 3))
+    k[..., 0, 1], k[..., 0, 2], k[..., 1, 2] = -axes[..., 2], axes[..., 1], -axes[..., 0]
+    k[..., 1, 0], k[..., 2, 0], k[..., 2, 1] = axes[..., 2], -axes[..., 1], axes[..., 0]
+    t = np.asarray(angle, float)[..., None, None]
+    return np.eye(3) + np.sin(t) * k + (1.0 - np.cos(t)) * (k @ k)
+
+
 def quat_axis_angle(axis: np.ndarray, angle: np.ndarray) -> np.ndarray:
     """(x, y, z, w) quaternions (..., 4) of rotations about ``axis`` (3,) by ``angle`` (...)."""
     h = 0.5 * np.asarray(angle, float)
@@ -86,6 +95,16 @@ def quat_from_matrices(r: np.ndarray) -> np.ndarray:
     return np.where(q[..., 3:4] < 0, -q, q)
 
 
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``np.cross`` over the last axis, without its axis juggling (a third of the time)."""
+    a, b = np.broadcast_arrays(a, b)
+    out = np.empty(a.shape)
+    out[..., 0] = a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1]
+    out[..., 1] = a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2]
+    out[..., 2] = a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+    return out
+
+
 def _unit(v: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
     n = np.linalg.norm(v, axis=-1, keepdims=True)
     return v / np.maximum(n, EPS), n[..., 0]
@@ -95,17 +114,17 @@ def _frame(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Rotation (..., 3, 3) with columns a, b', a x b' (b' = b made orthogonal to a; unit a)."""
     b = b - np.sum(a * b, -1, keepdims=True) * a
     b, _ = _unit(b)
-    return np.stack([a, b, np.cross(a, b)], axis=-1)
+    return np.stack([a, b, _cross(a, b)], axis=-1)
 
 
 def least_rotation(u: np.ndarray, d: np.ndarray) -> np.ndarray:
     """The smallest rotation (..., 3, 3) taking unit vector(s) ``u`` onto unit vectors ``d``."""
     u = np.broadcast_to(np.asarray(u, float), d.shape)
     c = np.sum(u * d, -1)
-    k = np.cross(u, d)
+    k = _cross(u, d)
     s = np.linalg.norm(k, axis=-1)
     # opposite vectors: half a turn about any axis orthogonal to u
-    alt = np.cross(u, np.where(np.abs(u[..., :1]) < 0.9, _AXES[0], _AXES[1]))
+    alt = _cross(u, np.where(np.abs(u[..., :1]) < 0.9, _AXES[0], _AXES[1]))
     k = np.where((s < 1e-9)[..., None] & (c < 0)[..., None], alt, k)
     k, _ = _unit(k)
     ang = np.arctan2(s, c)
@@ -172,6 +191,20 @@ class Tree:
             n += len(lk.joints)
         if root_segment >= 0:
             self.link_of_segment[root_segment] = -1
+        # index arrays for the vectorised kinematics: links by depth, parents, joints, columns
+        self._parent = np.array([lk.parent for lk in self.links], int)
+        self._child = np.array([lk.child_joint for lk in self.links], int)
+        self._pjoint = np.array([lk.parent_joint for lk in self.links], int)
+        depth = []
+        for lk in self.links:
+            depth.append(0 if lk.parent < 0 else depth[lk.parent] + 1)
+        self._levels = [np.array([i for i, dp in enumerate(depth) if dp == level], int)
+                        for level in range(max(depth, default=-1) + 1)]
+        self._balls = np.array([i for i, lk in enumerate(self.links) if lk.kind != HINGE], int)
+        self._hinges = np.array([i for i, lk in enumerate(self.links) if lk.kind == HINGE], int)
+        self._ball_cols = np.array([c for i in self._balls for c in
+                                    range(self._slices[i].start, self._slices[i].stop)], int)
+        self._hinge_cols = np.array([self._slices[i].start for i in self._hinges], int)
 
     @property
     def num_angles(self) -> int:
@@ -192,7 +225,11 @@ class Tree:
 
     # -------------------------------------------------- URDF
     def offsets(self, lengths: np.ndarray) -> np.ndarray:
-        """(20, 3) rest offsets of every joint from its parent for segment ``lengths`` (19,)."""
+        """(20, 3) rest offsets of every joint from its parent for segment ``lengths`` (19,)
+        along the model's rest directions; rest offsets (20, 3) (a ``Body``'s) are kept as given."""
+        lengths = np.asarray(lengths, float)
+        if lengths.shape == (NUM_JOINTS, 3):
+            return lengths
         out = np.zeros((NUM_JOINTS, 3))
         for k, (_, c) in enumerate(SEGMENTS):
             out[c] = REST_DIRECTIONS[c] * float(lengths[k])
@@ -205,7 +242,7 @@ class Tree:
 
     def urdf(self, lengths: np.ndarray, robot_name: str, radii: Optional[np.ndarray] = None,
              rgba: str = '1 0.7 0 1') -> str:
-        """The URDF (a string) for segment ``lengths`` (19,): revolute joints (limits +-pi: the
+        """The URDF (a string) for segment ``lengths`` (19,) or rest offsets (20, 3): revolute joints (limits +-pi: the
         angles are measured, not commanded), fixed end frames, a cylinder per segment for RViz
         (``radii``: (19,), default 3 cm)."""
         lengths = np.asarray(lengths, float)
@@ -238,12 +275,18 @@ class Tree:
                 out.append(joint(lk.joints[0], 'revolute', parent, lk.name, xyz, lk.axis))
             out.append(f'  <link name="{lk.name}">{self._visual(lk.segment, offsets, radii)}</link>')
         for j, name in self.fixed.items():
-            k = SEGMENT_OF_JOINT[j]
-            parent = self.root if k == self.root_segment else self.links[self.link_of_segment[k]].name
+            parent = self._fixed_parent(j)
             out.append(f'  <link name="{name}"/>')
             out.append(joint(name, 'fixed', parent, name, offsets[j]))
         out.append('</robot>')
         return '\n'.join(out) + '\n'
+
+    def _fixed_parent(self, j: int) -> str:
+        """The link a fixed frame at joint ``j`` hangs from: the segment ending at j (the root's
+        frame is the root)."""
+        k = SEGMENT_OF_JOINT[j]
+        return self.root if k < 0 or k == self.root_segment else \
+            self.links[self.link_of_segment[k]].name
 
     @staticmethod
     def _visual(k: int, offsets: np.ndarray, radii: np.ndarray) -> str:
@@ -267,52 +310,68 @@ class Tree:
 
         Returns ``(root_rotation (U, 3, 3), angles (U, num_angles), local (U, L, 3, 3))``: the root
         frame's axes (given, or the body heading of :func:`body_heading`), the angles in
-        ``joint_names`` order and every link's rotation relative to its parent link."""
+        ``joint_names`` order and every link's rotation relative to its parent link. The links of
+        one depth in the tree are solved together (a handful of array operations per depth)."""
         x = np.asarray(positions, float)
         u = x.shape[0]
         w_root = body_heading(x) if root_rotation is None else np.asarray(root_rotation, float)
         nl = len(self.links)
         world = np.empty((u, nl, 3, 3))
         local = np.empty((u, nl, 3, 3))
+        d_all, _ = _unit(x[:, self._child] - x[:, self._pjoint])          # (U, L, 3)
+        for lv in self._levels:
+            par = self._parent[lv]
+            wp = np.where((par < 0)[None, :, None, None], w_root[:, None],
+                          world[:, np.maximum(par, 0)])
+            d = d_all[:, lv]
+            d_l = np.einsum('unji,unj->uni', wp, d)                        # parent link's axes
+            rest = REST_DIRECTIONS[self._child[lv]]
+            r = least_rotation(rest, d_l)
+            twisted = [k for k, i in enumerate(lv) if self.links[i].twist is not None]
+            if twisted:
+                t = np.array(twisted)
+                ref_w = np.stack([self._twist_reference(self.links[lv[k]], x, d_all)
+                                  for k in twisted], axis=1)
+                ref_rest = np.array([self._twist_rest(self.links[lv[k]]) for k in twisted])
+                ref_l = np.einsum('unji,unj->uni', wp[:, t], ref_w)
+                dl = d_l[:, t]
+                perp = ref_l - np.sum(ref_l * dl, -1, keepdims=True) * dl
+                ok = np.linalg.norm(perp, axis=-1) > 1e-3 * np.maximum(
+                    np.linalg.norm(ref_l, axis=-1), EPS)
+                rest_t = np.broadcast_to(rest[t], dl.shape)
+                full = _frame(dl, ref_l) @ _frame(
+                    rest_t, np.broadcast_to(ref_rest, dl.shape)).swapaxes(-1, -2)
+                r[:, t] = np.where(ok[..., None, None], full, r[:, t])
+            hinges = [k for k, i in enumerate(lv) if self.links[i].kind == HINGE]
+            if hinges:
+                h = np.array(hinges)
+                ax = np.array([self.links[lv[k]].axis for k in hinges], float)
+                th = np.arctan2(np.sum(_cross(rest[h], d_l[:, h]) * ax, -1),
+                                np.sum(d_l[:, h] * rest[h], -1))
+                r[:, h] = _rot_axes(ax, th)
+            local[:, lv] = r
+            world[:, lv] = wp @ r
         angles = np.empty((u, self.num_angles))
-        for i, lk in enumerate(self.links):
-            wp = w_root if lk.parent < 0 else world[:, lk.parent]
-            p, c = SEGMENTS[lk.segment]
-            d, _ = _unit(x[:, c] - x[:, p])
-            d_l = np.einsum('uji,uj->ui', wp, d)           # in the parent link's axes
-            rest = REST_DIRECTIONS[c]
-            if lk.kind == HINGE:
-                ax = np.asarray(lk.axis)
-                th = np.arctan2(np.cross(rest, d_l) @ ax, d_l @ rest)
-                r = rot_axis(ax, th)
-                angles[:, self._slices[i]] = th[:, None]
-            else:
-                r = least_rotation(rest, d_l)
-                ref_w, ref_rest = self._twist_reference(lk, x, d)
-                if ref_w is not None:
-                    ref_l = np.einsum('uji,uj->ui', wp, ref_w)
-                    ref_l_perp = ref_l - np.sum(ref_l * d_l, -1, keepdims=True) * d_l
-                    ok = np.linalg.norm(ref_l_perp, axis=-1) > 1e-3 * np.maximum(
-                        np.linalg.norm(ref_l, axis=-1), EPS)
-                    full = _frame(d_l, ref_l) @ _frame(np.broadcast_to(rest, d_l.shape),
-                                                       np.broadcast_to(ref_rest, d_l.shape)
-                                                       ).swapaxes(-1, -2)
-                    r = np.where(ok[:, None, None], full, r)
-                angles[:, self._slices[i]] = euler_zyx(r)
-            local[:, i] = r
-            world[:, i] = wp @ r
+        angles[:, self._ball_cols] = euler_zyx(local[:, self._balls]).reshape(u, -1)
+        if len(self._hinges):
+            ax = np.array([self.links[i].axis for i in self._hinges], float)
+            v = np.array([_perp(a) for a in ax])
+            rv = np.einsum('ulij,lj->uli', local[:, self._hinges], v)
+            angles[:, self._hinge_cols] = np.arctan2(np.sum(_cross(v, rv) * ax, -1),
+                                                     np.sum(rv * v, -1))
         return w_root, angles, local
 
-    def _twist_reference(self, lk: Link, x: np.ndarray, d: np.ndarray):
-        if lk.twist is None:
-            return None, None
+    def _twist_reference(self, lk: Link, x: np.ndarray, d_all: np.ndarray) -> np.ndarray:
+        """The world vector (U, 3) that the link's twist reference follows."""
         if lk.twist[0] == 'line':
-            _, a, b, ref = lk.twist
-            return x[:, a] - x[:, b], np.asarray(ref, float)
+            return x[:, lk.twist[1]] - x[:, lk.twist[2]]
         # ('hinge', link index): the hinge's axis is the normal of the plane of the two segments
-        h = self.links[lk.twist[1]]
-        d2, _ = _unit(x[:, h.child_joint] - x[:, h.parent_joint])
-        return np.cross(d, d2), np.asarray(h.axis, float)
+        return _cross(d_all[:, self.links.index(lk)], d_all[:, lk.twist[1]])
+
+    def _twist_rest(self, lk: Link) -> np.ndarray:
+        """The twist reference's direction in the rest posture (link axes)."""
+        return np.asarray(lk.twist[3] if lk.twist[0] == 'line' else self.links[lk.twist[1]].axis,
+                          float)
 
     def local_rotations(self, angles: np.ndarray) -> np.ndarray:
         """(U, L, 3, 3) link rotations relative to their parents from joint angles (U, n)."""
@@ -327,11 +386,17 @@ class Tree:
     def joint_positions(self, lengths: np.ndarray, root_pos: np.ndarray, root_rotation: np.ndarray,
                         angles: np.ndarray) -> np.ndarray:
         """Forward kinematics: joint positions (U, 20, 3) of angles (U, n) on the tree with
-        segment ``lengths`` (19,) or (U, 19), the root at ``root_pos`` (U, 3) with axes
-        ``root_rotation`` (U, 3, 3)."""
+        segment ``lengths`` (19,) or (U, 19) (or rest offsets (20, 3) / (U, 20, 3)), the root at
+        ``root_pos`` (U, 3) with axes ``root_rotation`` (U, 3, 3)."""
         angles = np.atleast_2d(angles)
         u = angles.shape[0]
-        lengths = np.broadcast_to(np.asarray(lengths, float), (u, len(SEGMENTS)))
+        lengths = np.asarray(lengths, float)
+        if lengths.shape[-2:] == (NUM_JOINTS, 3):
+            off = np.broadcast_to(lengths, (u, NUM_JOINTS, 3))
+        else:
+            by_joint = np.zeros((u, NUM_JOINTS))
+            by_joint[:, [c for _, c in SEGMENTS]] = np.broadcast_to(lengths, (u, len(SEGMENTS)))
+            off = REST_DIRECTIONS * by_joint[..., None]
         local = self.local_rotations(angles)
         world = np.empty_like(local)
         x = np.empty((u, NUM_JOINTS, 3))
@@ -339,47 +404,80 @@ class Tree:
         w_root = np.asarray(root_rotation, float)
         if self.root_segment >= 0:   # the root link carries its own segment
             c = SEGMENTS[self.root_segment][1]
-            x[:, c] = root_pos + np.einsum('uij,j->ui', w_root, REST_DIRECTIONS[c]) * \
-                lengths[:, self.root_segment, None]
+            x[:, c] = root_pos + np.einsum('uij,uj->ui', w_root, off[:, c])
         for i, lk in enumerate(self.links):
             wp = w_root if lk.parent < 0 else world[:, lk.parent]
             world[:, i] = wp @ local[:, i]
             p, c = SEGMENTS[lk.segment]
-            x[:, c] = x[:, p] + np.einsum('uij,j->ui', world[:, i], REST_DIRECTIONS[c]) * \
-                lengths[:, lk.segment, None]
+            x[:, c] = x[:, p] + np.einsum('uij,uj->ui', world[:, i], off[:, c])
         return x
 
-    def joint_transforms(self, angles: np.ndarray, lengths: np.ndarray
-                         ) -> Tuple[List[Tuple[str, str]], np.ndarray, np.ndarray]:
-        """What ``robot_state_publisher`` would put on TF for every URDF joint: ``(pairs,
-        translations (U, J, 3), quaternions (U, J, 4))``, ``pairs[j] = (parent, child)`` link."""
-        angles = np.atleast_2d(np.asarray(angles, float))
-        u = angles.shape[0]
-        offsets = self.offsets(lengths)
-        pairs, trans, quats = [], [], []
-        zero = np.zeros((u, 3))
+    def angles_from_world(self, root_rotation: np.ndarray, world: np.ndarray) -> np.ndarray:
+        """Joint angles (U, n) of links whose world rotations are known: ``world`` (U, 19, 3, 3)
+        by segment (``model.SEGMENTS`` order; the root segment's is the root's when the root
+        link carries it), ``root_rotation`` (U, 3, 3). A hinge keeps only its rotation about its
+        axis. All links at once (no recursion: every rotation is given)."""
+        w_root = np.asarray(root_rotation, float)
+        world = np.asarray(world, float)
+        full = np.concatenate([world, w_root[:, None]], axis=1)   # index -1: the root
+        seg = np.array([lk.segment for lk in self.links])
+        par = np.array([self.links[lk.parent].segment if lk.parent >= 0 else -1
+                        for lk in self.links])
+        local = full[:, par].swapaxes(-1, -2) @ world[:, seg]        # (U, L, 3, 3)
+        angles = np.empty((w_root.shape[0], self.num_angles))
+        balls = [i for i, lk in enumerate(self.links) if lk.kind != HINGE]
+        cols = np.concatenate([np.arange(self._slices[i].start, self._slices[i].stop)
+                               for i in balls])
+        angles[:, cols] = euler_zyx(local[:, balls]).reshape(len(angles), -1)
         for i, lk in enumerate(self.links):
-            parent = self.root if lk.parent < 0 else self.links[lk.parent].name
-            a = angles[:, self._slices[i]]
-            xyz = np.broadcast_to(self.origin(lk, offsets), (u, 3))
             if lk.kind == HINGE:
-                pairs.append((parent, lk.name))
-                trans.append(xyz)
-                quats.append(quat_axis_angle(np.asarray(lk.axis), a[:, 0]))
-            else:
-                chain = [parent, *lk.intermediate, lk.name]
-                for n, ax in enumerate((_AXES[2], _AXES[1], _AXES[0])):
-                    pairs.append((chain[n], chain[n + 1]))
-                    trans.append(xyz if n == 0 else zero)
-                    quats.append(quat_axis_angle(ax, a[:, n]))
-        ident = np.broadcast_to(np.array([0.0, 0.0, 0.0, 1.0]), (u, 4))
-        for j, name in self.fixed.items():
-            k = SEGMENT_OF_JOINT[j]
-            parent = self.root if k == self.root_segment else self.links[self.link_of_segment[k]].name
-            pairs.append((parent, name))
-            trans.append(np.broadcast_to(offsets[j], (u, 3)))
-            quats.append(ident)
-        return pairs, np.stack(trans, axis=1), np.stack(quats, axis=1)
+                ax = np.asarray(lk.axis)
+                v = _perp(ax)
+                rv = local[:, i] @ v
+                angles[:, self._slices[i]] = np.arctan2(_cross(v, rv) @ ax, rv @ v)[:, None]
+        return angles
+
+    def tf_pairs(self) -> List[Tuple[str, str]]:
+        """(parent, child) link of every URDF joint: the revolute ones in ``joint_names`` order,
+        then the fixed frames (what ``robot_state_publisher`` would put on TF)."""
+        pairs = []
+        for lk in self.links:
+            parent = self.root if lk.parent < 0 else self.links[lk.parent].name
+            chain = [parent, *lk.intermediate, lk.name]
+            pairs += list(zip(chain[:-1], chain[1:]))
+        return pairs + [(self._fixed_parent(j), name) for j, name in self.fixed.items()]
+
+    def tf_translations(self, lengths: np.ndarray) -> np.ndarray:
+        """(J, 3) translations of :meth:`tf_pairs` (constant for given segment lengths)."""
+        offsets = self.offsets(lengths)
+        out = []
+        for lk in self.links:
+            out.append(self.origin(lk, offsets))
+            out += [np.zeros(3)] * (len(lk.joints) - 1)
+        out += [offsets[j] for j in self.fixed]
+        return np.array(out).reshape(-1, 3)
+
+    def tf_rotations(self, angles: np.ndarray) -> np.ndarray:
+        """(U, J, 4) quaternions x y z w of :meth:`tf_pairs` for joint angles (U, n)."""
+        if not hasattr(self, '_axes'):
+            axes = []
+            for lk in self.links:
+                axes += [lk.axis] if lk.kind == HINGE else [_AXES[2], _AXES[1], _AXES[0]]
+            self._axes = np.array(axes, float)
+        angles = np.atleast_2d(np.asarray(angles, float))
+        h = 0.5 * angles
+        q = np.zeros(angles.shape + (4,))
+        q[..., :3] = np.sin(h)[..., None] * self._axes
+        q[..., 3] = np.cos(h)
+        fixed = np.zeros((angles.shape[0], len(self.fixed), 4))
+        fixed[..., 3] = 1.0
+        return np.concatenate([q, fixed], axis=1)
+
+
+def _perp(a: np.ndarray) -> np.ndarray:
+    """A unit vector orthogonal to unit vector ``a``."""
+    v = np.cross(a, _AXES[0] if abs(a[0]) < 0.9 else _AXES[1])
+    return v / np.linalg.norm(v)
 
 
 def body_heading(x: np.ndarray, up=(0.0, 0.0, 1.0)) -> np.ndarray:
@@ -396,7 +494,7 @@ def body_heading(x: np.ndarray, up=(0.0, 0.0, 1.0)) -> np.ndarray:
     y = np.where(weak[:, None], shoulders, y)
     y, n = _unit(y)
     y = np.where((n < 1e-6)[:, None], _AXES[1], y)
-    return np.stack([np.cross(y, z), y, z], axis=-1)
+    return np.stack([_cross(y, z), y, z], axis=-1)
 
 
 def segment_tree(root: str, name: Callable[[int], str], kinds: Dict[int, str] = None,

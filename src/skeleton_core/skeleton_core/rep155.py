@@ -130,6 +130,8 @@ class Body:
     lengths: Optional[np.ndarray] = None          # (19,) the published URDF's lengths
     urdf_time: float = -np.inf
     history: List[np.ndarray] = field(default_factory=list)
+    pairs: List[Tuple[str, str]] = field(default_factory=list)   # its TF (parent, child)
+    translations: Optional[np.ndarray] = None     # (J, 3) for ``lengths``
 
     def observe(self, lengths: np.ndarray) -> None:
         self.history.append(lengths)
@@ -208,22 +210,23 @@ class BodyTracker:
                     b.lengths = est
                     b.urdf_time = now_s
                     out.urdf[b.body_id] = b.tree.urdf(est, f'human_{b.body_id}')
+                    b.translations = b.tree.tf_translations(est)
+                    if not b.pairs:
+                        b.pairs = b.tree.tf_pairs()
                 bodies.append(b)
             out.tracked = [b.body_id for b in bodies]
-            # every body has the same tree shape: solve them together
+            # every body has the same tree shape: solved and turned into transforms together
             tree = bodies[0].tree
             w_root, angles, _ = tree.solve(x)
             q_root = quat_from_matrices(w_root)
+            q_all = tree.tf_rotations(angles)
             for i, b in enumerate(bodies):
                 out.joint_names[b.body_id] = b.tree.joint_names
                 out.angles[b.body_id] = angles[i]
-                pairs, t, q = b.tree.joint_transforms(angles[i:i + 1], b.lengths)
                 out.tf_pairs.append((frame_id, b.tree.root))
-                out.tf_pairs.extend(pairs)
-                trans.append(x[i:i + 1, m.ROOT])
-                trans.append(t[0])
-                rots.append(q_root[i:i + 1])
-                rots.append(q[0])
+                out.tf_pairs.extend(b.pairs)
+                trans += [x[i:i + 1, m.ROOT], b.translations]
+                rots += [q_root[i:i + 1], q_all[i]]
         else:
             for u in uids:
                 self.bodies.setdefault(u, Body(self.body_id(u), None, self.window))
