@@ -27,25 +27,29 @@ class TfHistory:
     :meth:`lookup` chains them up to the common ancestor at one stamp."""
 
     def __init__(self):
-        self.dynamic: Dict[str, Dict[int, Tuple[str, Transform]]] = {}
-        self.static: Dict[str, Tuple[str, Transform]] = {}
+        self.dynamic: Dict[str, Dict[int, tuple]] = {}   # child -> stamp -> (parent, t, q)
+        self.static: Dict[str, tuple] = {}
         self.arrival: Dict[str, float] = {}
 
     def add(self, msg, static: bool) -> None:
-        for m in msg.transforms:
+        now = time.monotonic()
+        for m in msg.transforms:   # (kept as numbers: a Transform is made on lookup)
             t, r = m.transform.translation, m.transform.rotation
-            tr = Transform((t.x, t.y, t.z), (r.x, r.y, r.z, r.w))
+            item = (m.header.frame_id, (t.x, t.y, t.z), (r.x, r.y, r.z, r.w))
             if static:
-                self.static[m.child_frame_id] = (m.header.frame_id, tr)
+                self.static[m.child_frame_id] = item
             else:
                 stamp = m.header.stamp.sec * 10**9 + m.header.stamp.nanosec
-                self.dynamic.setdefault(m.child_frame_id, {})[stamp] = (m.header.frame_id, tr)
-                self.arrival[m.child_frame_id] = time.monotonic()
+                d = self.dynamic.setdefault(m.child_frame_id, {})
+                d[stamp] = item
+                if len(d) > 600:
+                    for k in sorted(d)[:-300]:
+                        del d[k]
+                self.arrival[m.child_frame_id] = now
 
     def _parent(self, frame: str, stamp: int):
-        if frame in self.static:
-            return self.static[frame]
-        return self.dynamic.get(frame, {}).get(stamp)
+        item = self.static.get(frame) or self.dynamic.get(frame, {}).get(stamp)
+        return None if item is None else (item[0], Transform(item[1], item[2]))
 
     def _to_top(self, frame: str, stamp: int) -> List[Tuple[str, Transform]]:
         chain, t, f = [(frame, Transform())], Transform(), frame
@@ -85,12 +89,12 @@ class Consumer:
         self._subs = {}
         n = self.node
         n.create_subscription(TFMessage, '/tf', lambda m: self._tf(m, False),
-                              QoSProfile(depth=500, reliability=ReliabilityPolicy.RELIABLE))
+                              QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE))
         n.create_subscription(TFMessage, '/tf_static', lambda m: self._tf(m, True), STATIC)
         n.create_subscription(IdsList, '/humans/bodies/tracked', self._on_tracked, 10)
         for topic, cls in (extra or {}).items():
             n.create_subscription(cls, topic, lambda m, t=topic: self._on_extra(t, m),
-                                  LATCHED if topic.endswith('description') else 50)
+                                  LATCHED if topic.endswith('description') else 300)
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(n)
         self._running = True
@@ -123,17 +127,18 @@ class Consumer:
                         lambda m, b=bid: self._on_urdf(b, m), LATCHED),
                     self.node.create_subscription(
                         JointState, f'/humans/bodies/{bid}/joint_states',
-                        lambda m, b=bid: self._on_js(b, m), 50))
+                        lambda m, b=bid: self._on_js(b, m), 300))
 
     def _on_urdf(self, bid, msg):
         with self.lock:
             self.urdf[bid] = msg.data
 
     def _on_js(self, bid, msg):
+        # as robot_state_publisher does: joint states apply to the URDF received before them
         stamp = msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec
         with self.lock:
             d = self.joint_states.setdefault(bid, {})
-            d[stamp] = dict(zip(msg.name, msg.position))
+            d[stamp] = (dict(zip(msg.name, msg.position)), self.urdf.get(bid))
             for k in sorted(d)[:-300]:
                 del d[k]
 
@@ -145,8 +150,7 @@ class Consumer:
         """(joint frame positions in ``fixed`` by FK of the body's URDF and joint states at
         ``stamp``, the same by TF lookups); None where something is missing."""
         with self.lock:
-            urdf = self.urdf.get(bid)
-            js = self.joint_states.get(bid, {}).get(stamp)
+            js, urdf = self.joint_states.get(bid, {}).get(stamp, (None, None))
             root = self.tf.lookup(fixed, f'body_{bid}', stamp)
             by_tf = [self.tf.lookup(fixed, f, stamp) for f in frames]
         if urdf is None or js is None or root is None:

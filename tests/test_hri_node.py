@@ -74,6 +74,13 @@ def test_rep155_bodies_joint_frames_and_leaving_users(graph):
     assert wait_until(lambda: consumer.last_tracked() == ['u1', 'u2'], 5), consumer.last_tracked()
     assert wait_until(lambda: set(consumer.urdf) == {'u1', 'u2'}, 5)
     # every joint frame, by TF and by FK of the URDF + joint states, where the skeleton put it
+    last = max(sent)
+
+    def caught_up():   # (a loaded machine delays the consumer's callbacks)
+        with consumer.lock:
+            return all(last in consumer.joint_states.get(b, {}) for b in ('u1', 'u2')) and \
+                consumer.tf.lookup('world', 'left_hand_2', last) is not None
+    assert wait_until(caught_up, 10)
     checked = 0
     for stamp in sorted(sent)[-20:]:
         for uid in (1, 2):

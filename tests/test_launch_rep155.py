@@ -85,8 +85,8 @@ def test_rep155_consumer_sees_every_user_and_fk_gives_the_reconstruction(consume
             lh = consumer.tf.lookup('world', f'left_hand_{uid}', stamp)
             if lh is not None:   # openni2_tracker's left hand: NiTE's, the wrist
                 hand.append(np.linalg.norm(lh.translation - want[m.WRIST_LEFT]))
-    print(f'REP-155 FK vs /posture/reconstructed: {len(errors)} bodies, max {max(errors):.4f} m')
     assert len(errors) >= 20, len(errors)
+    print(f'REP-155 FK vs /posture/reconstructed: {len(errors)} bodies, max {max(errors):.2e} m')
     assert max(errors) < 0.01
     assert len(hand) >= 20 and max(hand) < 1e-4
 
@@ -99,23 +99,40 @@ def test_character_urdf_and_joint_states_give_the_character_back(consumer):
     assert wait_until(ready, 120)
     with consumer.lock:
         urdf = {u: consumer.extra[f'/character/u{u}/robot_description'][-1].data for u in USERS}
-        states = {_stamp(j): dict(zip(j.name, j.position))
-                  for j in consumer.extra['/character/joint_states'][-60:]}
     errors = []
-    for stamp, users in sorted(_skeletons(consumer, '/character/skeletons').items())[-40:]:
+    deadline = time.monotonic() + 30
+    while len(errors) < 10 and time.monotonic() < deadline:
+        time.sleep(1.0)   # (the consumer's /tf callbacks may lag on a loaded machine)
+        errors = _character_errors(consumer, urdf)
+    assert len(errors) >= 10, len(errors)
+    print(f'character FK vs /character/skeletons: {len(errors)} characters, '
+          f'max {max(errors):.2e} m')
+    assert max(errors) < 0.01
+
+
+def _character_errors(consumer, urdf):
+    """FK of each character's URDF + joint states + root on TF against /character/skeletons, on
+    the stamps published once (a physics tick without a new target publishes the same stamp
+    again, with the character moved on: such stamps cannot be paired across topics)."""
+    from collections import Counter
+    with consumer.lock:
+        js_msgs = consumer.extra['/character/joint_states'][-90:]
+        sk_msgs = consumer.extra['/character/skeletons'][-90:]
+    once = {s for s, n in (Counter(map(_stamp, js_msgs)) + Counter(map(_stamp, sk_msgs))).items()
+            if n == 2}
+    states = {_stamp(j): dict(zip(j.name, j.position)) for j in js_msgs}
+    errors = []
+    for stamp, users in sorted(_skeletons(consumer, '/character/skeletons', 90).items()):
         js = states.get(stamp)
-        if js is None:
+        if js is None or stamp not in once:
             continue
         for uid, x in users.items():
-            root = consumer.tf.lookup('world', f'u{uid}_seg_Spine', stamp)
+            with consumer.lock:
+                root = consumer.tf.lookup('world', f'u{uid}_seg_Spine', stamp)
             if root is None:
                 continue
             poses = forward_kinematics_urdf(urdf[uid], js)
             # the joint points are the fixed frames u<id>_site_<Joint> (the MuJoCo sites)
             fk = np.array([root.apply(poses[f'u{uid}_site_{n}'][1]) for n in m.JOINT_NAMES])
             errors.append(np.linalg.norm(fk - x, axis=1).max())
-    print(f'character FK vs /character/skeletons: {len(errors)} characters, '
-          f'max {max(errors):.2e} m')
-    assert len(errors) >= 10, len(errors)
-    assert max(errors) < 0.01
-
+    return errors

@@ -15,9 +15,12 @@ from skeleton_core.tf import matrix_from_quat
 from skeleton_data.motions import builtin_clips
 
 
-def _urdf_positions(urdf, tree, angles, root_pos, root_rot):
-    """World joint positions by FK of the URDF text (a generic URDF reader, not the tree)."""
-    poses = forward_kinematics_urdf(urdf, dict(zip(tree.joint_names, angles)))
+def _urdf_positions(urdf, tree, angles, root_pos, root_rot, lengths):
+    """World joint positions by FK of the URDF text (a generic URDF reader, not the tree), the
+    segment lengths on the stretch joints."""
+    values = dict(zip(tree.joint_names + tree.stretch_names,
+                      np.concatenate([angles, tree.stretch_of(lengths)])))
+    poses = forward_kinematics_urdf(urdf, values)
     return np.array([root_pos + root_rot @ poses[f][1] for f in joint_frames(tree)])
 
 
@@ -55,8 +58,8 @@ def test_rest_posture_is_zero_angles_and_urdf_fk_gives_it_back():
     w, a, _ = tree.solve(x)
     assert np.abs(a).max() < 1e-9
     urdf = tree.urdf(body.segment_lengths, 'h')
-    p = _urdf_positions(urdf, tree, a[0], x[0, m.ROOT], w[0])
-    assert np.abs(p - x[0]).max() < 1e-9
+    p = _urdf_positions(urdf, tree, a[0], x[0, m.ROOT], w[0], body.segment_lengths)
+    assert np.abs(p - x[0]).max() < 1e-6   # (the URDF holds 6 digits)
 
 
 @pytest.mark.parametrize('clip', builtin_clips(seed=7), ids=lambda c: c.name)
@@ -68,7 +71,7 @@ def test_fk_of_solved_angles_reproduces_builtin_motions(clip):
     urdf = tree.urdf(np.median(m.segment_lengths(x), axis=0), 'h')
     w, a, _ = tree.solve(x[::45])
     for i, xi in enumerate(x[::45]):
-        p = _urdf_positions(urdf, tree, a[i], xi[m.ROOT], w[i])
+        p = _urdf_positions(urdf, tree, a[i], xi[m.ROOT], w[i], m.segment_lengths(xi))
         assert np.linalg.norm(p - xi, axis=-1).max() < 1e-6
 
 
@@ -159,3 +162,42 @@ def test_tracker_bodies_come_and_go_and_urdf_is_made_again_only_on_change():
     bad[3] = np.nan
     out = tr.update([_frame(1, x[21]), _frame(5, bad)], 21, 'kinect_link', 2.1)
     assert out.tracked == ['u1']
+
+
+def test_joint_states_with_stretch_give_positions_of_varying_lengths_back():
+    """Segment lengths that move frame to frame (a reconstruction that is not yet rigid) come back
+    exactly, whichever URDF the consumer has: each segment's prismatic ``<link>_length`` joint
+    carries its length in the frame."""
+    rng = np.random.default_rng(4)
+    x = np.asarray(builtin_clips(seed=6)[4].positions, float)[:40]
+    rel = m.parent_relative(x)
+    rel[:, 1:] *= 1.0 + rng.uniform(-0.03, 0.03, (len(x), m.NUM_JOINTS - 1, 1))
+    x = m.forward_kinematics(rel, x[:, m.ROOT])
+    tr = BodyTracker(window=10, min_urdf_period=0.0)
+    urdf, urdfs = None, set()
+    for k, xk in enumerate(x):
+        out = tr.update([_frame(7, xk)], k, 'kinect_link', float(k))
+        urdf = urdf or out.urdf.get('u7')   # the first one: joint states do not depend on it
+        urdfs.update(out.urdf.values())
+        values = dict(zip(out.joint_names['u7'], out.angles['u7']))
+        assert len(values) == 49 + 19
+        i = out.tf_pairs.index(('kinect_link', 'body_u7'))
+        root_t, root_r = out.tf_translations[i], matrix_from_quat(out.tf_rotations[i])
+        poses = forward_kinematics_urdf(urdf, values)
+        p = np.array([root_t + root_r @ poses[f'{f}_u7'][1] for f in JOINT_FRAMES])
+        assert np.linalg.norm(p - xk, axis=1).max() < 1e-6
+        # and the transforms on TF chain up to the same positions
+        if k % 13 == 0:
+            parent = {c: (pp, t, q) for (pp, c), t, q in zip(
+                out.tf_pairs, out.tf_translations, out.tf_rotations)}
+
+            def world(frame):
+                r, t = np.eye(3), np.zeros(3)
+                while frame != 'kinect_link':
+                    pp, tt, qq = parent[frame]
+                    r, t = matrix_from_quat(qq) @ r, matrix_from_quat(qq) @ t + tt
+                    frame = pp
+                return t
+            q = np.array([world(f'{f}_u7') for f in JOINT_FRAMES])
+            assert np.linalg.norm(q - xk, axis=1).max() < 1e-6
+    assert len(urdfs) > 1   # the lengths moved: the URDF was made again on the way

@@ -177,11 +177,16 @@ class Tree:
     root joint and every segment has a joint. ``fixed``: leaf joint -> name of its end frame."""
 
     def __init__(self, root: str, links: Sequence[Link], fixed: Dict[int, str],
-                 root_segment: int = -1):
+                 root_segment: int = -1, stretch: Optional[Dict[int, Tuple[str, str]]] = None):
         self.root = root
         self.links = list(links)
         self.fixed = dict(fixed)
         self.root_segment = root_segment
+        # link index -> (prismatic joint, end link): the segment's length in the frame, along the
+        # segment, so that positions whose lengths vary frame to frame come back exactly (and
+        # joint states never depend on which URDF a consumer has)
+        self.stretch = dict(stretch or {})
+        self.stretch_names: List[str] = [self.stretch[i][0] for i in sorted(self.stretch)]
         self.link_of_segment = {lk.segment: i for i, lk in enumerate(self.links)}
         self.joint_names: List[str] = [j for lk in self.links for j in lk.joints]
         self._slices = []
@@ -205,6 +210,19 @@ class Tree:
         self._ball_cols = np.array([c for i in self._balls for c in
                                     range(self._slices[i].start, self._slices[i].stop)], int)
         self._hinge_cols = np.array([self._slices[i].start for i in self._hinges], int)
+        self._stretch_links = np.array(sorted(self.stretch), int)
+        self._stretch_segments = np.array([self.links[i].segment for i in sorted(self.stretch)],
+                                          int)
+        rows, rev, n = {}, [], 0
+        for i, lk in enumerate(self.links):
+            rev += list(range(n, n + len(lk.joints)))
+            n += len(lk.joints)
+            if i in self.stretch:
+                rows[i] = n
+                n += 1
+        self._rev_rows = np.array(rev, int)
+        self._stretch_rows = np.array([rows[i] for i in sorted(self.stretch)], int)
+        self._num_tf = n + len(self.fixed)
 
     @property
     def num_angles(self) -> int:
@@ -236,9 +254,16 @@ class Tree:
         return out
 
     def origin(self, link: Link, offsets: np.ndarray) -> np.ndarray:
-        """The link's origin in its parent link (the end of the parent's segment; 0 at the root)."""
+        """The link's origin in its parent frame (the end of the parent's segment; 0 at the root
+        and below a parent's end link)."""
         p = link.parent_joint
-        return np.zeros(3) if p == ROOT else offsets[p]
+        return np.zeros(3) if p == ROOT or link.parent in self.stretch else offsets[p]
+
+    def hang(self, i: int) -> str:
+        """The frame that link ``i``'s children hang from (its end link, or itself; -1: root)."""
+        if i < 0:
+            return self.root
+        return self.stretch[i][1] if i in self.stretch else self.links[i].name
 
     def urdf(self, lengths: np.ndarray, robot_name: str, radii: Optional[np.ndarray] = None,
              rgba: str = '1 0.7 0 1') -> str:
@@ -252,41 +277,51 @@ class Tree:
                f'  <material name="skin"><color rgba="{rgba}"/></material>',
                f'  <link name="{self.root}">{self._visual(self.root_segment, offsets, radii)}</link>']
 
-        def joint(name, typ, parent, child, xyz=None, axis=None):
+        def joint(name, typ, parent, child, xyz=None, axis=None, lower=-math.pi, upper=math.pi):
             s = f'  <joint name="{name}" type="{typ}"><parent link="{parent}"/><child link="{child}"/>'
             if xyz is not None and np.any(np.abs(xyz) > 0):
                 s += f'<origin xyz="{_fmt(xyz)}" rpy="0 0 0"/>'
             if axis is not None:
                 s += (f'<axis xyz="{_fmt(axis)}"/>'
-                      f'<limit lower="{-math.pi:.6f}" upper="{math.pi:.6f}" effort="100" velocity="20"/>')
+                      f'<limit lower="{lower:.6f}" upper="{upper:.6f}" effort="100" velocity="20"/>')
             return s + '</joint>'
 
-        for lk in self.links:
-            parent = self.root if lk.parent < 0 else self.links[lk.parent].name
+        for i, lk in enumerate(self.links):
+            parent = self.hang(lk.parent)
             xyz = self.origin(lk, offsets)
             if lk.kind == BALL:
                 chain = [parent, *lk.intermediate, lk.name]
-                for i, (jn, ax) in enumerate(zip(lk.joints, (_AXES[2], _AXES[1], _AXES[0]))):
-                    if i < 2:
-                        out.append(f'  <link name="{chain[i + 1]}"/>')
-                    out.append(joint(jn, 'revolute', chain[i], chain[i + 1],
-                                     xyz if i == 0 else None, ax))
+                for n, (jn, ax) in enumerate(zip(lk.joints, (_AXES[2], _AXES[1], _AXES[0]))):
+                    if n < 2:
+                        out.append(f'  <link name="{chain[n + 1]}"/>')
+                    out.append(joint(jn, 'revolute', chain[n], chain[n + 1],
+                                     xyz if n == 0 else None, ax))
             else:
                 out.append(joint(lk.joints[0], 'revolute', parent, lk.name, xyz, lk.axis))
             out.append(f'  <link name="{lk.name}">{self._visual(lk.segment, offsets, radii)}</link>')
+            if i in self.stretch:
+                jn, end = self.stretch[i]
+                out.append(f'  <link name="{end}"/>')
+                out.append(joint(jn, 'prismatic', lk.name, end, None,
+                                 REST_DIRECTIONS[lk.child_joint], lower=0.0, upper=2.0))
         for j, name in self.fixed.items():
-            parent = self._fixed_parent(j)
             out.append(f'  <link name="{name}"/>')
-            out.append(joint(name, 'fixed', parent, name, offsets[j]))
+            out.append(joint(name, 'fixed', self._fixed_parent(j), name, self._fixed_offset(j, offsets)))
         out.append('</robot>')
         return '\n'.join(out) + '\n'
 
     def _fixed_parent(self, j: int) -> str:
-        """The link a fixed frame at joint ``j`` hangs from: the segment ending at j (the root's
+        """The frame a fixed frame at joint ``j`` hangs from: the segment ending at j (the root's
         frame is the root)."""
         k = SEGMENT_OF_JOINT[j]
         return self.root if k < 0 or k == self.root_segment else \
-            self.links[self.link_of_segment[k]].name
+            self.hang(self.link_of_segment[k])
+
+    def _fixed_offset(self, j: int, offsets: np.ndarray) -> np.ndarray:
+        k = SEGMENT_OF_JOINT[j]
+        if k >= 0 and k != self.root_segment and self.link_of_segment[k] in self.stretch:
+            return np.zeros(3)
+        return offsets[j]
 
     @staticmethod
     def _visual(k: int, offsets: np.ndarray, radii: np.ndarray) -> str:
@@ -438,24 +473,43 @@ class Tree:
         return angles
 
     def tf_pairs(self) -> List[Tuple[str, str]]:
-        """(parent, child) link of every URDF joint: the revolute ones in ``joint_names`` order,
-        then the fixed frames (what ``robot_state_publisher`` would put on TF)."""
+        """(parent, child) of every URDF joint, what ``robot_state_publisher`` would put on TF:
+        each link's revolute joints then its stretch, then the fixed frames."""
         pairs = []
-        for lk in self.links:
-            parent = self.root if lk.parent < 0 else self.links[lk.parent].name
-            chain = [parent, *lk.intermediate, lk.name]
+        for i, lk in enumerate(self.links):
+            chain = [self.hang(lk.parent), *lk.intermediate, lk.name]
             pairs += list(zip(chain[:-1], chain[1:]))
+            if i in self.stretch:
+                pairs.append((lk.name, self.stretch[i][1]))
         return pairs + [(self._fixed_parent(j), name) for j, name in self.fixed.items()]
 
-    def tf_translations(self, lengths: np.ndarray) -> np.ndarray:
-        """(J, 3) translations of :meth:`tf_pairs` (constant for given segment lengths)."""
+    def tf_translations(self, lengths: np.ndarray, stretch: Optional[np.ndarray] = None
+                        ) -> np.ndarray:
+        """(J, 3) translations of :meth:`tf_pairs` for the URDF's segment ``lengths`` (or, with
+        ``stretch`` (U, S), (U, J, 3): the stretch joints moved by those values)."""
         offsets = self.offsets(lengths)
-        out = []
-        for lk in self.links:
-            out.append(self.origin(lk, offsets))
-            out += [np.zeros(3)] * (len(lk.joints) - 1)
-        out += [offsets[j] for j in self.fixed]
-        return np.array(out).reshape(-1, 3)
+        out = np.zeros((self._num_tf, 3))
+        n = 0
+        for i, lk in enumerate(self.links):
+            out[n] = self.origin(lk, offsets)
+            n += len(lk.joints)
+            if i in self.stretch:   # (the stretch joint's value is the whole length)
+                n += 1
+        out[n:] = [self._fixed_offset(j, offsets) for j in self.fixed]
+        return out if stretch is None else self.stretched(out, stretch)
+
+    def stretched(self, translations: np.ndarray, stretch: np.ndarray) -> np.ndarray:
+        """:meth:`tf_translations` ``translations`` (J, 3) with the stretch joints at ``stretch``
+        (..., S): (..., J, 3)."""
+        stretch = np.asarray(stretch, float)
+        out = np.array(np.broadcast_to(translations, stretch.shape[:-1] + translations.shape))
+        dirs = REST_DIRECTIONS[self._child[self._stretch_links]]
+        out[..., self._stretch_rows, :] += stretch[..., None] * dirs
+        return out
+
+    def stretch_of(self, lengths: np.ndarray) -> np.ndarray:
+        """(..., S) stretch joint values (m) of segment ``lengths`` (..., 19): the lengths."""
+        return np.asarray(lengths, float)[..., self._stretch_segments]
 
     def tf_rotations(self, angles: np.ndarray) -> np.ndarray:
         """(U, J, 4) quaternions x y z w of :meth:`tf_pairs` for joint angles (U, n)."""
@@ -466,12 +520,11 @@ class Tree:
             self._axes = np.array(axes, float)
         angles = np.atleast_2d(np.asarray(angles, float))
         h = 0.5 * angles
-        q = np.zeros(angles.shape + (4,))
-        q[..., :3] = np.sin(h)[..., None] * self._axes
-        q[..., 3] = np.cos(h)
-        fixed = np.zeros((angles.shape[0], len(self.fixed), 4))
-        fixed[..., 3] = 1.0
-        return np.concatenate([q, fixed], axis=1)
+        q = np.zeros((angles.shape[0], self._num_tf, 4))
+        q[..., 3] = 1.0
+        q[:, self._rev_rows, :3] = np.sin(h)[..., None] * self._axes
+        q[:, self._rev_rows, 3] = np.cos(h)
+        return q
 
 
 def _perp(a: np.ndarray) -> np.ndarray:
@@ -501,11 +554,13 @@ def segment_tree(root: str, name: Callable[[int], str], kinds: Dict[int, str] = 
                  axes: Dict[int, tuple] = None, twists: Dict[int, tuple] = None,
                  fixed: Dict[int, str] = None, root_segment: int = -1,
                  joint_names: Callable[[int], Tuple[str, ...]] = None,
-                 intermediate: Callable[[int], Tuple[str, str]] = None) -> Tree:
+                 intermediate: Callable[[int], Tuple[str, str]] = None,
+                 stretch: Callable[[int], Tuple[str, str]] = None) -> Tree:
     """A :class:`Tree` with one link per segment, named ``name(k)`` (k: segment index);
     ``kinds[k]`` BALL (default) or HINGE with ``axes[k]``; ``twists[k]`` as :class:`Link`'s
     (a ``('hinge', k2)`` names the hinge's *segment*); ``joint_names(k)`` the revolute joints'
-    names (3 for a ball, 1 for a hinge) and ``intermediate(k)`` a ball's two massless links."""
+    names (3 for a ball, 1 for a hinge) and ``intermediate(k)`` a ball's two massless links;
+    ``stretch(k)``: (prismatic joint, end link) of a segment whose length may vary (:class:`Tree`)."""
     kinds, axes, twists, fixed = kinds or {}, axes or {}, twists or {}, fixed or {}
     order: List[int] = []
 
@@ -529,7 +584,8 @@ def segment_tree(root: str, name: Callable[[int], str], kinds: Dict[int, str] = 
                           joints=joint_names(k), axis=tuple(axes.get(k, (0.0, 0.0, 1.0))),
                           twist=tw, intermediate=intermediate(k) if kinds.get(k, BALL) == BALL
                           else ()))
-    return Tree(root, links, fixed, root_segment)
+    st = {} if stretch is None else {i: stretch(k) for i, k in enumerate(order)}
+    return Tree(root, links, fixed, root_segment, st)
 
 
 # ------------------------------------------------------------------ URDF forward kinematics

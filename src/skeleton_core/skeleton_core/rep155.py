@@ -92,8 +92,13 @@ def human_tree(body_id: str) -> Tree:
     twists = {seg[a]: ('hinge', seg[h]) for a, h in _ABOVE_HINGE.items()}
     twists[seg['ShoulderCenter']] = ('line', m.SHOULDER_LEFT, m.SHOULDER_RIGHT, (0.0, 1.0, 0.0))
     fixed = {j: _name(s, b, body_id) for j, (s, b) in _LEAF_FRAME.items()}
+    def stretch(k):
+        side, base = _SEGMENT_LINK[m.JOINT_NAMES[m.SEGMENTS[k][1]]]
+        return (_name(side, base + '_length', body_id), _name(side, base + '_end', body_id))
+
     return segment_tree(f'body_{body_id}', name, kinds=kinds, axes=axes, twists=twists,
-                        fixed=fixed, joint_names=joints, intermediate=intermediate)
+                        fixed=fixed, joint_names=joints, intermediate=intermediate,
+                        stretch=stretch)
 
 
 def joint_frames(tree: Tree) -> Tuple[str, ...]:
@@ -144,7 +149,9 @@ class Body:
 
 @dataclass
 class Output:
-    """What one input message turns into (the node publishes it as it is)."""
+    """What one input message turns into (the node publishes it as it is). A body's joint states
+    are its revolute joints' angles (rad) then its segments' lengths in this frame (m, prismatic
+    joints ``<segment link>_length``: the URDF's lengths are the estimate its cylinders show)."""
 
     stamp_ns: int
     frame_id: str
@@ -152,7 +159,7 @@ class Output:
     urdf: Dict[str, str]                 # body id -> URDF, for bodies whose URDF is new or changed
     left: List[str]                      # bodies that left with this message
     joint_names: Dict[str, List[str]]    # body id -> joint names
-    angles: Dict[str, np.ndarray]        # body id -> joint positions (rad)
+    angles: Dict[str, np.ndarray]        # body id -> joint positions (rad, then m)
     tf_pairs: List[Tuple[str, str]]      # (parent, child) of every transform
     tf_translations: np.ndarray          # (T, 3)
     tf_rotations: np.ndarray             # (T, 4) x y z w
@@ -164,7 +171,7 @@ class BodyTracker:
     again when they move more than ``length_tolerance`` (m), at most every ``min_urdf_period`` s;
     ``openni`` adds openni2_tracker's frames under the input's frame."""
 
-    def __init__(self, id_prefix: str = 'u', window: int = 30, length_tolerance: float = 0.005,
+    def __init__(self, id_prefix: str = 'u', window: int = 30, length_tolerance: float = 0.01,
                  min_urdf_period: float = 1.0, openni: bool = False, rep155: bool = True):
         self.id_prefix = id_prefix
         self.window = int(window)
@@ -221,11 +228,12 @@ class BodyTracker:
             q_root = quat_from_matrices(w_root)
             q_all = tree.tf_rotations(angles)
             for i, b in enumerate(bodies):
-                out.joint_names[b.body_id] = b.tree.joint_names
-                out.angles[b.body_id] = angles[i]
+                stretch = tree.stretch_of(lengths_now[i])
+                out.joint_names[b.body_id] = b.tree.joint_names + b.tree.stretch_names
+                out.angles[b.body_id] = np.concatenate([angles[i], stretch])
                 out.tf_pairs.append((frame_id, b.tree.root))
                 out.tf_pairs.extend(b.pairs)
-                trans += [x[i:i + 1, m.ROOT], b.translations]
+                trans += [x[i:i + 1, m.ROOT], tree.stretched(b.translations, stretch)]
                 rots += [q_root[i:i + 1], q_all[i]]
         else:
             for u in uids:

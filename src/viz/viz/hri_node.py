@@ -55,8 +55,9 @@ PARAMS = [
                      range=(0.05, 10.0))),
     hidden(ParamSpec('length_window', 30, 'frames whose median segment lengths make a URDF',
                      range=(1, 1000))),
-    hidden(ParamSpec('length_tolerance_m', 0.005, 'URDF made again when a median segment length '
-                     'moved more than this (m)', range=(0.0005, 0.1))),
+    hidden(ParamSpec('length_tolerance_m', 0.01, 'URDF made again when a median segment length '
+                     'moved more than this (m; the stretch joints carry smaller changes)',
+                     range=(0.0005, 0.5))),
 ]
 
 
@@ -177,7 +178,8 @@ class HriNode(ManagedNode):
                 self.destroy_publisher(pubs[1])
         if left:
             self._tf_msgs = {}   # (made again for the bodies that stay)
-        if left and stamp_ns is None and self.tracker is not None and self.tracker.rep155:
+        if (left and stamp_ns is None and self.tracker is not None and self.tracker.rep155
+                and self.context.ok()):
             self._publish_tracked([], None)   # the input stopped: nobody is tracked
 
     def _publish_tf(self, out) -> None:
