@@ -191,7 +191,7 @@ def test_joint_states_with_stretch_give_positions_of_varying_lengths_back():
             parent = {c: (pp, t, q) for (pp, c), t, q in zip(
                 out.tf_pairs, out.tf_translations, out.tf_rotations)}
 
-            def world(frame):
+            def world(frame, parent=parent):
                 r, t = np.eye(3), np.zeros(3)
                 while frame != 'kinect_link':
                     pp, tt, qq = parent[frame]
