@@ -104,7 +104,7 @@ def test_character_urdf_and_joint_states_give_the_character_back(consumer):
     while len(errors) < 10 and time.monotonic() < deadline:
         time.sleep(1.0)   # (the consumer's /tf callbacks may lag on a loaded machine)
         errors = _character_errors(consumer, urdf)
-    assert len(errors) >= 10, len(errors)
+    assert len(errors) >= 10, _character_report(consumer)
     print(f'character FK vs /character/skeletons: {len(errors)} characters, '
           f'max {max(errors):.2e} m')
     assert max(errors) < 0.01
@@ -136,3 +136,12 @@ def _character_errors(consumer, urdf):
             fk = np.array([root.apply(poses[f'u{uid}_site_{n}'][1]) for n in m.JOINT_NAMES])
             errors.append(np.linalg.norm(fk - x, axis=1).max())
     return errors
+
+
+def _character_report(consumer) -> str:
+    with consumer.lock:
+        js = [_stamp(j) for j in consumer.extra['/character/joint_states'][-90:]]
+        sk = [_stamp(j) for j in consumer.extra['/character/skeletons'][-90:]]
+        roots = {u: sorted(consumer.tf.dynamic.get(f'u{u}_seg_Spine', {}))[-3:] for u in USERS}
+    return (f'joint states {len(js)} (last {js[-3:]}), skeletons {len(sk)} (last {sk[-3:]}), '
+            f'roots on TF: {roots}')

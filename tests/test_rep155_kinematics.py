@@ -201,3 +201,28 @@ def test_joint_states_with_stretch_give_positions_of_varying_lengths_back():
             q = np.array([world(f'{f}_u7') for f in JOINT_FRAMES])
             assert np.linalg.norm(q - xk, axis=1).max() < 1e-6
     assert len(urdfs) > 1   # the lengths moved: the URDF was made again on the way
+
+
+def test_tf_encoder_bytes_are_the_tfmessage_rclpy_reads():
+    pytest.importorskip('rclpy')
+    from rclpy.serialization import deserialize_message
+    from tf2_msgs.msg import TFMessage
+
+    from skeleton_core.rep155 import TfEncoder
+    rng = np.random.default_rng(3)
+    enc = TfEncoder()
+    for n_users in (1, 3, 2):   # the layout is made again when the frames change
+        clip = builtin_clips(seed=n_users)[0]
+        out = BodyTracker(openni=True).update(
+            [_frame(u + 1, np.asarray(clip.positions[u])) for u in range(n_users)],
+            1_700_000_000_123_456_789, 'kinect_link', 0.0)
+        t = out.tf_translations + rng.normal(0, 1e-3, out.tf_translations.shape)
+        msg = deserialize_message(enc.encode(out.tf_pairs, out.stamp_ns, t, out.tf_rotations),
+                                  TFMessage)
+        assert [(m.header.frame_id, m.child_frame_id) for m in msg.transforms] == out.tf_pairs
+        assert {(m.header.stamp.sec, m.header.stamp.nanosec) for m in msg.transforms} == \
+            {(1_700_000_000, 123_456_789)}
+        got = np.array([[m.transform.translation.x, m.transform.translation.y,
+                         m.transform.translation.z, m.transform.rotation.x, m.transform.rotation.y,
+                         m.transform.rotation.z, m.transform.rotation.w] for m in msg.transforms])
+        assert np.array_equal(got, np.concatenate([t, out.tf_rotations], axis=1))

@@ -24,6 +24,7 @@ setup(
         'console_scripts': [
             'viz = viz.viz_node:main',
             'hri = viz.hri_node:main',
+            'bench_hri = viz.bench_hri:main',
             'report = viz.report:main',
         ],
     },

@@ -256,5 +256,61 @@ class BodyTracker:
         return out
 
 
+# ------------------------------------------------------------------ TF on the wire
+class TfEncoder:
+    """``tf2_msgs/TFMessage`` bytes (XCDR1, little endian, as ``skeleton_core.cdr`` writes) of
+    many transforms at once: the frame names are laid out once per set of (parent, child) pairs,
+    each message then only writes its stamp and 7 numbers per transform with numpy (an rclpy
+    message costs ~10 us per transform to fill and serialize: ~5 ms for 6 users' bodies)."""
+
+    def __init__(self):
+        self._key = None
+
+    def _layout(self, pairs: Sequence[Tuple[str, str]]) -> None:
+        buf = bytearray(b'\x00\x01\x00\x00')
+        floats, stamps = [], []
+
+        def align(n):
+            buf.extend(b'\x00' * ((-(len(buf) - 4)) % n))
+
+        def string(s):
+            b = s.encode() + b'\x00'
+            align(4)
+            buf.extend(len(b).to_bytes(4, 'little'))
+            buf.extend(b)
+        buf.extend(len(pairs).to_bytes(4, 'little'))
+        for parent, child in pairs:
+            align(4)
+            stamps.append(len(buf) - 4)
+            buf.extend(b'\x00' * 8)          # sec, nanosec
+            string(parent)
+            string(child)
+            align(8)
+            floats.append(len(buf) - 4)
+            buf.extend(b'\x00' * 56)         # translation x y z, rotation x y z w
+        size = len(buf)
+        buf.extend(b'\x00' * ((-(len(buf) - 4)) % 8))
+        self._template = np.frombuffer(bytes(buf), np.uint8)
+        self._size = size
+        self._floats = (np.array(floats)[:, None] // 8 + np.arange(7)).astype(np.intp)
+        self._stamps = np.array(stamps, np.intp) // 4
+
+    def encode(self, pairs: Sequence[Tuple[str, str]], stamp_ns: int, translations: np.ndarray,
+               rotations: np.ndarray) -> bytes:
+        """Bytes of the TFMessage of ``pairs`` (parent, child) at ``stamp_ns``."""
+        key = tuple(pairs)
+        if key != self._key:
+            self._layout(pairs)
+            self._key = key
+        buf = self._template.copy()
+        body = buf[4:]
+        body.view('<f8')[self._floats] = np.concatenate(
+            [np.asarray(translations, float), np.asarray(rotations, float)], axis=1)
+        u32 = body.view('<u4')
+        u32[self._stamps] = int(stamp_ns // 1_000_000_000)
+        u32[self._stamps + 1] = int(stamp_ns % 1_000_000_000)
+        return buf[:self._size].tobytes()
+
+
 __all__ = ['TRACKED_TOPIC', 'body_topic', 'human_tree', 'joint_frames', 'JOINT_FRAMES',
-           'openni_frames', 'Body', 'BodyTracker', 'Output', 'body_heading', 'BALL']
+           'openni_frames', 'Body', 'BodyTracker', 'Output', 'TfEncoder', 'body_heading', 'BALL']

@@ -26,7 +26,7 @@ from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityP
 from skeleton_core.cdr import CdrError, frames_from_cdr
 from skeleton_core.conversions import ns_to_stamp
 from skeleton_core.params import ParamSpec, hidden
-from skeleton_core.rep155 import TRACKED_TOPIC, BodyTracker, body_topic
+from skeleton_core.rep155 import TRACKED_TOPIC, BodyTracker, TfEncoder, body_topic
 from skeleton_core.rosnode import ManagedNode, Parameters, run_node
 
 SOURCES = {'reconstructed': 'u', 'character': 'c'}
@@ -68,7 +68,7 @@ class HriNode(ManagedNode):
         super().__init__('hri', **kwargs)
         self.tracker: Optional[BodyTracker] = None
         self._body_pubs: Dict[str, tuple] = {}
-        self._tf_msgs: Dict[tuple, Any] = {}
+        self._tf_encoder = TfEncoder()
         self._last_input = None
         self.params = Parameters(self, PARAMS, apply=self._apply_change)
 
@@ -100,7 +100,6 @@ class HriNode(ManagedNode):
 
     def cleanup(self) -> None:
         self.tracker = None
-        self._tf_msgs = {}
 
     def _apply_change(self, changed: Dict[str, Any]) -> None:
         if self.tracker is None:
@@ -176,29 +175,14 @@ class HriNode(ManagedNode):
             if pubs is not None:
                 self.destroy_publisher(pubs[0])
                 self.destroy_publisher(pubs[1])
-        if left:
-            self._tf_msgs = {}   # (made again for the bodies that stay)
         if (left and stamp_ns is None and self.tracker is not None and self.tracker.rep155
                 and self.context.ok()):
             self._publish_tracked([], None)   # the input stopped: nobody is tracked
 
     def _publish_tf(self, out) -> None:
-        from geometry_msgs.msg import TransformStamped
-        from tf2_msgs.msg import TFMessage
-        msgs = []
-        stamp = ns_to_stamp(out.stamp_ns)
-        for (parent, child), t, q in zip(out.tf_pairs, out.tf_translations.tolist(),
-                                         out.tf_rotations.tolist()):
-            m = self._tf_msgs.get((parent, child))
-            if m is None:
-                m = self._tf_msgs[(parent, child)] = TransformStamped()
-                m.header.frame_id, m.child_frame_id = parent, child
-            m.header.stamp = stamp
-            tr, ro = m.transform.translation, m.transform.rotation
-            tr.x, tr.y, tr.z = t
-            ro.x, ro.y, ro.z, ro.w = q
-            msgs.append(m)
-        self._tf_pub.publish(TFMessage(transforms=msgs))
+        # serialized by TfEncoder: hundreds of transforms per frame with 6 users
+        self._tf_pub.publish(self._tf_encoder.encode(out.tf_pairs, out.stamp_ns,
+                                                     out.tf_translations, out.tf_rotations))
 
 
 def main(args=None):
