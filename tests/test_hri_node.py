@@ -41,10 +41,12 @@ def _frames(k, uids):
 
 
 @pytest.fixture
-def graph(rclpy_context):
+def graph(rclpy_context, request):
+    source = getattr(request, 'param', 'reconstructed')
+    topic = {'reconstructed': '/posture/reconstructed', 'character': '/character/skeletons'}
     hri = bring_up(HriNode(context=rclpy_context, parameter_overrides=[
-        Parameter('openni_tf', value=True)], cli_args=['--ros-args', '-r',
-                                                         f'/posture/reconstructed:={IN}']))
+        Parameter('openni_tf', value=True), Parameter('source', value=source)],
+        cli_args=['--ros-args', '-r', f'{topic[source]}:={IN}']))
     peer = rclpy.create_node('hri_test_peer', context=rclpy_context)
     spinner = Spinner(rclpy_context, hri, peer)
     consumer = Consumer()
@@ -55,11 +57,11 @@ def graph(rclpy_context):
     peer.destroy_node()
 
 
-def _play(peer, pub, uids, start, n, sent):
+def _play(peer, pub, uids, start, n, sent, frame='kinect_link'):
     for k in range(start, start + n):
         stamp = 1_000_000_000 + k * 33_333_333
         frames = _frames(k, uids)
-        pub.publish(frames_to_array_msg(frames, stamp, 'kinect_link'))
+        pub.publish(frames_to_array_msg(frames, stamp, frame))
         sent[stamp] = {f.user_id: f.positions for f in frames}
         time.sleep(1 / 30)
 
@@ -111,3 +113,20 @@ def test_rep155_bodies_joint_frames_and_leaving_users(graph):
     t_stop = time.monotonic()
     assert wait_until(lambda: consumer.last_tracked() == [], 1.0), consumer.last_tracked()
     assert time.monotonic() - t_stop < 1.0
+
+
+@pytest.mark.parametrize('graph', ['character'], indirect=True)
+def test_bodies_of_the_physics_characters(graph):
+    """rep155_source:=character: the characters' skeletons (in world) are bodies c<user>."""
+    hri, peer, consumer = graph
+    pub = peer.create_publisher(SkeletonArray, IN, 10)
+    assert wait_until(lambda: pub.get_subscription_count() > 0, 10)
+    sent = {}
+    _play(peer, pub, [3], 0, 30, sent, frame='world')
+    assert wait_until(lambda: consumer.last_tracked() == ['c3'], 5), consumer.last_tracked()
+    last = max(sent)
+    assert wait_until(lambda: consumer.tf.lookup('world', 'l_hand_c3', last) is not None, 10)
+    fk, tf = consumer.body_positions('c3', [f'{f}_c3' for f in JOINT_FRAMES], last, 'world')
+    assert fk is not None and tf is not None
+    assert np.linalg.norm(fk - sent[last][3], axis=1).max() < 0.01
+    assert np.linalg.norm(tf - sent[last][3], axis=1).max() < 0.01
