@@ -79,7 +79,8 @@ class CharacterRobots:
         self._trees: Dict[int, Tree] = {}
         self._bodies: Dict[int, Body] = {}
 
-    def update(self, states: Dict, characters: Dict, lift: np.ndarray):
+    def update(self, states: Dict, characters: Dict, lift: np.ndarray, angles: bool = True):
+        """(``angles=False``: only the URDFs, the rest empty.)"""
         urdf = {}
         for uid in [u for u in self._trees if u not in states]:
             del self._trees[uid], self._bodies[uid]
@@ -93,6 +94,8 @@ class CharacterRobots:
             if self._bodies.get(uid) is not body:
                 self._bodies[uid] = body
                 urdf[uid] = character_urdf(uid, body)
+        if not angles:
+            return urdf, [], np.zeros(0), []
         q, a = character_joint_states(self._trees[uids[0]],
                                       np.stack([states[u].orientations for u in uids]))
         names = [n for u in uids for n in self._trees[u].joint_names]

@@ -14,7 +14,8 @@ Publishes
   (SPHERE) and mace (CYLINDER handle + SPHERE head, two ids) in ``world``, namespace
   ``physics_objects``.
   ``/character/joint_states`` -- sensor_msgs/JointState of every character (its MuJoCo ball joints
-  as three revolute joints each, ``u<id>_ball_<Joint>_{z,y,x}``), with each root on ``/tf``
+  as three revolute joints each, ``u<id>_ball_<Joint>_{z,y,x}``; only while subscribed), with each
+  root on ``/tf``
   (``world -> u<id>_seg_Spine``) and each character's URDF latched on
   ``/character/u<id>/robot_description`` (std_msgs/String; :mod:`physics_sim.character_urdf`).
   ``/tf_static`` (subscribed) -- the input frame's pose in ``world`` (``world -> kinect_link``,
@@ -409,8 +410,11 @@ class PhysicsNode(ManagedNode):
         self._publish_objects(latest)
 
     def _publish_robots(self, states, stamp_ns: int) -> None:
-        """The characters as robots: URDF (latched, when new), joint states, roots on TF."""
-        urdf, names, angles, roots = self._robots.update(states, self.sim.characters, self._lift())
+        """The characters as robots: URDF (latched, when new), and while something subscribes
+        to /character/joint_states, the joint states and the roots on TF."""
+        listened = self._js_pub.get_subscription_count() > 0
+        urdf, names, angles, roots = self._robots.update(states, self.sim.characters, self._lift(),
+                                                         angles=listened)
         for uid in [u for u in self._urdf_pubs if u not in states]:
             self.destroy_publisher(self._urdf_pubs.pop(uid))
         for uid, text in urdf.items():
@@ -418,7 +422,7 @@ class PhysicsNode(ManagedNode):
                 self._urdf_pubs[uid] = self.create_publisher(String, description_topic(uid),
                                                              STATIC_BROADCASTER_QOS)
             self._urdf_pubs[uid].publish(String(data=text))
-        if not names:
+        if not names or not listened:
             return
         stamp = ns_to_stamp(stamp_ns)
         self._js_pub.publish(JointState(header=Header(stamp=stamp), name=names,
