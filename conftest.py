@@ -32,7 +32,8 @@ SETUP_PROVIDES = frozenset({
     'launch_testing_ros', 'ros2cli', 'tf2_msgs', 'diagnostic_msgs', 'geometry_msgs', 'sensor_msgs',
     'visualization_msgs', 'std_msgs', 'skeleton_msgs', 'skeleton_core', 'skeleton_data',
     'skeleton_eval', 'kinect_driver', 'pose_reconstruction', 'physics_sim', 'performance_control',
-    'viz', 'kinect_bringup', 'kinect_experiments', 'mcap', 'mcap_ros2', 'numba', 'mujoco', 'openni'})
+    'viz', 'kinect_bringup', 'kinect_experiments', 'mcap', 'mcap_ros2', 'numba', 'mujoco', 'openni',
+    'hri_msgs'})
 _importorskip = pytest.importorskip
 
 

@@ -59,6 +59,12 @@ ARGS = [
      'worlds or a YAML path)'),
     ('start_feature', '', 'control:=true: feature a new character starts on ("" = the spawn)'),
     ('viz', 'true', 'run the RViz marker node'),
+    ('rep155', 'false', 'publish REP-155 (ROS4HRI) bodies (hri node): /humans/bodies/tracked, per '
+     'body its URDF, joint states and TF tree under body_<id> (docs/ros_outputs.md)'),
+    ('rep155_source', 'reconstructed', 'whose bodies rep155 and joint_tf publish: reconstructed | '
+     'character (the physics character)'),
+    ('joint_tf', 'false', "openni2_tracker's TF frames per joint (head_1, left_hand_1, ...) of "
+     'those bodies, under their skeleton frame'),
     ('rviz', 'false', 'start RViz with the bundled config'),
     ('record', '', 'record every pipeline topic to this MCAP file ("" = no recording)'),
     ('sensors', '1', 'number of sensors: N > 1 starts N drivers (driver.launch.py sensors:=N: '
@@ -204,6 +210,13 @@ def _nodes(context):
     if arg('viz').lower() in ('true', '1', 'yes'):
         nodes.append(managed_node(package='viz', executable='viz', name='viz',
                           parameters=params('viz'), **common))
+    rep155, joint_tf = (arg(a).lower() in ('true', '1', 'yes') for a in ('rep155', 'joint_tf'))
+    if rep155 or joint_tf:
+        if arg('rep155_source') not in ('reconstructed', 'character'):
+            raise RuntimeError(f"rep155_source:={arg('rep155_source')} is not one of "
+                               'reconstructed, character')
+        nodes.append(managed_node(package='viz', executable='hri', name='hri', parameters=params(
+            'hri', rep155=rep155, openni_tf=joint_tf, source=arg('rep155_source')), **common))
     if arg('record'):
         # the outputs of the nodes started here: the recorder's input waits for them
         from kinect_bringup.graph import RECONSTRUCTION, TOPICS, load_params, recorded_outputs

@@ -98,14 +98,18 @@ if [ -z "$underlay" ]; then
 fi
 
 # 3. colcon build (skipped when no package file changed) --------------------------------------
-src_stamp="$( (find src -type f \( -name package.xml -o -name setup.py -o -name setup.cfg \
+# REP-155's hri_msgs: the underlay's, else built from third_party/hri_msgs (its README)
+msg_src=(); [ -n "$underlay" ] && [ -d "$underlay/share/hri_msgs" ] ||
+  msg_src=("$(bash third_party/hri_msgs/unpack.sh "$_kp_build/third_party")")
+src_stamp="$( (cat third_party/hri_msgs/SHA256SUMS; echo "${msg_src[*]}"; \
+      find src -type f \( -name package.xml -o -name setup.py -o -name setup.cfg \
       -o -name CMakeLists.txt -o -name '*.msg' -o -name '*.srv' -o -name '*.launch.py' -o -name '*.yaml' \
       -o -name '*.rviz' \) -print0 | sort -z | xargs -0 sha256sum; \
       find src -maxdepth 3 -type d -print | sort; ls launch config 2>/dev/null; \
       echo "${underlay:-wheels}") | sha256sum | cut -c1-16)"
 if [ ! -f "$_kp_install/.kp-stamp" ] || [ "$(cat "$_kp_install/.kp-stamp")" != "$src_stamp" ]; then
   log "colcon build (${_kp_install#"$root"/})"
-  colcon --log-base "$_kp_log" build --symlink-install --base-paths src \
+  colcon --log-base "$_kp_log" build --symlink-install --base-paths src "${msg_src[@]}" \
     --build-base "$_kp_build" --install-base "$_kp_install" \
     --event-handlers console_direct- console_cohesion- console_stderr- status- summary+ \
     --cmake-args -DBUILD_TESTING=OFF -DPython3_EXECUTABLE="$(command -v python)" >&2 ||

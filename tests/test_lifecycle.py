@@ -36,6 +36,7 @@ FILE_PARAMS = {
     'control': {'world': f'{MISSING}/world.yaml'},
     'physics': {},
     'viz': {},
+    'hri': {},
     'fusion': {},
     'reliability': {},
     'recorder': {},   # its output, in a temporary folder: made on configure, not before

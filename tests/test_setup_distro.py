@@ -121,3 +121,19 @@ def test_tooling_build_script_refuses_an_unknown_distro_in_one_line(tmp_path):
                          capture_output=True, text=True, timeout=60)
     assert res.returncode == 1 and len(res.stderr.strip().splitlines()) == 1, res.stderr
     assert 'nosuch' in res.stderr and 'jazzy' in res.stderr and 'kilted' in res.stderr
+
+
+def test_vendored_hri_msgs_is_the_recorded_release_tarball(tmp_path):
+    """REP-155's messages build from third_party/hri_msgs (no ../shared): the tarball is the one
+    SHA256SUMS records, tracked, and unpack.sh gives colcon its package."""
+    hri = ROOT / 'third_party' / 'hri_msgs'
+    (line,) = [x for x in (hri / 'SHA256SUMS').read_text().splitlines() if x.strip()]
+    digest, name = line.split()
+    assert hashlib.sha256((hri / name).read_bytes()).hexdigest() == digest
+    if (ROOT / '.git').exists():
+        assert not subprocess.run(['git', 'check-ignore', name], cwd=hri, capture_output=True,
+                                  text=True).stdout.split()
+    out = subprocess.run(['bash', str(hri / 'unpack.sh'), str(tmp_path)], capture_output=True,
+                         text=True, check=True).stdout.strip()
+    assert (Path(out) / 'package.xml').read_text().count('<name>hri_msgs</name>') == 1
+    assert (Path(out) / 'msg' / 'IdsList.msg').is_file()

@@ -11,7 +11,7 @@ setup(
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),
-        ('share/' + package_name + '/rviz', glob('rviz/*.rviz')),
+        ('share/' + package_name + '/rviz', glob('rviz/*.rviz') + glob('rviz/*.json')),
     ],
     install_requires=['setuptools'],
     tests_require=['pytest'],
@@ -23,6 +23,8 @@ setup(
     entry_points={
         'console_scripts': [
             'viz = viz.viz_node:main',
+            'hri = viz.hri_node:main',
+            'bench_hri = viz.bench_hri:main',
             'report = viz.report:main',
         ],
     },

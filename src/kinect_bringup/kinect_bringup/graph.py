@@ -36,6 +36,7 @@ NODES: Dict[str, NodeInfo] = {n.name: n for n in (
     NodeInfo('control', 'performance_control', 'control', 'performance_control.control_node'),
     NodeInfo('physics', 'physics_sim', 'physics', 'physics_sim.physics_node'),
     NodeInfo('viz', 'viz', 'viz', 'viz.viz_node'),
+    NodeInfo('hri', 'viz', 'hri', 'viz.hri_node'),
     NodeInfo('recorder', 'kinect_bringup', 'recorder', 'kinect_bringup.recorder'),
 )}
 

@@ -23,7 +23,8 @@ from kinect_bringup.graph import NODES, repo_root
 
 # nodes with a config/<node>.yaml (the fused reconstruction node maps the three split nodes' files,
 # the recorder takes its two parameters from the launch file)
-YAML_NODES = ('driver', 'fusion', 'reliability', 'completion', 'optimizer', 'control', 'physics', 'viz')
+YAML_NODES = ('driver', 'fusion', 'reliability', 'completion', 'optimizer', 'control', 'physics', 'viz',
+              'hri')
 DOC = Path('docs') / 'parameters.md'
 PRESETS = Path('config') / 'presets'
 

@@ -13,6 +13,11 @@ Publishes
   ``/physics/objects`` -- visualization_msgs/MarkerArray: one DELETEALL then the boxes (CUBE), balls
   (SPHERE) and mace (CYLINDER handle + SPHERE head, two ids) in ``world``, namespace
   ``physics_objects``.
+  ``/character/joint_states`` -- sensor_msgs/JointState of every character (its MuJoCo ball joints
+  as three revolute joints each, ``u<id>_ball_<Joint>_{z,y,x}``; only while subscribed), with each
+  root on ``/tf``
+  (``world -> u<id>_seg_Spine``) and each character's URDF latched on
+  ``/character/u<id>/robot_description`` (std_msgs/String; :mod:`physics_sim.character_urdf`).
   ``/tf_static`` (subscribed) -- the input frame's pose in ``world`` (``world -> kinect_link``,
   published by the launch files' ``static_tf``): targets are moved to the world with it; a target
   whose frame TF does not know yet is dropped (counted as ``no transform``, logged once).
@@ -42,12 +47,15 @@ from skeleton_core.model import NUM_JOINTS, TRACKED
 from skeleton_core.params import ParamSpec, assign, build, param, specs
 from skeleton_core.presence import Presence
 from skeleton_core.rosnode import InputDrops, ManagedNode, Parameters, fill_marker, run_node
-from skeleton_core.tf import WORLD_FRAME, TfBuffer
-from skeleton_core.tf_ros import StaticTfListener
+from skeleton_core.tf import WORLD_FRAME, TfBuffer, Transform
+from skeleton_core.tf_ros import STATIC_BROADCASTER_QOS, StaticTfListener, to_tf_message
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Header, String
 from skeleton_msgs.msg import Intention, SkeletonArray
 from skeleton_msgs.srv import ApplyPush
 from visualization_msgs.msg import Marker, MarkerArray
 
+from .character_urdf import CharacterRobots, description_topic
 from .mjcf_world import ObjectSpec
 from .scheduler import TickScheduler
 from .simulation import SimConfig, Simulation, warm_up
@@ -149,6 +157,7 @@ class PhysicsNode(ManagedNode):
         self._drop = InputDrops(self.health, self.get_logger())
         self.sim: Optional[Simulation] = None
         self._deferred = None   # one-shot timer of a frame that arrived too soon after a tick
+        self._urdf_pubs: Dict[int, object] = {}   # each character's latched URDF
         self.params = Parameters(self, PARAMS, validate=self._validate_change,
                                  apply=self._apply_change)
 
@@ -176,6 +185,13 @@ class PhysicsNode(ManagedNode):
         self._sim_in_step = 0.0
         self.pub = self.publisher(SkeletonArray, v['output_topic'], 10)
         self.obj_pub = self.publisher(MarkerArray, v['objects_topic'], 10)
+        self._robots = CharacterRobots()
+        self._js_pub = self.publisher(JointState, '/character/joint_states', 10)
+        try:
+            from tf2_msgs.msg import TFMessage
+            self._tf_pub = self.publisher(TFMessage, '/tf', 100)
+        except ImportError:   # (every supported install has it: the launch tooling builds it)
+            self._tf_pub = None
         self.diagnostics(extra=self._diag_extra)
 
     def activate(self) -> None:
@@ -200,6 +216,9 @@ class PhysicsNode(ManagedNode):
 
     def cleanup(self) -> None:
         self.sim = None
+        for pub in self._urdf_pubs.values():
+            self.destroy_publisher(pub)
+        self._urdf_pubs = {}
 
     # ------------------------------------------------------------------ parameters
     def _validate_change(self, values: Dict, changed: Dict) -> Optional[str]:
@@ -381,6 +400,7 @@ class PhysicsNode(ManagedNode):
                 user_id=uid, stamp_ns=st.stamp_ns, frame_id=WORLD_FRAME))
             latest = max(latest, st.stamp_ns)
         self.pub.publish(frames_to_cdr(frames, latest, WORLD_FRAME))
+        self._publish_robots(states, latest)
         self._published_empty = not frames
         lat = None
         if latest:
@@ -388,6 +408,28 @@ class PhysicsNode(ManagedNode):
             lat = lat if 0 <= lat < 60 else None
         self.health.on_publish(lat)
         self._publish_objects(latest)
+
+    def _publish_robots(self, states, stamp_ns: int) -> None:
+        """The characters as robots: URDF (latched, when new), and while something subscribes
+        to /character/joint_states, the joint states and the roots on TF."""
+        listened = self._js_pub.get_subscription_count() > 0
+        urdf, names, angles, roots = self._robots.update(states, self.sim.characters, self._lift(),
+                                                         angles=listened)
+        for uid in [u for u in self._urdf_pubs if u not in states]:
+            self.destroy_publisher(self._urdf_pubs.pop(uid))
+        for uid, text in urdf.items():
+            if uid not in self._urdf_pubs:
+                self._urdf_pubs[uid] = self.create_publisher(String, description_topic(uid),
+                                                             STATIC_BROADCASTER_QOS)
+            self._urdf_pubs[uid].publish(String(data=text))
+        if not names or not listened:
+            return
+        stamp = ns_to_stamp(stamp_ns)
+        self._js_pub.publish(JointState(header=Header(stamp=stamp), name=names,
+                                        position=angles.tolist()))
+        if self._tf_pub is not None:
+            self._tf_pub.publish(to_tf_message(
+                [(WORLD_FRAME, child, Transform(t, q)) for child, t, q in roots], stamp))
 
     def _lift(self) -> np.ndarray:
         """The simulated world's offset from TF's world (the feet's lift above the floor)."""
