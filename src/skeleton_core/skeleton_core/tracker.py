@@ -23,7 +23,7 @@ from __future__ import annotations
 from typing import Optional
 
 # skeleton trackers a stream or a correction can come from
-TRACKERS = ('kinect_v2_sdk', 'kinect_v1_sdk', 'nite2', 'sensor_model')
+TRACKERS = ('kinect_v2_sdk', 'kinect_v1_sdk', 'nite2', 'sensor_model', 'azure_kinect_bt')
 TOPIC = '/kinect/tracker'
 MSGTYPE = 'std_msgs/msg/String'
 DESCRIPTIONS = {
@@ -31,6 +31,7 @@ DESCRIPTIONS = {
     'kinect_v1_sdk': 'Microsoft Kinect v1 SDK skeletal tracking',
     'nite2': 'OpenNI2 + NiTE2 user tracker (the live driver)',
     'sensor_model': "the synthetic source's sensor model",
+    'azure_kinect_bt': 'Azure Kinect / Orbbec Femto body tracking (K4ABT)',
 }
 
 
