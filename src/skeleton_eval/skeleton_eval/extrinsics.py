@@ -211,6 +211,9 @@ def _consistent_labels(pa: np.ndarray, pb: np.ndarray, w: np.ndarray) -> np.ndar
     return used & near
 
 
+MIN_VOTE_S = 0.5   # unmirrored: walking time a piece needs to decide its labelling
+
+
 def unmirrored(track: Track, walk_speed: float = 0.2) -> Track:
     """A stream without joint states (every joint TRACKED) with its left/right swaps undone.
 
@@ -222,7 +225,7 @@ def unmirrored(track: Track, walk_speed: float = 0.2) -> Track:
     which no person does: the heading jumps cut the track into pieces of one labelling, and
     each piece's labelling is the one whose heading agrees with the walking direction (the
     root's velocity, the calibration walk goes forward) on most of its moving frames; a piece
-    without movement flips from the one before."""
+    without enough walking flips from the one before (the first keeps its labels)."""
     if not _stateless(track) or len(track) < 3:
         return track
     p = track.positions
@@ -241,8 +244,11 @@ def unmirrored(track: Track, walk_speed: float = 0.2) -> Track:
     prev = False
     for n in range(int(piece[-1]) + 1):
         sel = piece == n
-        votes = np.sign(agree[sel & moving]).sum()
-        cur = bool(votes < 0) if votes != 0 else (not prev if n > 0 else False)
+        signs = np.sign(agree[sel & moving])
+        # a vote needs 0.5 s of walking and a clear majority (a walk on the spot sways)
+        decided = len(signs) >= MIN_VOTE_S / _period_s(track) and \
+            abs(signs.sum()) >= 0.2 * len(signs)
+        cur = bool(signs.sum() < 0) if decided else (not prev if n > 0 else False)
         swap[sel] = cur
         prev = cur
     if not swap.any():
