@@ -160,7 +160,7 @@ def _nodes(context):
         nodes.append(managed_node(package='kinect_driver', executable='driver', name='driver',
                                   parameters=params('driver', **driver_over), **common))
     elif drivers:
-        nodes.append(_drivers(arg, sensors))
+        nodes.append(_drivers(arg, sensors, config_dir))
     if sensors > 1:
         from skeleton_core.tf import sensor_namespace
         topics = [f'/{sensor_namespace(k, sensors)}/skeletons' for k in range(1, sensors + 1)]
@@ -243,16 +243,28 @@ def _nodes(context):
     return [GroupAction(([PushRosNamespace(ns)] if ns else []) + nodes)]
 
 
-def _drivers(arg, sensors: int):
-    """driver.launch.py sensors:=N: the N drivers and their frames on TF."""
+def _drivers(arg, sensors: int, config_dir: str):
+    """driver.launch.py sensors:=N: the N drivers and their frames on TF.
+
+    Every argument of driver.launch.py is given explicitly: an included launch file's defaults
+    do not apply to a name this launch already holds (its own ``sensor_pose`` default, one pose,
+    and its ``''`` for the driver arguments it leaves to driver.yaml would reach it)."""
     from launch.actions import IncludeLaunchDescription
     from launch.launch_description_sources import PythonLaunchDescriptionSource
-    over = {'sensors': str(sensors), 'static_tf': arg('static_tf'), 'extrinsics': arg('extrinsics')}
-    if arg('sensor_pose') != DEFAULT_SENSOR_POSE:   # else driver.launch.py's N default poses
-        over['sensor_pose'] = arg('sensor_pose')
+    from kinect_bringup.graph import load_params
+    from kinect_driver.driver_node import driver_params
+    # the default pose is one sensor's: '' lets driver.launch.py place the N sensors (front +
+    # side, docs/multi_sensor.md); extrinsics:= then publishes its poses on TF over those
+    pose = arg('sensor_pose')
+    over = {'sensors': str(sensors), 'sensor': '', 'calibrate': '', 'static_tf': arg('static_tf'),
+            'extrinsics': arg('extrinsics'),
+            'sensor_pose': '' if pose.strip() == DEFAULT_SENSOR_POSE else pose}
+    yaml_values = load_params('driver', config_dir)
+    specs = {s.name: s for s in driver_params()}
     for name in ('source', 'replay_file', 'scenario', 'num_users', 'device_uri', 'nite2_path'):
-        if arg(name):   # '' = driver.yaml's value
-            over[name] = arg(name)
+        # '' = driver.yaml's value (driver.launch.py would take it as the value itself)
+        value = arg(name) or yaml_values.get(name, specs[name].default)
+        over[name] = str(value)
     path = os.path.join(get_package_share_directory('kinect_bringup'), 'launch', 'driver.launch.py')
     return IncludeLaunchDescription(PythonLaunchDescriptionSource(path),
                                     launch_arguments=over.items())

@@ -30,6 +30,7 @@ from skeleton_core.tf import (TfBuffer, Transform, WORLD_FRAME, format_pose, par
                               sensor_frame, transforms_from_msg, transforms_to_yaml)
 from skeleton_eval.extrinsics import (Calibration, CalibrationError, MAX_OFFSET_S, Track,
                                       calibrate, pick_user, synthetic_tracks, tracks_from_frames)
+from skeleton_eval.sensor_params import tracker_params
 
 DEFAULT_REFERENCE_POSE = '0 0 0.8 0 0 0'
 DEFAULT_VIEW = '2.5 2.5 0 -90 0 0'     # sensor 2 in sensor 1's frame: front + side at 90 deg
@@ -75,6 +76,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help='--synthetic: the person walks on the spot facing the first sensor '
                         'instead of round a loop')
     p.add_argument('--seconds', type=float, default=10.0, help='--synthetic: walk duration (s)')
+    p.add_argument('--tracker', default='',
+                   help="--synthetic: the sensor model of this skeleton tracker (e.g. "
+                        "azure_kinect_bt); default the Kinect v1 model")
     return p
 
 
@@ -199,13 +203,14 @@ def solve(per_sensor: List[Dict[int, Track]], frames: List[str], reference: Tran
 
 def run_synthetic(args) -> int:
     view = parse_pose(args.view)
+    params = tracker_params(args.tracker) if args.tracker else None
     rows = []
     for seed in _seeds(args.seeds):
         rng = np.random.default_rng(seed + 100)   # the sensors' clock offset and capture phase
         off, phase = float(rng.uniform(-0.8, 0.8)), float(rng.uniform(0.0, 1.0 / 30.0))
         a, b, _ = synthetic_tracks(view, seed=seed, scenario=args.scenario,
                                    duration_s=args.seconds, clock_offset_s=off, phase_s=phase,
-                                   circle=not args.on_the_spot)
+                                   circle=not args.on_the_spot, sensor_params=params)
         t0 = time.perf_counter()
         try:
             c = calibrate(a, b, seed=seed, max_offset_s=args.max_offset)
@@ -230,8 +235,9 @@ def run_synthetic(args) -> int:
     d = np.array([r[1] for r in rows]) * 100
     a = np.array([r[2] for r in rows])
     ok = int(np.sum((d <= 3.0) & (a <= 2.0)))
+    tracker = f', tracker {args.tracker}' if args.tracker else ''
     print(f'{len(rows)} seeds, {"walking round a loop" if not args.on_the_spot else "on the spot"}'
-          f', scenario {args.scenario}: translation median {np.median(d):.2f} cm, max '
+          f', scenario {args.scenario}{tracker}: translation median {np.median(d):.2f} cm, max '
           f'{np.max(d):.2f} cm; rotation median {np.median(a):.2f} deg, max {np.max(a):.2f} deg; '
           f'{ok}/{len(rows)} within 3 cm and 2 deg')
     return 0

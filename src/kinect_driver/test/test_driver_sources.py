@@ -218,6 +218,22 @@ def test_synthetic_users_side_by_side_with_truth():
         SyntheticSource(num_users=7)
 
 
+def test_synthetic_source_declares_the_tracker_of_its_sensor_model():
+    """The Kinect model declares ``sensor_model``; the Azure Kinect body tracking's variant
+    declares ``azure_kinect_bt`` and, like that tracker's ROS message, has no joint states."""
+    from pathlib import Path
+    root = Path(__file__).resolve().parents[3]
+    kin = SyntheticSource(scenario='b', seed=4)
+    kin.open()
+    az = SyntheticSource(scenario='b', seed=4,
+                         sensor_params=str(root / 'config' / 'sensor_model_azure_kinect_bt.yaml'))
+    az.open()
+    assert (kin.tracker, az.tracker) == ('sensor_model', 'azure_kinect_bt')
+    states = {name: np.array([src.poll(10 ** 12 + k * 33_333_333)[0].frames[0].tracking_state
+                              for k in range(300)]) for name, src in (('kin', kin), ('az', az))}
+    assert (states['az'] == TRACKED).all() and (states['kin'] != TRACKED).any()
+
+
 def test_synthetic_is_reproducible_per_seed():
     a, b, c = (SyntheticSource(seed=s, num_users=2) for s in (5, 5, 6))
     for s in (a, b, c):

@@ -12,6 +12,7 @@ Examples::
     evaluate --experiment table3 --methods raw,C --calibration none  # no calibration segment
     evaluate --experiment fig5
     evaluate --experiment fig8 --methods C --params k,steps
+    evaluate --tracker azure_kinect_bt         # the Azure Kinect body tracking's sensor model
     evaluate --perturb                         # raw and C, classes a-e, seeds 0-2, sensor model
                                                # noise/offset/occlusion/failure/tracked groups
                                                # 0.5x, 1.5x
@@ -38,6 +39,7 @@ from skeleton_eval.figures import FIG8_SWEEPS, _database_postures, fig5, fig8
 from skeleton_eval.registry import available_methods, load_plugins
 from skeleton_eval.report import calibration_text, to_json, to_markdown
 from skeleton_eval.sensor_model import SensorModel
+from skeleton_eval.sensor_params import tracker_params
 from skeleton_eval.table3 import table3
 
 
@@ -61,6 +63,10 @@ def _parser():
                    choices=('table3', 'table4', 'fig5', 'fig8'))
     p.add_argument('--sensor-params', default=None,
                    help='sensor model YAML (default: config/sensor_model.yaml or built-ins)')
+    p.add_argument('--tracker', default='', metavar='NAME',
+                   help='the sensor model of this skeleton tracker (skeleton_core.tracker: e.g. '
+                        'azure_kinect_bt, config/sensor_model_azure_kinect_bt.yaml) over '
+                        '--sensor-params; default: the Kinect v1 model')
     p.add_argument('--params', default='',
                    help='fig8: comma-separated parameters to sweep (db_size,k,pca_dims,steps,'
                         'samples)')
@@ -213,6 +219,13 @@ def run(argv=None) -> int:
     args = _parser().parse_args(argv)
     if args.real:
         return run_real(args)
+    if args.tracker:
+        try:
+            args.sensor_params = tracker_params(args.tracker, args.sensor_params)
+        except (ValueError, OSError) as exc:
+            print(f'evaluate: --tracker: {exc}', file=sys.stderr)
+            return 2
+        print(f'[evaluate] sensor model of tracker {args.tracker}', file=sys.stderr)
 
     plugins = load_plugins()
     for mod, st in plugins.items():

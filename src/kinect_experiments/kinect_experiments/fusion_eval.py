@@ -6,13 +6,15 @@ placement (its frame is ``world`` here), sensor 2 at 90 deg on the user's side (
 further sensors around the user; ``--layout diagonal`` turns that ring by 45 deg (two sensors at
 45 deg either side of the front; the single-sensor rows stay the front sensor alone). Rows per
 class: single-sensor raw and C (sensor 1 alone), fused raw
-(:class:`pose_reconstruction.fusion.MultiSensorFusion`) and fused + C (the reconstruction
+(:class:`pose_reconstruction.fusion.MultiSensorFusion`), sensor 2 alone (raw, put in the reference
+frame) and fused + C (the reconstruction
 unchanged, fed the fused skeletons). Eq. 18 error (cm) against the truth, and MPJPE.
 """
 from __future__ import annotations
 
 import sys
 import time
+from dataclasses import replace
 from typing import Dict, List
 
 import numpy as np
@@ -71,6 +73,12 @@ def fused_frames(streams, poses: List[Transform], user_id: int = 1) -> List[Skel
     return out
 
 
+def in_reference(stream, pose: Transform):
+    """A view's stream (and its truth) put in the reference sensor's frame through its pose:
+    that sensor alone, scored like the reference sensor."""
+    return replace(stream, positions=pose.apply(stream.positions), truth=pose.apply(stream.truth))
+
+
 def run(args, dev_clips, methods=('raw', 'C')) -> int:
     n = int(args.sensors)
     scenarios = [s for s in args.scenarios.split(',') if s]
@@ -80,6 +88,7 @@ def run(args, dev_clips, methods=('raw', 'C')) -> int:
     front = Transform.identity()
     mf = args.max_frames if args.max_frames and args.max_frames > 0 else None
     single: Dict[str, list] = {}
+    others: Dict[str, list] = {}    # sensor 2 alone, put in the reference frame
     fused: Dict[int, List[SkeletonFrame]] = {}
     for sc in scenarios:
         single[sc] = []
@@ -89,18 +98,20 @@ def run(args, dev_clips, methods=('raw', 'C')) -> int:
                 one = views[0] if layout == 'front-side' else sensor.corrupt(
                     c, sc, seed=args.seed + r, max_frames=mf, view=front)
                 single[sc].append(one)
+                others.setdefault(sc, []).append(in_reference(views[1], poses[1]))
                 fused[id(one)] = fused_frames(views, poses)
                 if not args.quiet:
                     print(f'[evaluate] {n} sensors {sc} {c.name}', file=sys.stderr)
     res_single = E.evaluate_streams(list(methods), single)['results']
     res_fused = E.evaluate_streams(list(methods), single, frame_transform=lambda s: fused[id(s)])['results']
+    res_other = E.evaluate_streams(['raw'], others)['results']
     lines = [f'# {n} sensors ({layout}, 90 deg apart), seed {args.seed}, {len(dev_clips)} clips, '
              f'{mf or "all"} frames', '',
              '| class | row | Eq. 18 (cm) | MPJPE (cm) | vs single raw |', '|---|---|---|---|---|']
     for sc in scenarios:
         base = res_single['raw'][sc]['metrics']['eq18_cm']['overall']
-        for label, res in (('single', res_single), ('fused', res_fused)):
-            for m in methods:
+        for label, res in (('single', res_single), ('sensor 2', res_other), ('fused', res_fused)):
+            for m in (methods if label != 'sensor 2' else ['raw']):
                 mt = res[m][sc]['metrics']
                 e = mt['eq18_cm']['overall']
                 lines.append(f'| {sc} | {label} {m} | {e:.2f} | {mt["mpjpe_cm"]["overall"]:.2f} | '

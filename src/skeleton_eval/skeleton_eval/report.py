@@ -80,6 +80,34 @@ def no_harm_lines(res: Dict, method: str = 'C', reference: str = 'raw') -> List[
     return [md] if md else []
 
 
+GAIN_METRICS = (('eq18_cm', 'Eq. 18'), ('bone_dir_deg', 'bone direction'),
+                ('mpjpe_rel_cm', 'root-relative MPJPE'))
+
+
+def gain_lines(res: Dict, reference: str = 'raw') -> List[str]:
+    """Per class, each method's gain over ``reference`` (%, positive = below it) in Eq. 18, the
+    length-free bone direction and the root-relative MPJPE; a negative gain in bold."""
+    if reference not in res or len(res) < 2:
+        return []
+    keys = list(res[reference])
+    lines = [f'### Gain over {reference} per class (%): ' + ' / '.join(n for _, n in GAIN_METRICS),
+             '', '| method | ' + ' | '.join(keys) + ' |', '|---|' + '---:|' * len(keys)]
+    for m, per in res.items():
+        if m == reference:
+            continue
+        cells = []
+        for k in keys:
+            vals = []
+            for name, _ in GAIN_METRICS:
+                r = res[reference][k]['metrics'][name]['overall']
+                v = per[k]['metrics'][name]['overall'] if k in per else None
+                g = 100 * (r - v) / r if r and v is not None and np.isfinite(v) else float('nan')
+                vals.append(f'**{_fmt(g, 1)}**' if np.isfinite(g) and g < 0 else _fmt(g, 1))
+            cells.append(' / '.join(vals))
+        lines.append(f'| {m} | ' + ' | '.join(cells) + ' |')
+    return lines + ['']
+
+
 def to_markdown(results: Dict) -> str:
     exp = results.get('experiment', 'table4')
     lines: List[str] = []
@@ -140,6 +168,7 @@ def to_markdown(results: Dict) -> str:
                                      else float('nan')))
                 lines.append(f'| {JOINT_NAMES[j]} | ' + ' | '.join(vals) + ' |')
             lines.append('')
+            lines += gain_lines(res)
             lines += no_harm_lines(res)
     elif exp == 'fig5':
         lines += ['## PCA dimensions vs matching error and search time (Shum & Ho 2012 Fig. 5)', '',

@@ -110,6 +110,18 @@ class _Corrupter(FailureModes):
         self.fp_joints = [JOINT_INDEX[n] for n in self.sc.get('fp_joints', [])]
         w = np.asarray(self.sc.get('limb_weights', [1, 1, 1, 1]), float)
         self.limb_p = w / w.sum() if w.sum() > 0 else np.full(4, 0.25)
+        # what the tracker reports for what it cannot see (``reporting``): a per-joint state and
+        # the joint held (Kinect SDK, NiTE2), or every joint TRACKED and an unseen one predicted
+        # (Azure Kinect body tracking). The prediction error has its own random stream, so the
+        # held-joint model's draws are unchanged.
+        rep = self.p.get('reporting', {})
+        self.states = bool(rep.get('tracking_states', True))
+        self.predict = rep.get('unseen', 'hold') == 'predict'
+        if self.predict:
+            self.pred_rng = np.random.default_rng((seed * 7919 + 17) % (2 ** 31))
+            self.pred_sigma = float(rep.get('predicted_error_mm', 0.0)) * 1e-3
+            self.pred_rho = float(rep.get('predicted_rho', 0.95))
+            self.e_pred = self.pred_rng.standard_normal((NUM_JOINTS, 3)) * self.pred_sigma
 
     # -------------------------------------------------------------------------------------
     def _per_frame(self, rate_per_min: float) -> float:
@@ -187,9 +199,19 @@ class _Corrupter(FailureModes):
             self.last = pos.copy()
         hold_noise = float(p['occlusion_geometry']['hold_noise_mm']) * 1e-3
 
+        if self.predict:
+            r = self.pred_rho
+            self.e_pred = r * self.e_pred + np.sqrt(1 - r ** 2) * self.pred_sigma * \
+                self.pred_rng.standard_normal((NUM_JOINTS, 3))
+        seen = pos.copy()   # what a predicting tracker reports before the unseen error
+
         def make_inferred(mask, st=INFERRED):
             idx = np.flatnonzero(mask)
-            if len(idx):
+            if len(idx) and self.predict:
+                pos[idx] = seen[idx] + self.e_pred[idx]
+                state[idx] = np.minimum(state[idx], st)
+                clean[idx] = False
+            elif len(idx):
                 pos[idx] = self.hold[idx] + rng.standard_normal((len(idx), 3)) * hold_noise / 3
                 state[idx] = np.minimum(state[idx], st)
                 clean[idx] = False
@@ -236,7 +258,12 @@ class _Corrupter(FailureModes):
         if self.occ is not None:
             o = self.occ
             j = o['joints']
-            if o['mode'] == 'not_tracked':
+            if self.predict:   # a predicting tracker fills a lost limb with its prediction
+                target = self._collapse_targets(truth, o['limb'], j) if o['mode'] == 'collapse' \
+                    else None
+                pos[j] = seen[j] + self.e_pred[j] if target is None else target + self.e_pred[j]
+                state[j] = INFERRED
+            elif o['mode'] == 'not_tracked':
                 pos[j] = self.hold[j]
                 state[j] = NOT_TRACKED
             elif o['mode'] == 'freeze':
@@ -315,6 +342,8 @@ class _Corrupter(FailureModes):
         self.hold[tracked] = pos[tracked]
         self.last = pos.copy()
         self.frame_index += 1
+        if not self.states:   # no per-joint state in the tracker's message: all TRACKED
+            state = np.full(NUM_JOINTS, TRACKED, np.uint8)
         return pos, state, truth, clean
 
     def _collapse_targets(self, truth, limb, joints):

@@ -30,6 +30,7 @@ LIMBS = ('left_arm', 'right_arm', 'left_leg', 'right_leg')
 _GROUP_TABLE = dict(torso=3.0, head=3.0, shoulder=4.0, elbow=6.0, wrist=8.0, hand=10.0, hip=4.0,
                     knee=6.0, ankle=8.0, foot=10.0)
 DEFAULT_PARAMS: Dict = {
+    'tracker': 'sensor_model',
     'fps': 30.0,
     'placement': {'distance_m': 2.5, 'sensor_height_m': 0.8, 'lateral_offset_m': 0.0,
                   'face_sensor': True, 'min_range_m': 0.8, 'max_range_m': 4.0,
@@ -42,6 +43,8 @@ DEFAULT_PARAMS: Dict = {
     'systematic': {'sigma_mm': dict(torso=19.0, head=14.0, shoulder=33.0, elbow=32.0, wrist=23.0,
                                     hand=25.0, hip=26.0, knee=32.0, ankle=28.0, foot=42.0)},
     'occlusion_geometry': {'radius_scale': 0.8, 'hold_noise_mm': 15.0},
+    'reporting': {'tracking_states': True, 'unseen': 'hold', 'predicted_error_mm': 0.0,
+                  'predicted_rho': 0.95},
     'episodes': {'duration_s': [0.3, 2.0], 'collapse_frames': 4, 'elbow_knee_probability': 0.5},
     'false_positive': {'duration_s': [0.3, 1.5], 'offset_m': [0.1, 0.35], 'vibration_mm': 30.0,
                        'parent_probability': 0.5, 'proximity_m': 0.15, 'proximity_per_s': 1.0},
@@ -116,6 +119,42 @@ DEFAULT_PARAMS: Dict = {
 }
 
 
+# Per-tracker variants of the model: overrides merged over the base parameters by
+# :func:`tracker_params`; each is also a YAML file in config/ (``sensor_model_<tracker>.yaml``,
+# where the sources of its numbers are cited), which the tests keep equal to this table.
+TRACKER_VARIANTS: Dict[str, Dict] = {
+    'azure_kinect_bt': {
+        'tracker': 'azure_kinect_bt',
+        'fps': 30.0,
+        'placement': {'min_range_m': 0.5, 'max_range_m': 3.86,
+                      'horizontal_fov_deg': 75.0, 'vertical_fov_deg': 65.0},
+        'jitter': {'depth_coeff_mm': 0.5,
+                   'base_mm': dict(torso=1.5, head=2.0, shoulder=2.0, elbow=3.5, wrist=5.0,
+                                   hand=6.0, hip=2.0, knee=3.5, ankle=5.0, foot=6.0)},
+        'slow_drift': {'sigma_mm': dict(torso=2.5, head=3.5, shoulder=5.5, elbow=7.0, wrist=8.5,
+                                        hand=10.0, hip=2.0, knee=7.0, ankle=8.5, foot=10.0)},
+        'systematic': {'sigma_mm': dict(torso=13.0, head=10.0, shoulder=23.0, elbow=22.0,
+                                        wrist=16.0, hand=18.0, hip=18.0, knee=22.0, ankle=20.0,
+                                        foot=29.0)},
+        'reporting': {'tracking_states': False, 'unseen': 'predict', 'predicted_error_mm': 40.0,
+                      'predicted_rho': 0.95},
+    },
+}
+VARIANT_YAML = {name: f'sensor_model_{name}.yaml' for name in TRACKER_VARIANTS}
+
+
+def tracker_params(tracker: str, base: Union[None, str, Path, Dict] = None) -> Dict:
+    """The sensor model's parameters for the skeleton tracker ``tracker``
+    (:data:`skeleton_core.tracker.TRACKERS`): its variant (:data:`TRACKER_VARIANTS`) merged over
+    ``base`` (as :func:`load_params` takes). A tracker without a variant ('' , ``sensor_model``,
+    the Kinect SDKs, NiTE2) gets the base model; an unknown name is a one-line ``ValueError``."""
+    from skeleton_core.tracker import check
+    name = check(tracker)
+    params = load_params(base)
+    variant = TRACKER_VARIANTS.get(name)
+    return _merge(params, variant) if variant else params
+
+
 def default_yaml_path() -> Optional[Path]:
     """``config/sensor_model.yaml`` of the source tree, if it can be found (else None)."""
     env = os.environ.get('KP_SENSOR_MODEL')
@@ -160,3 +199,4 @@ def load_params(params: Union[None, str, Path, Dict] = None) -> Dict:
 
 def _group_array(table: Dict[str, float]) -> np.ndarray:
     return np.array([float(table[g]) for g in JOINT_GROUP])
+

@@ -142,6 +142,9 @@ class SyntheticSource(Source):
         except Exception as e:
             raise SourceError(f'cannot load sensor model parameters '
                               f'{self.sensor_params or "(default)"}: {e}') from None
+        # the tracker the model stands for (a tracker's variant declares its own, e.g. the
+        # Azure Kinect body tracking's), published on /kinect/tracker like a real source's
+        self.tracker = str(base.get('tracker') or 'sensor_model')
         clips = _load_motion(self.clip, self.seed)
         self._streams = []
         self._lengths = []
