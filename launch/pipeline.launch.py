@@ -34,7 +34,7 @@ from kinect_bringup.launch_nodes import managed_node
 
 ARGS = [
     # '' = keep the value from config/<node>.yaml
-    ('source', '', 'skeleton source: synthetic | replay | live (default: driver.yaml)'),
+    ('source', '', 'skeleton source: synthetic | replay | live | azure_kinect (default: driver.yaml)'),
     ('replay_file', '', 'bag (.mcap) or CSV file for source:=replay'),
     ('device_uri', '', 'live: OpenNI2 device URI or .oni recording ("" = first device)'),
     ('nite2_path', '', 'live: NiTE2 Redist directory (never bundled; see docs/live_kinect.md)'),
@@ -49,7 +49,7 @@ ARGS = [
      'optimizer nodes (same topics)'),
     ('input_tracker', '', 'skeleton tracker of the input, overriding the one the stream declares '
      'on /kinect/tracker (a replayed bag its own, live nite2, synthetic sensor_model): '
-     'kinect_v2_sdk | nite2 | kinect_v1_sdk | sensor_model; the learned sensor correction '
+     'kinect_v2_sdk | nite2 | kinect_v1_sdk | azure_kinect_bt | sensor_model; the learned sensor correction '
      'for that tracker applies'),
     ('user_profile', '', 'user profile name (cache/profiles/<name>.json, from build_profile)'),
     ('physics', 'true', 'run the MuJoCo physics character'),

@@ -46,11 +46,7 @@ def two_azure():
     return launch.LaunchDescription([
         IncludeLaunchDescription(
             PythonLaunchDescriptionSource(os.path.join(SHARE, 'launch', 'pipeline.launch.py')),
-            # (num_users, scenario: set because pipeline.launch.py passes its empty defaults on
-            # to the included driver.launch.py, which refuses them; the synthetic source's
-            # parameters, unused here)
-            launch_arguments={'sensors': '2', 'source': 'azure_kinect', 'num_users': '1',
-                              'scenario': 'a',
+            launch_arguments={'sensors': '2', 'source': 'azure_kinect',
                               'sensor_pose': '; '.join(POSES), 'record': str(OUTPUT),
                               'physics': 'false', 'viz': 'false'}.items()),
         fake_driver(1), fake_driver(2),

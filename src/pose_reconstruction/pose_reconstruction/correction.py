@@ -74,7 +74,7 @@ class CorrectionConfig:
         "build_correction --bag ... --reference ...), else off; '' = off")
     input_tracker: str = param(
         '', 'skeleton tracker of the input stream (kinect_v2_sdk, kinect_v1_sdk, nite2, '
-        "sensor_model; '' = the one the stream declares on /kinect/tracker): a correction is "
+        "azure_kinect_bt, sensor_model; '' = the one the stream declares on /kinect/tracker): a correction is "
         'applied only to the tracker it was learned from', choices=('',) + TRACKERS)
     correction_stage: str = param(
         'input', 'where the correction runs: input (every joint, before the reliability) or '
