@@ -52,6 +52,23 @@ def test_process_bag_reconstructs_scores_and_skips_a_corrupt_message(tmp_path):
     acc = summary['accuracy']
     assert acc['C']['frames'] == n - 1
     assert acc['C']['eq18_cm'] < acc['raw']['eq18_cm']
+    # one rigid skeleton: the output's lengths are the user's once estimated (the first
+    # seconds), the sensor's are not; the jitter beside them
+    b = summary['bone_lengths']
+    assert b['tracks'] == 1 and b['frames'] == n - 1 and b['out_nan_frames'] == 0
+    assert len(b['out_std_cm']) == len(b['segments']) == 19
+    assert b['raw_std_mean_cm'] > 0.5 and b['out_std_mean_cm'] < 0.1 * b['raw_std_mean_cm']
+    assert b['out_jitter_ms2'] < b['raw_jitter_ms2']
+
+
+def test_bone_length_std_is_per_user_track(tmp_path):
+    """Two users in turn under the same id (the first leaves for longer than the timeout):
+    two tracks, each with its own constant lengths, not one pooled std."""
+    n = _users_bag(tmp_path / 'in.mcap', [(0, [1]), (140, [1])], seconds=2.0)
+    summary = process(tmp_path / 'in.mcap', tmp_path / 'out.mcap', 'C', progress=False)
+    b = summary['bone_lengths']
+    assert b['tracks'] == 2 and b['frames'] == 2 * n
+    assert b['out_std_mean_cm'] < 0.1 * b['raw_std_mean_cm']
 
 
 def _users_bag(path, schedule, seconds=1.0, seed=5):

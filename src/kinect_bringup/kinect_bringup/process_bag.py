@@ -23,8 +23,9 @@ from skeleton_core.bag_split import bag_pieces, pieces_topics, read_pieces
 from skeleton_core.bagio import BagError, BagWriter
 from skeleton_core.cdr import SKELETON_ARRAY, CdrError, frames_from_cdr, frames_to_cdr
 from skeleton_core.presence import Presence
+from pose_reconstruction.profile import SEGMENT_NAMES
 from pose_reconstruction.reconstructor import Reconstructor
-from skeleton_eval.metrics import eq18_error, mpjpe
+from skeleton_eval.metrics import eq18_error, length_rigidity, mpjpe
 
 SKELETONS = 'skeleton_msgs/msg/SkeletonArray'
 
@@ -109,6 +110,9 @@ def process(bag, out: Path, method: str = 'C', database: str = '', physics: bool
     raw: Dict[tuple, np.ndarray] = {}
     rec: Dict[tuple, np.ndarray] = {}
     char: Dict[tuple, np.ndarray] = {}
+    # one user's (raw, output) frames from arrival to leaving: the bone-length std per track
+    tracks: List[tuple] = []
+    track_of: Dict[int, tuple] = {}
     errors: List = []
     skipped: Dict[str, int] = {}
     warned: set = set()
@@ -125,6 +129,7 @@ def process(bag, out: Path, method: str = 'C', database: str = '', physics: bool
 
     def leave(uid: int) -> None:
         users.pop(uid, None)
+        track_of.pop(uid, None)
         if sim is not None:
             sim.remove(uid)
 
@@ -177,10 +182,14 @@ def process(bag, out: Path, method: str = 'C', database: str = '', physics: bool
                 if r is None:
                     r = users[f.user_id] = Reconstructor(db, method=method, **params)
                     arrivals += 1
+                    track_of[f.user_id] = ([], [])
+                    tracks.append(track_of[f.user_id])
                 seen_users.add(f.user_id)
                 raw[(f.user_id, f.stamp_ns)] = f.positions
                 o = r.process(f)
                 rec[(f.user_id, f.stamp_ns)] = o.positions
+                track_of[f.user_id][0].append(f.positions)
+                track_of[f.user_id][1].append(o.positions)
                 outs.append(o)
             user_frames += len(outs)
             writer.write_raw(out_topic, frames_to_cdr(outs, stamp, frame_id), m.stamp_ns, SKELETONS)
@@ -209,6 +218,8 @@ def process(bag, out: Path, method: str = 'C', database: str = '', physics: bool
                'users': len(seen_users), 'user_arrivals': arrivals, 'user_frames': user_frames,
                'user_timeout_s': user_timeout_s, 'tracker': tracker, 'tracker_declared': streamed,
                'correction': (corr_mod.describe_file(corr) if corr is not None else None)}
+    summary['bone_lengths'] = dict(length_rigidity(
+        [(np.asarray(a), np.asarray(b)) for a, b in tracks if a]), segments=SEGMENT_NAMES)
     if sim is not None:
         summary.update({
             'characters': len(char_users), 'character_frames': char_frames,
@@ -232,6 +243,22 @@ def accuracy(truth: Dict, streams: Dict[str, Dict]) -> Dict:
         out[name] = {'frames': len(keys), 'mpjpe_cm': mpjpe(est, ref)[1],
                      'eq18_cm': eq18_error(est, ref)[1]}
     return out
+
+
+def bone_length_text(b: Dict, method: str) -> str:
+    """The summary's lines on the bone lengths: per user track, the std of each segment's
+    length over time (cm), raw and output, beside the jitter (m/s^2)."""
+    if not b.get('tracks'):
+        return '  bone lengths: no user track of 3 frames or more'
+    lines = [f"  bone-length std (cm, per user track, mean of 19 segments): raw "
+             f"{b['raw_std_mean_cm']:.3f} -> {method} {b['out_std_mean_cm']:.4f} "
+             f"({-b['std_reduction_pct']:+.1f} %); jitter raw {b['raw_jitter_ms2']:.2f} -> "
+             f"{method} {b['out_jitter_ms2']:.2f} m/s^2; NaN frames {b['out_nan_frames']}; "
+             f"{b['tracks']} track(s), {b['frames']} frames",
+             '    per segment (raw -> ' + method + '): ' + ', '.join(
+                 f'{n} {r:.2f}->{o:.2f}' for n, r, o in zip(b['segments'], b['raw_std_cm'],
+                                                         b['out_std_cm']))]
+    return '\n'.join(lines)
 
 
 def main(argv=None) -> int:
@@ -280,6 +307,7 @@ def main(argv=None) -> int:
               f"{summary['characters']}, frames with a character: "
               f"{summary['character_frame_share']:.1%} of {summary['user_frames']}; refused: "
               f"{refused}")
+    print(bone_length_text(summary['bone_lengths'], args.method))
     for name, acc in summary.get('accuracy', {}).items():
         print(f"  {name:>8}: MPJPE {acc['mpjpe_cm']:.2f} cm, Eq.18 {acc['eq18_cm']:.2f} cm "
               f"over {acc['frames']} frames")
