@@ -116,10 +116,10 @@ def test_length_rigidity_is_per_track_and_weighted_by_frames():
     raw_a, raw_b = a + rng.normal(0, 0.01, a.shape), b + rng.normal(0, 0.01, b.shape)
     r = M.length_rigidity([(raw_a, a), (raw_b, b), (raw_b[:2], b[:2])])
     assert r['tracks'] == 2 and r['frames'] == 62 and r['out_nan_frames'] == 0
-    assert r['out_std_mean_cm'] == 0.0 and r['std_reduction_pct'] == 100.0
+    assert r['out_std_mean_cm'] < 1e-12 and abs(r['std_reduction_pct'] - 100.0) < 1e-9
     want = (40 * M.bone_length_std(raw_a)[0] + 20 * M.bone_length_std(raw_b)[0]) / 60
     np.testing.assert_allclose(r['raw_std_cm'], want)
-    assert r['raw_jitter_ms2'] > r['out_jitter_ms2'] == 0.0
+    assert r['raw_jitter_ms2'] > 1.0 and r['out_jitter_ms2'] < 1e-9
     bad = b.copy()
     bad[3] = np.nan
     assert M.length_rigidity([(raw_b, bad)])['out_nan_frames'] == 1
