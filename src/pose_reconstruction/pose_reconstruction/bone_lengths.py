@@ -62,6 +62,14 @@ def skeleton_bone_lengths(positions) -> Dict[str, float]:
     return {n: float(v) for n, v in zip(SEGMENT_NAMES, L)}
 
 
+def lengths_text(lengths) -> str:
+    """``'HipCenter-Spine=0.1234 Spine-ShoulderCenter=...'`` (m), or ``'estimating'`` for None
+    (a diagnostics value)."""
+    if lengths is None:
+        return 'estimating'
+    return ' '.join(f'{n}={float(v):.4f}' for n, v in zip(SEGMENT_NAMES, lengths))
+
+
 class BoneLengthEstimator:
     """One user's segment lengths (module docstring). ``samples``: trusted observations per
     segment; ``settle_s``: freeze at the latest this long after the first trusted observation

@@ -265,13 +265,16 @@ class Reconstructor:
         self.reset()
 
     @property
+    def rigid_output(self) -> bool:
+        """Every output posture has the user's constant lengths (methods B / C, segments)."""
+        return self.method != 'A' and self.output_mode == 'segments'
+
+    @property
     def bone_lengths(self) -> Optional[np.ndarray]:
         """(19,) the user's segment lengths (m) every output posture of methods B and C (output
         mode ``'segments'``) has, once estimated (:mod:`.bone_lengths`); None before, and for
         method A and the blend output."""
-        if self.method == 'A' or self.output_mode != 'segments':
-            return None
-        return self.segment_output.user_lengths
+        return self.segment_output.user_lengths if self.rigid_output else None
 
     @property
     def bone_length_restarts(self) -> int:
