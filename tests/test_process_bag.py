@@ -61,6 +61,28 @@ def test_process_bag_reconstructs_scores_and_skips_a_corrupt_message(tmp_path):
     assert b['out_jitter_ms2'] < b['raw_jitter_ms2']
 
 
+def test_process_bag_saves_the_reconstructions_lengths_as_a_profile(tmp_path):
+    from pose_reconstruction.profile import load
+    from pose_reconstruction.reconstructor import Reconstructor
+    _users_bag(tmp_path / 'in.mcap', [(0, [1])], seconds=3.0)
+    summary = process(tmp_path / 'in.mcap', tmp_path / 'out.mcap', 'C', progress=False,
+                      save_profile='me', profile_dir=str(tmp_path / 'profiles'))
+    L = summary['bone_lengths']['longest_track_lengths_m']
+    prof = load(tmp_path / 'profiles' / 'me.json')
+    np.testing.assert_allclose(prof.segment_lengths, L, atol=1e-5)
+    import json
+    assert json.loads((tmp_path / 'profiles' / 'me.json').read_text())['estimated_by'] == \
+        'reconstruction'
+    # the profile gives the next run those lengths from the first frame
+    out = process(tmp_path / 'in.mcap', tmp_path / 'out2.mcap', 'C', progress=False,
+                  params={'profile': prof})
+    assert out['bone_lengths']['out_std_mean_cm'] < 1e-6
+    assert Reconstructor   # the parameter is the reconstruction's
+    with pytest.raises(ValueError, match='method B or C'):
+        process(tmp_path / 'in.mcap', tmp_path / 'o3.mcap', 'A', progress=False,
+                save_profile='me', profile_dir=str(tmp_path / 'profiles'))
+
+
 def test_bone_length_std_is_per_user_track(tmp_path):
     """Two users in turn under the same id (the first leaves for longer than the timeout):
     two tracks, each with its own constant lengths, not one pooled std."""

@@ -48,7 +48,8 @@ def process(bag, out: Path, method: str = 'C', database: str = '', physics: bool
             input_topic: str = '/kinect/skeletons', user_timeout_s: float = 2.0,
             time_jump_reset_s: float = 1.0, progress: bool = True,
             params: Optional[Dict] = None, warn=None, correction: str = 'auto',
-            input_tracker: str = '', info=None) -> Dict:
+            input_tracker: str = '', info=None, save_profile: str = '',
+            profile_dir: str = '') -> Dict:
     """Process ``bag`` into ``out``; returns a summary (frames, wall time, users, refusals,
     accuracy). ``bag``: one file, a folder of pieces (a split recording) or a list of pieces,
     processed in order as one recording.
@@ -67,7 +68,12 @@ def process(bag, out: Path, method: str = 'C', database: str = '', physics: bool
     the skeleton tracker the bag declares (``/kinect/tracker``, :mod:`skeleton_core.tracker`)
     or ``input_tracker`` when given (it overrides); a correction for another tracker is refused
     with one line through ``warn`` (the run goes on without it); ``info(text)`` gets which one
-    was applied."""
+    was applied.
+
+    ``bone_lengths`` in the summary: per user track, each segment's length std over time (cm),
+    raw and output, beside the jitter (:func:`skeleton_eval.metrics.length_rigidity`), and the
+    constant lengths of the longest track; ``save_profile`` (a name) saves them as that user
+    profile (``<profile_dir>/<name>.json``, default ``cache/profiles``)."""
     from skeleton_core.model import NOT_TRACKED
 
     if warn is None:
@@ -98,6 +104,12 @@ def process(bag, out: Path, method: str = 'C', database: str = '', physics: bool
              f'{"--input-tracker" if input_tracker else "declared by the bag"})')
     # node_common imports rclpy: process_bag runs without a ROS graph
     from pose_reconstruction.node_common import load_database
+    if save_profile:
+        if method == 'A':
+            raise ValueError('--save-profile needs method B or C (their output has one set of '
+                             'bone lengths per user)')
+        from pose_reconstruction.profile import profile_path
+        profile_path(save_profile, profile_dir or None)   # a bad name: refused before the run
     db = load_database(database)
     out_topic = '/posture/completed' if method == 'A' else '/posture/reconstructed'
     users: Dict[int, object] = {}
@@ -182,7 +194,7 @@ def process(bag, out: Path, method: str = 'C', database: str = '', physics: bool
                 if r is None:
                     r = users[f.user_id] = Reconstructor(db, method=method, **params)
                     arrivals += 1
-                    track_of[f.user_id] = ([], [])
+                    track_of[f.user_id] = ([], [], r)
                     tracks.append(track_of[f.user_id])
                 seen_users.add(f.user_id)
                 raw[(f.user_id, f.stamp_ns)] = f.positions
@@ -219,7 +231,18 @@ def process(bag, out: Path, method: str = 'C', database: str = '', physics: bool
                'user_timeout_s': user_timeout_s, 'tracker': tracker, 'tracker_declared': streamed,
                'correction': (corr_mod.describe_file(corr) if corr is not None else None)}
     summary['bone_lengths'] = dict(length_rigidity(
-        [(np.asarray(a), np.asarray(b)) for a, b in tracks if a]), segments=SEGMENT_NAMES)
+        [(np.asarray(a), np.asarray(b)) for a, b, _ in tracks if a]), segments=SEGMENT_NAMES)
+    # the user track with the most frames: its constant lengths (a profile can be saved)
+    longest = max(tracks, key=lambda t: len(t[0]), default=None)
+    lengths = longest[2].bone_lengths if longest is not None else None
+    summary['bone_lengths']['longest_track_lengths_m'] = (
+        None if lengths is None else [round(float(v), 5) for v in lengths])
+    if save_profile:
+        from pose_reconstruction.profile import from_estimate, profile_path
+        prof = from_estimate(lengths, save_profile, tracker or '',
+                             frames=len(longest[0]) if longest else 0,
+                             source=f'process_bag {bag} (method {method})')
+        summary['profile'] = str(prof.save(profile_path(save_profile, profile_dir or None)))
     if sim is not None:
         summary.update({
             'characters': len(char_users), 'character_frames': char_frames,
@@ -283,6 +306,11 @@ def main(argv=None) -> int:
                    help="the input's skeleton tracker (default: the one the bag declares on "
                         "/kinect/tracker); overrides the bag's")
     p.add_argument('--report', default=None, help='write the summary JSON here')
+    p.add_argument('--save-profile', default='', metavar='NAME',
+                   help="save the reconstruction's constant bone lengths of the user with the "
+                        'most frames as user profile NAME (cache/profiles/NAME.json; the '
+                        "reconstruction's user_profile parameter); methods B and C")
+    p.add_argument('--profile-dir', default='', help='--save-profile: profile directory')
     p.add_argument('--no-progress', action='store_true')
     args = p.parse_args(argv)
     bag = [Path(b) for b in args.bag] if len(args.bag) > 1 else Path(args.bag[0])
@@ -291,7 +319,8 @@ def main(argv=None) -> int:
     try:
         summary = process(bag, out, args.method, args.database, args.physics, args.topic,
                           user_timeout_s=args.user_timeout, progress=not args.no_progress,
-                          correction=args.correction, input_tracker=args.input_tracker)
+                          correction=args.correction, input_tracker=args.input_tracker,
+                          save_profile=args.save_profile, profile_dir=args.profile_dir)
     except (ValueError, FileNotFoundError, OSError, RuntimeError) as e:
         print(f'process_bag: error: {e}', file=sys.stderr)
         return 1
@@ -311,6 +340,8 @@ def main(argv=None) -> int:
     for name, acc in summary.get('accuracy', {}).items():
         print(f"  {name:>8}: MPJPE {acc['mpjpe_cm']:.2f} cm, Eq.18 {acc['eq18_cm']:.2f} cm "
               f"over {acc['frames']} frames")
+    if summary.get('profile'):
+        print(f"  user profile (the reconstruction's bone lengths): {summary['profile']}")
     print(f'  report: {report}')
     return 0
 

@@ -106,11 +106,11 @@ class SegmentOutputConfig:
         range=(0.0, 3600.0), public=False)
     length_new_person: float = param(
         0.12, 'segments: the observed lengths disagreeing with the frozen ones by more than this '
-        '(median over the trusted segments of |log(observed / frozen)|, averaged over '
-        'length_new_person_s) is taken as another person under the same id: the lengths are '
-        'estimated again; 0 = never', range=(0.0, 10.0), public=False)
+        '(|median over the trusted segments of log(observed / frozen)|: a size change, averaged '
+        'over length_new_person_s) is taken as another person under the same id: the lengths '
+        'are estimated again; 0 = never', range=(0.0, 10.0), public=False)
     length_new_person_s: float = param(
-        1.0, 'segments: how long (s) the lengths must disagree before they are estimated again',
+        3.0, 'segments: how long (s) the lengths must disagree before they are estimated again',
         range=(0.05, 3600.0), public=False)
     symmetric_lengths: bool = param(True, 'segments: left and right limbs share their mean '
                                     'lengths', public=False)
