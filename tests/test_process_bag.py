@@ -86,7 +86,7 @@ def test_process_bag_saves_the_reconstructions_lengths_as_a_profile(tmp_path):
 def test_bone_length_std_is_per_user_track(tmp_path):
     """Two users in turn under the same id (the first leaves for longer than the timeout):
     two tracks, each with its own constant lengths, not one pooled std."""
-    n = _users_bag(tmp_path / 'in.mcap', [(0, [1]), (140, [1])], seconds=2.0)
+    n = _users_bag(tmp_path / 'in.mcap', [(0, [1]), (160, [1])], seconds=3.0)
     summary = process(tmp_path / 'in.mcap', tmp_path / 'out.mcap', 'C', progress=False)
     b = summary['bone_lengths']
     assert b['tracks'] == 2 and b['frames'] == 2 * n
