@@ -194,3 +194,24 @@ def test_segments_the_sensor_gets_wrong_are_not_another_person():
     assert _feed(est, wrong) == [] and est.restarts == 0
     # while the whole skeleton 30 % larger for 5 s is
     assert len(_feed(est, np.tile(1.3 * TRUE, (150, 1)))) == 1
+
+
+@pytest.mark.parametrize('method', ['B', 'C'])
+def test_methods_b_and_c_output_one_rigid_skeleton(method):
+    """On a noisy, occluded stream: after the lengths are frozen, every output posture of B and
+    C has exactly them (smoothing, prediction correction, position fit, filled segments)."""
+    from pose_reconstruction.reconstructor import Reconstructor
+    from pose_reconstruction.synthetic import scenario
+    db, _, obs, ts = scenario(frames=90)
+    r = Reconstructor(db, method=method)
+    frozen_at, L = None, []
+    for k in range(len(obs)):
+        o = r.process(SkeletonFrame(positions=obs[k], tracking_state=ts[k], user_id=1,
+                                    stamp_ns=k * 33_333_333))
+        L.append(np.linalg.norm(SEG_DIFF @ o.positions, axis=1))
+        if frozen_at is None and r.bone_lengths is not None:
+            frozen_at = k
+    assert frozen_at is not None and frozen_at <= 61   # at the latest 2 s after the first
+    L = np.array(L[frozen_at:])
+    np.testing.assert_allclose(L, np.tile(r.bone_lengths, (len(L), 1)), rtol=1e-12, atol=1e-12)
+    assert r.bone_length_restarts == 0
