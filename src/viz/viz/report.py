@@ -35,7 +35,7 @@ from skeleton_core.model import INFERRED, JOINT_NAMES, NOT_TRACKED, NUM_JOINTS, 
 from .render import Panel, render_frames
 from .series import METHOD_ROLES, ROLE_TOPICS, BagData, SkeletonSeries, load_bag, primary_user
 from skeleton_core.bagio import BagError
-from skeleton_eval.metrics import bone_length_std
+from skeleton_core.model import segment_lengths
 
 DEFAULT_TOLERANCE_S = 0.02
 
@@ -111,8 +111,10 @@ def summarize(data: BagData, user: Optional[int], tolerance_s: float = DEFAULT_T
              'jitter_m_s2': _f(jitter(s)) if s is not None else None}
         if s is not None and len(s) >= 2:
             # std over time of each segment's length (cm): 0 for a rigid skeleton
-            per_seg, mean_seg = bone_length_std(s.positions)
-            e['bone_length_std_cm'] = _f(mean_seg)
+            with np.errstate(invalid='ignore'):
+                per_seg = np.nanstd(segment_lengths(s.positions) * 100.0, axis=0)
+            ok = np.isfinite(per_seg)
+            e['bone_length_std_cm'] = _f(per_seg[ok].mean() if ok.any() else float('nan'))
             e['bone_length_std_per_segment_cm'] = [_f(v) for v in per_seg]
         if s is not None and gt is not None:
             _, err, per_joint = position_errors(s, gt, tolerance_s)
