@@ -56,6 +56,7 @@ def test_process_bag_reconstructs_scores_and_skips_a_corrupt_message(tmp_path):
     # seconds), the sensor's are not; the jitter beside them
     b = summary['bone_lengths']
     assert b['tracks'] == 1 and b['frames'] == n - 1 and b['out_nan_frames'] == 0
+    assert b['restarts'] == 0
     assert len(b['out_std_cm']) == len(b['segments']) == 19
     assert b['raw_std_mean_cm'] > 0.5 and b['out_std_mean_cm'] < 0.1 * b['raw_std_mean_cm']
     assert b['out_jitter_ms2'] < b['raw_jitter_ms2']

@@ -235,6 +235,8 @@ def process(bag, out: Path, method: str = 'C', database: str = '', physics: bool
     # the user track with the most frames: its constant lengths (a profile can be saved)
     longest = max(tracks, key=lambda t: len(t[0]), default=None)
     lengths = longest[2].bone_lengths if longest is not None else None
+    # lengths estimated again within a track: evidence of another person under the same id
+    summary['bone_lengths']['restarts'] = int(sum(t[2].bone_length_restarts for t in tracks))
     summary['bone_lengths']['longest_track_lengths_m'] = (
         None if lengths is None else [round(float(v), 5) for v in lengths])
     if save_profile:
@@ -277,7 +279,8 @@ def bone_length_text(b: Dict, method: str) -> str:
              f"{b['raw_std_mean_cm']:.3f} -> {method} {b['out_std_mean_cm']:.4f} "
              f"({-b['std_reduction_pct']:+.1f} %); jitter raw {b['raw_jitter_ms2']:.2f} -> "
              f"{method} {b['out_jitter_ms2']:.2f} m/s^2; NaN frames {b['out_nan_frames']}; "
-             f"{b['tracks']} track(s), {b['frames']} frames",
+             f"{b['tracks']} track(s), {b['frames']} frames, lengths estimated again "
+             f"{b.get('restarts', 0)} time(s)",
              '    per segment (raw -> ' + method + '): ' + ', '.join(
                  f'{n} {r:.2f}->{o:.2f}' for n, r, o in zip(b['segments'], b['raw_std_cm'],
                                                          b['out_std_cm']))]
