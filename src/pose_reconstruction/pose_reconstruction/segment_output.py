@@ -10,7 +10,8 @@ long segment the sensor sees follows it and a short one takes the database's dir
 ``observation_weight`` when off) and the *trust in the sensor*
 (:mod:`.trust`) times min(1, reliability of the less reliable end / ``reliable_threshold``). One
 rigid skeleton per user: the segments get the user's constant lengths (:mod:`.bone_lengths`: the
-robust mean of the first ``length_frames`` trusted observations of each segment, frozen then or
+robust mean of the first trusted observations of each segment, ``length_min_frames`` to
+``length_frames`` of them (until its standard error is at most ``length_tolerance``), frozen then or
 ``length_settle_s`` after the first; estimated again when the observed lengths disagree with them
 by more than ``length_new_person`` for ``length_new_person_s``: another person under the same id;
 with ``symmetric_lengths`` the left and right limbs share the mean of their two lengths) and are
@@ -97,11 +98,17 @@ class SegmentOutputConfig:
         0.3, 'segments: weight of the observed direction of a segment with two reliable ends',
         range=(0.0, 1.0), public=False)
     length_frames: int = param(
-        3, "segments: trusted observations per segment behind the user's constant length "
-        '(their robust mean), then frozen (3: the lengths converge in 0.1 s; the real UI-PRMD '
-        "recordings' within-clip length change is mostly slow and pose-dependent, which more "
-        'frames do not average out: 15 gave the same MPJPE with a 7x larger transient)',
-        range=(1, 100000), public=False)
+        15, "segments: trusted observations per segment behind the user's constant length at "
+        'most (their robust mean), fewer when length_tolerance is met', range=(1, 100000),
+        public=False)
+    length_min_frames: int = param(
+        3, 'segments: trusted observations per segment at least', range=(1, 100000),
+        public=False)
+    length_tolerance: float = param(
+        0.003, "segments: a segment's length estimate is good enough when its standard error "
+        '(sample std / sqrt(n), m) is at most this: a steady sensor converges in '
+        'length_min_frames frames (the output\'s lengths change only then), a noisy one '
+        'averages up to length_frames', range=(0.0, 1.0), public=False)
     length_settle_s: float = param(
         2.0, "segments: the user's lengths are frozen at the latest this long (s) after the "
         'first trusted observation (a segment unseen by then keeps the length prior / reference '
@@ -248,7 +255,9 @@ class SegmentOutput:
         self.offset_sigma: Optional[Callable[[], float]] = None
         self.estimator = BoneLengthEstimator(self.length_frames, float(config.length_settle_s),
                                              float(config.length_new_person),
-                                             float(config.length_new_person_s))
+                                             float(config.length_new_person_s),
+                                             int(config.length_min_frames),
+                                             float(config.length_tolerance))
         self.reset()
 
     def reset(self) -> None:
