@@ -176,10 +176,7 @@ def test_reconstructor_uses_the_profile_lengths_from_the_first_frame():
     seq = _postures(5, rng)
     db = seq.repeat(10, axis=0) - seq[:1, :1]
     L = np.full(NUM_SEGMENTS, 0.25)
-    # length_follow_cutoff 0: the profile's lengths alone (a trusted sensor's slow length
-    # changes are followed from there on: test_length_follow.py)
-    rec = Reconstructor(db, method='C', profile=L, symmetric_lengths=False,
-                        length_follow_cutoff=0.0)
+    rec = Reconstructor(db, method='C', profile=L, symmetric_lengths=False)
     out = rec.process(SkeletonFrame(positions=seq[0], tracking_state=np.full(NUM_JOINTS, TRACKED)))
     got = np.linalg.norm(out.positions[list(SEGMENT_CHILDREN)] - out.positions[list(SEGMENT_PARENTS)],
                          axis=1)

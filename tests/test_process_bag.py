@@ -52,6 +52,48 @@ def test_process_bag_reconstructs_scores_and_skips_a_corrupt_message(tmp_path):
     acc = summary['accuracy']
     assert acc['C']['frames'] == n - 1
     assert acc['C']['eq18_cm'] < acc['raw']['eq18_cm']
+    # one rigid skeleton: the output's lengths are the user's once estimated (the first
+    # seconds), the sensor's are not; the jitter beside them
+    b = summary['bone_lengths']
+    assert b['tracks'] == 1 and b['frames'] == n - 1 and b['out_nan_frames'] == 0
+    assert b['restarts'] == 0
+    assert len(b['out_std_cm']) == len(b['segments']) == 19
+    assert b['raw_std_mean_cm'] > 0.5 and b['out_std_mean_cm'] < 0.1 * b['raw_std_mean_cm']
+    assert b['out_jitter_ms2'] < b['raw_jitter_ms2']
+
+
+def test_process_bag_saves_the_reconstructions_lengths_as_a_profile(tmp_path):
+    from pose_reconstruction.profile import load
+    from pose_reconstruction.reconstructor import Reconstructor
+    _users_bag(tmp_path / 'in.mcap', [(0, [1])], seconds=3.0)
+    summary = process(tmp_path / 'in.mcap', tmp_path / 'out.mcap', 'C', progress=False,
+                      save_profile='me', profile_dir=str(tmp_path / 'profiles'))
+    L = summary['bone_lengths']['longest_track_lengths_m']
+    prof = load(tmp_path / 'profiles' / 'me.json')
+    np.testing.assert_allclose(prof.segment_lengths, L, atol=1e-5)
+    import json
+    assert json.loads((tmp_path / 'profiles' / 'me.json').read_text())['estimated_by'] == \
+        'reconstruction'
+    # the profile gives the next run those lengths from the first frame
+    out = process(tmp_path / 'in.mcap', tmp_path / 'out2.mcap', 'C', progress=False,
+                  params={'profile': prof})
+    assert out['bone_lengths']['out_std_mean_cm'] < 1e-6
+    assert Reconstructor   # the parameter is the reconstruction's
+    with pytest.raises(ValueError, match='method B or C'):
+        process(tmp_path / 'in.mcap', tmp_path / 'o3.mcap', 'A', progress=False,
+                save_profile='me', profile_dir=str(tmp_path / 'profiles'))
+
+
+def test_bone_length_std_is_per_user_track(tmp_path):
+    """Two users in turn under the same id (the first leaves for longer than the timeout):
+    two tracks, each with its own constant lengths, not one pooled std."""
+    n = _users_bag(tmp_path / 'in.mcap', [(0, [1]), (160, [1])], seconds=3.0)
+    summary = process(tmp_path / 'in.mcap', tmp_path / 'out.mcap', 'C', progress=False)
+    b = summary['bone_lengths']
+    assert b['tracks'] == 2 and b['frames'] == 2 * n
+    # (3 s tracks of a noisy sensor: the first half second, while the estimate averages, is
+    # most of what is left)
+    assert b['out_std_mean_cm'] < 0.2 * b['raw_std_mean_cm']
 
 
 def _users_bag(path, schedule, seconds=1.0, seed=5):

@@ -376,3 +376,37 @@ def test_a_parameter_the_node_does_not_declare_is_refused_by_name(rclpy_context)
     with pytest.raises(ValueError, match=r"'user_timeout' is not a parameter .*misspelt"):
         ReliabilityNode(context=rclpy_context,
                         parameter_overrides=[Parameter('user_timeout', value=1.0)])
+
+
+def test_reconstruction_diagnostics_report_each_users_bone_lengths(rclpy_context, case):
+    from rclpy.parameter import Parameter
+    from rclpy.serialization import serialize_message
+
+    from pose_reconstruction.reconstruction_node import ReconstructionNode
+    from skeleton_core.conversions import SkeletonFrame, frames_to_array_msg
+    from skeleton_core.model import NUM_SEGMENTS
+
+    db, _, obs, ts = case
+    node = bring_up(ReconstructionNode(database_obj=db, context=rclpy_context,
+                                       parameter_overrides=[
+        Parameter('input_topic', value=f'/t{os.getpid()}/rec_in'),
+        Parameter('output_topic', value=f'/t{os.getpid()}/rec_out')]))
+    try:
+        def send(k):
+            i = k if k < len(obs) else 2 * len(obs) - 1 - k   # the clip forth and back
+            f = SkeletonFrame(positions=obs[i], tracking_state=ts[i], user_id=7,
+                              stamp_ns=1_000_000 + k * 33_333_333)
+            node._on_msg(serialize_message(frames_to_array_msg([f], f.stamp_ns, 'k')))
+        send(0)
+        assert node.diagnostics_extra()['user_7_bone_lengths_m'] == 'estimating'
+        for k in range(1, 100):   # frozen at the latest 2 s after the first trusted frame
+            send(k)
+        d = node.diagnostics_extra()
+        text = d['user_7_bone_lengths_m']
+        pairs = dict(kv.split('=') for kv in text.split())
+        assert len(pairs) == NUM_SEGMENTS and 'HipCenter-Spine' in pairs
+        rec = node._users[7].rec
+        assert np.allclose([float(v) for v in pairs.values()], rec.bone_lengths, atol=1e-4)
+        assert d['user_7_bone_length_restarts'] == 0
+    finally:
+        node.destroy_node()

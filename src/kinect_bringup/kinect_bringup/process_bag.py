@@ -28,8 +28,9 @@ from skeleton_core.bag_split import bag_pieces, pieces_topics, read_pieces
 from skeleton_core.bagio import BagError, BagWriter
 from skeleton_core.cdr import SKELETON_ARRAY, CdrError, frames_from_cdr, frames_to_cdr
 from skeleton_core.presence import Presence
+from pose_reconstruction.profile import SEGMENT_NAMES
 from pose_reconstruction.reconstructor import Reconstructor
-from skeleton_eval.metrics import eq18_error, mpjpe
+from skeleton_eval.metrics import eq18_error, length_rigidity, mpjpe
 
 SKELETONS = 'skeleton_msgs/msg/SkeletonArray'
 CONVERTED_TOPIC = '/kinect/skeletons'   # where a recording of body markers is converted to
@@ -53,7 +54,8 @@ def process(bag, out: Path, method: str = 'C', database: str = '', physics: bool
             input_topic: str = '/kinect/skeletons', user_timeout_s: float = 2.0,
             time_jump_reset_s: float = 1.0, progress: bool = True,
             params: Optional[Dict] = None, warn=None, correction: str = 'auto',
-            input_tracker: str = '', info=None) -> Dict:
+            input_tracker: str = '', info=None, save_profile: str = '',
+            profile_dir: str = '') -> Dict:
     """Process ``bag`` into ``out``; returns a summary (frames, wall time, users, refusals,
     accuracy). ``bag``: one file, a folder of pieces (a split recording) or a list of pieces,
     processed in order as one recording.
@@ -72,7 +74,12 @@ def process(bag, out: Path, method: str = 'C', database: str = '', physics: bool
     the skeleton tracker the bag declares (``/kinect/tracker``, :mod:`skeleton_core.tracker`)
     or ``input_tracker`` when given (it overrides); a correction for another tracker is refused
     with one line through ``warn`` (the run goes on without it); ``info(text)`` gets which one
-    was applied."""
+    was applied.
+
+    ``bone_lengths`` in the summary: per user track, each segment's length std over time (cm),
+    raw and output, beside the jitter (:func:`skeleton_eval.metrics.length_rigidity`), and the
+    constant lengths of the longest track; ``save_profile`` (a name) saves them as that user
+    profile (``<profile_dir>/<name>.json``, default ``cache/profiles``)."""
     from skeleton_core.model import NOT_TRACKED
 
     if warn is None:
@@ -110,6 +117,12 @@ def process(bag, out: Path, method: str = 'C', database: str = '', physics: bool
              f'{"--input-tracker" if input_tracker else "declared by the bag"})')
     # node_common imports rclpy: process_bag runs without a ROS graph
     from pose_reconstruction.node_common import load_database
+    if save_profile:
+        if method == 'A':
+            raise ValueError('--save-profile needs method B or C (their output has one set of '
+                             'bone lengths per user)')
+        from pose_reconstruction.profile import profile_path
+        profile_path(save_profile, profile_dir or None)   # a bad name: refused before the run
     db = load_database(database)
     out_topic = '/posture/completed' if method == 'A' else '/posture/reconstructed'
     users: Dict[int, object] = {}
@@ -122,6 +135,9 @@ def process(bag, out: Path, method: str = 'C', database: str = '', physics: bool
     raw: Dict[tuple, np.ndarray] = {}
     rec: Dict[tuple, np.ndarray] = {}
     char: Dict[tuple, np.ndarray] = {}
+    # one user's (raw, output) frames from arrival to leaving: the bone-length std per track
+    tracks: List[tuple] = []
+    track_of: Dict[int, tuple] = {}
     errors: List = []
     skipped: Dict[str, int] = {}
     warned: set = set()
@@ -138,6 +154,7 @@ def process(bag, out: Path, method: str = 'C', database: str = '', physics: bool
 
     def leave(uid: int) -> None:
         users.pop(uid, None)
+        track_of.pop(uid, None)
         if sim is not None:
             sim.remove(uid)
 
@@ -193,10 +210,14 @@ def process(bag, out: Path, method: str = 'C', database: str = '', physics: bool
                 if r is None:
                     r = users[f.user_id] = Reconstructor(db, method=method, **params)
                     arrivals += 1
+                    track_of[f.user_id] = ([], [], r)
+                    tracks.append(track_of[f.user_id])
                 seen_users.add(f.user_id)
                 raw[(f.user_id, f.stamp_ns)] = f.positions
                 o = r.process(f)
                 rec[(f.user_id, f.stamp_ns)] = o.positions
+                track_of[f.user_id][0].append(f.positions)
+                track_of[f.user_id][1].append(o.positions)
                 outs.append(o)
             user_frames += len(outs)
             writer.write_raw(out_topic, frames_to_cdr(outs, stamp, frame_id), m.stamp_ns, SKELETONS)
@@ -225,6 +246,21 @@ def process(bag, out: Path, method: str = 'C', database: str = '', physics: bool
                'users': len(seen_users), 'user_arrivals': arrivals, 'user_frames': user_frames,
                'user_timeout_s': user_timeout_s, 'tracker': tracker, 'tracker_declared': streamed,
                'correction': (corr_mod.describe_file(corr) if corr is not None else None)}
+    summary['bone_lengths'] = dict(length_rigidity(
+        [(np.asarray(a), np.asarray(b)) for a, b, _ in tracks if a]), segments=SEGMENT_NAMES)
+    # the user track with the most frames: its constant lengths (a profile can be saved)
+    longest = max(tracks, key=lambda t: len(t[0]), default=None)
+    lengths = longest[2].bone_lengths if longest is not None else None
+    # lengths estimated again within a track: evidence of another person under the same id
+    summary['bone_lengths']['restarts'] = int(sum(t[2].bone_length_restarts for t in tracks))
+    summary['bone_lengths']['longest_track_lengths_m'] = (
+        None if lengths is None else [round(float(v), 5) for v in lengths])
+    if save_profile:
+        from pose_reconstruction.profile import from_estimate, profile_path
+        prof = from_estimate(lengths, save_profile, tracker or '',
+                             frames=len(longest[0]) if longest else 0,
+                             source=f'process_bag {bag} (method {method})')
+        summary['profile'] = str(prof.save(profile_path(save_profile, profile_dir or None)))
     if sim is not None:
         summary.update({
             'characters': len(char_users), 'character_frames': char_frames,
@@ -288,6 +324,23 @@ def accuracy(truth: Dict, streams: Dict[str, Dict]) -> Dict:
     return out
 
 
+def bone_length_text(b: Dict, method: str) -> str:
+    """The summary's lines on the bone lengths: per user track, the std of each segment's
+    length over time (cm), raw and output, beside the jitter (m/s^2)."""
+    if not b.get('tracks'):
+        return '  bone lengths: no user track of 3 frames or more'
+    lines = [f"  bone-length std (cm, per user track, mean of 19 segments): raw "
+             f"{b['raw_std_mean_cm']:.3f} -> {method} {b['out_std_mean_cm']:.4f} "
+             f"({-b['std_reduction_pct']:+.1f} %); jitter raw {b['raw_jitter_ms2']:.2f} -> "
+             f"{method} {b['out_jitter_ms2']:.2f} m/s^2; NaN frames {b['out_nan_frames']}; "
+             f"{b['tracks']} track(s), {b['frames']} frames, lengths estimated again "
+             f"{b.get('restarts', 0)} time(s)",
+             '    per segment (raw -> ' + method + '): ' + ', '.join(
+                 f'{n} {r:.2f}->{o:.2f}' for n, r, o in zip(b['segments'], b['raw_std_cm'],
+                                                         b['out_std_cm']))]
+    return '\n'.join(lines)
+
+
 def main(argv=None) -> int:
     from skeleton_core.tracker import TRACKERS
     p = argparse.ArgumentParser(prog='process_bag', description=__doc__,
@@ -310,6 +363,11 @@ def main(argv=None) -> int:
                    help="the input's skeleton tracker (default: the one the bag declares on "
                         "/kinect/tracker); overrides the bag's")
     p.add_argument('--report', default=None, help='write the summary JSON here')
+    p.add_argument('--save-profile', default='', metavar='NAME',
+                   help="save the reconstruction's constant bone lengths of the user with the "
+                        'most frames as user profile NAME (cache/profiles/NAME.json; the '
+                        "reconstruction's user_profile parameter); methods B and C")
+    p.add_argument('--profile-dir', default='', help='--save-profile: profile directory')
     p.add_argument('--no-progress', action='store_true')
     args = p.parse_args(argv)
     bag = [Path(b) for b in args.bag] if len(args.bag) > 1 else Path(args.bag[0])
@@ -318,7 +376,8 @@ def main(argv=None) -> int:
     try:
         summary = process(bag, out, args.method, args.database, args.physics, args.topic,
                           user_timeout_s=args.user_timeout, progress=not args.no_progress,
-                          correction=args.correction, input_tracker=args.input_tracker)
+                          correction=args.correction, input_tracker=args.input_tracker,
+                          save_profile=args.save_profile, profile_dir=args.profile_dir)
     except (ValueError, FileNotFoundError, OSError, RuntimeError) as e:
         print(f'process_bag: error: {e}', file=sys.stderr)
         return 1
@@ -334,9 +393,12 @@ def main(argv=None) -> int:
               f"{summary['characters']}, frames with a character: "
               f"{summary['character_frame_share']:.1%} of {summary['user_frames']}; refused: "
               f"{refused}")
+    print(bone_length_text(summary['bone_lengths'], args.method))
     for name, acc in summary.get('accuracy', {}).items():
         print(f"  {name:>8}: MPJPE {acc['mpjpe_cm']:.2f} cm, Eq.18 {acc['eq18_cm']:.2f} cm "
               f"over {acc['frames']} frames")
+    if summary.get('profile'):
+        print(f"  user profile (the reconstruction's bone lengths): {summary['profile']}")
     print(f'  report: {report}')
     return 0
 

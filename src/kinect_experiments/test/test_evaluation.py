@@ -290,13 +290,14 @@ def test_method_c_takes_its_segment_lengths_from_the_calibration():
     sensor = SensorModel(seed=0)
     s = sensor.corrupt(clip, 'clean', seed=0, max_frames=20)
     cs = calibration_stream(sensor, clip, 'tpose', seed=0, start_ns=int(s.stamps_ns[0]))
-    # length_follow_cutoff 0: the calibration's constant lengths only (where the sensor is
-    # trusted they would follow its slow length changes; test_length_follow.py)
-    m = rc.Reconstructor(db, method='C', k=5, steps=2, samples=10, length_follow_cutoff=0.0)
+    from pose_reconstruction.bone_lengths import robust_mean
+    m = rc.Reconstructor(db, method='C', k=5, steps=2, samples=10, length_tolerance=0.0)
     out, _ = E.run_method(m, s, subset_frames(s, TABLE3_SUBSETS['c'][1]),
                           warmup=calibration_frames(cs))
-    # frozen after length_frames (15) calibration frames: their mean, left/right averaged
-    cal = segment_lengths(cs.positions[:m.segment_output.length_frames]).mean(axis=0)
+    # frozen after length_frames (15) calibration frames (length_tolerance 0: never fewer):
+    # their robust mean, left/right averaged
+    cal = np.array([robust_mean(c) for c in
+                    segment_lengths(cs.positions[:m.segment_output.length_frames]).T])
     mirror = [SEGMENT_CHILDREN.index(MIRROR[c]) for c in SEGMENT_CHILDREN]
     want = 0.5 * (cal + cal[mirror])
     got = segment_lengths(out)

@@ -37,6 +37,19 @@ class FusedProcessor:
                                **section(values, 'completion'), **rel, **terms)
         self.comp: Optional[Reconstructor] = None  # built when first wanted
 
+    @property
+    def bone_lengths(self):
+        """(19,) the user's constant segment lengths (m) of the reconstruction, None before."""
+        return self.rec.bone_lengths
+
+    @property
+    def rigid_output(self) -> bool:
+        return self.rec.rigid_output
+
+    @property
+    def bone_length_restarts(self) -> int:
+        return self.rec.bone_length_restarts
+
     def reset(self) -> None:
         self.rec.reset()
         if self.comp is not None:

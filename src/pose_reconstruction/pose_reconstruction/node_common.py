@@ -22,6 +22,7 @@ from skeleton_core.conversions import SkeletonFormatError, frame_from_arrays
 from skeleton_core.params import ParamSpec, build, hidden, specs
 from skeleton_core.rosnode import InputDrops, ManagedNode, Parameters
 
+from .bone_lengths import lengths_text
 from .correction import CorrectionConfig
 from .reliability import ReliabilityConfig
 
@@ -265,6 +266,20 @@ class DatabaseNode(SkeletonArrayNode):
         self.db = None
         self.user_terms: Dict[str, Any] = {}
         super().__init__(name, specs, **kwargs)
+
+    def diagnostics_extra(self) -> Dict[str, Any]:
+        """Adds each user's bone lengths (methods B and C: the constant lengths every output
+        posture has, ``user_<id>_bone_lengths_m``; 'estimating' until frozen) and how often they
+        were estimated again for another person under the same id."""
+        extra = super().diagnostics_extra()
+        with self._lock:
+            users = list(self._users.items())
+        for uid, proc in users:
+            if not getattr(proc, 'rigid_output', False):
+                continue   # method A, the blend output, the reliability alone
+            extra[f'user_{uid}_bone_lengths_m'] = lengths_text(proc.bone_lengths)
+            extra[f'user_{uid}_bone_length_restarts'] = int(proc.bone_length_restarts)
+        return extra
 
     def setup(self) -> None:
         self._load(self.params['database'])

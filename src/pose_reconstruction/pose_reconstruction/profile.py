@@ -8,8 +8,13 @@ reconstruction's ``symmetric_lengths``). The reconstruction (``profile`` paramet
 these lengths from the first frame instead of freezing the mean of the first ``length_frames``
 observations of every clip.
 
+The reconstruction's own estimate of a user's lengths (the constant lengths every output posture
+of methods B and C has, :mod:`.bone_lengths`) is saved the same way (:func:`from_estimate`,
+``process_bag --save-profile NAME``), with ``"estimated_by": "reconstruction"`` added.
+
 File: JSON ``{"format": "kinect_posture.user_profile", "version": 1, "name": ..., "tracker": ...,
-"segment_lengths_m": [19 numbers], "frames": n, "source": ...}``. :func:`load` refuses a malformed
+"segment_lengths_m": [19 numbers], "frames": n, "source": ...}`` (other keys are kept when
+written and ignored when read). :func:`load` refuses a malformed
 file with one line (:class:`ProfileError`). Profiles are found by name in a directory
 (:func:`profile_path`: ``<dir>/<name>.json``, default ``cache/profiles``).
 """
@@ -106,6 +111,16 @@ def measure(sequences: Iterable[np.ndarray], name: str, tracker: str = '',
         med = 0.5 * (med + med[_MIRROR_SEG])
     return UserProfile(name=name, segment_lengths=med, tracker=tracker, frames=len(P),
                        source=source)
+
+
+def from_estimate(lengths, name: str, tracker: str = '', frames: int = 0,
+                  source: str = '') -> UserProfile:
+    """A profile from the reconstruction's estimate of the user's lengths (19,; a
+    :class:`~.reconstructor.Reconstructor`'s ``bone_lengths`` once frozen)."""
+    if lengths is None:
+        raise ValueError('the reconstruction has not estimated the user\'s lengths yet')
+    return UserProfile(name=name, segment_lengths=np.asarray(lengths, float), tracker=tracker,
+                       frames=frames, source=source, extra={'estimated_by': 'reconstruction'})
 
 
 def load(path) -> UserProfile:

@@ -16,8 +16,9 @@ Output stage of B/C, ``output_mode``:
   the observed one; the weight of the observation is the larger of ``observation_weight`` (for a
   segment whose two ends are reliable, at or above ``reliable_threshold``; 0 otherwise) and the
   *trust in the sensor* times min(1, reliability of the less reliable end / ``reliable_threshold``);
-  the segments get constant user lengths (the mean observed length over the first
-  ``length_frames`` reliable observations of each segment, then frozen; with
+  the segments get the user's constant lengths (one rigid skeleton per user,
+  :mod:`.bone_lengths`: the robust mean of the first ``length_frames`` trusted observations of
+  each segment, then frozen, estimated again only for another person; :attr:`bone_lengths`; with
   ``symmetric_lengths`` the left and right limbs share the mean of their two lengths; with
   ``length_prior`` and a database that stores its bodies' proportions, combined with those
   proportions at the user's fitted size, each weighted by its expected error -- with a
@@ -262,6 +263,23 @@ class Reconstructor:
         """Use another user profile (UserProfile, (19,) lengths or None) and forget the user."""
         self.segment_output.profile_lengths = profile_lengths(profile)
         self.reset()
+
+    @property
+    def rigid_output(self) -> bool:
+        """Every output posture has the user's constant lengths (methods B / C, segments)."""
+        return self.method != 'A' and self.output_mode == 'segments'
+
+    @property
+    def bone_lengths(self) -> Optional[np.ndarray]:
+        """(19,) the user's segment lengths (m) every output posture of methods B and C (output
+        mode ``'segments'``) has, once estimated (:mod:`.bone_lengths`); None before, and for
+        method A and the blend output."""
+        return self.segment_output.user_lengths if self.rigid_output else None
+
+    @property
+    def bone_length_restarts(self) -> int:
+        """How often the lengths were estimated again (another person under the same id)."""
+        return int(self.segment_output.estimator.restarts)
 
     def _reliability_for(self, frame: SkeletonFrame) -> np.ndarray:
         est = self.reliability.update(frame.positions, frame.tracking_state)

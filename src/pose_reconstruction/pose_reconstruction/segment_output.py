@@ -8,15 +8,15 @@ against the database's -- a constant plus, with ``direction_db_spread``, the spr
 neighbours' directions of that segment: where they disagree the database knows it less --, so a
 long segment the sensor sees follows it and a short one takes the database's direction;
 ``observation_weight`` when off) and the *trust in the sensor*
-(:mod:`.trust`) times min(1, reliability of the less reliable end / ``reliable_threshold``). The
-segments get constant user lengths (the mean observed length over the first ``length_frames``
-reliable observations of each segment, then frozen; with ``symmetric_lengths`` the left and right
-limbs share the mean of their two lengths) and are chained from the observed root. Where the
-sensor is trusted the lengths follow the observed ones' slow part (``length_follow_cutoff``: the
-deviation from the constant length, weighted by the trust times min(1, reliability /
-``reliable_threshold``), through a first-order low-pass; the corrected Kinect's joint centres, like
-the Vicon reference's, make lengths that change with the pose, and a constant length adds its
-difference down the chain; the frame-to-frame length noise is not followed). Chaining adds
+(:mod:`.trust`) times min(1, reliability of the less reliable end / ``reliable_threshold``). One
+rigid skeleton per user: the segments get the user's constant lengths (:mod:`.bone_lengths`: the
+robust mean of the first trusted observations of each segment, ``length_min_frames`` to
+``length_frames`` of them (until its standard error is at most ``length_tolerance``), frozen then or
+``length_settle_s`` after the first; estimated again when the observed lengths disagree with them
+by more than ``length_new_person`` for ``length_new_person_s``: another person under the same id;
+with ``symmetric_lengths`` the left and right limbs share the mean of their two lengths) and are
+chained from the observed root. The lengths are imposed last, after the smoothing: every output
+posture has exactly them (to float precision). Chaining adds
 every segment's length and direction error down the chain (a spine 1 cm longer than the sensor's
 moves the head and both arms by 1 cm), so where the sensor is trusted ``position_fit`` places the
 constant-length skeleton nearest the observed joints instead: each joint pulled towards its
@@ -67,6 +67,7 @@ from skeleton_core.model import (MIRROR, NUM_JOINTS, NUM_SEGMENTS, ROOT, SEGMENT
 from skeleton_core.params import check, param
 
 from .body_fit import torso_weight
+from .bone_lengths import BoneLengthEstimator
 from .posture_space import ANCESTORS
 
 _MIRROR_SEG = np.array([SEGMENT_CHILDREN.index(MIRROR[c]) for c in SEGMENT_CHILDREN])
@@ -87,10 +88,6 @@ _DB_DIRECTION_VAR = np.radians(12.0) ** 2
 # direction_fusion without a length prior: the joint-centre offset of a tracked joint (m per
 # axis; length_offset_sigma's default, the sensor model's 2-4 cm)
 _OFFSET_SIGMA = 0.03
-# length_follow_cutoff: the largest deviation from the constant length followed (fraction of it;
-# the corrected Kinect's lengths on UI-PRMD vary by 0.3-2.1 cm std within a clip, a few % of a
-# segment; a larger one is a failure the reliability missed, not the pose)
-_LENGTH_FOLLOW_MAX = 0.15
 
 
 @dataclass
@@ -101,8 +98,30 @@ class SegmentOutputConfig:
         0.3, 'segments: weight of the observed direction of a segment with two reliable ends',
         range=(0.0, 1.0), public=False)
     length_frames: int = param(
-        15, 'segments: reliable observations averaged per segment length, then frozen',
-        range=(1, 100000), public=False)
+        15, "segments: trusted observations per segment behind the user's constant length at "
+        'most (their robust mean), fewer when length_tolerance is met', range=(1, 100000),
+        public=False)
+    length_min_frames: int = param(
+        3, 'segments: trusted observations per segment at least', range=(1, 100000),
+        public=False)
+    length_tolerance: float = param(
+        0.003, "segments: a segment's length estimate is good enough when its standard error "
+        '(sample std / sqrt(n), m) is at most this: a steady sensor converges in '
+        'length_min_frames frames (the output\'s lengths change only then), a noisy one '
+        'averages up to length_frames', range=(0.0, 1.0), public=False)
+    length_settle_s: float = param(
+        2.0, "segments: the user's lengths are frozen at the latest this long (s) after the "
+        'first trusted observation (a segment unseen by then keeps the length prior / reference '
+        'length); 0 = only when every segment has length_frames observations',
+        range=(0.0, 3600.0), public=False)
+    length_new_person: float = param(
+        0.12, 'segments: the observed lengths disagreeing with the frozen ones by more than this '
+        '(|median over the trusted segments of log(observed / frozen)|: a size change, averaged '
+        'over length_new_person_s) is taken as another person under the same id: the lengths '
+        'are estimated again; 0 = never', range=(0.0, 10.0), public=False)
+    length_new_person_s: float = param(
+        3.0, 'segments: how long (s) the lengths must disagree before they are estimated again',
+        range=(0.05, 3600.0), public=False)
     symmetric_lengths: bool = param(True, 'segments: left and right limbs share their mean '
                                     'lengths', public=False)
     smooth_min_cutoff: float = param(
@@ -155,12 +174,6 @@ class SegmentOutputConfig:
         True, 'segments: the observed direction of a segment with two reliable ends weighted by '
         "its expected error (the user's joint-centre offsets across the segment) against the "
         "database solution's; false = observation_weight everywhere", public=False)
-    length_follow_cutoff: float = param(
-        1.3, 'segments: where the sensor is trusted, the constant lengths follow the observed '
-        'ones through a low-pass of this cutoff (Hz; weight: the trust times min(1, reliability '
-        '/ reliable_threshold)): the slow, pose-dependent part of the sensor\'s lengths is kept, '
-        'its frame-to-frame noise is not; 0 = constant lengths', range=(0.0, 100.0),
-        public=False)
     smooth_trusted_scale: float = param(
         4.0, 'segments: cutoff factor of the smoothing of a segment the output takes from the '
         'sensor (in proportion to the observed direction\'s weight in it) and of the root (to '
@@ -227,7 +240,6 @@ class SegmentOutput:
         self.smooth_accel_cutoff = float(config.smooth_accel_cutoff)
         self.smooth_accel_beta = float(config.smooth_accel_beta)
         self.direction_fusion = bool(config.direction_fusion)
-        self.length_follow_cutoff = float(config.length_follow_cutoff)
         self.smooth_trusted_scale = float(config.smooth_trusted_scale)
         self.direction_db_spread = bool(config.direction_db_spread)
         self.direction_db_distance = float(config.direction_db_distance)
@@ -241,16 +253,21 @@ class SegmentOutput:
         # () -> the joint-centre offset scale measured on the user (m per axis; the length
         # prior's), set by the Reconstructor; None = _OFFSET_SIGMA
         self.offset_sigma: Optional[Callable[[], float]] = None
+        self.estimator = BoneLengthEstimator(self.length_frames, float(config.length_settle_s),
+                                             float(config.length_new_person),
+                                             float(config.length_new_person_s),
+                                             int(config.length_min_frames),
+                                             float(config.length_tolerance))
         self.reset()
 
     def reset(self) -> None:
-        self._seg_sum = np.zeros(NUM_SEGMENTS)
-        self._seg_count = np.zeros(NUM_SEGMENTS, int)
+        self.estimator.reset()
+        self.estimator.restarts = 0
         self._seg_fallback = np.full(NUM_SEGMENTS, np.nan)
         self._frozen_lengths: Optional[np.ndarray] = None
         self._prior_cache: Optional[tuple] = None  # (prior, sides, counts, fused lengths)
-        # length_follow_cutoff: the low-passed deviation of the observed lengths from L (19,)
-        self._length_dev = np.zeros(NUM_SEGMENTS)
+        self._estimate_cache: Optional[tuple] = None  # (counts, robust means)
+        self._profile_refused = False  # the profile's lengths were another person's
         # filled_memory_s: each segment's last reliably observed direction and its age (s)
         self._seen_u = np.zeros((NUM_SEGMENTS, 3))
         self._seen_age = np.full(NUM_SEGMENTS, np.inf)
@@ -267,54 +284,77 @@ class SegmentOutput:
             lead_speed=self.smooth_lead_speed) if mc > 0 else None
 
     def lengths(self, positions: np.ndarray, R: np.ndarray,
-                lengths: Optional[np.ndarray] = None) -> np.ndarray:
-        """(19,) constant user lengths: the mean observed length of each
-        segment over its first ``length_frames`` reliable observations (both ends at or above
-        ``reliable_threshold``), frozen afterwards; a segment not yet observed reliably keeps the
-        reliability reference length it had when first needed. ``lengths`` (19,): the observed
-        segment lengths of ``positions`` when already known."""
-        if self._frozen_lengths is not None:
-            return self._frozen_lengths
-        if self.profile_lengths is not None and self.output_scale == 'user':
-            L = self.profile_lengths
-            self._frozen_lengths = 0.5 * (L + L[_MIRROR_SEG]) if self.symmetric_lengths else L
-            return self._frozen_lengths
+                lengths: Optional[np.ndarray] = None, dt: float = 1.0 / 30.0) -> np.ndarray:
+        """(19,) the user's constant lengths (:mod:`.bone_lengths`): the robust mean of each
+        segment's first ``length_frames`` trusted observations (both ends at or above
+        ``reliable_threshold``), with the length prior when set, frozen once complete (or
+        ``length_settle_s`` after the first); a segment not yet observed keeps the reliability
+        reference length it had when first needed. A profile's lengths are frozen from the first
+        frame. Frozen lengths the observations persistently disagree with (another person under
+        the same id) are estimated again. ``lengths`` (19,): the observed segment lengths of
+        ``positions`` when already known; ``dt`` the frame step (s)."""
         if self.output_scale == 'standard':
             self._frozen_lengths = self._standard_lengths
             return self._frozen_lengths
         thr = self.reliable_threshold
         good = (R[SEGMENT_PARENT_INDEX] >= thr) & (R[SEGMENT_CHILD_INDEX] >= thr)
-        good &= self._seg_count < self.length_frames
-        if good.any():
-            ln = lengths
-            if ln is None:
-                ln = np.linalg.norm(positions[SEGMENT_CHILD_INDEX] - positions[SEGMENT_PARENT_INDEX], axis=1)
-            self._seg_sum[good] += ln[good]
-            self._seg_count[good] += 1
-        none = self._seg_count == 0
+        ln = lengths
+        if ln is None:
+            ln = np.linalg.norm(positions[SEGMENT_CHILD_INDEX] - positions[SEGMENT_PARENT_INDEX],
+                                axis=1)
+        est = self.estimator
+        if (self._frozen_lengths is None and self.profile_lengths is not None
+                and not self._profile_refused):
+            L = np.asarray(self.profile_lengths, float)
+            self._frozen_lengths = 0.5 * (L + L[_MIRROR_SEG]) if self.symmetric_lengths else L
+            est.freeze(self._frozen_lengths)
+        if self._frozen_lengths is not None:
+            if not est.observe(ln, good, dt):
+                return self._frozen_lengths
+            # another person: estimated again, from this frame (a profile was not theirs)
+            self._frozen_lengths = None
+            self._prior_cache = None
+            self._estimate_cache = None
+            self._profile_refused = self.profile_lengths is not None
+        else:
+            est.observe(ln, good, dt)
+        counts = est.counts
+        none = counts == 0
         if none.any():
             unset = none & ~np.isfinite(self._seg_fallback)
             if not self.height_settled():
                 unset = none  # the database height fit is still converging: follow it
             if unset.any():
                 self._seg_fallback[unset] = self.reliability.reference_lengths[unset]
-        L = np.where(none, self._seg_fallback, self._seg_sum / np.maximum(self._seg_count, 1))
+        cached = self._estimate_cache
+        if cached is not None and np.array_equal(cached[0], counts):
+            mean = cached[1]  # nothing observed since
+        else:
+            mean = est.estimate
+            self._estimate_cache = (counts.copy(), mean)
+        L = np.where(none, self._seg_fallback, mean)
         if self.length_prior is not None:
             # the observed lengths of each side and the length prior (it shares the sides'
             # lengths itself when symmetric_lengths)
             cached = self._prior_cache
             if cached is not None and cached[0] is self.length_prior \
-                    and np.array_equal(cached[1], L) and np.array_equal(cached[2], self._seg_count):
+                    and np.array_equal(cached[1], L) and np.array_equal(cached[2], counts):
                 L = cached[3].copy()  # nothing observed since: the same fusion
             else:
-                fused = self.length_prior(L, self._seg_count)
-                self._prior_cache = (self.length_prior, L, self._seg_count.copy(), fused.copy())
+                fused = self.length_prior(L, counts)
+                self._prior_cache = (self.length_prior, L, counts.copy(), fused.copy())
                 L = fused
         elif self.symmetric_lengths:
             L = 0.5 * (L + L[_MIRROR_SEG])
-        if self._seg_count.min() >= self.length_frames:
-            self._frozen_lengths = L  # every segment complete: constant from now on
+        if est.complete():
+            self._frozen_lengths = L  # constant from now on
+            est.freeze(L)
         return L
+
+    @property
+    def user_lengths(self) -> Optional[np.ndarray]:
+        """(19,) the user's frozen segment lengths (m), None while still being estimated."""
+        return None if self._frozen_lengths is None else self._frozen_lengths.copy()
 
     def output(self, frame: SkeletonFrame, solution: np.ndarray, w: np.ndarray,
                trust: float, yaw: Optional[float] = None,
@@ -331,7 +371,13 @@ class SegmentOutput:
         if seg_obs is None:
             seg_obs = SEG_DIFF @ obs
             len_obs = np.sqrt(np.einsum('sk,sk->s', seg_obs, seg_obs))
-        L = self.lengths(obs, w, len_obs)
+        # filter clock: the stamps' steps where plausible (1 ms - 0.5 s), else 30 Hz
+        stamp = int(frame.stamp_ns or 0)
+        dt = 1.0 / 30.0
+        if self._last_stamp is not None and 1e6 <= stamp - self._last_stamp <= 5e8:
+            dt = (stamp - self._last_stamp) * 1e-9
+        self._last_stamp = stamp
+        L = self.lengths(obs, w, len_obs, dt)
         vs = SEG_DIFF @ solution
         if yaw is not None:
             vs = vs @ yaw_matrix(yaw).T
@@ -346,17 +392,10 @@ class SegmentOutput:
         rel_frac = np.minimum(wmin * (1.0 / max(thr, 1e-6)), 1.0)
         beta = rel_frac * trust
         reliable = wmin >= thr
-        # filter clock: the stamps' steps where plausible (1 ms - 0.5 s), else 30 Hz
-        stamp = int(frame.stamp_ns or 0)
-        dt = 1.0 / 30.0
-        if self._last_stamp is not None and 1e6 <= stamp - self._last_stamp <= 5e8:
-            dt = (stamp - self._last_stamp) * 1e-9
-        self._last_stamp = stamp
         if self.direction_fusion:
             np.maximum(beta, self._fused_weight(L, db_spread, db_distance) * reliable, out=beta)
         elif self.observation_weight > 0.0:
             np.maximum(beta, self.observation_weight * reliable, out=beta)
-        L = self._followed_lengths(L, len_obs, rel_frac * trust, zero, dt)
         if self.filled_memory_s > 0.0:
             us = self._remembered(us, uo, reliable & ~zero, rel_frac, trust, dt)
         u = us + beta[:, None] * (uo - us)
@@ -451,29 +490,6 @@ class SegmentOutput:
         idx = np.nonzero(act)[0][good]
         out[idx] = v[good] / n[good, None]
         return out
-
-    def _followed_lengths(self, L: np.ndarray, len_obs: np.ndarray, follow: np.ndarray,
-                          zero: np.ndarray, dt: float) -> np.ndarray:
-        """(19,) ``length_follow_cutoff``: the constant lengths ``L`` plus the observed lengths'
-        deviation from them, weighted by ``follow`` (19,: the trust times the reliability
-        fraction of the less reliable end) and low-passed (first order): where the sensor is
-        trusted the output keeps its slow, pose-dependent lengths (the corrected Kinect's move
-        its joint centres with the pose; chained constant lengths add each segment's length
-        error down the chain), not their frame-to-frame noise; where it is not, the deviation
-        decays to 0 and the lengths are the constant ones. A deviation is bounded to
-        ``_LENGTH_FOLLOW_MAX`` of the length."""
-        fc = self.length_follow_cutoff
-        if fc <= 0.0 or self.output_scale != 'user':
-            return L  # off, or the output in the standard body's lengths
-        target = follow * (len_obs - L)
-        bad = zero | ~np.isfinite(target)
-        if bad.any():
-            target = np.where(bad, 0.0, target)
-        lim = _LENGTH_FOLLOW_MAX * L
-        np.clip(target, -lim, lim, out=target)
-        a = 1.0 - np.exp(-2.0 * np.pi * fc * dt)
-        self._length_dev += a * (target - self._length_dev)
-        return L + self._length_dev
 
     def _fused_weight(self, L: np.ndarray,
                       db_spread: Optional[np.ndarray] = None,

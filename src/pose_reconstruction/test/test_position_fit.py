@@ -70,9 +70,7 @@ def test_a_trusted_observed_direction_is_not_bent_by_the_fit():
     u = _unit(rng, NUM_SEGMENTS)
     root = np.array([0.1, -0.2, 2.5])
     obs = root + _SEG_CHAIN @ (u * (L * rng.uniform(0.85, 1.15, NUM_SEGMENTS))[:, None])
-    # constant lengths (length_follow_cutoff 0: the fit's own behaviour; following the trusted
-    # lengths is test_length_follow.py's)
-    so = _output(smooth_min_cutoff=0.0, symmetric_lengths=False, length_follow_cutoff=0.0)
+    so = _output(smooth_min_cutoff=0.0, symmetric_lengths=False)
     so.profile_lengths = L
     solution = root + _SEG_CHAIN @ (_unit(rng, NUM_SEGMENTS) * L[:, None])  # the database's
     f = SkeletonFrame(positions=obs, tracking_state=np.full(NUM_JOINTS, TRACKED, np.uint8))

@@ -25,7 +25,7 @@ def _run(scale, trust, obs_weight=None):
     kw = {} if obs_weight is None else dict(direction_fusion=False, observation_weight=obs_weight)
     so = SegmentOutput(None, np.full(NUM_SEGMENTS, 0.3), lambda: True, 0.5, 'user',
                        SegmentOutputConfig(smooth_trusted_scale=scale, symmetric_lengths=False,
-                                           length_follow_cutoff=0.0, position_fit=0.0, **kw))
+                                           position_fit=0.0, **kw))
     so.profile_lengths = L
     root = np.array([0.0, 0.1, 2.4])
     errs, outs = [], []

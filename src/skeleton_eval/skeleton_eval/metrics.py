@@ -266,3 +266,50 @@ def compute_all(pred, truth, fps: float = 30.0) -> Dict[str, Dict]:
                              ('bone_dir_deg', bone_direction_error(pred, truth))):
         out[name] = {'per_joint': [float(v) for v in per], 'overall': tot}
     return out
+
+
+def length_rigidity(tracks, fps: float = 30.0) -> Dict:
+    """Bone-length std per segment beside jitter, raw and output, from ``tracks``: a list of
+    ``(raw, out)`` pairs of (T, 20, 3) sequences, one per user track (one user's frames from
+    arrival to leaving: a rigid output has one set of lengths per track, a new user another).
+    Per track each segment's std over time (cm, :func:`bone_length_std`) and the jitter (m/s^2,
+    :func:`jitter`), averaged over the tracks weighted by their frames (tracks of fewer than 3
+    frames skipped). Returns ``{'tracks', 'frames', 'raw_std_cm' (19,), 'out_std_cm' (19,),
+    'raw_std_mean_cm', 'out_std_mean_cm', 'std_reduction_pct', 'raw_jitter_ms2',
+    'out_jitter_ms2', 'out_nan_frames'}``."""
+    rs, os_, rj, oj, w = [], [], [], [], []
+    nan_frames = 0
+    frames = 0
+    for raw, out in tracks:
+        raw, out = _check(raw), _check(out)
+        if len(raw) != len(out):
+            raise ValueError('each track needs as many raw as output frames')
+        nan_frames += int((~np.isfinite(out)).any(axis=(1, 2)).sum())
+        frames += len(out)
+        if len(out) < 3:
+            continue
+        rs.append(bone_length_std(raw)[0])
+        os_.append(bone_length_std(out)[0])
+        rj.append(jitter(raw, fps)[1])
+        oj.append(jitter(out, fps)[1])
+        w.append(float(len(out)))
+
+    ntracks = len(w)
+    if not w:   # no track long enough
+        rs, os_, rj, oj, w = ([np.full(len(SEGMENT_CHILD_INDEX), np.nan)],) * 2 + (
+            [float('nan')],) * 2 + ([1.0],)
+
+    def avg(x):
+        a = np.asarray(x, float)
+        wt = np.asarray(w)[:, None] if a.ndim == 2 else np.asarray(w)
+        ok = np.isfinite(a)
+        with np.errstate(invalid='ignore'):
+            return (np.where(ok, a, 0.0) * wt).sum(axis=0) / (ok * wt).sum(axis=0)
+    r, o = avg(rs), avg(os_)
+    rm, om = _overall(r), _overall(o)
+    return {'tracks': ntracks, 'frames': frames,
+            'raw_std_cm': [float(v) for v in r], 'out_std_cm': [float(v) for v in o],
+            'raw_std_mean_cm': rm, 'out_std_mean_cm': om,
+            'std_reduction_pct': 100.0 * (rm - om) / rm if rm > 0 else float('nan'),
+            'raw_jitter_ms2': float(avg(rj)), 'out_jitter_ms2': float(avg(oj)),
+            'out_nan_frames': nan_frames}

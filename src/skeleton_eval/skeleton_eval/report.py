@@ -9,7 +9,7 @@ from typing import Dict, List
 import numpy as np
 
 from . import no_harm as NH
-from skeleton_core.model import JOINT_NAMES, NUM_JOINTS
+from skeleton_core.model import JOINT_NAMES, NUM_JOINTS, SEGMENT_CHILDREN, SEGMENT_PARENTS
 from .sensor_statistics import format_statistics
 
 
@@ -108,6 +108,36 @@ def gain_lines(res: Dict, reference: str = 'raw') -> List[str]:
     return lines + ['']
 
 
+def bone_length_lines(res: Dict) -> List[str]:
+    """A table of the bone-length std per segment (cm, each clip's std over time, pooled over
+    the classes weighted by frames) of every method, beside its jitter (m/s²)."""
+    if not res:
+        return []
+    names = [f'{JOINT_NAMES[p]}-{JOINT_NAMES[c]}' for p, c in zip(SEGMENT_PARENTS,
+                                                                  SEGMENT_CHILDREN)]
+    cols = {}
+    for m, per in res.items():
+        keys = list(per)
+        w = np.array([per[k]['frames'] for k in keys], float)
+        v = np.array([per[k]['metrics']['bone_std_cm']['per_joint'] for k in keys], float)
+        j = np.array([per[k]['metrics']['jitter_ms2']['overall'] for k in keys], float)
+        ok = np.isfinite(v)
+        with np.errstate(invalid='ignore'):
+            seg = (np.where(ok, v, 0.0) * w[:, None]).sum(0) / (ok * w[:, None]).sum(0)
+        okj = np.isfinite(j)
+        jit = float((j[okj] * w[okj]).sum() / w[okj].sum()) if okj.any() else float('nan')
+        cols[m] = (seg, jit)
+    lines = ['### Bone-length std per segment (cm), all classes pooled, beside jitter', '',
+             '| segment | ' + ' | '.join(cols) + ' |', '|---|' + '---:|' * len(cols)]
+    for i, n in enumerate(names):
+        lines.append(f'| {n} | ' + ' | '.join(_fmt(c[0][i], 3) for c in cols.values()) + ' |')
+    lines.append('| **mean** | ' + ' | '.join(_fmt(float(np.nanmean(c[0])), 3)
+                                               for c in cols.values()) + ' |')
+    lines.append('| jitter m/s² | ' + ' | '.join(_fmt(c[1], 1) for c in cols.values()) + ' |')
+    lines.append('')
+    return lines
+
+
 def to_markdown(results: Dict) -> str:
     exp = results.get('experiment', 'table4')
     lines: List[str] = []
@@ -169,6 +199,7 @@ def to_markdown(results: Dict) -> str:
                 lines.append(f'| {JOINT_NAMES[j]} | ' + ' | '.join(vals) + ' |')
             lines.append('')
             lines += gain_lines(res)
+            lines += bone_length_lines(res)
             lines += no_harm_lines(res)
     elif exp == 'fig5':
         lines += ['## PCA dimensions vs matching error and search time (Shum & Ho 2012 Fig. 5)', '',

@@ -105,3 +105,21 @@ def test_nan_frames_are_skipped():
     out = M.compute_all(pred, truth)
     assert set(out) == set(M.METRICS)
     assert len(out['eq18_cm']['per_joint']) == NUM_JOINTS and len(out['bone_dir_deg']['per_joint']) == 19
+
+
+def test_length_rigidity_is_per_track_and_weighted_by_frames():
+    from skeleton_core.model import standard_body
+    rng = np.random.default_rng(0)
+    a = np.repeat(standard_body(1.6).rest_positions()[None], 40, 0)
+    b = np.repeat(standard_body(1.9).rest_positions()[None], 20, 0)
+    # two rigid tracks of different people: 0 each (a pooled std would not be)
+    raw_a, raw_b = a + rng.normal(0, 0.01, a.shape), b + rng.normal(0, 0.01, b.shape)
+    r = M.length_rigidity([(raw_a, a), (raw_b, b), (raw_b[:2], b[:2])])
+    assert r['tracks'] == 2 and r['frames'] == 62 and r['out_nan_frames'] == 0
+    assert r['out_std_mean_cm'] < 1e-12 and abs(r['std_reduction_pct'] - 100.0) < 1e-9
+    want = (40 * M.bone_length_std(raw_a)[0] + 20 * M.bone_length_std(raw_b)[0]) / 60
+    np.testing.assert_allclose(r['raw_std_cm'], want)
+    assert r['raw_jitter_ms2'] > 1.0 and r['out_jitter_ms2'] < 1e-9
+    bad = b.copy()
+    bad[3] = np.nan
+    assert M.length_rigidity([(raw_b, bad)])['out_nan_frames'] == 1

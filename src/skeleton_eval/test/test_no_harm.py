@@ -129,6 +129,13 @@ def test_evaluate_streams_reports_the_no_harm_sums_per_method():
     assert NH.overall(nh_raw) > 1.0 and NH.overall(nh_c) == pytest.approx(0.0, abs=1e-6)
     md = to_markdown({'experiment': 'table4', 'results': res['results']})
     assert 'No harm: C against raw' in md and '0 of 19 segment-class cells' in md
+    # the bone-length std per segment beside the jitter: the truth's (toy clip: rigid) ~0, the
+    # sensor's not
+    rows = {ln.split(' | ')[0]: ln for ln in md.splitlines() if ln.startswith('| ')}
+    assert 'Bone-length std per segment' in md and '| HipCenter-Spine' in rows
+    raw_mean, c_mean = [float(x) for x in rows['| **mean**'].strip(' |').split(' | ')[1:]]
+    assert raw_mean > 0.3 and c_mean < 0.01
+    assert rows['| jitter m/s²'].count('|') == 4
 
 
 def test_root_relative_mpjpe_ignores_a_shift_of_the_whole_body():

@@ -69,6 +69,15 @@ def test_report_from_memory_with_missing_topics(tmp_path):
     assert summary['animation']['frames'] == 8
     md = (tmp_path / 'mem_summary.md').read_text()
     assert '| reconstructed | 24 | 24 | 1.73 |' in md
+    # the bone-length std beside the jitter (the moving arm's upper segment changes length in
+    # this toy 'reconstruction', the 3 cm sensor noise far more)
+    rec_std = m['reconstructed']['bone_length_std_cm']
+    assert 0.0 < rec_std < 0.5 * m['raw']['bone_length_std_cm']
+    assert len(m['raw']['bone_length_std_per_segment_cm']) == NUM_JOINTS - 1
+    assert [ln for ln in md.splitlines()
+            if ln.startswith('| reconstructed')][0].endswith(f'| {rec_std:.3f} |')
+    line = report.bone_length_line(summary)
+    assert line.startswith('bone-length std') and f'reconstructed {rec_std:.4f}' in line
 
 
 def test_render_frames_api_without_bag_and_no_data_panels(tmp_path):

@@ -35,6 +35,7 @@ from skeleton_core.model import INFERRED, JOINT_NAMES, NOT_TRACKED, NUM_JOINTS, 
 from .render import Panel, render_frames
 from .series import METHOD_ROLES, ROLE_TOPICS, BagData, SkeletonSeries, load_bag, primary_user
 from skeleton_core.bagio import BagError
+from skeleton_core.model import segment_lengths
 
 DEFAULT_TOLERANCE_S = 0.02
 
@@ -108,6 +109,13 @@ def summarize(data: BagData, user: Optional[int], tolerance_s: float = DEFAULT_T
         s = series.get(role)
         e = {'frames': len(s) if s is not None else 0,
              'jitter_m_s2': _f(jitter(s)) if s is not None else None}
+        if s is not None and len(s) >= 2:
+            # std over time of each segment's length (cm): 0 for a rigid skeleton
+            with np.errstate(invalid='ignore'):
+                per_seg = np.nanstd(segment_lengths(s.positions) * 100.0, axis=0)
+            ok = np.isfinite(per_seg)
+            e['bone_length_std_cm'] = _f(per_seg[ok].mean() if ok.any() else float('nan'))
+            e['bone_length_std_per_segment_cm'] = [_f(v) for v in per_seg]
         if s is not None and gt is not None:
             _, err, per_joint = position_errors(s, gt, tolerance_s)
             e['matched_frames'] = int(err.size)
@@ -282,12 +290,14 @@ def summary_markdown(summary: Dict, files: Dict[str, str], source: str) -> str:
         lines.append('| (none) | | |')
     lines += ['', '## Methods against ground truth', '',
               '| method | frames | matched | mean error (cm) | median (cm) | p95 (cm) | '
-              'pose error (cm) | jitter (m/s²) |', '|---|---|---|---|---|---|---|---|']
+              'pose error (cm) | jitter (m/s²) | bone-length std (cm) |',
+              '|---|---|---|---|---|---|---|---|---|']
     for role, e in summary['methods'].items():
         lines.append(f"| {role} | {e['frames']} | {e.get('matched_frames', '—')} | "
                      f"{cm(e.get('mean_error_m'))} | {cm(e.get('median_error_m'))} | "
                      f"{cm(e.get('p95_error_m'))} | {cm(e.get('mean_pose_error_m'))} | "
-                     f"{'—' if e['jitter_m_s2'] is None else format(e['jitter_m_s2'], '.2f')} |")
+                     f"{'—' if e['jitter_m_s2'] is None else format(e['jitter_m_s2'], '.2f')} | "
+                     f"{'—' if e.get('bone_length_std_cm') is None else format(e['bone_length_std_cm'], '.3f')} |")
     if summary['roles'].get('ground_truth', {}).get('frames', 0) == 0:
         lines += ['', 'No `/kinect/ground_truth` in the bag: errors cannot be computed.']
     else:
@@ -366,6 +376,22 @@ def data_from_series(series: Dict[str, SkeletonSeries]) -> BagData:
     return BagData(by_role, counts, {}, dict(ROLE_TOPICS))
 
 
+def bone_length_line(summary: Dict) -> str:
+    """One line: the bone-length std (cm, mean of the 19 segments' std over time) and the
+    jitter of the raw sensor and the reconstruction ('' without both)."""
+    m = summary.get('methods', {})
+    raw, rec = m.get('raw', {}), m.get('reconstructed', {})
+    r, o = raw.get('bone_length_std_cm'), rec.get('bone_length_std_cm')
+    if r is None or o is None:
+        return ''
+    pct = f' ({100.0 * (o - r) / r:+.1f} %)' if r > 0 else ''
+    jr, jo = raw.get('jitter_m_s2'), rec.get('jitter_m_s2')
+    jit = f'; jitter raw {jr:.2f} -> reconstructed {jo:.2f} m/s²' if jr is not None and \
+        jo is not None else ''
+    return (f'bone-length std (cm, mean of 19 segments): raw {r:.3f} -> reconstructed '
+            f'{o:.4f}{pct}{jit}')
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(
         prog='report', description='Offline report of a recorded pipeline bag: animation (GIF), '
@@ -408,6 +434,9 @@ def main(argv=None) -> int:
     files = write_report(data, a.out, name=name, user=a.user, fps=a.fps,
                          max_frames=a.max_frames, gif=not a.no_gif, tolerance_s=a.tolerance,
                          source=Path(a.bag).name)
+    line = bone_length_line(json.loads(Path(files['summary_json']).read_text()))
+    if line:
+        print(line)
     print(f'report of {a.bag} written:')
     for k, v in files.items():
         if v:
