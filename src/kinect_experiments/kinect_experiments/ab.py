@@ -97,8 +97,11 @@ def run_figures(bench_json: Dict) -> Dict[str, Dict[str, float]]:
                 if m in o:
                     fig[f'{key}.{m}'] = float(o[m])
         procs = r.get('processes', {})
-        rate = float((r.get('sensor1') if r.get('sensors', 1) > 1 else r.get('input') or {})
-                     .get('rate_hz', 0.0) or 0.0)
+        # captured frames per second: the distinct capture stamps of the input (sensor 1's with
+        # several sensors), counted the same way by every version of the bench
+        src = (r.get('sensor1') if r.get('sensors', 1) > 1 else r.get('input')) or {}
+        secs, users = float(r.get('seconds') or 0.0), max(1, int(r.get('users') or 1))
+        rate = src.get('skeletons', 0) / users / secs if secs > 0 else 0.0
         total = 0.0
         for name, s in procs.items():
             c = float(s.get('cpu_percent', float('nan')))
@@ -215,11 +218,15 @@ def _clean_env(root: Path) -> Dict[str, str]:
     env = dict(os.environ)
     for k in ('AMENT_PREFIX_PATH', 'CMAKE_PREFIX_PATH', 'COLCON_PREFIX_PATH', 'PYTHONPATH',
               'VIRTUAL_ENV', 'KINECT_POSTURE_ROOT', 'KINECT_POSTURE_ROS',
-              'KINECT_POSTURE_LAUNCH_TOOLING', 'LD_LIBRARY_PATH'):
+              'KINECT_POSTURE_LAUNCH_TOOLING',
+              # the pip wheels' bootstrap sets the library path once per process tree: the
+              # other tree's python redoes it (its own install on the path, not this one's)
+              '_ROS_WHEELS_BOOTSTRAP_COMPLETE'):
         env.pop(k, None)
-    keep = [p for p in env.get('PATH', '').split(os.pathsep)
-            if p and not p.startswith(str(root)) and '.venv' not in p]
-    env['PATH'] = os.pathsep.join(keep)
+    for var in ('PATH', 'LD_LIBRARY_PATH'):
+        keep = [p for p in env.get(var, '').split(os.pathsep)
+                if p and not p.startswith(str(root)) and '.venv' not in p]
+        env[var] = os.pathsep.join(keep)
     return env
 
 
@@ -317,6 +324,7 @@ def run_ab(root: Path, ref: str, case_args: Sequence[str], alternations: int, ou
            fail_ratio: Optional[float] = None, args_line: str = '', log=print) -> int:
     """The comparison; exit code 0 (printed), 1 (the guard found a regression), 3 (refused:
     the machine was not quiet)."""
+    out = Path(out).resolve()
     sha = resolve(root, ref)
     head = git(root, 'rev-parse', '--short', 'HEAD')
     dirty = bool(git(root, 'status', '--porcelain', '--untracked-files=no'))

@@ -573,7 +573,7 @@ def _run_against(p, args, argv, root: Path) -> int:
         case.append('--skip-bag')
     if args.alternations < 1:
         p.error('--alternations must be >= 1')
-    out = Path(args.out if '--out' in given else str(root / 'out' / 'bench-ab'))
+    out = Path(args.out if '--out' in given else str(root / 'out' / 'bench-ab')).resolve()
     line = ' '.join(argv if argv is not None else sys.argv[1:])
     try:
         return ab.run_ab(root, args.against, case, args.alternations, out,

@@ -11,8 +11,8 @@ from kinect_experiments import ab
 def _bench_json(rec_p95, char_p95, dropped=0, cpu=(30.0, 40.0), users=6):
     out = {'p50_ms': rec_p95 / 2, 'dropped': dropped, 'skeletons': 100}
     return {'results': [{
-        'mode': 'processes', 'users': users, 'sensors': 1,
-        'input': {'rate_hz': 30.0, 'p50_ms': 1.0, 'p95_ms': 2.0},
+        'mode': 'processes', 'users': users, 'sensors': 1, 'seconds': 10.0,
+        'input': {'rate_hz': 30.0, 'p50_ms': 1.0, 'p95_ms': 2.0, 'skeletons': 300 * users},
         'reconstructed': {**out, 'p95_ms': rec_p95},
         'character': {**out, 'p95_ms': char_p95},
         'processes': {'reconstruction': {'cpu_percent': cpu[0]},
