@@ -57,7 +57,7 @@ class FusionClock:
         self.sensors = list(sensors)
         self.period_s = float(period_s)
         self.max_wait_s = self.period_s if max_wait_s is None else float(max_wait_s)
-        if not 0.0 <= self.max_wait_s <= self.period_s:
+        if not 0.0 <= self.max_wait_s <= self.period_s + 1e-9:
             raise ValueError(f'max_wait_s must be in [0, {self.period_s:.3f}] s (one frame '
                              f'period), got {self.max_wait_s}')
         self.reset()
