@@ -9,7 +9,7 @@ from kinect_experiments import ab
 
 
 def _bench_json(rec_p95, char_p95, dropped=0, cpu=(30.0, 40.0), users=6):
-    out = {'p50_ms': rec_p95 / 2, 'dropped': dropped, 'skeletons': 100}
+    out = {'p50_ms': rec_p95 / 2, 'dropped': dropped, 'skeletons': 300 * users}
     return {'results': [{
         'mode': 'processes', 'users': users, 'sensors': 1, 'seconds': 10.0,
         'input': {'rate_hz': 30.0, 'p50_ms': 1.0, 'p95_ms': 2.0, 'skeletons': 300 * users},
@@ -25,6 +25,10 @@ def test_figures_of_a_run_include_cpu_time_per_frame():
     assert fig['cpu.graph'] == 90.0
     # 30 % of a core at 30 frames/s = 10 ms of CPU per frame
     assert fig['cpu_ms_per_frame.reconstruction'] == pytest.approx(10.0)
+    # a node that output half the frames (the rest dropped) spent twice as much per frame
+    run = _bench_json(20.0, 30.0, cpu=(30.0, 60.0))
+    run['results'][0]['character']['skeletons'] = 150 * 6
+    assert ab.run_figures(run)['processes 6u 1s']['cpu_ms_per_frame.physics'] == pytest.approx(40.0)
     assert 'input.p95_ms' not in fig   # the input is judged only with several sensors
 
 
