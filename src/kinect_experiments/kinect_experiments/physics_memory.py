@@ -41,7 +41,7 @@ def main(argv=None) -> int:
 
     rclpy.init()
     node = bring_up(PhysicsNode(parameter_overrides=[
-        Parameter('user_timeout_s', value=3600.0)]))   # users leave when this tool says
+        Parameter('user_timeout_s', value=60.0)]))   # users leave when this tool says
     node.tf.set('world', 'kinect_link', Transform.from_xyz_ypr(0, 0, 0.8))
     ex = node_executor()
     ex.add_node(node)
