@@ -7,8 +7,9 @@ machine, else the comparison is refused (or, with ``--ignore-load``, printed as 
     ros2 run kinect_experiments bench --against            # HEAD^ (the previous landed commit)
     ros2 run kinect_experiments bench --against HEAD^ --users 2 --alternations 3 --fail-ratio 1.5
 
-The reference is built with colcon into ``cache/ab/<commit>/tree`` (a detached ``git worktree``)
-over this tree's venv, never with its own ``setup.sh`` (which could reinstall the shared venv);
+The reference is built with colcon into ``cache/ab/<commit>/tree`` (the commit's files from
+``git archive``: no worktree is registered in the repository) over this tree's venv, never
+with its own ``setup.sh`` (which could reinstall the shared venv);
 each run is that tree's own ``bench`` (its probe, its graph) in a fresh process with that tree's
 environment. Nothing in this module imports rclpy.
 """
@@ -184,8 +185,9 @@ def to_markdown(cmp: Comparison, ref: str, ref_sha: str, head: str, loads: List[
     lines = [f'# A/B benchmark: B = this tree ({head}) against A = {ref} ({ref_sha})', '',
              f'Command: `bench {args_line}`. Runs alternated A B A B ...; each figure lists the '
              'runs in order; ratio = B / A of the medians, and per alternation. CPU in % of one '
-             'core over the measured seconds; cpu_ms_per_frame = CPU time per captured frame '
-             '(the load-insensitive figure).', '']
+             'core over the measured seconds; cpu_ms_per_frame = CPU time per frame the process '
+             'output (the captures for the driver and the graph): the figure least moved by '
+             'other jobs.', '']
     if not valid:
         lines += [f'**NOT VALID**: the machine was busier than {100 * max_busy:.0f} % before '
                   'a run (`--ignore-load`): other jobs moved these figures; compare CPU time '
@@ -247,10 +249,13 @@ def prepare(root: Path, sha: str, log=print) -> Path:
     once; later comparisons reuse it."""
     base = root / 'cache' / 'ab' / sha[:12]
     tree = base / 'tree'
-    if not (tree / '.git').exists():
-        base.mkdir(parents=True, exist_ok=True)
-        subprocess.run(['git', 'worktree', 'prune'], cwd=root, capture_output=True)
-        git(root, 'worktree', 'add', '--detach', str(tree), sha)
+    if not (tree / '.ab-source').exists():
+        # the commit's files (git archive): no worktree registered in the repository
+        tree.mkdir(parents=True, exist_ok=True)
+        arch = subprocess.run(['git', 'archive', '--format=tar', sha], cwd=root,
+                              capture_output=True, check=True).stdout
+        subprocess.run(['tar', '-x', '-C', str(tree)], input=arch, check=True)
+        (tree / '.ab-source').write_text(sha + '\n')
     shared = (root / '..' / 'shared').resolve()
     if shared.is_dir() and not (base / 'shared').exists():
         (base / 'shared').symlink_to(shared)   # the tree's ../shared: the same CMU clips
