@@ -15,6 +15,7 @@ help:
 	@echo "                into cache/sensor_correction_kinect_v2_sdk.npz (input_tracker:=kinect_v2_sdk loads it)"
 	@echo "make evaluate   accuracy table of every method on the sensor-model streams"
 	@echo "make bench      end-to-end latency/throughput benchmark"
+	@echo "make bench-guard  CI's budget guard: short A/B against HEAD^, fails only on a large regression in 3 of 3 runs"
 	@echo "make soak       10-minute soak of the running graph"
 	@echo "make params     write config/*.yaml and docs/parameters.md from the parameter declarations"
 
@@ -42,10 +43,13 @@ evaluate:
 bench:
 	@$(RUN) ros2 run kinect_experiments bench $(ARGS)
 
+bench-guard:
+	@scripts/bench-guard.sh
+
 soak:
 	@$(RUN) ros2 run kinect_experiments soak $(ARGS)
 
 params:
 	@$(RUN) ros2 run kinect_experiments param_docs $(ARGS)
 
-.PHONY: help setup test lint demo build-db build-correction evaluate bench soak params
+.PHONY: help setup test lint demo build-db build-correction evaluate bench bench-guard soak params

@@ -499,7 +499,26 @@ def main(argv=None) -> int:
     p.add_argument('--no-physics', action='store_true')
     p.add_argument('--skip-bag', action='store_true')
     p.add_argument('--out', default=str(root / 'out' / 'bench'))
+    ab = p.add_argument_group('A/B against another commit (kinect_experiments.ab)')
+    ab.add_argument('--against', nargs='?', const='HEAD^', default=None, metavar='COMMIT',
+                    help='build COMMIT beside this tree (cache/ab/) and alternate its bench with '
+                         'this one on the same cases (A B A B ...), printing B / A per output and '
+                         'process; without a value: HEAD^, the previous landed commit. Defaults '
+                         'then: --modes processes --sensors 1 --skip-bag')
+    ab.add_argument('--alternations', type=int, default=3, help='A/B pairs (default 3)')
+    ab.add_argument('--max-busy', type=float, default=None,
+                    help='refuse a run when more than this share of the machine (0-1, all cores) '
+                         'was busy in the 3 s before it, after waiting up to --load-wait s '
+                         '(default 0.25)')
+    ab.add_argument('--load-wait', type=float, default=120.0)
+    ab.add_argument('--ignore-load', action='store_true',
+                    help='run on a busy machine anyway; the report is marked NOT VALID')
+    ab.add_argument('--fail-ratio', type=float, default=None,
+                    help='exit 1 when an output p95 or the graph CPU is worse than this ratio '
+                         '(and 5 ms / 10 points) on every alternation, or drops appear (CI guard)')
     args = p.parse_args(argv)
+    if args.against is not None:
+        return _run_against(p, args, argv, root)
     for ex in args.executors.split(','):
         if ex not in EXECUTORS:
             p.error(f'--executors: {ex!r} is not one of {list(EXECUTORS)}')
@@ -538,6 +557,32 @@ def main(argv=None) -> int:
     print(md)
     print(f'[bench] wrote {out / "bench.md"} and {out / "bench.json"}')
     return 0
+
+
+def _run_against(p, args, argv, root: Path) -> int:
+    from kinect_experiments import ab
+    given = set(a.split('=')[0] for a in (argv if argv is not None else sys.argv[1:]))
+    case = ['--users', args.users, '--seconds', str(args.seconds), '--warmup', str(args.warmup),
+            '--reconstruction', args.reconstruction,
+            '--modes', args.modes if '--modes' in given else 'processes',
+            '--sensors', args.sensors if '--sensors' in given else '1',
+            '--executors', args.executors]
+    if args.no_physics:
+        case.append('--no-physics')
+    if args.skip_bag or '--skip-bag' not in given:
+        case.append('--skip-bag')
+    if args.alternations < 1:
+        p.error('--alternations must be >= 1')
+    out = Path(args.out if '--out' in given else str(root / 'out' / 'bench-ab')).resolve()
+    line = ' '.join(argv if argv is not None else sys.argv[1:])
+    try:
+        return ab.run_ab(root, args.against, case, args.alternations, out,
+                         max_busy=ab.MAX_BUSY if args.max_busy is None else args.max_busy,
+                         wait_s=args.load_wait, ignore_load=args.ignore_load,
+                         fail_ratio=args.fail_ratio, args_line=line)
+    except (ValueError, RuntimeError, OSError, subprocess.CalledProcessError) as e:
+        print(f'[bench] {e}', file=sys.stderr)
+        return 2
 
 
 if __name__ == '__main__':

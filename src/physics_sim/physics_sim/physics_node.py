@@ -156,7 +156,11 @@ class PhysicsNode(ManagedNode):
         super().__init__('physics', **kwargs)
         self._drop = InputDrops(self.health, self.get_logger())
         self.sim: Optional[Simulation] = None
-        self._deferred = None   # one-shot timer of a frame that arrived too soon after a tick
+        # the one-shot tick of a frame that arrived too soon after a tick: one timer made at
+        # activate and re-armed (period + reset), never a timer per frame (rclpy keeps a weak
+        # reference per timer ever made in the callback group: a slow leak at 30 Hz)
+        self._deferred = None
+        self._deferred_armed = False
         self._urdf_pubs: Dict[int, object] = {}   # each character's latched URDF
         self.params = Parameters(self, PARAMS, validate=self._validate_change,
                                  apply=self._apply_change)
@@ -205,6 +209,9 @@ class PhysicsNode(ManagedNode):
             self.subscription(Intention, v['intention_topic'], self._on_intention, 10)
         self.service(ApplyPush, '~/apply_push', self._on_push_srv)
         self.tick_timer = self.timer(1.0 / v['output_rate'], self._on_timer)
+        self._deferred = self.timer(1.0 / v['output_rate'], self._on_deferred)
+        self._deferred.cancel()
+        self._deferred_armed = False
         self.get_logger().info(
             f'physics: {v["controller"]} at {v["timestep"] * 1000:.1f} ms, input {v["input_topic"]}'
             f' -> {v["output_topic"]}, {len(self.sim.objects)} objects'
@@ -213,6 +220,7 @@ class PhysicsNode(ManagedNode):
 
     def deactivate(self) -> None:
         self._cancel_deferred()
+        self._deferred = None   # (destroyed with the other timers of the active state)
 
     def cleanup(self) -> None:
         self.sim = None
@@ -299,18 +307,22 @@ class PhysicsNode(ManagedNode):
             if d.action == 'tick':
                 self._cancel_deferred()
                 self._tick(d.dt)
-            elif d.action == 'defer' and self._deferred is None:
-                self._deferred = self.create_timer(d.delay_s, self._on_deferred)
+            elif d.action == 'defer' and not self._deferred_armed and self._deferred is not None:
+                self._deferred.timer_period_ns = max(1, int(d.delay_s * 1e9))
+                self._deferred.reset()
+                self._deferred_armed = True
 
     def _on_deferred(self) -> None:
+        if not self._deferred_armed:   # (cancelled after it became ready)
+            self._cancel_deferred()
+            return
         self._cancel_deferred()
         self._tick(self.scheduler.on_deferred())
 
     def _cancel_deferred(self) -> None:
-        if self._deferred is not None:
+        if self._deferred is not None and self._deferred_armed:
             self._deferred.cancel()
-            self.destroy_timer(self._deferred)
-            self._deferred = None
+        self._deferred_armed = False
 
     def _expire(self, wall: float) -> None:
         """Remove the characters of users unseen for ``user_timeout_s`` of the input's time."""

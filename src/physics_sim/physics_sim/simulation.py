@@ -42,6 +42,7 @@ from typing import Dict, List, Mapping, Optional, Sequence
 import numpy as np
 from skeleton_core.conversions import validate_arrays
 from skeleton_core.geometry import quat_rotate, retarget, retarget_by_joint
+from skeleton_core.memory import release_freed_memory
 from skeleton_core.tf import Transform
 from skeleton_core.model import (FOOT_LEFT, FOOT_RIGHT, HAND_LEFT, HAND_RIGHT, HEAD, JOINT_INDEX,
                                  JOINT_NAMES, SEGMENT_OF_JOINT, SEGMENTS, Body, estimate_height,
@@ -165,6 +166,7 @@ class Simulation:
                 w.with_objects = k == 0
                 w.rebuild()
             new.append(w)
+        closed = 0
         for w in old:
             if w in new:
                 continue
@@ -172,11 +174,16 @@ class Simulation:
                 replaced = self._cache.pop(tuple(sorted(w.user_ids())), None)
                 if replaced is not None and replaced is not w:
                     replaced.close()
+                    closed += 1
                 self._cache[tuple(sorted(w.user_ids()))] = w
             else:
                 w.close()
+                closed += 1
         while len(self._cache) > self.CACHE_SIZE:
             self._cache.pop(next(iter(self._cache))).close()
+            closed += 1
+        if closed:   # the freed models' pages back to the OS, not kept in the heap's arenas
+            release_freed_memory()
         self.worlds = new
         self._world_of = {u: w for w in new for u in w.user_ids()}
 
@@ -363,8 +370,11 @@ class Simulation:
         self._rebuild()
         # cached worlds with this character can never be taken back (a user who returns is a
         # new Character): free them now instead of when 16 others have pushed them out
-        for key in [k for k in self._cache if int(user_id) in k]:
+        gone = [k for k in self._cache if int(user_id) in k]
+        for key in gone:
             self._cache.pop(key).close()
+        if gone:
+            release_freed_memory()
         return True
 
     # ------------------------------------------------------------------ objects

@@ -57,6 +57,11 @@ PARAMS: List[ParamSpec] = [
               validator=_topics, read_only=True),
     ParamSpec('output_topic', '/kinect/skeletons', 'fused SkeletonArray in world (the '
               "reconstruction's input)", read_only=True),
+    ParamSpec('max_wait_ms', 5.0, 'longest a fused frame waits for a later sensor: a sensor whose '
+              'frames come within it after the reference\'s (learned per sensor) is waited for, '
+              'one trailing further is not (its newest frame is held, at most one period old); '
+              '33.3 waits a whole frame period for every sensor',
+              range=(0.0, 1000.0 * FRAME_PERIOD_S), read_only=True),
 ]
 
 
@@ -96,7 +101,7 @@ class FusionNode(ManagedNode):
         from skeleton_core.tf import Transform
         # placements start unknown: a sensor's frames are taken once TF has its frame
         self.fusion = MultiSensorFusion({s: Transform() for s in self.sensors})
-        self.clock = FusionClock(self.sensors)
+        self.clock = FusionClock(self.sensors, max_wait_s=self.params['max_wait_ms'] / 1000.0)
 
     def activate(self) -> None:
         self._new_state()
@@ -159,9 +164,12 @@ class FusionNode(ManagedNode):
                 continue
             self.pub.publish(data)
             self._published(stamp)
-        if self.clock.pending is not None:
-            if self._deadline.is_canceled() or stamps:
-                self._deadline.reset()   # one frame period from now at most
+        deadline = self.clock.deadline()
+        if deadline is not None:
+            if self._deadline.is_canceled() or stamps:   # armed for the pending stamp's deadline
+                self._deadline.timer_period_ns = max(
+                    1, int((deadline - time.monotonic()) * 1e9))
+                self._deadline.reset()
         elif not self._deadline.is_canceled():
             self._deadline.cancel()
 

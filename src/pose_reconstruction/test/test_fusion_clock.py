@@ -80,3 +80,65 @@ def test_old_or_repeated_reference_stamps_are_not_published_twice():
         c.on_frame('x', 0, 0.0)
     with pytest.raises(ValueError):
         FusionClock([])
+
+
+def _run(c, lags, start=0, deliver=0.002, timer=True):
+    """Sensor a every period (arriving ``deliver`` after capture), b ``lag`` s after a's arrival
+    with a stamp at or after a's; the node's deadline timer fired when due. Returns (stamp,
+    wall time published) in order."""
+    out = []
+    for k, lag in enumerate(lags, start):
+        t = k * P
+        wa = t + deliver
+        out += [(s, wa) for s in c.on_frame('a', ns(t), wa)]
+        d = c.deadline()
+        if timer and d is not None and (lag is None or d < wa + lag):
+            out += [(s, d) for s in c.on_timer(d)]
+        if lag is not None:
+            out += [(s, wa + lag) for s in c.on_frame('b', ns(t + lag), wa + lag)]
+    return out
+
+
+def test_a_sensor_trailing_beyond_the_bound_is_not_waited_for_once_its_lag_is_known():
+    c = FusionClock(['a', 'b'], max_wait_s=0.005)
+    out = _run(c, [0.020] * 40)
+    assert [s for s, _ in out] == [ns(k * P) for k in range(40)]    # every stamp, once
+    waits = [w - (s / NS + 0.002) for s, w in out]
+    # b unheard at first (not waited for), then unknown lag: waited for up to the bound, 5 ms
+    assert max(waits[1:6]) == pytest.approx(0.005)
+    # from then on its 20 ms lag is known to exceed the bound: published on a's arrival
+    assert all(abs(w) < 1e-9 for w in waits[7:])
+    assert c.expected_lag('b') == pytest.approx(0.020) and c.wait_for('b') == 0.0
+    assert c.early >= 30
+
+
+def test_a_sensor_close_in_phase_is_waited_for_and_a_late_frame_costs_its_lag_not_a_period():
+    c = FusionClock(['a', 'b'], max_wait_s=0.005)
+    out = _run(c, [0.0015] * 20)
+    assert c.forced == 0                                   # every stamp had b's frame
+    assert all(w - (s / NS + 0.002) == pytest.approx(0.0015) for s, w in out[1:])
+    assert c.wait_for('b') == pytest.approx(0.0015 + 0.003)
+    # b's next frame does not come: published 4.5 ms after a's arrival, not one period
+    out = _run(c, [None], start=20)
+    assert out == [(ns(20 * P), pytest.approx(20 * P + 0.002 + 0.0045))]
+    assert c.forced == 1
+
+
+def test_the_wait_follows_a_sensor_whose_phase_changes():
+    c = FusionClock(['a', 'b'], max_wait_s=0.005)
+    _run(c, [0.020] * 30)
+    assert c.wait_for('b') == 0.0
+    _run(c, [0.001] * 30, start=30)      # b re-phased (restarted): 1 ms after a
+    assert c.wait_for('b') == pytest.approx(0.004)
+    out = _run(c, [0.001] * 3, start=60)
+    assert [w - (s / NS + 0.002) for s, w in out] == [pytest.approx(0.001)] * 3
+
+
+def test_the_default_bound_waits_up_to_a_period_and_the_bound_is_checked():
+    c = FusionClock(['a', 'b'])
+    out = _run(c, [0.020] * 20)
+    assert c.forced == 0 and all(w - (s / NS + 0.002) == pytest.approx(0.020) for s, w in out[1:])
+    with pytest.raises(ValueError, match='max_wait_s'):
+        FusionClock(['a', 'b'], max_wait_s=0.05)
+    with pytest.raises(ValueError, match='max_wait_s'):
+        FusionClock(['a', 'b'], max_wait_s=-0.001)

@@ -73,3 +73,26 @@ def slope(t: Sequence[float], y: Sequence[float], warmup: float = 0.0,
 
 
 __all__ = ['rss_mb', 'open_files', 'slope']
+
+
+_LIBC = None
+
+
+def release_freed_memory() -> bool:
+    """Hand the C heap's free pages back to the OS (glibc ``malloc_trim(0)``): after large
+    native objects of varying size are freed (a MuJoCo model recompiled when a user arrives or
+    leaves), the allocator keeps the freed pages in its arenas and the RSS only ever rises in
+    steps. A few ms; call it after such a release, never per frame. False where there is no
+    glibc (nothing done)."""
+    global _LIBC
+    if _LIBC is None:
+        try:
+            import ctypes
+            _LIBC = ctypes.CDLL('libc.so.6')
+            _LIBC.malloc_trim.argtypes = [ctypes.c_size_t]
+        except (OSError, AttributeError):
+            _LIBC = False
+    if not _LIBC:
+        return False
+    _LIBC.malloc_trim(0)
+    return True

@@ -5,6 +5,7 @@ This is the only module of ``skeleton_core`` that imports rclpy; library modules
 """
 from __future__ import annotations
 
+import os
 import signal
 import sys
 import time
@@ -263,6 +264,32 @@ def spin_until_shutdown(executor, context=None) -> None:
     ctx = context if context is not None else rclpy.get_default_context()
     while ctx.ok():
         executor.spin_once(timeout_sec=SPIN_SLICE_S)
+
+
+# The executor of a node's own process (run_node): KINECT_EXECUTOR=auto (default: rclpy's events
+# executor where it exists, Jazzy and newer; else the single-threaded one), events or single.
+# The single-threaded executor rebuilds its wait set -- every subscription, timer and the
+# lifecycle node's five services -- in Python on every wake-up; the events executor waits in C++
+# and runs only what is ready.
+EXECUTOR_ENV = 'KINECT_EXECUTOR'
+EXECUTOR_KINDS = ('auto', 'events', 'single')
+
+
+def node_executor(kind: Optional[str] = None):
+    """The executor that spins one node process (``kind``: default ``$KINECT_EXECUTOR`` or
+    ``auto``)."""
+    kind = (kind or os.environ.get(EXECUTOR_ENV) or 'auto').strip().lower()
+    if kind not in EXECUTOR_KINDS:
+        raise ValueError(f'{EXECUTOR_ENV}={kind!r} is not one of {list(EXECUTOR_KINDS)}')
+    if kind in ('auto', 'events'):
+        from skeleton_core.compat import events_executor
+        try:
+            return events_executor()
+        except RuntimeError:
+            if kind == 'events':
+                raise
+    from rclpy.executors import SingleThreadedExecutor
+    return SingleThreadedExecutor()
 
 
 # What a configure step reports as one line (a missing or corrupt file, a value the library
@@ -546,6 +573,8 @@ def run_node(node_factory: Callable[..., Node], args=None, executor=None) -> int
     rclpy.init(args=args)
     node = None
     try:
+        if executor is None:
+            executor = node_executor()   # (a wrong KINECT_EXECUTOR: its one line, exit 1)
         node = node_factory()
         if isinstance(node, ManagedNode):
             if managed:
@@ -571,8 +600,6 @@ def run_node(node_factory: Callable[..., Node], args=None, executor=None) -> int
         return 0 if stopped else 1
     spinning.append(True)
     try:
-        if executor is None:
-            executor = rclpy.get_global_executor()
         executor.add_node(node)
         spin_until_shutdown(executor)
     except (KeyboardInterrupt, ExternalShutdownException):

@@ -1,0 +1,124 @@
+"""kinect_experiments.ab (``bench --against``): the load guard waits for a quiet machine and
+refuses a busy one; the figures of two benches are paired per alternation; the CI guard fails
+only on a large regression seen on every alternation."""
+import subprocess
+
+import pytest
+
+from kinect_experiments import ab
+
+
+def _bench_json(rec_p95, char_p95, dropped=0, cpu=(30.0, 40.0), users=6):
+    out = {'p50_ms': rec_p95 / 2, 'dropped': dropped, 'skeletons': 300 * users}
+    return {'results': [{
+        'mode': 'processes', 'users': users, 'sensors': 1, 'seconds': 10.0,
+        'input': {'rate_hz': 30.0, 'p50_ms': 1.0, 'p95_ms': 2.0, 'skeletons': 300 * users},
+        'reconstructed': {**out, 'p95_ms': rec_p95},
+        'character': {**out, 'p95_ms': char_p95},
+        'processes': {'reconstruction': {'cpu_percent': cpu[0]},
+                      'physics': {'cpu_percent': cpu[1]}}}]}
+
+
+def test_figures_of_a_run_include_cpu_time_per_frame():
+    fig = ab.run_figures(_bench_json(20.0, 30.0, cpu=(30.0, 60.0)))['processes 6u 1s']
+    assert fig['reconstructed.p95_ms'] == 20.0 and fig['character.dropped'] == 0
+    assert fig['cpu.graph'] == 90.0
+    # 30 % of a core at 30 frames/s = 10 ms of CPU per frame
+    assert fig['cpu_ms_per_frame.reconstruction'] == pytest.approx(10.0)
+    # a node that output half the frames (the rest dropped) spent twice as much per frame
+    run = _bench_json(20.0, 30.0, cpu=(30.0, 60.0))
+    run['results'][0]['character']['skeletons'] = 150 * 6
+    assert ab.run_figures(run)['processes 6u 1s']['cpu_ms_per_frame.physics'] == pytest.approx(40.0)
+    assert 'input.p95_ms' not in fig   # the input is judged only with several sensors
+
+
+def _compare(pairs):
+    cmp = ab.Comparison()
+    for a, b in pairs:
+        cmp.add('a', ab.run_figures(a))
+        cmp.add('b', ab.run_figures(b))
+    return cmp.rows()
+
+
+def test_guard_fails_only_when_every_alternation_regresses():
+    slow = [(_bench_json(10.0, 20.0), _bench_json(10.5, 40.0))] * 3   # character 2x, +20 ms
+    bad = ab.regressions(_compare(slow), 1.5)
+    assert [r['figure'] for r in bad] == ['character.p95_ms']
+    # one alternation of the three was not slower (a stall in an A run, say): no failure
+    mixed = slow[:2] + [(_bench_json(10.0, 38.0), _bench_json(10.0, 40.0))]
+    assert ab.regressions(_compare(mixed), 1.5) == []
+    # fewer than three alternations never fail
+    assert ab.regressions(_compare(slow[:2]), 1.5) == []
+    # doubled but tiny (2 -> 4 ms): noise, not a regression
+    tiny = [(_bench_json(2.0, 3.0), _bench_json(4.0, 6.0))] * 3
+    assert ab.regressions(_compare(tiny), 1.5) == []
+
+
+def test_guard_fails_on_drops_where_the_reference_had_none_and_on_cpu():
+    drops = [(_bench_json(10.0, 20.0), _bench_json(10.0, 20.0, dropped=4))] * 3
+    assert {r['figure'] for r in ab.regressions(_compare(drops))} == {
+        'reconstructed.dropped', 'character.dropped'}
+    cpu = [(_bench_json(10.0, 20.0, cpu=(30, 40)), _bench_json(10.0, 20.0, cpu=(60, 60)))] * 3
+    assert [r['figure'] for r in ab.regressions(_compare(cpu))] == ['cpu.graph']
+
+
+def test_ratio_per_alternation_and_of_the_medians():
+    rows = {r['figure']: r for r in _compare([(_bench_json(10.0, 20.0), _bench_json(5.0, 20.0)),
+                                              (_bench_json(20.0, 20.0), _bench_json(10.0, 20.0))])}
+    r = rows['reconstructed.p95_ms']
+    assert r['ratios'] == [0.5, 0.5] and r['ratio'] == pytest.approx(7.5 / 15.0)
+    assert rows['character.dropped']['ratios'] == [1.0, 1.0]   # 0 and 0: equal, not a division
+
+
+def test_load_guard_waits_for_quiet_then_refuses():
+    t = [0.0]
+
+    def clock():
+        return t[0]
+
+    def busy_then_quiet(seq):
+        it = iter(seq)
+
+        def busy():
+            t[0] += 10.0
+            return next(it)
+        return busy
+    chk = ab.wait_for_quiet(0.25, 60.0, busy_then_quiet([0.9, 0.6, 0.1]), clock, lambda: 1.0)
+    assert chk.ok and chk.busy == 0.1 and chk.waited_s == 30.0
+    t[0] = 0.0
+    chk = ab.wait_for_quiet(0.25, 25.0, busy_then_quiet([0.9] * 10), clock, lambda: 3.0)
+    assert not chk.ok and chk.busy == 0.9 and chk.waited_s >= 25.0
+
+
+def test_machine_busy_from_cpu_jiffies():
+    samples = iter([(100.0, 1000.0), (150.0, 1200.0)])
+    assert ab.machine_busy(0, lambda: next(samples), lambda s: None) == pytest.approx(0.25)
+    busy, total = ab.cpu_times()     # the real /proc/stat
+    assert 0 <= busy <= total
+
+
+def test_report_says_not_valid_on_a_busy_machine():
+    cmp = ab.Comparison()
+    cmp.add('a', ab.run_figures(_bench_json(10.0, 20.0)))
+    cmp.add('b', ab.run_figures(_bench_json(10.0, 20.0)))
+    loads = [{'side': 'a', 'busy': 0.8, 'loadavg': 5.0, 'waited_s': 120.0},
+             {'side': 'b', 'busy': 0.1, 'loadavg': 1.0, 'waited_s': 0.0}]
+    md = ab.to_markdown(cmp, 'HEAD^', 'abc', 'def', loads, False, 0.25, '--against')
+    assert '**NOT VALID**' in md and '| 1 | A | 80 % | 5.00 | 120 |' in md
+    assert 'NOT VALID' not in ab.to_markdown(cmp, 'HEAD^', 'abc', 'def', loads, True, 0.25, '')
+
+
+def test_reference_must_exist_in_the_clone(tmp_path):
+    subprocess.run(['git', 'init', '-q', str(tmp_path)], check=True)
+    with pytest.raises(ValueError, match='no such commit'):
+        ab.resolve(tmp_path, 'HEAD^')
+
+
+def test_an_older_bench_gets_only_the_options_it_knows(tmp_path):
+    src = tmp_path / 'src' / 'kinect_bringup' / 'kinect_bringup'
+    src.mkdir(parents=True)
+    (src / 'bench.py').write_text("p.add_argument('--users')\np.add_argument('--skip-bag', "
+                                  "action='store_true')\np.add_argument('--seconds')\n")
+    cmd = ab.bench_command(tmp_path, ['--users', '6', '--sensors', '1', '--skip-bag',
+                                      '--seconds', '8'], tmp_path / 'o')[-1]
+    assert 'python -m kinect_bringup.bench --users 6 --skip-bag --seconds 8 --out' in cmd
