@@ -16,7 +16,9 @@ help:
 	@echo "make evaluate   accuracy table of every method on the sensor-model streams"
 	@echo "make bench      end-to-end latency/throughput benchmark"
 	@echo "make soak       10-minute soak of the running graph"
-	@echo "make params     write config/*.yaml and docs/parameters.md from the parameter declarations"
+	@echo "make params     write config/*.yaml and the generated reference pages (docs/parameters.md,"
+	@echo "                docs/launch_arguments.md, docs/commands.md) from the declarations"
+	@echo "make docs       build the documentation site (MkDocs, strict: links, anchors, navigation) into out/site/"
 
 setup:
 	@scripts/setup.sh
@@ -48,4 +50,7 @@ soak:
 params:
 	@$(RUN) ros2 run kinect_experiments param_docs $(ARGS)
 
-.PHONY: help setup test lint demo build-db build-correction evaluate bench soak params
+docs:
+	@scripts/docs.sh --check-generated
+
+.PHONY: help setup test lint demo build-db build-correction evaluate bench soak params docs
