@@ -22,6 +22,12 @@ help:
 
 setup:
 	@scripts/setup.sh
+	@$(RUN) python -m kinect_bringup.warm_kernels
+
+# the numba kernels compiled into their on-disk cache (seconds when they already are), so that no
+# node of the graph compiles at its first start
+warm-kernels:
+	@$(RUN) python -m kinect_bringup.warm_kernels
 
 test:
 	@scripts/run-tests.sh
@@ -29,7 +35,7 @@ test:
 lint:
 	@$(RUN) ruff check .
 
-demo: build-db
+demo: build-db warm-kernels
 	@$(RUN) ros2 run kinect_bringup demo
 
 build-db:
@@ -53,4 +59,4 @@ params:
 docs:
 	@scripts/docs.sh --check-generated
 
-.PHONY: help setup test lint demo build-db build-correction evaluate bench soak params docs
+.PHONY: warm-kernels help setup test lint demo build-db build-correction evaluate bench soak params docs
