@@ -66,17 +66,23 @@ class _ManagedNode(LifecycleNode):
         logger = launch.logging.get_logger('kinect_bringup.lifecycle')
         ros_node = get_ros_node(context)
         stopped = lambda: context.is_shutdown  # noqa: E731
+        start = time.monotonic()
+
+        def report(active: bool) -> None:
+            if active:   # one line per node: the graph log says when the graph was up
+                logger.info(f'{name} active {time.monotonic() - start:.1f} s after its start')
+
         if self._source:
             def bring_up():
-                drive_to_active(ros_node, name, stopped, logger.warning,
-                                before_activate=lambda: _wait_for_consumers(context, name,
-                                                                             logger.warning))
+                report(drive_to_active(
+                    ros_node, name, stopped, logger.warning,
+                    before_activate=lambda: _wait_for_consumers(context, name, logger.warning)))
         else:
             up = _CONSUMERS.setdefault(context, {}).setdefault(name, threading.Event())
 
             def bring_up():
                 try:
-                    drive_to_active(ros_node, name, stopped, logger.warning)
+                    report(drive_to_active(ros_node, name, stopped, logger.warning))
                 finally:
                     up.set()   # active, or failed (logged): the sources do not wait for it
         threading.Thread(target=bring_up, name=f'bring-up {name}', daemon=True).start()
@@ -89,3 +95,25 @@ def managed_node(**kwargs) -> LifecycleNode:
     kwargs.setdefault('namespace', '')
     kwargs['arguments'] = [MANAGED_FLAG] + list(kwargs.get('arguments', []))
     return _ManagedNode(**kwargs)
+
+
+def rviz_node(config: str) -> launch.actions.OpaqueFunction:
+    """RViz with ``config`` when the launch argument ``rviz`` is true: where RViz (``rviz2``) is
+    not installed, one warning line and the graph runs without it (launch_ros would stop the
+    whole launch on the missing package)."""
+    def start(context):
+        if launch.substitutions.LaunchConfiguration('rviz').perform(context).lower() \
+                not in ('true', '1', 'yes'):
+            return []
+        from ament_index_python.packages import PackageNotFoundError, get_package_prefix
+        try:
+            get_package_prefix('rviz2')
+        except PackageNotFoundError:
+            launch.logging.get_logger('kinect_bringup').warning(
+                'rviz:=true: RViz (rviz2) is not installed here; the graph runs without it '
+                '(install ros-<distro>-rviz2, or run RViz on another PC of the same ROS_DOMAIN_ID)')
+            return []
+        from launch_ros.actions import Node
+        return [Node(package='rviz2', executable='rviz2', name='rviz2', arguments=['-d', config],
+                     output='screen')]
+    return launch.actions.OpaqueFunction(function=start)
