@@ -26,7 +26,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(Path(__file__).parent))
 import domains  # noqa: E402
 
-pytestmark = [pytest.mark.launch_tooling, pytest.mark.slow]
+# the first test's setup starts every line's graph (two at a time: ~5 min on a loaded 2-core machine)
+pytestmark = [pytest.mark.launch_tooling, pytest.mark.slow, pytest.mark.timeout(1800)]
 
 _spec = importlib.util.spec_from_file_location('_documented', Path(__file__).parent /
                                                'test_documented_commands.py')
