@@ -1,4 +1,4 @@
-"""length_follow_cutoff of the segment output (issue 34): where the sensor is trusted, the
+"""length_follow_cutoff of the segment output: where the sensor is trusted, the
 constant lengths follow the slow, pose-dependent part of the observed lengths, not their
 frame-to-frame noise; where it is not trusted they stay constant."""
 import numpy as np
