@@ -15,7 +15,6 @@ import shutil
 import signal
 import subprocess
 import sys
-import tempfile
 import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
@@ -53,10 +52,9 @@ EXTRINSICS = """transforms:
 """
 
 
-def _workspace() -> Path:
+def _workspace(work: Path) -> Path:
     """A scratch directory with the files the documented lines name (never the user's out/)."""
     from test_launch_replay import _write_input
-    work = Path(tempfile.mkdtemp(prefix='kp_documented_launches_'))
     (work / 'out').mkdir()
     (work / 'cache' / 'uiprmd').mkdir(parents=True)
     _write_input(work / 'out' / 'demo.mcap')
@@ -107,13 +105,13 @@ def _run(line: str, work: Path):
 
 
 @pytest.fixture(scope='module')
-def runs(request):
+def runs(request, tmp_path_factory):
     """The selected lines (`-k` selects some), two at a time."""
     if shutil.which('ros2') is None:
         pytest.fail('the ros2 command line is not on the PATH: run `make setup`')
     lines = [item.callspec.params['line'] for item in request.session.items
              if getattr(item, 'callspec', None) and 'line' in item.callspec.params]
-    work = _workspace()
+    work = _workspace(tmp_path_factory.mktemp('documented_launches'))
     with ThreadPoolExecutor(max_workers=2) as pool:
         return dict(zip(lines, pool.map(lambda ln: _run(ln, work), lines)))
 
