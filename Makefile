@@ -17,10 +17,18 @@ help:
 	@echo "make bench      end-to-end latency/throughput benchmark"
 	@echo "make bench-guard  CI's budget guard: short A/B against HEAD^, fails only on a large regression in 3 of 3 runs"
 	@echo "make soak       10-minute soak of the running graph"
-	@echo "make params     write config/*.yaml and docs/parameters.md from the parameter declarations"
+	@echo "make params     write config/*.yaml and the generated reference pages (docs/parameters.md,"
+	@echo "                docs/launch_arguments.md, docs/commands.md) from the declarations"
+	@echo "make docs       build the documentation site (MkDocs, strict: links, anchors, navigation) into out/site/"
 
 setup:
 	@scripts/setup.sh
+	@$(RUN) python -m kinect_bringup.warm_kernels
+
+# the numba kernels compiled into their on-disk cache (seconds when they already are), so that no
+# node of the graph compiles at its first start
+warm-kernels:
+	@$(RUN) python -m kinect_bringup.warm_kernels
 
 test:
 	@scripts/run-tests.sh
@@ -28,7 +36,7 @@ test:
 lint:
 	@$(RUN) ruff check .
 
-demo: build-db
+demo: build-db warm-kernels
 	@$(RUN) ros2 run kinect_bringup demo
 
 build-db:
@@ -52,4 +60,7 @@ soak:
 params:
 	@$(RUN) ros2 run kinect_experiments param_docs $(ARGS)
 
-.PHONY: help setup test lint demo build-db build-correction evaluate bench bench-guard soak params
+docs:
+	@scripts/docs.sh --check-generated
+
+.PHONY: warm-kernels help setup test lint demo build-db build-correction evaluate bench bench-guard soak params docs

@@ -25,12 +25,11 @@ import os
 from ament_index_python.packages import get_package_share_directory
 from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument, GroupAction, OpaqueFunction
-from launch.conditions import IfCondition
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node, PushRosNamespace
 from skeleton_core.tf import DEFAULT_SENSOR_POSE
 
-from kinect_bringup.launch_nodes import managed_node
+from kinect_bringup.launch_nodes import managed_node, rviz_node
 
 ARGS = [
     # '' = keep the value from config/<node>.yaml
@@ -275,6 +274,5 @@ def generate_launch_description():
     return LaunchDescription(
         [DeclareLaunchArgument(n, default_value=d, description=t) for n, d, t in ARGS] + [
             OpaqueFunction(function=_nodes),
-            Node(package='rviz2', executable='rviz2', name='rviz2', arguments=['-d', rviz_config],
-                 condition=IfCondition(LaunchConfiguration('rviz')), output='screen'),
+            rviz_node(rviz_config),
         ])

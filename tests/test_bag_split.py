@@ -1,4 +1,4 @@
-"""Recordings that rotate (issue 32): a recording split by duration or size into pieces, each a
+"""Recordings that rotate: a recording split by duration or size into pieces, each a
 complete bag; replay and recover_bag take the folder (or the list of pieces) as one recording,
 a cut last piece included. The split decisions come from the messages' log times, so a
 30-minute recording is written in seconds."""

@@ -1,4 +1,4 @@
-"""Learned sensor correction, user profiles and the leave-one-subject-out protocol (issue 20)."""
+"""Learned sensor correction, user profiles and the leave-one-subject-out protocol."""
 from __future__ import annotations
 
 import json

@@ -1,4 +1,4 @@
-"""A lab's own pairs (issue 33): a recording of the input topic from any tracker plus a mocap
+"""A lab's own pairs: a recording of the input topic from any tracker plus a mocap
 reference on its own clock and frame -> clock offset by cross-correlation, rigid registration, a
 correction for that tracker with its leave-one-subject-out report; the tracker travels with the
 bag to process_bag."""

@@ -1,7 +1,9 @@
 """The README's main job (`make demo` = `kinect_bringup.demo`), shortened: it writes the bag, the
 animation and the plots, and the bag holds every topic with real skeletons in it (a recorder bug
-once wrote 600 empty messages per topic, which a count alone did not catch)."""
+once wrote 600 empty messages per topic, which a count alone did not catch), and every output
+has a message for the first input frame's stamp."""
 import os
+import re
 import subprocess
 import sys
 
@@ -40,8 +42,22 @@ def test_demo_writes_bag_animation_and_plots(tmp_path):
     for topic in SKELETON_TOPICS + ['/viz/markers']:
         assert counts.get(topic, ("", 0))[1] >= 30, (topic, counts)  # (type, count)
     users = {t: set() for t in SKELETON_TOPICS}
+    stamps = {t: set() for t in SKELETON_TOPICS}
+    first_input = None
     for m in bagio.read_messages(out / 'demo.mcap', topics=SKELETON_TOPICS):
         users[m.topic].update(s.user_id for s in m.msg.skeletons)
+        stamp = m.msg.header.stamp.sec * 10**9 + m.msg.header.stamp.nanosec
+        stamps[m.topic].add(stamp)
+        if m.topic == '/kinect/skeletons' and first_input is None and m.msg.skeletons:
+            first_input = stamp
     assert all(u == {1, 2} for u in users.values()), users
+    # the driver is activated once every other node is up: every output has the first frame
+    missing = [t for t in SKELETON_TOPICS if first_input not in stamps[t]]
+    assert not missing, f'no message for the first input frame ({first_input}) on {missing}'
+    assert 'graph up after' in proc.stdout, log
+    # the graph log holds no warning: the demo stops the launch without its Ctrl-C notice
+    graph_log = (out / 'demo.log').read_text()
+    warnings = [ln for ln in graph_log.splitlines() if re.search(r'\[(WARNING|WARN|ERROR)\]', ln)]
+    assert not warnings, warnings
     summary = (out / 'demo_summary.md').read_text()
     assert 'No `/kinect/ground_truth`' not in summary, summary

@@ -1,4 +1,4 @@
-"""Multi-sensor fusion (pose_reconstruction.fusion, issue 31 item 3): pass-through, reliability
+"""Multi-sensor fusion (pose_reconstruction.fusion): pass-through, reliability
 weighting, mirror resolution, association, time alignment. ROS-free, fast."""
 import numpy as np
 import pytest

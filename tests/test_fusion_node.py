@@ -1,4 +1,4 @@
-"""fusion node over real DDS (issue 31): two sensors' SkeletonArrays in their frames, their poses
+"""fusion node over real DDS: two sensors' SkeletonArrays in their frames, their poses
 on /tf_static, one fused SkeletonArray in world out; one sensor passes through byte-identical;
 a frame whose sensor is not on TF is dropped and counted; a late sensor is not waited for. The
 reconstruction and the physics take input already in world (identity on TF)."""

@@ -1,4 +1,4 @@
-"""launch_pytest: the graph split across machines as a lab runs it (issue 31 item 5), here two
+"""launch_pytest: the graph split across machines as a lab runs it, here two
 launches on one machine, one DDS domain: ``driver.launch.py sensors:=2 sensor:=k`` for k = 1, 2
 (the sensor PCs: one driver each, in /kinect_k, its frame on TF) and ``pipeline.launch.py sensors:=2
 drivers:=false`` (the other PC: fusion, reconstruction). The two drivers' skeletons are fused

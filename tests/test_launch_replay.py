@@ -1,5 +1,5 @@
 """A recording replayed through ``ros2 launch kinect_bringup pipeline.launch.py source:=replay
-replay_file:=... record:=...`` loses nothing (issue 22): the driver waits until the reconstruction
+replay_file:=... record:=...`` loses nothing: the driver waits until the reconstruction
 and the recorder have subscribed, every input frame is reconstructed, and the bag's ground truth
 is replayed so the report of the run scores it. The recording is read while it is still being
 written (crash-safe recorder: flushed every 0.25 s)."""

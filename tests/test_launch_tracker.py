@@ -1,4 +1,4 @@
-"""The tracker travels with the data (issue 33): a bag that declares its skeleton tracker
+"""The tracker travels with the data: a bag that declares its skeleton tracker
 (``/kinect/tracker``), replayed through ``ros2 launch kinect_bringup pipeline.launch.py
 source:=replay replay_file:=...`` with no other argument, gets the sensor correction learned for
 that tracker (``cache/sensor_correction_<tracker>.npz``, here a file written by the test with a

@@ -1,4 +1,4 @@
-"""Memory stays flat while users come and go (issue 32): the physics library churned with visitors
+"""Memory stays flat while users come and go: the physics library churned with visitors
 (every arrival and departure recompiles the MuJoCo world), judged as memory per user that came and
 went after warm-up; and the slope estimator the soak and the diagnostics use."""
 import gc

@@ -63,7 +63,7 @@ def test_yaml_values_keep_their_types():
 
 
 # a lab should find the knobs that matter in `ros2 param list`: the rest is fixed in the code or
-# set by a preset (config/presets) in the evaluation (issue 29)
+# set by a preset (config/presets) in the evaluation
 MAX_PER_NODE = 20
 MAX_TOTAL = 150
 

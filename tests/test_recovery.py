@@ -1,4 +1,4 @@
-"""Crash-safe recording (issue 22): a cut or unfinished MCAP is read up to its last complete message
+"""Crash-safe recording: a cut or unfinished MCAP is read up to its last complete message
 with one warning line, recover() rewrites it into a complete bag, and a recorder process killed
 with SIGKILL leaves a file holding all but the last flush period of what it received."""
 from __future__ import annotations

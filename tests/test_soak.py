@@ -49,7 +49,7 @@ def test_short_soak_passes(tmp_path):
     assert report['rss_mb'], 'no RSS figures'
     assert all(code == 0 for n, code in report['exit_codes'].items() if n != 'recorder'), \
         report['exit_codes']
-    # issue 22: users come and go, and the faults that must lose nothing
+    # users come and go, and the faults that must lose nothing
     users = report['users']
     assert users['sequence_characters'] == users['sequence_users'] == 20, users
     assert users['crowd_characters_at_most'] == 6 and users['crowd_refusals_counted'] > 0, users

@@ -25,6 +25,7 @@ setup(
             'soak = kinect_experiments.soak:main',
             'passthrough = kinect_experiments.passthrough:main',
             'param_docs = kinect_experiments.param_docs:main',
+            'compare_results = kinect_experiments.compare_results:main',
         ],
     },
 )

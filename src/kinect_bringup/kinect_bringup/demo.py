@@ -64,7 +64,8 @@ def run_graph(bag: Path, duration: float, args, use_launch: bool,
     opts = {'scenario': args.scenario, 'num_users': str(args.num_users), 'method': args.method,
             'seed': str(args.seed)}
     if use_launch:
-        cmd = ['ros2', 'launch', 'kinect_bringup', 'pipeline.launch.py', f'record:={bag}'] + \
+        # pipeline.launch.py that a SIGUSR1 stops without the Ctrl-C notice in the graph log
+        cmd = ['ros2', 'launch', 'kinect_bringup', 'demo.launch.py', f'record:={bag}'] + \
             [f'{k}:={v}' for k, v in opts.items()]
     else:
         cmd = [sys.executable, '-m', 'kinect_bringup.pipeline', '--record', str(bag),
@@ -85,7 +86,10 @@ def run_graph(bag: Path, duration: float, args, use_launch: bool,
                 while time.monotonic() < deadline and proc.poll() is None:
                     time.sleep(0.2)
             if proc.poll() is None:
-                os.killpg(proc.pid, signal.SIGINT)
+                if use_launch:   # the launch stops its nodes (SIGINT each) and ends
+                    os.kill(proc.pid, signal.SIGUSR1)
+                else:
+                    os.killpg(proc.pid, signal.SIGINT)
                 try:
                     proc.wait(timeout=30)
                 except subprocess.TimeoutExpired:

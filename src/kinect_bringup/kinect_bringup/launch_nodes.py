@@ -10,10 +10,18 @@ message or a service reply can be lost while DDS is still matching, and the node
 inactive. A failed configure (a missing database: one line naming ``make build-db``) leaves that
 node unconfigured; fix the parameter and ``ros2 lifecycle set /NODE configure`` (or call its
 ``~/change_state`` service), then ``activate``.
+
+The sources (``kinect_driver``'s ``driver``) are configured beside the other nodes but activated
+last: each waits until every other managed node of the same launch is active (or has failed, or
+``SOURCE_WAIT_S`` passed), so the reconstruction, physics and recorder take the first frame the
+source publishes, and a recording holds every output from its first input frame. A launch of the
+drivers alone (``driver.launch.py``) has nothing to wait for.
 """
 from __future__ import annotations
 
 import threading
+import time
+import weakref
 
 import launch
 from launch_ros.actions import LifecycleNode
@@ -23,16 +31,61 @@ from skeleton_core.lifecycle_client import drive_to_active
 from skeleton_core.rosnode import MANAGED_FLAG
 
 
+# the nodes whose input is the sensor: activated once every other node of their launch is up
+SOURCES = {('kinect_driver', 'driver')}
+# a source waits at most this long for the others (a node stuck in a transition must not keep
+# the sensor off for good); it is logged
+SOURCE_WAIT_S = 60.0
+# per launch context: {node name: Event set once that non-source node is active or has failed}
+_CONSUMERS: 'weakref.WeakKeyDictionary' = weakref.WeakKeyDictionary()
+
+
+def _wait_for_consumers(context, name: str, log) -> None:
+    """Block until every non-source node of ``context`` is up (see the module's text)."""
+    start = time.monotonic()
+    pending = dict(_CONSUMERS.get(context, {}))
+    while pending and not context.is_shutdown:
+        pending = {n: e for n, e in pending.items() if not e.is_set()}
+        if time.monotonic() - start > SOURCE_WAIT_S:
+            log(f'{name}: activated although {", ".join(sorted(pending))} not active after '
+                f'{SOURCE_WAIT_S:.0f} s')
+            return
+        time.sleep(0.05)
+
+
 class _ManagedNode(LifecycleNode):
     """A LifecycleNode whose launch drives it to active (see the module's text)."""
+
+    def __init__(self, **kwargs):
+        self._source = (kwargs.get('package'), kwargs.get('executable')) in SOURCES
+        super().__init__(**kwargs)
 
     def execute(self, context: launch.LaunchContext):
         actions = super().execute(context)
         name = self.node_name
         logger = launch.logging.get_logger('kinect_bringup.lifecycle')
-        threading.Thread(target=drive_to_active, name=f'bring-up {name}', daemon=True,
-                         args=(get_ros_node(context), name, lambda: context.is_shutdown,
-                               logger.warning)).start()
+        ros_node = get_ros_node(context)
+        stopped = lambda: context.is_shutdown  # noqa: E731
+        start = time.monotonic()
+
+        def report(active: bool) -> None:
+            if active:   # one line per node: the graph log says when the graph was up
+                logger.info(f'{name} active {time.monotonic() - start:.1f} s after its start')
+
+        if self._source:
+            def bring_up():
+                report(drive_to_active(
+                    ros_node, name, stopped, logger.warning,
+                    before_activate=lambda: _wait_for_consumers(context, name, logger.warning)))
+        else:
+            up = _CONSUMERS.setdefault(context, {}).setdefault(name, threading.Event())
+
+            def bring_up():
+                try:
+                    report(drive_to_active(ros_node, name, stopped, logger.warning))
+                finally:
+                    up.set()   # active, or failed (logged): the sources do not wait for it
+        threading.Thread(target=bring_up, name=f'bring-up {name}', daemon=True).start()
         return actions
 
 
@@ -42,3 +95,25 @@ def managed_node(**kwargs) -> LifecycleNode:
     kwargs.setdefault('namespace', '')
     kwargs['arguments'] = [MANAGED_FLAG] + list(kwargs.get('arguments', []))
     return _ManagedNode(**kwargs)
+
+
+def rviz_node(config: str) -> launch.actions.OpaqueFunction:
+    """RViz with ``config`` when the launch argument ``rviz`` is true: where RViz (``rviz2``) is
+    not installed, one warning line and the graph runs without it (launch_ros would stop the
+    whole launch on the missing package)."""
+    def start(context):
+        if launch.substitutions.LaunchConfiguration('rviz').perform(context).lower() \
+                not in ('true', '1', 'yes'):
+            return []
+        from ament_index_python.packages import PackageNotFoundError, get_package_prefix
+        try:
+            get_package_prefix('rviz2')
+        except PackageNotFoundError:
+            launch.logging.get_logger('kinect_bringup').warning(
+                'rviz:=true: RViz (rviz2) is not installed here; the graph runs without it '
+                '(install ros-<distro>-rviz2, or run RViz on another PC of the same ROS_DOMAIN_ID)')
+            return []
+        from launch_ros.actions import Node
+        return [Node(package='rviz2', executable='rviz2', name='rviz2', arguments=['-d', config],
+                     output='screen')]
+    return launch.actions.OpaqueFunction(function=start)

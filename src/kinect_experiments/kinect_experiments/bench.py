@@ -22,7 +22,7 @@ frame is dropped when its capture stamp appears on /kinect/skeletons but never o
 The floor: beside the graph, a pass-through node (``kinect_experiments.passthrough``: subscribe to
 /kinect/skeletons, republish the same bytes on /bench/passthrough) runs in every case; its latency,
 measured by the same probe in the same seconds, is what one DDS hop and one Python callback cost at
-that moment, and every row prints it. The targets (issue 23) are judged against it: 2 users,
+that moment, and every row prints it. The latency targets are judged against it: 2 users,
 reconstructed p95 <= floor p95 + 5 ms and character p95 <= floor p95 + 12 ms; 6 users, every output
 p95 <= 33 ms with 0 dropped frames and the graph's CPU <= 150 % (of the 2 cores' 200 %).
 """
@@ -54,7 +54,7 @@ FLOOR_TOPIC = '/bench/passthrough'
 SENSOR1_TOPIC = '/kinect_1/skeletons'
 TOPICS = {'/kinect/skeletons': 'input', '/posture/reconstructed': 'reconstructed',
           '/character/skeletons': 'character', FLOOR_TOPIC: 'floor', SENSOR1_TOPIC: 'sensor1'}
-# issue 23's targets: (users, output) -> ms over the floor's p95; 6 users: absolute
+# the latency targets: (users, output) -> ms over the floor's p95; 6 users: absolute
 OVER_FLOOR_MS = {(2, 'reconstructed'): 5.0, (2, 'character'): 12.0}
 SIX_USERS_P95_MS, SIX_USERS_CPU_PCT = 33.0, 150.0
 PROCESS_BAG_PHYSICS_X = 10.0
@@ -359,7 +359,7 @@ def graph_cpu(r: Dict) -> float:
 
 
 def targets(results: List[Dict], bag_speed: Dict) -> List[Dict]:
-    """Issue 23's targets judged on this run: one dict per check (what, figure, limit, met)."""
+    """The latency targets judged on this run: one dict per check (what, figure, limit, met)."""
     out = []
     for r in results:
         fl = r.get('floor', {})
@@ -467,7 +467,7 @@ def to_markdown(results: List[Dict], bag_speed: Dict, commit: str) -> str:
             lines.append(f"process_bag ({tag}): {b}")
     checks = targets(results, bag_speed)
     if checks:
-        lines += ['', '## Targets (issue 23)', '', '| case | target | figure | limit | met |',
+        lines += ['', '## Targets', '', '| case | target | figure | limit | met |',
                   '|---|---|---:|---:|---|']
         for c in checks:
             lines.append(f"| {c['case']} | {c['what']} | {c['figure']:.1f} | {c['limit']:.1f} | "

@@ -1,12 +1,12 @@
-"""Where the fused raw Eq. 18 error comes from (issue 31 (a)): every segment of every frame by
+"""Where the fused raw Eq. 18 error comes from: every segment of every frame by
 whether each of the two views tracks it (both ends TRACKED), with the mean error of view 1, view 2,
 the fusion and the per-segment oracle (the better view), and each category's share of the fused
 mean; then per joint the share of frames each view (and both) does not track.
 
     python -m kinect_experiments.fusion_breakdown --seeds 1 --scenarios b,c --layout front-side
 
-``--oracle`` prints instead what no fusion of the two views' raw observations can beat (issue 31
-(a)): Eq. 18 of the fused raw skeleton and of oracles that know the truth, against the front
+``--oracle`` prints instead what no fusion of the two views' raw observations can beat:
+Eq. 18 of the fused raw skeleton and of oracles that know the truth, against the front
 sensor alone:
 
 * joint select: per joint and frame, the view whose joint is nearer the truth;

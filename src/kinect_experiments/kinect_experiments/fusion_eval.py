@@ -1,4 +1,4 @@
-"""``evaluate --sensors N``: several sensors watching the same people, fused (issue 31 item 4).
+"""``evaluate --sensors N``: several sensors watching the same people, fused.
 
 Every dev clip x class x seed is seen by N sensor-model views (skeleton_eval.sensor_model, ``view``:
 the same motion and turns, per-view noise, occlusion and failures): sensor 1 is the reference

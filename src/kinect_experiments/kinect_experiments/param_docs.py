@@ -1,7 +1,8 @@
 """``make params`` / ``ros2 run kinect_experiments param_docs``: write the parameter files of the nodes
-(``config/<node>.yaml``) and the parameter reference (``docs/parameters.md``) from the parameter
-declarations (``skeleton_core.params``: dataclass fields declared with ``param()``, and the few
-node-only ``ParamSpec`` s), so that neither can drift from the code.
+(``config/<node>.yaml``), the parameter reference (``docs/parameters.md``) and the launch-argument
+and command references (``docs/launch_arguments.md``, ``docs/commands.md``: :mod:`.reference_docs`)
+from the declarations (``skeleton_core.params``: dataclass fields declared with ``param()``, and
+the few node-only ``ParamSpec`` s; the launch files; the commands), so none can drift from the code.
 
     param_docs            # (re)write config/*.yaml and docs/parameters.md in the repository
     param_docs --check    # exit 1 and name the stale files (the test suite runs this check)
@@ -162,6 +163,10 @@ def outputs() -> Dict[Path, str]:
     """Relative path -> content of every generated file."""
     files = {Path('config') / f'{n}.yaml': render_yaml(n) for n in YAML_NODES}
     files[DOC] = render_markdown()
+    root = repo_root()
+    if root is not None:   # the launch-argument and command references (reference_docs)
+        from .reference_docs import outputs as reference_outputs
+        files.update(reference_outputs(root))
     return files
 
 

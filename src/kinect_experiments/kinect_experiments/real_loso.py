@@ -373,7 +373,7 @@ def _pct(a, b):
 
 
 def summary(res: Dict) -> str:
-    """Targets of issue 20 against raw (overall, per movement)."""
+    """The real-data targets against raw (overall, per movement)."""
     R = res['results']
     if 'raw' not in R:
         return ''

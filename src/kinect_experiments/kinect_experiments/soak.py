@@ -6,7 +6,7 @@
 While the synthetic driver streams one user, an injector publishes on /kinect/skeletons: visitors
 appearing and vanishing, bursts and gaps, and malformed messages of every kind (fuzz.MUTATIONS);
 parameters are changed at run time; one node at a time is killed (SIGKILL) and restarted. Before
-that abuse, users come and go (issue 22): 20 users one after another (each must get a
+that abuse, users come and go: 20 users one after another (each must get a
 character) and 7 at once (6 characters, the 7th refused and counted in the physics node's
 diagnostics). After it, the faults that must lose nothing: the recorder (recording from the
 start) is killed with SIGKILL and its bag recovered (>= 95 % of the frames it received back), the
@@ -27,7 +27,7 @@ node the longest-lived of its processes, from 25 % of that process's life on, an
 process lived at least --rss-min-duration s (default 120): the RSS slope (Theil-Sen, MB/s) at
 most --max-rss-slope (0.05), open files and log volume not growing; CPU is reported. Growth is a
 slope, never a percentage after warm-up: a steady 1 MB/s is a few per cent over a few minutes
-and 20 GB over a day (issue 32). Over a shorter window allocator and cache warm-up cannot be
+and 20 GB over a day. Over a shorter window allocator and cache warm-up cannot be
 told from a leak: the node's entry says ``judged: false`` and, when no process was judged (e.g.
 the 45 s soak of the test suite), ``rss_verdict`` says ``skipped``.
 """
@@ -85,7 +85,7 @@ SEQUENCE_MAX_S = 10.0
 CROWD_USERS = list(range(130, 137))      # 7 at once (with the driver's user: 8)
 CROWD_S = 3.0
 MAX_CHARACTERS = 6                       # physics.yaml max_characters (default)
-MAX_RSS_SLOPE = 0.05      # MB/s after warm-up: 180 MB a lab hour would fail (issue 32: 1.4 MB/s)
+MAX_RSS_SLOPE = 0.05      # MB/s after warm-up: 180 MB a lab hour would fail (the physics node's leak: 1.4 MB/s)
 MAX_FD_SLOPE_PER_H = 10.0   # open files a node may gain per hour
 MAX_LOG_KB_PER_MIN = 20.0   # a node's log volume (about 29 MB a day)
 # a killed process's last messages are delivered within this; a new process cannot publish

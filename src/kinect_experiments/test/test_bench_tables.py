@@ -1,5 +1,5 @@
 """kinect_experiments.bench: the nodes' /diagnostics become the 'where the time goes' table; the
-pass-through floor beside every row and issue 23's targets judged against it."""
+pass-through floor beside every row and the latency targets judged against it."""
 from kinect_experiments.bench import NODE_LATENCY, _node_latencies, targets, to_markdown
 
 

@@ -1,4 +1,4 @@
-"""Benchmark of the performance controller (issue 24 targets); prints every figure.
+"""Benchmark of the performance controller (against its targets); prints every figure.
 
     ros2 run performance_control bench_control                 # test seeds (the reported figures)
     ros2 run performance_control bench_control --dev           # dev seeds (used for tuning)
@@ -322,7 +322,7 @@ def release(rows, world) -> tuple:
     """(COM speed m/s at the last hand's release -- the most over the 0.2 s before it and the
     0.1 s after --, horizontal distance m from there to where a foot next holds the floor, or nan)
     of a run that starts holding a feature with the hands: the release of a user who lowers the
-    arms is a dismount, not a fling (issue 30)."""
+    arms is a dismount, not a fling."""
     held = [any(e.startswith('Hand') for e in o.contacts) for o in rows]
     k = next((i for i in range(len(held) - 1, 0, -1) if held[i - 1] and not held[i]), None)
     if k is None:

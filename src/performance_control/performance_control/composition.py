@@ -466,7 +466,7 @@ def _capsule_d_np(pts, a, ab, den):
 def _capsule_d_jit(pts, a, ab, den):  # pragma: no cover - numba
     """:func:`_capsule_d_np` compiled: the same operations in the same order per pair (the
     constraints call it ~8 times a frame on a few points and capsules, where numpy's per-call
-    overhead was most of its time: control6, docs/control.md)."""
+    overhead was most of its time: round 6, docs/research/2026-11-28-performance-control-development.md)."""
     n, k = pts.shape[0], a.shape[0]
     d = np.empty((n, k))
     cp = np.empty((n, k, 3))

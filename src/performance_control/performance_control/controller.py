@@ -56,7 +56,7 @@ JUMP_LEAP = 0.5
 # the user lowers it faster than this relative to their COM -- the release read from the arm's
 # movement, before the hand is low enough for hand_release_margin. Lowering the arms while
 # holding turns the hands' target about the grip at ~8 rad/s and the contact's PD pulls the body
-# round the bar (issue 30: the COM left the bars at 6-8 m/s); the swings of the continuous
+# round the bar (the COM left the bars at 6-8 m/s); the swings of the continuous
 # performance's seeds 0-9 lower a held hand at most ~0.6 m/s (0.1 s smoothed), the user's
 # arms coming down reach 1.2-1.4 m/s two frames before the hands pass the head. On the rope
 # and the rocks lowering a held hand is the pull of the climb: there both held hands lowered
@@ -351,7 +351,7 @@ class PerformanceController:
                    for c in (self.dp.contacts.get(h) for h in HANDS))
 
     def _jump_catch(self, e: str, f: Feature, pt) -> bool:
-        """Reach/jump to engage (issue 30): under the bars, the user's feet leave their floor
+        """Reach/jump to engage: under the bars, the user's feet leave their floor
         with both hands above the bars' engage joint (a jump, or a real hang: :mod:`.support`);
         the character's hand catches a bar within :data:`JUMP_LEAP` horizontally and at most
         :data:`JUMP_REACH` above it."""

@@ -24,7 +24,7 @@ relative to the COM propel the body) and a buoyancy force for the feature's ``bo
 
 The COM body only translates: the character's orientation follows the user's (the paper lets the
 orientation be passive in free fall; we keep the user's, a simplification documented in
-docs/control.md).
+docs/research/2026-11-28-performance-control-development.md).
 """
 from __future__ import annotations
 
@@ -66,7 +66,7 @@ class Contact:
 # 1 m pendulum), climbing the rope hand over hand more (2 sank the climber 0.6 m, 3 regrabbed too
 # rarely in test_climbing_hand_over_hand_regrabs_the_swinging_rope); without a bound, a user
 # lowering the arms while holding the bars drove the pitch PD (the target direction turning ~8
-# rad/s) with over 13 kN (18 body weights) and the release flung the body at 12 m/s (issue 30).
+# rad/s) with over 13 kN (18 body weights) and the release flung the body at 12 m/s.
 ARM_STRENGTH = 4.0
 # body weights: the largest force one hand exerts across the arm, turning the body about the grip
 # (the Eq. 3-4 part of its force, perpendicular to r; Shum & Ho 2012 bound their PD forces "to
@@ -75,7 +75,7 @@ ARM_STRENGTH = 4.0
 # A user lowering the arms from the bars turned the hands' target about the grip at ~8 rad/s and
 # the pitch PD (mostly its rate term, kad 600 N s/rad) pushed each hand across the arm with 1.3-
 # 2.6 kN for the 0.1 s before the hands were low enough to let go: the COM left the bars at 7-8
-# m/s and landed 5 m behind (issue 30). The swings of the continuous performance (seeds 0-9) ask
+# m/s and landed 5 m behind. The swings of the continuous performance (seeds 0-9) ask
 # for 1.0-1.2 body weights across the arm (99th percentile of the frames held) for six of nine
 # performers, 1.9-3.6 for three, who swing less with the bound (the bench's and the tests'
 # swings still hold and swing). The pull along the arm keeps ARM_STRENGTH (climbing).

@@ -131,7 +131,7 @@ def continuous_stream(world, rng: np.random.Generator, fps: float = FPS,
                       approach: Tuple[Tuple[float, float], ...] = (),
                       rope_approach: Tuple[Tuple[float, float], ...] = (),
                       swim_at: Optional[float] = None):
-    """One continuous performance (Sec. 8.3, issue 30): stand; walk in place (the character
+    """One continuous performance (Sec. 8.3): stand; walk in place (the character
     walks forward under the monkey bars) until ``bars_at`` s; stop, raise the arms and jump (the
     character catches a bar); swing like on the bars; lower the arms (the character lets go and
     drops); walk in place turning 45 deg right (the character walks into the water); swim a

@@ -42,8 +42,8 @@ breaststroke and the rope).
 
 No parameter: the constants are physics (a jump's flight time) and sensor facts (tiptoe, noise);
 ``CROUCH`` and ``CROUCH_HOLD`` were chosen leave-one-subject-out on UI-PRMD (``bench_control
---real``: the least strict pair meeting the targets on the four other subjects; docs/control.md;
-since control7's floor and standing height the rule picks CROUCH 0.1 in four folds, the shipped
+--real``: the least strict pair meeting the targets on the four other subjects; docs/research, control report;
+since round 7's floor and standing height the rule picks CROUCH 0.1 in four folds, the shipped
 0.15 still meeting the targets on every subject).
 """
 from __future__ import annotations

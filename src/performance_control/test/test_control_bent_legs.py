@@ -1,4 +1,4 @@
-"""The legs at work veto every example (issue 30, real Kinect v2: sit-to-stand and the deep squat
+"""The legs at work veto every example (real Kinect v2: sit-to-stand and the deep squat
 took the breaststroke and the rope): the feet planted and the hips lowered is a squat, not an
 imitation; standing again, the same arm motion is recognised; a jump's tucked legs are no squat."""
 import numpy as np

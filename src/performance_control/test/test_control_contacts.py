@@ -109,7 +109,7 @@ def test_user_lowering_the_arms_releases_the_bars_and_the_character_lands():
 
 @pytest.mark.parametrize('seed', [2, 4])
 def test_lowering_the_arms_from_the_bars_is_a_dismount_not_a_fling(seed):
-    """Issue 30: a user swinging on the bars lowers the arms over 0.3 s; while the hands still
+    """A user swinging on the bars lowers the arms over 0.3 s; while the hands still
     hold, the target turning about the grip (~8 rad/s) drove the pitch PD with up to 4 body
     weights per hand and the COM left the bars at 5-8 m/s, landing 3 m away (main at 14991c8:
     these performers 5.2 / 7.8 m/s, 3.2 / 2.9 m). Bounded across the arm (SWING_STRENGTH) and

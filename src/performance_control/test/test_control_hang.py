@@ -1,4 +1,4 @@
-"""Hanging and the reach/jump to engage the monkey bars (issue 30): the user's support tells a
+"""Hanging and the reach/jump to engage the monkey bars: the user's support tells a
 hang (off the floor longer than a jump, both hands overhead), a jump under the bars with the
 hands up makes the character catch a bar, and a jump or raised arms alone engage nothing."""
 import dataclasses
@@ -64,7 +64,7 @@ def test_the_floor_follows_the_user_when_the_stream_starts_off_it():
 
 
 def test_one_foot_reported_through_the_floor_does_not_lower_it():
-    """The floor is where both feet stand (control7): held-out performer 37's left foot was
+    """The floor is where both feet stand (round 7): held-out performer 37's left foot was
     reported 0.13-0.17 m through the floor for 1.4 s; taken as the floor, standing read as 0.1 m
     off it and raising the arms as a jump (the character's hands caught the bar overhead)."""
     n = 150

@@ -225,7 +225,7 @@ def test_an_untestable_change_share_gate_does_not_pass():
 
 def test_walk_recognition_ignores_a_users_constant_posture_offset_not_an_in_phase_swing():
     """The floor's walk is compared also about the user's own mean posture (``own_posture``,
-    control7), while the feet alternate:
+    round 7), while the feet alternate:
     a walker whose elbows are bent 24 deg more and shoulders flexed 11 deg more than the example's
     (the continuous performance's seed 1, walk recognised only in bursts about the example's
     mean) is as near the example's subspace as the example's own walker, within half the

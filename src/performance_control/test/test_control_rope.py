@@ -1,4 +1,4 @@
-"""Climbing the rope (issue 24): the character climbs hand over hand without sinking down the
+"""Climbing the rope: the character climbs hand over hand without sinking down the
 rope, and the rope chain stays numerically stable while one hand holds it."""
 import mujoco
 import numpy as np
@@ -107,7 +107,7 @@ def test_no_unstable_step_while_one_hand_holds_the_rope():
 
 
 def test_a_hand_climbing_the_rope_grabs_the_rope_not_a_bar_beside_it():
-    """Hand over hand (control6): while one hand holds the rope, the free hand grabs only the rope.
+    """Hand over hand (round 6): while one hand holds the rope, the free hand grabs only the rope.
     The rope swinging back under the last bar brought a climber's free hand within the bars'
     engage distance and it hung by one hand from the bar (seed 23 of the watched performance).
     Without the held rope the same hand at the same place does catch the bar."""

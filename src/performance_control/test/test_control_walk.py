@@ -70,7 +70,7 @@ def test_walking_in_place_walks_the_character_forward_and_it_stops_with_the_user
 
 def test_continuous_performance_bars_rope_water():
     """floor -> walk -> under the bars, jump to catch one -> swing -> drop -> walk -> rope ->
-    climb -> drop -> walk (turning 45 deg right) -> into the water -> swim (issue 30), by a
+    climb -> drop -> walk (turning 45 deg right) -> into the water -> swim, by a
     performer who stops walking when the character has arrived at the rope."""
     ctl = PerformanceController(WORLD, ControlParams(sensor_height=SENSOR_HEIGHT))
     phase, rows = [], []
@@ -118,7 +118,7 @@ def test_continuous_performance_bars_rope_water():
 
 
 def test_the_watched_performers_decisions_change_the_stream_only_after_they_are_taken():
-    """The closed loop of :func:`watched_performance` (issue 30, control5): each decision -- stop
+    """The closed loop of :func:`watched_performance` (round 5): each decision -- stop
     for the bars, turn toward them, stop for the rope, walk on when the character rests short of
     it -- regenerates the stream; the frames the controller has already seen, through the sensor
     model, must be the same in the new stream (else the user would have done something else
@@ -148,7 +148,7 @@ def test_the_watched_performers_decisions_change_the_stream_only_after_they_are_
     assert np.array_equal(a[:k + 1], b[:k + 1])
     assert ('climb' in [w for _, w in s1]) and (r, 'reach for the rope') in s2
     assert (r + ROPE_WAIT, 'walk') in s2
-    # on the way to the rope, a course correction at 13 s (control6)
+    # on the way to the rope, a course correction at 13 s (round 6)
     c, _ = continuous_stream(WORLD, np.random.default_rng(seed), rope_at=ROPE_LATEST,
                              rope_approach=((13.0, 0.5),), **kw)
     d, _ = continuous_stream(WORLD, np.random.default_rng(seed), rope_at=ROPE_LATEST, **kw)
@@ -156,7 +156,7 @@ def test_the_watched_performers_decisions_change_the_stream_only_after_they_are_
     assert np.array_equal(c[:k + 1], d[:k + 1])
     assert not np.allclose(c[k + 31], d[k + 31], atol=0.05)
     # the character still short of the water at r + 17 s: the user walks on, swims later
-    # (control7; d swims at r + 17 from the rope at ROPE_LATEST)
+    # (round 7; d swims at r + 17 from the rope at ROPE_LATEST)
     r = ROPE_LATEST
     e, s3 = continuous_stream(WORLD, np.random.default_rng(seed), rope_at=r, swim_at=r + 19.0,
                               **kw)
@@ -168,7 +168,7 @@ def test_the_watched_performers_decisions_change_the_stream_only_after_they_are_
 
 def test_the_watched_performer_corrects_the_course_when_the_character_would_pass_the_rope():
     """On the way to the rope the user turns by the character's course error when its course
-    passes beside the rope (held-out seed 23 of control4 walked past it 0.35 m to the side:
+    passes beside the rope (held-out seed 23 of round 4 walked past it 0.35 m to the side:
     its heading differed from the user's aim by ~7 deg and the user never corrected it)."""
     from performance_control.performances import ROPE_STOP, _course_error
     target = np.array([5.0, 0.0])

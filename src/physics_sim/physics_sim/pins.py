@@ -18,7 +18,7 @@ class FootPins:
         """``world``: the :class:`~physics_sim.world.World` whose feet these are (held weakly: a
         world and its pins in a reference cycle outlive the world until a full garbage
         collection, and a world holds a MuJoCo model and data of several MB that Python's
-        collector does not see -- a world dropped per visitor piled up, issue 32)."""
+        collector does not see -- a world dropped per visitor piled up)."""
         self._world = weakref.ref(world)
         self.feet: List[tuple] = []    # (character index, joint, PinState)
         self.idx = np.zeros(0, int)    # stacked joint row of every foot

@@ -15,7 +15,7 @@ Prints
    KNN vs cKDTree in PCA space (with its recall of the exact Eq. 9 neighbours), and with K;
 6. method C per frame per user on the large real database (every CMU clip and its mirror image,
    no filter: ~53k postures; built once into the cache), with the single-precision KNN screening
-   beside the exact double-precision search (issue 23: <= 3 ms per frame and user).
+   beside the exact double-precision search (the target: <= 3 ms per frame and user).
 
 The machine may be shared: figures are medians over the frames of a clip.
 """

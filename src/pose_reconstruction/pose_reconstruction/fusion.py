@@ -1,4 +1,4 @@
-"""Several Kinects, one skeleton: reliability-weighted multi-sensor fusion (issue 31 item 3). No rclpy.
+"""Several Kinects, one skeleton: reliability-weighted multi-sensor fusion. No rclpy.
 
 Each sensor publishes its users in its own frame (``kinect_k_link``); TF says where the sensor is
 (``world <- kinect_k_link``, :mod:`skeleton_core.tf`). :class:`MultiSensorFusion` turns the latest

@@ -1,4 +1,4 @@
-"""``fusion`` node: several Kinects' skeletons fused into one SkeletonArray in ``world`` (issue 31).
+"""``fusion`` node: several Kinects' skeletons fused into one SkeletonArray in ``world``.
 
 Subscribes
   ``input_topics`` (default ``/kinect_1/skeletons``, ``/kinect_2/skeletons``: the drivers of

@@ -34,7 +34,7 @@ database's bodies do; the correction then carries its reference's proportions (m
 over its training subjects, :func:`.correction.reference_proportions`) and they replace the
 database's (the hands, which that reference lacks, keep the database's). On the real UI-PRMD
 recordings the database's proportions moved the corrected lengths away from what the sensor
-measures (the hip segments by ~0.7 cm, the neck ~0.7 cm; docs/accuracy.md, fifth round).
+measures (the hip segments by ~0.7 cm, the neck ~0.7 cm; docs/research, accuracy, round 5).
 
 The output length is the inverse-variance (minimum expected error) combination::
 

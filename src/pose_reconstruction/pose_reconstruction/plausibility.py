@@ -23,7 +23,7 @@ Terms (each 1 = plausible):
   its parent between two frames (a snap onset) blames it and what hangs from it, latched until
   it jumps again (the snap ends) or ``latch_frames`` pass: a wrist and hand snapped together
   onto a point their own lengths allow keeps every bone length. A jump from a length the bone
-  term rejects to one it accepts is a failure ending, not a snap onset (issue 34: a wrist that
+  term rejects to one it accepts is a failure ending, not a snap onset (a wrist that
   slid onto an object slower than the speed limit, rejected by its forearm length, jumped back
   and was then latched for 1.5 s on the right place, the forearm filled by the database). So is
   a jump away from a place the segment held for fewer than ``TRANSIENT_FRAMES`` frames (since
@@ -44,7 +44,7 @@ Terms (each 1 = plausible):
   last ``floor_window`` frames, of the lowest TRACKED foot or ankle (less its height). The floor
   is where the feet are lowest: a foot lifted, or resting TRACKED on a step or an object, is
   above it on most frames (the median of such a window put the floor 25-30 cm too high and
-  rejected a clean TRACKED ankle below it for 20 frames, issue 34); a foot through the floor is a
+  rejected a clean TRACKED ankle below it for 20 frames); a foot through the floor is a
   short event. A joint ``floor_tolerance_m`` below the floor starts losing plausibility,
   ``floor_reject_m`` below it has none.
 * **whole-skeleton jump** — the TRACKED joints moving, in the median, more than ``jump_m`` from
@@ -52,7 +52,7 @@ Terms (each 1 = plausible):
   True) until they are back within ``jump_m``, for at most ``jump_frames`` frames (then the new
   place is accepted: a real re-acquisition). "Where each was" moves on with the body's velocity
   before the jump (the median displacement per frame): a running user is 0.7 m on after the 6
-  frames the skeleton spent on someone else, and its return to the user is a return (issue 34:
+  frames the skeleton spent on someone else, and its return to the user is a return (before:
   9 frames of a running user's right skeleton were rejected as still jumped).
 
 ``plausibility=False`` turns the whole term off (R_p = 1: the paper's reliability).
@@ -78,7 +78,7 @@ from skeleton_core.model import (ANKLE_LEFT, ANKLE_RIGHT, FOOT_LEFT, FOOT_RIGHT,
 @dataclass
 class PlausibilityConfig:
     """Parameters of :class:`PlausibilityCheck` (nested in the reliability's configuration; our
-    values, tuned on the dev clips with sensor seed 0: docs/robustness.md)."""
+    values, tuned on the dev clips with sensor seed 0: docs/research/2026-11-28-robustness.md)."""
 
     plausibility: bool = param(
         True, 'confident failures: lower the reliability of TRACKED joints a body cannot have '
@@ -151,11 +151,11 @@ FLOOR_QUANTILE = 0.25
 # the floor forgotten when no foot or ankle was TRACKED for more frames than this (1 s): the user
 # may have moved onto other ground meanwhile (a Kinect walk on uneven terrain: a foot re-acquired
 # 19 cm below the floor its window still held from 2.3 s before was rejected for 6 frames and
-# filled by the database, issue 34); a new floor from the next 5 tracked frames on
+# filled by the database); a new floor from the next 5 tracked frames on
 FLOOR_STALE_FRAMES = 30
 # segment speed: a place a segment held for fewer frames than this (since it was tracked, or
 # since its last jump) is a transient; a jump away from it is a failure ending, not a snap onset
-# (issue 34: a Kinect v2 leg that starts a recording 36 cm off and jumps to the right place one
+# (a Kinect v2 leg that starts a recording 36 cm off and jumps to the right place one
 # frame later was latched unreliable for 1.5 s)
 TRANSIENT_FRAMES = 3
 _ANKLE_HEIGHT = float(-standard_body().rest_offsets[FOOT_LEFT][2])
@@ -318,7 +318,7 @@ class PlausibilityCheck:
         """R_p of a whole-skeleton jump frame: every joint 0. The segment-speed term does not
         compare the first frame back with the last one before the jump: across the gap a
         running user's limbs swing farther than a snap's step, and the right skeleton's return
-        was latched as a snap of its ankles for 1.5 s (issue 34); the return is judged as a
+        was latched as a snap of its ankles for 1.5 s; the return is judged as a
         re-acquisition (no segment TRACKED in the last frame)."""
         self._last_both = np.zeros(NUM_SEGMENTS, bool)
         self.value = np.zeros(NUM_JOINTS)
@@ -360,7 +360,7 @@ class PlausibilityCheck:
             # a segment's end moves relative to its parent when the parent jumps: where the
             # segment above ended a failure in this frame (a knee back from where it hung behind
             # an object), this segment's jump is that return, not a snap of its own child (the
-            # ankle, right all along, was latched for 1.5 s, issue 34)
+            # ankle, right all along, was latched for 1.5 s)
             for s in range(NUM_SEGMENTS):   # parents first
                 q = PARENT_SEGMENT[s]
                 if q >= 0 and jump[s] and ended[q]:

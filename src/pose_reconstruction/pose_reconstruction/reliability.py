@@ -20,7 +20,7 @@ becomes implausible, and the length profile learns only from plausible segments.
 judges a TRACKED joint by its segments to other TRACKED joints only (none: R_k = 1): a segment
 whose other end is INFERRED (held at a stale place) or NOT_TRACKED has R_t = 0 there already and
 must not make the tracked end unreliable too (the paper's Eq. 6 averaged it in: a tracked spine
-above a hidden hip centre read R_k <= 0.5 and was replaced by the database; issue 34). Nor does a
+above a hidden hip centre read R_k <= 0.5 and was replaced by the database). Nor does a
 segment to an end joint (head, hand, foot) judge its parent when the parent has other segments:
 the end joint has only that segment to be judged by, so a wrong length there is the end's (a hand
 resting TRACKED on an object 10-20 cm off put the wrist beside it at R_k ~ 0.5 and handed the
@@ -106,7 +106,7 @@ _INCIDENCE_MEAN = INCIDENCE / INCIDENCE.sum(axis=1, keepdims=True)
 # (20, 19): the segments a TRACKED joint is judged by with the plausibility stage (Eq. 6 without
 # blaming a neighbour): its own, less a segment to an end joint (head, hand, foot) when the joint
 # has others -- an end joint has only that segment to be judged by, so a wrong length there is
-# the end's (a hand resting on an object 10-20 cm off; issue 34), not its parent's
+# the end's (a hand resting on an object 10-20 cm off), not its parent's
 _END = INCIDENCE.sum(axis=1) == 1
 _JUDGED_BY = INCIDENCE.copy()
 for _s in range(NUM_SEGMENTS):
@@ -536,7 +536,7 @@ class ReliabilityEstimator:
             # there already; an INFERRED joint is held at a stale place) says nothing about its
             # TRACKED end. Eq. 6 averages it in, so a tracked spine above a table-hidden hip
             # centre, or a tracked knee below a hidden hip, reads R_k <= 0.5 and is handed to the
-            # database although the sensor sees it (issue 34); likewise a tracked wrist beside a
+            # database although the sensor sees it; likewise a tracked wrist beside a
             # tracked hand resting 10-20 cm off on an object. A tracked joint is judged by its
             # segments to other tracked joints only, less a segment to an end joint when it has
             # others (_JUDGED_BY; none left: R_k = 1; bone lengths of confident failures are the

@@ -1,7 +1,7 @@
 """Compiled per-frame steps of the reliability (Eq. 1-8) and of the plausibility's segment terms.
 
 :meth:`.reliability.ReliabilityEstimator.update` runs once per sensor, user and frame: with several
-sensors (the fusion, issue 31) that is 12 calls per capture for 2 sensors x 6 users, and its ~50
+sensors (the fusion) that is 12 calls per capture for 2 sensors x 6 users, and its ~50
 numpy calls on 20-element arrays cost far more than their arithmetic. These kernels do the same
 arithmetic in one compiled call each (:mod:`skeleton_core.jit`: numba when installed and
 ``KINECT_NUMBA`` is not 0). The numpy formulation stays in ``reliability.py`` / ``plausibility.py``

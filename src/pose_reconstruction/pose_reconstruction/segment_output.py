@@ -414,7 +414,7 @@ class SegmentOutput:
                 # a segment takes the fitted direction only as far as its direction is not the
                 # sensor's already: the fit restores constant lengths by moving joints, which
                 # turns short segments (the hips, the feet, the shoulders) away from what the
-                # sensor sees (real UI-PRMD subset: +4-6 deg on the hip segments, issue 34); an
+                # sensor sees (real UI-PRMD subset: +4-6 deg on the hip segments); an
                 # observed direction is kept, the fit then places the skeleton
                 self._fit_positions(vr, obs, pull, L, rel_frac * (1.0 - beta))
         if self._seg_filter is not None:
@@ -503,7 +503,7 @@ class SegmentOutput:
         error, 12 deg (``_DB_DIRECTION_VAR``) plus ``db_spread`` (19,) when given, the spread of
         the K neighbours' directions (:func:`neighbour_direction_spread`): on the sensor-model
         streams the solution's error grows with it (rms 6.6 deg where the neighbours agree within
-        1-3.5 deg, 21.6 deg where they spread 17-53 deg; docs/accuracy.md, seventh round). With
+        1-3.5 deg, 21.6 deg where they spread 17-53 deg; docs/research, accuracy, round 7). With
         ``db_distance`` (the nearest database posture's RMS distance per reliable joint, standard
         body, m) above ``direction_db_distance``, the constant part is scaled by
         ``(db_distance / direction_db_distance)^2``: measured, the solution's direction error grows

@@ -1,4 +1,4 @@
-"""Issue 21: the sensor model's confident failures (class d), the plausibility term that catches
+"""The sensor model's confident failures (class d), the plausibility term that catches
 them, the prediction-corrected smoother, and the perturbed sensor models of `evaluate --perturb`."""
 import numpy as np
 import pytest
@@ -306,7 +306,7 @@ def test_a_jump_back_to_a_right_length_ends_a_failure_not_starts_one(jit):
     """Class c: a wrist and hand slide onto an object slower than the speed limit (no snap onset
     seen), the forearm length rejected by the bone term; then they jump back to the body. The
     jump is the failure's end: the wrist is reliable again after the Eq. 8 delay, not latched
-    implausible for ``latch_frames`` (1.5 s) on its right place (issue 34: the forearm was
+    implausible for ``latch_frames`` (1.5 s) on its right place (the forearm was
     handed to the database, 40 deg off, against the sensor's 20)."""
     pos, st = _standing()
     start, end = 60, 100

@@ -1,4 +1,4 @@
-"""direction_fusion of the segment output (issue 34): a reliable segment's observed direction
+"""direction_fusion of the segment output: a reliable segment's observed direction
 weighted by the expected errors of the sensor (joint-centre offsets across the segment) and of the
 database, so that a long segment the sensor sees follows it and a short one takes the database's."""
 import numpy as np

@@ -1,4 +1,4 @@
-"""filled_memory_s of the segment output (issue 34): a segment the database fills starts from
+"""filled_memory_s of the segment output: a segment the database fills starts from
 where the sensor last saw it, in proportion to the trust in the sensor, the memory fading with
 its time constant. On the real recordings (trust ~1: the database does not explain the
 exercises) a glitch of a few frames kept the last seen shank instead of the database's raised

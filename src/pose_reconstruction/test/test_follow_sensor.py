@@ -1,4 +1,4 @@
-"""Where the sensor is right, the output follows it (issue 34): a TRACKED joint is not blamed for
+"""Where the sensor is right, the output follows it: a TRACKED joint is not blamed for
 a hidden neighbour (reliability Eq. 6), a new user id is a new user (no whole-skeleton-jump hold
 on the old place), and a looping synthetic clip has no teleport."""
 import numpy as np

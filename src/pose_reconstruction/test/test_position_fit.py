@@ -60,7 +60,7 @@ def test_fit_recovers_a_translated_skeleton_and_ignores_missing_joints():
 
 
 def test_a_trusted_observed_direction_is_not_bent_by_the_fit():
-    """Issue 34: where the sensor is trusted and reliable, the output's segment directions are the
+    """Where the sensor is trusted and reliable, the output's segment directions are the
     sensor's; the fit places the constant-length skeleton (here: only its root can move), it does
     not turn short segments to restore lengths."""
     from skeleton_core.conversions import SkeletonFrame

@@ -1,4 +1,4 @@
-"""smooth_trusted_scale of the segment output (issue 34): a segment the output takes from the
+"""smooth_trusted_scale of the segment output: a segment the output takes from the
 sensor is smoothed less (its lag bent what the sensor gives right); what the database gives keeps
 the full smoothing."""
 import numpy as np

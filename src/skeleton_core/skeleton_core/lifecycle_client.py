@@ -57,10 +57,12 @@ def call_once(client, request, timeout_s: float):
 
 
 def drive_to_active(node, name: str, stopped: Callable[[], bool],
-                    log: Optional[Callable[[str], None]] = None) -> bool:
+                    log: Optional[Callable[[str], None]] = None,
+                    before_activate: Optional[Callable[[], None]] = None) -> bool:
     """Take lifecycle node ``name`` (fully qualified) to ``active`` from ``node`` (spun by
     someone else). True once active; False when it refuses a transition, is finalized, or
-    ``stopped()`` turns true first."""
+    ``stopped()`` turns true first. ``before_activate`` (once, when the node is inactive and
+    about to be activated) may block: a source waits there for the nodes that consume it."""
     def clients():
         return (node.create_client(GetState, f'{name}/get_state'),
                 node.create_client(ChangeState, f'{name}/change_state'))
@@ -135,6 +137,10 @@ def drive_to_active(node, name: str, stopped: Callable[[], bool],
             continue
         busy_since = None
         tid, label = NEXT[state]
+        if tid == Transition.TRANSITION_ACTIVATE and before_activate is not None:
+            before_activate()
+            before_activate = None
+            continue                     # the state may have changed meanwhile
         try:
             reply = call_once(change, ChangeState.Request(transition=Transition(id=tid)),
                               TRANSITION_TIMEOUT_S)

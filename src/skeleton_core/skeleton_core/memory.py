@@ -4,7 +4,7 @@ and the tests judge growth.
 
 Growth is judged as a slope (MB per second, or per user that came and went), never as a
 percentage after warm-up: a steady 1 MB/s is 20 % over a few minutes but 20 GB over a lab day,
-and a percentage over a short run hides it (issue 32). The slope is Theil-Sen's (the median of the
+and a percentage over a short run hides it. The slope is Theil-Sen's (the median of the
 slopes between pairs of samples): the resident memory also follows the load (a physics world with
 more visitors is bigger), and a few such steps move the median far less than a least-squares
 line.

@@ -1,13 +1,14 @@
 """drive_to_active without DDS: a node whose lifecycle services are there but never answer (a
 reply path DDS did not match) or are never discovered gets new clients after SILENT_S, with one
-warning, and is then driven to active; an error raised by a call is logged and retried."""
+warning, and is then driven to active; an error raised by a call is logged and retried; a
+``before_activate`` hook runs once between configure and activate."""
 import time
 
 import pytest
 
 pytest.importorskip('lifecycle_msgs')
 
-from lifecycle_msgs.msg import State  # noqa: E402
+from lifecycle_msgs.msg import State, Transition  # noqa: E402
 from lifecycle_msgs.srv import GetState  # noqa: E402
 
 from skeleton_core import lifecycle_client as lc  # noqa: E402
@@ -126,3 +127,45 @@ def test_a_transition_that_does_not_end_is_logged(monkeypatch):
     assert lc.drive_to_active(_BusyNode(1), '/n', lambda: time.monotonic() > deadline,
                               logged.append)
     assert logged == []
+
+
+class _StatefulNode:
+    """Unconfigured until asked to configure, inactive until asked to activate; ``events``
+    records the transitions requested."""
+
+    def __init__(self):
+        self.state, self.events = State.PRIMARY_STATE_UNCONFIGURED, []
+        node = self
+
+        class Client(_Client):
+            def call_async(self, request):
+                reply = self.srv_type.Response()
+                if self.srv_type is GetState:
+                    reply.current_state.id = node.state
+                else:
+                    tid = request.transition.id
+                    node.events.append(tid)
+                    node.state = {Transition.TRANSITION_CONFIGURE: State.PRIMARY_STATE_INACTIVE,
+                                  Transition.TRANSITION_ACTIVATE: State.PRIMARY_STATE_ACTIVE}[tid]
+                    reply.success = True
+                return _Future(reply)
+        self._client = Client
+
+    def create_client(self, srv_type, name):
+        return self._client(srv_type, answers=True)
+
+    def destroy_client(self, c):
+        pass
+
+
+def test_before_activate_runs_once_between_configure_and_activate():
+    node = _StatefulNode()
+
+    def hold():
+        node.events.append('hold')
+        assert node.state == State.PRIMARY_STATE_INACTIVE   # configured, not yet active
+
+    deadline = time.monotonic() + 5.0
+    assert lc.drive_to_active(node, '/driver', lambda: time.monotonic() > deadline,
+                              before_activate=hold)
+    assert node.events == [Transition.TRANSITION_CONFIGURE, 'hold', Transition.TRANSITION_ACTIVATE]

@@ -1,4 +1,4 @@
-"""Joint maps that accept real rigs (issue 33): a BVH whose every joint has 6 channels, whose End
+"""Joint maps that accept real rigs: a BVH whose every joint has 6 channels, whose End
 Sites sit at offset 0 and that has no finger joints builds a database through the shipped generic
 map (a copy written by the test) with no warning; a zero-length segment the map cannot avoid is
 refused naming the joint and the fix; a point beyond a joint (extrapolation) is expressible;

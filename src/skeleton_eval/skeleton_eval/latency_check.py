@@ -1,4 +1,4 @@
-"""How well the synthetic added-latency figure resolves a delay (issue 21, docs/robustness.md).
+"""How well the synthetic added-latency figure resolves a delay (docs/research/2026-11-28-robustness.md).
 
 For C on the dev clips, per sensor-model variant and seed and per class a-d: the one-sided delay the
 evaluation table reports (:func:`.evaluation.reliable_latency_curve`, shifts >= 0), the signed delay

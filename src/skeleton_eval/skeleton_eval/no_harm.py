@@ -10,7 +10,7 @@ good as the sensor's own segment. This module scores exactly those segment-frame
 * :func:`direction_sums` — per segment the sum and count of the length-free direction error (deg)
   over the masked segment-frames (sums pool over streams by adding);
 * :func:`compare` / :func:`violations` — a method's per-segment mean against a reference's (the
-  raw sensor, or raw + correction on real data), with the tolerance of issue 34 (0.5 deg);
+  raw sensor, or raw + correction on real data), with the no-harm tolerance (0.5 deg);
 * :func:`to_markdown` — the per-segment table of ``make evaluate`` (classes as columns).
 
 The mask depends only on the input stream, so every method is scored on the same segment-frames
@@ -25,7 +25,7 @@ import numpy as np
 from skeleton_core.model import (JOINT_NAMES, NUM_SEGMENTS, SEGMENT_CHILD_INDEX,
                                  SEGMENT_PARENT_INDEX, TRACKED)
 
-TOLERANCE_DEG = 0.5   # issue 34: C's direction error <= raw's + 0.5 deg on every segment
+TOLERANCE_DEG = 0.5   # C's direction error <= raw's + 0.5 deg on every segment
 SEGMENT_NAMES = tuple(f'{JOINT_NAMES[p]}-{JOINT_NAMES[c]}'
                       for p, c in zip(SEGMENT_PARENT_INDEX, SEGMENT_CHILD_INDEX))
 

@@ -32,7 +32,7 @@ from .sensor_params import CONFIDENT_FAILURES, load_params
 GROUPS = ('noise', 'offset', 'occlusion', 'failure', 'tracked')
 OCCLUDED_CLASSES = ('a', 'b', 'c')
 FAILURE_CLASS = 'd'
-TRACKED_ERROR_CLASS = 'e'   # small persistent errors of TRACKED joints (issue 34)
+TRACKED_ERROR_CLASS = 'e'   # small persistent errors of TRACKED joints
 
 
 def _scale_table(t: Dict, f: float) -> None:
@@ -149,7 +149,7 @@ def targets(res: Dict, method: str = 'C', reference: str = 'raw') -> List[Dict]:
             if sc == FAILURE_CLASS:
                 checks.append(('direction >= 25% below raw', gd, gd >= 25.0))
             if c.get('no_harm') and b.get('no_harm'):
-                # issue 34: on TRACKED, fault-free segments no segment more than 0.5 deg worse
+                # on TRACKED, fault-free segments no segment more than 0.5 deg worse
                 w = NH.worst(c['no_harm'], b['no_harm'])
                 if w is not None:
                     checks.append((f'no harm per segment (worst {w["segment"]}, '

@@ -1,9 +1,11 @@
-#!/usr/bin/env python3
-"""scripts/compare_results.py BEFORE.json AFTER.json: field by field, two outputs of `make evaluate`
-(table4.json, table3.json, ...) or `real_loso` (real_loso.json), e.g. before and after a change
-that must not change behaviour. Wall-clock fields (processing times, dates) are left out (keys
-matching TIMING); every other number must be equal (floats within 1e-9 relative). Prints each
-difference and a summary; exit 1 when any differs."""
+"""``ros2 run kinect_experiments compare_results BEFORE.json AFTER.json``: field by field, two outputs
+of `make evaluate` (table4.json, table3.json, ...) or `real_loso` (real_loso.json), e.g. before and
+after a change that must not change behaviour.
+
+Wall-clock fields (processing times, dates) are left out (keys matching TIMING); every other number
+must be equal (floats within 1e-9 relative). Prints each difference and a summary; exit 1 when any
+differs."""
+import argparse
 import json
 import math
 import re
@@ -42,19 +44,25 @@ def walk(a, b, path, out, count):
         out.append(f'{path}: {a!r} != {b!r}')
 
 
-def main(argv) -> int:
-    if len(argv) != 2:
-        print(__doc__.split('\n\n')[0], file=sys.stderr)
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(prog='compare_results', description=__doc__.split('\n\n')[0],
+                                epilog=__doc__.split('\n\n')[1])
+    p.add_argument('before', help='JSON output before the change')
+    p.add_argument('after', help='JSON output after the change')
+    args = p.parse_args(argv)
+    try:
+        with open(args.before) as fa, open(args.after) as fb:
+            a, b = json.load(fa), json.load(fb)
+    except (OSError, ValueError) as e:
+        print(f'[ERROR] compare_results: {e}', file=sys.stderr)
         return 2
-    with open(argv[0]) as fa, open(argv[1]) as fb:
-        a, b = json.load(fa), json.load(fb)
     out, count = [], [0]
     walk(a, b, '', out, count)
     for line in out[:60]:
         print('DIFF', line)
-    print(f'{argv[0]} vs {argv[1]}: {count[0]} fields compared, {len(out)} differ')
+    print(f'{args.before} vs {args.after}: {count[0]} fields compared, {len(out)} differ')
     return 1 if out else 0
 
 
 if __name__ == '__main__':
-    sys.exit(main(sys.argv[1:]))
+    sys.exit(main())
