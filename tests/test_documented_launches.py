@@ -124,8 +124,6 @@ def test_the_pages_have_launch_lines():
 def test_documented_launch_line_brings_its_nodes_up(runs, line):
     up_at, died, text = runs[line]
     tail = '\n'.join(text.splitlines()[-40:])
-    if died is not None and 'sensor_pose has 1 pose(s) for sensors:=' in text:
-        pytest.xfail('pipeline.launch.py sensors:=N without sensor_pose: fixed on another branch')
     assert died is None, f'{line}: the launch ended by itself (exit {died}):\n{tail}'
     running = text.split('user interrupted with ctrl-c')[0]   # a process Ctrl-C ends may say so
     assert 'Traceback' not in text and 'process has died' not in running, f'{line}:\n{tail}'
