@@ -62,6 +62,8 @@ def _workspace(work: Path) -> Path:
         shutil.copy(work / 'out' / 'demo.mcap', work / 'out' / name)
     shutil.copy(work / 'out' / 'demo.mcap', work / 'cache' / 'uiprmd' / 'm01_s02_e01.mcap')
     (work / 'cache' / 'extrinsics.yaml').write_text(EXTRINSICS)
+    from azure_fake import write_bag   # an Azure Kinect ROS driver's body_tracking_data bag
+    write_bag(work / 'azure.mcap')
     shutil.copytree(ROOT / 'config', work / 'cache' / 'config')
     db = ROOT / 'cache' / 'motion_db.npz'
     if db.is_file():
@@ -110,7 +112,8 @@ def runs(request, tmp_path_factory):
     if shutil.which('ros2') is None:
         pytest.fail('the ros2 command line is not on the PATH: run `make setup`')
     lines = [item.callspec.params['line'] for item in request.session.items
-             if getattr(item, 'callspec', None) and 'line' in item.callspec.params]
+             if item.module is request.module and getattr(item, 'callspec', None)
+             and 'line' in item.callspec.params]   # (other modules parametrize a 'line' too)
     work = _workspace(tmp_path_factory.mktemp('documented_launches'))
     with ThreadPoolExecutor(max_workers=2) as pool:
         return dict(zip(lines, pool.map(lambda ln: _run(ln, work), lines)))

@@ -8,6 +8,7 @@ from __future__ import annotations
 import os
 import signal
 import sys
+import threading
 import time
 from typing import Any, Callable, Dict, Iterable, List, Optional, Sequence
 
@@ -18,6 +19,7 @@ from rclpy.exceptions import ParameterException
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from rclpy.signals import SignalHandlerOptions
 
 from .cdr import CdrError, frames_from_cdr
 from .health import Health
@@ -254,15 +256,16 @@ SPIN_SLICE_S = 0.25
 REACH_WAIT_S = 0.5
 
 
-def spin_until_shutdown(executor, context=None) -> None:
+def spin_until_shutdown(executor, context=None, stop=None) -> None:
     """Spin ``executor`` until ``context`` (default: the global one) is shut down, in slices of
     ``SPIN_SLICE_S``. ``executor.spin()`` waits in rcl_wait without a timeout for the guard
     condition rclpy's signal handler triggers, and with the pip wheels (Jazzy 7.1.6, Kilted)
     that wake-up is lost in about 1 of 10 SIGTERMs: the context is shut down, the process waits
     forever (a plain ``rclpy.spin`` node: 4 hangs in 40 SIGTERMs 1.5-3.5 s after start; this loop
-    0 in 40). A lost wake-up now costs at most one slice."""
+    0 in 40). A lost wake-up now costs at most one slice. ``stop`` (a threading.Event): also
+    ends when it is set (run_node's signal handler)."""
     ctx = context if context is not None else rclpy.get_default_context()
-    while ctx.ok():
+    while ctx.ok() and not (stop is not None and stop.is_set()):
         executor.spin_once(timeout_sec=SPIN_SLICE_S)
 
 
@@ -556,21 +559,25 @@ def run_node(node_factory: Callable[..., Node], args=None, executor=None) -> int
         return 0
     managed = MANAGED_FLAG in remove_ros_args(argv)
     spinning = []
+    stop = threading.Event()
 
-    def _on_sigint(signum, frame):
-        # Starting up: Ctrl-C stops the start (KeyboardInterrupt, handled below). Spinning: rclpy's
-        # own handler (installed over this one, which it then calls) has already shut the context
-        # down and the executor returns; a KeyboardInterrupt raised at an arbitrary bytecode in
-        # the executor (e.g. half-way through constructing a Task) would only leave rclpy objects
-        # half-built, whose finalizers then print tracebacks at exit.
+    def _on_signal(signum, frame):
+        # Starting up: Ctrl-C / SIGTERM stops the start (KeyboardInterrupt, handled below).
+        # Spinning: the spin loop ends after the callback in progress (at most SPIN_SLICE_S),
+        # and only then are the node and the context shut down. (rclpy's own handler shut the
+        # context down from under the executor: the events executor then still ran callbacks
+        # whose publish raised "publisher's context is invalid", logged as a FATAL and a trace.)
         if not spinning:
             raise KeyboardInterrupt
+        stop.set()
 
     try:
-        signal.signal(signal.SIGINT, _on_sigint)
+        signal.signal(signal.SIGINT, _on_signal)
+        signal.signal(signal.SIGTERM, _on_signal)
+        handlers = SignalHandlerOptions.NO
     except ValueError:  # not the main thread (a test calling run_node): signals are not ours
-        pass
-    rclpy.init(args=args)
+        handlers = SignalHandlerOptions.ALL
+    rclpy.init(args=args, signal_handler_options=handlers)
     node = None
     try:
         if executor is None:
@@ -601,7 +608,7 @@ def run_node(node_factory: Callable[..., Node], args=None, executor=None) -> int
     spinning.append(True)
     try:
         executor.add_node(node)
-        spin_until_shutdown(executor)
+        spin_until_shutdown(executor, stop=stop)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except RuntimeError:
