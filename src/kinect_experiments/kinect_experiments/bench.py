@@ -6,8 +6,8 @@ separate processes — plus the offline ``process_bag`` speed. Writes Markdown +
     ros2 run kinect_experiments bench --users 1,2 --modes pipeline --seconds 8
     ros2 run kinect_experiments bench --users 6 --modes processes --sensors 1,2   # fusion beside
 
-With ``--sensors 2`` (in the default list) every user count also runs with two sensors (issue
-31): two synthetic drivers in /kinect_1 and /kinect_2 (front + side, the same people seen from
+With ``--sensors 2`` (in the default list) every user count also runs with two sensors:
+two synthetic drivers in /kinect_1 and /kinect_2 (front + side, the same people seen from
 ``driver.launch.py sensors:=2``'s default poses), their frames on TF, the ``fusion`` node, then
 the graph unchanged, as separate processes (``ros2 launch pipeline.launch.py sensors:=2``). The
 latency is then from sensor 1's capture (the fused frames carry its stamps); ``fused`` is the

@@ -570,8 +570,8 @@ class ReliabilityEstimator:
         """With the plausibility stage: a joint the sensor tracks again is not held down by the
         frames in which it was INFERRED or NOT_TRACKED. Eq. 8 smooths ``min(R_b, R_k, R_t)`` over
         its window, so a joint re-acquired TRACKED read 0.33, 0.61, 0.81 on its first three
-        frames and its segments were filled by the database although the sensor saw them (issue
-        34: the re-acquired shanks of classes b, c, e). The tracking state is the SDK's statement
+        frames and its segments were filled by the database although the sensor saw them
+        (the re-acquired shanks of classes b, c, e). The tracking state is the SDK's statement
         about this frame, not a noisy measurement: the reliability is at least ``min(Eq. 8 of
         min(R_b, R_k), R_t now)`` -- the behaviour and length terms keep their window, a
         vibrating or wrong-length joint stays unreliable -- and still at most ``R_p``. Losing a
