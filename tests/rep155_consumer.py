@@ -10,10 +10,10 @@ from typing import Dict, List, Optional, Tuple
 
 import numpy as np
 import rclpy
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
+from ros_helpers import Spinner
 from skeleton_core.kinematic_tree import forward_kinematics_urdf
 from skeleton_core.tf import Transform
 
@@ -128,15 +128,7 @@ class Consumer:
         for topic, cls in (extra or {}).items():
             n.create_subscription(cls, topic, lambda m, t=topic: self._on_extra(t, m),
                                   LATCHED if topic.endswith('description') else 300)
-        self.executor = SingleThreadedExecutor(context=self.context)
-        self.executor.add_node(n)
-        self._running = True
-        self._thread = threading.Thread(target=self._spin, daemon=True)
-        self._thread.start()
-
-    def _spin(self):
-        while self._running and self.context.ok():
-            self.executor.spin_once(timeout_sec=0.05)
+        self._spinner = Spinner(self.context, n)
 
     def _tf(self, msg, static):
         with self.lock:
@@ -194,8 +186,6 @@ class Consumer:
         return fk, tf
 
     def close(self):
-        self._running = False
-        self._thread.join(timeout=5)
-        self.executor.shutdown()
+        self._spinner.stop()
         self.node.destroy_node()
         rclpy.shutdown(context=self.context)

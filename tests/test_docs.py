@@ -213,7 +213,7 @@ def test_every_page_is_in_the_navigation():
 
 def test_no_work_item_names():
     """Docs, code, comments and tests say what a thing is, not which work item made it: no
-    "issue 34", "#31" or "control6" (the research record under docs/research/ included)."""
+    issue numbers, hash-numbers or experiment branch names (docs/research/ included)."""
     import subprocess
     # (a line ending in "issue": its number wrapped onto the next line)
     pattern = r'issue [0-9]|\bissue$|#[0-9]{2}\b|\bcontrol[0-9]\b|\b(ab29|control30|fusion31)\b'
