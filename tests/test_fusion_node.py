@@ -124,9 +124,10 @@ def test_one_sensor_passes_through_byte_identical(rclpy_context, peer):
         fusion.destroy_node()
 
 
-def test_no_transform_dropped_and_a_late_sensor_not_waited_for(rclpy_context, peer):
-    # sensor 2's frame is not on TF: its messages are dropped (counted); sensor 1 is published
-    # alone, each frame within one period of wall time although sensor 2 keeps delivering
+def test_no_transform_held_then_dropped_and_a_late_sensor_not_waited_for(rclpy_context, peer):
+    # sensor 2's frame is not on TF: its messages are held (1 s of them per sensor), then dropped
+    # (counted); sensor 1 is published alone, each frame within one period of wall time although
+    # sensor 2 keeps delivering
     fusion, spinner = start(rclpy_context, peer, IN, frames_on_tf=('kinect_1_link',))
     try:
         rng = np.random.default_rng(2)
@@ -139,9 +140,17 @@ def test_no_transform_dropped_and_a_late_sensor_not_waited_for(rclpy_context, pe
                                                st, 'kinect_2_link'))
             time.sleep(0.033)
         assert _wait(lambda: len(peer.got) >= 6, 10), len(peer.got)
-        assert fusion.health.dropped['no transform'] == 6
+        assert len(fusion._held) == 6 and 'no transform' not in fusion.health.dropped
         stamps = [frames_from_cdr(d)[0] for d in peer.got]
         assert stamps == [t0 + i * PERIOD_NS for i in range(6)]
+        for i in range(6, 6 + 60):   # 2 s more of sensor 2 alone: 6 no longer fit
+            st = t0 + i * PERIOD_NS
+            peer.pubs[1].publish(frames_to_cdr([seen(person(), SIDE, 'kinect_2_link', st, rng)],
+                                               st, 'kinect_2_link'))
+            time.sleep(0.002)
+        assert _wait(lambda: fusion.health.dropped.get('no transform') == 6, 10), \
+            fusion.health.dropped
+        assert len(fusion._held) == 60
         snap = fusion.health.snapshot()
         assert snap['dropped[no transform]'] == 6
     finally:

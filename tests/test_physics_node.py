@@ -367,10 +367,11 @@ def test_intention_over_dds_makes_the_hands_grip_the_bars(rclpy_context):
 
 
 def test_targets_wait_for_the_sensor_frame_and_follow_a_tilted_sensor(rclpy_context):
-    """No transform for the input's frame yet: targets are dropped (counted as 'no transform'),
-    no character. Once /tf_static has world -> kinect_link (1.2 m up, yawed 90 deg, tilted 20 deg
-    down), the character stands where that pose puts the sensor-frame target: on the floor of
-    world, not where the sensor frame's own axes would put it."""
+    """No transform for the input's frame yet: targets are held, nothing dropped, no character.
+    Once /tf_static has world -> kinect_link (1.2 m up, yawed 90 deg, tilted 20 deg down), the
+    held targets are taken (the first input frame is published) and the character stands where
+    that pose puts the sensor-frame target: on the floor of world, not where the sensor frame's
+    own axes would put it."""
     node = bring_up(PhysicsNode(context=rclpy_context, parameter_overrides=[
         Parameter('input_topic', value='/test_tf_phys/in'), Parameter('body_height', value=1.75)]))
     peer = rclpy.create_node('tf_phys_peer', context=rclpy_context)
@@ -386,9 +387,12 @@ def test_targets_wait_for_the_sensor_frame_and_follow_a_tilted_sensor(rclpy_cont
         for i in range(5):
             pub.publish(_msg(target, 5_000_000_000 + i * 33_333_333))
             time.sleep(1 / 30)
-        assert _wait(lambda: node.health.dropped.get('no transform', 0) >= 1, 5)
-        assert not node.sim.characters
+        assert _wait(lambda: len(node._held) == 5, 5)
+        assert not node.sim.characters and 'no transform' not in node.health.dropped
         peer.tf = sensor_on_tf(peer, pose)
+        assert _wait(lambda: any(m.header.stamp.sec == 5 and m.header.stamp.nanosec == 0
+                                 for m in got), 10)   # the first, held, target's stamp
+        assert len(node._held) == 0
         for i in range(5, 50):
             pub.publish(_msg(target, 5_000_000_000 + i * 33_333_333))
             time.sleep(1 / 30)

@@ -11,7 +11,7 @@ import time
 import numpy as np
 import pytest
 
-from skeleton_core.tf import (TfBuffer, Transform, default_sensor_poses, load_transforms,
+from skeleton_core.tf import (HeldUntilTf, TfBuffer, Transform, default_sensor_poses, load_transforms,
                               parse_pose, transforms_to_yaml)
 
 
@@ -170,3 +170,13 @@ def test_static_tf_bad_arguments_are_one_line_and_exit_1(args, text):
     lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
     assert len(lines) == 1 and text in lines[0], r.stderr
     assert 'Traceback' not in r.stderr
+
+
+def test_held_until_tf_keeps_the_newest_in_order_and_gives_back_what_it_lets_go():
+    held = HeldUntilTf(limit=3)
+    assert [held.hold(i) for i in range(5)] == [None, None, None, 0, 1]
+    assert len(held) == 3
+    assert held.take() == [2, 3, 4]
+    assert len(held) == 0 and held.take() == []
+    with pytest.raises(ValueError, match='limit'):
+        HeldUntilTf(limit=0)

@@ -19,8 +19,9 @@ Publishes
   (``world -> u<id>_seg_Spine``) and each character's URDF latched on
   ``/character/u<id>/robot_description`` (std_msgs/String; :mod:`physics_sim.character_urdf`).
   ``/tf_static`` (subscribed) -- the input frame's pose in ``world`` (``world -> kinect_link``,
-  published by the launch files' ``static_tf``): targets are moved to the world with it; a target
-  whose frame TF does not know yet is dropped (counted as ``no transform``, logged once).
+  published by the launch files' ``static_tf``): targets are moved to the world with it; targets
+  whose frame TF does not know yet are held (the newest second of them) and taken when it does,
+  older ones dropped (counted as ``no transform``, logged once).
   ``/diagnostics`` -- Health plus the simulation's counters and real-time factor.
 Service
   ``~/apply_push`` -- skeleton_msgs/srv/ApplyPush.
@@ -47,7 +48,7 @@ from skeleton_core.model import NUM_JOINTS, TRACKED
 from skeleton_core.params import ParamSpec, assign, build, param, specs
 from skeleton_core.presence import Presence
 from skeleton_core.rosnode import InputDrops, ManagedNode, Parameters, fill_marker, run_node
-from skeleton_core.tf import WORLD_FRAME, TfBuffer, Transform
+from skeleton_core.tf import WORLD_FRAME, HeldUntilTf, TfBuffer, Transform
 from skeleton_core.tf_ros import STATIC_BROADCASTER_QOS, StaticTfListener, to_tf_message
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Header, String
@@ -178,7 +179,8 @@ class PhysicsNode(ManagedNode):
         # frames on TF: the targets' frame (the sensor's) -> world from /tf_static; the
         # characters are published in world
         self.tf = TfBuffer()
-        self.tf_listener = StaticTfListener(self, self.tf)
+        self.tf_listener = StaticTfListener(self, self.tf, on_change=self._release_held)
+        self._held = HeldUntilTf(limit=max(1, int(round(v['output_rate']))))   # 1 s of input
         self._pose_key = None   # (input frame, TF version) of the sensor pose in use
         self.presence = Presence(v['user_timeout_s'])
         self.scheduler = TickScheduler(v['output_rate'], v['sync_to_input'])
@@ -219,6 +221,7 @@ class PhysicsNode(ManagedNode):
                f' grips from {v["intention_topic"]}' if v['feature_world'] else ''))
 
     def deactivate(self) -> None:
+        self._held.take()   # input held for TF is not replayed after a restart
         self._cancel_deferred()
         self._deferred = None   # (destroyed with the other timers of the active state)
 
@@ -266,11 +269,23 @@ class PhysicsNode(ManagedNode):
 
     def _on_input(self, data: bytes) -> None:
         self.health.on_receive()
+        self._take_input(data)
+
+    def _release_held(self) -> None:
+        """TF changed: the input held for want of it, in the order it came."""
+        if getattr(self, '_held', None) is not None and self.sim is not None:
+            for data in self._held.take():
+                self._take_input(data)
+
+    def _take_input(self, data: bytes) -> None:
         decoded = self._drop.decode(data)
         if decoded is None:
             return
         header_stamp, header_frame, frames = decoded
-        if not self._sensor_pose(header_frame or 'kinect_link'):
+        missing = self._sensor_pose(header_frame or 'kinect_link')
+        if missing:   # held until TF knows the frame; what no longer fits is dropped
+            if self._held.hold(data) is not None:
+                self._drop('no transform', missing)
             return
         now = time.monotonic()
         self.presence.observe(header_stamp, (), wall=now)   # the input's clock moves on:
@@ -379,23 +394,21 @@ class PhysicsNode(ManagedNode):
             self._sim_in_step = 0.9 * self._sim_in_step + 0.1 * steps * ts
         self._publish()
 
-    def _sensor_pose(self, frame: str) -> bool:
-        """Take the sensor's pose (world <- ``frame``) from TF; False (the message dropped and
-        counted, the reason logged once) while TF does not know it."""
+    def _sensor_pose(self, frame: str) -> str:
+        """Take the sensor's pose (world <- ``frame``) from TF; '' when it did, else why not."""
         key = (frame, self.tf.version)
         if key == self._pose_key:
-            return True
+            return ''
         try:
             pose = self.tf.lookup(WORLD_FRAME, frame)
         except LookupError as e:
-            self._drop('no transform', f'waiting for TF {WORLD_FRAME} -> {frame} ({e}); the '
-                       'launch files publish it (static_tf, launch argument sensor_pose)')
-            return False
+            return (f'waiting for TF {WORLD_FRAME} -> {frame} ({e}); the launch files publish it '
+                    '(static_tf, launch argument sensor_pose)')
         self.sim.set_sensor_pose(pose)
         if self._pose_key is None or self._pose_key[0] != frame:
             self.get_logger().info(f'sensor frame {frame} in {WORLD_FRAME}: {pose}')
         self._pose_key = key
-        return True
+        return ''
 
     def _publish(self) -> None:
         states = self.sim.states()

@@ -5,8 +5,9 @@ Subscribes
   ``driver.launch.py sensors:=2``) -- skeleton_msgs/SkeletonArray, each in its sensor's frame
   (``header.frame_id``, e.g. ``kinect_2_link``).
   ``/tf_static`` -- each sensor frame's pose in ``world`` (the launch files' ``static_tf``, from
-  ``sensor_pose`` or a calibration file); a message whose frame TF does not know yet is dropped
-  (counted as ``no transform``, logged once).
+  ``sensor_pose`` or a calibration file); messages whose frame TF does not know yet are held (the
+  newest second of them per sensor) and taken when it does, older ones dropped (counted as
+  ``no transform``, logged once).
 Publishes
   ``output_topic`` (default ``/kinect/skeletons``, what the reconstruction reads) -- one
   SkeletonArray in ``world`` per capture of the first sensor still delivering, stamped with its
@@ -28,7 +29,7 @@ from rclpy.qos import QoSProfile
 from skeleton_core.cdr import frames_to_cdr
 from skeleton_core.params import ParamSpec
 from skeleton_core.rosnode import InputDrops, ManagedNode, Parameters, run_node
-from skeleton_core.tf import WORLD_FRAME, TfBuffer
+from skeleton_core.tf import WORLD_FRAME, HeldUntilTf, TfBuffer
 from skeleton_core.tf_ros import StaticTfListener
 from skeleton_msgs.msg import SkeletonArray
 
@@ -90,7 +91,7 @@ class FusionNode(ManagedNode):
                 self.get_logger().info(f'compiled kernels ready in {warm_s:.1f} s (cached from now on)')
         self._new_state()
         self.tf = TfBuffer()
-        self.tf_listener = StaticTfListener(self, self.tf)
+        self.tf_listener = StaticTfListener(self, self.tf, on_change=self._release_held)
         self._configured.append(('subscription', self.tf_listener.sub))
         self._pose_key: Dict[str, tuple] = {}   # sensor -> (frame, TF version) of its pose
         self.pub = self.publisher(SkeletonArray, self.params['output_topic'],
@@ -102,6 +103,8 @@ class FusionNode(ManagedNode):
         # placements start unknown: a sensor's frames are taken once TF has its frame
         self.fusion = MultiSensorFusion({s: Transform() for s in self.sensors})
         self.clock = FusionClock(self.sensors, max_wait_s=self.params['max_wait_ms'] / 1000.0)
+        # the frames that came before TF knew their frame, in arrival order (1 s of each sensor's)
+        self._held = HeldUntilTf(limit=round(len(self.sensors) / FRAME_PERIOD_S))
 
     def activate(self) -> None:
         self._new_state()
@@ -137,11 +140,24 @@ class FusionNode(ManagedNode):
             self.pub.publish(data)
             self._published(self._stamp_of(data))
             return
+        self._take_input(sensor, data)
+
+    def _release_held(self) -> None:
+        """TF changed: the frames held for want of it, in the order they came."""
+        if self.fusion is None:
+            return
+        for sensor, data in self._held.take():
+            self._take_input(sensor, data)
+
+    def _take_input(self, sensor: str, data: bytes) -> None:
         decoded = self._drop.decode(data)
         if decoded is None:
             return
         stamp, frame_id, frames = decoded
-        if not self._sensor_pose(sensor, frame_id):
+        missing = self._sensor_pose(sensor, frame_id)
+        if missing:   # held until TF knows the frame; what no longer fits is dropped
+            if self._held.hold((sensor, data)) is not None:
+                self._drop('no transform', missing)
             return
         try:
             self.fusion.add(sensor, frames, stamp)
@@ -188,23 +204,22 @@ class FusionNode(ManagedNode):
         except Exception:  # noqa: BLE001 - passed through as it came: the stamp is only a figure
             return None
 
-    def _sensor_pose(self, sensor: str, frame: str) -> bool:
-        """The sensor's placement (world <- ``frame``) from TF into the fusion; False (the message
-        dropped and counted, the reason logged once) while TF does not know the frame."""
+    def _sensor_pose(self, sensor: str, frame: str) -> str:
+        """The sensor's placement (world <- ``frame``) from TF into the fusion; '' when it is
+        there, else why not."""
         key = (frame, self.tf.version)
         if self._pose_key.get(sensor) == key:
-            return True
+            return ''
         try:
             pose = self.tf.lookup(WORLD_FRAME, frame or '?')
         except LookupError as e:
-            self._drop('no transform', f'{sensor}: waiting for TF {WORLD_FRAME} -> {frame} ({e}); '
-                       'the launch files publish it (static_tf: sensor_pose, extrinsics)')
-            return False
+            return (f'{sensor}: waiting for TF {WORLD_FRAME} -> {frame} ({e}); the launch files '
+                    'publish it (static_tf: sensor_pose, extrinsics)')
         self.fusion.poses[sensor] = pose
         if self._pose_key.get(sensor, ('',))[0] != frame:
             self.get_logger().info(f'{sensor}: frame {frame} in {WORLD_FRAME}: {pose}')
         self._pose_key[sensor] = key
-        return True
+        return ''
 
 
 def main(args=None) -> int:

@@ -265,6 +265,30 @@ class TfBuffer:
         return self._to_ancestor(target, common).inverse() * self._to_ancestor(source, common)
 
 
+class HeldUntilTf:
+    """Input that came before TF knew its frame, held until it does (nothing of a sensor's first
+    frames is lost to a static transform that arrives a little after them, as a latched
+    ``/tf_static`` can). Bounded: the newest ``limit`` items are kept; :meth:`hold` returns the one
+    it had to let go (a drop for the caller to count), :meth:`take` the held items, oldest first."""
+
+    def __init__(self, limit: int = 30):
+        if limit < 1:
+            raise ValueError(f'limit must be >= 1, got {limit}')
+        self.limit = int(limit)
+        self._items: List = []
+
+    def __len__(self) -> int:
+        return len(self._items)
+
+    def hold(self, item):
+        self._items.append(item)
+        return self._items.pop(0) if len(self._items) > self.limit else None
+
+    def take(self) -> List:
+        out, self._items = self._items, []
+        return out
+
+
 def transforms_from_msg(msg) -> List[Tuple[str, str, 'Transform']]:
     """The ``(parent, child, Transform)`` items of a ``tf2_msgs/TFMessage`` (an rclpy message or
     any object with its fields, e.g. one decoded from a bag); a transform that is not one (NaN,
