@@ -3,7 +3,6 @@ fake Azure Kinect ROS driver (tests/fake_azure_driver.py: the driver's ``/body_t
 markers of three bodies entering and leaving): every capture of every body is reconstructed.
 
 Its own module: launch_pytest runs one launch service at a time."""
-import os
 import sys
 import tempfile
 import time
@@ -12,21 +11,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-launch_pytest = pytest.importorskip(
-    'launch_pytest', reason='ROS 2 launch tooling not installed: no /opt/ros/<distro> and no '
-    '../shared/ros2 to build it from (scripts/setup.sh builds it when ../shared/ros2 exists)')
-
 import launch  # noqa: E402
-from ament_index_python.packages import get_package_share_directory  # noqa: E402
-from launch.actions import ExecuteProcess, IncludeLaunchDescription  # noqa: E402
-from launch.launch_description_sources import PythonLaunchDescriptionSource  # noqa: E402
+from launch_support import include, launch_pytest  # noqa: E402
+from launch.actions import ExecuteProcess  # noqa: E402
 
 import azure_fake as A  # noqa: E402
 from skeleton_core import tracker as T  # noqa: E402
 
 pytestmark = [pytest.mark.launch_tooling, pytest.mark.slow]
 
-SHARE = get_package_share_directory('kinect_bringup')
 HERE = Path(__file__).resolve().parent
 OUTPUT = Path(tempfile.mkdtemp(prefix='kp_launch_azure_live_')) / 'live.mcap'
 
@@ -34,10 +27,8 @@ OUTPUT = Path(tempfile.mkdtemp(prefix='kp_launch_azure_live_')) / 'live.mcap'
 @launch_pytest.fixture(scope='module')
 def azure_live():
     return launch.LaunchDescription([
-        IncludeLaunchDescription(
-            PythonLaunchDescriptionSource(os.path.join(SHARE, 'launch', 'pipeline.launch.py')),
-            launch_arguments={'source': 'azure_kinect', 'record': str(OUTPUT),
-                              'physics': 'false', 'viz': 'false'}.items()),
+        include('pipeline.launch.py', source='azure_kinect', record=str(OUTPUT),
+                physics='false', viz='false'),
         # the Azure Kinect ROS driver: starts once the reconstruction and the recorder read
         ExecuteProcess(cmd=[sys.executable, str(HERE / 'fake_azure_driver.py'), '--wait-topic',
                             '/kinect/skeletons', '--wait', '2', '--timeout', '120'],

@@ -5,7 +5,6 @@ source:=replay replay_file:=BAG`` with nothing else set: every frame of every bo
 reconstructed, and the recording of the run declares the tracker ``azure_kinect_bt``.
 
 Its own module: launch_pytest runs one launch service at a time."""
-import os
 import tempfile
 import time
 from pathlib import Path
@@ -13,21 +12,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-launch_pytest = pytest.importorskip(
-    'launch_pytest', reason='ROS 2 launch tooling not installed: no /opt/ros/<distro> and no '
-    '../shared/ros2 to build it from (scripts/setup.sh builds it when ../shared/ros2 exists)')
-
 import launch  # noqa: E402
-from ament_index_python.packages import get_package_share_directory  # noqa: E402
-from launch.actions import IncludeLaunchDescription  # noqa: E402
-from launch.launch_description_sources import PythonLaunchDescriptionSource  # noqa: E402
+from launch_support import include, launch_pytest  # noqa: E402
 
 import azure_fake as A  # noqa: E402
 from skeleton_core import tracker as T  # noqa: E402
 
 pytestmark = [pytest.mark.launch_tooling, pytest.mark.slow]
 
-SHARE = get_package_share_directory('kinect_bringup')
 WORK = Path(tempfile.mkdtemp(prefix='kp_launch_azure_replay_'))
 INPUT, OUTPUT = WORK / 'body_tracking.mcap', WORK / 'replayed.mcap'
 
@@ -36,11 +28,9 @@ INPUT, OUTPUT = WORK / 'body_tracking.mcap', WORK / 'replayed.mcap'
 def azure_replay():
     A.write_bag(INPUT)
     return launch.LaunchDescription([
-        IncludeLaunchDescription(
-            PythonLaunchDescriptionSource(os.path.join(SHARE, 'launch', 'pipeline.launch.py')),
-            launch_arguments={'source': 'replay', 'replay_file': str(INPUT),
-                              'record': str(OUTPUT), 'physics': 'false',
-                              'viz': 'false'}.items()),
+        include('pipeline.launch.py', source='replay', replay_file=str(INPUT),
+                record=str(OUTPUT), physics='false',
+                viz='false'),
         launch_pytest.actions.ReadyToTest(),
     ])
 

@@ -5,7 +5,6 @@ own pose: each driver takes its camera's ``/kinect_k/body_tracking_data``, the f
 skeleton per person in ``world``, and the reconstruction rebuilds them.
 
 Its own module: launch_pytest runs one launch service at a time."""
-import os
 import sys
 import tempfile
 import time
@@ -14,20 +13,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-launch_pytest = pytest.importorskip(
-    'launch_pytest', reason='ROS 2 launch tooling not installed: no /opt/ros/<distro> and no '
-    '../shared/ros2 to build it from (scripts/setup.sh builds it when ../shared/ros2 exists)')
-
 import launch  # noqa: E402
-from ament_index_python.packages import get_package_share_directory  # noqa: E402
-from launch.actions import ExecuteProcess, IncludeLaunchDescription  # noqa: E402
-from launch.launch_description_sources import PythonLaunchDescriptionSource  # noqa: E402
+from launch_support import include, launch_pytest  # noqa: E402
+from launch.actions import ExecuteProcess  # noqa: E402
 
 import azure_fake as A  # noqa: E402
 
 pytestmark = [pytest.mark.launch_tooling, pytest.mark.slow]
 
-SHARE = get_package_share_directory('kinect_bringup')
 HERE = Path(__file__).resolve().parent
 OUTPUT = Path(tempfile.mkdtemp(prefix='kp_launch_azure_sensors_')) / 'two.mcap'
 POSES = ('0 0 0.8 0 0 0', '2.5 2.5 0.8 -90 0 0')   # front + side
@@ -44,11 +37,9 @@ def fake_driver(k):
 @launch_pytest.fixture(scope='module')
 def two_azure():
     return launch.LaunchDescription([
-        IncludeLaunchDescription(
-            PythonLaunchDescriptionSource(os.path.join(SHARE, 'launch', 'pipeline.launch.py')),
-            launch_arguments={'sensors': '2', 'source': 'azure_kinect',
-                              'sensor_pose': '; '.join(POSES), 'record': str(OUTPUT),
-                              'physics': 'false', 'viz': 'false'}.items()),
+        include('pipeline.launch.py', sensors='2', source='azure_kinect',
+                sensor_pose='; '.join(POSES), record=str(OUTPUT),
+                physics='false', viz='false'),
         fake_driver(1), fake_driver(2),
         launch_pytest.actions.ReadyToTest(),
     ])

@@ -2,29 +2,19 @@
 
 Its own module: launch_pytest runs one launch service at a time, so this function-scoped launch
 must not share a module with the module-scoped pipeline launch."""
-import os
 import signal
 import time
 
 import launch
-import launch_pytest  # make setup builds the launch tooling: these tests never skip
+from launch_support import include, launch_pytest  # noqa: E402
 import pytest
-from ament_index_python.packages import get_package_share_directory  # noqa: E402
-from launch.actions import IncludeLaunchDescription, RegisterEventHandler  # noqa: E402
+from launch.actions import RegisterEventHandler  # noqa: E402
 from launch.event_handlers import OnProcessExit  # noqa: E402
-from launch.launch_description_sources import PythonLaunchDescriptionSource  # noqa: E402
 
 from kinect_bringup.graph import TOPICS  # noqa: E402
 from ros_helpers import Probe  # noqa: E402
 
 pytestmark = [pytest.mark.launch_tooling, pytest.mark.slow]
-SHARE = get_package_share_directory('kinect_bringup')
-
-
-def include(name, **args):
-    return IncludeLaunchDescription(
-        PythonLaunchDescriptionSource(os.path.join(SHARE, 'launch', name)),
-        launch_arguments={k: str(v) for k, v in args.items()}.items())
 
 
 EXITS = []

@@ -6,33 +6,19 @@ into one per person in ``world`` on /kinect/skeletons, and the reconstruction (u
 them into /posture/reconstructed in ``world``.
 
 Its own module: launch_pytest runs one launch service at a time."""
-import os
 import time
 
 import pytest
 
-launch_pytest = pytest.importorskip(
-    'launch_pytest', reason='ROS 2 launch tooling not installed: no /opt/ros/<distro> and no '
-    '../shared/ros2 to build it from (scripts/setup.sh builds it when ../shared/ros2 exists)')
-
 import launch  # noqa: E402
-from ament_index_python.packages import get_package_share_directory  # noqa: E402
-from launch.actions import IncludeLaunchDescription  # noqa: E402
-from launch.launch_description_sources import PythonLaunchDescriptionSource  # noqa: E402
+from launch_support import include, launch_pytest  # noqa: E402
 
 from ros_helpers import Probe  # noqa: E402
 
 pytestmark = [pytest.mark.launch_tooling, pytest.mark.slow]
-SHARE = get_package_share_directory('kinect_bringup')
 SKELETONS = 'skeleton_msgs/msg/SkeletonArray'
 TOPICS = {'/kinect_1/skeletons': SKELETONS, '/kinect_2/skeletons': SKELETONS,
           '/kinect/skeletons': SKELETONS, '/posture/reconstructed': SKELETONS}
-
-
-def include(name, **args):
-    return IncludeLaunchDescription(
-        PythonLaunchDescriptionSource(os.path.join(SHARE, 'launch', name)),
-        launch_arguments={k: str(v) for k, v in args.items()}.items())
 
 
 @launch_pytest.fixture

@@ -3,34 +3,23 @@
 They need the launch tooling: a system ROS 2's, or the one `make setup` builds from
 third_party/ros2/<distro>; it is never optional, so they never skip.
 """
-import os
 import time
 
 import launch
-import launch_pytest  # make setup builds the launch tooling: these tests never skip
+from launch_support import include, launch_pytest  # noqa: E402
 import numpy as np
 import pytest
-from ament_index_python.packages import get_package_share_directory  # noqa: E402
-from launch.actions import IncludeLaunchDescription  # noqa: E402
-from launch.launch_description_sources import PythonLaunchDescriptionSource  # noqa: E402
 
 from kinect_bringup.graph import TOPICS, load_params  # noqa: E402
 from ros_helpers import Probe  # noqa: E402
 
 pytestmark = [pytest.mark.launch_tooling, pytest.mark.slow]
 
-SHARE = get_package_share_directory('kinect_bringup')
 SKELETON_TOPICS = {t: ty for t, ty in TOPICS.items() if ty.endswith('SkeletonArray')}
 PIPELINE_TOPICS = dict(SKELETON_TOPICS)
 PIPELINE_TOPICS['/viz/markers'] = TOPICS['/viz/markers']
 PIPELINE_TOPICS.pop('/kinect/ground_truth')
 NODES = ['driver', 'reconstruction', 'physics', 'viz']  # the default graph (fused reconstruction)
-
-
-def include(name, **args):
-    return IncludeLaunchDescription(
-        PythonLaunchDescriptionSource(os.path.join(SHARE, 'launch', name)),
-        launch_arguments={k: str(v) for k, v in args.items()}.items())
 
 
 @launch_pytest.fixture(scope='module')

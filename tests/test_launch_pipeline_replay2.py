@@ -4,20 +4,13 @@ model's views, each bag in its sensor's frame ``kinect_k_link``) replay in ``/ki
 ``/kinect_2``; every node becomes active and the fused skeletons (in ``world``) are reconstructed.
 
 Its own module: launch_pytest runs one launch service at a time."""
-import os
 import tempfile
 from pathlib import Path
 
 import pytest
 
-launch_pytest = pytest.importorskip(
-    'launch_pytest', reason='ROS 2 launch tooling not installed: no /opt/ros/<distro> and no '
-    '../shared/ros2 to build it from (scripts/setup.sh builds it when ../shared/ros2 exists)')
-
 import launch  # noqa: E402
-from ament_index_python.packages import get_package_share_directory  # noqa: E402
-from launch.actions import IncludeLaunchDescription  # noqa: E402
-from launch.launch_description_sources import PythonLaunchDescriptionSource  # noqa: E402
+from launch_support import include, launch_pytest  # noqa: E402
 
 from skeleton_core.bagio import BagWriter  # noqa: E402
 from skeleton_core.cdr import SKELETON_ARRAY, frames_to_cdr  # noqa: E402
@@ -29,7 +22,6 @@ from skeleton_eval.sensor_model import SensorModel  # noqa: E402
 from ros_helpers import Probe  # noqa: E402
 
 pytestmark = [pytest.mark.launch_tooling, pytest.mark.slow]
-SHARE = get_package_share_directory('kinect_bringup')
 SKELETONS = 'skeleton_msgs/msg/SkeletonArray'
 TOPICS = {'/kinect_1/skeletons': SKELETONS, '/kinect_2/skeletons': SKELETONS,
           '/kinect/skeletons': SKELETONS, '/posture/reconstructed': SKELETONS}
@@ -62,11 +54,9 @@ def _write_bags():
 def two_bag_pipeline():
     _write_bags()
     return launch.LaunchDescription([
-        IncludeLaunchDescription(
-            PythonLaunchDescriptionSource(os.path.join(SHARE, 'launch', 'pipeline.launch.py')),
-            launch_arguments={'sensors': '2', 'source': 'replay',
-                              'replay_file': '; '.join(str(b) for b in BAGS),
-                              'physics': 'false', 'viz': 'false'}.items()),
+        include('pipeline.launch.py', sensors='2', source='replay',
+                replay_file='; '.join(str(b) for b in BAGS),
+                physics='false', viz='false'),
         launch_pytest.actions.ReadyToTest(),
     ])
 

@@ -5,23 +5,15 @@ reconstructed. The pipeline's own one-sensor ``sensor_pose`` default used to rea
 driver launch and stop it at once ("sensor_pose has 1 pose(s) for sensors:=2").
 
 Its own module: launch_pytest runs one launch service at a time."""
-import os
 
 import pytest
 
-launch_pytest = pytest.importorskip(
-    'launch_pytest', reason='ROS 2 launch tooling not installed: no /opt/ros/<distro> and no '
-    '../shared/ros2 to build it from (scripts/setup.sh builds it when ../shared/ros2 exists)')
-
 import launch  # noqa: E402
-from ament_index_python.packages import get_package_share_directory  # noqa: E402
-from launch.actions import IncludeLaunchDescription  # noqa: E402
-from launch.launch_description_sources import PythonLaunchDescriptionSource  # noqa: E402
+from launch_support import include, launch_pytest  # noqa: E402
 
 from ros_helpers import Probe  # noqa: E402
 
 pytestmark = [pytest.mark.launch_tooling, pytest.mark.slow]
-SHARE = get_package_share_directory('kinect_bringup')
 SKELETONS = 'skeleton_msgs/msg/SkeletonArray'
 TOPICS = {'/kinect_1/skeletons': SKELETONS, '/kinect_2/skeletons': SKELETONS,
           '/kinect/skeletons': SKELETONS, '/posture/reconstructed': SKELETONS,
@@ -39,9 +31,7 @@ def node_states(probe, nodes):
 @launch_pytest.fixture
 def two_sensor_pipeline():
     return launch.LaunchDescription([
-        IncludeLaunchDescription(
-            PythonLaunchDescriptionSource(os.path.join(SHARE, 'launch', 'pipeline.launch.py')),
-            launch_arguments={'sensors': '2'}.items()),
+        include('pipeline.launch.py', sensors='2'),
         launch_pytest.actions.ReadyToTest(),
     ])
 

@@ -3,18 +3,14 @@ replay_file:=... record:=...`` loses nothing: the driver waits until the reconst
 and the recorder have subscribed, every input frame is reconstructed, and the bag's ground truth
 is replayed so the report of the run scores it. The recording is read while it is still being
 written (crash-safe recorder: flushed every 0.25 s)."""
-import os
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
 import launch
-import launch_pytest  # make setup builds the launch tooling: these tests never skip
+from launch_support import include, launch_pytest  # noqa: E402
 import pytest
-from ament_index_python.packages import get_package_share_directory  # noqa: E402
-from launch.actions import IncludeLaunchDescription  # noqa: E402
-from launch.launch_description_sources import PythonLaunchDescriptionSource  # noqa: E402
 
 from skeleton_core.bagio import BagWriter, read_messages  # noqa: E402
 from skeleton_core.cdr import SKELETON_ARRAY, frames_to_cdr  # noqa: E402
@@ -24,7 +20,6 @@ from skeleton_eval.sensor_model import SensorModel  # noqa: E402
 
 pytestmark = [pytest.mark.launch_tooling, pytest.mark.slow]
 
-SHARE = get_package_share_directory('kinect_bringup')
 WORK = Path(tempfile.mkdtemp(prefix='kp_launch_replay_'))
 INPUT, OUTPUT = WORK / 'input.mcap', WORK / 'replayed.mcap'
 FRAMES = 90
@@ -49,11 +44,9 @@ def _write_input(path):
 def replay_launch():
     _write_input(INPUT)
     return launch.LaunchDescription([
-        IncludeLaunchDescription(
-            PythonLaunchDescriptionSource(os.path.join(SHARE, 'launch', 'pipeline.launch.py')),
-            launch_arguments={'source': 'replay', 'replay_file': str(INPUT),
-                              'record': str(OUTPUT), 'physics': 'false',
-                              'viz': 'false'}.items()),
+        include('pipeline.launch.py', source='replay', replay_file=str(INPUT),
+                record=str(OUTPUT), physics='false',
+                viz='false'),
         launch_pytest.actions.ReadyToTest(),
     ])
 

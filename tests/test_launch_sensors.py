@@ -5,21 +5,14 @@ from their own poses, so the calibration recovers the second sensor's pose from 
 published over DDS.
 
 Its own module: launch_pytest runs one launch service at a time."""
-import os
 import time
 
 import numpy as np
 import pytest
 
-launch_pytest = pytest.importorskip(
-    'launch_pytest', reason='ROS 2 launch tooling not installed: no /opt/ros/<distro> and no '
-    '../shared/ros2 to build it from (scripts/setup.sh builds it when ../shared/ros2 exists)')
-
 import launch  # noqa: E402
+from launch_support import include, launch_pytest  # noqa: E402
 import rclpy  # noqa: E402
-from ament_index_python.packages import get_package_share_directory  # noqa: E402
-from launch.actions import IncludeLaunchDescription  # noqa: E402
-from launch.launch_description_sources import PythonLaunchDescriptionSource  # noqa: E402
 from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 
 from skeleton_core.cdr import frames_from_cdr  # noqa: E402
@@ -28,17 +21,14 @@ from skeleton_core.tf_ros import StaticTfListener  # noqa: E402
 from skeleton_eval.extrinsics import tracks_from_frames  # noqa: E402
 
 pytestmark = [pytest.mark.launch_tooling, pytest.mark.slow]
-SHARE = get_package_share_directory('kinect_bringup')
 POSES = '0 0 0.8 0 0 0; 2.5 2.5 1.0 -90 0 0'   # front + side, the side sensor 0.2 m higher
 
 
 @launch_pytest.fixture
 def two_sensors():
     return launch.LaunchDescription([
-        IncludeLaunchDescription(
-            PythonLaunchDescriptionSource(os.path.join(SHARE, 'launch', 'driver.launch.py')),
-            launch_arguments={'sensors': '2', 'sensor_pose': POSES, 'scenario': 'clean',
-                              'num_users': '1'}.items()),
+        include('driver.launch.py', sensors='2', sensor_pose=POSES, scenario='clean',
+                num_users='1'),
         launch_pytest.actions.ReadyToTest(),
     ])
 

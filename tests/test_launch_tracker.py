@@ -12,14 +12,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-launch_pytest = pytest.importorskip(
-    'launch_pytest', reason='ROS 2 launch tooling not installed: no /opt/ros/<distro> and no '
-    '../shared/ros2 to build it from (scripts/setup.sh builds it when ../shared/ros2 exists)')
-
 import launch  # noqa: E402
-from ament_index_python.packages import get_package_share_directory  # noqa: E402
-from launch.actions import IncludeLaunchDescription  # noqa: E402
-from launch.launch_description_sources import PythonLaunchDescriptionSource  # noqa: E402
+from launch_support import include, launch_pytest  # noqa: E402
 
 from skeleton_core import tracker as T  # noqa: E402
 from skeleton_core.bagio import BagWriter, read_messages  # noqa: E402
@@ -30,7 +24,6 @@ from skeleton_eval.sensor_model import SensorModel  # noqa: E402
 
 pytestmark = [pytest.mark.launch_tooling, pytest.mark.slow]
 
-SHARE = get_package_share_directory('kinect_bringup')
 WORK = Path(tempfile.mkdtemp(prefix='kp_launch_tracker_'))
 INPUT, OUTPUT = WORK / 'input.mcap', WORK / 'replayed.mcap'
 CACHE = WORK / 'cache'
@@ -65,11 +58,9 @@ def tracker_launch():
     _write_inputs()
     os.environ['KINECT_POSTURE_CACHE'] = str(CACHE)   # the launched nodes' cache/
     return launch.LaunchDescription([
-        IncludeLaunchDescription(
-            PythonLaunchDescriptionSource(os.path.join(SHARE, 'launch', 'pipeline.launch.py')),
-            launch_arguments={'source': 'replay', 'replay_file': str(INPUT),
-                              'record': str(OUTPUT), 'physics': 'false',
-                              'viz': 'false'}.items()),
+        include('pipeline.launch.py', source='replay', replay_file=str(INPUT),
+                record=str(OUTPUT), physics='false',
+                viz='false'),
         launch_pytest.actions.ReadyToTest(),
     ])
 
