@@ -13,6 +13,16 @@ every output posture of a user the same 19 segment lengths; this module estimate
   ~4 mm) converges in ``min_samples`` frames, so the output's lengths change only in the first
   0.1 s of a user; a noisy one averages more frames (on the sensor-model streams 3 frames cost
   up to 2 points of Eq. 18 on class a against 15).
+* **While converging** the output has the *expected final* estimate (:meth:`BoneLengthEstimator.
+  predicted`), not the running mean: the samples so far weighed with what the remaining ones are
+  expected to average, each segment's mean shrunk towards the body proportions at the user's
+  size (one scale from every observed segment; the proportions' spread the most likely on the
+  user, so a user or sensor layout they do not fit is hardly shrunk). Its noise is measured on
+  the user (pooled over the segments) and, for the first frame, on the sensor's earlier users
+  (:class:`SensorLengthNoise`). Once a segment is done, or no more samples can come, it is the
+  estimate itself: the converged lengths are the same as without the prediction. On the
+  synthetic Azure Kinect bag (1.2 cm joint noise) the whole-track bone-length std of the 1.3 s
+  user went from 79 % to 87 % below the tracker's, of the 2-5 s users from 84-90 % to 92 %.
 * **Frozen**: when every segment has its samples, or ``settle_s`` seconds after the first trusted
   observation (a segment still unseen then keeps the caller's fallback, e.g. the length prior's
   proportions at the user's size). From then on the lengths are constant.

@@ -36,6 +36,14 @@ database's (the hands, which that reference lacks, keep the database's). On the 
 recordings the database's proportions moved the corrected lengths away from what the sensor
 measures (the hip segments by ~0.7 cm, the neck ~0.7 cm; docs/research, accuracy, round 5).
 
+**Converging lengths.** While the observed lengths are still being estimated their means vary
+more than they will when final (a few noisy or settling first frames); the caller passes that
+excess variance per side (:meth:`.BoneLengthEstimator.excess_variances`), and the offset scale
+(the left/right differences less it), the size fit, ``k`` and the outlier test take it in, so
+they are judged as on the final lengths (without it, one side 9 cm off in the first two frames
+of a real recording made the offset scale 2 cm instead of 2 mm and moved every output length by
+~1 cm). The output weights stay the final ones; with no excess (converged) nothing changes.
+
 The output length is the inverse-variance (minimum expected error) combination::
 
     L = (L_obs * var_prior + r h * var_obs) / (var_obs + var_prior)
