@@ -40,9 +40,11 @@ measures (the hip segments by ~0.7 cm, the neck ~0.7 cm; docs/research, accuracy
 more than they will when final (a few noisy or settling first frames); the caller passes that
 excess variance per side (:meth:`.BoneLengthEstimator.excess_variances`), and the offset scale
 (the left/right differences less it), the size fit, ``k`` and the outlier test take it in, so
-they are judged as on the final lengths (without it, one side 9 cm off in the first two frames
-of a real recording made the offset scale 2 cm instead of 2 mm and moved every output length by
-~1 cm). The output weights stay the final ones; with no excess (converged) nothing changes.
+they are judged as on the final lengths (the sampling noise of the first means otherwise reads as
+joint-centre offsets, inflating the offset scale and moving every output length). The output
+weights stay the final ones; with no excess (converged) nothing changes. A side that is wrong
+but steady for its first frames (a real Kinect v2 leg settling over 2-4 frames) shows no
+excess and still inflates the scale until its later samples come.
 
 The output length is the inverse-variance (minimum expected error) combination::
 
