@@ -46,14 +46,11 @@ from typing import Dict, Optional
 
 import numpy as np
 
-from skeleton_core.model import (JOINT_NAMES, MIRROR, NUM_SEGMENTS, SEGMENT_CHILD_INDEX,
-                                 SEGMENT_CHILDREN, SEGMENT_PARENT_INDEX)
+from skeleton_core.model import (JOINT_NAMES, NUM_SEGMENTS, SEGMENT_CHILD_INDEX,
+                                 SEGMENT_PARENT_INDEX)
 
 from .profile import SEGMENT_NAMES
 
-# the mirror image of each segment (itself on the midline)
-_MIRROR_SEG = np.array([SEGMENT_CHILDREN.index(MIRROR[c]) for c in SEGMENT_CHILDREN])
-_MIRRORED = _MIRROR_SEG != np.arange(NUM_SEGMENTS)
 # a frame's evidence about another person needs this many trusted segments
 MIN_SEGMENTS = 6
 # the robust mean keeps samples within this many scaled MADs of the median (and within _MIN_DEV)
@@ -148,6 +145,8 @@ class BoneLengthEstimator:
         self.done = np.zeros(NUM_SEGMENTS, bool)   # a segment's estimate is good enough
         self._elapsed: Optional[float] = None   # s since the first trusted observation
         self._frames = 0                        # frames observed since then
+        self._estimate_key = -1                 # the samples behind self._estimate
+        self._estimate = np.full(NUM_SEGMENTS, np.nan)
         self._dt = 1.0 / 30.0                   # the last frame step (s)
         self.frozen: Optional[np.ndarray] = None
         self._evidence = 0.0                    # the averaged disagreement with the frozen lengths
@@ -156,7 +155,12 @@ class BoneLengthEstimator:
     @property
     def estimate(self) -> np.ndarray:
         """(19,) the robust mean of each segment's samples (NaN where none)."""
-        return np.array([robust_mean(self._buf[:c, s]) for s, c in enumerate(self.counts)])
+        key = int(self.counts.sum())   # samples only accumulate until reset()
+        if self._estimate_key != key:
+            self._estimate = np.array([robust_mean(self._buf[:c, s])
+                                       for s, c in enumerate(self.counts)])
+            self._estimate_key = key
+        return self._estimate.copy()
 
     def expected_counts(self, noise2: np.ndarray) -> np.ndarray:
         """(19,) how many samples each segment is expected to have when it is final, given its
@@ -175,10 +179,11 @@ class BoneLengthEstimator:
         """(19,) each segment's sum of squared deviations from its mean (m^2), (19,) their
         degrees of freedom."""
         n = self.counts
-        ss = np.zeros(NUM_SEGMENTS)
-        for s in np.nonzero(n >= 2)[0]:
-            x = self._buf[:n[s], s]
-            ss[s] = float(np.sum((x - x.mean()) ** 2))
+        x = self._buf   # NaN beyond each segment's samples
+        with np.errstate(invalid='ignore'):
+            mean = np.where(n > 0, np.nansum(x, axis=0) / np.maximum(n, 1), 0.0)
+        d = np.where(np.isfinite(x), x - mean, 0.0)
+        ss = np.where(n >= 2, np.sum(d * d, axis=0), 0.0)
         return ss, np.maximum(n - 1, 0)
 
     def noise_variances(self) -> np.ndarray:
@@ -233,11 +238,11 @@ class BoneLengthEstimator:
             # likely on the observed means (a robust normal likelihood: a segment beyond 3
             # standard deviations counts as at 3), and the proportions that are most likely
             e2 = ((m - c) ** 2)[ok]
-            for tau in _SPREADS:
-                var = se2[ok] + (tau * c[ok]) ** 2
-                nll = float(np.sum(np.log(var) + np.minimum(e2 / var, 9.0)))
-                if best is None or nll < best[0]:
-                    best = (nll, tau * tau, c, ok)
+            var = se2[ok][None] + (_SPREADS[:, None] * c[ok][None]) ** 2
+            nll = np.sum(np.log(var) + np.minimum(e2[None] / var, 9.0), axis=1)
+            i = int(np.argmin(nll))
+            if best is None or nll[i] < best[0]:
+                best = (float(nll[i]), float(_SPREADS[i]) ** 2, c, ok)
         if best is None:
             return m
         _, tau2, c, ok = best
