@@ -86,8 +86,12 @@ def test_process_bag_takes_a_body_tracking_recording_as_it_is(bag, tmp_path):
               f'({1 - so / sr:.0%} below; after the first {SETTLE} frames {settled[1]:.2f} -> '
               f'{settled[0]:.3f} cm), jitter raw {jr:.1f} -> {jo:.1f} m/s^2')
     for u, (sr, so, jr, jo, (s_out, s_raw)) in figures.items():
-        # the user's lengths are learned in the first half second, then held
-        assert so < 0.25 * sr and s_out <= 0.1 * s_raw, (u, figures)
+        # the user's lengths are learned in the first half second, then held; while they
+        # converge the output has the expected final lengths (bone_lengths.py): over the whole
+        # track >= 90 % below the tracker's from 2 s on, >= 85 % on the 1.3 s user (the
+        # 15-sample estimate of a 1.7 cm length noise itself moves that much while it forms)
+        assert so < (0.10 if expected[u] >= 60 else 0.15) * sr, (u, figures)
+        assert s_out <= 0.1 * s_raw, (u, figures)
         assert jo < jr, (u, figures)
 
 

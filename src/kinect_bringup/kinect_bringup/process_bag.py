@@ -28,6 +28,7 @@ from skeleton_core.bag_split import bag_pieces, pieces_topics, read_pieces
 from skeleton_core.bagio import BagError, BagWriter
 from skeleton_core.cdr import SKELETON_ARRAY, CdrError, frames_from_cdr, frames_to_cdr
 from skeleton_core.presence import Presence
+from pose_reconstruction.bone_lengths import SensorLengthNoise
 from pose_reconstruction.profile import SEGMENT_NAMES
 from pose_reconstruction.reconstructor import Reconstructor
 from skeleton_eval.metrics import eq18_error, length_rigidity, mpjpe
@@ -126,6 +127,8 @@ def process(bag, out: Path, method: str = 'C', database: str = '', physics: bool
     db = load_database(database)
     out_topic = '/posture/completed' if method == 'A' else '/posture/reconstructed'
     users: Dict[int, object] = {}
+    # one sensor: its segment length noise measured on a user is the next one's first guess
+    length_noise = SensorLengthNoise()
     presence = Presence(user_timeout_s)
     sim = None
     if physics:
@@ -208,7 +211,9 @@ def process(bag, out: Path, method: str = 'C', database: str = '', physics: bool
             for f in frames:
                 r = users.get(f.user_id)
                 if r is None:
-                    r = users[f.user_id] = Reconstructor(db, method=method, **params)
+                    r = users[f.user_id] = Reconstructor(db, method=method,
+                                                                length_noise=length_noise,
+                                                                **params)
                     arrivals += 1
                     track_of[f.user_id] = ([], [], r)
                     tracks.append(track_of[f.user_id])

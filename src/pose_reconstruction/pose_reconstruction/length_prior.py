@@ -36,6 +36,16 @@ database's (the hands, which that reference lacks, keep the database's). On the 
 recordings the database's proportions moved the corrected lengths away from what the sensor
 measures (the hip segments by ~0.7 cm, the neck ~0.7 cm; docs/research, accuracy, round 5).
 
+**Converging lengths.** While the observed lengths are still being estimated their means vary
+more than they will when final (a few noisy or settling first frames); the caller passes that
+excess variance per side (:meth:`.BoneLengthEstimator.excess_variances`), and the offset scale
+(the left/right differences less it), the size fit, ``k`` and the outlier test take it in, so
+they are judged as on the final lengths (the sampling noise of the first means otherwise reads as
+joint-centre offsets, inflating the offset scale and moving every output length). The output
+weights stay the final ones; with no excess (converged) nothing changes. A side that is wrong
+but steady for its first frames (a real Kinect v2 leg settling over 2-4 frames) shows no
+excess and still inflates the scale until its later samples come.
+
 The output length is the inverse-variance (minimum expected error) combination::
 
     L = (L_obs * var_prior + r h * var_obs) / (var_obs + var_prior)
@@ -61,6 +71,8 @@ from skeleton_core.params import check, param
 # the mirror image of each segment (itself on the midline)
 _MIRROR_SEG = np.array([SEGMENT_CHILDREN.index(MIRROR[c]) for c in SEGMENT_CHILDREN])
 _MIRRORED = _MIRROR_SEG != np.arange(NUM_SEGMENTS)
+# the least offset variance (m^2 per axis) measured once the sampling variance is taken out
+_MIN_SIGMA2 = 1e-8
 
 
 @dataclass
@@ -129,27 +141,43 @@ class LengthPrior:
         except (ValueError, TypeError):
             return None
 
-    def offset_variance(self, sides: np.ndarray, seen: np.ndarray) -> float:
+    def offset_variance(self, sides: np.ndarray, seen: np.ndarray,
+                        excess: Optional[np.ndarray] = None) -> float:
         """``sigma^2`` (m^2 per axis) from the left/right differences of the observed lengths
-        ``sides`` (19,) where ``seen`` (module docstring); the parameter when not measurable."""
+        ``sides`` (19,) where ``seen`` (module docstring), less ``excess`` (19,), the sampling
+        variance of each side's length beyond its final one (the estimate still converging);
+        the parameter when not measurable."""
         pair = _MIRRORED & seen & seen[_MIRROR_SEG]
         if not self.online or not pair.any():
             return self.sigma2
         d = sides[pair] - sides[_MIRROR_SEG][pair]
-        return float(np.mean(d * d)) / 4.0
+        d2 = d * d
+        if excess is not None:
+            d2 = d2 - excess[pair] - excess[_MIRROR_SEG][pair]
+        return max(float(np.mean(d2)) / 4.0, _MIN_SIGMA2)
 
-    def fuse(self, sides: np.ndarray, counts: np.ndarray) -> np.ndarray:
+    def fuse(self, sides: np.ndarray, counts: np.ndarray,
+             excess: Optional[np.ndarray] = None) -> np.ndarray:
         """(19,) the output lengths from ``sides`` (19,) the mean observed length of each segment
         (any value where ``counts`` is 0) and ``counts`` (19,) the reliable observations behind
-        them (module docstring)."""
+        them (module docstring). ``excess`` (19,; m^2): while the lengths are still being
+        estimated, how much more each side's length varies now than it will when final
+        (:meth:`.BoneLengthEstimator.excess_variances`): the offset scale, the user's size, the
+        prior's check and the outliers are then judged as they will be on the final lengths
+        (without it, a few noisy first frames inflated the offset scale ten-fold and moved every
+        output length); 0 once final."""
         L = np.asarray(sides, float)
         seen = np.asarray(counts) > 0
-        s2 = self.offset_variance(L, seen)
+        ex = np.zeros(NUM_SEGMENTS) if excess is None else np.where(
+            seen, np.nan_to_num(np.asarray(excess, float), nan=0.0), 0.0)
+        s2 = self.offset_variance(L, seen, ex)
         nobs = np.ones(NUM_SEGMENTS)  # sides behind each observed length
         if self.symmetric:
             other = L[_MIRROR_SEG]
             both = seen & seen[_MIRROR_SEG] & _MIRRORED
             L = np.where(both, 0.5 * (L + other), np.where(seen, L, other))
+            ex = np.where(both, 0.25 * (ex + ex[_MIRROR_SEG]),
+                          np.where(seen, ex, ex[_MIRROR_SEG]))
             nobs = np.where(both, 2.0, 1.0)
             seen = seen | seen[_MIRROR_SEG]
         if int(seen.sum()) < self.min_segments:
@@ -158,6 +186,7 @@ class LengthPrior:
             return L
         r = self.mean
         var_obs = 2.0 * s2 / nobs
+        var_now = var_obs + ex   # the observed lengths' error as they are now
         k = 1.0
         use = seen.copy()
         h = float(np.dot(r[use], L[use]) / np.dot(r[use], r[use]))
@@ -166,17 +195,17 @@ class LengthPrior:
         for _ in range(3):
             # segments the prior cannot describe (beyond length_prior_outlier standard
             # deviations): observed lengths only, and left out of the size and of k
-            zs = (L - r * h) ** 2 / (var_obs + k * var_p0 + r * r * var_h)
+            zs = (L - r * h) ** 2 / (var_now + k * var_p0 + r * r * var_h)
             use = seen & (zs <= self.outlier2)
             if int(use.sum()) < self.min_segments:
                 use = seen
             # the user's size: weighted least squares of the observed lengths on the ratios
-            wr = (r / (var_obs + k * var_p0))[use]
+            wr = (r / (var_now + k * var_p0))[use]
             h = float(np.dot(wr, L[use]) / np.dot(wr, r[use]))
             var_h = 1.0 / float(np.dot(wr, r[use]))
             var_p0 = (r * h) ** 2 * self.rel_var
             # the prior checked against the user: its spread at least as the database's
-            z = (L - r * h) ** 2 - var_obs - r * r * var_h
+            z = (L - r * h) ** 2 - var_now - r * r * var_h
             k = max(1.0, float(np.sum(z[use]) / max(float(np.sum(var_p0[use])), 1e-12)))
         var_prior = k * var_p0 + r * r * var_h
         self.offset_sigma, self.height, self.prior_scale = float(np.sqrt(s2)), h, k

@@ -395,7 +395,8 @@ def load_user_terms(values: Dict[str, Any], logger=None) -> Dict[str, Any]:
     """The Reconstructor keywords of the correction / profile parameters: ``correction`` (None
     when off or refused: another or an undeclared tracker, logged in one line; the tracker is
     ``input_tracker``, else ``stream_tracker``: the one the stream declares on /kinect/tracker),
-    ``correction_stage``, ``input_tracker``, ``profile``. Files are loaded by path, never
+    ``correction_stage``, ``input_tracker``, ``profile``, ``length_noise`` (the sensor's segment
+    length noise, shared by the node's users: :class:`.bone_lengths.SensorLengthNoise`). Files are loaded by path, never
     built: a named file (or the default correction that applies to the input) that is missing
     or malformed raises FileNotFoundError / ValueError with one line naming the command that
     builds it."""
@@ -411,8 +412,9 @@ def load_user_terms(values: Dict[str, Any], logger=None) -> Dict[str, Any]:
     if values.get('user_profile'):
         prof = P.load_by_name(values['user_profile'], values.get('profiles_dir') or None)
         info(f'user profile {prof.name!r}: segment lengths from {prof.frames} frames')
+    from .bone_lengths import SensorLengthNoise
     return {'correction': corr, 'correction_stage': values.get('correction_stage', 'input'),
-            'input_tracker': tracker, 'profile': prof}
+            'input_tracker': tracker, 'profile': prof, 'length_noise': SensorLengthNoise()}
 
 
 def load_database(path: str, loader: Optional[Callable[[], Any]] = None):

@@ -185,7 +185,7 @@ class Reconstructor:
 
     def __init__(self, db, method: str = 'C', use_reliability: Optional[bool] = None,
                  correction=None, correction_stage: str = CorrectionConfig.correction_stage,
-                 input_tracker: str = '', profile=None, **params):
+                 input_tracker: str = '', profile=None, length_noise=None, **params):
         method = str(method).upper()
         if method not in METHODS:
             raise ValueError(f'method must be one of {METHODS}, got {method!r}')
@@ -225,12 +225,17 @@ class Reconstructor:
             self.body_fit.height_settled if self.body_fit else (lambda: True),
             self.reliable_threshold, self.output_scale, cfg.segments)
         self.segment_output.profile_lengths = profile_lengths(profile)
+        # the sensor's segment length noise on earlier users (bone_lengths.SensorLengthNoise,
+        # shared by the users of one sensor): a new user's first frames converge with it
+        self.segment_output.estimator.noise_memory = length_noise
         # a correction maps the joints to its reference's layout: the prior takes its proportions
         self.length_prior = LengthPrior.from_meta(
             cfg.lengths, getattr(db, 'meta', None), cfg.segments.symmetric_lengths,
             layout=getattr(correction, 'meta', None))
         if self.length_prior is not None:
             self.segment_output.length_prior = self.length_prior.fuse
+            self.segment_output.proportions = np.stack([self.segment_output.proportions,
+                                                        self.length_prior.mean])
             prior = self.length_prior
             self.segment_output.offset_sigma = lambda: prior.offset_sigma
         self.length_window = int(cfg.length_window)

@@ -246,6 +246,11 @@ class SegmentOutput:
         self.filled_memory_s = float(config.filled_memory_s)
         # the user's profile lengths (19,), used from the first frame when set (Reconstructor)
         self.profile_lengths: Optional[np.ndarray] = None
+        # the body proportions ((19,) or (k, 19), any scale) the expected final lengths are
+        # predicted from while the estimate converges (BoneLengthEstimator.predicted): the
+        # database body's, and the length prior's when set (the Reconstructor); None = the
+        # running estimate itself
+        self.proportions: Optional[np.ndarray] = self._standard_lengths
         # (observed lengths of each side (19,), reliable observation counts (19,)) -> lengths:
         # the length prior (length_prior.py), set by the Reconstructor; None = observed lengths
         # only
@@ -266,7 +271,7 @@ class SegmentOutput:
         self._seg_fallback = np.full(NUM_SEGMENTS, np.nan)
         self._frozen_lengths: Optional[np.ndarray] = None
         self._prior_cache: Optional[tuple] = None  # (prior, sides, counts, fused lengths)
-        self._estimate_cache: Optional[tuple] = None  # (counts, robust means)
+        self._estimate_cache: Optional[tuple] = None  # (counts, means, complete, excess)
         self._profile_refused = False  # the profile's lengths were another person's
         # filled_memory_s: each segment's last reliably observed direction and its age (s)
         self._seen_u = np.zeros((NUM_SEGMENTS, 3))
@@ -326,27 +331,33 @@ class SegmentOutput:
                 unset = none  # the database height fit is still converging: follow it
             if unset.any():
                 self._seg_fallback[unset] = self.reliability.reference_lengths[unset]
+        complete = est.complete()
         cached = self._estimate_cache
-        if cached is not None and np.array_equal(cached[0], counts):
-            mean = cached[1]  # nothing observed since
+        if cached is not None and cached[2] == complete and np.array_equal(cached[0], counts):
+            mean, excess = cached[1], cached[3]  # nothing observed since
+        elif complete:
+            mean, excess = est.estimate, None
         else:
-            mean = est.estimate
-            self._estimate_cache = (counts.copy(), mean)
+            # while converging: the expected final estimate, and how much more the estimate
+            # varies now than it will (the output's lengths move less while they converge)
+            mean, excess = est.predicted(self.proportions), est.excess_variances()
+        self._estimate_cache = (counts.copy(), mean, complete, excess)
         L = np.where(none, self._seg_fallback, mean)
         if self.length_prior is not None:
             # the observed lengths of each side and the length prior (it shares the sides'
             # lengths itself when symmetric_lengths)
             cached = self._prior_cache
-            if cached is not None and cached[0] is self.length_prior \
+            if cached is not None and cached[0] is self.length_prior and cached[4] == complete \
                     and np.array_equal(cached[1], L) and np.array_equal(cached[2], counts):
                 L = cached[3].copy()  # nothing observed since: the same fusion
             else:
-                fused = self.length_prior(L, counts)
-                self._prior_cache = (self.length_prior, L, counts.copy(), fused.copy())
+                fused = (self.length_prior(L, counts) if excess is None
+                         else self.length_prior(L, counts, excess))
+                self._prior_cache = (self.length_prior, L, counts.copy(), fused.copy(), complete)
                 L = fused
         elif self.symmetric_lengths:
             L = 0.5 * (L + L[_MIRROR_SEG])
-        if est.complete():
+        if complete:
             self._frozen_lengths = L  # constant from now on
             est.freeze(L)
         return L

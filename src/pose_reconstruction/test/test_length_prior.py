@@ -111,7 +111,7 @@ def test_the_fusion_runs_again_only_when_an_observation_arrives():
     out = Reconstructor(db, method='C').segment_output
     calls = []
     prior = out.length_prior
-    out.length_prior = lambda L, n: calls.append(n.copy()) or prior(L, n)
+    out.length_prior = lambda L, n, *a: calls.append(n.copy()) or prior(L, n, *a)
     p = np.asarray(clip.positions[0], float)
     seen = np.full(p.shape[0], 1.0)
     seen[SEGMENT_CHILD_INDEX[-1]] = 0.0  # one segment never observed: lengths never freeze
