@@ -4,7 +4,10 @@ describe their arguments (`--show-args`), every documented executable answers `-
 usage and exit code 0, without a traceback and without starting ROS.
 
 (tests/test_docs.py checks statically that the packages, files, options and launch arguments
-named exist; this runs them through the real `ros2` command line.)
+named exist; this runs them through the real `ros2` command line.) REAL_RUNS below names, for every
+documented executable, the tests that run it for real (tests/test_documented_runs.py for those no
+other test runs; tests/test_documented_launches.py starts every launch line), and fails for one
+without.
 """
 import os
 import re
@@ -106,3 +109,101 @@ def test_documented_executables_answer_help():
             if rc != 0 or 'Traceback' in out or 'usage:' not in out.lower():
                 bad.append(f'ros2 run {pkg} {exe} --help: exit {rc}\n{out[-1500:]}')
     assert not bad, '\n\n'.join(bad)
+
+
+# Every documented executable -> the tests that run it for real (its main() or the installed
+# executable, with real arguments, checking its real output; `--help` above is not one). A
+# command added to a page without a test here fails test_every_documented_executable_is_run_for_real.
+RUNS = 'tests/test_documented_runs.py::test_documented_command_runs'
+NODES = 'tests/test_documented_runs.py::test_documented_nodes_run_over_dds_and_stop_on_ctrl_c'
+REAL_RUNS = {
+    ('kinect_bringup', 'calibrate_extrinsics'): [f'{RUNS}[calibrate_extrinsics]'],
+    ('kinect_bringup', 'pipeline'): [
+        'tests/test_launch_cli.py::test_ros2_launch_and_pipeline_run_the_same_configuration',
+        'tests/test_launch_cli.py::test_pipeline_on_the_single_threaded_executor_flows_and_stops_on_sigint'],
+    ('kinect_bringup', 'process_bag'): [f'{RUNS}[process_bag]', f'{RUNS}[process_bag_report]'],
+    ('kinect_bringup', 'recorder'): [
+        'tests/test_recovery.py::test_a_recorder_killed_with_sigkill_keeps_what_it_received',
+        'tests/test_bag_split.py::test_recorder_node_rotates_and_process_bag_takes_the_folder'],
+    ('kinect_bringup', 'recover_bag'): ['tests/test_recovery.py::test_recover_bag_command'],
+    ('kinect_experiments', 'bench'): [f'{RUNS}[bench]'],
+    ('kinect_experiments', 'evaluate'): [
+        'src/kinect_experiments/test/test_evaluation.py::test_evaluate_cli_writes_markdown_and_json'],
+    ('kinect_experiments', 'soak'): ['tests/test_soak.py::test_short_soak_passes'],
+    ('performance_control', 'bench_control'): [f'{RUNS}[bench_control]'],
+    ('performance_control', 'control'): [NODES],
+    ('performance_control', 'demo_control'): [f'{RUNS}[demo_control]'],
+    ('physics_sim', 'bench_physics'): [f'{RUNS}[bench_physics]'],
+    ('physics_sim', 'physics'): [NODES],
+    ('pose_reconstruction', 'bench_reconstruction'): [f'{RUNS}[bench_reconstruction]'],
+    ('pose_reconstruction', 'build_correction'): [
+        'tests/test_correction_pairs.py::test_build_correction_from_pairs_learns_the_tracker_error_with_a_loso_report',
+        'tests/test_correction_azure.py::test_build_correction_learns_an_azure_kinect_correction_found_by_auto'],
+    ('skeleton_data', 'build_db'): ['src/skeleton_data/test/test_database.py::test_build_db_cli'],
+    ('skeleton_data', 'import_azure_json'): [f'{RUNS}[import_azure_json]'],
+    ('skeleton_eval', 'import_uiprmd'): [
+        'tests/test_uiprmd.py::test_cli_skips_bad_files_and_writes_the_rest'],
+    ('viz', 'bench_hri'): [f'{RUNS}[bench_hri]'],
+    ('viz', 'report'): ['src/viz/test/test_report.py::test_report_cli_on_a_small_bag'],
+}
+
+
+def _entry_modules():
+    """(pkg, exe) -> the module its console script runs, from the packages' setup.py."""
+    found = {}
+    for setup in ROOT.glob('src/*/setup.py'):
+        for exe, module in re.findall(r"'(\w+) = ([\w.]+):main'", setup.read_text()):
+            found[(setup.parent.name, exe)] = module
+    return found
+
+
+def _test_function(node_id):
+    """The source of the module-level test function a node id names (None if there is none), its
+    parametrize id and its file's text."""
+    import ast
+    path, _, name = node_id.partition('::')
+    name, _, param = name.partition('[')
+    file = ROOT / path
+    if not file.is_file() or not file.name.startswith('test_'):
+        return None, None, None
+    text = file.read_text()
+    for node in ast.parse(text).body:
+        if isinstance(node, ast.FunctionDef) and node.name == name and name.startswith('test_'):
+            return ast.get_source_segment(text, node), param.rstrip(']') or None, text
+    return None, None, None
+
+
+def test_every_documented_executable_is_run_for_real():
+    """Every documented executable has a test that runs it for real, and each test named exists
+    (a module-level test in a file pytest collects) and runs that executable: its source names the
+    executable, or calls main()/run() of the entry module its file imports, or (for
+    tests/test_documented_runs.py) its command table names it."""
+    import importlib.util
+    missing = sorted(set(EXECUTABLES) - set(REAL_RUNS))
+    assert not missing, (f'documented executables no test runs for real: {missing} (add a run to '
+                         'tests/test_documented_runs.py COMMANDS and name it in REAL_RUNS)')
+    stale = sorted(set(REAL_RUNS) - set(EXECUTABLES))
+    assert not stale, f'REAL_RUNS names executables no page documents any more: {stale}'
+    spec = importlib.util.spec_from_file_location('_documented_runs', Path(__file__).parent /
+                                                  'test_documented_runs.py')
+    runs = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(runs)
+    modules = _entry_modules()
+    bad = []
+    for (pkg, exe), ids in sorted(REAL_RUNS.items()):
+        assert ids, (pkg, exe)
+        module = modules[(pkg, exe)]
+        for node_id in ids:
+            src, param, text = _test_function(node_id)
+            if src is None:
+                bad.append(f'{pkg} {exe}: no test {node_id}')
+            elif param is not None:
+                if runs.COMMANDS.get(param, (None, None))[:2] != (pkg, exe):
+                    bad.append(f'{pkg} {exe}: {node_id} runs {runs.COMMANDS.get(param)}')
+            elif node_id == NODES:
+                if (pkg, exe) not in {v[:2] for v in runs.NODES.values()}:
+                    bad.append(f'{pkg} {exe}: {node_id} does not start it')
+            elif not (re.search(rf'\b{exe}\b', src) or (module.rsplit('.', 1)[-1] in text
+                                                        and re.search(r'\.(main|run)\(', src))):
+                bad.append(f'{pkg} {exe}: {node_id} neither names {exe} nor calls {module}')
+    assert not bad, '\n'.join(bad)
