@@ -173,11 +173,22 @@ def _test_function(node_id):
     return None, None, None
 
 
+def _runs(src, text, exe, module):
+    """Whether a test's source starts the executable (its name as a string: a node of a graph),
+    runs its module (`-m module`), or calls main()/run() of the module as its file imports it."""
+    pkg, _, last = module.rpartition('.')
+    names = {last} if re.search(rf'from {re.escape(pkg)} import [^\n]*\b{last}\b', text) else set()
+    names |= set(re.findall(rf'(?:from {re.escape(pkg)} import {last}|import {re.escape(module)}) '
+                            rf'as (\w+)', text))
+    names |= set(re.findall(rf"(\w+) = pytest\.importorskip\('{re.escape(module)}'\)", src))
+    return bool(re.search(rf"['\"]{exe}['\"]", src) or module in src
+                or any(re.search(rf'\b{n}\.(main|run)\(', src) for n in names))
+
+
 def test_every_documented_executable_is_run_for_real():
     """Every documented executable has a test that runs it for real, and each test named exists
-    (a module-level test in a file pytest collects) and runs that executable: its source names the
-    executable, or calls main()/run() of the entry module its file imports, or (for
-    tests/test_documented_runs.py) its command table names it."""
+    (a module-level test in a file pytest collects) and runs that executable (:func:`_runs`, or
+    for tests/test_documented_runs.py its command table)."""
     import importlib.util
     missing = sorted(set(EXECUTABLES) - set(REAL_RUNS))
     assert not missing, (f'documented executables no test runs for real: {missing} (add a run to '
@@ -203,7 +214,90 @@ def test_every_documented_executable_is_run_for_real():
             elif node_id == NODES:
                 if (pkg, exe) not in {v[:2] for v in runs.NODES.values()}:
                     bad.append(f'{pkg} {exe}: {node_id} does not start it')
-            elif not (re.search(rf'\b{exe}\b', src) or (module.rsplit('.', 1)[-1] in text
-                                                        and re.search(r'\.(main|run)\(', src))):
-                bad.append(f'{pkg} {exe}: {node_id} neither names {exe} nor calls {module}')
+            elif not _runs(src, text, exe, module):
+                bad.append(f'{pkg} {exe}: {node_id} neither starts {exe} nor calls {module}')
     assert not bad, '\n'.join(bad)
+
+
+MAKE = re.compile(r'^make ([a-z][\w-]*)')
+# Every documented `make TARGET` whose recipe is not a documented `ros2 run` (those are REAL_RUNS')
+# -> what runs it for real: a test (node id), or a script that runs it (file, the line it holds)
+MAKE_RUNS = {
+    'demo': ['tests/test_demo.py::test_demo_writes_bag_animation_and_plots'],
+    'docs': [('.ci/run', 'make docs')],
+    'bench-guard': [('.ci/run', 'make bench-guard')],
+    'help': ['tests/test_documented_commands.py::test_make_help_lists_every_documented_target'],
+    'lint': ['tests/test_lint.py::test_the_tree_passes_ruff'],
+    'params': ['tests/test_param_docs.py::test_check_command_fails_on_a_stale_file'],
+    'setup': [('scripts/run-tests.sh', 'scripts/setup.sh'),
+              'tests/test_warm_kernels.py::test_warm_kernels_runs'],
+    'test': [('.ci/run', 'make test')],
+}
+
+
+def _make_targets():
+    """The `make TARGET`s of the pages' code blocks and spans (as _command_lines finds commands)."""
+    found = set()
+    for page in PAGES:
+        text = page.read_text()
+        chunks = [b.replace('\\\n', ' ') for b in FENCE.findall(text)] + SPAN.findall(FENCE.sub('', text))
+        for chunk in chunks:
+            for line in chunk.splitlines():
+                m = MAKE.match(re.sub(r'(^|\s)#.*', '', line).strip())
+                if m:
+                    found.add(m.group(1))
+    return found
+
+
+def _makefile_recipes():
+    """target -> its recipe's lines, from the Makefile."""
+    recipes, target = {}, None
+    for line in (ROOT / 'Makefile').read_text().splitlines():
+        m = re.match(r'^([a-z][\w-]*):', line)
+        if m:
+            target = m.group(1)
+            recipes[target] = []
+        elif line.startswith('\t') and target:
+            recipes[target].append(line.strip().lstrip('@'))
+    return recipes
+
+
+MAKE_TARGETS = sorted(_make_targets())
+
+
+def test_every_documented_make_target_is_run_for_real():
+    """Every documented `make TARGET` is a Makefile target, run for real: its recipe's `ros2 run`
+    is a documented executable REAL_RUNS covers, or MAKE_RUNS names an existing test or a script
+    that runs it."""
+    assert {'setup', 'test', 'demo'} <= set(MAKE_TARGETS), MAKE_TARGETS
+    recipes = _makefile_recipes()
+    bad = []
+    for target in MAKE_TARGETS:
+        if target not in recipes:
+            bad.append(f'make {target}: no such target in the Makefile')
+            continue
+        runs = [re.search(r'ros2 run (\w+) (\w+)', ln) for ln in recipes[target]]
+        if any(r and r.groups() in REAL_RUNS for r in runs) and target not in MAKE_RUNS:
+            continue
+        if not MAKE_RUNS.get(target):
+            bad.append(f'make {target}: no test runs it (add it to MAKE_RUNS)')
+        for run in MAKE_RUNS.get(target, []):
+            if isinstance(run, tuple):
+                if run[1] not in (ROOT / run[0]).read_text():
+                    bad.append(f'make {target}: {run[0]} does not hold {run[1]!r}')
+            elif _test_function(run)[0] is None:
+                bad.append(f'make {target}: no test {run}')
+    assert not bad, '\n'.join(bad)
+    stale = sorted(set(MAKE_RUNS) - set(MAKE_TARGETS))
+    assert not stale, f'MAKE_RUNS names targets no page documents any more: {stale}'
+
+
+def test_make_help_lists_every_documented_target():
+    """`make help` runs and describes every documented target."""
+    make = shutil.which('make')
+    if make is None:
+        pytest.skip('no make on this machine')
+    rc, out = _run([make, '--no-print-directory', 'help'], timeout=60)
+    assert rc == 0, out[-2000:]
+    listed = set(re.findall(r'^make ([a-z][\w-]*)', out, re.M))
+    assert set(MAKE_TARGETS) - {'help'} <= listed, sorted(set(MAKE_TARGETS) - listed)
