@@ -159,6 +159,10 @@ def _run(work, key, timeout=600):
         res = subprocess.run(_executable(pkg, exe) + args.split(), cwd=work,
                              env=_env(domain), capture_output=True, text=True, timeout=timeout)
         return res.returncode, res.stdout + res.stderr, time.monotonic() - t0
+    except subprocess.TimeoutExpired as e:   # this command fails, the others still run
+        out = ''.join(x.decode(errors='replace') if isinstance(x, bytes) else x
+                      for x in (e.stdout or '', e.stderr or ''))
+        return None, f'still running after {timeout} s\n{out}', timeout
     finally:
         domains.release(domain)
 
