@@ -117,7 +117,8 @@ def test_documented_executables_answer_help():
 RUNS = 'tests/test_documented_runs.py::test_documented_command_runs'
 NODES = 'tests/test_documented_runs.py::test_documented_nodes_run_over_dds_and_stop_on_ctrl_c'
 REAL_RUNS = {
-    ('kinect_bringup', 'calibrate_extrinsics'): [f'{RUNS}[calibrate_extrinsics]'],
+    ('kinect_bringup', 'calibrate_extrinsics'): [f'{RUNS}[calibrate_extrinsics]',
+                                                f'{RUNS}[calibrate_extrinsics_bags]'],
     ('kinect_bringup', 'pipeline'): [
         'tests/test_launch_cli.py::test_ros2_launch_and_pipeline_run_the_same_configuration',
         'tests/test_launch_cli.py::test_pipeline_on_the_single_threaded_executor_flows_and_stops_on_sigint'],

@@ -46,11 +46,33 @@ def _capture_json(path: Path, frames: int = 20):
                     'bodies': [body]} for i in range(frames)]}))
 
 
+def _two_sensor_bags(first: Path, second: Path, seconds: float = 8.0):
+    """One recording per sensor of one person walking round a loop (the sensor model), the second
+    sensor at calibrate_extrinsics --synthetic's view of the first (2.5 m ahead, 2.5 m aside,
+    turned -90 deg)."""
+    from skeleton_core.bagio import BagWriter
+    from skeleton_core.cdr import SKELETON_ARRAY, frames_to_cdr
+    from skeleton_core.conversions import SkeletonFrame
+    from skeleton_core.tf import Transform
+    from skeleton_eval.extrinsics import synthetic_tracks
+    view = Transform.from_xyz_ypr(2.5, 2.5, 0.0, yaw=-90.0)
+    tracks = synthetic_tracks(view, seed=3, duration_s=seconds)[:2]
+    for path, track, frame in ((first, tracks[0], 'kinect_1_link'),
+                               (second, tracks[1], 'kinect_2_link')):
+        with BagWriter(path) as bag:
+            for i, stamp in enumerate(int(t) for t in track.stamps_ns):
+                f = SkeletonFrame(positions=track.positions[i], tracking_state=track.tracking_state[i],
+                                  user_id=1, stamp_ns=stamp, frame_id=frame)
+                bag.write_raw('/kinect/skeletons', frames_to_cdr([f], stamp, frame), stamp,
+                              SKELETON_ARRAY)
+
+
 def _workspace(work: Path) -> Path:
     from test_launch_replay import _write_input   # a short sensor-model recording (3 s)
     (work / 'out').mkdir()
     _write_input(work / 'out' / 'demo.mcap')
     _capture_json(work / 'capture.json')
+    _two_sensor_bags(work / 'kinect1.mcap', work / 'kinect2.mcap')
     return work
 
 
@@ -85,6 +107,15 @@ def _extrinsics_check(work, out):
     assert re.search(r'^seed 3: +[\d.]+ cm +[\d.]+ deg', out, re.M), out[-2000:]
     from skeleton_core.tf import load_transforms   # the file the launch files' extrinsics:= load
     assert 'kinect_2_link' in {c for _, c, _ in load_transforms(work / 'cache' / 'extrinsics.yaml')}
+
+
+def _extrinsics_from_bags_check(work, out):
+    from skeleton_core.tf import Transform, load_transforms
+    poses = {c: t for _, c, t in load_transforms(work / 'cache' / 'extrinsics_bags.yaml')}
+    # the second sensor's world pose: the first's default (0.8 m up) times the view it was given
+    want = Transform.from_xyz_ypr(0.0, 0.0, 0.8) * Transform.from_xyz_ypr(2.5, 2.5, 0.0, yaw=-90.0)
+    err = np.linalg.norm(poses['kinect_2_link'].translation - want.translation)
+    assert err < 0.1, (poses['kinect_2_link'], out[-2000:])
 
 
 def _bench_check(work, out):
@@ -129,6 +160,9 @@ COMMANDS = {   # (longest first: two run at a time)
     'calibrate_extrinsics': ('kinect_bringup', 'calibrate_extrinsics',
                              '--synthetic --seeds 3 --seconds 4 --out cache/extrinsics.yaml',
                              _extrinsics_check),
+    'calibrate_extrinsics_bags': ('kinect_bringup', 'calibrate_extrinsics',
+                                  'kinect1.mcap kinect2.mcap --out cache/extrinsics_bags.yaml',
+                                  _extrinsics_from_bags_check),
     'bench_hri': ('viz', 'bench_hri', '--frames 3', _figures(r'6 character\(s\): [\d.]+ ms')),
     'bench_reconstruction': ('pose_reconstruction', 'bench_reconstruction',
                              '--frames 10 --quick --source synthetic',
