@@ -232,11 +232,29 @@ NODES = {   # the documented node lines: (pkg, exe, --ros-args given, parameters
 HOLD_S = 3.0
 
 
+def _stand_on_the_physics_input(probe, seconds):
+    """A person standing in the world frame (no TF needed) on /posture/reconstructed, 30 Hz."""
+    from skeleton_core.conversions import SkeletonFrame, frames_to_array_msg
+    from skeleton_core.model import standard_body
+    from skeleton_msgs.msg import SkeletonArray
+    pub = probe.node.create_publisher(SkeletonArray, '/posture/reconstructed', 10)
+    p = standard_body().rest_positions()
+    p = p - [0.0, 0.0, p[:, 2].min()]   # feet on the floor
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        stamp = time.time_ns()
+        f = SkeletonFrame(positions=p, tracking_state=np.full(len(p), 2, np.uint8), user_id=1,
+                          stamp_ns=stamp, frame_id='world')
+        pub.publish(frames_to_array_msg([f], stamp, 'world'))
+        time.sleep(1 / 30)
+
+
 def test_documented_nodes_run_over_dds_and_stop_on_ctrl_c(tmp_path):
     """`ros2 run physics_sim physics` and `ros2 run performance_control control --ros-args ...`,
     started together on a DDS domain of their own: each comes up (configured and active on its
     own, no lifecycle manager), answers over DDS with the parameters the line gave it, runs a few
-    seconds and exits 0 on Ctrl-C without a traceback."""
+    seconds (the physics given a standing person on its input: its character comes out) and
+    exits 0 on Ctrl-C without a traceback."""
     from ros_helpers import Probe, wait_until
     domain = domains.claim(30 + os.getpid() % 50)
     procs, logs = {}, {}
@@ -246,7 +264,8 @@ def test_documented_nodes_run_over_dds_and_stop_on_ctrl_c(tmp_path):
             procs[name] = subprocess.Popen(_executable(pkg, exe) + args, cwd=tmp_path,
                                            env=_env(domain), stdout=f, stderr=subprocess.STDOUT,
                                            start_new_session=True)
-    probe = Probe({}, name='documented_nodes_probe', domain_id=domain)
+    probe = Probe({'/character/skeletons': 'skeleton_msgs/msg/SkeletonArray'},
+                  name='documented_nodes_probe', domain_id=domain)
     got = {}
     try:
         def up():
@@ -256,7 +275,8 @@ def test_documented_nodes_run_over_dds_and_stop_on_ctrl_c(tmp_path):
         for name, (_, _, _, want) in NODES.items():
             if procs[name].poll() is None:
                 got[name] = probe.get_parameters(f'/{name}', list(want) or None)
-        time.sleep(HOLD_S)
+        _stand_on_the_physics_input(probe, HOLD_S)
+        characters = probe.counts()['/character/skeletons']
     finally:
         probe.close()
         for p in procs.values():
@@ -269,6 +289,8 @@ def test_documented_nodes_run_over_dds_and_stop_on_ctrl_c(tmp_path):
                 os.killpg(p.pid, signal.SIGKILL)
                 p.wait()
         domains.release(domain)
+    physics_log = logs['physics'].read_text(errors='replace')
+    assert characters > 0, f'no /character/skeletons from the physics\n{physics_log[-3000:]}'
     for name, (_, _, _, want) in NODES.items():
         text = logs[name].read_text(errors='replace')
         assert procs[name].returncode == 0 and 'Traceback' not in text, \
