@@ -232,8 +232,9 @@ NODES = {   # the documented node lines: (pkg, exe, --ros-args given, parameters
 HOLD_S = 3.0
 
 
-def _stand_on_the_physics_input(probe, seconds):
-    """A person standing in the world frame (no TF needed) on /posture/reconstructed, 30 Hz."""
+def _stand_on_the_input(probe, seconds):
+    """A person standing in the world frame (no TF needed) on /posture/reconstructed (the input of
+    both nodes), 30 Hz."""
     from skeleton_core.conversions import SkeletonFrame, frames_to_array_msg
     from skeleton_core.model import standard_body
     from skeleton_msgs.msg import SkeletonArray
@@ -253,8 +254,9 @@ def test_documented_nodes_run_over_dds_and_stop_on_ctrl_c(tmp_path):
     """`ros2 run physics_sim physics` and `ros2 run performance_control control --ros-args ...`,
     started together on a DDS domain of their own: each comes up (configured and active on its
     own, no lifecycle manager), answers over DDS with the parameters the line gave it, runs a few
-    seconds (the physics given a standing person on its input: its character comes out) and
-    exits 0 on Ctrl-C without a traceback."""
+    seconds given a standing person on their input (/posture/reconstructed: the physics'
+    character and the control's composed pose come out) and exits 0 on Ctrl-C without a
+    traceback."""
     from ros_helpers import Probe, wait_until
     domain = domains.claim(30 + os.getpid() % 50)
     procs, logs = {}, {}
@@ -264,7 +266,8 @@ def test_documented_nodes_run_over_dds_and_stop_on_ctrl_c(tmp_path):
             procs[name] = subprocess.Popen(_executable(pkg, exe) + args, cwd=tmp_path,
                                            env=_env(domain), stdout=f, stderr=subprocess.STDOUT,
                                            start_new_session=True)
-    probe = Probe({'/character/skeletons': 'skeleton_msgs/msg/SkeletonArray'},
+    probe = Probe({'/character/skeletons': 'skeleton_msgs/msg/SkeletonArray',
+                   '/control/target': 'skeleton_msgs/msg/SkeletonArray'},
                   name='documented_nodes_probe', domain_id=domain)
     got = {}
     try:
@@ -275,8 +278,8 @@ def test_documented_nodes_run_over_dds_and_stop_on_ctrl_c(tmp_path):
         for name, (_, _, _, want) in NODES.items():
             if procs[name].poll() is None:
                 got[name] = probe.get_parameters(f'/{name}', list(want) or None)
-        _stand_on_the_physics_input(probe, HOLD_S)
-        characters = probe.counts()['/character/skeletons']
+        _stand_on_the_input(probe, HOLD_S)
+        outputs = probe.counts()
     finally:
         probe.close()
         for p in procs.values():
@@ -289,8 +292,6 @@ def test_documented_nodes_run_over_dds_and_stop_on_ctrl_c(tmp_path):
                 os.killpg(p.pid, signal.SIGKILL)
                 p.wait()
         domains.release(domain)
-    physics_log = logs['physics'].read_text(errors='replace')
-    assert characters > 0, f'no /character/skeletons from the physics\n{physics_log[-3000:]}'
     for name, (_, _, _, want) in NODES.items():
         text = logs[name].read_text(errors='replace')
         assert procs[name].returncode == 0 and 'Traceback' not in text, \
@@ -299,3 +300,6 @@ def test_documented_nodes_run_over_dds_and_stop_on_ctrl_c(tmp_path):
         for k, v in want.items():
             assert got[name][k] == (pytest.approx(v) if isinstance(v, float) else v), \
                 (name, k, got[name])
+    for name, topic in (('physics', '/character/skeletons'), ('control', '/control/target')):
+        assert outputs[topic] > 0, \
+            f'no {topic} from {name}\n{logs[name].read_text(errors="replace")[-3000:]}'
