@@ -253,14 +253,16 @@ def push_test() -> Dict:
     return out
 
 
-def rtf(quick: bool, variants=None, counts=(1, 2, 6), chunk: int = 10) -> Dict:
+def rtf(quick: bool, variants=None, counts=(1, 2, 6), chunk: int = 10,
+        frames: int = 0) -> Dict:
     """Real-time factors. For each number of characters, the variants are stepped in chunks of
     ``chunk`` frames, interleaved round-robin, so a change in the machine's load hits them alike;
     each figure is the median over its chunks (the VM's timing varies +-25 % run to run). Worlds
     with other numbers of characters are not alive meanwhile (a 6-character world between chunks
-    would evict a 1-character one from the caches)."""
+    would evict a 1-character one from the caches). ``frames``: frames per run (default 60 quick,
+    else 90), at least one chunk."""
     seq = clips(True)[0][1]
-    n_chunks = (60 if quick else 90) // chunk
+    n_chunks = max(1, (frames or (60 if quick else 90)) // chunk)
     out = {}
     for n in counts:
         runs = {}
@@ -319,13 +321,19 @@ def main(argv=None) -> int:
     ap.add_argument('--rtf-only', action='store_true',
                     help='only the real-time factors (every controller, and the alternatives beside '
                          'the defaults: one model per group that can touch, the numpy Eq. 1)')
+    ap.add_argument('--frames', type=int, default=0,
+                    help='real-time factors: frames per variant and number of characters '
+                         '(default 60 with --quick, else 90; fewer: a quick check, noisier figures)')
     ap.add_argument('--out', default='out/bench_physics.json')
     args = ap.parse_args(argv if argv is not None else sys.argv[1:])
     load = os.getloadavg()[0] if hasattr(os, 'getloadavg') else float('nan')
     res = {'cpu_count': os.cpu_count(), 'load_avg_1min': load}
     t0 = time.perf_counter()
     print(f'bench_physics (2 ms step; load average {load:.1f} on {os.cpu_count()} cores)', flush=True)
-    res['real_time_factor'] = rtf(args.quick, [v for v, _, _ in VARIANTS] + list(RTF_VARIANTS))
+    if args.frames < 0:
+        ap.error('--frames must be >= 0')
+    res['real_time_factor'] = rtf(args.quick, [v for v, _, _ in VARIANTS] + list(RTF_VARIANTS),
+                                  frames=args.frames)
     r = res['real_time_factor']
     for k in [k for k in r if not k.endswith('_cpu')]:
         print(f'  RTF {k:28s} wall {r[k]:6.2f}   CPU-time {r[k + "_cpu"]:6.2f} '
