@@ -105,6 +105,7 @@ class DriverNode(ManagedNode):
 
     def __init__(self, **kwargs):
         super().__init__('driver', **kwargs)
+        self._first_out = True
         from skeleton_msgs.msg import SkeletonArray
         self._msg_type = SkeletonArray
         self.source = None
@@ -149,6 +150,7 @@ class DriverNode(ManagedNode):
 
     def activate(self) -> None:
         self._retry_timer = None
+        self._first_out = True   # the first frame of this activation: see _publish
         self._subscribe_source()
         if self._opened:
             self._started()
@@ -291,6 +293,12 @@ class DriverNode(ManagedNode):
         v = self.params.values
         self.health.on_receive()
         live_stamp = not self.source.recorded or v['restamp']
+        first = self._first_out
+        if first and not self.source.recorded:
+            # a live source's first frame reaches every subscriber the graph knows (the nodes
+            # activated before this driver; DDS matching is two-sided, and the driver's side may
+            # lag): bounded by REACH_WAIT_S. A replay has its own handshake (replay_gate)
+            self.reach_subscribers([p for p in (self.pub, self.truth_pub) if p is not None])
         msg = None
         if out.raw is not None:
             if v['restamp'] or (v['publish_tf'] and self.tf_pub is not None):
@@ -323,6 +331,10 @@ class DriverNode(ManagedNode):
         self.health.on_publish(latency_s=(now - stamp) / 1e9 if live_stamp else None)
         if out.truth is not None and v['publish_ground_truth'] and self.truth_pub is not None:
             self.truth_pub.publish(frames_to_cdr(out.truth, stamp, out.frame_id or v['frame_id']))
+        if first:   # a recording can be checked to start with it
+            self._first_out = False
+            self.get_logger().info(f'first frame on {SKELETONS_TOPIC}: stamp '
+                                   f'{stamp // 10**9}.{stamp % 10**9:09d}')
         if v['publish_tf'] and self.tf_pub is not None and msg is not None:
             self._publish_tf(msg)
 
