@@ -21,9 +21,15 @@ first frame, so the reconstruction's output of that frame finds the recorder the
 discovered late would otherwise take the first frames' outputs past the recorder. Matching is
 two-sided: the recorder's subscription seeing a publisher does not mean that the publisher has
 met the subscription yet, and under load the publisher's side came later (the reconstruction's
-output of a replay's first frame lost, 1 clean-clone test run in 6): the input waits
-:data:`MATCH_SETTLE_S` more (the publishers reach every subscriber their graph knows before
-they publish, ``ManagedNode.reach_subscribers``)."""
+output of a replay's first frame lost, 1 clean-clone test run in 6): the recorder reports
+active :data:`MATCH_SETTLE_S` later (the publishers reach every subscriber their graph knows before
+they publish, ``ManagedNode.reach_subscribers``).
+
+The driver's first frame recorded: the launch file also names the driver's topics
+(:data:`~kinect_bringup.graph.INPUTS`) in ``wait_for_publishers``; the recorder subscribes to them
+as above and finishes its activation only once those subscriptions have met the driver's
+publishers (at most :data:`INPUTS_WAIT_S`). The launch files activate the driver last, once every
+other node is active, so it starts with the recorder listening."""
 from __future__ import annotations
 
 import importlib
