@@ -8,6 +8,7 @@ once per source change, not once per start.
 """
 from __future__ import annotations
 
+import importlib.util
 import os
 import sys
 from typing import Callable
@@ -54,9 +55,26 @@ def njit(fn: Callable) -> Callable:
     return numba.njit(cache=True, nogil=True)(fn)
 
 
+def lazy_module(name: str):
+    """The module ``name``, executed on its first attribute access (``importlib.util.LazyLoader``;
+    a normal module from then on). A module of kernels imported this way costs nothing until a
+    kernel runs: a process that only reads a node's declarations (the launch files map the
+    reconstruction's parameters) does not import numba."""
+    if name in sys.modules:
+        return sys.modules[name]
+    spec = importlib.util.find_spec(name)
+    if spec is None:
+        raise ImportError(f'no module named {name!r}')
+    spec.loader = importlib.util.LazyLoader(spec.loader)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module
+    spec.loader.exec_module(module)
+    return module
+
+
 def pick(compiled: Callable, fallback: Callable) -> Callable:
     """``compiled`` when :func:`enabled`, else ``fallback`` (the numpy twin)."""
     return compiled if enabled() else fallback
 
 
-__all__ = ['enabled', 'njit', 'pick']
+__all__ = ['enabled', 'lazy_module', 'njit', 'pick']
