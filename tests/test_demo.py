@@ -61,7 +61,9 @@ def test_demo_writes_bag_animation_and_plots(tmp_path):
     driver_first = int(said[1]) * 10**9 + int(said[2])
     assert first == {t: driver_first for t in INPUT_TOPICS}, (first, driver_first)
     missing = [t for t in SKELETON_TOPICS if driver_first not in stamps[t]]
-    assert not missing, f'no message for the first input frame ({driver_first}) on {missing}'
+    assert not missing, (f'no message for the first input frame ({driver_first}) on {missing}; '
+                         f'their first stamps {[sorted(stamps[t])[:3] for t in missing]}; '
+                         + graph_log[-4000:])
     assert 'graph up after' in proc.stdout, log
     # the graph log holds no warning: the demo stops the launch without its Ctrl-C notice
     warnings = [ln for ln in graph_log.splitlines() if re.search(r'\[(WARNING|WARN|ERROR)\]', ln)]

@@ -426,6 +426,9 @@ class PhysicsNode(ManagedNode):
                 reliability=np.ones(NUM_JOINTS, np.float32), orientations=st.orientations,
                 user_id=uid, stamp_ns=st.stamp_ns, frame_id=WORLD_FRAME))
             latest = max(latest, st.stamp_ns)
+        # a subscriber that appeared since activation (a recorder) is reached before this output:
+        # DDS matching is two-sided, and the publisher's side may lag under load
+        self.reach_subscribers([self.pub])
         self.pub.publish(frames_to_cdr(frames, latest, WORLD_FRAME))
         self._publish_robots(states, latest)
         self._published_empty = not frames
