@@ -9,7 +9,8 @@
   ``wait_for_subscribers`` > 0 (the launch file and ``pipeline`` set the graph's count) the replay
   waits before its first frame until ``/kinect/skeletons`` has that many subscribers, and after
   it until they acknowledged it (at most ``wait_timeout_s``): nothing is lost while the graph
-  comes up.
+  comes up. Every other source waits for those subscribers before its first frame too (counted
+  by its publisher, which has then met them), and is not held after it.
 * ``live``: an OpenNI2 sensor or ``.oni`` recording with the NiTE2 user tracker
   (:mod:`kinect_driver.sources.openni_live`, docs/live_kinect.md).
 * ``azure_kinect``: the body markers of the Azure Kinect ROS driver (Azure Kinect, Orbbec Femto;
@@ -141,11 +142,14 @@ class DriverNode(ManagedNode):
             if not (e.retryable and self.source.retry_s > 0):
                 raise RuntimeError(str(e)) from None
             self.get_logger().warning(f'{e} - retrying every {self.source.retry_s:g} s')
-        # replay: hold the first frame until the graph is there (kinect_driver.replay_gate)
-        want = v['wait_for_subscribers'] if self.source.recorded else 0
+        # the first frame only once the graph's readers are there (kinect_driver.replay_gate),
+        # counted by this publisher (its side of the match; the graph's list may lag it); a
+        # replay is also held until they acknowledged it, a live source cannot be held
         log = self.get_logger()
-        self.gate = ReplayGate(want, v['wait_timeout_s'], info=log.info, warn=log.warning,
-                               on_release=self._delay_source, topic=SKELETONS_TOPIC)
+        self.gate = ReplayGate(v['wait_for_subscribers'], v['wait_timeout_s'], info=log.info,
+                               warn=log.warning, on_release=self._delay_source,
+                               topic=SKELETONS_TOPIC, hold_first=self.source.recorded,
+                               label='replay' if self.source.recorded else v['source'])
         self.diagnostics(extra=self.source.status)
 
     def activate(self) -> None:
