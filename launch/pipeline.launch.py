@@ -222,6 +222,18 @@ def _nodes(context):
         started = RECONSTRUCTION[mode] + [n for n in ('physics', 'viz')
                                           if arg(n).lower() in ('true', '1', 'yes')]
         recorded = load_params('recorder', config_dir).get('topics', list(TOPICS))
+        if drivers and sensors == 1:
+            # and the driver's topics: the recorder is active once it has met the driver, which
+            # is activated last, so the recording holds the driver's first frame
+            from kinect_driver.sources import SourceError, source_class
+            source = driver_over.get('source') or load_params('driver', config_dir).get(
+                'source', driver_specs['source'].default)
+            try:
+                truth = source_class(source).has_truth
+            except SourceError:   # (the driver says so)
+                truth = False
+            recorded = [t for t in recorded if t != '/kinect/ground_truth' or truth]
+            started = ['driver'] + started
         rec_over = dict(output=arg('record'), **_split())
         rec_over['wait_for_publishers'] = recorded_outputs(started, recorded) or ['']
         nodes.append(managed_node(package='kinect_bringup', executable='recorder', name='recorder',

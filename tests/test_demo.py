@@ -1,7 +1,7 @@
 """The README's main job (`make demo` = `kinect_bringup.demo`), shortened: it writes the bag, the
 animation and the plots, and the bag holds every topic with real skeletons in it (a recorder bug
 once wrote 600 empty messages per topic, which a count alone did not catch), and every output
-has a message for one of the first input frames' stamps."""
+has a message for the stamp of the driver's first frame, the first input frame it holds."""
 import os
 import re
 import subprocess
@@ -44,24 +44,28 @@ def test_demo_writes_bag_animation_and_plots(tmp_path):
         assert counts.get(topic, ("", 0))[1] >= 30, (topic, counts)  # (type, count)
     users = {t: set() for t in SKELETON_TOPICS}
     stamps = {t: set() for t in SKELETON_TOPICS}
-    first = {}   # input topic -> its first recorded stamp with skeletons
+    first = {}   # input topic -> its first recorded stamp
     for m in bagio.read_messages(out / 'demo.mcap', topics=SKELETON_TOPICS):
         users[m.topic].update(s.user_id for s in m.msg.skeletons)
         stamp = m.msg.header.stamp.sec * 10**9 + m.msg.header.stamp.nanosec
         stamps[m.topic].add(stamp)
-        if m.topic in INPUT_TOPICS and m.topic not in first and m.msg.skeletons:
+        if m.topic in INPUT_TOPICS and m.topic not in first:
             first[m.topic] = stamp
     assert all(u == {1, 2} for u in users.values()), users
-    # the driver is activated once every other node is up: every output has one of the first
-    # three input frames the recorder holds on both input topics (0.1 s: a live driver may start
-    # before the recorder's two input subscriptions have both matched, and DDS discovery between
-    # processes that started together is not instantaneous)
-    start = sorted(s for s in stamps['/kinect/skeletons'] if s >= max(first.values()))[:3]
-    missing = [t for t in SKELETON_TOPICS if not stamps[t].intersection(start)]
-    assert not missing, f'no message for the first input frames ({start}) on {missing}'
+    # the driver is activated once every other node is up and the recorder has met it: the
+    # recording begins with the driver's first frame (its stamp in the graph log) on both input
+    # topics, and every output has a message for that frame
+    graph_log = (out / 'demo.log').read_text()
+    said = re.search(r'first frame on /kinect/skeletons: stamp (\d+)\.(\d{9})', graph_log)
+    assert said, graph_log[-3000:]
+    driver_first = int(said[1]) * 10**9 + int(said[2])
+    assert first == {t: driver_first for t in INPUT_TOPICS}, (first, driver_first)
+    missing = [t for t in SKELETON_TOPICS if driver_first not in stamps[t]]
+    assert not missing, (f'no message for the first input frame ({driver_first}) on {missing}; '
+                         f'their first stamps {[sorted(stamps[t])[:3] for t in missing]}; '
+                         + graph_log[-4000:])
     assert 'graph up after' in proc.stdout, log
     # the graph log holds no warning: the demo stops the launch without its Ctrl-C notice
-    graph_log = (out / 'demo.log').read_text()
     warnings = [ln for ln in graph_log.splitlines() if re.search(r'\[(WARNING|WARN|ERROR)\]', ln)]
     assert not warnings, warnings
     summary = (out / 'demo_summary.md').read_text()

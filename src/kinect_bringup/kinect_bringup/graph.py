@@ -54,8 +54,14 @@ TOPICS: Dict[str, str] = {
 }
 
 
-# The recorded topics each node publishes (the recorder waits for them before its input)
+# The graph's input, the driver's topics: the recorder subscribes to them last (once the outputs'
+# publishers are there), and a recording holds them from the driver's first frame
+INPUTS = ('/kinect/skeletons', '/kinect/ground_truth')
+
+# The recorded topics each node publishes (the recorder waits for them before its input, and for
+# the driver's before it is active)
 OUTPUTS: Dict[str, List[str]] = {
+    'driver': list(INPUTS),
     'reliability': ['/kinect/skeletons_reliability'],
     'completion': ['/posture/completed'],
     'optimizer': ['/posture/reconstructed'],
@@ -68,7 +74,8 @@ OUTPUTS: Dict[str, List[str]] = {
 
 def recorded_outputs(names: List[str], recorded_topics: List[str]) -> List[str]:
     """The topics of ``recorded_topics`` that the graph's nodes ``names`` publish, in the
-    recorder's order: its subscriptions to them match before it subscribes to the input."""
+    recorder's order: its subscriptions to the outputs match before it subscribes to the input
+    (:data:`INPUTS`), and those to the input before it is active."""
     published = {t for n in names for t in OUTPUTS.get(n, [])}
     return [t for t in recorded_topics if t in published]
 

@@ -21,9 +21,15 @@ first frame, so the reconstruction's output of that frame finds the recorder the
 discovered late would otherwise take the first frames' outputs past the recorder. Matching is
 two-sided: the recorder's subscription seeing a publisher does not mean that the publisher has
 met the subscription yet, and under load the publisher's side came later (the reconstruction's
-output of a replay's first frame lost, 1 clean-clone test run in 6): the input waits
-:data:`MATCH_SETTLE_S` more (the publishers reach every subscriber their graph knows before
-they publish, ``ManagedNode.reach_subscribers``)."""
+output of a replay's first frame lost, 1 clean-clone test run in 6): the recorder reports
+active :data:`MATCH_SETTLE_S` later (the publishers reach every subscriber their graph knows before
+they publish, ``ManagedNode.reach_subscribers``).
+
+The driver's first frame recorded: the launch file also names the driver's topics
+(:data:`~kinect_bringup.graph.INPUTS`) in ``wait_for_publishers``; the recorder subscribes to them
+as above and finishes its activation only once those subscriptions have met the driver's
+publishers (at most :data:`INPUTS_WAIT_S`). The launch files activate the driver last, once every
+other node is active, so it starts with the recorder listening."""
 from __future__ import annotations
 
 import importlib
@@ -37,9 +43,10 @@ from skeleton_core.bag_split import pieces_dir
 from skeleton_core.rosnode import ManagedNode, ParamSpec, Parameters, run_node
 from skeleton_core.tf_ros import STATIC_LISTENER_QOS, TF_STATIC_TOPIC
 
-from .graph import TOPICS
+from .graph import INPUTS, TOPICS
 
 PUBLISHERS_WAIT_S = 10.0   # then the input is recorded anyway (with a warning naming the topics)
+INPUTS_WAIT_S = 5.0        # the input's publishers named in wait_for_publishers: then active anyway
 # once every awaited publisher is seen, the input waits this much longer: the publishers' side of
 # the match (module docstring)
 MATCH_SETTLE_S = 0.5
@@ -62,8 +69,9 @@ PARAMS = [
               'loses at most this much; 0 = only full 1 MiB chunks', range=(0.0, 60.0),
               read_only=True),
     ParamSpec('wait_for_publishers', [''],
-              'recorded topics whose publishers the other topics wait for (set by the launch '
-              'file: the outputs of the nodes it starts; [""] = none)', read_only=True),
+              'recorded topics whose publishers the recorder waits for before it is active (set '
+              'by the launch file: the topics of the nodes it starts; the input is subscribed '
+              'once the outputs have theirs; [""] = none)', read_only=True),
     ParamSpec('fsync', True, 'also force each flush onto the disk (survives a power cut)',
               read_only=True),
     ParamSpec('split_size_mb', 0.0,
@@ -109,26 +117,36 @@ class RecorderNode(ManagedNode):
             self.timer(min(0.5, self.params['flush_period']), self._poll)
         topics = list(self.params['topics'])   # (checked on configure)
         wait = [t for t in self.params['wait_for_publishers'] if t in topics]
-        outputs = {t: self._subscribe(t) for t in wait}
+        outputs = {t: self._subscribe(t) for t in wait if t not in INPUTS}
         for topic in LATCHED:
-            if topic in topics and topic not in wait:
+            if topic in topics and topic not in outputs:
                 self._subscribe(topic)
-        self._inputs = [t for t in topics if t not in wait and t not in LATCHED]
+        self._inputs = [t for t in topics if t not in outputs and t not in LATCHED]
+        self._input_subs = {}
         seen_at = []
 
-        def missing():
+        def outputs_missing():
             left = [t for t, sub in outputs.items() if _publishers(sub) == 0]
-            if left or not outputs:
-                seen_at.clear()
-                return left
-            if not seen_at:
+            if not left and not seen_at:
                 seen_at.append(time.monotonic())
-            if time.monotonic() - seen_at[0] < MATCH_SETTLE_S:
-                return ['(the publishers\' side of the match)']
-            return []
-        self.when_ready(missing, self._subscribe_inputs, PUBLISHERS_WAIT_S,
+            return left
+        self.when_ready(outputs_missing, self._subscribe_inputs, PUBLISHERS_WAIT_S,
                         'no publisher; recording the input anyway (the first frames\' outputs '
                         'may be missing)')
+        seen_at = seen_at or [time.monotonic()]
+
+        def inputs_missing():
+            left = [t for t in wait if t in self._input_subs
+                    and _publishers(self._input_subs[t]) == 0]
+            if not left and outputs and time.monotonic() - seen_at[0] < MATCH_SETTLE_S:
+                return ['(the publishers\' side of the match)']
+            return left
+        # active once the input's subscriptions met their publishers (the driver, activated
+        # last, then starts with this recorder listening) and the outputs' publishers had
+        # MATCH_SETTLE_S to meet this recorder
+        self.when_ready(inputs_missing, self._recording, INPUTS_WAIT_S,
+                        'no publisher met; recording anyway (the first input frames may be '
+                        'missing)')
 
     def _subscribe(self, topic: str):
         msgtype = TOPICS[topic]
@@ -147,8 +165,9 @@ class RecorderNode(ManagedNode):
                                  qos, raw=True)
 
     def _subscribe_inputs(self) -> None:
-        for topic in self._inputs:
-            self._subscribe(topic)
+        self._input_subs = {topic: self._subscribe(topic) for topic in self._inputs}
+
+    def _recording(self) -> None:
         where = (f'pieces in {pieces_dir(self.path)}/ (split at '
                  + ' or '.join(x for x in (
                      f'{self.params["split_size_mb"]:g} MB' if self.params['split_size_mb'] else '',

@@ -9,7 +9,8 @@
   ``wait_for_subscribers`` > 0 (the launch file and ``pipeline`` set the graph's count) the replay
   waits before its first frame until ``/kinect/skeletons`` has that many subscribers, and after
   it until they acknowledged it (at most ``wait_timeout_s``): nothing is lost while the graph
-  comes up.
+  comes up. Every other source waits for those subscribers before its first frame too (counted
+  by its publisher, which has then met them), and is not held after it.
 * ``live``: an OpenNI2 sensor or ``.oni`` recording with the NiTE2 user tracker
   (:mod:`kinect_driver.sources.openni_live`, docs/live_kinect.md).
 * ``azure_kinect``: the body markers of the Azure Kinect ROS driver (Azure Kinect, Orbbec Femto;
@@ -105,6 +106,7 @@ class DriverNode(ManagedNode):
 
     def __init__(self, **kwargs):
         super().__init__('driver', **kwargs)
+        self._first_out = True
         from skeleton_msgs.msg import SkeletonArray
         self._msg_type = SkeletonArray
         self.source = None
@@ -140,15 +142,19 @@ class DriverNode(ManagedNode):
             if not (e.retryable and self.source.retry_s > 0):
                 raise RuntimeError(str(e)) from None
             self.get_logger().warning(f'{e} - retrying every {self.source.retry_s:g} s')
-        # replay: hold the first frame until the graph is there (kinect_driver.replay_gate)
-        want = v['wait_for_subscribers'] if self.source.recorded else 0
+        # the first frame only once the graph's readers are there (kinect_driver.replay_gate),
+        # counted by this publisher (its side of the match; the graph's list may lag it); a
+        # replay is also held until they acknowledged it, a live source cannot be held
         log = self.get_logger()
-        self.gate = ReplayGate(want, v['wait_timeout_s'], info=log.info, warn=log.warning,
-                               on_release=self._delay_source, topic=SKELETONS_TOPIC)
+        self.gate = ReplayGate(v['wait_for_subscribers'], v['wait_timeout_s'], info=log.info,
+                               warn=log.warning, on_release=self._delay_source,
+                               topic=SKELETONS_TOPIC, hold_first=self.source.recorded,
+                               label='replay' if self.source.recorded else v['source'])
         self.diagnostics(extra=self.source.status)
 
     def activate(self) -> None:
         self._retry_timer = None
+        self._first_out = True   # the first frame of this activation: see _publish
         self._subscribe_source()
         if self._opened:
             self._started()
@@ -291,6 +297,12 @@ class DriverNode(ManagedNode):
         v = self.params.values
         self.health.on_receive()
         live_stamp = not self.source.recorded or v['restamp']
+        first = self._first_out
+        if first and not self.source.recorded:
+            # a live source's first frame reaches every subscriber the graph knows (the nodes
+            # activated before this driver; DDS matching is two-sided, and the driver's side may
+            # lag): bounded by REACH_WAIT_S. A replay has its own handshake (replay_gate)
+            self.reach_subscribers([p for p in (self.pub, self.truth_pub) if p is not None])
         msg = None
         if out.raw is not None:
             if v['restamp'] or (v['publish_tf'] and self.tf_pub is not None):
@@ -323,6 +335,10 @@ class DriverNode(ManagedNode):
         self.health.on_publish(latency_s=(now - stamp) / 1e9 if live_stamp else None)
         if out.truth is not None and v['publish_ground_truth'] and self.truth_pub is not None:
             self.truth_pub.publish(frames_to_cdr(out.truth, stamp, out.frame_id or v['frame_id']))
+        if first:   # a recording can be checked to start with it
+            self._first_out = False
+            self.get_logger().info(f'first frame on {SKELETONS_TOPIC}: stamp '
+                                   f'{stamp // 10**9}.{stamp % 10**9:09d}')
         if v['publish_tf'] and self.tf_pub is not None and msg is not None:
             self._publish_tf(msg)
 

@@ -23,19 +23,24 @@ class ReplayGate:
     """``may_poll(...)`` before each poll of the source; ``published(n)`` after it.
 
     States: ``subscribers`` (waiting before the first frame), ``acks`` (first frame out, waiting
-    for its acknowledgements), ``playing``. ``want`` 0 (or a live source): playing at once.
+    for its acknowledgements), ``playing``. ``want`` 0: playing at once. ``hold_first`` False (a
+    live source, which cannot be held): only step 1, then playing from the first frame on;
+    ``label`` names the source in the log lines.
     """
 
     def __init__(self, want: int, timeout_s: float, clock: Callable[[], float] = time.monotonic,
                  info: Callable[[str], None] = lambda m: None,
                  warn: Callable[[str], None] = lambda m: None,
                  on_release: Callable[[float], None] = lambda held_s: None,
-                 topic: str = '/kinect/skeletons'):
+                 topic: str = '/kinect/skeletons', hold_first: bool = True,
+                 label: str = 'replay'):
         self.want = int(want)
         self.timeout_s = float(timeout_s)
         self.clock = clock
         self.info, self.warn, self.on_release = info, warn, on_release
         self.topic = topic
+        self.hold_first = bool(hold_first)
+        self.label = label
         self.state = 'subscribers' if self.want > 0 else 'playing'
         self._waiting_since: Optional[float] = None
         self._main_ready_at: Optional[float] = None
@@ -64,24 +69,24 @@ class ReplayGate:
         with nothing due plays on without holding)."""
         if self.state == 'first':
             self._first_at = self.clock()
-            self.state = 'acks' if n_outputs else 'playing'
+            self.state = 'acks' if n_outputs and self.hold_first else 'playing'
 
     def _subscribers_ready(self, have: int, others: Callable[[], Sequence[str]]) -> bool:
         now = self.clock()
         if self._waiting_since is None:
             self._waiting_since = now
-            self.info(f'replay: waiting for {self.want} subscriber(s) on {self.topic} before '
+            self.info(f'{self.label}: waiting for {self.want} subscriber(s) on {self.topic} before '
                       'the first frame')
         if have >= self.want:
             if self._main_ready_at is None:
                 self._main_ready_at = now
             if others() and now - self._main_ready_at < OTHERS_GRACE_S:
                 return False
-            self.info(f'replay: {have} subscriber(s) after {now - self._waiting_since:.1f} s: '
+            self.info(f'{self.label}: {have} subscriber(s) after {now - self._waiting_since:.1f} s: '
                       'playing')
             return True
         if now - self._waiting_since >= self.timeout_s:
-            self.warn(f'replay: only {have} of {self.want} subscriber(s) on {self.topic} after '
+            self.warn(f'{self.label}: only {have} of {self.want} subscriber(s) on {self.topic} after '
                       f'{self.timeout_s:g} s: playing anyway (frames may be lost)')
             return True
         return False

@@ -74,3 +74,19 @@ def test_a_first_poll_with_nothing_due_plays_on_and_live_plays_at_once():
     assert g.playing and released == []
     live = ReplayGate(0, 10.0)
     assert live.playing and live.may_poll(lambda: 0)
+
+
+def test_a_live_source_waits_for_the_subscribers_but_is_never_held_after_its_first_frame():
+    clock = Clock()
+    log = []
+    g = ReplayGate(2, 10.0, clock=clock, info=lambda m: log.append(('info', m)),
+                   warn=lambda m: log.append(('warn', m)), hold_first=False, label='synthetic')
+    subs = [1]
+    poll = lambda: g.may_poll(lambda: subs[0], lambda: (), lambda: False)  # noqa: E731
+    assert not poll()                       # one of two readers: the first frame waits
+    clock.t += 0.5
+    subs[0] = 2
+    assert poll()
+    g.published(1)
+    assert g.playing                        # never acknowledged (acked False): plays on anyway
+    assert all(kind == 'info' and m.startswith('synthetic:') for kind, m in log), log

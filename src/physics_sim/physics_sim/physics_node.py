@@ -173,9 +173,6 @@ class PhysicsNode(ManagedNode):
             self.sim = Simulation(config_from_params(v), objects_from_params(v))
         except ValueError as e:
             raise ValueError(f'physics: {e}') from e
-        warm_s = warm_up()   # compiled kernels now, not on the first frame
-        if warm_s > 0.5:
-            self.get_logger().info(f'compiled kernels ready in {warm_s:.1f} s (cached from now on)')
         # frames on TF: the targets' frame (the sensor's) -> world from /tf_static; the
         # characters are published in world
         self.tf = TfBuffer()
@@ -198,6 +195,11 @@ class PhysicsNode(ManagedNode):
             self._tf_pub = self.publisher(TFMessage, '/tf', 100)
         except ImportError:   # (every supported install has it: the launch tooling builds it)
             self._tf_pub = None
+        # compiled kernels now, not on the first frame; last: DDS matches the publishers and
+        # the /tf_static subscription made above meanwhile (the graph's start waits for it)
+        warm_s = warm_up()
+        if warm_s > 0.5:
+            self.get_logger().info(f'compiled kernels ready in {warm_s:.1f} s (cached from now on)')
         self.diagnostics(extra=self._diag_extra)
 
     def activate(self) -> None:
@@ -424,6 +426,9 @@ class PhysicsNode(ManagedNode):
                 reliability=np.ones(NUM_JOINTS, np.float32), orientations=st.orientations,
                 user_id=uid, stamp_ns=st.stamp_ns, frame_id=WORLD_FRAME))
             latest = max(latest, st.stamp_ns)
+        # a subscriber that appeared since activation (a recorder) is reached before this output:
+        # DDS matching is two-sided, and the publisher's side may lag under load
+        self.reach_subscribers([self.pub])
         self.pub.publish(frames_to_cdr(frames, latest, WORLD_FRAME))
         self._publish_robots(states, latest)
         self._published_empty = not frames

@@ -95,16 +95,17 @@ class SkeletonArrayNode(ManagedNode):
     # -- lifecycle -------------------------------------------------------------------------------
     def configure(self) -> None:
         self.setup()
-        # the compiled kernels loaded now, not on the first frame: loading them from numba's
-        # cache takes 0.5-0.7 s on a quiet 2-core machine, seconds under load, and a node that
-        # stalls on its first frame loses the frames behind it (a depth-10 queue holds 1/3 s)
-        warm_s = sum(warm() for warm in self.kernels())
-        if warm_s > 0.5:
-            self.get_logger().info(f'compiled kernels ready in {warm_s:.1f} s (cached from now on)')
         from skeleton_msgs.msg import SkeletonArray
         depth = self.params['qos_depth']
         self._pubs = [self.publisher(SkeletonArray, self.params[o], QoSProfile(depth=depth))
                       for o in self._outputs]
+        # the compiled kernels loaded now, not on the first frame: loading them from numba's
+        # cache takes 0.5-0.7 s on a quiet 2-core machine, seconds under load, and a node that
+        # stalls on its first frame loses the frames behind it (a depth-10 queue holds 1/3 s).
+        # After the publishers: DDS matches them with their subscribers meanwhile
+        warm_s = sum(warm() for warm in self.kernels())
+        if warm_s > 0.5:
+            self.get_logger().info(f'compiled kernels ready in {warm_s:.1f} s (cached from now on)')
         self.diagnostics(extra=self.diagnostics_extra)
 
     def activate(self) -> None:

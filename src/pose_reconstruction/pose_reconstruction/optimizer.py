@@ -35,11 +35,13 @@ import numpy as np
 from skeleton_core.geometry import quat_average
 from skeleton_core.model import (NUM_JOINTS, NUM_SEGMENTS, SEGMENT_CHILDREN, SEGMENT_CHILD_INDEX,
                                  SEGMENT_PARENTS, SEGMENT_PARENT_INDEX)
+from skeleton_core import jit
 from skeleton_core.params import check, param
 
-from .kernels import energy_from_products, warm_up
 from .posture_space import as_database_arrays
 from .search import KNN_MODES, DatabaseSearch
+
+kernels = jit.lazy_module('pose_reconstruction.kernels')   # (numba: when first used)
 
 
 SOLVERS = ('stochastic', 'gauss_newton')
@@ -146,7 +148,7 @@ class NaturalPostureOptimizer:
     Parameters: :class:`OptimizerConfig` fields as keywords (or ``config``)."""
 
     def __init__(self, db, config: Optional[OptimizerConfig] = None, **params):
-        warm_up()   # the compiled kernels, once per process: not on a user's first frame
+        kernels.warm_up()   # the compiled kernels, once per process: not on a user's first frame
         self.db = as_database_arrays(db)
         self.body = self.db.body
         self.L = self.body.segment_lengths.copy()  # (19,)
@@ -253,7 +255,7 @@ class NaturalPostureOptimizer:
         """Eq. 15 for samples stored as the columns of ``ZT`` (d + 1, M), last row 1 -> (M,).
         ``P`` (d + 57 + K, M) and ``sq`` (57, M): optional work arrays (reused across steps)."""
         P = np.matmul(S['WT'], ZT, out=P)
-        return energy_from_products(P, ZT, S['d'], S['const'], self.L, self.w_kinematics,
+        return kernels.energy_from_products(P, ZT, S['d'], S['const'], self.L, self.w_kinematics,
                                     self.w_style, sq)
 
     def energy(self, Z: np.ndarray, S: dict) -> np.ndarray:

@@ -8,7 +8,7 @@ from typing import Any, Dict, Optional
 from skeleton_core.params import ParamSpec, specs
 from skeleton_core.rosnode import run_node
 
-from . import kernels, reliability_kernels
+from skeleton_core.jit import lazy_module
 from .node_common import (CORRECTION_SPECS, DATABASE_SPEC, RELIABILITY_NAMES, RELIABILITY_SPECS,
                           DatabaseNode, check_reliability_params, common_specs)
 from .optimizer import OptimizerConfig
@@ -35,7 +35,8 @@ class OptimizerNode(DatabaseNode):
         return Reconstructor(self.db, method=values['method'], **params, **self.user_terms)
 
     def kernels(self):
-        return [reliability_kernels.warm_up, kernels.warm_up]   # Eq. 1-8, Eq. 15
+        return [lazy_module('pose_reconstruction.reliability_kernels').warm_up,
+                lazy_module('pose_reconstruction.kernels').warm_up]   # Eq. 1-8, Eq. 15
 
 
 def main(args=None) -> int:

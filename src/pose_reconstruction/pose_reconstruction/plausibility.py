@@ -135,7 +135,7 @@ class PlausibilityConfig:
 PLAUSIBILITY_PARAMS = tuple(names(PlausibilityConfig))
 PLAUSIBILITY_DEFAULTS: Dict = defaults(PlausibilityConfig)
 
-from . import reliability_kernels as K  # noqa: E402  (after the model imports, which it does not need)
+K = jit.lazy_module('pose_reconstruction.reliability_kernels')  # (numba: when first used)
 
 _SEG_P = np.array(SEGMENT_PARENTS)
 _SEG_C = np.array(SEGMENT_CHILDREN)

@@ -19,7 +19,9 @@ from typing import Any, Dict, Optional
 from skeleton_core.params import specs
 from skeleton_core.rosnode import ParamSpec, run_node
 
-from . import completion_node, kernels, optimizer_node, reliability_kernels
+from skeleton_core.jit import lazy_module
+
+from . import completion_node, optimizer_node
 from .node_common import (CORRECTION_SPECS, DATABASE_SPEC, RELIABILITY_SPECS, DatabaseNode,
                           check_reliability_params, common_specs)
 from .fused import FusedProcessor, section
@@ -80,7 +82,8 @@ class ReconstructionNode(DatabaseNode):
         return FusedProcessor(self.db, values, self.user_terms)
 
     def kernels(self):
-        return [reliability_kernels.warm_up, kernels.warm_up]   # Eq. 1-8, Eq. 15
+        return [lazy_module('pose_reconstruction.reliability_kernels').warm_up,
+                lazy_module('pose_reconstruction.kernels').warm_up]   # Eq. 1-8, Eq. 15
 
     def diagnostics_extra(self) -> Dict[str, Any]:
         extra = super().diagnostics_extra()

@@ -61,9 +61,10 @@ from skeleton_core.model import (ANKLE_LEFT, ANKLE_RIGHT, ELBOW_LEFT, ELBOW_RIGH
 
 from skeleton_core import jit
 
-from . import reliability_kernels as K
 from .plausibility import PLAUSIBILITY_PARAMS, PlausibilityCheck, PlausibilityConfig
 from .posture_space import heading_yaw
+
+K = jit.lazy_module('pose_reconstruction.reliability_kernels')   # (numba: when first used)
 
 REFERENCE_MODES = ('observed', 'standard')
 _ONES = [1.0] * NUM_JOINTS   # heading_yaw's weights: the hip and shoulder lines alike

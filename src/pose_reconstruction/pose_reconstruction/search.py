@@ -16,7 +16,6 @@ from __future__ import annotations
 from typing import Optional
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from skeleton_core.model import NUM_JOINTS
 
@@ -110,6 +109,7 @@ class DatabaseSearch:
             self._build_kdtree()
 
     def _build_kdtree(self) -> None:
+        from scipy.spatial import cKDTree   # (only knn='kdtree': scipy.spatial takes 0.3 s to import)
         X = self._X
         self._kd_mean = X.mean(axis=0)
         _, _, vt = np.linalg.svd(X - self._kd_mean, full_matrices=False)

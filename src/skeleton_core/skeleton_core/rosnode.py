@@ -399,24 +399,25 @@ class ManagedNode(LifecycleNode):
 
     def when_ready(self, missing: Callable[[], List[str]], then: Callable[[], None],
                    timeout_s: float, what: str) -> None:
-        """Call ``then`` once ``missing()`` (the names still waited for) is empty, polled every
-        50 ms without blocking the node, at most ``timeout_s``: then a warning names what is
-        still missing (``<names>: <what> after N s``) and ``then`` runs anyway. At once when
-        nothing is missing now. The poll is an activate-time timer (gone on deactivate)."""
-        if not missing():
-            then()
-            return
+        """Call ``then`` once ``missing()`` (the names still waited for) is empty, at most
+        ``timeout_s``: then a warning names what is still missing (``<names>: <what> after N
+        s``) and ``then`` runs anyway. Called from :meth:`activate`, it waits inside the
+        transition (polled every 10 ms; DDS discovery and matching go on in the middleware's
+        own threads), so the node reports active only once ``then`` ran: a manager that
+        activates the source last (the launch files) starts it when this node takes its input.
+        At once when nothing is missing now; not at all when the context shuts down meanwhile."""
         since = time.monotonic()
-
-        def poll():
-            left, waited = missing(), time.monotonic() - since
-            if left and waited < timeout_s:
+        left = missing()
+        while left:
+            waited = time.monotonic() - since
+            if not self.context.ok():
                 return
-            timer.cancel()
-            if left:
+            if waited >= timeout_s:
                 self.get_logger().warning(f'{", ".join(left)}: {what} after {waited:.0f} s')
-            then()
-        timer = self.timer(0.05, poll)
+                break
+            time.sleep(0.01)
+            left = missing()
+        then()
 
     def service(self, *args, **kwargs):
         srv = self.create_service(*args, **kwargs)

@@ -28,7 +28,6 @@ from dataclasses import dataclass, field
 from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 __all__ = ['BvhError', 'Bvh', 'parse_bvh', 'load_bvh', 'CHANNEL_NAMES']
 
@@ -108,6 +107,7 @@ class Bvh:
                     rot_axes.append(c[0])
                     rot_cols.append(start + k)
             if rot_axes:
+                from scipy.spatial.transform import Rotation   # (scipy.spatial: 0.3 s to import)
                 angles = m[:, rot_cols]
                 if np.any(angles != 0.0):
                     rot[:, j] = Rotation.from_euler(''.join(rot_axes), angles,

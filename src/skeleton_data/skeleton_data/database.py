@@ -43,7 +43,6 @@ from pathlib import Path
 from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from skeleton_core.geometry import normalize, quat_from_yaw, quat_multiply, retarget, swing_twist
 from .mocap import FIVE_CLASSES, MotionClip, rest_directions
@@ -196,6 +195,7 @@ def filter_postures(flat: np.ndarray, threshold: float, chunk: int = 256,
     the projected kept rows yields candidates within ``sqrt(threshold)``, and only those are checked
     in full dimension. Rows kept since the last tree build (< 256) are checked by brute force.
     """
+    from scipy.spatial import cKDTree   # (building only: the nodes load the database without it)
     x = np.ascontiguousarray(flat, dtype=np.float64)
     n = x.shape[0]
     if threshold <= 0 or n == 0:

@@ -68,7 +68,6 @@ from typing import Dict, Optional, Tuple
 
 import numpy as np
 import yaml
-from scipy.spatial.transform import Rotation
 
 from skeleton_core.geometry import quat_multiply, quat_rotate
 from skeleton_core.model import (HIP_CENTER, HIP_LEFT, HIP_RIGHT, JOINT_INDEX, JOINT_NAMES,
@@ -156,6 +155,7 @@ def orientations_from_positions(positions: np.ndarray) -> np.ndarray:
     Spine made orthogonal to it (identity in the standard T-pose). Every other segment: its
     parent's orientation swung by the smallest rotation that carries the rest direction, as the
     parent holds it, onto the observed segment (no twist relative to the parent)."""
+    from scipy.spatial.transform import Rotation   # (scipy.spatial: 0.3 s to import)
     p = np.asarray(positions, float)
     a_std = rest_directions()
     q = np.zeros(p.shape[:-1] + (4,))
@@ -556,6 +556,7 @@ def bvh_frames(bvh: Bvh, jm: JointMap) -> Tuple[np.ndarray, np.ndarray]:
         a_std = rest_directions()
         js = sorted(src_bone)
         r_rep = np.einsum('ij,fkjl,ml->fkim', c, rot[:, [src_bone[j] for j in js]], c)
+        from scipy.spatial.transform import Rotation
         qb = Rotation.from_matrix(r_rep.reshape(-1, 3, 3)).as_quat().reshape(-1, len(js), 4)
         corr = np.zeros((len(js), 4))
         corr[:, 3] = 1.0

@@ -74,9 +74,9 @@ class ReplayConfig:
     replay_skip_topics: list = param(list(GRAPH_OUTPUTS), 'topics not replayed (by default '
                                      'those the node graph produces itself)', public=False)
     wait_for_subscribers: int = param(
-        0, 'before the first frame, wait until /kinect/skeletons has this many subscribers, and '
-        'after it until they acknowledged it (the launch file and pipeline set the graph\'s '
-        'count; 0 = start at once, like ros2 bag play)', range=(0, 100))
+        0, 'before the first frame, wait until /kinect/skeletons has this many subscribers (any '
+        'source), and after it until they acknowledged it (a replay; the launch file and pipeline '
+        'set the graph\'s count; 0 = start at once, like ros2 bag play)', range=(0, 100))
     wait_timeout_s: float = param(30.0, 'play anyway (with a warning) after waiting this long '
                                   'for subscribers (s)', range=(0.0, 3600.0), public=False)
 
