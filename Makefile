@@ -9,6 +9,7 @@ help:
 	@echo "make test       bootstrap if needed and run the test suite (lint included)"
 	@echo "make lint       only the linter (ruff, configured in ruff.toml)"
 	@echo "make setup      only bootstrap (venv / ROS 2, launch tooling, colcon build); ROS_DISTRO=kilted for Kilted"
+	@echo "make warm-kernels  compile the numba kernels into their disk cache (make setup does it too)"
 	@echo "make build-db   build the motion database from ../shared/mocap/cmu (or built-in motions) into"
 	@echo "                cache/motion_db.npz, the file the nodes load (they never build it)"
 	@echo "make build-correction  learn the sensor correction from ../shared/kinect/ui-prmd (or ARGS=\"--src DIR\")"

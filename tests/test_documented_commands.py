@@ -233,6 +233,7 @@ MAKE_RUNS = {
     'setup': [('scripts/run-tests.sh', 'scripts/setup.sh'),
               'tests/test_warm_kernels.py::test_warm_kernels_runs'],
     'test': [('.ci/run', 'make test')],
+    'warm-kernels': ['tests/test_warm_kernels.py::test_warm_kernels_runs'],
 }
 
 
