@@ -303,3 +303,23 @@ def test_documented_nodes_run_over_dds_and_stop_on_ctrl_c(tmp_path):
     for name, topic in (('physics', '/character/skeletons'), ('control', '/control/target')):
         assert outputs[topic] > 0, \
             f'no {topic} from {name}\n{logs[name].read_text(errors="replace")[-3000:]}'
+
+
+def test_live_calibration_stopped_by_ctrl_c_says_so_without_a_traceback(tmp_path):
+    """`calibrate_extrinsics --live 2` stopped before its recording is complete (Ctrl-C, or the
+    launch that started it shutting down): one line, exit 130, nothing written, no traceback."""
+    domain = domains.claim(70)
+    try:
+        proc = subprocess.Popen(
+            _executable('kinect_bringup', 'calibrate_extrinsics')
+            + ['--live', '2', '--duration', '30', '--out', str(tmp_path / 'x.yaml')],
+            cwd=tmp_path, env=_env(domain), stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+            text=True)
+        time.sleep(4.0)   # (no sensor: it waits for the first skeleton of each)
+        proc.send_signal(signal.SIGINT)
+        out, _ = proc.communicate(timeout=30)
+    finally:
+        domains.release(domain)
+    assert proc.returncode == 130, out
+    assert 'Traceback' not in out and 'interrupted' in out and 'nothing written' in out, out
+    assert not (tmp_path / 'x.yaml').exists()

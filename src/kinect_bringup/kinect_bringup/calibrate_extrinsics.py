@@ -137,6 +137,10 @@ def tracks_from_bags(bags: List[str], topics: List[str]):
     return per_sensor, frames, tf
 
 
+class Interrupted(Exception):
+    """The live recording was stopped (Ctrl-C, the launch shutting down) before it was complete."""
+
+
 def tracks_live(n: int, duration: float):
     """Record ``/kinect_k/skeletons`` of n running sensors for ``duration`` s (after the first
     skeleton of every sensor); returns (tracks per sensor, frame per sensor, TF)."""
@@ -165,6 +169,7 @@ def tracks_live(n: int, duration: float):
                                  raw=True)
     node.get_logger().info(f'walk round a loop 2.5-3 m across where all {n} sensors see you; '
                            f'recording {duration:.0f} s from the first skeleton of every sensor')
+    from rclpy.executors import ExternalShutdownException
     start = None
     try:
         while rclpy.ok():
@@ -173,9 +178,14 @@ def tracks_live(n: int, duration: float):
                 start = time.monotonic()
             if start is not None and time.monotonic() - start >= duration:
                 break
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass   # Ctrl-C: judged below, as a recording that stopped early
     finally:
         node.destroy_node()
         rclpy.try_shutdown()
+    if start is None or time.monotonic() - start < duration:
+        raise Interrupted(f'stopped after {0.0 if start is None else time.monotonic() - start:.0f}'
+                          f' of the {duration:.0f} s to record, nothing written')
     if not all(got):
         raise ValueError('no skeletons from ' + ', '.join(f'/kinect_{k + 1}/skeletons'
                                                           for k in range(n) if not got[k]))
@@ -276,6 +286,9 @@ def main(argv=None) -> int:
     except (ValueError, OSError, CalibrationError) as e:
         print(f'calibrate_extrinsics: error: {e}', file=sys.stderr)
         return 1
+    except Interrupted as e:
+        print(f'calibrate_extrinsics: interrupted: {e}', file=sys.stderr)
+        return 130
     except KeyboardInterrupt:
         print('calibrate_extrinsics: interrupted, nothing written', file=sys.stderr)
         return 130
