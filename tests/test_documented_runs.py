@@ -307,7 +307,8 @@ def test_documented_nodes_run_over_dds_and_stop_on_ctrl_c(tmp_path):
 
 def test_live_calibration_stopped_by_ctrl_c_says_so_without_a_traceback(tmp_path):
     """`calibrate_extrinsics --live 2` stopped before its recording is complete (Ctrl-C, or the
-    launch that started it shutting down): one line, exit 130, nothing written, no traceback."""
+    launch that started it shutting down): one line, a clean exit as a node's (0: the launch
+    logs no death), nothing written, no traceback."""
     domain = domains.claim(70)
     try:
         proc = subprocess.Popen(
@@ -320,6 +321,6 @@ def test_live_calibration_stopped_by_ctrl_c_says_so_without_a_traceback(tmp_path
         out, _ = proc.communicate(timeout=30)
     finally:
         domains.release(domain)
-    assert proc.returncode == 130, out
+    assert proc.returncode == 0, out
     assert 'Traceback' not in out and 'interrupted' in out and 'nothing written' in out, out
     assert not (tmp_path / 'x.yaml').exists()

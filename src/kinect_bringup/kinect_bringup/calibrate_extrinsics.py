@@ -286,9 +286,10 @@ def main(argv=None) -> int:
     except (ValueError, OSError, CalibrationError) as e:
         print(f'calibrate_extrinsics: error: {e}', file=sys.stderr)
         return 1
-    except Interrupted as e:
+    except Interrupted as e:   # a stop asked for (Ctrl-C through rclpy, a launch shutting
+        #                          down): a clean exit, as a node's, with what was not done said
         print(f'calibrate_extrinsics: interrupted: {e}', file=sys.stderr)
-        return 130
+        return 0
     except KeyboardInterrupt:
         print('calibrate_extrinsics: interrupted, nothing written', file=sys.stderr)
         return 130
