@@ -269,12 +269,15 @@ def prepare(root: Path, sha: str, log=print) -> Path:
         return tree
     log(f'[ab] building {sha[:12]} in {tree} (colcon, once)')
     install, build = _bases(tree)
-    # this tree's environment without its own workspace overlay: the venv and launch tooling
+    # this tree's environment without its own packages: the venv and launch tooling (inside
+    # the tree too: .venv-<distro>) and the vendored hri_msgs stay, the tree's install of its
+    # own packages goes
     env = dict(os.environ)
     env.pop('COLCON_PREFIX_PATH', None)
+    own = str(root / 'install') + os.sep
     env['AMENT_PREFIX_PATH'] = os.pathsep.join(
         p for p in env.get('AMENT_PREFIX_PATH', '').split(os.pathsep)
-        if p and not p.startswith(str(root)))
+        if p and (not p.startswith(own) or os.path.basename(p.rstrip(os.sep)) == 'hri_msgs'))
     env['CMAKE_PREFIX_PATH'] = env['AMENT_PREFIX_PATH']
     res = subprocess.run(
         ['colcon', '--log-base', str(tree / 'log'), 'build', '--symlink-install', '--base-paths',
