@@ -176,8 +176,8 @@ class PhysicsNode(ManagedNode):
         # frames on TF: the targets' frame (the sensor's) -> world from /tf_static; the
         # characters are published in world
         self.tf = TfBuffer()
-        self.tf_listener = StaticTfListener(self, self.tf, on_change=self._release_held)
         self._held = HeldUntilTf(limit=max(1, int(round(v['output_rate']))))   # 1 s of input
+        self.tf_listener = StaticTfListener(self, self.tf, on_change=self._release_held)
         self._pose_key = None   # (input frame, TF version) of the sensor pose in use
         self.presence = Presence(v['user_timeout_s'])
         self.scheduler = TickScheduler(v['output_rate'], v['sync_to_input'])
@@ -275,7 +275,7 @@ class PhysicsNode(ManagedNode):
 
     def _release_held(self) -> None:
         """TF changed: the input held for want of it, in the order it came."""
-        if getattr(self, '_held', None) is not None and self.sim is not None:
+        if self.sim is not None:
             for data in self._held.take():
                 self._take_input(data)
 
