@@ -20,11 +20,23 @@ timer republishes the newest target's stamp while no new one arrives: counted as
 frame is dropped when its capture stamp appears on /kinect/skeletons but never on the output topic.
 
 The floor: beside the graph, a pass-through node (``kinect_experiments.passthrough``: subscribe to
-/kinect/skeletons, republish the same bytes on /bench/passthrough) runs in every case; its latency,
-measured by the same probe in the same seconds, is what one DDS hop and one Python callback cost at
-that moment, and every row prints it. The latency targets are judged against it: 2 users,
-reconstructed p95 <= floor p95 + 5 ms and character p95 <= floor p95 + 12 ms; 6 users, every output
-p95 <= 33 ms with 0 dropped frames and the graph's CPU <= 150 % (of the 2 cores' 200 %).
+/kinect/skeletons -- with several sensors sensor 1's raw /kinect_1/skeletons --, republish the same
+bytes on /bench/passthrough) runs in every case; its latency, measured by the same probe in the same
+seconds, is what one DDS hop and one Python callback cost at that moment, and every row prints it.
+The latency targets are judged against it: one sensor, 2 users, reconstructed p95 <= floor p95 +
+5 ms and character p95 <= floor p95 + 12 ms; several sensors, fused p95 <= floor p95 + 5 ms, and
+2 users with 0 dropped frames; 6 users, every output p95 <= 33 ms with 0 dropped frames and the
+graph's CPU <= 150 % (of the 2 cores' 200 %).
+
+Each case starts its processes, waits until every output has delivered (the start-up -- imports,
+kernels loading, DDS discovery -- is not measured; its seconds are printed), then ``--warmup`` s,
+then measures ``--seconds``: every frame lost in that window counts.
+
+``--drivers-elsewhere``: the drivers as a lab runs them, on the sensors' own computers. Their
+frames (the same synthetic source, seeds, users and views) are generated before the case and one
+light process (``kinect_experiments.remote_drivers``) publishes them as pre-serialized bytes,
+restamped with their capture times; what stays on this machine is the DDS receive. Its CPU is
+printed apart and not counted in the graph's.
 """
 from __future__ import annotations
 
@@ -58,6 +70,9 @@ TOPICS = {'/kinect/skeletons': 'input', '/posture/reconstructed': 'reconstructed
 OVER_FLOOR_MS = {(2, 'reconstructed'): 5.0, (2, 'character'): 12.0}
 SIX_USERS_P95_MS, SIX_USERS_CPU_PCT = 33.0, 150.0
 PROCESS_BAG_PHYSICS_X = 10.0
+FUSED_OVER_FLOOR_MS = 5.0   # several sensors: the fused input p95 over the raw sensor's floor
+STARTUP_TIMEOUT_S = 90.0    # the longest a case waits for every output to deliver
+REMOTE_MARGIN_S = 30.0      # drivers elsewhere: frames generated beyond warm-up + window
 
 
 class LatencyProbe:
@@ -79,6 +94,8 @@ class LatencyProbe:
         self.repeats: Dict[str, int] = {t: 0 for t in TOPICS}
         self.nan = 0
         self.diagnostics: Dict[str, Dict[str, str]] = {}   # node name -> its latest key/values
+        self.first: Dict[str, float] = {}   # topic -> monotonic time of its first message since
+        #                                     wait_for() was called (recording or not)
         qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
         for t in TOPICS:  # serialized: the probe's own decoding must not delay what it measures
             self.node.create_subscription(SkeletonArray, t, lambda m, t=t: self._cb(t, m), qos,
@@ -97,6 +114,8 @@ class LatencyProbe:
 
     def _cb(self, topic, data):
         now = time.time_ns()
+        if topic not in self.first:
+            self.first[topic] = time.monotonic()
         if not self.recording:
             return
         errors = []
@@ -120,6 +139,19 @@ class LatencyProbe:
             for st in msg.status:
                 self.diagnostics[st.name.lstrip('/')] = {kv.key: kv.value for kv in st.values}
 
+    def wait_for(self, topics, timeout: float) -> List[str]:
+        """Wait until each of ``topics`` has delivered a message that came after this call (a
+        graph of an earlier case, or its last messages still in flight, do not count); returns
+        the topics still silent after ``timeout`` s."""
+        with self.lock:
+            self.first = {}
+        deadline = time.monotonic() + timeout
+        while True:
+            missing = [t for t in topics if t not in self.first]
+            if not missing or time.monotonic() >= deadline:
+                return missing
+            time.sleep(0.05)
+
     def start(self):
         with self.lock:
             self.diagnostics.clear()
@@ -142,10 +174,13 @@ class LatencyProbe:
         self.rclpy.try_shutdown(context=self.ctx)
 
 
-def _proc_stats(graph: Graph, seconds: float) -> Dict[str, Dict[str, float]]:
+def _proc_stats(graph: Graph, seconds: float, outside: Dict[str, subprocess.Popen] = None
+                ) -> Dict[str, Dict[str, float]]:
+    """CPU % and RSS of the graph's processes over ``seconds`` (and of the ``outside`` ones,
+    measured in the same seconds, under their own names: the caller keeps them apart)."""
     import psutil
     procs = {}
-    for name, p in graph.procs.items():
+    for name, p in {**graph.procs, **(outside or {})}.items():
         try:
             ps = psutil.Process(p.pid)
             ps.cpu_percent(None)
@@ -193,20 +228,23 @@ def _physics_figures(diagnostics: Dict[str, Dict[str, str]]) -> Dict[str, float]
     return out
 
 
-def _add_sensors(graph: Graph, users: int, sensors: int) -> None:
+def _add_sensors(graph: Graph, users: int, sensors: int, drivers: bool = True) -> None:
     """``driver.launch.py sensors:=N`` as processes: N synthetic drivers in /kinect_k (frames
-    kinect_k_link, the same people seen from the default poses) and one static_tf."""
+    kinect_k_link, the same people seen from the default poses; ``drivers`` False: none, the
+    frames come from elsewhere) and one static_tf."""
     from kinect_bringup.processes import node_command
     from skeleton_core.tf import default_sensor_poses, format_pose, sensor_frame, sensor_namespace
+    from .remote_drivers import driver_values
     poses = default_sensor_poses(sensors)
     tf_cmd = [sys.executable, '-m', 'kinect_driver.static_tf_node']
     for k in range(1, sensors + 1):
         ns = sensor_namespace(k, sensors)
-        graph.add(f'driver_{k}', node_command('driver', {
-            'num_users': users, 'scenario': 'b', 'frame_id': sensor_frame(k, sensors),
-            'view_pose': format_pose(poses[0].inverse() * poses[k - 1])}, ros_args=[
-            '-r', f'__ns:=/{ns}', '-r', f'/kinect/skeletons:=/{ns}/skeletons',
-            '-r', f'/kinect/ground_truth:=/{ns}/ground_truth']))
+        if drivers:
+            v = driver_values(users, sensors, k)
+            graph.add(f'driver_{k}', node_command('driver', {
+                key: v[key] for key in ('num_users', 'scenario', 'frame_id', 'view_pose')},
+                ros_args=['-r', f'__ns:=/{ns}', '-r', f'/kinect/skeletons:=/{ns}/skeletons',
+                          '-r', f'/kinect/ground_truth:=/{ns}/ground_truth']))
         tf_cmd += ['--pose', format_pose(poses[k - 1]), '--child', sensor_frame(k, sensors)]
     # (beside the Graph's own static_tf, which publishes the one-sensor frame kinect_link)
     graph.add('static_tf_sensors', tf_cmd + ['--ros-args', '-r', '__node:=static_tf_sensors'])
@@ -214,7 +252,7 @@ def _add_sensors(graph: Graph, users: int, sensors: int) -> None:
 
 def run_case(probe: LatencyProbe, mode: str, users: int, seconds: float, warmup: float,
              physics: bool, log_dir: Path, reconstruction: str = 'fused', sensors: int = 1,
-             executor: str = 'auto') -> Dict:
+             executor: str = 'auto', drivers_elsewhere: bool = False) -> Dict:
     overrides = {'driver': {'num_users': users, 'scenario': 'b'}}
     pipeline_args = ['--num-users', str(users), '--scenario', 'b', '--no-viz',
                      '--reconstruction', reconstruction, '--executor', executor]
@@ -222,38 +260,63 @@ def run_case(probe: LatencyProbe, mode: str, users: int, seconds: float, warmup:
     if not physics:
         pipeline_args.append('--no-physics')
     case_dir = log_dir / (f'{mode}_{reconstruction}_{users}' + (f'_{sensors}s' if sensors > 1 else '')
-                          + (f'_{executor}' if mode == 'pipeline' else ''))
+                          + (f'_{executor}' if mode == 'pipeline' else '')
+                          + ('_elsewhere' if drivers_elsewhere else ''))
+    if (sensors > 1 or drivers_elsewhere) and mode != 'processes':
+        raise ValueError('several sensors and drivers elsewhere run as processes only (as ros2 '
+                         'launch runs them)')
     if sensors > 1:
-        if mode != 'processes':
-            raise ValueError('several sensors run as processes only (as ros2 launch runs them)')
         nodes = ['fusion'] + [n for n in nodes if n != 'driver']
-    floor = _start_passthrough(case_dir)
+    elif drivers_elsewhere:
+        nodes = [n for n in nodes if n != 'driver']
+    remote = None
+    if drivers_elsewhere:   # every frame made now, before the graph starts (remote_drivers)
+        from . import remote_drivers
+        remote = remote_drivers.generate(users, sensors, warmup + seconds + REMOTE_MARGIN_S,
+                                         case_dir / 'remote_frames.pkl')
+    # the floor: one DDS hop and one Python callback on the sensor's own topic (sensor 1's
+    # with several sensors: the fusion is then judged against it)
+    floor = _start_passthrough(case_dir, SENSOR1_TOPIC if sensors > 1 else '/kinect/skeletons')
+    started = time.monotonic()
     graph = Graph(mode, nodes=nodes, overrides=overrides, pipeline_args=pipeline_args,
                   log_dir=case_dir)
+    outside = {}
     if sensors > 1:
-        _add_sensors(graph, users, sensors)
+        _add_sensors(graph, users, sensors, drivers=not drivers_elsewhere)
+    if drivers_elsewhere:
+        outside['remote drivers'] = _start_logged(
+            case_dir / 'remote_drivers.log',
+            [sys.executable, '-m', 'kinect_experiments.remote_drivers',
+             str(case_dir / 'remote_frames.pkl')])
+    outputs = ['/kinect/skeletons', '/posture/reconstructed'] + (
+        ['/character/skeletons'] if physics else [])
     try:
-        deadline = time.monotonic() + 90
-        while probe.count['/kinect/skeletons'] == 0 and time.monotonic() < deadline:
-            probe.recording = True  # count arrivals to know the graph is up
-            time.sleep(0.2)
+        # every output delivering before the warm-up begins: the start-up (processes importing,
+        # kernels loading) is not in the window; what is lost after it counts
+        silent = probe.wait_for(outputs, STARTUP_TIMEOUT_S)
+        if silent:
+            print(f'[bench] nothing on {", ".join(silent)} {STARTUP_TIMEOUT_S:g} s after the '
+                  f'start: measuring anyway (see {case_dir})', flush=True)
+        first = {TOPICS[t]: probe.first[t] - started for t in outputs if t in probe.first}
         time.sleep(warmup)
         probe.start()
-        stats = _proc_stats(graph, seconds)
+        stats = _proc_stats(graph, seconds, outside)
         probe.stop()
     finally:
         graph.stop()
-        floor.terminate()
-        try:
-            floor.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            floor.kill()
+        for proc in [floor, *outside.values()]:
+            _stop(proc)
     with probe.lock:
         res = {'mode': mode, 'reconstruction': reconstruction, 'users': users, 'sensors': sensors,
                'executor': executor if mode == 'pipeline' else None,
-               'seconds': seconds, 'processes': stats,
+               'drivers_elsewhere': drivers_elsewhere, 'seconds': seconds,
+               'processes': {k: v for k, v in stats.items() if k not in outside},
+               'outside': {k: v for k, v in stats.items() if k in outside},
+               'first_output_s': first,
                'nan_outputs': probe.nan, 'nodes': _node_latencies(probe.diagnostics),
                'physics': _physics_figures(probe.diagnostics)}
+        if remote:
+            res['remote_frames'] = {k: remote[k] for k in ('frames', 'rate_hz', 'generate_s')}
         # the captures: sensor 1's with several sensors (the fused frames carry its stamps)
         src_topic = SENSOR1_TOPIC if sensors > 1 else '/kinect/skeletons'
         src = _per_stamp(probe.stamps[src_topic])
@@ -283,12 +346,27 @@ def _per_stamp(keys) -> Dict[int, int]:
     return out
 
 
-def _start_passthrough(log_dir: Path) -> subprocess.Popen:
-    """The floor node, as a process of its own beside the graph (its CPU is not the graph's)."""
-    log_dir.mkdir(parents=True, exist_ok=True)
-    out = open(log_dir / 'passthrough.log', 'w')
-    return subprocess.Popen([sys.executable, '-m', 'kinect_experiments.passthrough'], stdout=out,
-                            stderr=subprocess.STDOUT)
+def _start_passthrough(log_dir: Path, topic: str = '/kinect/skeletons') -> subprocess.Popen:
+    """The floor node on ``topic``, as a process of its own beside the graph (its CPU is not the
+    graph's)."""
+    return _start_logged(log_dir / 'passthrough.log', [
+        sys.executable, '-m', 'kinect_experiments.passthrough', '--input', topic,
+        '--output', FLOOR_TOPIC])
+
+
+def _start_logged(log: Path, cmd: List[str]) -> subprocess.Popen:
+    log.parent.mkdir(parents=True, exist_ok=True)
+    with open(log, 'w') as out:
+        return subprocess.Popen(cmd, stdout=out, stderr=subprocess.STDOUT)
+
+
+def _stop(proc: subprocess.Popen) -> None:
+    proc.send_signal(signal.SIGINT)
+    try:
+        proc.wait(timeout=10)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait()
 
 
 def process_bag_speed(log_dir: Path) -> Dict:
@@ -341,7 +419,8 @@ def _time_process_bag(bag: Path, log_dir: Path, physics: bool) -> Dict:
 def _label(r: Dict) -> str:
     n, ex = r.get('sensors', 1), r.get('executor')
     return (f"{r['mode']} ({r.get('reconstruction', 'split')}" + (f', {ex} executor' if ex else '')
-            + ')' + (f', {n} sensors' if n > 1 else ''))
+            + ')' + (f', {n} sensors' if n > 1 else '')
+            + (', drivers elsewhere' if r.get('drivers_elsewhere') else ''))
 
 
 def _outputs(r: Dict) -> List[str]:
@@ -363,13 +442,28 @@ def targets(results: List[Dict], bag_speed: Dict) -> List[Dict]:
     out = []
     for r in results:
         fl = r.get('floor', {})
+        several = r.get('sensors', 1) > 1
         for (users, key), over in OVER_FLOOR_MS.items():
             o = r.get(key, {})
-            if r['users'] == users and o.get('skeletons') and fl.get('skeletons'):
+            # (one sensor: with several the floor is sensor 1's raw topic, before the fusion)
+            if r['users'] == users and not several and o.get('skeletons') and fl.get('skeletons'):
                 limit = fl['p95_ms'] + over
                 out.append({'case': _label(r), 'what': f'{users} users {key} p95 <= floor p95 + '
                             f'{over:g} ms', 'figure': o['p95_ms'], 'limit': limit,
                             'met': o['p95_ms'] <= limit})
+        o = r.get('input', {})
+        if several and o.get('skeletons') and fl.get('skeletons'):
+            limit = fl['p95_ms'] + FUSED_OVER_FLOOR_MS
+            out.append({'case': _label(r), 'what': f'fused p95 <= floor p95 (sensor 1 raw) + '
+                        f'{FUSED_OVER_FLOOR_MS:g} ms', 'figure': o['p95_ms'], 'limit': limit,
+                        'met': o['p95_ms'] <= limit})
+        if several and r['users'] == 2:
+            for key in _outputs(r):
+                o = r.get(key, {})
+                if o.get('skeletons'):
+                    out.append({'case': _label(r), 'what': f'2 users {_output_name(key)} '
+                                'dropped = 0', 'figure': o.get('dropped', 0), 'limit': 0,
+                                'met': o.get('dropped', 0) == 0})
         if r['users'] == 6:
             for key in _outputs(r):
                 o = r.get(key, {})
@@ -408,8 +502,12 @@ def to_markdown(results: List[Dict], bag_speed: Dict, commit: str) -> str:
              'measured in the same seconds: one DDS hop and one Python callback now; '
              '"over floor" = p95 - floor p95. With 2 sensors: two drivers, their frames on TF and '
              'the fusion node before the same graph; latency from sensor 1\'s capture, `fused` = '
-             'the fusion\'s output (/kinect/skeletons, which the floor then republishes: its '
-             'figure includes the fusion), dropped = sensor-1 user-frames that never came out.',
+             'the fusion\'s output (/kinect/skeletons), the floor = sensor 1\'s raw topic '
+             '(/kinect_1/skeletons) republished, dropped = sensor-1 user-frames that never came '
+             'out. Drivers elsewhere: the drivers\' frames generated before the run and '
+             'published as pre-serialized bytes by one process (remote_drivers), whose CPU is '
+             'listed apart and is not in the graph\'s. The window begins `--warmup` s after every '
+             'output delivered (first output: seconds from the start).',
              '', '| mode | users | output | rate Hz | p50 ms | p95 ms | p99 ms | floor p50 / p95 ms '
              '| over floor ms | p95/budget | dropped |',
              '|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|']
@@ -442,6 +540,15 @@ def to_markdown(results: List[Dict], bag_speed: Dict, commit: str) -> str:
         for name, s in r['processes'].items():
             lines.append(f"| {_label(r)} | {r['users']} | {name} | {s['cpu_percent']:.0f} | {s['rss_mb']:.0f} |")
         lines.append(f"| {_label(r)} | {r['users']} | **graph** | {graph_cpu(r):.0f} | |")
+        for name, s in r.get('outside', {}).items():
+            lines.append(f"| {_label(r)} | {r['users']} | {name} (not the graph's) | "
+                         f"{s['cpu_percent']:.0f} | {s['rss_mb']:.0f} |")
+    firsts = [r for r in results if r.get('first_output_s')]
+    if firsts:
+        lines += ['', 'First output, s after the graph\'s processes started: '
+                  + '; '.join(f"{_label(r)}, {r['users']} users: " + ', '.join(
+                      f'{_output_name(k)} {v:.1f}' for k, v in r['first_output_s'].items())
+                      for r in firsts)]
     phys = [(r, r['physics']) for r in results if r.get('physics')]
     if phys:
         lines += ['', 'Physics node (its /diagnostics): real-time factor = simulated s per wall s '
@@ -497,6 +604,11 @@ def main(argv=None) -> int:
     p.add_argument('--seconds', type=float, default=10.0)
     p.add_argument('--warmup', type=float, default=4.0)
     p.add_argument('--no-physics', action='store_true')
+    p.add_argument('--drivers-elsewhere', action='store_true',
+                   help='the drivers as a lab runs them, on other machines: their frames (the '
+                        'same synthetic source and seeds) generated before each case and '
+                        'published as pre-serialized bytes by one light process, whose CPU is '
+                        'printed apart and left out of the graph\'s (processes mode only)')
     p.add_argument('--skip-bag', action='store_true')
     p.add_argument('--out', default=str(root / 'out' / 'bench'))
     ab = p.add_argument_group('A/B against another commit (kinect_experiments.ab)')
@@ -539,14 +651,17 @@ def main(argv=None) -> int:
                     p.error(f'--reconstruction {rec!r} is not one of {list(RECONSTRUCTION)}')
                 for users in [int(u) for u in args.users.split(',')]:
                     for n in [int(k) for k in args.sensors.split(',')]:
-                        if n > 1 and mode != 'processes':
+                        if (n > 1 or args.drivers_elsewhere) and mode != 'processes':
                             continue   # several sensors: as processes (ros2 launch) only
                         for ex in (args.executors.split(',') if mode == 'pipeline' else ['auto']):
                             print(f'[bench] {mode} ({rec}{", " + ex if mode == "pipeline" else ""}'
-                                  f'), {users} user(s), {n} sensor(s) ...', flush=True)
+                                  f'), {users} user(s), {n} sensor(s)'
+                                  + (', drivers elsewhere' if args.drivers_elsewhere else '')
+                                  + ' ...', flush=True)
                             results.append(run_case(probe, mode, users, args.seconds,
                                                     args.warmup, not args.no_physics,
-                                                    out / 'logs', rec, n, ex))
+                                                    out / 'logs', rec, n, ex,
+                                                    args.drivers_elsewhere))
     finally:
         probe.close()
     bag_speed = {} if args.skip_bag else process_bag_speed(out / 'logs')
@@ -569,6 +684,8 @@ def _run_against(p, args, argv, root: Path) -> int:
             '--executors', args.executors]
     if args.no_physics:
         case.append('--no-physics')
+    if args.drivers_elsewhere:
+        case.append('--drivers-elsewhere')
     if args.skip_bag or '--skip-bag' not in given:
         case.append('--skip-bag')
     if args.alternations < 1:

@@ -16,7 +16,7 @@ buffer raises :class:`CdrError` (a ``ValueError``).
 from __future__ import annotations
 
 import struct
-from typing import Iterable, List, Optional, Tuple
+from typing import Iterable, List, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -178,4 +178,34 @@ def frames_to_cdr(frames: Iterable[SkeletonFrame], stamp_ns: int, frame_id: str,
     return w.bytes()
 
 
-__all__ = ['CdrError', 'SKELETON_ARRAY', 'frames_from_cdr', 'frames_to_cdr']
+def stamp_offsets(data: bytes) -> List[int]:
+    """Byte offsets of every stamp of a little-endian serialized SkeletonArray (the header's,
+    then each skeleton's): :func:`restamp_cdr` rewrites them without decoding the message."""
+    r = _Reader(data)
+    if r.end != '<':
+        raise CdrError('stamp_offsets: a big-endian buffer')
+    out = [r.pos]
+    r.stamp_ns()
+    r.string()
+    for _ in range(r.u32()):
+        r._align(4)
+        out.append(r.pos)
+        r.stamp_ns()
+        r.string()
+        r.u32()
+        for dtype, per in (('f8', 3), ('f8', 4), ('u1', 1), ('f4', 1)):
+            r.array(dtype, per * r.u32())
+    return out
+
+
+def restamp_cdr(data: bytes, offsets: Sequence[int], stamp_ns: int) -> bytes:
+    """``data`` with every stamp at ``offsets`` (:func:`stamp_offsets`) set to ``stamp_ns``."""
+    out = bytearray(data)
+    sec, nsec = int(stamp_ns // 1_000_000_000), int(stamp_ns % 1_000_000_000)
+    for off in offsets:
+        _STAMP_W.pack_into(out, off, sec, nsec)
+    return bytes(out)
+
+
+__all__ = ['CdrError', 'SKELETON_ARRAY', 'frames_from_cdr', 'frames_to_cdr', 'restamp_cdr',
+           'stamp_offsets']
