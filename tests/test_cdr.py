@@ -10,7 +10,8 @@ from geometry_msgs.msg import Point, Quaternion  # noqa: E402
 from rclpy.serialization import deserialize_message, serialize_message  # noqa: E402
 from skeleton_msgs.msg import Skeleton, SkeletonArray  # noqa: E402
 
-from skeleton_core.cdr import CdrError, frames_from_cdr, frames_to_cdr  # noqa: E402
+from skeleton_core.cdr import (CdrError, frames_from_cdr, frames_to_cdr,  # noqa: E402
+                               restamp_cdr, stamp_offsets)
 from skeleton_core.conversions import (SkeletonFrame, frames_from_array_msg,  # noqa: E402
                                        frames_to_array_msg)
 
@@ -90,3 +91,22 @@ def test_validated_frames_are_written_as_they_are():
                for f in frames]
     assert (frames_to_cdr(checked, 5, 'kinect', validated=True)
             == frames_to_cdr(frames, 5, 'kinect'))
+
+
+def test_restamp_rewrites_every_stamp_as_rclpy_reads_it():
+    """A pre-serialized message restamped in place (the benchmark's remote drivers) is the message
+    serialized with the new stamp, header and every skeleton alike: rclpy reads that stamp."""
+    frames = _frames(np.random.default_rng(3), n=3)
+    data = frames_to_cdr(frames, frames[0].stamp_ns, 'kinect_2_link')
+    offsets = stamp_offsets(data)
+    assert len(offsets) == 1 + len(frames)
+    new = 1_800_000_001_000_000_007
+    out = restamp_cdr(data, offsets, new)
+    assert out == frames_to_cdr([f.copy(stamp_ns=new) for f in frames], new, 'kinect_2_link')
+    msg = deserialize_message(out, SkeletonArray)
+    assert (msg.header.stamp.sec, msg.header.stamp.nanosec) == (1_800_000_001, 7)
+    assert all((sk.header.stamp.sec, sk.header.stamp.nanosec) == (1_800_000_001, 7)
+               for sk in msg.skeletons)
+    _same([f.copy(stamp_ns=new) for f in frames_from_cdr(data)[2]], frames_from_cdr(out)[2])
+    with pytest.raises(CdrError):
+        stamp_offsets(data[:len(data) // 2])
