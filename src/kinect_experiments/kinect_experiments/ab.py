@@ -310,12 +310,20 @@ def bench_module(tree: Path) -> str:
     raise ValueError(f'{tree}: no bench module (kinect_experiments or kinect_bringup)')
 
 
+# options that change what is measured: an older bench without one is refused, not run without it
+MEASURED_ALIKE = ('--drivers-elsewhere',)
+
+
 def bench_command(tree: Path, case_args: Sequence[str], out: Path) -> List[str]:
     """Run ``tree``'s own bench with its own environment (its env.sh) on ``case_args``; options
     its bench does not know are left out (an older bench)."""
     known = _known_options(tree)
     args, i = [], 0
     case_args = list(case_args)
+    for a in MEASURED_ALIKE:
+        if a in case_args and a not in known:
+            raise ValueError(f'the bench of {tree} has no {a}: without it that side would '
+                             'measure another graph, and the ratios would not compare')
     while i < len(case_args):
         a = case_args[i]
         takes = i + 1 < len(case_args) and not case_args[i + 1].startswith('--')
@@ -345,6 +353,7 @@ def run_ab(root: Path, ref: str, case_args: Sequence[str], alternations: int, ou
     head = git(root, 'rev-parse', '--short', 'HEAD')
     dirty = bool(git(root, 'status', '--porcelain', '--untracked-files=no'))
     tree_a = prepare(root, sha, log)
+    bench_command(tree_a, case_args, out)   # a reference that cannot run the case: refused now
     out.mkdir(parents=True, exist_ok=True)
     cmp = Comparison()
     loads: List[Dict] = []

@@ -122,3 +122,6 @@ def test_an_older_bench_gets_only_the_options_it_knows(tmp_path):
     cmd = ab.bench_command(tmp_path, ['--users', '6', '--sensors', '1', '--skip-bag',
                                       '--seconds', '8'], tmp_path / 'o')[-1]
     assert 'python -m kinect_bringup.bench --users 6 --skip-bag --seconds 8 --out' in cmd
+    # an option that changes what is measured is not dropped: that side is refused
+    with pytest.raises(ValueError, match='has no --drivers-elsewhere'):
+        ab.bench_command(tmp_path, ['--users', '6', '--drivers-elsewhere'], tmp_path / 'o')
