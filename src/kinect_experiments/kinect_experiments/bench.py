@@ -59,6 +59,8 @@ from skeleton_core.bagio import bag_topics
 import signal
 from skeleton_data.database import build_default
 
+from .remote_drivers import DEFAULT_PHASE_MS
+
 PROCESS_BAG_MODULE = 'kinect_bringup.process_bag'
 
 BUDGET_MS = 1000.0 / 30.0
@@ -252,7 +254,8 @@ def _add_sensors(graph: Graph, users: int, sensors: int, drivers: bool = True) -
 
 def run_case(probe: LatencyProbe, mode: str, users: int, seconds: float, warmup: float,
              physics: bool, log_dir: Path, reconstruction: str = 'fused', sensors: int = 1,
-             executor: str = 'auto', drivers_elsewhere: bool = False) -> Dict:
+             executor: str = 'auto', drivers_elsewhere: bool = False,
+             phase_ms: float = None) -> Dict:
     overrides = {'driver': {'num_users': users, 'scenario': 'b'}}
     pipeline_args = ['--num-users', str(users), '--scenario', 'b', '--no-viz',
                      '--reconstruction', reconstruction, '--executor', executor]
@@ -270,6 +273,9 @@ def run_case(probe: LatencyProbe, mode: str, users: int, seconds: float, warmup:
     elif drivers_elsewhere:
         nodes = [n for n in nodes if n != 'driver']
     remote = None
+    phase_ms = DEFAULT_PHASE_MS if phase_ms is None else float(phase_ms)
+    if drivers_elsewhere and not 0 <= phase_ms * (sensors - 1) < BUDGET_MS:
+        raise ValueError(f'{sensors} sensors {phase_ms:g} ms apart do not fit one frame')
     if drivers_elsewhere:   # every frame made now, before the graph starts (remote_drivers)
         from . import remote_drivers
         remote = remote_drivers.generate(users, sensors, warmup + seconds + REMOTE_MARGIN_S,
@@ -287,7 +293,8 @@ def run_case(probe: LatencyProbe, mode: str, users: int, seconds: float, warmup:
         outside['remote drivers'] = _start_logged(
             case_dir / 'remote_drivers.log',
             [sys.executable, '-m', 'kinect_experiments.remote_drivers',
-             str(case_dir / 'remote_frames.pkl')])
+             str(case_dir / 'remote_frames.pkl'), '--phase-ms',
+             str(phase_ms)])
     outputs = ['/kinect/skeletons', '/posture/reconstructed'] + (
         ['/character/skeletons'] if physics else [])
     try:
@@ -317,6 +324,7 @@ def run_case(probe: LatencyProbe, mode: str, users: int, seconds: float, warmup:
                'physics': _physics_figures(probe.diagnostics)}
         if remote:
             res['remote_frames'] = {k: remote[k] for k in ('frames', 'rate_hz', 'generate_s')}
+            res['remote_frames']['phase_ms'] = phase_ms
         # the captures: sensor 1's with several sensors (the fused frames carry its stamps)
         src_topic = SENSOR1_TOPIC if sensors > 1 else '/kinect/skeletons'
         src = _per_stamp(probe.stamps[src_topic])
@@ -540,8 +548,10 @@ def to_markdown(results: List[Dict], bag_speed: Dict, commit: str) -> str:
         for name, s in r['processes'].items():
             lines.append(f"| {_label(r)} | {r['users']} | {name} | {s['cpu_percent']:.0f} | {s['rss_mb']:.0f} |")
         lines.append(f"| {_label(r)} | {r['users']} | **graph** | {graph_cpu(r):.0f} | |")
+        phase = r.get('remote_frames', {}).get('phase_ms')
         for name, s in r.get('outside', {}).items():
-            lines.append(f"| {_label(r)} | {r['users']} | {name} (not the graph's) | "
+            apart = f'; sensors {phase:g} ms apart' if phase is not None else ''
+            lines.append(f"| {_label(r)} | {r['users']} | {name} (not the graph's{apart}) | "
                          f"{s['cpu_percent']:.0f} | {s['rss_mb']:.0f} |")
     firsts = [r for r in results if r.get('first_output_s')]
     if firsts:
@@ -609,6 +619,10 @@ def main(argv=None) -> int:
                         'same synthetic source and seeds) generated before each case and '
                         'published as pre-serialized bytes by one light process, whose CPU is '
                         'printed apart and left out of the graph\'s (processes mode only)')
+    p.add_argument('--phase-ms', type=float, default=None,
+                   help='with --drivers-elsewhere: sensor 2 captures this long after sensor 1 '
+                        '(default 3: within the fusion\'s wait bound, waited for on every frame; '
+                        'e.g. 16.7: half a frame, not waited for)')
     p.add_argument('--skip-bag', action='store_true')
     p.add_argument('--out', default=str(root / 'out' / 'bench'))
     ab = p.add_argument_group('A/B against another commit (kinect_experiments.ab)')
@@ -629,6 +643,10 @@ def main(argv=None) -> int:
                     help='exit 1 when an output p95 or the graph CPU is worse than this ratio '
                          '(and 5 ms / 10 points) on every alternation, or drops appear (CI guard)')
     args = p.parse_args(argv)
+    if args.phase_ms is not None and not args.drivers_elsewhere:
+        p.error('--phase-ms sets the replayed sensors\' phase: it needs --drivers-elsewhere')
+    if args.phase_ms is not None and not 0 <= args.phase_ms < BUDGET_MS:
+        p.error(f'--phase-ms must be in [0, {BUDGET_MS:.1f}) ms, got {args.phase_ms:g}')
     if args.against is not None:
         return _run_against(p, args, argv, root)
     for ex in args.executors.split(','):
@@ -661,7 +679,7 @@ def main(argv=None) -> int:
                             results.append(run_case(probe, mode, users, args.seconds,
                                                     args.warmup, not args.no_physics,
                                                     out / 'logs', rec, n, ex,
-                                                    args.drivers_elsewhere))
+                                                    args.drivers_elsewhere, args.phase_ms))
     finally:
         probe.close()
     bag_speed = {} if args.skip_bag else process_bag_speed(out / 'logs')
@@ -686,6 +704,8 @@ def _run_against(p, args, argv, root: Path) -> int:
         case.append('--no-physics')
     if args.drivers_elsewhere:
         case.append('--drivers-elsewhere')
+    if args.phase_ms is not None:
+        case += ['--phase-ms', str(args.phase_ms)]
     if args.skip_bag or '--skip-bag' not in given:
         case.append('--skip-bag')
     if args.alternations < 1:

@@ -122,5 +122,14 @@ def test_bench_runs_one_user_two_sensors_with_the_drivers_elsewhere(tmp_path):
     assert r['floor']['skeletons'] > 0 and r['sensor1']['skeletons'] > 0
     assert set(r['first_output_s']) == {'input', 'reconstructed'}
     md = (tmp_path / 'bench.md').read_text()
-    assert "| remote drivers (not the graph's) |" in md
+    assert "| remote drivers (not the graph's; sensors 3 ms apart) |" in md
     assert 'fused p95 <= floor p95 (sensor 1 raw) + 5 ms' in md
+
+
+def test_phase_needs_the_drivers_elsewhere_and_must_fit_a_frame(capsys):
+    from kinect_experiments import bench
+    for argv, says in ((['--phase-ms', '3'], 'it needs --drivers-elsewhere'),
+                       (['--drivers-elsewhere', '--phase-ms', '40'], 'must be in [0, 33.3)')):
+        with pytest.raises(SystemExit) as e:
+            bench.main(argv)
+        assert e.value.code == 2 and says in capsys.readouterr().err
