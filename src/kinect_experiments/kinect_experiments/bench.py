@@ -324,7 +324,8 @@ def run_case(probe: LatencyProbe, mode: str, users: int, seconds: float, warmup:
                'physics': _physics_figures(probe.diagnostics)}
         if remote:
             res['remote_frames'] = {k: remote[k] for k in ('frames', 'rate_hz', 'generate_s')}
-            res['remote_frames']['phase_ms'] = phase_ms
+            if sensors > 1:
+                res['remote_frames']['phase_ms'] = phase_ms
         # the captures: sensor 1's with several sensors (the fused frames carry its stamps)
         src_topic = SENSOR1_TOPIC if sensors > 1 else '/kinect/skeletons'
         src = _per_stamp(probe.stamps[src_topic])
@@ -557,7 +558,8 @@ def to_markdown(results: List[Dict], bag_speed: Dict, commit: str) -> str:
     if firsts:
         lines += ['', 'First output, s after the graph\'s processes started: '
                   + '; '.join(f"{_label(r)}, {r['users']} users: " + ', '.join(
-                      f'{_output_name(k)} {v:.1f}' for k, v in r['first_output_s'].items())
+                      f"{_output_name(k) if r.get('sensors', 1) > 1 else k} {v:.1f}"
+                      for k, v in r['first_output_s'].items())
                       for r in firsts)]
     phys = [(r, r['physics']) for r in results if r.get('physics')]
     if phys:
