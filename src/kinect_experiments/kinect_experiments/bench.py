@@ -75,6 +75,8 @@ PROCESS_BAG_PHYSICS_X = 10.0
 FUSED_OVER_FLOOR_MS = 5.0   # several sensors: the fused input p95 over the raw sensor's floor
 STARTUP_TIMEOUT_S = 90.0    # the longest a case waits for every output to deliver
 REMOTE_MARGIN_S = 30.0      # drivers elsewhere: frames generated beyond warm-up + window
+LINGER_S = 25.0             # publishers found before the first case: time to go away (a killed
+#                             process's participant stays until its DDS lease ends, ~20 s)
 
 
 class LatencyProbe:
@@ -140,6 +142,24 @@ class LatencyProbe:
         with self.lock:
             for st in msg.status:
                 self.diagnostics[st.name.lstrip('/')] = {kv.key: kv.value for kv in st.values}
+
+    def publishers(self, seconds: float = 2.0, linger: float = 0.0) -> Dict[str, int]:
+        """The measured topics something already publishes on (after ``seconds`` of discovery):
+        before the first case, another graph on this DDS domain (another shell's, scripts/env.sh
+        gives every shell the same domain), whose messages would be measured as the graph's.
+        ``linger``: how long found publishers get to go away (a graph just stopped: a killed
+        process stays in discovery until its lease ends)."""
+        deadline = time.monotonic() + seconds
+        while True:
+            found = {t: n for t in TOPICS if (n := self.node.count_publishers(t))}
+            if found or time.monotonic() >= deadline:
+                break
+            time.sleep(0.1)
+        deadline = time.monotonic() + linger
+        while found and time.monotonic() < deadline:
+            time.sleep(0.5)
+            found = {t: n for t in TOPICS if (n := self.node.count_publishers(t))}
+        return found
 
     def wait_for(self, topics, timeout: float) -> List[str]:
         """Wait until each of ``topics`` has delivered a message that came after this call (a
@@ -663,6 +683,14 @@ def main(argv=None) -> int:
         commit = 'unknown'
     build_default()  # the nodes' default database file (make build-db), outside the measurement
     probe = LatencyProbe()
+    busy = probe.publishers(linger=LINGER_S)
+    if busy:
+        import os
+        probe.close()
+        print(f"[bench] another graph already publishes on {', '.join(sorted(busy))} in DDS "
+              f"domain {os.environ.get('ROS_DOMAIN_ID', '0')}: its messages would be measured as "
+              "this graph's; run with a ROS_DOMAIN_ID of its own", file=sys.stderr)
+        return 2
     results = []
     try:
         for mode in args.modes.split(','):

@@ -58,10 +58,12 @@ def _publish(node, pub, stamp_ns):
 def test_probe_waits_for_messages_that_come_after_the_call():
     """A case waits for its own graph: messages a topic delivered before the wait (the previous
     case's graph) do not end it -- they did, and every case after the first began measuring while
-    its graph was still starting, the start-up counted as dropped frames."""
+    its graph was still starting, the start-up counted as dropped frames. A graph publishing
+    before the first case (another shell's on the same domain) is found."""
     from rclpy.qos import QoSProfile, ReliabilityPolicy
     from skeleton_msgs.msg import SkeletonArray
     probe = LatencyProbe()
+    assert probe.publishers(0.5) == {}
     ctx = rclpy.Context()
     rclpy.init(context=ctx)
     node = rclpy.create_node('earlier_case', context=ctx)
@@ -71,6 +73,8 @@ def test_probe_waits_for_messages_that_come_after_the_call():
         deadline = time.monotonic() + 20
         while pub.get_subscription_count() == 0 and time.monotonic() < deadline:
             time.sleep(0.05)
+        # before the first case: a graph already there is found (its messages would count)
+        assert probe.publishers() == {'/kinect/skeletons': 1}
         _publish(node, pub, time.time_ns())
         assert probe.wait_for(['/kinect/skeletons'], 10.0) == []
         # nothing new: the earlier message does not count
