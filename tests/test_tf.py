@@ -30,6 +30,20 @@ def test_ypr_follows_tf2_and_a_positive_pitch_tilts_the_sensor_down():
     np.testing.assert_allclose((r * r.inverse()).translation, 0, atol=1e-12)
 
 
+def test_apply_quat_of_identity_orientations_is_the_product_exactly():
+    """Identity orientations (a tracker without any) take a shortcut: the same values as the
+    quaternion product, bit for bit; anything else still goes through the product."""
+    from skeleton_core.geometry import quat_multiply
+    rng = np.random.default_rng(4)
+    for _ in range(50):
+        t = Transform.from_xyz_ypr(*rng.normal(size=3), *rng.uniform(-170, 170, 3))
+        for q in (np.tile([0.0, 0.0, 0.0, 1.0], (20, 1)), rng.normal(size=(20, 4)),
+                  np.vstack([np.tile([0.0, 0.0, 0.0, 1.0], (19, 1)), [[0.0, 0.0, 1e-9, 1.0]]])):
+            want = quat_multiply(np.broadcast_to(t.rotation, q.shape), q)
+            assert np.array_equal(t.apply_quat(q), want)
+    assert t.apply_quat(np.zeros((0, 4))).shape == (0, 4)
+
+
 def test_buffer_looks_up_chains_through_the_common_ancestor():
     tf = TfBuffer()
     w1 = Transform.from_xyz_ypr(0, 0, 0.8, 0, 5, 0)

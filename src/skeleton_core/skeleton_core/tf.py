@@ -166,6 +166,12 @@ class Transform:
     def apply_quat(self, quats) -> np.ndarray:
         """Orientations (..., 4) from the child frame into the parent frame."""
         q = np.asarray(quats, float)
+        if q.ndim == 2 and len(q) and q.shape[1] == 4 and (q[:, 3] == 1.0).all() \
+                and not q[:, :3].any():
+            # identity orientations (a tracker without any: the message carries identities):
+            # the rotation itself, the product's value, without its cost (a third of the
+            # fusion's per-view time with six users)
+            return np.tile(np.asarray(self.rotation, float), (len(q), 1))
         return quat_multiply(np.broadcast_to(self.rotation, q.shape), q)
 
     def is_identity(self, tol: float = 1e-12) -> bool:
