@@ -171,7 +171,9 @@ class Transform:
             # identity orientations (a tracker without any: the message carries identities):
             # the rotation itself, the product's value, without its cost (a third of the
             # fusion's per-view time with six users)
-            return np.tile(np.asarray(self.rotation, float), (len(q), 1))
+            out = np.empty_like(q)
+            out[:] = self.rotation
+            return out
         return quat_multiply(np.broadcast_to(self.rotation, q.shape), q)
 
     def is_identity(self, tol: float = 1e-12) -> bool:
