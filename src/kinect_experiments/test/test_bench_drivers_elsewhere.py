@@ -97,13 +97,23 @@ def test_two_sensor_targets_judge_the_fusion_against_the_raw_sensor_floor():
          'input': {**out, 'p95_ms': 8.5}, 'reconstructed': {**out, 'p95_ms': 20.0, 'dropped': 4},
          'character': {**out, 'p95_ms': 30.0}}
     checks = {c['what']: c['met'] for c in targets([r], {})}
-    assert checks['fused p95 <= floor p95 (sensor 1 raw) + 5 ms'] is True
+    assert checks['fused p95 <= floor p95 (sensor 1 raw) + 5 ms'] is True   # phase unknown
     assert checks['2 users fused dropped = 0'] is True
     assert checks['2 users reconstructed dropped = 0'] is False
     # the one-sensor over-floor targets are not judged against a floor before the fusion
     assert not any(w.startswith('2 users reconstructed p95') for w in checks)
     r['input']['p95_ms'] = 9.5
     assert not next(c['met'] for c in targets([r], {}) if c['what'].startswith('fused p95'))
+    # replayed 3 ms apart: the fused frame must wait that long for sensor 2, on top of the floor
+    r['remote_frames'] = {'phase_ms': 3.0}
+    (check,) = [c for c in targets([r], {}) if c['what'].startswith('fused p95')]
+    assert check['what'] == ('fused p95 <= floor p95 (sensor 1 raw) + 3 ms wait for the last '
+                             'sensor + 5 ms')
+    assert check['limit'] == pytest.approx(12.0) and check['met']
+    # half a frame apart: beyond the fusion's wait bound, not waited for: no allowance
+    r['remote_frames'] = {'phase_ms': 16.7}
+    (check,) = [c for c in targets([r], {}) if c['what'].startswith('fused p95')]
+    assert check['limit'] == pytest.approx(9.0) and not check['met']
 
 
 @pytest.mark.timeout(300)
@@ -127,7 +137,7 @@ def test_bench_runs_one_user_two_sensors_with_the_drivers_elsewhere(tmp_path):
     assert set(r['first_output_s']) == {'input', 'reconstructed'}
     md = (tmp_path / 'bench.md').read_text()
     assert "| remote drivers (not the graph's; sensors 3 ms apart) |" in md
-    assert 'fused p95 <= floor p95 (sensor 1 raw) + 5 ms' in md
+    assert 'fused p95 <= floor p95 (sensor 1 raw) + 3 ms wait for the last sensor + 5 ms' in md
 
 
 def test_phase_needs_the_drivers_elsewhere_and_must_fit_a_frame(capsys):
