@@ -60,12 +60,13 @@ def local_pca(Yc: np.ndarray, dims: int):
     return V, s
 
 
-def _local_pca(Yc: np.ndarray, dims: int, G: Optional[np.ndarray] = None):
+def _local_pca(Yc: np.ndarray, dims: int, G: Optional[np.ndarray] = None, eig=None):
     """:func:`local_pca` plus the latent coordinates of the rows, ``Yc V^T`` (K, d) (from the
-    Gram matrix ``G = Yc Yc^T`` when K < 60: ``U_d s``, no further product)."""
+    Gram matrix ``G = Yc Yc^T`` when K < 60: ``U_d s``, no further product). ``eig``: the
+    ``np.linalg.eigh`` of ``G`` when already computed (several users' at once)."""
     K, D = Yc.shape
     if K < D:
-        lam, U = np.linalg.eigh(Yc @ Yc.T if G is None else G)
+        lam, U = eig if eig is not None else np.linalg.eigh(Yc @ Yc.T if G is None else G)
         lam, U = lam[::-1], U[:, ::-1]
         keep = lam > max(lam[0], 1e-300) * 1e-10
         d = int(min(dims, keep.sum()))
@@ -169,6 +170,8 @@ class NaturalPostureOptimizer:
         cfg = dataclasses.replace(self.config, **kw)
         check(cfg)
         self.config = cfg
+        # what must be equal for optimizers to be solved in one batch (solve_batch)
+        self._batch_key = dataclasses.astuple(dataclasses.replace(cfg, seed=0))
         for name in _INT_PARAMS + _FLOAT_PARAMS + ('solver', 'knn'):
             setattr(self, name, getattr(cfg, name))
         self.k = min(self.k, self.db.size)
@@ -183,7 +186,7 @@ class NaturalPostureOptimizer:
 
     # -- energy -------------------------------------------------------------------------------
     def _setup(self, Y: np.ndarray, query: np.ndarray, weights: np.ndarray,
-               continuity_target: Optional[np.ndarray]):
+               continuity_target: Optional[np.ndarray], pre=None):
         """Local PCA of the neighbours ``Y`` (K, 60) and the constants of the energy.
 
         Every term is evaluated in the latent space: with ``x = mu + V^T z`` (V orthonormal rows)
@@ -191,12 +194,17 @@ class NaturalPostureOptimizer:
         and the segment vectors of E_k are affine in z (``seg0 + z dV``). The weighted sum of the
         quadratic and linear parts and every product with z are gathered into one matrix ``W``
         so that :meth:`energy` needs one matrix product per batch.
+        ``pre``: ``(mu, Yc, G, eigh of G or None)`` already computed (:func:`solve_batch`).
         """
         K = len(Y)
-        mu = Y.sum(axis=0) * (1.0 / K)
-        Yc = Y - mu
-        G = Yc @ Yc.T
-        V, s, zn = _local_pca(Yc, self.pca_dims, G)
+        if pre is None:
+            mu = Y.sum(axis=0) * (1.0 / K)
+            Yc = Y - mu
+            G = Yc @ Yc.T
+            eig = None
+        else:
+            mu, Yc, G, eig = pre
+        V, s, zn = _local_pca(Yc, self.pca_dims, G, eig)
         d = V.shape[0]
         znsq = np.einsum('kd,kd->k', zn, zn)
         res_n = np.maximum(np.diagonal(G) - znsq, 0.0)
@@ -409,3 +417,156 @@ class NaturalPostureOptimizer:
             steps=steps, shift=shift, timings_ms={'knn': 1e3 * (t1 - t0), 'local_pca': 1e3 * (t2 - t1),
                                      'optimise': 1e3 * (t3 - t2), 'orientations': 1e3 * (t4 - t3)},
             terms_fn=lambda: {k: float(v[0]) for k, v in self.energy_terms(zs, S).items()})
+
+
+def _batchable(opt: NaturalPostureOptimizer, first: NaturalPostureOptimizer) -> bool:
+    """``opt`` can be solved in one batch with ``first``: the same database and parameters
+    (the seed aside: every optimizer keeps its own random stream), the stochastic solver and
+    the exact brute-force KNN."""
+    return (opt._X is first._X and opt.solver == 'stochastic' and opt.search.batchable
+            and opt._batch_key == first._batch_key)
+
+
+def solve_batch(opts: Sequence[NaturalPostureOptimizer], queries: Sequence[np.ndarray],
+                weights: Sequence[np.ndarray], previous: Sequence[Sequence[np.ndarray]],
+                translate: Sequence[bool]) -> list:
+    """:meth:`NaturalPostureOptimizer.solve` of several users' frames (one optimizer each, its
+    own random stream) at once: one KNN matrix product over the database for every query whose
+    root is reliable, the neighbours' Gram matrices and their eigendecompositions stacked, each
+    step of the stochastic search one stacked matrix product and one energy kernel call for the
+    users still searching, and the orientation averages stacked. The results are those of the
+    users' own ``solve`` calls (the same random draws; distances to rounding). Optimizers that
+    differ (parameters, solver, KNN mode, database) are solved one by one."""
+    n = len(opts)
+    if n == 0:
+        return []
+    first = opts[0]
+    if n < 2 or not all(_batchable(o, first) for o in opts):
+        return [o.solve(q, w, p, translate=t)
+                for o, q, w, p, t in zip(opts, queries, weights, previous, translate)]
+    t0 = time.perf_counter()
+    ws, qs = [], []
+    for w, q in zip(weights, queries):
+        w = np.asarray(w, float)
+        if w.min() < 0.0 or w.max() > 1.0:
+            w = np.clip(w, 0.0, 1.0)
+        ws.append(w)
+        qs.append(np.asarray(q, float))
+    knn = [None] * n
+    shifts = [None] * n
+    plain = [i for i in range(n) if not translate[i]]
+    for i in range(n):
+        if translate[i]:   # the translation-invariant search: one by one (an unreliable root)
+            w_knn = ws[i] if ws[i].sum() > 1e-6 else np.ones_like(ws[i])
+            idx, dist, sh = opts[i].search.knn_search(qs[i], w_knn, translate=True)
+            inv = 1.0 / (dist + 1e-6)
+            shifts[i] = (inv @ sh) / inv.sum()
+            qs[i] = qs[i] + shifts[i]
+            knn[i] = (idx, dist)
+    if plain:
+        W = np.stack([ws[i] if ws[i].sum() > 1e-6 else np.ones_like(ws[i]) for i in plain])
+        IDX, DIST = first.search.knn_search_many(np.stack([qs[i] for i in plain]), W)
+        for r, i in enumerate(plain):
+            knn[i] = (IDX[r], DIST[r])
+    t1 = time.perf_counter()
+    conts = []
+    for p in previous:
+        conts.append(2.0 * p[0] - p[1] if len(p) >= 2 else p[0] if len(p) == 1 else None)
+    K = first.k
+    IDX = np.stack([knn[i][0] for i in range(n)])
+    Y = first._X.take(IDX.ravel(), axis=0).reshape(n, K, -1)
+    mu = Y.sum(axis=1) * (1.0 / K)
+    Yc = Y - mu[:, None, :]
+    G = Yc @ np.swapaxes(Yc, 1, 2)
+    eig = np.linalg.eigh(G) if K < Y.shape[2] else None
+    Ss = [o._setup(Y[i], qs[i], ws[i], conts[i],
+                   pre=(mu[i], Yc[i], G[i], None if eig is None else (eig[0][i], eig[1][i])))
+          for i, o in enumerate(opts)]
+    t2 = time.perf_counter()
+    z0s, e0s = [], []
+    for o, S, p in zip(opts, Ss, previous):
+        V, m = S['V'], S['mu']
+        starts = np.empty((3 if len(p) else 2, V.shape[0]))
+        starts[0] = 0.0
+        starts[1] = S['zn'][0]
+        if len(p):
+            starts[2] = V @ (p[0].ravel() - m)
+        e_starts = o.energy(starts, S)
+        j = int(e_starts.argmin())
+        z0s.append(starts[j])
+        e0s.append(float(e_starts[j]))
+    zs, es, steps = list(z0s), list(e0s), [0] * n
+    groups: Dict[tuple, list] = {}
+    for i, S in enumerate(Ss):   # the same latent dimension and neighbours: one stacked search
+        groups.setdefault(S['WT'].shape, []).append(i)
+    for members in groups.values():
+        _stochastic_many(opts, Ss, members, zs, es, steps)
+    t3 = time.perf_counter()
+    X = [(S['mu'] + z @ S['V']).reshape(NUM_JOINTS, 3) for S, z in zip(Ss, zs)]
+    oris = [None] * n
+    if first.db.orientations is not None:
+        DIST = np.stack([knn[i][1] for i in range(n)])
+        inv = 1.0 / (DIST + 1e-6)                                            # (n, K)
+        Q = first.db.orientations.take(IDX, axis=0)                          # (n, K, 20, 4)
+        avg = quat_average(np.swapaxes(Q, 1, 2),
+                           np.broadcast_to(inv[:, None, :], (n, NUM_JOINTS, K)))
+        oris = list(avg)
+    t4 = time.perf_counter()
+    share = 1e3 / n
+    timings = {'knn': share * (t1 - t0), 'local_pca': share * (t2 - t1),
+               'optimise': share * (t3 - t2), 'orientations': share * (t4 - t3)}
+    out = []
+    for i, (o, S) in enumerate(zip(opts, Ss)):
+        zi = zs[i][None]
+        out.append(OptimizerResult(
+            positions=X[i], orientations=oris[i], neighbours=knn[i][0], distances=knn[i][1],
+            energy=es[i], steps=steps[i], shift=shifts[i], timings_ms=dict(timings),
+            terms_fn=lambda o=o, zi=zi, S=S: {k: float(v[0])
+                                               for k, v in o.energy_terms(zi, S).items()}))
+    return out
+
+
+def _stochastic_many(opts, Ss, members, zs, es, steps) -> None:
+    """:meth:`NaturalPostureOptimizer._stochastic` of the users ``members`` (the same energy
+    matrix shape), step by step together: each draws its samples from its own random stream, as
+    alone; a user whose samples do not improve stops (Sec. VI-E), the others go on. Updates
+    ``zs``, ``es``, ``steps`` in place."""
+    first = opts[members[0]]
+    M, n_steps = first.samples, first.steps
+    if n_steps <= 0:
+        return
+    d = Ss[members[0]]['d']
+    act = list(members)
+    while act:
+        u = len(act)
+        Z = np.empty((u, d + 1, M))
+        Z[:, d] = 1.0
+        WT = np.stack([Ss[i]['WT'] for i in act])
+        SIG = np.stack([opts[i].step_scale * np.maximum(Ss[i]['sd'], 1e-6) for i in act])[:, :, None]
+        ZC = np.stack([np.asarray(zs[i], float) for i in act])[:, :, None]
+        const = np.array([Ss[i]['const'] for i in act])
+        E0 = np.array([es[i] for i in act])
+        P = np.empty((u, WT.shape[1], M))
+        changed = False
+        while not changed:
+            for r, i in enumerate(act):
+                steps[i] += 1
+                opts[i].rng.standard_normal(out=Z[r, :d])
+            Zs = Z[:, :d]
+            Zs *= SIG
+            Zs += ZC
+            np.matmul(WT, Z, out=P)
+            E = kernels.energy_many(P, Z, d, const, first.L, first.w_kinematics, first.w_style)
+            J = E.argmin(axis=1)
+            EJ = E[np.arange(u), J]
+            better = EJ < E0
+            for r in np.flatnonzero(better):
+                ZC[r] = Z[r, :d, J[r]:J[r] + 1]
+                E0[r] = EJ[r]
+            stopped = [act[r] for r in np.flatnonzero(~better)]
+            for r, i in enumerate(act):
+                zs[i], es[i] = ZC[r, :, 0], float(E0[r])
+            done = [i for i in act if steps[i] >= n_steps]
+            if stopped or done:
+                act = [i for i in act if i not in stopped and steps[i] < n_steps]
+                changed = True
