@@ -110,8 +110,9 @@ def user_streams(users: int, frames: int) -> List[tuple]:
 
 
 def users_per_message(db, frames: int, counts=(1, 2, 6), rounds: int = 2) -> Dict[tuple, float]:
-    """CPU time (thread time, ms; the median over a clip's messages after the first 10) of the
-    reconstruction node's processors on one message's users, each user alone
+    """CPU time (thread time, ms; the median over a clip's messages after the first 10, or the
+    first third of a short clip) of the reconstruction node's processors on one message's
+    users, each user alone
     (``FusedProcessor.process``) and the users together (``FusedProcessor.process_batch``), the
     reconstructed output only; interleaved, the median of ``rounds``. {(users, batched): ms}."""
     db = as_database_arrays(db)
@@ -134,7 +135,7 @@ def users_per_message(db, frames: int, counts=(1, 2, 6), rounds: int = 2) -> Dic
                         for p, f in zip(procs, fr):
                             p.process(f, wanted)
                     cpu.append(1e3 * (time.thread_time() - c0))
-                got.setdefault((n, batched), []).append(float(np.median(cpu[10:])))
+                got.setdefault((n, batched), []).append(float(np.median(cpu[min(10, frames // 3):])))
     return {k: float(np.median(v)) for k, v in got.items()}
 
 
