@@ -110,32 +110,36 @@ def user_streams(users: int, frames: int) -> List[tuple]:
 
 
 def users_per_message(db, frames: int, counts=(1, 2, 6), rounds: int = 2) -> Dict[tuple, float]:
-    """CPU time (thread time, ms; the median over a clip's messages after the first 10, or the
-    first third of a short clip) of the reconstruction node's processors on one message's
-    users, each user alone
-    (``FusedProcessor.process``) and the users together (``FusedProcessor.process_batch``), the
-    reconstructed output only; interleaved, the median of ``rounds``. {(users, batched): ms}."""
+    """CPU time (thread time, ms) of the reconstruction node's processors on one message's
+    users, each user alone (``FusedProcessor.process``) and the users together
+    (``FusedProcessor.process_batch``), the reconstructed output only. The two run in lockstep
+    on the same messages (each message both ways, in alternating order), so that a shared
+    machine's load changes hit both alike; the median over the messages after the first 10 (or
+    the first third of a short clip) and over ``rounds``. {(users, batched): ms}."""
     db = as_database_arrays(db)
     wanted = (True, False, False)
     got: Dict[tuple, list] = {}
+    skip = min(10, frames // 3)
     for _ in range(rounds):
         for n in counts:
             st = user_streams(n, frames)
-            for batched in (False, True):
-                procs = [FusedProcessor(db, {}) for _ in range(n)]
-                cpu = []
-                for t in range(frames):
-                    fr = [SkeletonFrame(positions=o[t], tracking_state=s[t], user_id=u + 1,
-                                        stamp_ns=(t + 1) * 33_333_333, frame_id='kinect')
-                          for u, (o, s) in enumerate(st)]
+            procs = {False: [FusedProcessor(db, {}) for _ in range(n)],
+                     True: [FusedProcessor(db, {}) for _ in range(n)]}
+            cpu: Dict[bool, list] = {False: [], True: []}
+            for t in range(frames):
+                fr = [SkeletonFrame(positions=o[t], tracking_state=s[t], user_id=u + 1,
+                                    stamp_ns=(t + 1) * 33_333_333, frame_id='kinect')
+                      for u, (o, s) in enumerate(st)]
+                for batched in ((False, True) if t % 2 else (True, False)):
                     c0 = time.thread_time()
                     if batched:
-                        FusedProcessor.process_batch(procs, fr, wanted)
+                        FusedProcessor.process_batch(procs[True], fr, wanted)
                     else:
-                        for p, f in zip(procs, fr):
+                        for p, f in zip(procs[False], fr):
                             p.process(f, wanted)
-                    cpu.append(1e3 * (time.thread_time() - c0))
-                got.setdefault((n, batched), []).append(float(np.median(cpu[min(10, frames // 3):])))
+                    cpu[batched].append(1e3 * (time.thread_time() - c0))
+            for batched, v in cpu.items():
+                got.setdefault((n, batched), []).append(float(np.median(v[skip:])))
     return {k: float(np.median(v)) for k, v in got.items()}
 
 

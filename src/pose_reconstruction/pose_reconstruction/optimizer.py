@@ -479,9 +479,7 @@ def solve_batch(opts: Sequence[NaturalPostureOptimizer], queries: Sequence[np.nd
     Yc = Y - mu[:, None, :]
     G = Yc @ np.swapaxes(Yc, 1, 2)
     eig = np.linalg.eigh(G) if K < Y.shape[2] else None
-    Ss = [o._setup(Y[i], qs[i], ws[i], conts[i],
-                   pre=(mu[i], Yc[i], G[i], None if eig is None else (eig[0][i], eig[1][i])))
-          for i, o in enumerate(opts)]
+    Ss = _setup_many(opts, Y, mu, Yc, G, eig, qs, ws, conts)
     t2 = time.perf_counter()
     z0s, e0s = [], []
     for o, S, p in zip(opts, Ss, previous):
@@ -537,36 +535,113 @@ def _stochastic_many(opts, Ss, members, zs, es, steps) -> None:
         return
     d = Ss[members[0]]['d']
     act = list(members)
-    while act:
+    u = len(act)
+    Z = np.empty((u, d + 1, M))
+    Z[:, d] = 1.0
+    WT = np.stack([Ss[i]['WT'] for i in act])
+    SIG = np.stack([opts[i].step_scale * np.maximum(Ss[i]['sd'], 1e-6) for i in act])[:, :, None]
+    ZC = np.stack([np.asarray(zs[i], float) for i in act])[:, :, None]
+    const = np.array([Ss[i]['const'] for i in act])
+    E0 = np.array([es[i] for i in act])
+    P = np.empty((u, WT.shape[1], M))
+    rngs = [opts[i].rng.standard_normal for i in act]
+    L, w_k, w_s = first.L, first.w_kinematics, first.w_style
+    for k in range(1, n_steps + 1):
+        for r, normal in enumerate(rngs):
+            normal(out=Z[r, :d])
+        Zs = Z[:, :d]
+        Zs *= SIG
+        Zs += ZC
+        np.matmul(WT, Z, out=P)
+        E = kernels.energy_many(P, Z, d, const, L, w_k, w_s)
+        J = E.argmin(axis=1)
+        EJ = E[np.arange(u), J]
+        better = EJ < E0
+        Jl = J.tolist()
+        for r, b in enumerate(better.tolist()):
+            if b:
+                ZC[r] = Z[r, :d, Jl[r]:Jl[r] + 1]
+        np.copyto(E0, EJ, where=better)
+        go = better if k < n_steps else np.zeros(u, bool)
+        if go.all():
+            continue
+        for r, i in enumerate(act):    # the users that stop here: their result
+            if not go[r]:
+                zs[i], es[i], steps[i] = ZC[r, :, 0].copy(), float(E0[r]), k
+        if not go.any():
+            return
+        keep = np.flatnonzero(go)
+        act = [act[r] for r in keep]
+        rngs = [rngs[r] for r in keep]
         u = len(act)
-        Z = np.empty((u, d + 1, M))
-        Z[:, d] = 1.0
-        WT = np.stack([Ss[i]['WT'] for i in act])
-        SIG = np.stack([opts[i].step_scale * np.maximum(Ss[i]['sd'], 1e-6) for i in act])[:, :, None]
-        ZC = np.stack([np.asarray(zs[i], float) for i in act])[:, :, None]
-        const = np.array([Ss[i]['const'] for i in act])
-        E0 = np.array([es[i] for i in act])
+        Z, WT, SIG, ZC = Z[keep], WT[keep], SIG[keep], ZC[keep]
+        const, E0 = const[keep], E0[keep]
         P = np.empty((u, WT.shape[1], M))
-        changed = False
-        while not changed:
-            for r, i in enumerate(act):
-                steps[i] += 1
-                opts[i].rng.standard_normal(out=Z[r, :d])
-            Zs = Z[:, :d]
-            Zs *= SIG
-            Zs += ZC
-            np.matmul(WT, Z, out=P)
-            E = kernels.energy_many(P, Z, d, const, first.L, first.w_kinematics, first.w_style)
-            J = E.argmin(axis=1)
-            EJ = E[np.arange(u), J]
-            better = EJ < E0
-            for r in np.flatnonzero(better):
-                ZC[r] = Z[r, :d, J[r]:J[r] + 1]
-                E0[r] = EJ[r]
-            stopped = [act[r] for r in np.flatnonzero(~better)]
-            for r, i in enumerate(act):
-                zs[i], es[i] = ZC[r, :, 0], float(E0[r])
-            done = [i for i in act if steps[i] >= n_steps]
-            if stopped or done:
-                act = [i for i in act if i not in stopped and steps[i] < n_steps]
-                changed = True
+
+
+def _setup_many(opts, Y, mu, Yc, G, eig, qs, ws, conts) -> list:
+    """:meth:`NaturalPostureOptimizer._setup` of stacked users (``Y`` (n, K, 60) and its
+    ``mu``, ``Yc``, ``G``, ``eig``): the users whose local PCA keeps every one of ``pca_dims``
+    dimensions and who have a continuity target (every frame after a user's first) as stacked
+    array operations, the others one by one. The same numbers to rounding."""
+    n, K, D = Y.shape
+    first = opts[0]
+    dims = first.pca_dims
+    out = [None] * n
+    full = []
+    if eig is not None and dims < K:
+        lam = eig[0][:, ::-1]
+        keep = lam > np.maximum(lam[:, 0], 1e-300)[:, None] * 1e-10
+        full = [i for i in range(n) if conts[i] is not None and keep[i].sum() >= dims]
+    for i in range(n):
+        if not full or i not in full:
+            out[i] = opts[i]._setup(Y[i], qs[i], ws[i], conts[i],
+                                    pre=(mu[i], Yc[i], G[i],
+                                         None if eig is None else (eig[0][i], eig[1][i])))
+    if not full:
+        return out
+    f = np.array(full)
+    d = dims
+    s = np.sqrt(lam[f, :d])                                               # (m, d)
+    Ud = eig[1][f][:, :, ::-1][:, :, :d]                                   # (m, K, d)
+    V = (np.swapaxes(Ud, 1, 2) @ Yc[f]) / s[:, :, None]                    # (m, d, 60)
+    zn = Ud * s[:, None, :]                                                # (m, K, d)
+    znsq = np.einsum('mkd,mkd->mk', zn, zn)
+    res_n = np.maximum(np.diagonal(G[f], axis1=1, axis2=2) - znsq, 0.0)
+    sd = s * (1.0 / np.sqrt(max(K - 1, 1)))
+    Q = np.stack([np.asarray(qs[i], float).ravel() for i in full])         # (m, 60)
+    W60 = np.repeat(np.stack([ws[i] for i in full]), 3, axis=1)            # (m, 60)
+    MU = mu[f]
+    mq = MU - Q
+    Vw = V * W60[:, None, :]
+    A_c = Vw @ np.swapaxes(V, 1, 2)                                        # (m, d, d)
+    b_c = 2.0 * np.einsum('mdj,mj->md', Vw, mq)
+    c_c = np.einsum('mj,mj->m', mq, W60 * mq)
+    zn_sq = znsq + res_n
+    C = np.stack([conts[i].ravel() for i in full])
+    cm = C - MU
+    zc = np.einsum('mdj,mj->md', V, cm)
+    res_c = np.maximum(np.einsum('mj,mj->m', cm, cm) - np.einsum('md,md->m', zc, zc), 0.0)
+    wc = np.array([opts[i].w_control for i in full])
+    wm = np.array([opts[i].w_continuity for i in full])
+    wsty = np.array([opts[i].w_style for i in full])
+    inv_j = 1.0 / NUM_JOINTS
+    n3 = 3 * NUM_SEGMENTS
+    WT = np.empty((len(full), d + n3 + K, d + 1))
+    np.multiply(A_c, wc[:, None, None], out=WT[:, :d, :d])
+    diag = np.arange(d)
+    WT[:, diag, diag] += (wm * inv_j)[:, None]         # E_m's |z|^2, then E_s's, as _setup
+    WT[:, diag, diag] += (wsty * inv_j)[:, None]
+    WT[:, :d, d] = wc[:, None] * b_c - (2.0 * wm * inv_j)[:, None] * zc
+    const = wc * c_c + wm * inv_j * (np.einsum('md,md->m', zc, zc) + res_c)
+    Vt = np.swapaxes(V, 1, 2)
+    np.subtract(Vt[:, _SEGX_C], Vt[:, _SEGX_P], out=WT[:, d:d + n3, :d])
+    np.subtract(MU[:, _SEGX_C], MU[:, _SEGX_P], out=WT[:, d:d + n3, d])
+    np.multiply(zn, -2.0, out=WT[:, d + n3:, :d])
+    WT[:, d + n3:, d] = zn_sq
+    for r, i in enumerate(full):
+        out[i] = dict(mu=MU[r], V=V[r], zn=zn[r], zn_sq=zn_sq[r], res_n=res_n[r], sd=sd[r],
+                      q=Q[r], w60=W60[r], A_c=A_c[r], b_c=b_c[r], c_c=float(c_c[r]),
+                      c=C[r], zc=zc[r], res_c=float(res_c[r]), WT=WT[r], const=float(const[r]),
+                      d=d)
+    return out
