@@ -124,7 +124,7 @@ from .profile import from_optional as profile_lengths
 from .length_prior import LengthPrior, LengthPriorConfig
 from .reliability import ReliabilityConfig, ReliabilityEstimator
 from .segment_output import (SEG_DIFF, SegmentOutput, SegmentOutputConfig,
-                             neighbour_direction_spread)
+                             neighbour_direction_spread, neighbour_direction_spreads)
 from .trust import SensorTrust, TrustConfig
 
 METHODS = ('A', 'B', 'C')
@@ -385,8 +385,13 @@ class Reconstructor:
                         translate=translate, prep=prep, yaw=yaw, height=height,
                         prev=prev[::-1], segments=segments, t0=t0, t1=t1)
 
-    def _finish(self, p: '_Pending', res) -> SkeletonFrame:
-        """The frame after the optimizer's result ``res`` for :meth:`_begin`'s ``p``."""
+    def _wants_spread(self, p: '_Pending', res) -> bool:
+        return bool(p.segments and self.segment_output.direction_db_spread
+                    and res.neighbours is not None)
+
+    def _finish(self, p: '_Pending', res, spread=None) -> SkeletonFrame:
+        """The frame after the optimizer's result ``res`` for :meth:`_begin`'s ``p``
+        (``spread``: the neighbours' direction spread when already computed)."""
         frame, R, obs, w, yaw, prep = p.frame, p.R, p.obs, p.w, p.yaw, p.prep
         t1, tf = p.t1, time.perf_counter()
         self._prev.append((res.positions, yaw))
@@ -404,8 +409,7 @@ class Reconstructor:
             # database is trusted more than the sensor
             root = obs[ROOT] - ((1.0 - alpha) / prep.scale) * (yaw_matrix(yaw) @ res.shift)
         if p.segments:
-            spread = None
-            if self.segment_output.direction_db_spread and res.neighbours is not None:
+            if spread is None and self._wants_spread(p, res):
                 Y = self.db.flat.take(res.neighbours, axis=0).reshape(-1, NUM_JOINTS, 3)
                 spread = neighbour_direction_spread(Y, res.distances)
             positions = self.segment_output.output(frame, res.positions, w, alpha, yaw=yaw,
@@ -496,11 +500,21 @@ def process_batch(recs, frames) -> list:
                               [p.translate for _, p in pend])
     except USER_ERRORS:
         results = None   # one user's numbers broke the batch: each alone, its error its own
+    spreads = {}
+    if results is not None:
+        # the neighbours' segment direction spreads of the users whose output uses them
+        want = [k for k, (i, p) in enumerate(pend) if recs[i]._wants_spread(p, results[k])]
+        if len(want) > 1 and len({len(results[k].neighbours) for k in want}) == 1:
+            idx = np.stack([results[k].neighbours for k in want])
+            Y = recs[pend[want[0]][0]].db.flat.take(idx, axis=0).reshape(
+                len(want), idx.shape[1], NUM_JOINTS, 3)
+            sp = neighbour_direction_spreads(Y, np.stack([results[k].distances for k in want]))
+            spreads = dict(zip(want, sp))
     for k, (i, p) in enumerate(pend):
         try:
             res = results[k] if results is not None else recs[i].core.solve(
                 p.query, p.w, p.prev, translate=p.translate)
-            outs[i] = recs[i]._finish(p, res)
+            outs[i] = recs[i]._finish(p, res, spreads.get(k))
         except USER_ERRORS as e:
             outs[i] = e
     return outs

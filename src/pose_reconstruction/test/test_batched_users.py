@@ -176,3 +176,14 @@ def test_energy_many_numba_and_numpy_agree_with_the_one_user_kernel(db):
         one = kernels._energy_numba(P[u], ZT[u], d, const[u], opt.L, opt.w_kinematics,
                                     opt.w_style)
         assert np.array_equal(a[u], one)
+
+
+def test_direction_spreads_of_several_users_equal_each_users():
+    from pose_reconstruction.segment_output import (neighbour_direction_spread,
+                                                    neighbour_direction_spreads)
+    rng = np.random.default_rng(0)
+    Y = rng.normal(size=(4, 30, NUM_JOINTS, 3))
+    dist = rng.uniform(0.01, 1.0, (4, 30))
+    many = neighbour_direction_spreads(Y, dist)
+    for y, d, m in zip(Y, dist, many):
+        np.testing.assert_allclose(m, neighbour_direction_spread(y, d), rtol=0, atol=1e-12)
