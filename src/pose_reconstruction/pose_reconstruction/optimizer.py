@@ -481,19 +481,32 @@ def solve_batch(opts: Sequence[NaturalPostureOptimizer], queries: Sequence[np.nd
     eig = np.linalg.eigh(G) if K < Y.shape[2] else None
     Ss = _setup_many(opts, Y, mu, Yc, G, eig, qs, ws, conts)
     t2 = time.perf_counter()
-    z0s, e0s = [], []
-    for o, S, p in zip(opts, Ss, previous):
+    # initial sample of each user: the best of the neighbours' mean, the previous solution and
+    # the nearest neighbour (as solve), evaluated for the users of one shape at once
+    starts = []
+    for S, p in zip(Ss, previous):
         V, m = S['V'], S['mu']
-        starts = np.empty((3 if len(p) else 2, V.shape[0]))
-        starts[0] = 0.0
-        starts[1] = S['zn'][0]
+        st = np.empty((3 if len(p) else 2, V.shape[0]))
+        st[0] = 0.0
+        st[1] = S['zn'][0]
         if len(p):
-            starts[2] = V @ (p[0].ravel() - m)
-        e_starts = o.energy(starts, S)
-        j = int(e_starts.argmin())
-        z0s.append(starts[j])
-        e0s.append(float(e_starts[j]))
-    zs, es, steps = list(z0s), list(e0s), [0] * n
+            st[2] = V @ (p[0].ravel() - m)
+        starts.append(st)
+    zs, es, steps = [None] * n, [0.0] * n, [0] * n
+    by_start: Dict[tuple, list] = {}
+    for i, S in enumerate(Ss):
+        by_start.setdefault((S['WT'].shape, len(starts[i])), []).append(i)
+    for members in by_start.values():
+        d = Ss[members[0]]['d']
+        ZT = np.ones((len(members), d + 1, len(starts[members[0]])))
+        for r, i in enumerate(members):
+            ZT[r, :d] = starts[i].T
+        P = np.matmul(np.stack([Ss[i]['WT'] for i in members]), ZT)
+        E = kernels.energy_many(P, ZT, d, np.array([Ss[i]['const'] for i in members]),
+                                first.L, first.w_kinematics, first.w_style)
+        for r, i in enumerate(members):
+            j = int(E[r].argmin())
+            zs[i], es[i] = starts[i][j], float(E[r, j])
     groups: Dict[tuple, list] = {}
     for i, S in enumerate(Ss):   # the same latent dimension and neighbours: one stacked search
         groups.setdefault(S['WT'].shape, []).append(i)
