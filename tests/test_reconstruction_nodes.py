@@ -410,3 +410,46 @@ def test_reconstruction_diagnostics_report_each_users_bone_lengths(rclpy_context
         assert d['user_7_bone_length_restarts'] == 0
     finally:
         node.destroy_node()
+
+
+def test_reconstruction_node_processes_a_messages_users_together(rclpy_context, case):
+    """Messages of three users (the node solves their optimizer runs together): every user's
+    output equals its own FusedProcessor's, frame by frame; a message with one user goes the
+    one-user way; a user with a malformed skeleton is dropped alone."""
+    from rclpy.parameter import Parameter
+    from rclpy.serialization import serialize_message
+
+    from pose_reconstruction.fused import FusedProcessor
+    from pose_reconstruction.reconstruction_node import ReconstructionNode
+    from skeleton_core.cdr import frames_from_cdr
+    from skeleton_core.conversions import SkeletonFrame, frames_to_array_msg
+
+    db, _, obs, ts = case
+    node = bring_up(ReconstructionNode(database_obj=db, context=rclpy_context,
+                                       parameter_overrides=[
+        Parameter('input_topic', value=f'/t{os.getpid()}/batch_in'),
+        Parameter('output_topic', value=f'/t{os.getpid()}/batch_out')]))
+    sent = []
+    node._pubs[0].publish = sent.append   # the serialized output, without DDS
+    refs = {}
+    try:
+        for k in range(30):
+            stamp = 1_000_000 + k * 33_333_333
+            uids = (3,) if k == 5 else (1, 2, 3)
+            frames = [SkeletonFrame(positions=obs[k] + (0.7 * u, 0.0, 0.0),
+                                    tracking_state=ts[(k + 7 * u) % len(ts)], user_id=u,
+                                    stamp_ns=stamp) for u in uids]
+            msg = frames_to_array_msg(frames, stamp, 'k')
+            if k == 12:   # user 2's skeleton malformed: dropped at decoding, the others kept
+                msg.skeletons[1].positions = msg.skeletons[1].positions[:10]
+                frames = [f for f in frames if f.user_id != 2]
+            node._on_msg(serialize_message(msg))
+            _, _, out = frames_from_cdr(sent[-1], [])
+            assert [f.user_id for f in out] == [f.user_id for f in frames]
+            for f, o in zip(frames, out):
+                ref = refs.setdefault(f.user_id, FusedProcessor(db, dict(node.params.values)))
+                r = ref.process(f, (True, False, False))[0]
+                np.testing.assert_allclose(o.positions, r.positions, rtol=0, atol=1e-9)
+        assert sum(node.health.dropped.values()) == 1   # user 2's skeleton in message 12
+    finally:
+        node.destroy_node()

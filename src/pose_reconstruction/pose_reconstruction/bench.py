@@ -10,7 +10,8 @@ Prints
 3. method A time per query;
 4. the reconstruction node's work per two-user message without DDS (CDR decode, reliability +
    method C for each user through FusedProcessor, result check, CDR encode) and the cost of a
-   user's first frame (building the per-user state);
+   user's first frame (building the per-user state); the CPU time per message at 1, 2 and 6
+   users, each user alone vs the users together (``--users-only``: this alone);
 5. how time grows with database size (1k -> 50k postures, jittered copies) for brute-force BLAS
    KNN vs cKDTree in PCA space (with its recall of the exact Eq. 9 neighbours), and with K;
 6. method C per frame per user on the large real database (every CMU clip and its mirror image,
@@ -34,7 +35,7 @@ from .fused import FusedProcessor
 from .optimizer import NaturalPostureOptimizer
 from .posture_space import as_database_arrays, parent_relative_error
 from .reconstructor import Reconstructor
-from .synthetic import SyntheticDatabase, corrupt_clip, scenario
+from .synthetic import SyntheticDatabase, corrupt_clip, scenario, smooth_clip
 from skeleton_data.database import DatabaseError, load_or_build_default
 from . import search as opt_mod
 
@@ -98,6 +99,61 @@ def node_messages(db, obs, ts, obs2, ts2) -> Dict[str, np.ndarray]:
     return {'message': np.array(per_msg[1:]), 'new_user': np.array(first)}
 
 
+def user_streams(users: int, frames: int) -> List[tuple]:
+    """``users`` corrupted synthetic clips (observed, tracking state), side by side in front of
+    the sensor at different heights: the users of one message."""
+    out = []
+    for u in range(users):
+        _, truth = smooth_clip(frames, seed=10 + u, height=1.55 + 0.05 * u)
+        out.append(corrupt_clip(truth + np.array([0.5 * u - 1.2, 0.0, 0.0]), seed=20 + u))
+    return out
+
+
+def users_per_message(db, frames: int, counts=(1, 2, 6), rounds: int = 2) -> Dict[tuple, float]:
+    """CPU time (thread time, ms) of the reconstruction node's processors on one message's
+    users, each user alone (``FusedProcessor.process``) and the users together
+    (``FusedProcessor.process_batch``), the reconstructed output only. The two run in lockstep
+    on the same messages (each message both ways, in alternating order), so that a shared
+    machine's load changes hit both alike; the median over the messages after the first 10 (or
+    the first third of a short clip) and over ``rounds``. {(users, batched): ms}."""
+    db = as_database_arrays(db)
+    wanted = (True, False, False)
+    got: Dict[tuple, list] = {}
+    skip = min(10, frames // 3)
+    for _ in range(rounds):
+        for n in counts:
+            st = user_streams(n, frames)
+            procs = {False: [FusedProcessor(db, {}) for _ in range(n)],
+                     True: [FusedProcessor(db, {}) for _ in range(n)]}
+            cpu: Dict[bool, list] = {False: [], True: []}
+            for t in range(frames):
+                fr = [SkeletonFrame(positions=o[t], tracking_state=s[t], user_id=u + 1,
+                                    stamp_ns=(t + 1) * 33_333_333, frame_id='kinect')
+                      for u, (o, s) in enumerate(st)]
+                for batched in ((False, True) if t % 2 else (True, False)):
+                    c0 = time.thread_time()
+                    if batched:
+                        FusedProcessor.process_batch(procs[True], fr, wanted)
+                    else:
+                        for p, f in zip(procs[False], fr):
+                            p.process(f, wanted)
+                    cpu[batched].append(1e3 * (time.thread_time() - c0))
+            for batched, v in cpu.items():
+                got.setdefault((n, batched), []).append(float(np.median(v[skip:])))
+    return {k: float(np.median(v)) for k, v in got.items()}
+
+
+def print_users_per_message(db, frames: int) -> None:
+    res = users_per_message(db, frames)
+    print(f'\n## reconstruction node, users per message ({frames} frames, database '
+          f'{as_database_arrays(db).size} postures): CPU ms per message (thread time, median), '
+          f'each user alone vs the users together')
+    print(f'{"users":>6}{"alone":>9}{"together":>10}{"per user":>10}{"together":>10}{"saved":>8}')
+    for n in sorted({k[0] for k in res}):
+        a, b = res[(n, False)], res[(n, True)]
+        print(f'{n:>6}{a:>9.2f}{b:>10.2f}{a / n:>10.2f}{b / n:>10.2f}{1 - b / a:>8.0%}')
+
+
 def jittered(db, size: int, seed: int = 0) -> SyntheticDatabase:
     """A database of ``size`` postures: copies of ``db`` with 2 cm Gaussian joint jitter."""
     d = as_database_arrays(db)
@@ -115,7 +171,14 @@ def main(argv=None) -> int:
                     help='database for the timing sections (default: auto = CMU if present)')
     ap.add_argument('--frames', type=int, default=150, help='frames of the test clip')
     ap.add_argument('--quick', action='store_true', help='fewer sizes / K values')
+    ap.add_argument('--users-only', action='store_true',
+                    help='only the CPU time per message at 1, 2 and 6 users, each alone vs together')
     a = ap.parse_args(argv)
+    if a.users_only:
+        db = (scenario(frames=a.frames)[0] if a.source == 'synthetic'
+              else load_or_build_default(source=a.source))
+        print_users_per_message(db, a.frames)
+        return 0
 
     print('# posture reconstruction benchmark (medians; the machine may be loaded by other jobs)')
     # 1. accuracy on a synthetic scenario
@@ -135,7 +198,6 @@ def main(argv=None) -> int:
     if a.source == 'synthetic':
         db, src = sdb, 'synthetic'
     else:
-        from skeleton_data.database import load_or_build_default
         db = load_or_build_default(source=a.source)
         src = db.meta.get('source', a.source)
     n = len(db.positions)
@@ -172,6 +234,7 @@ def main(argv=None) -> int:
           f'check, encode): median {np.median(nm["message"]):.2f} ms, p95 '
           f'{np.percentile(nm["message"], 95):.2f} ms; a new user\'s state '
           f'{np.median(nm["new_user"]):.2f} ms')
+    print_users_per_message(db, a.frames)
 
     # 5. scaling with database size and K (KNN only, and the whole frame)
     sizes = (1000, 3000, 10000) if a.quick else (1000, 3000, 10000, 50000)

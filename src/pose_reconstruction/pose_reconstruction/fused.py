@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from typing import Any, Dict, Optional, Sequence
 
-from .reconstructor import Reconstructor
+from .reconstructor import USER_ERRORS, Reconstructor, process_batch
 
 
 def section(values: Dict[str, Any], name: str) -> Dict[str, Any]:
@@ -59,6 +59,10 @@ class FusedProcessor:
         out = self.rec.process(frame)
         if not (wanted[1] or wanted[2]):
             return out, None, None
+        return self._more(frame, out, wanted)
+
+    def _more(self, frame, out, wanted: Sequence[bool]):
+        """The reliability and completion outputs beside the reconstruction ``out``."""
         rel = frame.copy(reliability=out.reliability)
         comp = None
         if wanted[2]:
@@ -66,3 +70,30 @@ class FusedProcessor:
                 self.comp = Reconstructor(self._db, **self._comp_args)
             comp = self.comp.process(rel)
         return out, (rel if wanted[1] else None), comp
+
+    @staticmethod
+    def process_batch(procs: Sequence['FusedProcessor'], frames, wanted: Sequence[bool]) -> list:
+        """:meth:`process` of several users' frames of one message (one processor each), the
+        optimizer runs of the users solved together (:func:`~.reconstructor.process_batch`): the
+        outputs of ``[p.process(f, wanted) for p, f in zip(procs, frames)]``, each element a
+        tuple or the exception that user's frame raised. A processor given twice (two skeletons
+        with one user id) is processed one frame after the other."""
+        if len({id(p) for p in procs}) < len(procs):
+            out = []
+            for p, f in zip(procs, frames):
+                try:
+                    out.append(p.process(f, wanted))
+                except USER_ERRORS as e:
+                    out.append(e)
+            return out
+        recs = process_batch([p.rec for p in procs], frames)
+        out = []
+        for p, f, rec in zip(procs, frames, recs):
+            if isinstance(rec, Exception) or not (wanted[1] or wanted[2]):
+                out.append(rec if isinstance(rec, Exception) else (rec, None, None))
+                continue
+            try:
+                out.append(p._more(f, rec, wanted))
+            except USER_ERRORS as e:
+                out.append(e)
+        return out

@@ -5,7 +5,9 @@
 * :func:`energy_from_products` -- Eq. 15 of every stochastic sample from the one matrix product
   ``P = WT [z; 1]`` of :meth:`NaturalPostureOptimizer._energy_t` (the quadratic and linear part,
   the segment lengths of E_k, the closest neighbour of E_s): one pass over ``P`` instead of about
-  ten numpy calls per optimisation step.
+  ten numpy calls per optimisation step;
+* :func:`energy_many` -- the same for several users' stacked products at once (one call per
+  optimisation step of a frame's users, :func:`~.optimizer.solve_batch`).
 """
 from __future__ import annotations
 
@@ -60,12 +62,48 @@ def _energy_kernel(P, ZT, d, const, L, w_k, w_s, sq=None):
     return e
 
 
+def _energy_many_numpy(P, ZT, d, const, L, w_k, w_s, sq=None):
+    return np.stack([_energy_numpy(P[u], ZT[u], d, const[u], L, w_k, w_s, sq)
+                     for u in range(P.shape[0])])
+
+
+def _energy_many_kernel(P, ZT, d, const, L, w_k, w_s, sq=None):
+    # the arithmetic of _energy_kernel, in the same order, for each of the U stacked users
+    U, m = P.shape[0], P.shape[2]
+    n = L.shape[0]
+    K = P.shape[1] - d - 3 * n
+    ck, cs = w_k / n, w_s / NUM_JOINTS
+    e = np.empty((U, m))
+    for u in range(U):
+        for j in range(m):
+            acc = 0.0
+            for i in range(d):
+                acc += P[u, i, j] * ZT[u, i, j]
+            ek = 0.0
+            for s in range(n):
+                x, y, z = P[u, d + s, j], P[u, d + n + s, j], P[u, d + 2 * n + s, j]
+                r = np.sqrt(x * x + y * y + z * z) - L[s]
+                ek += r * r
+            best = P[u, d + 3 * n, j]
+            for k in range(1, K):
+                v = P[u, d + 3 * n + k, j]
+                if v < best:
+                    best = v
+            e[u, j] = acc + const[u] + ek * ck + best * cs
+    return e
+
+
 _energy_numba = jit.njit(_energy_kernel)
+_energy_many_numba = jit.njit(_energy_many_kernel)
 # energy_from_products(P, ZT, d, const, L, w_k, w_s, sq=None) -> (M,): Eq. 15 of the M samples
 # (columns of ZT, (d + 1, M), last row 1) from P = WT ZT ((d + 57 + K, M): the quadratic form's
 # rows, the 57 segment coordinates by axis block, the K style rows); ``sq`` a (57, M) work array
 # for the numpy twin
 energy_from_products = jit.pick(_energy_numba, _energy_numpy)
+# energy_many(P, ZT, d, const, L, w_k, w_s, sq=None) -> (U, M): the same for U users' stacked
+# products (P (U, d + 57 + K, M), ZT (U, d + 1, M), const (U,)), the numbers of
+# energy_from_products for each user
+energy_many = jit.pick(_energy_many_numba, _energy_many_numpy)
 
 _warm = [False]
 
@@ -83,7 +121,8 @@ def warm_up() -> float:
     L, sq = np.ones(NUM_SEGMENTS), np.empty((3 * NUM_SEGMENTS, m))
     for work in (None, sq):   # energy() passes no work array, the stochastic search one
         _energy_numba(P, ZT, d, 0.0, L, 1.0, 1.0, work)
+    _energy_many_numba(P[None], ZT[None], d, np.zeros(1), L, 1.0, 1.0, sq)
     return time.perf_counter() - t0
 
 
-__all__ = ['energy_from_products', 'warm_up']
+__all__ = ['energy_from_products', 'energy_many', 'warm_up']

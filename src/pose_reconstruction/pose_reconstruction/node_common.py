@@ -228,6 +228,7 @@ class SkeletonArrayNode(ManagedNode):
             wanted = (True,) + tuple(p.get_subscription_count() > 0 for p in self._pubs[1:])
             results: List[List] = [[] for _ in self._pubs]
             self._purge()
+            procs = []
             for f in frames:
                 proc = self._users.get(f.user_id)
                 if proc is None:
@@ -235,8 +236,21 @@ class SkeletonArrayNode(ManagedNode):
                 self._last_seen[f.user_id] = time.monotonic()
                 if f.stamp_ns == 0:
                     f.stamp_ns = stamp
+                procs.append(proc)
+            # a processor that handles a message's users together (the reconstruction: their
+            # optimizer runs batched) gets them at once: per user a tuple or its exception
+            batch = getattr(type(procs[0]), 'process_batch', None) if (
+                self._multi and len(procs) > 1
+                and all(type(p) is type(procs[0]) for p in procs)) else None
+            batched = batch(procs, frames, wanted) if batch is not None else None
+            for k, (f, proc) in enumerate(zip(frames, procs)):
                 try:
-                    outs = proc.process(f, wanted) if self._multi else (proc.process(f),)
+                    if batched is not None:
+                        outs = batched[k]
+                        if isinstance(outs, Exception):
+                            raise outs
+                    else:
+                        outs = proc.process(f, wanted) if self._multi else (proc.process(f),)
                     # every result checked before any is kept; the checked arrays are what
                     # gets serialized (frames_to_cdr(validated=True) does not check again)
                     checked = [None if res is None else frame_from_arrays(

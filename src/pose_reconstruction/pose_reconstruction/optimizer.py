@@ -60,12 +60,13 @@ def local_pca(Yc: np.ndarray, dims: int):
     return V, s
 
 
-def _local_pca(Yc: np.ndarray, dims: int, G: Optional[np.ndarray] = None):
+def _local_pca(Yc: np.ndarray, dims: int, G: Optional[np.ndarray] = None, eig=None):
     """:func:`local_pca` plus the latent coordinates of the rows, ``Yc V^T`` (K, d) (from the
-    Gram matrix ``G = Yc Yc^T`` when K < 60: ``U_d s``, no further product)."""
+    Gram matrix ``G = Yc Yc^T`` when K < 60: ``U_d s``, no further product). ``eig``: the
+    ``np.linalg.eigh`` of ``G`` when already computed (several users' at once)."""
     K, D = Yc.shape
     if K < D:
-        lam, U = np.linalg.eigh(Yc @ Yc.T if G is None else G)
+        lam, U = eig if eig is not None else np.linalg.eigh(Yc @ Yc.T if G is None else G)
         lam, U = lam[::-1], U[:, ::-1]
         keep = lam > max(lam[0], 1e-300) * 1e-10
         d = int(min(dims, keep.sum()))
@@ -169,6 +170,8 @@ class NaturalPostureOptimizer:
         cfg = dataclasses.replace(self.config, **kw)
         check(cfg)
         self.config = cfg
+        # what must be equal for optimizers to be solved in one batch (solve_batch)
+        self._batch_key = dataclasses.astuple(dataclasses.replace(cfg, seed=0))
         for name in _INT_PARAMS + _FLOAT_PARAMS + ('solver', 'knn'):
             setattr(self, name, getattr(cfg, name))
         self.k = min(self.k, self.db.size)
@@ -183,7 +186,7 @@ class NaturalPostureOptimizer:
 
     # -- energy -------------------------------------------------------------------------------
     def _setup(self, Y: np.ndarray, query: np.ndarray, weights: np.ndarray,
-               continuity_target: Optional[np.ndarray]):
+               continuity_target: Optional[np.ndarray], pre=None):
         """Local PCA of the neighbours ``Y`` (K, 60) and the constants of the energy.
 
         Every term is evaluated in the latent space: with ``x = mu + V^T z`` (V orthonormal rows)
@@ -191,12 +194,17 @@ class NaturalPostureOptimizer:
         and the segment vectors of E_k are affine in z (``seg0 + z dV``). The weighted sum of the
         quadratic and linear parts and every product with z are gathered into one matrix ``W``
         so that :meth:`energy` needs one matrix product per batch.
+        ``pre``: ``(mu, Yc, G, eigh of G or None)`` already computed (:func:`solve_batch`).
         """
         K = len(Y)
-        mu = Y.sum(axis=0) * (1.0 / K)
-        Yc = Y - mu
-        G = Yc @ Yc.T
-        V, s, zn = _local_pca(Yc, self.pca_dims, G)
+        if pre is None:
+            mu = Y.sum(axis=0) * (1.0 / K)
+            Yc = Y - mu
+            G = Yc @ Yc.T
+            eig = None
+        else:
+            mu, Yc, G, eig = pre
+        V, s, zn = _local_pca(Yc, self.pca_dims, G, eig)
         d = V.shape[0]
         znsq = np.einsum('kd,kd->k', zn, zn)
         res_n = np.maximum(np.diagonal(G) - znsq, 0.0)
@@ -409,3 +417,244 @@ class NaturalPostureOptimizer:
             steps=steps, shift=shift, timings_ms={'knn': 1e3 * (t1 - t0), 'local_pca': 1e3 * (t2 - t1),
                                      'optimise': 1e3 * (t3 - t2), 'orientations': 1e3 * (t4 - t3)},
             terms_fn=lambda: {k: float(v[0]) for k, v in self.energy_terms(zs, S).items()})
+
+
+def _batchable(opt: NaturalPostureOptimizer, first: NaturalPostureOptimizer) -> bool:
+    """``opt`` can be solved in one batch with ``first``: the same database and parameters
+    (the seed aside: every optimizer keeps its own random stream), the stochastic solver and
+    the exact brute-force KNN."""
+    return (opt._X is first._X and opt.solver == 'stochastic' and opt.search.batchable
+            and opt._batch_key == first._batch_key)
+
+
+def solve_batch(opts: Sequence[NaturalPostureOptimizer], queries: Sequence[np.ndarray],
+                weights: Sequence[np.ndarray], previous: Sequence[Sequence[np.ndarray]],
+                translate: Sequence[bool]) -> list:
+    """:meth:`NaturalPostureOptimizer.solve` of several users' frames (one optimizer each, its
+    own random stream) at once: one KNN matrix product over the database for every query whose
+    root is reliable, the neighbours' Gram matrices and their eigendecompositions stacked, each
+    step of the stochastic search one stacked matrix product and one energy kernel call for the
+    users still searching, and the orientation averages stacked. The results are those of the
+    users' own ``solve`` calls (the same random draws; distances to rounding). Optimizers that
+    differ (parameters, solver, KNN mode, database) are solved one by one."""
+    n = len(opts)
+    if n == 0:
+        return []
+    first = opts[0]
+    if n < 2 or not all(_batchable(o, first) for o in opts):
+        return [o.solve(q, w, p, translate=t)
+                for o, q, w, p, t in zip(opts, queries, weights, previous, translate)]
+    t0 = time.perf_counter()
+    ws, qs = [], []
+    for w, q in zip(weights, queries):
+        w = np.asarray(w, float)
+        if w.min() < 0.0 or w.max() > 1.0:
+            w = np.clip(w, 0.0, 1.0)
+        ws.append(w)
+        qs.append(np.asarray(q, float))
+    knn = [None] * n
+    shifts = [None] * n
+    plain = [i for i in range(n) if not translate[i]]
+    for i in range(n):
+        if translate[i]:   # the translation-invariant search: one by one (an unreliable root)
+            w_knn = ws[i] if ws[i].sum() > 1e-6 else np.ones_like(ws[i])
+            idx, dist, sh = opts[i].search.knn_search(qs[i], w_knn, translate=True)
+            inv = 1.0 / (dist + 1e-6)
+            shifts[i] = (inv @ sh) / inv.sum()
+            qs[i] = qs[i] + shifts[i]
+            knn[i] = (idx, dist)
+    if plain:
+        W = np.stack([ws[i] if ws[i].sum() > 1e-6 else np.ones_like(ws[i]) for i in plain])
+        IDX, DIST = first.search.knn_search_many(np.stack([qs[i] for i in plain]), W)
+        for r, i in enumerate(plain):
+            knn[i] = (IDX[r], DIST[r])
+    t1 = time.perf_counter()
+    conts = []
+    for p in previous:
+        conts.append(2.0 * p[0] - p[1] if len(p) >= 2 else p[0] if len(p) == 1 else None)
+    K = first.k
+    IDX = np.stack([knn[i][0] for i in range(n)])
+    Y = first._X.take(IDX.ravel(), axis=0).reshape(n, K, -1)
+    mu = Y.sum(axis=1) * (1.0 / K)
+    Yc = Y - mu[:, None, :]
+    G = Yc @ np.swapaxes(Yc, 1, 2)
+    eig = np.linalg.eigh(G) if K < Y.shape[2] else None
+    Ss = _setup_many(opts, Y, mu, Yc, G, eig, qs, ws, conts)
+    t2 = time.perf_counter()
+    # initial sample of each user: the best of the neighbours' mean, the previous solution and
+    # the nearest neighbour (as solve), evaluated for the users of one shape at once
+    starts = []
+    for S, p in zip(Ss, previous):
+        V, m = S['V'], S['mu']
+        st = np.empty((3 if len(p) else 2, V.shape[0]))
+        st[0] = 0.0
+        st[1] = S['zn'][0]
+        if len(p):
+            st[2] = V @ (p[0].ravel() - m)
+        starts.append(st)
+    zs, es, steps = [None] * n, [0.0] * n, [0] * n
+    by_start: Dict[tuple, list] = {}
+    for i, S in enumerate(Ss):
+        by_start.setdefault((S['WT'].shape, len(starts[i])), []).append(i)
+    for members in by_start.values():
+        d = Ss[members[0]]['d']
+        ZT = np.ones((len(members), d + 1, len(starts[members[0]])))
+        for r, i in enumerate(members):
+            ZT[r, :d] = starts[i].T
+        P = np.matmul(np.stack([Ss[i]['WT'] for i in members]), ZT)
+        E = kernels.energy_many(P, ZT, d, np.array([Ss[i]['const'] for i in members]),
+                                first.L, first.w_kinematics, first.w_style)
+        for r, i in enumerate(members):
+            j = int(E[r].argmin())
+            zs[i], es[i] = starts[i][j], float(E[r, j])
+    groups: Dict[tuple, list] = {}
+    for i, S in enumerate(Ss):   # the same latent dimension and neighbours: one stacked search
+        groups.setdefault(S['WT'].shape, []).append(i)
+    for members in groups.values():
+        _stochastic_many(opts, Ss, members, zs, es, steps)
+    t3 = time.perf_counter()
+    X = [(S['mu'] + z @ S['V']).reshape(NUM_JOINTS, 3) for S, z in zip(Ss, zs)]
+    oris = [None] * n
+    if first.db.orientations is not None:
+        DIST = np.stack([knn[i][1] for i in range(n)])
+        inv = 1.0 / (DIST + 1e-6)                                            # (n, K)
+        Q = first.db.orientations.take(IDX, axis=0)                          # (n, K, 20, 4)
+        avg = quat_average(np.swapaxes(Q, 1, 2),
+                           np.broadcast_to(inv[:, None, :], (n, NUM_JOINTS, K)))
+        oris = list(avg)
+    t4 = time.perf_counter()
+    share = 1e3 / n
+    timings = {'knn': share * (t1 - t0), 'local_pca': share * (t2 - t1),
+               'optimise': share * (t3 - t2), 'orientations': share * (t4 - t3)}
+    out = []
+    for i, (o, S) in enumerate(zip(opts, Ss)):
+        zi = zs[i][None]
+        out.append(OptimizerResult(
+            positions=X[i], orientations=oris[i], neighbours=knn[i][0], distances=knn[i][1],
+            energy=es[i], steps=steps[i], shift=shifts[i], timings_ms=dict(timings),
+            terms_fn=lambda o=o, zi=zi, S=S: {k: float(v[0])
+                                               for k, v in o.energy_terms(zi, S).items()}))
+    return out
+
+
+def _stochastic_many(opts, Ss, members, zs, es, steps) -> None:
+    """:meth:`NaturalPostureOptimizer._stochastic` of the users ``members`` (the same energy
+    matrix shape), step by step together: each draws its samples from its own random stream, as
+    alone; a user whose samples do not improve stops (Sec. VI-E), the others go on. Updates
+    ``zs``, ``es``, ``steps`` in place."""
+    first = opts[members[0]]
+    M, n_steps = first.samples, first.steps
+    if n_steps <= 0:
+        return
+    d = Ss[members[0]]['d']
+    act = list(members)
+    u = len(act)
+    Z = np.empty((u, d + 1, M))
+    Z[:, d] = 1.0
+    WT = np.stack([Ss[i]['WT'] for i in act])
+    SIG = np.stack([opts[i].step_scale * np.maximum(Ss[i]['sd'], 1e-6) for i in act])[:, :, None]
+    ZC = np.stack([np.asarray(zs[i], float) for i in act])[:, :, None]
+    const = np.array([Ss[i]['const'] for i in act])
+    E0 = np.array([es[i] for i in act])
+    P = np.empty((u, WT.shape[1], M))
+    rngs = [opts[i].rng.standard_normal for i in act]
+    L, w_k, w_s = first.L, first.w_kinematics, first.w_style
+    for k in range(1, n_steps + 1):
+        for r, normal in enumerate(rngs):
+            normal(out=Z[r, :d])
+        Zs = Z[:, :d]
+        Zs *= SIG
+        Zs += ZC
+        np.matmul(WT, Z, out=P)
+        E = kernels.energy_many(P, Z, d, const, L, w_k, w_s)
+        J = E.argmin(axis=1)
+        EJ = E[np.arange(u), J]
+        better = EJ < E0
+        Jl = J.tolist()
+        for r, b in enumerate(better.tolist()):
+            if b:
+                ZC[r] = Z[r, :d, Jl[r]:Jl[r] + 1]
+        np.copyto(E0, EJ, where=better)
+        go = better if k < n_steps else np.zeros(u, bool)
+        if go.all():
+            continue
+        for r, i in enumerate(act):    # the users that stop here: their result
+            if not go[r]:
+                zs[i], es[i], steps[i] = ZC[r, :, 0].copy(), float(E0[r]), k
+        if not go.any():
+            return
+        keep = np.flatnonzero(go)
+        act = [act[r] for r in keep]
+        rngs = [rngs[r] for r in keep]
+        u = len(act)
+        Z, WT, SIG, ZC = Z[keep], WT[keep], SIG[keep], ZC[keep]
+        const, E0 = const[keep], E0[keep]
+        P = np.empty((u, WT.shape[1], M))
+
+
+def _setup_many(opts, Y, mu, Yc, G, eig, qs, ws, conts) -> list:
+    """:meth:`NaturalPostureOptimizer._setup` of stacked users (``Y`` (n, K, 60) and its
+    ``mu``, ``Yc``, ``G``, ``eig``): the users whose local PCA keeps every one of ``pca_dims``
+    dimensions and who have a continuity target (every frame after a user's first) as stacked
+    array operations, the others one by one. The same numbers to rounding."""
+    n, K, D = Y.shape
+    first = opts[0]
+    dims = first.pca_dims
+    out = [None] * n
+    full = []
+    if eig is not None and dims < K:
+        lam = eig[0][:, ::-1]
+        keep = lam > np.maximum(lam[:, 0], 1e-300)[:, None] * 1e-10
+        full = [i for i in range(n) if conts[i] is not None and keep[i].sum() >= dims]
+    for i in range(n):
+        if not full or i not in full:
+            out[i] = opts[i]._setup(Y[i], qs[i], ws[i], conts[i],
+                                    pre=(mu[i], Yc[i], G[i],
+                                         None if eig is None else (eig[0][i], eig[1][i])))
+    if not full:
+        return out
+    f = np.array(full)
+    d = dims
+    s = np.sqrt(lam[f, :d])                                               # (m, d)
+    Ud = eig[1][f][:, :, ::-1][:, :, :d]                                   # (m, K, d)
+    V = (np.swapaxes(Ud, 1, 2) @ Yc[f]) / s[:, :, None]                    # (m, d, 60)
+    zn = Ud * s[:, None, :]                                                # (m, K, d)
+    znsq = np.einsum('mkd,mkd->mk', zn, zn)
+    res_n = np.maximum(np.diagonal(G[f], axis1=1, axis2=2) - znsq, 0.0)
+    sd = s * (1.0 / np.sqrt(max(K - 1, 1)))
+    Q = np.stack([np.asarray(qs[i], float).ravel() for i in full])         # (m, 60)
+    W60 = np.repeat(np.stack([ws[i] for i in full]), 3, axis=1)            # (m, 60)
+    MU = mu[f]
+    mq = MU - Q
+    Vw = V * W60[:, None, :]
+    A_c = Vw @ np.swapaxes(V, 1, 2)                                        # (m, d, d)
+    b_c = 2.0 * np.einsum('mdj,mj->md', Vw, mq)
+    c_c = np.einsum('mj,mj->m', mq, W60 * mq)
+    zn_sq = znsq + res_n
+    C = np.stack([conts[i].ravel() for i in full])
+    cm = C - MU
+    zc = np.einsum('mdj,mj->md', V, cm)
+    res_c = np.maximum(np.einsum('mj,mj->m', cm, cm) - np.einsum('md,md->m', zc, zc), 0.0)
+    wc = np.array([opts[i].w_control for i in full])
+    wm = np.array([opts[i].w_continuity for i in full])
+    wsty = np.array([opts[i].w_style for i in full])
+    inv_j = 1.0 / NUM_JOINTS
+    n3 = 3 * NUM_SEGMENTS
+    WT = np.empty((len(full), d + n3 + K, d + 1))
+    np.multiply(A_c, wc[:, None, None], out=WT[:, :d, :d])
+    diag = np.arange(d)
+    WT[:, diag, diag] += (wm * inv_j)[:, None]         # E_m's |z|^2, then E_s's, as _setup
+    WT[:, diag, diag] += (wsty * inv_j)[:, None]
+    WT[:, :d, d] = wc[:, None] * b_c - (2.0 * wm * inv_j)[:, None] * zc
+    const = wc * c_c + wm * inv_j * (np.einsum('md,md->m', zc, zc) + res_c)
+    Vt = np.swapaxes(V, 1, 2)
+    np.subtract(Vt[:, _SEGX_C], Vt[:, _SEGX_P], out=WT[:, d:d + n3, :d])
+    np.subtract(MU[:, _SEGX_C], MU[:, _SEGX_P], out=WT[:, d:d + n3, d])
+    np.multiply(zn, -2.0, out=WT[:, d + n3:, :d])
+    WT[:, d + n3:, d] = zn_sq
+    for r, i in enumerate(full):
+        out[i] = dict(mu=MU[r], V=V[r], zn=zn[r], zn_sq=zn_sq[r], res_n=res_n[r], sd=sd[r],
+                      q=Q[r], w60=W60[r], A_c=A_c[r], b_c=b_c[r], c_c=float(c_c[r]),
+                      c=C[r], zc=zc[r], res_c=float(res_c[r]), WT=WT[r], const=float(const[r]),
+                      d=d)
+    return out

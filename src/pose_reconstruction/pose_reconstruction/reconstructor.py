@@ -114,7 +114,7 @@ from skeleton_core.params import split as params_split
 
 from .body_fit import BodyFit, BodyFitConfig
 from .completion import CompletionConfig, PCACompletion
-from .optimizer import NaturalPostureOptimizer, OptimizerConfig
+from .optimizer import NaturalPostureOptimizer, OptimizerConfig, solve_batch
 from .plausibility import unswap_permutation
 from .posture_space import (QueryConfig, QueryPreparer, as_database_arrays, rest_directions,
                             to_sensor_frame, user_bone_lengths, yaw_quat_matrix)
@@ -124,7 +124,7 @@ from .profile import from_optional as profile_lengths
 from .length_prior import LengthPrior, LengthPriorConfig
 from .reliability import ReliabilityConfig, ReliabilityEstimator
 from .segment_output import (SEG_DIFF, SegmentOutput, SegmentOutputConfig,
-                             neighbour_direction_spread)
+                             neighbour_direction_spread, neighbour_direction_spreads)
 from .trust import SensorTrust, TrustConfig
 
 METHODS = ('A', 'B', 'C')
@@ -321,6 +321,15 @@ class Reconstructor:
         self._lengths_n += 1
 
     def process(self, frame: SkeletonFrame) -> SkeletonFrame:
+        step = self._begin(frame)
+        if isinstance(step, SkeletonFrame):
+            return step
+        return self._finish(step, self.core.solve(step.query, step.w, step.prev,
+                                                  translate=step.translate))
+
+    def _begin(self, frame: SkeletonFrame):
+        """The frame up to the optimizer: the output frame when it is done without one (method
+        A, a held skeleton), else the :class:`_Pending` solve that :meth:`_finish` completes."""
         t0 = time.perf_counter()
         uid = getattr(frame, 'user_id', None)
         if uid != self._user_id:
@@ -361,63 +370,156 @@ class Reconstructor:
         if self.method == 'A':
             user_bones = user_bone_lengths(self.user_segment_lengths())
             res = self.core.complete(frame.positions, R, height, frame.orientations, user_bones)
-            positions, ori = res.positions, res.orientations
             self.timings_ms = {'reliability': 1e3 * (t1 - t0),
                                'completion': 1e3 * (time.perf_counter() - t1)}
+            return self._emit(frame, res.positions, R, res.orientations, res)
+        w = R if self.use_reliability else np.ones(NUM_JOINTS)
+        translate = self.float_root and w[ROOT] < self.reliable_threshold
+        yaw_in = self.body_fit.heading_in(obs, w, height, translate)
+        prep = self.preparer.prepare(obs, w, height, yaw=yaw_in)
+        yaw = float(prep.transform.yaw)
+        prev = []
+        for x, y in self._prev:  # bring earlier solutions into this frame's heading
+            prev.append(x @ yaw_matrix(y - yaw).T)
+        return _Pending(frame=frame, R=R, obs=obs, seg_obs=seg_obs, len_obs=len_obs, w=w,
+                        translate=translate, prep=prep, yaw=yaw, height=height,
+                        prev=prev[::-1], segments=segments, t0=t0, t1=t1)
+
+    def _wants_spread(self, p: '_Pending', res) -> bool:
+        return bool(p.segments and self.segment_output.direction_db_spread
+                    and res.neighbours is not None)
+
+    def _finish(self, p: '_Pending', res, spread=None) -> SkeletonFrame:
+        """The frame after the optimizer's result ``res`` for :meth:`_begin`'s ``p``
+        (``spread``: the neighbours' direction spread when already computed)."""
+        frame, R, obs, w, yaw, prep = p.frame, p.R, p.obs, p.w, p.yaw, p.prep
+        t1, tf = p.t1, time.perf_counter()
+        self._prev.append((res.positions, yaw))
+        self.body_fit.update(prep.query, w, p.height, yaw, p.translate)
+        t2 = time.perf_counter()
+        wsum = float(w.sum())
+        rms = float(np.sqrt(res.distances[0] / max(wsum, 1e-6)))
+        alpha = self.trust.update(obs, w, rms)
+        self.trust_sensor = alpha
+        if self.latch_trust:
+            self.reliability.plausibility.sensor_trust = alpha
+        root = None
+        if res.shift is not None and alpha < 1.0:
+            # the root towards where the database neighbours place it, as far as the
+            # database is trusted more than the sensor
+            root = obs[ROOT] - ((1.0 - alpha) / prep.scale) * (yaw_matrix(yaw) @ res.shift)
+        if p.segments:
+            if spread is None and self._wants_spread(p, res):
+                Y = self.db.flat.take(res.neighbours, axis=0).reshape(-1, NUM_JOINTS, 3)
+                spread = neighbour_direction_spread(Y, res.distances)
+            positions = self.segment_output.output(frame, res.positions, w, alpha, yaw=yaw,
+                                                   seg_obs=p.seg_obs, len_obs=p.len_obs,
+                                                   root=root, db_spread=spread,
+                                                   db_distance=rms)
         else:
-            w = R if self.use_reliability else np.ones(NUM_JOINTS)
-            translate = self.float_root and w[ROOT] < self.reliable_threshold
-            yaw_in = self.body_fit.heading_in(obs, w, height, translate)
-            prep = self.preparer.prepare(obs, w, height, yaw=yaw_in)
-            yaw = float(prep.transform.yaw)
-            prev = []
-            for x, y in self._prev:  # bring earlier solutions into this frame's heading
-                prev.append(x @ yaw_matrix(y - yaw).T)
-            res = self.core.solve(prep.query, w, prev[::-1], translate=translate)
-            self._prev.append((res.positions, yaw))
-            self.body_fit.update(prep.query, w, height, yaw, translate)
-            t2 = time.perf_counter()
-            wsum = float(w.sum())
-            rms = float(np.sqrt(res.distances[0] / max(wsum, 1e-6)))
-            alpha = self.trust.update(obs, w, rms)
-            self.trust_sensor = alpha
-            if self.latch_trust:
-                self.reliability.plausibility.sensor_trust = alpha
-            root = None
-            if res.shift is not None and alpha < 1.0:
-                # the root towards where the database neighbours place it, as far as the
-                # database is trusted more than the sensor
-                root = obs[ROOT] - ((1.0 - alpha) / prep.scale) * (yaw_matrix(yaw) @ res.shift)
-            if segments:
-                spread = None
-                if self.segment_output.direction_db_spread and res.neighbours is not None:
-                    Y = self.db.flat.take(res.neighbours, axis=0).reshape(-1, NUM_JOINTS, 3)
-                    spread = neighbour_direction_spread(Y, res.distances)
-                positions = self.segment_output.output(frame, res.positions, w, alpha, yaw=yaw,
-                                                       seg_obs=seg_obs, len_obs=len_obs,
-                                                       root=root, db_spread=spread,
-                                                       db_distance=rms)
-            else:
-                user_bones = user_bone_lengths(self.user_segment_lengths())
-                bones = user_bones if self.output_scale == 'user' else None
-                positions = to_sensor_frame(res.positions, prep.transform, bones,
-                                            self._rest_dirs)
-                if alpha > 0.0:
-                    keep = w >= self.reliable_threshold
-                    positions[keep] = ((1.0 - alpha) * positions[keep]
-                                       + alpha * frame.positions[keep])
-            ori = None
-            if res.orientations is not None:
-                ori = res.orientations @ yaw_quat_matrix(yaw).T
-            elif frame.orientations is not None:
-                ori = frame.orientations.copy()
-            self.timings_ms = {'reliability': 1e3 * (t1 - t0),
-                               'prepare': 1e3 * (t2 - t1) - sum(res.timings_ms.values()),
-                               **res.timings_ms,
-                               'output': 1e3 * (time.perf_counter() - t2)}
+            user_bones = user_bone_lengths(self.user_segment_lengths())
+            bones = user_bones if self.output_scale == 'user' else None
+            positions = to_sensor_frame(res.positions, prep.transform, bones,
+                                        self._rest_dirs)
+            if alpha > 0.0:
+                keep = w >= self.reliable_threshold
+                positions[keep] = ((1.0 - alpha) * positions[keep]
+                                   + alpha * frame.positions[keep])
+        ori = None
+        if res.orientations is not None:
+            ori = res.orientations @ yaw_quat_matrix(yaw).T
+        elif frame.orientations is not None:
+            ori = frame.orientations.copy()
+        # the optimizer's own stages are timed by it (in a batch: its share of the batch)
+        prepare = (1e3 * (p.t_solve - t1 + t2 - tf) if p.t_solve
+                   else 1e3 * (t2 - t1) - sum(res.timings_ms.values()))
+        self.timings_ms = {'reliability': 1e3 * (t1 - p.t0), 'prepare': prepare,
+                           **res.timings_ms,
+                           'output': 1e3 * (time.perf_counter() - t2)}
+        return self._emit(frame, positions, R, ori, res)
+
+    def _emit(self, frame, positions, R, ori, res) -> SkeletonFrame:
         self.last_result = res
         out = frame.copy(positions=np.asarray(positions, float),
                          reliability=R.astype(np.float32),
                          orientations=None if ori is None else np.asarray(ori, float))
         self._last_output = out
         return out
+
+
+@dataclass
+class _Pending:
+    """One user's frame between :meth:`Reconstructor._begin` and :meth:`Reconstructor._finish`:
+    the optimizer's inputs (``query`` normalised, ``w``, ``prev`` most recent first,
+    ``translate``) and what the output stage needs."""
+    frame: SkeletonFrame
+    R: np.ndarray
+    obs: np.ndarray
+    seg_obs: np.ndarray
+    len_obs: np.ndarray
+    w: np.ndarray
+    translate: bool
+    prep: object
+    yaw: float
+    height: float
+    prev: list
+    segments: bool
+    t0: float
+    t1: float
+    t_solve: float = 0.0
+
+    @property
+    def query(self) -> np.ndarray:
+        return self.prep.query
+
+
+def process_batch(recs, frames) -> list:
+    """:meth:`Reconstructor.process` of several users' frames of one time (one Reconstructor
+    each, distinct), their optimizer runs solved together (:func:`~.optimizer.solve_batch`):
+    the outputs are those of ``[r.process(f) for r, f in zip(recs, frames)]``. Each element of
+    the result is the output frame or the exception that user's frame raised (the others go
+    on)."""
+    outs: list = [None] * len(recs)
+    pend = []
+    for i, (r, f) in enumerate(zip(recs, frames)):
+        try:
+            step = r._begin(f)
+        except USER_ERRORS as e:
+            outs[i] = e
+            continue
+        if isinstance(step, SkeletonFrame):
+            outs[i] = step
+        else:
+            step.t_solve = time.perf_counter()
+            pend.append((i, step))
+    if not pend:
+        return outs
+    try:
+        results = solve_batch([recs[i].core for i, _ in pend], [p.query for _, p in pend],
+                              [p.w for _, p in pend], [p.prev for _, p in pend],
+                              [p.translate for _, p in pend])
+    except USER_ERRORS:
+        results = None   # one user's numbers broke the batch: each alone, its error its own
+    spreads = {}
+    if results is not None:
+        # the neighbours' segment direction spreads of the users whose output uses them
+        want = [k for k, (i, p) in enumerate(pend) if recs[i]._wants_spread(p, results[k])]
+        if len(want) > 1 and len({len(results[k].neighbours) for k in want}) == 1:
+            idx = np.stack([results[k].neighbours for k in want])
+            Y = recs[pend[want[0]][0]].db.flat.take(idx, axis=0).reshape(
+                len(want), idx.shape[1], NUM_JOINTS, 3)
+            sp = neighbour_direction_spreads(Y, np.stack([results[k].distances for k in want]))
+            spreads = dict(zip(want, sp))
+    for k, (i, p) in enumerate(pend):
+        try:
+            res = results[k] if results is not None else recs[i].core.solve(
+                p.query, p.w, p.prev, translate=p.translate)
+            outs[i] = recs[i]._finish(p, res, spreads.get(k))
+        except USER_ERRORS as e:
+            outs[i] = e
+    return outs
+
+
+# what one user's frame may raise in the reconstruction (the node drops that frame and resets
+# that user)
+USER_ERRORS = (ValueError, FloatingPointError, ArithmeticError, IndexError)

@@ -213,6 +213,16 @@ def neighbour_direction_spread(Y: np.ndarray, dist: np.ndarray) -> np.ndarray:
     return 1.0 - np.einsum('sd,sd->s', m, m)
 
 
+def neighbour_direction_spreads(Y: np.ndarray, dist: np.ndarray) -> np.ndarray:
+    """:func:`neighbour_direction_spread` of several users at once: ``Y`` (U, K, 20, 3),
+    ``dist`` (U, K) -> (U, 19)."""
+    v = Y[:, :, SEGMENT_CHILD_INDEX] - Y[:, :, SEGMENT_PARENT_INDEX]
+    u = v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-9)
+    wk = 1.0 / np.maximum(np.asarray(dist, float), 1e-9)
+    m = np.einsum('uk,uksd->usd', wk / wk.sum(axis=1, keepdims=True), u)
+    return 1.0 - np.einsum('usd,usd->us', m, m)
+
+
 class SegmentOutput:
     """One user's segment output: lengths frozen once observed, the One Euro filter state."""
 
