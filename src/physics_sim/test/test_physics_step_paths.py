@@ -107,3 +107,13 @@ def test_output_frames_of_a_bad_state_leave_the_error_to_the_frame_check():
     assert not validated
     assert (frames_to_cdr(frames, latest, 'world', validated=validated)
             == frames_to_cdr(_old_frames(states, np.zeros(3)), latest, 'world'))
+
+
+def test_step_cost_prints_the_cost_and_a_digest_of_the_same_outputs(capsys):
+    from physics_sim import step_cost
+    assert step_cost.main(['--users', '2', '--frames', '2']) == 0
+    assert step_cost.main(['--users', '2', '--frames', '2']) == 0
+    lines = capsys.readouterr().out.strip().splitlines()
+    assert len(lines) == 2 and 'ms per frame' in lines[0]
+    assert lines[0].split('digest ')[1] == lines[1].split('digest ')[1]   # deterministic
+    assert step_cost.main(['--users', '7']) == 2
