@@ -43,8 +43,7 @@ from typing import Dict, List, Optional
 import numpy as np
 from geometry_msgs.msg import WrenchStamped
 from skeleton_core.cdr import frames_to_cdr
-from skeleton_core.conversions import SkeletonFormatError, SkeletonFrame, ns_to_stamp
-from skeleton_core.model import NUM_JOINTS, TRACKED
+from skeleton_core.conversions import SkeletonFormatError, ns_to_stamp
 from skeleton_core.params import ParamSpec, assign, build, param, specs
 from skeleton_core.presence import Presence
 from skeleton_core.rosnode import InputDrops, ManagedNode, Parameters, fill_marker, run_node
@@ -58,6 +57,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 from .character_urdf import CharacterRobots, description_topic
 from .mjcf_world import ObjectSpec
+from .output import output_frames
 from .scheduler import TickScheduler
 from .simulation import SimConfig, Simulation, warm_up
 
@@ -417,19 +417,11 @@ class PhysicsNode(ManagedNode):
         if not states and self._published_empty:
             self._publish_objects(None)
             return
-        frames = []
-        latest = 0
-        lift = self._lift()
-        for uid, st in states.items():
-            frames.append(SkeletonFrame(
-                positions=st.positions - lift, tracking_state=np.full(NUM_JOINTS, TRACKED, np.uint8),
-                reliability=np.ones(NUM_JOINTS, np.float32), orientations=st.orientations,
-                user_id=uid, stamp_ns=st.stamp_ns, frame_id=WORLD_FRAME))
-            latest = max(latest, st.stamp_ns)
+        frames, latest, validated = output_frames(states, self._lift(), WORLD_FRAME)
         # a subscriber that appeared since activation (a recorder) is reached before this output:
         # DDS matching is two-sided, and the publisher's side may lag under load
         self.reach_subscribers([self.pub])
-        self.pub.publish(frames_to_cdr(frames, latest, WORLD_FRAME))
+        self.pub.publish(frames_to_cdr(frames, latest, WORLD_FRAME, validated=validated))
         self._publish_robots(states, latest)
         self._published_empty = not frames
         lat = None

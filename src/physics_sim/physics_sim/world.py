@@ -265,11 +265,26 @@ class World:
         tg = self.tg
         return np.minimum(np.maximum((np.array(times)[:, None] - tg['T0']) / tg['PER'], 0.0), 1.0)
 
-    def targets_at(self, t: float):
+    def share_at(self, t: float):
+        """:meth:`frame_shares` at one time ``t``: a plain number when every character has the
+        same frame time and period (targets arriving together: the common case), else (N,).
+        The same numbers either way (one IEEE division, clamp), without numpy's per-call cost
+        at every physics step."""
+        u = self.tg['uniform']
+        if u is None:
+            return self.frame_shares((t,))[0]
+        s = (t - u[0]) / u[1]
+        return 1.0 if s > 1.0 else (0.0 if s < 0.0 else s)
+
+    def targets_at(self, t: float, share=None):
         """Interpolated targets (N*20, 3) and their velocities at time ``t``: linear over one
-        frame period, then held."""
+        frame period, then held. ``share``: :meth:`share_at` ``t`` when the caller has it."""
         tg = self.tg
-        sj = self.frame_shares((t,))[0][self.ix.jchar][:, None]
+        if share is None:
+            share = self.share_at(t)
+        if isinstance(share, float):
+            return tg['P0'] + share * tg['dP'], tg['V'] * (share < 1.0)
+        sj = share[self.ix.jchar][:, None]
         return tg['P0'] + sj * tg['dP'], tg['V'] * (sj < 1.0)
 
     def points_now(self) -> np.ndarray:
@@ -297,7 +312,7 @@ class World:
         characters' interpolation shares at ``t`` when the caller has them."""
         d, g, ix = self.data, self.config.gains, self.ix
         if share is None:
-            share = self.frame_shares((t,))[0]
+            share = self.share_at(t)
         if isinstance(share, float) or len(share) == 1:
             ss = float(share) if isinstance(share, float) else float(share[0])
             q_t = tg['Q0w'] + ss * tg['dQw']

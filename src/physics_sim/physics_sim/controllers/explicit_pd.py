@@ -6,6 +6,7 @@ available); Eq. 2 torques and the foot pins every ``slow_control_every`` steps (
 from __future__ import annotations
 
 import mujoco
+import numpy as np
 
 from ..controller import explicit_pd_wrenches
 from .registry import register
@@ -19,6 +20,17 @@ class ExplicitPD(Controller):
     def __init__(self):
         self._twist = None
         self._count = 0
+        self._share = None    # (N,) every character's interpolation share, refilled per step
+        self._sb = None       # the segment bodies' rows of xfrc_applied (a slice when contiguous)
+
+    def bind(self, world) -> None:
+        ix = world.ix
+        n = len(world.chars)
+        self._share = np.zeros(n)
+        sb = ix.sb
+        # the same additions as indexing with sb, without the gather and scatter at every step
+        contiguous = len(sb) > 0 and np.array_equal(sb, np.arange(sb[0], sb[0] + len(sb)))
+        self._sb = slice(int(sb[0]), int(sb[0]) + len(sb)) if contiguous else sb
 
     def targets_changed(self, world) -> None:
         self._twist = None      # recomputed on the next step
@@ -26,10 +38,11 @@ class ExplicitPD(Controller):
 
     def advance(self, world, nsteps: int) -> None:
         m, d = world.model, world.data
+        step1, step2, control = mujoco.mj_step1, mujoco.mj_step2, self._control
         for _ in range(nsteps):
-            mujoco.mj_step1(m, d)   # kinematics + velocities of the current state
-            self._control(world)    # forces from the current state (not one step old)
-            mujoco.mj_step2(m, d)
+            step1(m, d)         # kinematics + velocities of the current state
+            control(world)      # forces from the current state (not one step old)
+            step2(m, d)
             world.time = float(d.time)
 
     def _control(self, w) -> None:
@@ -41,18 +54,27 @@ class ExplicitPD(Controller):
         tg = w.tg
         if tg is not None:
             ix = w.ix
+            share = w.share_at(t)
+            if isinstance(share, float):   # one share for all: the kernel takes it per character
+                shares = self._share
+                if shares is None or len(shares) != len(tg['T0']):
+                    shares = self._share = np.zeros(len(tg['T0']))
+                shares.fill(share)
+            else:
+                shares = share
             explicit_pd_wrenches(xfrc, d.site_xpos, ix.js, d.cvel, d.subtree_com, d.xipos, ix.jb,
-                                 ix.jroot, tg['P0'], tg['dP'], tg['V'], w.frame_shares((t,))[0],
+                                 ix.jroot, tg['P0'], tg['dP'], tg['V'], shares,
                                  ix.jchar, g.ke, g.kd, g.max_force, ix.ub, ix.sum_rows)
             self._count += 1
             if self._twist is None or self._count >= (c.slow_control_every or 4):
                 self._count = 0
-                p_t, v_t = w.targets_at(t)
+                p_t, v_t = w.targets_at(t, share)
                 pts = w.joint_points()
-                self._twist = w.twist_torques(t, tg, pts)
+                self._twist = w.twist_torques(t, tg, pts, share=share)
                 w.pins.update(p_t, v_t, pts)
-            xfrc[ix.sb, 3:] += self._twist
-        w.apply_pushes(t)
+            xfrc[ix.sb if self._sb is None else self._sb, 3:] += self._twist
+        if w.shared.pushes:
+            w.apply_pushes(t)
 
 
 __all__ = ['ExplicitPD']

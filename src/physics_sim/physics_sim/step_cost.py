@@ -1,0 +1,67 @@
+"""``python -m physics_sim.step_cost``: the CPU time one output frame of the physics character
+costs in this process (no ROS): ``--users`` characters side by side, swaying, driven as the
+physics node drives its simulation (a target per user, ``advance(1/30)``, ``states()``), with the
+node's default settings. Prints the process CPU ms per frame (mean, median, 10th percentile of
+the frames: CPU time, valid on a loaded machine only as a comparison made in the same minutes,
+old and new alternated) and a digest of every output (positions and orientations, bit for bit):
+two builds with the same digest computed the same numbers.
+
+    python -m physics_sim.step_cost --users 6 --frames 300
+"""
+from __future__ import annotations
+
+import argparse
+import hashlib
+import sys
+import time
+
+import numpy as np
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(prog='step_cost', description=__doc__,
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument('--users', type=int, default=6)
+    p.add_argument('--frames', type=int, default=300, help='timed frames (after 30 untimed)')
+    args = p.parse_args(argv)
+    if not (1 <= args.users <= 6 and args.frames >= 1):
+        print('step_cost: --users must be 1-6 and --frames at least 1', file=sys.stderr)
+        return 2
+
+    from skeleton_core.model import NUM_JOINTS, standard_body
+    from .simulation import SimConfig, Simulation, warm_up
+
+    warm_up()
+    rest = standard_body().rest_positions() - np.array([0.0, 0.0, 0.8])
+    sim = Simulation(SimConfig())
+    digest = hashlib.sha256()
+    sway = np.arange(NUM_JOINTS)[:, None] * 0.3
+
+    def frame(k: int) -> None:
+        for u in range(args.users):
+            pos = rest + np.array([0.0, 1.2 * u - 3.0, 0.0])   # side by side, 1.2 m apart
+            pos = pos + 0.05 * np.sin(0.2 * k + u + sway)
+            pos[[7, 11], 2] += 0.2 * np.sin(0.1 * k + u)       # the hands up and down
+            sim.set_target(u + 1, pos, None, k * 33_333_333)
+        sim.advance(1 / 30)
+        states = sim.states()
+        for uid in sorted(states):
+            digest.update(states[uid].positions.tobytes())
+            digest.update(states[uid].orientations.tobytes())
+
+    for k in range(30):
+        frame(k)
+    per = []
+    for k in range(30, 30 + args.frames):
+        t0 = time.process_time()
+        frame(k)
+        per.append(time.process_time() - t0)
+    ms = 1000.0 * np.array(per)
+    print(f'{args.users} users, {args.frames} frames, controller {sim.controller}: CPU '
+          f'{ms.mean():.2f} ms per frame (median {np.median(ms):.2f}, p10 '
+          f'{np.percentile(ms, 10):.2f}); outputs digest {digest.hexdigest()[:16]}')
+    return 0
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())
