@@ -14,6 +14,11 @@ fallback that keeps the output rate when the input is slower or stops.
 * A timer tick (no input tick for a period) simulates the wall time since the last tick, bounded
   to [0.5, 1.5] periods: an overloaded machine gets a slower simulation at a kept output rate, not
   ever longer (costlier) ticks. Without ``sync_to_input`` every tick is one period.
+* The input's time is simulated once: what timer ticks simulated since the last input tick (input
+  late, not stopped: a loaded machine) is taken off the next input tick's frame time (down to 0:
+  that tick publishes the new target's stamp without stepping). Otherwise a late frame's time
+  would be simulated twice, by the timer and by its own tick: more work exactly when the machine
+  has least to give, and a character running ahead of its input.
 * Each tick's time is spent in whole physics steps; the remainder is carried to the next tick
   (simulated time = the time ticked).
 """
@@ -59,6 +64,8 @@ class TickScheduler:
         self.pending_stamp: Optional[float] = None      # newest target waiting for a deferred tick
         self.deferred = False
         self.time_debt = 0.0
+        self.timer_time = 0.0       # simulated by timer ticks since the last input tick (s)
+        self._input_tick = False    # the next tick_time is an input (or deferred) tick's
 
     def _bounded(self, dt: float) -> float:
         return min(max(dt, MIN_TICK * self.period), MAX_TICK * self.period)
@@ -74,7 +81,9 @@ class TickScheduler:
             self.pending_stamp = None
             self.last_input_tick = now
             self.last_input_stamp = stamp_s
-            return InputDecision('tick', None if last is None else self._bounded(stamp_s - last))
+            self._input_tick = True
+            return InputDecision('tick', None if last is None
+                                 else self._input_time(stamp_s - last))
         self.pending_stamp = stamp_s if self.pending_stamp is None else max(self.pending_stamp,
                                                                              stamp_s)
         if self.deferred:
@@ -91,9 +100,24 @@ class TickScheduler:
         stamp, self.pending_stamp = self.pending_stamp, None
         if stamp is None or self.last_input_stamp is None:
             return None
-        dt = self._bounded(stamp - self.last_input_stamp)
+        dt = self._input_time(stamp - self.last_input_stamp)
         self.last_input_stamp = stamp
         return dt
+
+    def _input_time(self, stamp_gap: float) -> float:
+        """An input tick's simulated time: its frame time (bounded) less what timer ticks
+        simulated of it; what they simulated beyond it is owed by the next input tick (at most
+        one period). After a gap in the input (stamps more than MAX_TICK periods apart) nothing
+        is owed: the timer simulated the gap."""
+        frame_time = self._bounded(stamp_gap)
+        owed, self.timer_time = self.timer_time, 0.0
+        self._input_tick = True
+        if stamp_gap > MAX_TICK * self.period or stamp_gap < 0:
+            return frame_time
+        if owed > frame_time:
+            self.timer_time = min(owed - frame_time, self.period)
+            return 0.0
+        return frame_time - owed
 
     def timer_due(self) -> bool:
         """The timer fired: tick unless input ticked less than a period ago."""
@@ -108,6 +132,9 @@ class TickScheduler:
             dt = self._bounded(now - self.last_tick)
         elif dt is None:
             dt = self.period
+        if self.sync and not self._input_tick and self.last_input_stamp is not None:
+            self.timer_time += dt   # a timer tick while input is expected: owed by the next
+        self._input_tick = False
         self.last_tick = now
         return dt
 

@@ -79,6 +79,43 @@ def test_the_timer_is_the_fallback_when_input_stops():
     assert s.tick_time() == pytest.approx(MIN_TICK * P)
 
 
+def test_a_late_frame_is_simulated_once_not_by_the_timer_and_again_by_its_own_tick():
+    s, clock = make()
+    s.tick_time(s.on_input(5.0).dt)
+    total = 0.0
+    for i in range(1, 31):                               # a loaded machine: every other frame
+        clock.t += (1.2 if i % 2 else 0.8) * P           # late, the timer firing before it
+        if s.timer_due():
+            total += s.tick_time()
+        d = s.on_input(5.0 + i * P)
+        assert d.action == 'tick'
+        total += s.tick_time(d.dt)
+        # the simulated time follows the input's (stamps), not the sum of both ticks
+        assert total == pytest.approx(i * P, abs=0.25 * P)
+    # on time again: each input tick simulates its frame time
+    s.tick_time(s.on_input(5.0 + 31 * P).dt)
+    clock.t += P
+    d = s.on_input(5.0 + 32 * P)
+    assert d.dt == pytest.approx(P) and s.tick_time(d.dt) == pytest.approx(P)
+
+
+def test_a_deferred_tick_pays_off_what_the_timer_simulated():
+    s, clock = make()
+    s.tick_time(s.on_input(5.0).dt)
+    clock.t += 1.2 * P
+    assert s.timer_due() and s.tick_time() == pytest.approx(1.2 * P)
+    assert s.on_input(5.0 + P).dt == 0.0                 # 1 period of stamps, 1.2 simulated
+    s.tick_time(0.0)
+    assert s.timer_time == pytest.approx(0.2 * P)        # owed by the next
+    clock.t += 0.1 * P
+    assert s.on_input(5.0 + 1.5 * P).action == 'defer'
+    assert s.on_deferred() == pytest.approx(0.3 * P)    # its frame time less what is owed
+    # input stopped for a second, then back: the timer simulated the gap; nothing owed
+    clock.t += 0.1 * P
+    s.tick_time()
+    assert s.on_input(6.6).dt == pytest.approx(MAX_TICK * P)
+
+
 def test_without_sync_every_tick_is_one_period_and_the_timer_always_ticks():
     s, clock = make(sync=False)
     assert s.timer_due()
