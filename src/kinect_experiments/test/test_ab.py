@@ -125,3 +125,32 @@ def test_an_older_bench_gets_only_the_options_it_knows(tmp_path):
     # an option that changes what is measured is not dropped: that side is refused
     with pytest.raises(ValueError, match='has no --drivers-elsewhere'):
         ab.bench_command(tmp_path, ['--users', '6', '--drivers-elsewhere'], tmp_path / 'o')
+
+
+def _fake_reference(tmp_path, body):
+    tree = tmp_path / 'cache' / 'ab' / 'abc' / 'tree'
+    mod = tree / 'src' / 'kinect_bringup' / 'kinect_bringup'
+    mod.mkdir(parents=True)
+    (mod / '__init__.py').write_text('')
+    (mod / 'warm_kernels.py').write_text(body)
+    (tree / 'scripts').mkdir()
+    (tree / 'scripts' / 'env.sh').write_text('export PYTHONPATH="$PWD/src/kinect_bringup"\n')
+    return tree
+
+
+def test_the_reference_compiles_its_kernels_once_before_any_run(tmp_path):
+    """Its first run must not compile inside the graph (every frame of that run lost)."""
+    from kinect_experiments.ab import warm
+    tree = _fake_reference(tmp_path, 'open("compiled", "a").write("x")\n')
+    assert warm(tmp_path, tree, log=lambda *_: None) == tree
+    assert (tree / 'compiled').read_text() == 'x'
+    warm(tmp_path, tree, log=lambda *_: None)                # cached: not again
+    assert (tree / 'compiled').read_text() == 'x'
+
+
+def test_a_reference_whose_kernels_fail_to_compile_is_an_error(tmp_path):
+    from kinect_experiments.ab import warm
+    tree = _fake_reference(tmp_path, 'raise SystemExit("no compiler")\n')
+    with pytest.raises(RuntimeError, match='no compiler'):
+        warm(tmp_path, tree, log=lambda *_: None)
+    assert not (tree / '.ab-warm').exists()
