@@ -60,8 +60,8 @@ class SimConfig:
         '(stable at any gain, slower)', choices=INTEGRATORS, read_only=True, public=False)
     solver: str = param(
         'auto', 'MuJoCo constraint solver (contacts, foot pins, holds, mocap_constraints); all '
-        'converge to the same forces. auto = pgs for actuator_pd/explicit_pd (few active rows: '
-        'fastest), newton for mocap_constraints (60 stiff rows a character)', choices=SOLVERS,
+        'converge to the same forces. auto = newton (pgs is as fast for one character alone, '
+        'two to three times slower once characters touch)', choices=SOLVERS,
         read_only=True, public=False)
     implicit_joint_damping: bool = param(
         False, "euler: integrate the ball joints' damping implicitly (MuJoCo's default, "

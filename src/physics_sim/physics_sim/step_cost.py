@@ -6,7 +6,7 @@ the frames: CPU time, valid on a loaded machine only as a comparison made in the
 old and new alternated) and a digest of every output (positions and orientations, bit for bit):
 two builds with the same digest computed the same numbers.
 
-    python -m physics_sim.step_cost --users 6 --frames 300
+    python -m physics_sim.step_cost --users 6 --frames 300 [--spacing 0.8] [--solver pgs]
 """
 from __future__ import annotations
 
@@ -23,9 +23,13 @@ def main(argv=None) -> int:
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument('--users', type=int, default=6)
     p.add_argument('--frames', type=int, default=300, help='timed frames (after 30 untimed)')
+    p.add_argument('--spacing', type=float, default=1.2,
+                   help='m between neighbours (0.8: their arms touch)')
+    p.add_argument('--solver', default='auto', help='SimConfig.solver (auto, pgs, cg, newton)')
     args = p.parse_args(argv)
-    if not (1 <= args.users <= 6 and args.frames >= 1):
-        print('step_cost: --users must be 1-6 and --frames at least 1', file=sys.stderr)
+    if not (1 <= args.users <= 6 and args.frames >= 1 and 0.3 <= args.spacing <= 5.0):
+        print('step_cost: --users must be 1-6, --frames at least 1, --spacing 0.3-5 m',
+              file=sys.stderr)
         return 2
 
     from skeleton_core.model import NUM_JOINTS, standard_body
@@ -33,13 +37,19 @@ def main(argv=None) -> int:
 
     warm_up()
     rest = standard_body().rest_positions() - np.array([0.0, 0.0, 0.8])
-    sim = Simulation(SimConfig())
+    try:
+        config = SimConfig(solver=args.solver)
+        config.validate()
+    except ValueError as e:
+        print(f'step_cost: {e}', file=sys.stderr)
+        return 2
+    sim = Simulation(config)
     digest = hashlib.sha256()
     sway = np.arange(NUM_JOINTS)[:, None] * 0.3
 
     def frame(k: int) -> None:
         for u in range(args.users):
-            pos = rest + np.array([0.0, 1.2 * u - 3.0, 0.0])   # side by side, 1.2 m apart
+            pos = rest + np.array([0.0, args.spacing * (u - 2.5), 0.0])   # side by side
             pos = pos + 0.05 * np.sin(0.2 * k + u + sway)
             pos[[7, 11], 2] += 0.2 * np.sin(0.1 * k + u)       # the hands up and down
             sim.set_target(u + 1, pos, None, k * 33_333_333)
@@ -57,7 +67,8 @@ def main(argv=None) -> int:
         frame(k)
         per.append(time.process_time() - t0)
     ms = 1000.0 * np.array(per)
-    print(f'{args.users} users, {args.frames} frames, controller {sim.controller}: CPU '
+    print(f'{args.users} users {args.spacing:g} m apart, {args.frames} frames, controller '
+          f'{sim.controller}, solver {args.solver}: CPU '
           f'{ms.mean():.2f} ms per frame (median {np.median(ms):.2f}, p10 '
           f'{np.percentile(ms, 10):.2f}); outputs digest {digest.hexdigest()[:16]}')
     return 0

@@ -117,3 +117,13 @@ def test_step_cost_prints_the_cost_and_a_digest_of_the_same_outputs(capsys):
     assert len(lines) == 2 and 'ms per frame' in lines[0]
     assert lines[0].split('digest ')[1] == lines[1].split('digest ')[1]   # deterministic
     assert step_cost.main(['--users', '7']) == 2
+    assert step_cost.main(['--solver', 'dantzig']) == 2
+    assert step_cost.main(['--spacing', '0.1']) == 2
+    capsys.readouterr()
+    # touching neighbours with either solver: other contacts, other numbers
+    assert step_cost.main(['--users', '2', '--frames', '2', '--spacing', '0.8']) == 0
+    assert step_cost.main(['--users', '2', '--frames', '2', '--spacing', '0.8',
+                           '--solver', 'pgs']) == 0
+    near, pgs = capsys.readouterr().out.strip().splitlines()
+    assert '0.8 m apart' in near and 'solver pgs' in pgs
+    assert near.split('digest ')[1] != pgs.split('digest ')[1]

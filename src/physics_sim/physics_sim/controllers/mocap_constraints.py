@@ -16,7 +16,6 @@ from .chunked import ChunkedController
 @register
 class MocapConstraints(ChunkedController):
     name = 'mocap_constraints'
-    solver = 'newton'   # 60 stiff rows a character take pgs many sweeps: 3x slower there
 
     def character_params(self, config, params):
         c = config
