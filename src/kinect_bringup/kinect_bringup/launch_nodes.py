@@ -42,15 +42,19 @@ _CONSUMERS: 'weakref.WeakKeyDictionary' = weakref.WeakKeyDictionary()
 
 def _wait_for_consumers(context, name: str, log) -> None:
     """Block until every non-source node of ``context`` is up (see the module's text)."""
-    start = time.monotonic()
-    pending = dict(_CONSUMERS.get(context, {}))
-    while pending and not context.is_shutdown:
-        pending = {n: e for n, e in pending.items() if not e.is_set()}
-        if time.monotonic() - start > SOURCE_WAIT_S:
-            log(f'{name}: activated although {", ".join(sorted(pending))} not active after '
-                f'{SOURCE_WAIT_S:.0f} s')
-            return
-        time.sleep(0.05)
+    deadline = time.monotonic() + SOURCE_WAIT_S
+    consumers = dict(_CONSUMERS.get(context, {}))
+    for up in consumers.values():
+        # woken as the node comes up (no poll interval added to the start); the shutdown and
+        # the deadline checked every half second meanwhile
+        while not up.wait(min(0.5, max(deadline - time.monotonic(), 0.0) + 0.01)):
+            if context.is_shutdown:
+                return
+            if time.monotonic() > deadline:
+                pending = sorted(n for n, e in consumers.items() if not e.is_set())
+                log(f'{name}: activated although {", ".join(pending)} not active after '
+                    f'{SOURCE_WAIT_S:.0f} s')
+                return
 
 
 class _ManagedNode(LifecycleNode):
