@@ -71,22 +71,33 @@ class _ManagedNode(LifecycleNode):
         ros_node = get_ros_node(context)
         stopped = lambda: context.is_shutdown  # noqa: E731
         start = time.monotonic()
+        configured = []   # s after the start when the node was seen configured (inactive)
+
+        def inactive() -> None:
+            configured.append(time.monotonic() - start)
 
         def report(active: bool) -> None:
-            if active:   # one line per node: the graph log says when the graph was up
-                logger.info(f'{name} active {time.monotonic() - start:.1f} s after its start')
+            if active:   # one line per node: the graph log says when the graph was up, and
+                #          how long its configure and its activation took
+                logger.info(f'{name} active {time.monotonic() - start:.1f} s after its start'
+                            + (f' (configured after {configured[0]:.1f} s)' if configured
+                               else ''))
 
         if self._source:
+            def before_activate():
+                inactive()
+                _wait_for_consumers(context, name, logger.warning)
+
             def bring_up():
-                report(drive_to_active(
-                    ros_node, name, stopped, logger.warning,
-                    before_activate=lambda: _wait_for_consumers(context, name, logger.warning)))
+                report(drive_to_active(ros_node, name, stopped, logger.warning,
+                                       before_activate=before_activate))
         else:
             up = _CONSUMERS.setdefault(context, {}).setdefault(name, threading.Event())
 
             def bring_up():
                 try:
-                    report(drive_to_active(ros_node, name, stopped, logger.warning))
+                    report(drive_to_active(ros_node, name, stopped, logger.warning,
+                                           before_activate=inactive))
                 finally:
                     up.set()   # active, or failed (logged): the sources do not wait for it
         threading.Thread(target=bring_up, name=f'bring-up {name}', daemon=True).start()
