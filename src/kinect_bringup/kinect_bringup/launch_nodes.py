@@ -73,8 +73,9 @@ class _ManagedNode(LifecycleNode):
         start = time.monotonic()
         configured = []   # s after the start when the node was seen configured (inactive)
 
-        def inactive() -> None:
+        def inactive() -> bool:
             configured.append(time.monotonic() - start)
+            return False   # (did not wait: activated without asking the state again)
 
         def report(active: bool) -> None:
             if active:   # one line per node: the graph log says when the graph was up, and
