@@ -204,6 +204,9 @@ def _nodes(context):
             phys_over['feature_world'] = str(world_path(arg('world')))
         elif posture_topic:
             phys_over['input_topic'] = posture_topic
+        if drivers and sensors == 1 and arg('static_tf').lower() in ('true', '1', 'yes'):
+            # its input's frame, published below: the physics takes input once TF has it
+            phys_over['wait_for_frames'] = ['kinect_link']
         nodes.append(managed_node(package='physics_sim', executable='physics', name='physics',
                           parameters=params('physics', **phys_over), **common))
     if arg('viz').lower() in ('true', '1', 'yes'):

@@ -1,8 +1,7 @@
 """The README's main job (`make demo` = `kinect_bringup.demo`), shortened: it writes the bag, the
 animation and the plots, and the bag holds every topic with real skeletons in it (a recorder bug
 once wrote 600 empty messages per topic, which a count alone did not catch), and every output
-has a message for the stamp of the driver's first frame, the first input frame it holds (the
-character: one from the first second, docs/startup.md)."""
+has a message for the stamp of the driver's first frame, the first input frame it holds."""
 import os
 import re
 import subprocess
@@ -21,7 +20,6 @@ pytestmark = [pytest.mark.ros, pytest.mark.slow]
 SKELETON_TOPICS = ['/kinect/skeletons', '/kinect/ground_truth', '/kinect/skeletons_reliability',
                    '/posture/reconstructed', '/character/skeletons']
 INPUT_TOPICS = ('/kinect/skeletons', '/kinect/ground_truth')   # the driver's
-CHARACTER = '/character/skeletons'
 
 
 def test_demo_writes_bag_animation_and_plots(tmp_path):
@@ -62,15 +60,12 @@ def test_demo_writes_bag_animation_and_plots(tmp_path):
     assert said, graph_log[-3000:]
     driver_first = int(said[1]) * 10**9 + int(said[2])
     assert first == {t: driver_first for t in INPUT_TOPICS}, (first, driver_first)
-    missing = [t for t in SKELETON_TOPICS if driver_first not in stamps[t]
-               and t != CHARACTER]
+    # (the character too: the physics takes input only once TF has the sensor frame, so its
+    # first targets are not held for TF and released in a burst)
+    missing = [t for t in SKELETON_TOPICS if driver_first not in stamps[t]]
     assert not missing, (f'no message for the first input frame ({driver_first}) on {missing}; '
                          f'their first stamps {[sorted(stamps[t])[:3] for t in missing]}; '
                          + graph_log[-4000:])
-    # the character: from the first second (docs/startup.md, known limit: in about one start
-    # in four its first outputs come a few frames late, 0.13-0.16 s in the runs seen)
-    late = (min(stamps[CHARACTER]) - driver_first) * 1e-9
-    assert late <= 1.0, (late, graph_log[-4000:])
     assert 'graph up after' in proc.stdout, log
     # the graph log holds no warning: the demo stops the launch without its Ctrl-C notice
     warnings = [ln for ln in graph_log.splitlines() if re.search(r'\[(WARNING|WARN|ERROR)\]', ln)]

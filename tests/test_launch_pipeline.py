@@ -69,12 +69,15 @@ def test_yaml_parameters_are_set_on_the_running_nodes(probe):
         overridden = {'driver': {'num_users', 'scenario', 'source', 'seed', 'replay_file',
                                  'wait_for_subscribers'},
                       'reconstruction': {'optimizer.method'},
-                      'physics': {'input_topic'}}.get(node, set())
+                      'physics': {'input_topic', 'wait_for_frames'}}.get(node, set())
         for k, v in expected.items():
             if k in overridden:
                 continue
             assert got[k] == pytest.approx(v) if isinstance(v, float) else got[k] == v, (node, k)
     assert probe.get_parameters('/driver', ['num_users'])['num_users'] == 2  # launch argument
+    # the physics takes its input once TF has the sensor frame the launch publishes
+    assert probe.get_parameters('/physics', ['wait_for_frames']) == {
+        'wait_for_frames': ['kinect_link']}
 
 
 @pytest.mark.launch(fixture=pipeline_launch)

@@ -406,3 +406,44 @@ def test_targets_wait_for_the_sensor_frame_and_follow_a_tilted_sensor(rclpy_cont
         spinner.stop()
         node.destroy_node()
         peer.destroy_node()
+
+
+def test_activation_waits_for_the_sensor_frame_so_no_target_is_held(rclpy_context):
+    """With wait_for_frames (the launch files name the frame their static_tf publishes), the node
+    is not active, and does not subscribe to its input, until /tf_static has that frame: the
+    driver, activated after it, then sends targets that are moved to world at once, and the first
+    output is the first target's (none held for TF and released in a burst)."""
+    import threading
+    node = PhysicsNode(context=rclpy_context, parameter_overrides=[
+        Parameter('input_topic', value='/test_tf_wait/in'), Parameter('body_height', value=1.75),
+        Parameter('wait_for_frames', value=['kinect_link'])])
+    peer = rclpy.create_node('tf_wait_peer', context=rclpy_context)
+    got, spinner = [], None
+    try:
+        node.trigger_configure()
+        done = []
+        t = threading.Thread(target=lambda: done.append(node.trigger_activate()), daemon=True)
+        t.start()   # (as the launch's lifecycle service call: the activation blocks)
+        time.sleep(1.5)
+        assert not done and node.lifecycle_state == 'inactive'
+        assert peer.count_subscribers('/test_tf_wait/in') == 0
+        peer.tf = sensor_on_tf(peer)
+        t.join(10)
+        assert done and node.lifecycle_state == 'active', done
+        spinner = Spinner(rclpy_context, node, peer)
+        peer.create_subscription(SkeletonArray, '/character/skeletons', got.append, 50)
+        pub = peer.create_publisher(SkeletonArray, '/test_tf_wait/in', 10)
+        assert _wait(lambda: pub.get_subscription_count() > 0, 10)
+        assert _wait(lambda: node.pub.get_subscription_count() > 0, 10)
+        for i in range(10):
+            pub.publish(_msg(clip(1)[0], 7_000_000_000 + i * 33_333_333))
+            time.sleep(1 / 30)
+        assert _wait(lambda: len(got) >= 5, 10)
+        first = got[0].header.stamp
+        assert (first.sec, first.nanosec) == (7, 0), first
+        assert len(node._held) == 0 and 'no transform' not in node.health.dropped
+    finally:
+        if spinner is not None:
+            spinner.stop()
+        node.destroy_node()
+        peer.destroy_node()

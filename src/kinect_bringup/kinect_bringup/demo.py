@@ -15,6 +15,7 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from typing import Optional
 
 from skeleton_core.bagio import recover, truncation
 
@@ -34,28 +35,36 @@ def launch_available() -> bool:
     return True
 
 
-def wait_for_output(proc, timeout: float, topic: str = '/character/skeletons'):
-    """Seconds until the first message on ``topic`` (the last stage of the graph), or None."""
-    import rclpy
-    from rclpy.node import Node
-    from skeleton_msgs.msg import SkeletonArray
-    ctx = rclpy.Context()
-    rclpy.init(context=ctx)
-    node = Node('demo_watch', context=ctx)
-    got = []
-    node.create_subscription(SkeletonArray, topic, got.append, 10)
-    from rclpy.executors import SingleThreadedExecutor
-    ex = SingleThreadedExecutor(context=ctx)
-    ex.add_node(node)
-    t0 = time.monotonic()
-    try:
-        while not got and time.monotonic() - t0 < timeout and proc.poll() is None:
-            ex.spin_once(timeout_sec=0.2)
-    finally:
-        ex.shutdown()
-        node.destroy_node()
-        rclpy.try_shutdown(context=ctx)
-    return (time.monotonic() - t0) if got else None
+class OutputWatch:
+    """A subscription to ``topic`` (the last stage of the graph), made before the graph starts:
+    its rclpy import and DDS participant are not part of the start it times, and do not take
+    CPU from the graph's processes while they come up."""
+
+    def __init__(self, topic: str = '/character/skeletons'):
+        import rclpy
+        from rclpy.executors import SingleThreadedExecutor
+        from rclpy.node import Node
+        from skeleton_msgs.msg import SkeletonArray
+        self.ctx = rclpy.Context()
+        rclpy.init(context=self.ctx)
+        self.node = Node('demo_watch', context=self.ctx)
+        self.got = []
+        self.node.create_subscription(SkeletonArray, topic, self.got.append, 10)
+        self.executor = SingleThreadedExecutor(context=self.ctx)
+        self.executor.add_node(self.node)
+
+    def wait(self, proc, timeout: float, since: float) -> Optional[float]:
+        """Seconds from ``since`` (monotonic) to the first message, or None (``timeout``, or
+        ``proc`` ended)."""
+        while not self.got and time.monotonic() - since < timeout and proc.poll() is None:
+            self.executor.spin_once(timeout_sec=0.2)
+        return (time.monotonic() - since) if self.got else None
+
+    def close(self) -> None:
+        import rclpy
+        self.executor.shutdown()
+        self.node.destroy_node()
+        rclpy.try_shutdown(context=self.ctx)
 
 
 def run_graph(bag: Path, duration: float, args, use_launch: bool,
@@ -73,10 +82,15 @@ def run_graph(bag: Path, duration: float, args, use_launch: bool,
                '--method', args.method, '--seed', str(args.seed)]
     print(f'[demo] running for {duration:.0f} s: {" ".join(cmd)}', flush=True)
     log_path = bag.with_suffix('.log')
+    watch = OutputWatch()
     with open(log_path, 'w') as log:
+        t0 = time.monotonic()
         proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
         try:
-            started = wait_for_output(proc, startup_timeout)
+            try:
+                started = watch.wait(proc, startup_timeout, t0)
+            finally:
+                watch.close()
             if started is None:
                 print(f'[demo] the graph produced no /character/skeletons within '
                       f'{startup_timeout:.0f} s; stopping it', file=sys.stderr)

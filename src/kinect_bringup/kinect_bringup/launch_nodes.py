@@ -42,15 +42,19 @@ _CONSUMERS: 'weakref.WeakKeyDictionary' = weakref.WeakKeyDictionary()
 
 def _wait_for_consumers(context, name: str, log) -> None:
     """Block until every non-source node of ``context`` is up (see the module's text)."""
-    start = time.monotonic()
-    pending = dict(_CONSUMERS.get(context, {}))
-    while pending and not context.is_shutdown:
-        pending = {n: e for n, e in pending.items() if not e.is_set()}
-        if time.monotonic() - start > SOURCE_WAIT_S:
-            log(f'{name}: activated although {", ".join(sorted(pending))} not active after '
-                f'{SOURCE_WAIT_S:.0f} s')
-            return
-        time.sleep(0.05)
+    deadline = time.monotonic() + SOURCE_WAIT_S
+    consumers = dict(_CONSUMERS.get(context, {}))
+    for up in consumers.values():
+        # woken as the node comes up (no poll interval added to the start); the shutdown and
+        # the deadline checked every half second meanwhile
+        while not up.wait(min(0.5, max(deadline - time.monotonic(), 0.0) + 0.01)):
+            if context.is_shutdown:
+                return
+            if time.monotonic() > deadline:
+                pending = sorted(n for n, e in consumers.items() if not e.is_set())
+                log(f'{name}: activated although {", ".join(pending)} not active after '
+                    f'{SOURCE_WAIT_S:.0f} s')
+                return
 
 
 class _ManagedNode(LifecycleNode):
@@ -67,22 +71,34 @@ class _ManagedNode(LifecycleNode):
         ros_node = get_ros_node(context)
         stopped = lambda: context.is_shutdown  # noqa: E731
         start = time.monotonic()
+        configured = []   # s after the start when the node was seen configured (inactive)
+
+        def inactive() -> bool:
+            configured.append(time.monotonic() - start)
+            return False   # (did not wait: activated without asking the state again)
 
         def report(active: bool) -> None:
-            if active:   # one line per node: the graph log says when the graph was up
-                logger.info(f'{name} active {time.monotonic() - start:.1f} s after its start')
+            if active:   # one line per node: the graph log says when the graph was up, and
+                #          how long its configure and its activation took
+                logger.info(f'{name} active {time.monotonic() - start:.1f} s after its start'
+                            + (f' (configured after {configured[0]:.1f} s)' if configured
+                               else ''))
 
         if self._source:
+            def before_activate():
+                inactive()
+                _wait_for_consumers(context, name, logger.warning)
+
             def bring_up():
-                report(drive_to_active(
-                    ros_node, name, stopped, logger.warning,
-                    before_activate=lambda: _wait_for_consumers(context, name, logger.warning)))
+                report(drive_to_active(ros_node, name, stopped, logger.warning,
+                                       before_activate=before_activate))
         else:
             up = _CONSUMERS.setdefault(context, {}).setdefault(name, threading.Event())
 
             def bring_up():
                 try:
-                    report(drive_to_active(ros_node, name, stopped, logger.warning))
+                    report(drive_to_active(ros_node, name, stopped, logger.warning,
+                                           before_activate=inactive))
                 finally:
                     up.set()   # active, or failed (logged): the sources do not wait for it
         threading.Thread(target=bring_up, name=f'bring-up {name}', daemon=True).start()

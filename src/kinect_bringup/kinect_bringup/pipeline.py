@@ -192,6 +192,8 @@ def main(argv=None) -> int:
         tf_args = ['--pose', args.sensor_pose] + (['--file', args.extrinsics]
                                                   if args.extrinsics else [])
         frames = transforms_from_args(parse_args(tf_args))   # the sensor frame on TF
+        if 'physics' in names:   # its input's frame: taken once TF has it (as the launch files)
+            over['physics'].setdefault('wait_for_frames', ['kinect_link'])
         nodes = [StaticTfNode(frames)]
         nodes += create_nodes(names, over, directory)
         executor, kind = make_executor(args.executor, args.threads)

@@ -3,7 +3,8 @@ come up, by CPU time (valid on a loaded machine, unlike the wall clock of ``make
 up after N s"). Runs ``ros2 launch kinect_bringup demo.launch.py`` (``make demo``'s graph, with a
 recording) ``--runs`` times and reads every process of the launch from ``/proc`` at the moment
 the launch logs ``/driver active`` (the driver is activated last, once every other node is
-active): the launch itself, each node process, and their total; the median over the runs.
+active): the launch itself, each node process (with the CPU of any child it ran and waited for
+meanwhile), and their total; the median over the runs.
 
     python -m kinect_experiments.startup_cpu [--runs 3] [--num-users 2] [--out out/startup_cpu]
 
@@ -28,12 +29,15 @@ READY = '/driver active'   # kinect_bringup.launch_nodes logs it once the source
 
 def stat_fields(text: str) -> list:
     """The fields of a ``/proc/PID/stat`` line after the command name (which may hold spaces and
-    parentheses): index 0 is the state, 2 the process group, 3 the session, 11/12 utime/stime."""
+    parentheses): index 0 is the state, 2 the process group, 3 the session, 11/12 utime/stime,
+    13/14 those of its children that ended."""
     return text[text.rindex(')') + 2:].split()
 
 
 def cpu_seconds(fields: list, hz: float) -> float:
-    return (int(fields[11]) + int(fields[12])) / hz
+    """The process's CPU and that of its children that ended (cutime/cstime: a library that
+    probes something in a short-lived subprocess at import, which ``/proc`` no longer lists)."""
+    return sum(int(f) for f in fields[11:15]) / hz
 
 
 def process_name(cmdline: list) -> str:

@@ -17,3 +17,10 @@ def test_process_names():
     assert process_name(['/venv/bin/python', '/ws/install/jazzy/pose_reconstruction/lib/'
                          'pose_reconstruction/reconstruction', '--managed']) == 'reconstruction'
     assert process_name([]) == '?'
+
+
+def test_the_cpu_of_children_that_ended_is_counted():
+    # utime stime cutime cstime: a library that probed something in a subprocess at import
+    line = ('4242 (physics) S 1 4242 4242 0 -1 4194560 100 0 0 0 '
+            '250 50 30 20 20 0 3 0 12345 1000 10 18446744073709551615\n')
+    assert cpu_seconds(stat_fields(line), 100.0) == 3.5

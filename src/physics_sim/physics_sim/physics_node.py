@@ -115,10 +115,18 @@ class PhysicsNodeConfig:
                            read_only=True)
     push_duration: float = param(0.1, 'duration of pushes from the ~/push topic (s)',
                                  range=(0.001, 5.0), public=False)
+    wait_for_frames: List[str] = param(
+        [''], 'sensor frames whose pose in world (/tf_static) the node waits for before it takes '
+        'input, at most 10 s (set by the launch files that publish them: the first targets are '
+        'moved to world at once, none held); [""] = none', read_only=True)
     intention_topic: str = param('/control/intention', 'with feature_world: the control '
                                  "node's engaged effectors (skeleton_msgs/Intention), whose hands "
                                  'grip the features', read_only=True)
 
+
+# the longest the activation waits for the frames of wait_for_frames on TF (then it takes input,
+# held until TF has its frame, with a warning)
+TF_WAIT_S = 10.0
 
 # the node's parameters: its own and every SimConfig field (declared there, with its ROS name)
 SIM_PARAMS = specs(SimConfig)
@@ -203,6 +211,15 @@ class PhysicsNode(ManagedNode):
         self.diagnostics(extra=self._diag_extra)
 
     def activate(self) -> None:
+        # the input only once TF has the sensor frames the launch publishes (wait_for_frames;
+        # at most TF_WAIT_S): the first targets are then moved to world at once, not held and
+        # released together later (the graph's start activates the driver after this node)
+        frames = [f.lstrip('/') for f in self.params['wait_for_frames'] if f]
+        self.when_ready(lambda: self.tf_listener.missing(frames, WORLD_FRAME), self._start_input,
+                        TF_WAIT_S, f'no pose in {WORLD_FRAME} on TF; taking the input anyway '
+                        '(held until TF has it)')
+
+    def _start_input(self) -> None:
         v = self.params.values
         self.scheduler.reset()
         # serialized in and out (skeleton_core.cdr): no rclpy message objects per joint

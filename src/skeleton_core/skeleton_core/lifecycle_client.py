@@ -62,7 +62,8 @@ def drive_to_active(node, name: str, stopped: Callable[[], bool],
     """Take lifecycle node ``name`` (fully qualified) to ``active`` from ``node`` (spun by
     someone else). True once active; False when it refuses a transition, is finalized, or
     ``stopped()`` turns true first. ``before_activate`` (once, when the node is inactive and
-    about to be activated) may block: a source waits there for the nodes that consume it."""
+    about to be activated) may block: a source waits there for the nodes that consume it (the
+    state is then asked again); returning False says it did not (activated at once)."""
     def clients():
         return (node.create_client(GetState, f'{name}/get_state'),
                 node.create_client(ChangeState, f'{name}/change_state'))
@@ -138,9 +139,10 @@ def drive_to_active(node, name: str, stopped: Callable[[], bool],
         busy_since = None
         tid, label = NEXT[state]
         if tid == Transition.TRANSITION_ACTIVATE and before_activate is not None:
-            before_activate()
+            waited = before_activate()
             before_activate = None
-            continue                     # the state may have changed meanwhile
+            if waited is not False:      # the state may have changed meanwhile
+                continue
         try:
             reply = call_once(change, ChangeState.Request(transition=Transition(id=tid)),
                               TRANSITION_TIMEOUT_S)

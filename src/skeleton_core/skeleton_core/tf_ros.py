@@ -76,6 +76,22 @@ class StaticTfListener:
         if self.buffer.version != before and self.on_change is not None:
             self.on_change()
 
+    def poll(self) -> None:
+        """Apply the messages waiting on the subscription now: for a node that waits for a
+        frame inside one of its callbacks (its activation), where its executor cannot deliver
+        them."""
+        while True:
+            with self.sub.handle:
+                taken = self.sub.handle.take_message(self.sub.msg_type, self.sub.raw)
+            if taken is None:
+                return
+            self._on_msg(taken[0])
+
+    def missing(self, frames: Iterable[str], target: str) -> List[str]:
+        """Of ``frames``, those TF cannot map into ``target`` yet (after :meth:`poll`)."""
+        self.poll()
+        return [f for f in frames if f and not self.buffer.can_transform(target, f)]
+
     def destroy(self) -> None:
         self.node.destroy_subscription(self.sub)
 
