@@ -390,12 +390,7 @@ class NaturalPostureOptimizer:
         S = self._setup(self._X.take(idx, axis=0), query, w, c)
         t2 = time.perf_counter()
         # initial sample: best of the neighbours' mean, the previous solution and the nearest one
-        V, mu = S['V'], S['mu']
-        starts = np.empty((3 if len(previous) else 2, V.shape[0]))
-        starts[0] = 0.0
-        starts[1] = S['zn'][0]
-        if len(previous):
-            starts[2] = V @ (previous[0].ravel() - mu)
+        starts = _initial_samples(S, previous)
         e_starts = self.energy(starts, S)
         j = int(e_starts.argmin())
         z0, e0 = starts[j], float(e_starts[j])
@@ -403,7 +398,7 @@ class NaturalPostureOptimizer:
             z, e, steps = self._gauss_newton(z0, e0, S)
         else:
             z, e, steps = self._stochastic(z0, e0, S)
-        x = (mu + z @ V).reshape(NUM_JOINTS, 3)
+        x = (S['mu'] + z @ S['V']).reshape(NUM_JOINTS, 3)
         t3 = time.perf_counter()
         ori = None
         if self.db.orientations is not None:
@@ -417,6 +412,18 @@ class NaturalPostureOptimizer:
             steps=steps, shift=shift, timings_ms={'knn': 1e3 * (t1 - t0), 'local_pca': 1e3 * (t2 - t1),
                                      'optimise': 1e3 * (t3 - t2), 'orientations': 1e3 * (t4 - t3)},
             terms_fn=lambda: {k: float(v[0]) for k, v in self.energy_terms(zs, S).items()})
+
+
+def _initial_samples(S: dict, previous: Sequence[np.ndarray]) -> np.ndarray:
+    """The search's candidate starts in the local space ``S``: the neighbours' mean (0), the
+    nearest neighbour and, with a previous solution, that one."""
+    V, mu = S['V'], S['mu']
+    starts = np.empty((3 if len(previous) else 2, V.shape[0]))
+    starts[0] = 0.0
+    starts[1] = S['zn'][0]
+    if len(previous):
+        starts[2] = V @ (previous[0].ravel() - mu)
+    return starts
 
 
 def _batchable(opt: NaturalPostureOptimizer, first: NaturalPostureOptimizer) -> bool:
@@ -483,15 +490,7 @@ def solve_batch(opts: Sequence[NaturalPostureOptimizer], queries: Sequence[np.nd
     t2 = time.perf_counter()
     # initial sample of each user: the best of the neighbours' mean, the previous solution and
     # the nearest neighbour (as solve), evaluated for the users of one shape at once
-    starts = []
-    for S, p in zip(Ss, previous):
-        V, m = S['V'], S['mu']
-        st = np.empty((3 if len(p) else 2, V.shape[0]))
-        st[0] = 0.0
-        st[1] = S['zn'][0]
-        if len(p):
-            st[2] = V @ (p[0].ravel() - m)
-        starts.append(st)
+    starts = [_initial_samples(S, p) for S, p in zip(Ss, previous)]
     zs, es, steps = [None] * n, [0.0] * n, [0] * n
     by_start: Dict[tuple, list] = {}
     for i, S in enumerate(Ss):
