@@ -148,6 +148,44 @@ def test_twist_kernel_numba_and_numpy_agree():
     np.testing.assert_allclose(out['numpy'], want, rtol=1e-9, atol=1e-12)
 
 
+def test_wrench_qfrc_is_what_mujoco_makes_of_xfrc_applied():
+    """explicit_pd's wrenches handed to MuJoCo as generalized forces (compiled, over each body's
+    dof chain) are MuJoCo's own from the same wrenches as xfrc_applied: mj_applyFT at every body's
+    centre of mass, and the same accelerations from mj_forward."""
+    pytest.importorskip('numba')
+    import mujoco
+    from physics_sim import controller as ctl
+    from physics_sim.simulation import SimConfig, Simulation
+    sim = Simulation(SimConfig(controller='explicit_pd', body_height=1.75))
+    base = standard_body().rest_positions() + np.array([2.5, 0.0, -0.8])
+    for uid, dy in ((1, -0.4), (2, 0.4)):
+        sim.set_target(uid, base + [0.0, dy, 0.0])
+    sim.advance(0.1)
+    m, d, ix = sim.model, sim.data, sim.worlds[0].ix
+    mujoco.mj_forward(m, d)   # cdof, xipos of the current qpos (the controller: after mj_step1)
+    rng = np.random.default_rng(2)
+    wr = np.zeros_like(d.xfrc_applied)
+    bodies = np.union1d(ix.jb, ix.sb).astype(np.int64)
+    wr[bodies] = rng.normal(0.0, 50.0, (len(bodies), 6))
+    wr[bodies[3]] = 0.0                  # a body without a wrench
+    qfrc = np.full(m.nv, np.nan)         # every entry written
+    ctl.wrench_qfrc(qfrc, wr, bodies, m.body_dofadr, m.body_dofnum, m.body_parentid,
+                    m.dof_parentid, m.body_rootid, d.cdof, d.xipos, d.subtree_com)
+    ref = np.zeros(m.nv)
+    for b in bodies:
+        mujoco.mj_applyFT(m, d, wr[b, :3].copy(), wr[b, 3:].copy(), d.xipos[b].copy(), int(b), ref)
+    assert np.abs(ref).max() > 10.0
+    np.testing.assert_allclose(qfrc, ref, rtol=1e-10, atol=1e-9)
+    d.qfrc_applied[:] = qfrc
+    d.xfrc_applied[:] = 0.0
+    mujoco.mj_forward(m, d)
+    via_qfrc = d.qacc.copy()
+    d.qfrc_applied[:] = 0.0
+    d.xfrc_applied[:] = wr
+    mujoco.mj_forward(m, d)
+    np.testing.assert_allclose(via_qfrc, d.qacc, rtol=1e-8, atol=1e-6)
+
+
 def test_segment_quats_numba_and_python_agree():
     """Target orientations from joint positions (one call per target frame and character):
     the numba kernel gives the scalar Python's quaternions on random postures, on a degenerate
