@@ -187,6 +187,103 @@ explicit_pd_wrenches = jit.pick(_explicit_pd_numba, _explicit_pd_numpy)
 
 
 
+# ---------------------------------------------------------------------------------------------
+# Eq. 2 torques of every segment about its axis between joint points (numba / numpy twins)
+# ---------------------------------------------------------------------------------------------
+def _twist_numpy(out, xquat, sb, tw_m, q0, dq, share, schar, pts, sc, sp, w, cvel, ke_i, kd_i,
+                 max_torque):
+    ss = share[schar]
+    q_t = q0 + ss[:, None] * dq
+    err = twist_angle(xquat[sb], tw_m, q_t)
+    axes = pts[sc] - pts[sp]
+    axes /= np.maximum(np.sqrt(np.einsum('ij,ij->i', axes, axes)), 1e-9)[:, None]
+    rate_t = np.einsum('ij,ij->i', w, axes) * (ss < 1.0)
+    rate = np.einsum('ij,ij->i', cvel[sb, :3], axes)
+    out[:] = pd_twist_torque(err, rate_t, rate, ke_i, kd_i, max_torque)[:, None] * axes
+
+
+def _twist_kernel(out, xquat, sb, tw_m, q0, dq, share, schar, pts, sc, sp, w, cvel, ke_i, kd_i,
+                  max_torque):
+    qt = np.empty(4)
+    for n in range(sb.shape[0]):
+        s = share[schar[n]]
+        b = sb[n]
+        for i in range(4):
+            qt[i] = q0[n, i] + s * dq[n, i]
+        rw = 0.0
+        proj = 0.0
+        for i in range(4):
+            rw += xquat[b, i] * qt[i]
+            row = 0.0
+            for j in range(4):
+                row += tw_m[n, i, j] * qt[j]
+            proj += xquat[b, i] * row
+        err = 2.0 * np.arctan2(proj * np.copysign(1.0, rw), abs(rw))
+        c, p = sc[n], sp[n]
+        ax, ay, az = pts[c, 0] - pts[p, 0], pts[c, 1] - pts[p, 1], pts[c, 2] - pts[p, 2]
+        nrm = max(np.sqrt(ax * ax + ay * ay + az * az), 1e-9)
+        ax, ay, az = ax / nrm, ay / nrm, az / nrm
+        rate_t = (w[n, 0] * ax + w[n, 1] * ay + w[n, 2] * az) * (1.0 if s < 1.0 else 0.0)
+        rate = cvel[b, 0] * ax + cvel[b, 1] * ay + cvel[b, 2] * az
+        tau = ke_i[n] * err + kd_i[n] * (rate_t - rate)
+        tau = min(max(tau, -max_torque), max_torque)
+        out[n, 0] = tau * ax
+        out[n, 1] = tau * ay
+        out[n, 2] = tau * az
+
+
+# twist_torques(out, xquat, sb, tw_m, q0, dq, share, schar, pts, sc, sp, w, cvel, ke_i, kd_i,
+#               max_torque):
+# writes Eq. 2's torque vector (N, 3) of every segment into ``out``: the target orientation
+# q0 + s dq (w x y z, s = share[schar] per segment) against the body quaternion ``xquat[sb]``
+# (:func:`twist_angle` with the forms ``tw_m``), about the unit axis from joint point ``pts[sp]``
+# to ``pts[sc]``, the target twist rate ``w . axis`` while s < 1, the measured ``cvel[sb, :3] .
+# axis``, per-segment gains ``ke_i``, ``kd_i``, bounded by ``max_torque``
+# (:func:`pd_twist_torque`). One compiled loop instead of a dozen numpy calls on 19 rows a
+# character, every few physics steps; the numpy twin computes the same numbers
+# (tests/test_physics_controller).
+_twist_numba = jit.njit(_twist_kernel)
+twist_torques = jit.pick(_twist_numba, _twist_numpy)
+
+
+# ---------------------------------------------------------------------------------------------
+# body wrenches as generalized forces: what MuJoCo does with xfrc_applied, over the dof chains
+# ---------------------------------------------------------------------------------------------
+def _wrench_qfrc_kernel(qfrc, wr, bodies, dofadr, dofnum, body_parent, dof_parent, rootid, cdof,
+                        xipos, subtree_com):
+    qfrc[:] = 0.0
+    for k in range(bodies.shape[0]):
+        b = bodies[k]
+        fx, fy, fz = wr[b, 0], wr[b, 1], wr[b, 2]
+        tx, ty, tz = wr[b, 3], wr[b, 4], wr[b, 5]
+        if fx == 0.0 and fy == 0.0 and fz == 0.0 and tx == 0.0 and ty == 0.0 and tz == 0.0:
+            continue
+        r = rootid[b]
+        ox, oy, oz = (xipos[b, 0] - subtree_com[r, 0], xipos[b, 1] - subtree_com[r, 1],
+                      xipos[b, 2] - subtree_com[r, 2])
+        mx, my, mz = tx + oy * fz - oz * fy, ty + oz * fx - ox * fz, tz + ox * fy - oy * fx
+        while b > 0 and dofnum[b] == 0:
+            b = body_parent[b]
+        if b == 0:
+            continue
+        i = dofadr[b] + dofnum[b] - 1
+        while i >= 0:
+            qfrc[i] += (cdof[i, 3] * fx + cdof[i, 4] * fy + cdof[i, 5] * fz
+                        + cdof[i, 0] * mx + cdof[i, 1] * my + cdof[i, 2] * mz)
+            i = dof_parent[i]
+
+
+# wrench_qfrc(qfrc, wr, bodies, dofadr, dofnum, body_parent, dof_parent, rootid, cdof, xipos,
+#             subtree_com): sets ``qfrc`` (nv,) to the generalized forces of the wrenches ``wr``
+# (nbody, 6: force, torque at the body's centre of mass ``xipos``, xfrc_applied's layout) on
+# ``bodies``: J^T [F; T] over each body's dof chain from MuJoCo's ``cdof`` (com-based motion
+# subspaces about the ``subtree_com`` of the body's root), which is what MuJoCo computes from
+# xfrc_applied (mj_applyFT) with two dense 3 x nv Jacobians a body: 114 bodies and nv 360 at six
+# characters were 30 us of every step. Compiled only: without numba explicit_pd writes
+# xfrc_applied (tests/test_physics_controller compares the two).
+wrench_qfrc = jit.njit(_wrench_qfrc_kernel)
+
+
 __all__ = ['Gains', 'clamp_norm', 'pd_force', 'twist_error', 'pd_twist_torque', 'twist_drive',
            'twist_angle', 'twist_forms', 'cross_rows', 'apply_at_points', 'point_velocity',
-           'explicit_pd_wrenches']
+           'explicit_pd_wrenches', 'twist_torques', 'wrench_qfrc']

@@ -593,9 +593,9 @@ class Simulation:
 
 
 def warm_up() -> float:
-    """Compile (or load from numba's cache) the compiled kernels -- explicit_pd's Eq. 1, the target
-    orientations -- by stepping a throw-away one-character world once, so that a node does it at
-    start and not on its first frame. Returns the seconds it took."""
+    """Compile (or load from numba's cache) the compiled kernels -- explicit_pd's Eq. 1 and
+    Eq. 2, the target orientations -- by stepping a throw-away one-character world once, so that
+    a node does it at start and not on its first frame. Returns the seconds it took."""
     t0 = time.perf_counter()
     body = standard_body()
     sim = Simulation(SimConfig(controller='explicit_pd', body_height=body.height))

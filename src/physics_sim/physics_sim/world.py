@@ -23,6 +23,7 @@ from skeleton_core.model import (ELBOW_LEFT, ELBOW_RIGHT, HAND_LEFT, HAND_RIGHT,
 from .character import Character
 from .config import CharacterState, SimConfig
 from .controller import pd_twist_torque, twist_angle, twist_drive, twist_forms
+from .controller import twist_torques as twist_kernel
 from .controllers import make_controller
 from .feature_holds import grip_changes
 from .frames import SensorPose
@@ -79,6 +80,7 @@ class World:
         self.with_objects = with_objects
         self.time = time
         self.pins = FootPins(self)
+        self._twist_share = None   # twist_torques' (N,) shares when all characters share one
         self.model = self.data = None
         self.rebuild(old)
 
@@ -313,6 +315,18 @@ class World:
         d, g, ix = self.data, self.config.gains, self.ix
         if share is None:
             share = self.share_at(t)
+        if damped and ix.axis_site is None:   # the axes between joint points: one compiled loop
+            if isinstance(share, float):
+                n = len(tg['T0'])
+                if self._twist_share is None or len(self._twist_share) != n:
+                    self._twist_share = np.empty(n)
+                self._twist_share.fill(share)
+                share = self._twist_share
+            out = np.empty((len(ix.sb), 3))
+            twist_kernel(out, d.xquat, ix.sb, ix.tw_m, tg['Q0w'], tg['dQw'], share, ix.schar,
+                         pts, ix.sc, ix.sp, tg['W'], d.cvel, g.twist_ke * ix.tw_i,
+                         g.twist_kd * ix.tw_i, float(g.max_torque))
+            return out
         if isinstance(share, float) or len(share) == 1:
             ss = float(share) if isinstance(share, float) else float(share[0])
             q_t = tg['Q0w'] + ss * tg['dQw']

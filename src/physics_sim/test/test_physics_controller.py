@@ -105,6 +105,87 @@ def test_explicit_pd_kernel_numba_and_numpy_agree():
     np.testing.assert_allclose(out['numpy'], ref, rtol=1e-12, atol=1e-9)
 
 
+def test_twist_kernel_numba_and_numpy_agree():
+    """Eq. 2 about the axes between joint points (compiled by numba) gives the numpy
+    formulation's torques (twist_angle + pd_twist_torque) on a real MuJoCo state with random
+    target orientations and rates, bounded and unbounded torques, moving and held targets; the
+    numpy twin is what World.twist_torques computes the long way (axis sites, the actuators'
+    path)."""
+    pytest.importorskip('numba')
+    from physics_sim import controller as ctl
+    from physics_sim.simulation import SimConfig, Simulation
+    sim = Simulation(SimConfig(controller='explicit_pd', body_height=1.75))
+    base = standard_body().rest_positions() + np.array([2.5, 0.0, -0.8])
+    for uid, dy in ((1, -1.0), (2, 1.0)):
+        sim.set_target(uid, base + [0.0, dy, 0.0])
+    sim.advance(0.05)
+    w = sim.worlds[0]
+    d, ix = w.data, w.ix
+    rng = np.random.default_rng(1)
+    n = len(ix.sb)
+    q0 = d.xquat[ix.sb] + rng.normal(0.0, 0.3, (n, 4))
+    dq, wt = rng.normal(0.0, 0.05, (n, 4)), rng.normal(0.0, 3.0, (n, 3))
+    d.cvel[:] = rng.normal(0.0, 2.0, d.cvel.shape)
+    share = np.array([0.3, 1.0])       # one character's target moving, the other's held
+    pts = w.joint_points()
+    ke_i, kd_i = 400.0 * ix.tw_i, 40.0 * ix.tw_i
+    out = {}
+    for name, fn in (('numba', ctl._twist_numba), ('numpy', ctl._twist_numpy)):
+        out[name] = np.zeros((n, 3))
+        fn(out[name], d.xquat, ix.sb, ix.tw_m, q0, dq, share, ix.schar, pts, ix.sc, ix.sp, wt,
+           d.cvel, ke_i, kd_i, 2.0)
+    tau = np.linalg.norm(out['numpy'], axis=1)
+    assert (tau > 1.999).sum() > 5 and (tau < 1.99).sum() > 5   # bounded and not
+    np.testing.assert_allclose(out['numba'], out['numpy'], rtol=1e-12, atol=1e-12)
+    # the numpy twin is Eq. 2: twist error and rates about the joint-point axis, bounded
+    axes = pts[ix.sc] - pts[ix.sp]
+    axes /= np.linalg.norm(axes, axis=1)[:, None]
+    ss = share[ix.schar]
+    err = ctl.twist_angle(d.xquat[ix.sb], ix.tw_m, q0 + ss[:, None] * dq)
+    rate_t = np.sum(wt * axes, axis=1) * (ss < 1.0)
+    rate = np.sum(d.cvel[ix.sb, :3] * axes, axis=1)
+    want = np.clip(ke_i * err + kd_i * (rate_t - rate), -2.0, 2.0)[:, None] * axes
+    np.testing.assert_allclose(out['numpy'], want, rtol=1e-9, atol=1e-12)
+
+
+def test_wrench_qfrc_is_what_mujoco_makes_of_xfrc_applied():
+    """explicit_pd's wrenches handed to MuJoCo as generalized forces (compiled, over each body's
+    dof chain) are MuJoCo's own from the same wrenches as xfrc_applied: mj_applyFT at every body's
+    centre of mass, and the same accelerations from mj_forward."""
+    pytest.importorskip('numba')
+    import mujoco
+    from physics_sim import controller as ctl
+    from physics_sim.simulation import SimConfig, Simulation
+    sim = Simulation(SimConfig(controller='explicit_pd', body_height=1.75))
+    base = standard_body().rest_positions() + np.array([2.5, 0.0, -0.8])
+    for uid, dy in ((1, -0.4), (2, 0.4)):
+        sim.set_target(uid, base + [0.0, dy, 0.0])
+    sim.advance(0.1)
+    m, d, ix = sim.model, sim.data, sim.worlds[0].ix
+    mujoco.mj_forward(m, d)   # cdof, xipos of the current qpos (the controller: after mj_step1)
+    rng = np.random.default_rng(2)
+    wr = np.zeros_like(d.xfrc_applied)
+    bodies = np.union1d(ix.jb, ix.sb).astype(np.int64)
+    wr[bodies] = rng.normal(0.0, 50.0, (len(bodies), 6))
+    wr[bodies[3]] = 0.0                  # a body without a wrench
+    qfrc = np.full(m.nv, np.nan)         # every entry written
+    ctl.wrench_qfrc(qfrc, wr, bodies, m.body_dofadr, m.body_dofnum, m.body_parentid,
+                    m.dof_parentid, m.body_rootid, d.cdof, d.xipos, d.subtree_com)
+    ref = np.zeros(m.nv)
+    for b in bodies:
+        mujoco.mj_applyFT(m, d, wr[b, :3].copy(), wr[b, 3:].copy(), d.xipos[b].copy(), int(b), ref)
+    assert np.abs(ref).max() > 10.0
+    np.testing.assert_allclose(qfrc, ref, rtol=1e-10, atol=1e-9)
+    d.qfrc_applied[:] = qfrc
+    d.xfrc_applied[:] = 0.0
+    mujoco.mj_forward(m, d)
+    via_qfrc = d.qacc.copy()
+    d.qfrc_applied[:] = 0.0
+    d.xfrc_applied[:] = wr
+    mujoco.mj_forward(m, d)
+    np.testing.assert_allclose(via_qfrc, d.qacc, rtol=1e-8, atol=1e-6)
+
+
 def test_segment_quats_numba_and_python_agree():
     """Target orientations from joint positions (one call per target frame and character):
     the numba kernel gives the scalar Python's quaternions on random postures, on a degenerate

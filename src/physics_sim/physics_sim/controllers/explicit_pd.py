@@ -1,14 +1,18 @@
 """``explicit_pd``: the papers' scheme (Shum & Ho 2012 Sec. 6; Shum et al. 2013 Sec. VII). Eq. 1
 forces at every joint point and Eq. 2 torques about every segment axis, applied as external forces
-(``xfrc_applied``) and integrated explicitly. Eq. 1 is evaluated from the current state at every
-physics step (:func:`physics_sim.controller.explicit_pd_wrenches`, compiled where numba is
-available); Eq. 2 torques and the foot pins every ``slow_control_every`` steps (default 4)."""
+and integrated explicitly: body wrenches handed to MuJoCo as generalized forces
+(``qfrc_applied``, :func:`physics_sim.controller.wrench_qfrc`; ``xfrc_applied`` without numba).
+Eq. 1 is evaluated from the current state at every physics step
+(:func:`physics_sim.controller.explicit_pd_wrenches`, compiled where numba is available); Eq. 2
+torques and the foot pins every ``slow_control_every`` steps (default 4)."""
 from __future__ import annotations
 
 import mujoco
 import numpy as np
 
-from ..controller import explicit_pd_wrenches
+from skeleton_core import jit
+
+from ..controller import explicit_pd_wrenches, wrench_qfrc
 from .registry import register
 from .base import Controller
 
@@ -22,6 +26,9 @@ class ExplicitPD(Controller):
         self._count = 0
         self._share = None    # (N,) every character's interpolation share, refilled per step
         self._sb = None       # the segment bodies' rows of xfrc_applied (a slice when contiguous)
+        # compiled: the wrenches are summed here and handed to MuJoCo as generalized forces
+        self._wr = None       # (nbody, 6) like xfrc_applied, or None: xfrc_applied itself
+        self._bodies = None   # the bodies that get a wrench
 
     def bind(self, world) -> None:
         ix = world.ix
@@ -31,6 +38,11 @@ class ExplicitPD(Controller):
         # the same additions as indexing with sb, without the gather and scatter at every step
         contiguous = len(sb) > 0 and np.array_equal(sb, np.arange(sb[0], sb[0] + len(sb)))
         self._sb = slice(int(sb[0]), int(sb[0]) + len(sb)) if contiguous else sb
+        if jit.enabled():
+            self._wr = np.zeros_like(world.data.xfrc_applied)
+            self._bodies = np.union1d(ix.jb, sb).astype(np.int64)
+        else:
+            self._wr = self._bodies = None
 
     def targets_changed(self, world) -> None:
         self._twist = None      # recomputed on the next step
@@ -49,7 +61,12 @@ class ExplicitPD(Controller):
         d, c = w.data, w.config
         g = c.gains
         xfrc = d.xfrc_applied
-        xfrc[:] = 0.0
+        xfrc[:] = 0.0         # the pushes' (apply_pushes)
+        wr = self._wr
+        if wr is None:
+            wr = xfrc
+        else:
+            wr[:] = 0.0
         t = w.time
         tg = w.tg
         if tg is not None:
@@ -62,7 +79,7 @@ class ExplicitPD(Controller):
                 shares.fill(share)
             else:
                 shares = share
-            explicit_pd_wrenches(xfrc, d.site_xpos, ix.js, d.cvel, d.subtree_com, d.xipos, ix.jb,
+            explicit_pd_wrenches(wr, d.site_xpos, ix.js, d.cvel, d.subtree_com, d.xipos, ix.jb,
                                  ix.jroot, tg['P0'], tg['dP'], tg['V'], shares,
                                  ix.jchar, g.ke, g.kd, g.max_force, ix.ub, ix.sum_rows)
             self._count += 1
@@ -72,7 +89,12 @@ class ExplicitPD(Controller):
                 pts = w.joint_points()
                 self._twist = w.twist_torques(t, tg, pts, share=share)
                 w.pins.update(p_t, v_t, pts)
-            xfrc[ix.sb if self._sb is None else self._sb, 3:] += self._twist
+            wr[ix.sb if self._sb is None else self._sb, 3:] += self._twist
+        if self._wr is not None:
+            m = w.model
+            wrench_qfrc(d.qfrc_applied, wr, self._bodies, m.body_dofadr, m.body_dofnum,
+                        m.body_parentid, m.dof_parentid, m.body_rootid, d.cdof, d.xipos,
+                        d.subtree_com)
         if w.shared.pushes:
             w.apply_pushes(t)
 
