@@ -131,6 +131,9 @@ def _nodes(context):
         if arg(name):   # typed as declared
             driver_over[name] = type(driver_specs[name].default)(arg(name))
     opt_over = dict(db_over)
+    # a recording's frames wait in the reconstruction's queues while it is busy, never lost
+    from kinect_bringup.graph import QUEUED_READERS, replay_overrides, replays
+    queued = replay_overrides(list(QUEUED_READERS)) if replays(arg('source'), config_dir) else {}
     tracker = arg('input_tracker') or {'live': 'nite2', 'synthetic': 'sensor_model'}.get(
         arg('source'), '')
     if tracker:
@@ -171,16 +174,19 @@ def _nodes(context):
         from kinect_bringup.graph import load_params
         fused = load_params('reconstruction', config_dir)
         fused.update({f'optimizer.{k}' if k == 'method' else k: v for k, v in opt_over.items()})
+        fused.update(queued.get('reconstruction', {}))
         nodes.append(managed_node(package='pose_reconstruction', executable='reconstruction',
                           name='reconstruction', parameters=[fused], **common))
     elif mode == 'split':
         nodes += [
             managed_node(package='pose_reconstruction', executable='reliability', name='reliability',
-                 parameters=params('reliability'), **common),
+                 parameters=params('reliability', **queued.get('reliability', {})), **common),
             managed_node(package='pose_reconstruction', executable='completion', name='completion',
-                 parameters=params('completion', **db_over), **common),
+                 parameters=params('completion', **db_over, **queued.get('completion', {})),
+                 **common),
             managed_node(package='pose_reconstruction', executable='optimizer', name='optimizer',
-                 parameters=params('optimizer', **opt_over), **common),
+                 parameters=params('optimizer', **opt_over, **queued.get('optimizer', {})),
+                 **common),
         ]
     else:
         raise RuntimeError(f'reconstruction:={mode} is not one of fused, split')

@@ -2,9 +2,12 @@
 /body_tracking_data /imu``; tests/azure_fake.py: three bodies entering and leaving, captures split
 over messages, a joint missing) replays through ``ros2 launch kinect_bringup pipeline.launch.py
 source:=replay replay_file:=BAG`` with nothing else set: every frame of every body is
-reconstructed, and the recording of the run declares the tracker ``azure_kinect_bt``.
+reconstructed, even when the reconstruction is held up mid-replay for longer than its live queue
+holds (a loaded machine), and the recording of the run declares the tracker ``azure_kinect_bt``.
 
 Its own module: launch_pytest runs one launch service at a time."""
+import os
+import signal
 import tempfile
 import time
 from pathlib import Path
@@ -35,10 +38,46 @@ def azure_replay():
     ])
 
 
+HELD_S = 1.5   # 45 frames of the recording: over four times the reconstruction's live queue (10)
+
+
+def _child(name: str) -> int:
+    """The pid of this process's child (the launch's) whose command line names ``name``: only
+    this test's own graph, never another run's."""
+    for d in os.listdir('/proc'):
+        if not d.isdigit():
+            continue
+        try:
+            with open(f'/proc/{d}/stat') as f:
+                ppid = int(f.read().rsplit(')', 1)[1].split()[1])
+            with open(f'/proc/{d}/cmdline', 'rb') as f:
+                cmd = f.read().replace(b'\0', b' ').decode(errors='replace')
+        except (OSError, ValueError, IndexError):
+            continue
+        if ppid == os.getpid() and f'/{name} ' in cmd:
+            return int(d)
+    raise AssertionError(f'no {name} process started by this test')
+
+
+def _hold(pid: int, seconds: float) -> None:
+    """The process stopped for ``seconds``, as a loaded machine can hold a node up."""
+    os.kill(pid, signal.SIGSTOP)
+    try:
+        time.sleep(seconds)
+    finally:
+        os.kill(pid, signal.SIGCONT)
+
+
 @pytest.mark.launch(fixture=azure_replay)
 def test_an_azure_kinect_recording_replays_through_the_pipeline():
     expected = A.expected_user_frames()
     deadline = time.monotonic() + 180
+    # once the replay plays (its first frames recorded), the reconstruction is held up: the
+    # frames the replay sends meanwhile wait for it instead of being lost
+    reconstruction = _child('reconstruction')
+    while time.monotonic() < deadline and not A.users_of(OUTPUT, '/kinect/skeletons'):
+        time.sleep(0.1)
+    _hold(reconstruction, HELD_S)
     while time.monotonic() < deadline and \
             A.user_frames(A.users_of(OUTPUT, '/posture/reconstructed')) != expected:
         time.sleep(1.0)

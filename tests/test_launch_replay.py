@@ -91,3 +91,18 @@ def test_the_replay_waits_for_every_reader_of_the_skeletons():
     assert skeleton_subscribers(graph_nodes(physics=False, viz=False, record=True)) == 2
     assert skeleton_subscribers(graph_nodes(reconstruction='split')) == 2   # reliability, viz
     assert skeleton_subscribers(['recorder'], recorded_topics=['/posture/reconstructed']) == 0
+
+
+def test_a_recordings_readers_queue_it():
+    """With the source a recording the reconstruction nodes' input queues are deep (ROS QoS
+    overrides of their input topics); a live or synthetic source keeps the nodes' own depth."""
+    from kinect_bringup.graph import REPLAY_QUEUE_DEPTH, graph_nodes, replay_overrides, replays
+    assert replays('replay') and not replays('live') and not replays('synthetic')
+    assert not replays('')    # the driver's YAML: synthetic
+    assert replay_overrides(graph_nodes()) == {
+        'reconstruction': {'qos_overrides./kinect/skeletons.subscription.depth': REPLAY_QUEUE_DEPTH}}
+    split = replay_overrides(graph_nodes(reconstruction='split'))
+    assert {n: list(v) for n, v in split.items()} == {
+        'reliability': ['qos_overrides./kinect/skeletons.subscription.depth'],
+        'completion': ['qos_overrides./kinect/skeletons_reliability.subscription.depth'],
+        'optimizer': ['qos_overrides./posture/completed.subscription.depth']}

@@ -174,6 +174,33 @@ def skeleton_subscribers(names: List[str], directory: Optional[Path] = None,
     return n
 
 
+# A replayed recording is played at its recorded speed, whatever its readers can take: the
+# reconstruction's input queue (qos_depth 10) holds a third of a second, so a node held up for
+# longer (a loaded machine) lost the frames behind it. A recording's readers queue its frames
+# instead (the ROS QoS override of their input's depth): they fall behind and catch up, and every
+# frame of the file is reconstructed. 33 s of frames at 30 Hz
+REPLAY_QUEUE_DEPTH = 1000
+# the reconstruction nodes' input topics (their input_topic defaults)
+QUEUED_READERS = {'reconstruction': '/kinect/skeletons', 'reliability': '/kinect/skeletons',
+                  'completion': '/kinect/skeletons_reliability', 'optimizer': '/posture/completed'}
+
+
+def replay_overrides(names: List[str]) -> Dict[str, Dict]:
+    """Per-node parameter overrides of the graph ``names`` when the source is a recording (the
+    driver's ``source`` replay): the reconstruction nodes' input queues deep enough that a busy
+    node delays the recording's frames instead of losing them."""
+    return {n: {f'qos_overrides.{QUEUED_READERS[n]}.subscription.depth': REPLAY_QUEUE_DEPTH}
+            for n in names if n in QUEUED_READERS}
+
+
+def replays(source: str, directory: Optional[Path] = None) -> bool:
+    """Whether the driver plays a recording: ``source`` (a launch argument; '' = the driver's
+    YAML value) is replay."""
+    if not source:
+        source = str(load_params('driver', directory).get('source', ''))
+    return source == 'replay'
+
+
 RECONSTRUCTION = {'fused': ['reconstruction'],
                   'split': ['reliability', 'completion', 'optimizer']}
 

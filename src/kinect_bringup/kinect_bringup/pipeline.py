@@ -17,7 +17,7 @@ from typing import Dict, List, Optional
 from skeleton_core.tf import DEFAULT_SENSOR_POSE
 
 from .graph import (RECONSTRUCTION, config_dir, graph_nodes, load_params, node_class, params_file,
-                    skeleton_subscribers)
+                    replay_overrides, replays, skeleton_subscribers)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -188,6 +188,10 @@ def main(argv=None) -> int:
         over = node_overrides(args)
         # a replay holds its first frame until every node reading /kinect/skeletons is there
         over['driver'].setdefault('wait_for_subscribers', skeleton_subscribers(names, directory))
+        if replays(over['driver'].get('source', ''), directory):
+            # a recording's frames wait in the reconstruction's queues while it is busy
+            for name, values in replay_overrides(names).items():
+                over.setdefault(name, {}).update(values)
         from kinect_driver.static_tf_node import StaticTfNode, parse_args, transforms_from_args
         tf_args = ['--pose', args.sensor_pose] + (['--file', args.extrinsics]
                                                   if args.extrinsics else [])

@@ -43,6 +43,9 @@ from .tf_names import tf_frames
 SKELETONS_TOPIC = '/kinect/skeletons'
 GROUND_TRUTH_TOPIC = '/kinect/ground_truth'
 STALL_S = 2.0  # live: warn when the device sends nothing for this long
+# a recording's frames are kept until every reader acknowledged them (a reader held up for longer
+# than the live depth of 10 frames would otherwise miss the ones behind them): 33 s at 30 Hz
+RECORDING_DEPTH = 1000
 
 
 def _non_empty(name):
@@ -116,7 +119,9 @@ class DriverNode(ManagedNode):
     def configure(self) -> None:
         v = self.params.values
         qos = QoSProfile(depth=10)
-        self.pub = self.publisher(self._msg_type, SKELETONS_TOPIC, qos)
+        recorded = getattr(source_class(v['source']), 'recorded', False)
+        self.pub = self.publisher(self._msg_type, SKELETONS_TOPIC,
+                                  QoSProfile(depth=RECORDING_DEPTH) if recorded else qos)
         self.truth_pub = self.publisher(self._msg_type, GROUND_TRUTH_TOPIC, qos) \
             if source_class(v['source']).has_truth else None
         self.tf_pub = None

@@ -1,6 +1,6 @@
 """``bench_physics``: figures of the physics character (no ROS).
 
-    ros2 run physics_sim bench_physics [--quick] [--long] [--out out/bench_physics.json]
+    ros2 run physics_sim bench_physics [--quick] [--long] [--solver pgs] [--out out/bench_physics.json]
 
 Prints, for every controller (``actuator_pd`` = Eq. 1-2 as MuJoCo actuators, the default, with
 explicit Euler integration as the paper and with implicitfast (``actuator_pd_implicit``);
@@ -82,6 +82,8 @@ RTF_VARIANTS = {'actuator_pd_split': ('actuator_pd', dict(world_split='contact')
                 'explicit_pd_numpy': ('explicit_pd', {}),
                 'auto': ('auto', dict(integrator='euler')),
                 'auto_split': ('auto', dict(integrator='euler', world_split='contact'))}
+# SimConfig.solver of every run (--solver; auto = the node's default, newton)
+SOLVER = 'auto'
 
 
 def config(variant: str, **kw) -> SimConfig:
@@ -91,6 +93,7 @@ def config(variant: str, **kw) -> SimConfig:
         kw = {**extra, **kw}
     ctrl, integ = next(((c, i) for n, c, i in VARIANTS if n == variant), (variant, 'implicitfast'))
     kw.setdefault('integrator', integ)
+    kw.setdefault('solver', SOLVER)
     return SimConfig(controller=ctrl, body_height=1.75, **kw)
 
 
@@ -324,12 +327,22 @@ def main(argv=None) -> int:
     ap.add_argument('--frames', type=int, default=0,
                     help='real-time factors: frames per variant and number of characters '
                          '(default 60 with --quick, else 90; fewer: a quick check, noisier figures)')
+    ap.add_argument('--solver', default='auto',
+                    help='MuJoCo constraint solver of every run (SimConfig.solver: auto = newton, '
+                         'the default; pgs, cg to compare)')
     ap.add_argument('--out', default='out/bench_physics.json')
     args = ap.parse_args(argv if argv is not None else sys.argv[1:])
+    global SOLVER
+    try:
+        SimConfig(solver=args.solver).validate()
+    except ValueError as e:
+        ap.error(str(e))
+    SOLVER = args.solver
     load = os.getloadavg()[0] if hasattr(os, 'getloadavg') else float('nan')
-    res = {'cpu_count': os.cpu_count(), 'load_avg_1min': load}
+    res = {'cpu_count': os.cpu_count(), 'load_avg_1min': load, 'solver': args.solver}
     t0 = time.perf_counter()
-    print(f'bench_physics (2 ms step; load average {load:.1f} on {os.cpu_count()} cores)', flush=True)
+    print(f'bench_physics (2 ms step; solver {args.solver}; load average {load:.1f} on '
+          f'{os.cpu_count()} cores)', flush=True)
     if args.frames < 0:
         ap.error('--frames must be >= 0')
     res['real_time_factor'] = rtf(args.quick, [v for v, _, _ in VARIANTS] + list(RTF_VARIANTS),

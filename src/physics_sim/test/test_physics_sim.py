@@ -460,6 +460,24 @@ def test_bench_rtf_reports_every_run():
     assert all(np.isfinite(x) and x > 0 for x in r.values())
 
 
+def test_bench_solver_option_sets_every_run(monkeypatch):
+    """bench_physics --solver pgs: every run's MuJoCo model on PGS (the default auto: newton); an
+    unknown solver is refused with a usage error."""
+    from physics_sim import bench
+
+    def model_solver():
+        sim = Simulation(bench.config('actuator_pd'))
+        sim.step({0: tpose_sensor()})
+        return sim.world_of(0).model.opt.solver
+
+    assert model_solver() == mujoco.mjtSolver.mjSOL_NEWTON
+    monkeypatch.setattr(bench, 'SOLVER', 'pgs')
+    assert model_solver() == mujoco.mjtSolver.mjSOL_PGS
+    with pytest.raises(SystemExit) as e:
+        bench.main(['--solver', 'simplex', '--rtf-only'])
+    assert e.value.code == 2
+
+
 def test_auto_controller_switches_with_the_number_of_characters():
     """controller 'auto': actuator_pd for few characters, explicit_pd from auto_explicit_from on
     (decided when the world is recompiled for a character coming or going); the characters keep

@@ -122,10 +122,14 @@ class SkeletonArrayNode(ManagedNode):
                 if p.get_subscription_count() < self.count_subscribers(p.topic_name)]
 
     def _subscribe_input(self) -> None:
+        from rclpy.qos_overriding_options import QoSOverridingOptions
         from skeleton_msgs.msg import SkeletonArray
-        # serialized in and out (skeleton_core.cdr): no rclpy message objects per joint
+        # serialized in and out (skeleton_core.cdr): no rclpy message objects per joint. The
+        # queue's depth may be overridden the ROS way (qos_overrides.<topic>.subscription.depth):
+        # the launch files queue a replayed recording (kinect_bringup.graph.replay_overrides)
         self.subscription(SkeletonArray, self.params['input_topic'], self._on_msg,
-                          QoSProfile(depth=self.params['qos_depth']), raw=True)
+                          QoSProfile(depth=self.params['qos_depth']), raw=True,
+                          qos_overriding_options=QoSOverridingOptions.with_default_policies())
         self.get_logger().info(f"{self.params['input_topic']} -> "
                                + ', '.join(p.topic_name for p in self._pubs))
 
