@@ -72,6 +72,9 @@ class FusionClock:
         self.early = 0                         # ... of them not waited for (lag beyond the bound)
         self.lags: Dict[str, Deque[float]] = {s: collections.deque(maxlen=LAG_WINDOW)
                                               for s in self.sensors}
+        # expected_lag per sensor while its lags do not change (it is asked several times per
+        # frame: each arrival and each deadline; the lags change once per reference stamp)
+        self._expected: Dict[str, Optional[float]] = {}
         # recent reference stamps -> (arrival wall time, sensors whose lag is noted)
         self._recent: Dict[int, tuple] = {}
 
@@ -87,10 +90,14 @@ class FusionClock:
     def expected_lag(self, sensor: str) -> Optional[float]:
         """The lag (s) that covers :data:`LAG_QUANTILE` % of ``sensor``'s recent frames; None
         while fewer than :data:`LAG_MIN_SAMPLES` are known."""
+        if sensor in self._expected:
+            return self._expected[sensor]
         lags = self.lags.get(sensor)
         if lags is None or len(lags) < LAG_MIN_SAMPLES:
             return None
-        return float(np.percentile(np.fromiter(lags, float), LAG_QUANTILE))
+        lag = self._expected[sensor] = float(np.percentile(np.fromiter(lags, float),
+                                                           LAG_QUANTILE))
+        return lag
 
     def wait_for(self, sensor: str) -> float:
         """How long (s) after a reference frame's arrival its stamp waits for ``sensor``."""
@@ -152,6 +159,7 @@ class FusionClock:
             if sensor not in noted and stamp_ns >= st:
                 noted.add(sensor)
                 self.lags[sensor].append(min(max(wall - w, 0.0), 2 * self.period_s))
+                self._expected.pop(sensor, None)
 
     def _note_lag_of_earlier(self, stamp_ns: int, wall: float) -> None:
         """A sensor whose frame at or after this reference stamp came before it: lag 0."""
@@ -160,6 +168,7 @@ class FusionClock:
             if s not in noted and latest >= stamp_ns:
                 noted.add(s)
                 self.lags[s].append(0.0)
+                self._expected.pop(s, None)
 
     def _emit(self, forced: bool = False) -> int:
         stamp = self.pending
