@@ -27,9 +27,9 @@ every sensor whose frame comes within the period, as before the adaptation.
 from __future__ import annotations
 
 import collections
+import math
 from typing import Deque, Dict, List, Optional, Sequence
 
-import numpy as np
 
 FRAME_PERIOD_S = 1.0 / 30.0
 ABSENT_PERIODS = 10.0  # a sensor silent this many frame periods (1/3 s) is not waited for: an
@@ -42,6 +42,19 @@ LAG_WINDOW = 30          # reference stamps whose lags are remembered per sensor
 LAG_QUANTILE = 90        # the lag a wait must cover (per cent of the recent stamps)
 LAG_MIN_SAMPLES = 5      # lags known before a sensor's wait is adapted
 LAG_MARGIN_S = 0.003     # added to the expected lag: delivery jitter
+
+
+def _quantile(values, q: float) -> float:
+    """``np.quantile(values, q)`` (the same value: its 'linear' method and its interpolation
+    arithmetic, as plausibility's floor quantile) without numpy's ~50 us per call on 30 values."""
+    v = sorted(values)
+    pos = (len(v) - 1) * q
+    lo = int(math.floor(pos))
+    hi = min(lo + 1, len(v) - 1)
+    t = pos - lo
+    a, b = v[lo], v[hi]
+    d = b - a
+    return float(b - d * (1.0 - t) if t >= 0.5 else a + d * t)
 
 
 class FusionClock:
@@ -95,8 +108,7 @@ class FusionClock:
         lags = self.lags.get(sensor)
         if lags is None or len(lags) < LAG_MIN_SAMPLES:
             return None
-        lag = self._expected[sensor] = float(np.percentile(np.fromiter(lags, float),
-                                                           LAG_QUANTILE))
+        lag = self._expected[sensor] = _quantile(lags, LAG_QUANTILE / 100.0)
         return lag
 
     def wait_for(self, sensor: str) -> float:
