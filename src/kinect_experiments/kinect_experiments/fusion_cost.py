@@ -9,7 +9,8 @@ the same digest when their outputs are byte for byte the same).
 
 Sensor k's message i is stamped ``i`` periods + ``(k - 1) * phase`` after the start and arrives
 in that order (the bench's replay); the fusion clock is driven with those times as its wall
-clock, so the stamps it publishes and its holds are the node's, minus the DDS delivery. CPU is
+clock (its deadline handled before the next arrival, as the node's timer), so the stamps it
+publishes and its holds are the node's, minus the DDS delivery. CPU is
 ``time.process_time`` of this process: the figure other jobs on the machine move least.
 """
 from __future__ import annotations
@@ -77,7 +78,10 @@ def replay(data: Dict, frames: int, phase_ms: float = 3.0, warm: int = 30) -> Di
             if fusion.poses[names[k]] is None:
                 fusion.poses[names[k]] = frame_pose[fid]
             fusion.add(names[k], fr, st)
-            out = clock.on_frame(names[k], st, (stamp - t0_ns) * 1e-9)
+            wall = (stamp - t0_ns) * 1e-9
+            due = clock.deadline()   # the node's deadline timer, had it fired before this arrival
+            out = clock.on_timer(due) if due is not None and due <= wall else []
+            out += clock.on_frame(names[k], st, wall)
             c2 = time.process_time()
             t_fuse = t_enc = 0.0
             for o in out:
