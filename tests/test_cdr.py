@@ -110,3 +110,49 @@ def test_restamp_rewrites_every_stamp_as_rclpy_reads_it():
     _same([f.copy(stamp_ns=new) for f in frames_from_cdr(data)[2]], frames_from_cdr(out)[2])
     with pytest.raises(CdrError):
         stamp_offsets(data[:len(data) // 2])
+
+
+@pytest.mark.parametrize('seed', [0, 1, 2])
+def test_skeletons_checked_together_decode_as_one_by_one(seed, monkeypatch):
+    """A message whose skeletons are all valid is checked in one pass: the frames are bit for
+    bit those of the one-by-one path (frame_from_arrays), orientations (zero quaternions ->
+    identity, normalised), missing and NaN reliabilities and duplicate ids alike."""
+    import skeleton_core.cdr as cdr
+    rng = np.random.default_rng(seed)
+    frames = _frames(rng, 5)
+    frames[3].reliability = np.array([], np.float32)     # no reliability: unknown
+    msg = frames_to_array_msg(frames, 9, 'k')
+    zero = Quaternion(x=0.0, y=0.0, z=0.0, w=0.0)        # a default-constructed C++ message's
+    msg.skeletons[1].orientations = [zero] * 20
+    msg.skeletons[2].orientations = [Quaternion(x=3.0, y=-40.0, z=0.5, w=1e3)] * 19 + [zero]
+    msg.skeletons.append(msg.skeletons[0])               # a duplicate id
+    data = serialize_message(msg)
+    calls = []
+    together = cdr._checked_together
+    monkeypatch.setattr(cdr, '_checked_together', lambda p: calls.append(1) or together(p))
+    e1, e2 = [], []
+    got = frames_from_cdr(data, e1)[2]
+    assert calls and together([(a.positions, a.tracking_state, a.reliability, a.orientations,
+                                a.user_id, a.stamp_ns, a.frame_id) for a in got]) is not None
+    monkeypatch.setattr(cdr, '_checked_together', lambda p: None)
+    ref = frames_from_cdr(data, e2)[2]
+    assert [e.cause for e in e1] == [e.cause for e in e2] == ['duplicate user id']
+    assert len(got) == len(ref) == 5
+    for x, y in zip(got, ref):
+        for a, b in ((x.positions, y.positions), (x.tracking_state, y.tracking_state),
+                     (x.reliability, y.reliability), (x.orientations, y.orientations)):
+            assert a.dtype == b.dtype and a.shape == b.shape
+            assert a.tobytes() == b.tobytes()
+        assert (x.user_id, x.stamp_ns, x.frame_id) == (y.user_id, y.stamp_ns, y.frame_id)
+
+
+def test_one_invalid_skeleton_sends_the_message_one_by_one():
+    """An out-of-range reliability in one skeleton: the message is decoded one by one, that
+    skeleton dropped with its reason, the others kept."""
+    frames = _frames(np.random.default_rng(4), 3)
+    msg = frames_to_array_msg(frames, 9, 'k')
+    msg.skeletons[1].reliability = [2.0] * 20
+    errors = []
+    got = frames_from_cdr(serialize_message(msg), errors)[2]
+    assert [f.user_id for f in got] == [1, 3]
+    assert [e.cause for e in errors] == ['reliability out of range']

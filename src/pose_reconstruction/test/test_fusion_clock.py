@@ -142,3 +142,19 @@ def test_the_default_bound_waits_up_to_a_period_and_the_bound_is_checked():
         FusionClock(['a', 'b'], max_wait_s=0.05)
     with pytest.raises(ValueError, match='max_wait_s'):
         FusionClock(['a', 'b'], max_wait_s=-0.001)
+
+
+def test_the_expected_lag_is_numpys_percentile_of_the_recent_lags_after_every_frame():
+    """The lag a wait covers: np.percentile (linear) of the sensor's last LAG_WINDOW lags, the
+    same value after every new lag (it is kept between them, not recomputed per arrival)."""
+    import numpy as np
+    from pose_reconstruction.fusion_clock import LAG_MIN_SAMPLES, LAG_QUANTILE
+    rng = np.random.default_rng(3)
+    c = FusionClock(['a', 'b'], max_wait_s=0.005)
+    lags = np.concatenate([rng.random(40) * 0.008, np.full(10, 0.003), rng.random(30) * 0.03])
+    for k, lag in enumerate(lags.tolist()):
+        _run(c, [lag], start=k)
+        want = (None if len(c.lags['b']) < LAG_MIN_SAMPLES
+                else float(np.percentile(np.array(c.lags['b']), LAG_QUANTILE)))
+        assert c.expected_lag('b') == want
+        assert c.expected_lag('b') == want   # asked again: the kept value

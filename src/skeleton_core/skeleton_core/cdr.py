@@ -20,9 +20,9 @@ from typing import Iterable, List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from .conversions import (SkeletonFormatError, SkeletonFrame, collect_frames, frame_from_arrays,
-                          validate_arrays)
-from .model import NUM_JOINTS
+from .conversions import (MAX_ABS_COORDINATE, SkeletonFormatError, SkeletonFrame, collect_frames,
+                          frame_from_arrays, validate_arrays)
+from .model import NUM_JOINTS, TRACKING_STATES
 
 SKELETON_ARRAY = 'skeleton_msgs/msg/SkeletonArray'
 _IDENTITY = np.tile(np.array([0.0, 0.0, 0.0, 1.0]), (NUM_JOINTS, 1))
@@ -109,8 +109,55 @@ def frames_from_cdr(data: bytes, errors: Optional[List[SkeletonFormatError]] = N
         ts = r.array('u1', r.u32())
         rel = r.array('f4', r.u32())
         parsed.append((pos, ts, rel, ori if len(ori) else None, uid, sk_stamp, sk_frame))
+    checked = _checked_together(parsed)
+    if checked is not None:   # every skeleton valid: the frames as frame_from_arrays makes them
+        return stamp, frame_id, collect_frames(checked, lambda a: SkeletonFrame(*a), frame_id,
+                                               errors)
     return stamp, frame_id, collect_frames(parsed, lambda a: frame_from_arrays(*a), frame_id,
                                            errors)
+
+
+_NAN_RELIABILITY = np.full(NUM_JOINTS, np.nan, np.float32)
+
+
+def _checked_together(parsed: list) -> Optional[list]:
+    """The skeletons of one message checked at once, as :func:`validate_arrays` checks each:
+    per skeleton the arguments of :class:`SkeletonFrame` (positions, tracking state,
+    reliability, unit orientations, id, stamp, frame), the same values ``frame_from_arrays``
+    returns for it; None when one of them is not valid (or not of the usual shapes): the caller
+    then takes them one by one, which says why."""
+    if not parsed:
+        return None
+    shape_p, n = (NUM_JOINTS, 3), NUM_JOINTS
+    for pos, ts, rel, ori, *_ in parsed:
+        if (pos.shape != shape_p or ts.shape[0] != n or rel.shape[0] not in (0, n)
+                or (ori is not None and ori.shape[0] != n)):
+            return None
+    P = np.stack([a[0] for a in parsed])
+    if not np.abs(P).max() <= MAX_ABS_COORDINATE:   # also False for NaN
+        return None
+    if np.stack([a[1] for a in parsed]).max() > max(TRACKING_STATES):
+        return None
+    rels = [a[2] for a in parsed if a[2].shape[0]]
+    if rels:
+        R = np.stack(rels)
+        if not (R.min() >= 0.0 and R.max() <= 1.0) and np.logical_or(R < 0.0, R > 1.0).any():
+            return None   # (NaN: unknown, allowed)
+    oris = [a[3] for a in parsed if a[3] is not None]
+    unit = iter(())
+    if oris:
+        Q = np.concatenate(oris)
+        norm = np.sqrt(np.einsum('ij,ij->i', Q, Q))
+        if not np.isfinite(norm).all():
+            return None
+        zero = norm < 1e-9   # a default-constructed message: identity
+        if zero.any():
+            Q[zero] = (0.0, 0.0, 0.0, 1.0)
+            norm[zero] = 1.0
+        unit = iter(np.split(Q / norm[:, None], len(oris)))
+    return [(pos, ts, rel if rel.shape[0] else _NAN_RELIABILITY.copy(),
+             None if ori is None else next(unit), int(uid), int(sk_stamp), sk_frame)
+            for pos, ts, rel, ori, uid, sk_stamp, sk_frame in parsed]
 
 
 class _Writer:
