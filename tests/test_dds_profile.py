@@ -101,3 +101,15 @@ def test_fast_dds_loads_the_profile_without_an_error(tmp_path):
     bad.write_text(dds_profile.profile_path().read_text().replace('<count>', '<counts>')
                    .replace('</count>', '</counts>'))
     assert _xml_errors(bad) != ''
+
+
+@pytest.mark.ros
+def test_the_matching_experiment_reports_every_case(monkeypatch, capsys):
+    """kinect_experiments.discovery_match (docs/startup.md's measure of the matching wait): a
+    publisher and a subscriber process per run, with and without the profile, each matched."""
+    from kinect_experiments import discovery_match
+    monkeypatch.setenv('ROS_DOMAIN_ID', str(domains.claim(
+        int(os.environ.get('ROS_DOMAIN_ID', '0')) + 29)))
+    assert discovery_match.main(['--runs', '1', '--gap', '0.3']) == 0
+    rows = [line for line in capsys.readouterr().out.splitlines() if ' first: ' in line]
+    assert len(rows) == 4 and not any('never' in r for r in rows), rows
