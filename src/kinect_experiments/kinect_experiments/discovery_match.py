@@ -44,13 +44,17 @@ if role == 'pub':
 else:
     node.create_subscription(String, topic, lambda m: None, 10,
                              event_callbacks=SubscriptionEventCallbacks(matched=matched))
-made = time.time()
+print(json.dumps(dict(role=role, made=time.time())), flush=True)
 ex = SingleThreadedExecutor(context=ctx)
 ex.add_node(node)
-end = made + hold
-while time.time() < end and 'matched' not in got:
+end = time.time() + hold
+# the subscriber ends once matched; the publisher stays until it is stopped (leaving at its own
+# match could take it away before the subscriber has matched it)
+while time.time() < end and (role == 'pub' or 'matched' not in got):
     ex.spin_once(timeout_sec=0.01)
-print(json.dumps(dict(role=role, made=made, **got)), flush=True)
+    if 'matched' in got and not got.get('said'):
+        print(json.dumps(dict(role=role, matched=got['matched'])), flush=True)
+        got['said'] = True
 rclpy.try_shutdown(context=ctx)
 '''
 
@@ -64,14 +68,17 @@ def one_run(first: str, gap: float, env: Dict[str, str], hold: float = 8.0) -> O
     time.sleep(gap)
     procs.append(subprocess.Popen([sys.executable, '-c', _CHILD, second, topic, str(hold)],
                                   env=env, stdout=subprocess.PIPE, text=True))
-    out = {}
-    for p in procs:
-        stdout, _ = p.communicate(timeout=hold + gap + 60)
-        for line in stdout.splitlines():
-            if line.startswith('{'):
-                r = json.loads(line)
-                out[r['role']] = r
-    if 'matched' not in out.get('sub', {}) or 'pub' not in out:
+    out = {'pub': {}, 'sub': {}}
+    sub = procs[0] if first == 'sub' else procs[1]
+    pub = procs[1] if first == 'sub' else procs[0]
+    sub_out, _ = sub.communicate(timeout=hold + gap + 60)
+    pub.terminate()   # (SIGTERM: rclpy's handler shuts it down)
+    pub_out, _ = pub.communicate(timeout=60)
+    for line in (sub_out + pub_out).splitlines():
+        if line.startswith('{'):
+            r = json.loads(line)
+            out[r['role']].update(r)
+    if 'matched' not in out['sub'] or 'made' not in out['pub']:
         return None
     return out['sub']['matched'] - max(out['pub']['made'], out['sub']['made'])
 
