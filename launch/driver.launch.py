@@ -27,7 +27,7 @@ from launch.actions import DeclareLaunchArgument, OpaqueFunction
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
-from kinect_bringup.launch_nodes import managed_node
+from kinect_bringup.launch_nodes import managed_node, startup_profile
 
 DRIVER_ARGS = ('source', 'replay_file', 'scenario', 'num_users', 'device_uri', 'nite2_path')
 FRAME_ARGS = [
@@ -132,5 +132,6 @@ def generate_launch_description():
     # from the parameter declarations)
     args = [(n, str(specs[n].default), specs[n].description) for n in DRIVER_ARGS]
     return LaunchDescription(
+        [startup_profile()] +
         [DeclareLaunchArgument(n, default_value=d, description=t)
          for n, d, t in args + FRAME_ARGS] + [OpaqueFunction(function=_sensors)])

@@ -29,7 +29,7 @@ from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node, PushRosNamespace
 from skeleton_core.tf import DEFAULT_SENSOR_POSE
 
-from kinect_bringup.launch_nodes import managed_node, rviz_node
+from kinect_bringup.launch_nodes import managed_node, rviz_node, startup_profile
 
 ARGS = [
     # '' = keep the value from config/<node>.yaml
@@ -293,6 +293,7 @@ def _drivers(arg, sensors: int, config_dir: str):
 def generate_launch_description():
     rviz_config = os.path.join(get_package_share_directory('viz'), 'rviz', 'pipeline.rviz')
     return LaunchDescription(
+        [startup_profile()] +
         [DeclareLaunchArgument(n, default_value=d, description=t) for n, d, t in ARGS] + [
             OpaqueFunction(function=_nodes),
             rviz_node(rviz_config),

@@ -19,6 +19,7 @@ from typing import Optional
 
 from skeleton_core.bagio import recover, truncation
 
+from .dds_profile import use_startup_profile
 from .graph import repo_root
 from skeleton_data.database import build_default
 from viz.report import main as report_main
@@ -82,6 +83,8 @@ def run_graph(bag: Path, duration: float, args, use_launch: bool,
                '--method', args.method, '--seed', str(args.seed)]
     print(f'[demo] running for {duration:.0f} s: {" ".join(cmd)}', flush=True)
     log_path = bag.with_suffix('.log')
+    # the start's Fast DDS profile (unless the user has one) for the watch and the graph
+    use_startup_profile()
     watch = OutputWatch()
     with open(log_path, 'w') as log:
         t0 = time.monotonic()

@@ -16,6 +16,10 @@ last: each waits until every other managed node of the same launch is active (or
 ``SOURCE_WAIT_S`` passed), so the reconstruction, physics and recorder take the first frame the
 source publishes, and a recording holds every output from its first input frame. A launch of the
 drivers alone (``driver.launch.py``) has nothing to wait for.
+
+:func:`startup_profile`, first in a launch file's description, gives the launch and the processes
+it starts the Fast DDS profile of the start (``kinect_bringup.dds_profile``) unless the user has
+their own.
 """
 from __future__ import annotations
 
@@ -103,6 +107,17 @@ class _ManagedNode(LifecycleNode):
                     up.set()   # active, or failed (logged): the sources do not wait for it
         threading.Thread(target=bring_up, name=f'bring-up {name}', daemon=True).start()
         return actions
+
+
+def startup_profile() -> launch.actions.OpaqueFunction:
+    """The Fast DDS profile of the start (:mod:`kinect_bringup.dds_profile`) set in the launch's
+    environment (``context.environment`` is the launch process's: its own participant, made
+    after this, and every process it starts get it), unless the user has their own profile."""
+    def apply(context):
+        from kinect_bringup.dds_profile import startup_profile_env
+        return [launch.actions.SetEnvironmentVariable(name, value)
+                for name, value in startup_profile_env(context.environment).items()]
+    return launch.actions.OpaqueFunction(function=apply)
 
 
 def managed_node(**kwargs) -> LifecycleNode:

@@ -30,6 +30,10 @@ TRANSITION_TIMEOUT_S = 10.0
 SILENT_S = 20.0
 # after an error raised by a call (logged), the next attempt
 RETRY_S = 1.0
+# how long one attempt waits for both services to be discovered, and how often it looks (rclpy's
+# Client.wait_for_service looks every 0.25 s: up to that much added to each node's start)
+DISCOVER_S = 2.0
+DISCOVER_POLL_S = 0.01
 TRANSITIONING = {State.TRANSITION_STATE_CONFIGURING: 'configuring',
                  State.TRANSITION_STATE_CLEANINGUP: 'cleaning up',
                  State.TRANSITION_STATE_SHUTTINGDOWN: 'shutting down',
@@ -54,6 +58,17 @@ def call_once(client, request, timeout_s: float):
             pass
         return None
     return None if future.exception() is not None else future.result()
+
+
+def services_ready(clients, timeout_s: float = DISCOVER_S) -> bool:
+    """True once every client's service is discovered (looked at every :data:`DISCOVER_POLL_S`),
+    False after ``timeout_s``."""
+    deadline = time.monotonic() + timeout_s
+    while not all(c.service_is_ready() for c in clients):
+        if time.monotonic() >= deadline:
+            return False
+        time.sleep(DISCOVER_POLL_S)
+    return True
 
 
 def drive_to_active(node, name: str, stopped: Callable[[], bool],
@@ -94,8 +109,7 @@ def drive_to_active(node, name: str, stopped: Callable[[], bool],
         try:
             if get is None:
                 get, change = clients()
-            seen = get.wait_for_service(timeout_sec=1.0) and \
-                change.wait_for_service(timeout_sec=1.0)
+            seen = services_ready((get, change))
             reply = call_once(get, GetState.Request(), STATE_TIMEOUT_S) if seen else None
         except Exception as e:   # noqa: BLE001 -- the bring-up must not end silently
             say(type(e).__name__, f'{name}: lifecycle bring-up: {type(e).__name__}: {e}; '
@@ -162,4 +176,4 @@ def drive_to_active(node, name: str, stopped: Callable[[], bool],
     return False
 
 
-__all__ = ['call_once', 'drive_to_active']
+__all__ = ['call_once', 'drive_to_active', 'services_ready']

@@ -36,7 +36,7 @@ class _Client:
     def __init__(self, srv_type, answers, seen=True, raises=False):
         self.srv_type, self.answers, self.seen, self.raises = srv_type, answers, seen, raises
 
-    def wait_for_service(self, timeout_sec):
+    def service_is_ready(self):
         return self.seen
 
     def call_async(self, request):
@@ -71,6 +71,30 @@ class _Node:
 
     def destroy_client(self, c):
         self.destroyed.append(c)
+
+
+@pytest.fixture(autouse=True)
+def _short_discovery(monkeypatch):
+    monkeypatch.setattr(lc, 'DISCOVER_S', 0.01)
+
+
+class _Appears:
+    """A client whose service is discovered at its ``after``-th look."""
+
+    def __init__(self, after):
+        self.after, self.looks = after, 0
+
+    def service_is_ready(self):
+        self.looks += 1
+        return self.looks >= self.after
+
+
+def test_services_ready_looks_until_every_service_is_there():
+    a, b = _Appears(3), _Appears(5)
+    assert lc.services_ready((a, b), timeout_s=5.0)
+    assert b.looks == 5        # returned at the look that found the last one, not a later one
+    never = _Appears(10 ** 9)
+    assert not lc.services_ready((a, never), timeout_s=0.05)
 
 
 def test_clients_made_anew_when_the_services_never_answer(monkeypatch):
