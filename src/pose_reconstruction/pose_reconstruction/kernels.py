@@ -7,7 +7,11 @@
   the segment lengths of E_k, the closest neighbour of E_s): one pass over ``P`` instead of about
   ten numpy calls per optimisation step;
 * :func:`energy_many` -- the same for several users' stacked products at once (one call per
-  optimisation step of a frame's users, :func:`~.optimizer.solve_batch`).
+  optimisation step of a frame's users, :func:`~.optimizer.solve_batch`);
+* :func:`scale_samples_many` / :func:`select_many` -- the rest of a stacked optimisation step:
+  the standard normal draws scaled and moved to each user's centre, and each user's best sample
+  taken when it improves (two strided broadcasts and an argmin, gather and masked copy in numpy;
+  the same arithmetic, element by element, compiled).
 """
 from __future__ import annotations
 
@@ -93,6 +97,58 @@ def _energy_many_kernel(P, ZT, d, const, L, w_k, w_s, sq=None):
     return e
 
 
+def _scale_samples_many_numpy(Z, SIG, ZC, d):
+    Zs = Z[:, :d]
+    Zs *= SIG
+    Zs += ZC
+
+
+def _scale_samples_many_kernel(Z, SIG, ZC, d):
+    # Z[u, i, j] * SIG[u, i] + ZC[u, i], rounded after each operation as the numpy twin
+    for u in range(Z.shape[0]):
+        for i in range(d):
+            s, c = SIG[u, i, 0], ZC[u, i, 0]
+            for j in range(Z.shape[2]):
+                Z[u, i, j] = Z[u, i, j] * s + c
+
+
+def _select_many_numpy(E, Z, d, ZC, E0):
+    u = E.shape[0]
+    J = E.argmin(axis=1)
+    EJ = E[np.arange(u), J]
+    better = EJ < E0
+    Jl = J.tolist()
+    for r, b in enumerate(better.tolist()):
+        if b:
+            ZC[r] = Z[r, :d, Jl[r]:Jl[r] + 1]
+    np.copyto(E0, EJ, where=better)
+    return better
+
+
+def _select_many_kernel(E, Z, d, ZC, E0):
+    U, m = E.shape
+    better = np.zeros(U, np.bool_)
+    for u in range(U):
+        j = 0   # numpy's argmin: the first minimum, or the first NaN
+        best = E[u, 0]
+        if not np.isnan(best):
+            for k in range(1, m):
+                v = E[u, k]
+                if np.isnan(v):
+                    j = k
+                    best = v
+                    break
+                if v < best:
+                    j = k
+                    best = v
+        if best < E0[u]:
+            better[u] = True
+            E0[u] = best
+            for i in range(d):
+                ZC[u, i, 0] = Z[u, i, j]
+    return better
+
+
 _energy_numba = jit.njit(_energy_kernel)
 _energy_many_numba = jit.njit(_energy_many_kernel)
 # energy_from_products(P, ZT, d, const, L, w_k, w_s, sq=None) -> (M,): Eq. 15 of the M samples
@@ -104,6 +160,16 @@ energy_from_products = jit.pick(_energy_numba, _energy_numpy)
 # products (P (U, d + 57 + K, M), ZT (U, d + 1, M), const (U,)), the numbers of
 # energy_from_products for each user
 energy_many = jit.pick(_energy_many_numba, _energy_many_numpy)
+_scale_samples_many_numba = jit.njit(_scale_samples_many_kernel)
+_select_many_numba = jit.njit(_select_many_kernel)
+# scale_samples_many(Z, SIG, ZC, d): in place, the first d rows of each user's samples Z
+# (U, d + 1, M) times SIG (U, d, 1) plus ZC (U, d, 1) (the stochastic search's draws around
+# each user's centre)
+scale_samples_many = jit.pick(_scale_samples_many_numba, _scale_samples_many_numpy)
+# select_many(E, Z, d, ZC, E0) -> (U,) bool: each user's best sample of E (U, M) (the first
+# minimum) improves on E0 (U,): then ZC[u] (d, 1) <- that sample's Z[u, :d] and E0[u] <- its
+# energy, in place
+select_many = jit.pick(_select_many_numba, _select_many_numpy)
 
 _warm = [False]
 
@@ -121,8 +187,11 @@ def warm_up() -> float:
     L, sq = np.ones(NUM_SEGMENTS), np.empty((3 * NUM_SEGMENTS, m))
     for work in (None, sq):   # energy() passes no work array, the stochastic search one
         _energy_numba(P, ZT, d, 0.0, L, 1.0, 1.0, work)
-    _energy_many_numba(P[None], ZT[None], d, np.zeros(1), L, 1.0, 1.0, sq)
+    E = _energy_many_numba(P[None], ZT[None], d, np.zeros(1), L, 1.0, 1.0, sq)
+    c = np.ones((1, d, 1))
+    _scale_samples_many_numba(ZT[None], c, c, d)
+    _select_many_numba(E, ZT[None], d, c, np.zeros(1))
     return time.perf_counter() - t0
 
 
-__all__ = ['energy_from_products', 'energy_many', 'warm_up']
+__all__ = ['energy_from_products', 'energy_many', 'scale_samples_many', 'select_many', 'warm_up']

@@ -561,19 +561,10 @@ def _stochastic_many(opts, Ss, members, zs, es, steps) -> None:
     for k in range(1, n_steps + 1):
         for r, normal in enumerate(rngs):
             normal(out=Z[r, :d])
-        Zs = Z[:, :d]
-        Zs *= SIG
-        Zs += ZC
+        kernels.scale_samples_many(Z, SIG, ZC, d)
         np.matmul(WT, Z, out=P)
         E = kernels.energy_many(P, Z, d, const, L, w_k, w_s)
-        J = E.argmin(axis=1)
-        EJ = E[np.arange(u), J]
-        better = EJ < E0
-        Jl = J.tolist()
-        for r, b in enumerate(better.tolist()):
-            if b:
-                ZC[r] = Z[r, :d, Jl[r]:Jl[r] + 1]
-        np.copyto(E0, EJ, where=better)
+        better = kernels.select_many(E, Z, d, ZC, E0)   # the improving users' new centres
         go = better if k < n_steps else np.zeros(u, bool)
         if go.all():
             continue

@@ -187,3 +187,31 @@ def test_direction_spreads_of_several_users_equal_each_users():
     many = neighbour_direction_spreads(Y, dist)
     for y, d, m in zip(Y, dist, many):
         np.testing.assert_allclose(m, neighbour_direction_spread(y, d), rtol=0, atol=1e-12)
+
+
+def test_stochastic_step_kernels_numba_and_numpy_agree():
+    pytest.importorskip('numba')
+    rng = np.random.default_rng(4)
+    u, d, m = 5, 7, 40
+    for trial in range(20):
+        Z0 = rng.normal(size=(u, d + 1, m))
+        SIG = rng.uniform(0.01, 2.0, (u, d, 1))
+        ZC0 = rng.normal(size=(u, d, 1))
+        E = rng.normal(size=(u, m))
+        E[1, 3] = E[1, 9] = E[1].min() - 1.0      # a tie: the first minimum wins
+        if trial % 2:
+            E[2, 11] = np.nan                       # NaN: numpy's argmin takes the first NaN
+            E[3, 0] = np.nan
+        E0 = np.nanmin(E, axis=1) + 0.1
+        E0[0] = -np.inf                             # a user whose samples do not improve
+        runs = []
+        for scale, select in ((kernels._scale_samples_many_numba, kernels._select_many_numba),
+                              (kernels._scale_samples_many_numpy, kernels._select_many_numpy)):
+            Z, ZC, e0 = Z0.copy(), ZC0.copy(), E0.copy()
+            scale(Z, SIG, ZC, d)
+            better = select(E, Z, d, ZC, e0)
+            runs.append((Z, ZC, e0, np.asarray(better)))
+        for a, b in zip(*runs):
+            assert np.array_equal(a, b, equal_nan=True)
+        assert runs[0][3].any() and not runs[0][3].all()
+        assert np.array_equal(runs[0][0][:, d], Z0[:, d])   # the row of ones is left alone
