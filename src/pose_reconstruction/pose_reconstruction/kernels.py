@@ -5,7 +5,9 @@
 * :func:`energy_from_products` -- Eq. 15 of every stochastic sample from the one matrix product
   ``P = WT [z; 1]`` of :meth:`NaturalPostureOptimizer._energy_t` (the quadratic and linear part,
   the segment lengths of E_k, the closest neighbour of E_s): one pass over ``P`` instead of about
-  ten numpy calls per optimisation step;
+  ten numpy calls per optimisation step (the loops run over ``P``'s rows outside and the samples
+  inside: contiguous and vectorised, each sample's sums and minimum in the order of one sample at
+  a time, so the numbers do not change with the layout);
 * :func:`energy_many` -- the same for several users' stacked products at once (one call per
   optimisation step of a frame's users, :func:`~.optimizer.solve_batch`);
 * :func:`scale_samples_many` / :func:`select_many` -- the rest of a stacked optimisation step:
@@ -43,27 +45,39 @@ def _energy_numpy(P, ZT, d, const, L, w_k, w_s, sq=None):
 
 
 def _energy_kernel(P, ZT, d, const, L, w_k, w_s, sq=None):
+    # each sample j: acc = sum_i P[i, j] ZT[i, j] (i in order), ek = sum_s (|segment s| - L_s)^2
+    # (s in order), best = min_k of the style rows (k in order), e = acc + const + ek ck + best cs;
+    # the loops run over the rows outside and the samples inside (contiguous, vectorised), each
+    # sample's operations in the same order as one sample at a time
     n = L.shape[0]
     m = P.shape[1]
     K = P.shape[0] - d - 3 * n
     ck, cs = w_k / n, w_s / NUM_JOINTS
     e = np.empty(m)
-    for j in range(m):
-        acc = 0.0
-        for i in range(d):
-            acc += P[i, j] * ZT[i, j]
-        ek = 0.0
-        for s in range(n):
-            x, y, z = P[d + s, j], P[d + n + s, j], P[d + 2 * n + s, j]
-            r = np.sqrt(x * x + y * y + z * z) - L[s]
-            ek += r * r
-        best = P[d + 3 * n, j]
-        for k in range(1, K):
-            v = P[d + 3 * n + k, j]
-            if v < best:
-                best = v
-        e[j] = acc + const + ek * ck + best * cs
+    _energy_rows(P, ZT, d, const, L, ck, cs, n, K, m, e)
     return e
+
+
+def _energy_rows(P, ZT, d, const, L, ck, cs, n, K, m, e):
+    acc = np.zeros(m)
+    for i in range(d):
+        for j in range(m):
+            acc[j] += P[i, j] * ZT[i, j]
+    ek = np.zeros(m)
+    for s in range(n):
+        ls = L[s]
+        for j in range(m):
+            x, y, z = P[d + s, j], P[d + n + s, j], P[d + 2 * n + s, j]
+            r = np.sqrt(x * x + y * y + z * z) - ls
+            ek[j] += r * r
+    best = P[d + 3 * n].copy()
+    for k in range(1, K):
+        for j in range(m):
+            v = P[d + 3 * n + k, j]
+            if v < best[j]:
+                best[j] = v
+    for j in range(m):
+        e[j] = acc[j] + const + ek[j] * ck + best[j] * cs
 
 
 def _energy_many_numpy(P, ZT, d, const, L, w_k, w_s, sq=None):
@@ -79,21 +93,7 @@ def _energy_many_kernel(P, ZT, d, const, L, w_k, w_s, sq=None):
     ck, cs = w_k / n, w_s / NUM_JOINTS
     e = np.empty((U, m))
     for u in range(U):
-        for j in range(m):
-            acc = 0.0
-            for i in range(d):
-                acc += P[u, i, j] * ZT[u, i, j]
-            ek = 0.0
-            for s in range(n):
-                x, y, z = P[u, d + s, j], P[u, d + n + s, j], P[u, d + 2 * n + s, j]
-                r = np.sqrt(x * x + y * y + z * z) - L[s]
-                ek += r * r
-            best = P[u, d + 3 * n, j]
-            for k in range(1, K):
-                v = P[u, d + 3 * n + k, j]
-                if v < best:
-                    best = v
-            e[u, j] = acc + const[u] + ek * ck + best * cs
+        _energy_rows(P[u], ZT[u], d, const[u], L, ck, cs, n, K, m, e[u])
     return e
 
 
@@ -149,6 +149,7 @@ def _select_many_kernel(E, Z, d, ZC, E0):
     return better
 
 
+_energy_rows = jit.njit(_energy_rows)
 _energy_numba = jit.njit(_energy_kernel)
 _energy_many_numba = jit.njit(_energy_many_kernel)
 # energy_from_products(P, ZT, d, const, L, w_k, w_s, sq=None) -> (M,): Eq. 15 of the M samples

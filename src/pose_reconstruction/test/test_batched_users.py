@@ -215,3 +215,49 @@ def test_stochastic_step_kernels_numba_and_numpy_agree():
             assert np.array_equal(a, b, equal_nan=True)
         assert runs[0][3].any() and not runs[0][3].all()
         assert np.array_equal(runs[0][0][:, d], Z0[:, d])   # the row of ones is left alone
+
+
+def _energy_one_sample_at_a_time(P, ZT, d, const, L, w_k, w_s):
+    # Eq. 15 sample by sample (the kernels' arithmetic before their loops ran over rows outside)
+    n, m = L.shape[0], P.shape[1]
+    K = P.shape[0] - d - 3 * n
+    ck, cs = w_k / n, w_s / NUM_JOINTS
+    e = np.empty(m)
+    for j in range(m):
+        acc = 0.0
+        for i in range(d):
+            acc += P[i, j] * ZT[i, j]
+        ek = 0.0
+        for s in range(n):
+            x, y, z = P[d + s, j], P[d + n + s, j], P[d + 2 * n + s, j]
+            r = np.sqrt(x * x + y * y + z * z) - L[s]
+            ek += r * r
+        best = P[d + 3 * n, j]
+        for k in range(1, K):
+            v = P[d + 3 * n + k, j]
+            if v < best:
+                best = v
+        e[j] = acc + const + ek * ck + best * cs
+    return e
+
+
+def test_energy_kernels_compute_each_sample_in_the_same_order():
+    """The compiled kernels loop over rows outside and samples inside (vectorised); every
+    sample's sums and minimum keep their order: the numbers of one sample at a time, bit for
+    bit (NaN included)."""
+    numba = pytest.importorskip('numba')
+    ref = numba.njit(_energy_one_sample_at_a_time)
+    rng = np.random.default_rng(6)
+    for t in range(40):
+        u, d, k, m = 3, int(rng.integers(1, 25)), int(rng.integers(2, 40)), int(rng.integers(1, 130))
+        P = rng.normal(size=(u, d + 57 + k, m)) * rng.uniform(0.01, 10.0)
+        if t % 4 == 0:
+            P[1, d + 57 + 1, 0] = np.nan
+        ZT = rng.normal(size=(u, d + 1, m))
+        const, L = rng.normal(size=u), rng.uniform(0.05, 0.5, 19)
+        many = kernels._energy_many_numba(P, ZT, d, const, L, 0.7, 8.0)
+        for r in range(u):
+            want = ref(P[r], ZT[r], d, const[r], L, 0.7, 8.0)
+            assert np.array_equal(many[r], want, equal_nan=True)
+            assert np.array_equal(kernels._energy_numba(P[r], ZT[r], d, const[r], L, 0.7, 8.0),
+                                  want, equal_nan=True)
