@@ -300,6 +300,7 @@ class NaturalPostureOptimizer:
         ZT[d] = 1.0
         sig = sigma[:, None]
         zc = np.asarray(z, float)[:, None]
+        Z3, sig3 = ZT[None], sig[None]
         normal = self.rng.standard_normal
         Zs = ZT[:d]
         P = np.empty((S['WT'].shape[0], self.samples))
@@ -307,8 +308,7 @@ class NaturalPostureOptimizer:
         for _ in range(self.steps):
             steps += 1
             normal(out=Zs)
-            Zs *= sig
-            Zs += zc
+            kernels.scale_samples_many(Z3, sig3, zc[None], d)   # Zs * sig + zc, in place
             E = self._energy_t(ZT, S, P, sq)
             j = int(E.argmin())
             ej = float(E[j])
