@@ -250,3 +250,12 @@ def test_median_is_numpys_median():
             got = median(x)
             assert (np.isnan(want) and np.isnan(got)) or got == want
     assert median(np.array([1.0, 3.0])) == 2.0 and median(np.array([5.0, 1.0, 2.0])) == 2.0
+
+
+def test_sample_std_is_numpys():
+    from pose_reconstruction.bone_lengths import sample_std
+    rng = np.random.default_rng(5)
+    for n in list(range(2, 60)) + [100, 129, 300]:
+        buf = rng.normal(0.3, 0.01, (n + 3, 4)) * rng.uniform(0.1, 10.0)
+        x = buf[:n, 2]   # a strided column, as the estimator's samples
+        assert sample_std(x) == float(np.std(x, ddof=1))
