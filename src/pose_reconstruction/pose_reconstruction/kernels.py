@@ -5,9 +5,15 @@
 * :func:`energy_from_products` -- Eq. 15 of every stochastic sample from the one matrix product
   ``P = WT [z; 1]`` of :meth:`NaturalPostureOptimizer._energy_t` (the quadratic and linear part,
   the segment lengths of E_k, the closest neighbour of E_s): one pass over ``P`` instead of about
-  ten numpy calls per optimisation step;
+  ten numpy calls per optimisation step (the loops run over ``P``'s rows outside and the samples
+  inside: contiguous and vectorised, each sample's sums and minimum in the order of one sample at
+  a time, so the numbers do not change with the layout);
 * :func:`energy_many` -- the same for several users' stacked products at once (one call per
-  optimisation step of a frame's users, :func:`~.optimizer.solve_batch`).
+  optimisation step of a frame's users, :func:`~.optimizer.solve_batch`);
+* :func:`scale_samples_many` / :func:`select_many` -- the rest of a stacked optimisation step:
+  the standard normal draws scaled and moved to each user's centre, and each user's best sample
+  taken when it improves (two strided broadcasts and an argmin, gather and masked copy in numpy;
+  the same arithmetic, element by element, compiled).
 """
 from __future__ import annotations
 
@@ -39,27 +45,39 @@ def _energy_numpy(P, ZT, d, const, L, w_k, w_s, sq=None):
 
 
 def _energy_kernel(P, ZT, d, const, L, w_k, w_s, sq=None):
+    # each sample j: acc = sum_i P[i, j] ZT[i, j] (i in order), ek = sum_s (|segment s| - L_s)^2
+    # (s in order), best = min_k of the style rows (k in order), e = acc + const + ek ck + best cs;
+    # the loops run over the rows outside and the samples inside (contiguous, vectorised), each
+    # sample's operations in the same order as one sample at a time
     n = L.shape[0]
     m = P.shape[1]
     K = P.shape[0] - d - 3 * n
     ck, cs = w_k / n, w_s / NUM_JOINTS
     e = np.empty(m)
-    for j in range(m):
-        acc = 0.0
-        for i in range(d):
-            acc += P[i, j] * ZT[i, j]
-        ek = 0.0
-        for s in range(n):
-            x, y, z = P[d + s, j], P[d + n + s, j], P[d + 2 * n + s, j]
-            r = np.sqrt(x * x + y * y + z * z) - L[s]
-            ek += r * r
-        best = P[d + 3 * n, j]
-        for k in range(1, K):
-            v = P[d + 3 * n + k, j]
-            if v < best:
-                best = v
-        e[j] = acc + const + ek * ck + best * cs
+    _energy_rows(P, ZT, d, const, L, ck, cs, n, K, m, e)
     return e
+
+
+def _energy_rows(P, ZT, d, const, L, ck, cs, n, K, m, e):
+    acc = np.zeros(m)
+    for i in range(d):
+        for j in range(m):
+            acc[j] += P[i, j] * ZT[i, j]
+    ek = np.zeros(m)
+    for s in range(n):
+        ls = L[s]
+        for j in range(m):
+            x, y, z = P[d + s, j], P[d + n + s, j], P[d + 2 * n + s, j]
+            r = np.sqrt(x * x + y * y + z * z) - ls
+            ek[j] += r * r
+    best = P[d + 3 * n].copy()
+    for k in range(1, K):
+        for j in range(m):
+            v = P[d + 3 * n + k, j]
+            if v < best[j]:
+                best[j] = v
+    for j in range(m):
+        e[j] = acc[j] + const + ek[j] * ck + best[j] * cs
 
 
 def _energy_many_numpy(P, ZT, d, const, L, w_k, w_s, sq=None):
@@ -75,24 +93,63 @@ def _energy_many_kernel(P, ZT, d, const, L, w_k, w_s, sq=None):
     ck, cs = w_k / n, w_s / NUM_JOINTS
     e = np.empty((U, m))
     for u in range(U):
-        for j in range(m):
-            acc = 0.0
-            for i in range(d):
-                acc += P[u, i, j] * ZT[u, i, j]
-            ek = 0.0
-            for s in range(n):
-                x, y, z = P[u, d + s, j], P[u, d + n + s, j], P[u, d + 2 * n + s, j]
-                r = np.sqrt(x * x + y * y + z * z) - L[s]
-                ek += r * r
-            best = P[u, d + 3 * n, j]
-            for k in range(1, K):
-                v = P[u, d + 3 * n + k, j]
-                if v < best:
-                    best = v
-            e[u, j] = acc + const[u] + ek * ck + best * cs
+        _energy_rows(P[u], ZT[u], d, const[u], L, ck, cs, n, K, m, e[u])
     return e
 
 
+def _scale_samples_many_numpy(Z, SIG, ZC, d):
+    Zs = Z[:, :d]
+    Zs *= SIG
+    Zs += ZC
+
+
+def _scale_samples_many_kernel(Z, SIG, ZC, d):
+    # Z[u, i, j] * SIG[u, i] + ZC[u, i], rounded after each operation as the numpy twin
+    for u in range(Z.shape[0]):
+        for i in range(d):
+            s, c = SIG[u, i, 0], ZC[u, i, 0]
+            for j in range(Z.shape[2]):
+                Z[u, i, j] = Z[u, i, j] * s + c
+
+
+def _select_many_numpy(E, Z, d, ZC, E0):
+    u = E.shape[0]
+    J = E.argmin(axis=1)
+    EJ = E[np.arange(u), J]
+    better = EJ < E0
+    Jl = J.tolist()
+    for r, b in enumerate(better.tolist()):
+        if b:
+            ZC[r] = Z[r, :d, Jl[r]:Jl[r] + 1]
+    np.copyto(E0, EJ, where=better)
+    return better
+
+
+def _select_many_kernel(E, Z, d, ZC, E0):
+    U, m = E.shape
+    better = np.zeros(U, np.bool_)
+    for u in range(U):
+        j = 0   # numpy's argmin: the first minimum, or the first NaN
+        best = E[u, 0]
+        if not np.isnan(best):
+            for k in range(1, m):
+                v = E[u, k]
+                if np.isnan(v):
+                    j = k
+                    best = v
+                    break
+                if v < best:
+                    j = k
+                    best = v
+        if best < E0[u]:
+            better[u] = True
+            E0[u] = best
+            for i in range(d):
+                ZC[u, i, 0] = Z[u, i, j]
+    return better
+
+
+_energy_rows = jit.njit(_energy_rows)
 _energy_numba = jit.njit(_energy_kernel)
 _energy_many_numba = jit.njit(_energy_many_kernel)
 # energy_from_products(P, ZT, d, const, L, w_k, w_s, sq=None) -> (M,): Eq. 15 of the M samples
@@ -104,6 +161,16 @@ energy_from_products = jit.pick(_energy_numba, _energy_numpy)
 # products (P (U, d + 57 + K, M), ZT (U, d + 1, M), const (U,)), the numbers of
 # energy_from_products for each user
 energy_many = jit.pick(_energy_many_numba, _energy_many_numpy)
+_scale_samples_many_numba = jit.njit(_scale_samples_many_kernel)
+_select_many_numba = jit.njit(_select_many_kernel)
+# scale_samples_many(Z, SIG, ZC, d): in place, the first d rows of each user's samples Z
+# (U, d + 1, M) times SIG (U, d, 1) plus ZC (U, d, 1) (the stochastic search's draws around
+# each user's centre)
+scale_samples_many = jit.pick(_scale_samples_many_numba, _scale_samples_many_numpy)
+# select_many(E, Z, d, ZC, E0) -> (U,) bool: each user's best sample of E (U, M) (the first
+# minimum) improves on E0 (U,): then ZC[u] (d, 1) <- that sample's Z[u, :d] and E0[u] <- its
+# energy, in place
+select_many = jit.pick(_select_many_numba, _select_many_numpy)
 
 _warm = [False]
 
@@ -121,8 +188,11 @@ def warm_up() -> float:
     L, sq = np.ones(NUM_SEGMENTS), np.empty((3 * NUM_SEGMENTS, m))
     for work in (None, sq):   # energy() passes no work array, the stochastic search one
         _energy_numba(P, ZT, d, 0.0, L, 1.0, 1.0, work)
-    _energy_many_numba(P[None], ZT[None], d, np.zeros(1), L, 1.0, 1.0, sq)
+    E = _energy_many_numba(P[None], ZT[None], d, np.zeros(1), L, 1.0, 1.0, sq)
+    c = np.ones((1, d, 1))
+    _scale_samples_many_numba(ZT[None], c, c, d)
+    _select_many_numba(E, ZT[None], d, c, np.zeros(1))
     return time.perf_counter() - t0
 
 
-__all__ = ['energy_from_products', 'energy_many', 'warm_up']
+__all__ = ['energy_from_products', 'energy_many', 'scale_samples_many', 'select_many', 'warm_up']

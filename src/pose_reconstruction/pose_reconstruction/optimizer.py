@@ -300,6 +300,7 @@ class NaturalPostureOptimizer:
         ZT[d] = 1.0
         sig = sigma[:, None]
         zc = np.asarray(z, float)[:, None]
+        Z3, sig3 = ZT[None], sig[None]
         normal = self.rng.standard_normal
         Zs = ZT[:d]
         P = np.empty((S['WT'].shape[0], self.samples))
@@ -307,8 +308,7 @@ class NaturalPostureOptimizer:
         for _ in range(self.steps):
             steps += 1
             normal(out=Zs)
-            Zs *= sig
-            Zs += zc
+            kernels.scale_samples_many(Z3, sig3, zc[None], d)   # Zs * sig + zc, in place
             E = self._energy_t(ZT, S, P, sq)
             j = int(E.argmin())
             ej = float(E[j])
@@ -561,19 +561,10 @@ def _stochastic_many(opts, Ss, members, zs, es, steps) -> None:
     for k in range(1, n_steps + 1):
         for r, normal in enumerate(rngs):
             normal(out=Z[r, :d])
-        Zs = Z[:, :d]
-        Zs *= SIG
-        Zs += ZC
+        kernels.scale_samples_many(Z, SIG, ZC, d)
         np.matmul(WT, Z, out=P)
         E = kernels.energy_many(P, Z, d, const, L, w_k, w_s)
-        J = E.argmin(axis=1)
-        EJ = E[np.arange(u), J]
-        better = EJ < E0
-        Jl = J.tolist()
-        for r, b in enumerate(better.tolist()):
-            if b:
-                ZC[r] = Z[r, :d, Jl[r]:Jl[r] + 1]
-        np.copyto(E0, EJ, where=better)
+        better = kernels.select_many(E, Z, d, ZC, E0)   # the improving users' new centres
         go = better if k < n_steps else np.zeros(u, bool)
         if go.all():
             continue

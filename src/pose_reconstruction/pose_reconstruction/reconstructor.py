@@ -124,7 +124,8 @@ from .profile import from_optional as profile_lengths
 from .length_prior import LengthPrior, LengthPriorConfig
 from .reliability import ReliabilityConfig, ReliabilityEstimator
 from .segment_output import (SEG_DIFF, SegmentOutput, SegmentOutputConfig,
-                             neighbour_direction_spread, neighbour_direction_spreads)
+                             neighbour_direction_spread, neighbour_direction_spreads, run_steps,
+                             serve_requests)
 from .trust import SensorTrust, TrustConfig
 
 METHODS = ('A', 'B', 'C')
@@ -392,11 +393,18 @@ class Reconstructor:
     def _finish(self, p: '_Pending', res, spread=None) -> SkeletonFrame:
         """The frame after the optimizer's result ``res`` for :meth:`_begin`'s ``p``
         (``spread``: the neighbours' direction spread when already computed)."""
+        return run_steps(self._finish_steps(p, res, spread))
+
+    def _finish_steps(self, p: '_Pending', res, spread=None):
+        """:meth:`_finish` as a generator that yields the segment output's smoothing filter
+        request once (:meth:`~.segment_output.SegmentOutput.output_steps`; None without one)
+        and returns the frame: :func:`process_batch` serves several users' requests at once."""
         frame, R, obs, w, yaw, prep = p.frame, p.R, p.obs, p.w, p.yaw, p.prep
         t1, tf = p.t1, time.perf_counter()
         self._prev.append((res.positions, yaw))
         self.body_fit.update(prep.query, w, p.height, yaw, p.translate)
         t2 = time.perf_counter()
+        waited = 0.0
         wsum = float(w.sum())
         rms = float(np.sqrt(res.distances[0] / max(wsum, 1e-6)))
         alpha = self.trust.update(obs, w, rms)
@@ -412,11 +420,16 @@ class Reconstructor:
             if spread is None and self._wants_spread(p, res):
                 Y = self.db.flat.take(res.neighbours, axis=0).reshape(-1, NUM_JOINTS, 3)
                 spread = neighbour_direction_spread(Y, res.distances)
-            positions = self.segment_output.output(frame, res.positions, w, alpha, yaw=yaw,
-                                                   seg_obs=p.seg_obs, len_obs=p.len_obs,
-                                                   root=root, db_spread=spread,
-                                                   db_distance=rms)
+            steps = self.segment_output.output_steps(
+                frame, res.positions, w, alpha, yaw=yaw, seg_obs=p.seg_obs, len_obs=p.len_obs,
+                root=root, db_spread=spread, db_distance=rms)
+            request = next(steps)
+            t_wait = time.perf_counter()
+            filtered = yield request   # (in a batch, the other users' output meanwhile)
+            waited = time.perf_counter() - t_wait
+            positions = run_steps(steps, filtered)
         else:
+            yield None
             user_bones = user_bone_lengths(self.user_segment_lengths())
             bones = user_bones if self.output_scale == 'user' else None
             positions = to_sensor_frame(res.positions, prep.transform, bones,
@@ -435,7 +448,7 @@ class Reconstructor:
                    else 1e3 * (t2 - t1) - sum(res.timings_ms.values()))
         self.timings_ms = {'reliability': 1e3 * (t1 - p.t0), 'prepare': prepare,
                            **res.timings_ms,
-                           'output': 1e3 * (time.perf_counter() - t2)}
+                           'output': 1e3 * (time.perf_counter() - t2 - waited)}
         return self._emit(frame, positions, R, ori, res)
 
     def _emit(self, frame, positions, R, ori, res) -> SkeletonFrame:
@@ -510,11 +523,20 @@ def process_batch(recs, frames) -> list:
                 len(want), idx.shape[1], NUM_JOINTS, 3)
             sp = neighbour_direction_spreads(Y, np.stack([results[k].distances for k in want]))
             spreads = dict(zip(want, sp))
+    steps, requests = [], []
     for k, (i, p) in enumerate(pend):
         try:
             res = results[k] if results is not None else recs[i].core.solve(
                 p.query, p.w, p.prev, translate=p.translate)
-            outs[i] = recs[i]._finish(p, res, spreads.get(k))
+            g = recs[i]._finish_steps(p, res, spreads.get(k))
+            requests.append(next(g))   # up to the output's smoothing filter
+            steps.append((i, g))
+        except USER_ERRORS as e:
+            outs[i] = e
+    filtered = serve_requests(requests)   # the users' smoothing filters updated together
+    for k, (i, g) in enumerate(steps):
+        try:
+            outs[i] = run_steps(g, filtered[k])
         except USER_ERRORS as e:
             outs[i] = e
     return outs

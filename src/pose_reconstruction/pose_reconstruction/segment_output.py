@@ -90,6 +90,41 @@ _DB_DIRECTION_VAR = np.radians(12.0) ** 2
 _OFFSET_SIGMA = 0.03
 
 
+def serve_request(req):
+    """The filtered rows of one :meth:`SegmentOutput.output_steps` filter request (None: none)."""
+    return None if req is None else req[0].update(req[1], None, *req[2:])
+
+
+def run_steps(steps, filtered=serve_request):
+    """The value of a generator of :meth:`SegmentOutput.output_steps`' kind (it yields one
+    filter request or None): the request served by its filter's own update, or, for a request
+    already taken with ``next``, ``filtered``: its filtered rows (None for none; an exception is
+    raised)."""
+    if filtered is serve_request:
+        filtered = serve_request(next(steps))
+    if isinstance(filtered, Exception):
+        steps.close()
+        raise filtered
+    try:
+        steps.send(filtered)
+    except StopIteration as done:
+        return done.value
+    raise RuntimeError('an output step yielded more than once')
+
+
+def serve_requests(requests) -> list:
+    """The filtered rows of several users' filter requests (None: none), their One Euro updates
+    stacked (``OneEuroFilter.update_many``: the same numbers as each alone; an element is the
+    exception that user's filter raised)."""
+    idx = [k for k, r in enumerate(requests) if r is not None]
+    out: list = [None] * len(requests)
+    if idx:
+        got = OneEuroFilter.update_many(*zip(*(requests[k] for k in idx)))
+        for k, g in zip(idx, got):
+            out[k] = g
+    return out
+
+
 @dataclass
 class SegmentOutputConfig:
     """Parameters of :class:`SegmentOutput` (their reconstruction parameter names)."""
@@ -388,6 +423,15 @@ class SegmentOutput:
         or, with ``yaw``, the normalised solution (only its segment directions matter: they are
         turned by ``yaw``). ``seg_obs`` / ``len_obs``: the observed segment vectors (19, 3) and
         lengths (19,) when already computed."""
+        return run_steps(self.output_steps(frame, solution, w, trust, yaw, seg_obs, len_obs,
+                                           root, db_spread, db_distance))
+
+    def output_steps(self, frame, solution, w, trust, yaw=None, seg_obs=None, len_obs=None,
+                     root=None, db_spread=None, db_distance=None):
+        """:meth:`output` as a generator that yields once: the smoothing filter's update it
+        needs, ``(filter, rows, stamp_ns, cutoff_scale, speed_scale, lead)`` (None without
+        smoothing), is sent the filtered rows and returns the output positions (several users'
+        filter updates stacked: :func:`serve_requests`)."""
         obs = np.asarray(frame.positions, float)
         if seg_obs is None:
             seg_obs = SEG_DIFF @ obs
@@ -477,7 +521,7 @@ class SegmentOutput:
                 lead = np.empty(NUM_SEGMENTS + 1)
                 lead[:NUM_SEGMENTS] = self.smooth_lead * rel_frac
                 lead[NUM_SEGMENTS] = self.smooth_lead  # the root is never heavily smoothed
-            vr = self._seg_filter.update(vr, None, self._filter_clock_ns, scale, speed, lead)
+            vr = yield (self._seg_filter, vr, self._filter_clock_ns, scale, speed, lead)
             v = vr[:NUM_SEGMENTS]
             nv = np.sqrt(np.einsum('sk,sk->s', v, v))
             keep = nv > 1e-9
@@ -485,6 +529,7 @@ class SegmentOutput:
                 np.where(keep[:, None], v / np.maximum(nv, 1e-9)[:, None], u)
             v *= L[:, None]
         else:
+            yield None
             v = vr[:NUM_SEGMENTS]
         return vr[NUM_SEGMENTS] + _SEG_CHAIN @ v
 

@@ -187,3 +187,77 @@ def test_direction_spreads_of_several_users_equal_each_users():
     many = neighbour_direction_spreads(Y, dist)
     for y, d, m in zip(Y, dist, many):
         np.testing.assert_allclose(m, neighbour_direction_spread(y, d), rtol=0, atol=1e-12)
+
+
+def test_stochastic_step_kernels_numba_and_numpy_agree():
+    pytest.importorskip('numba')
+    rng = np.random.default_rng(4)
+    u, d, m = 5, 7, 40
+    for trial in range(20):
+        Z0 = rng.normal(size=(u, d + 1, m))
+        SIG = rng.uniform(0.01, 2.0, (u, d, 1))
+        ZC0 = rng.normal(size=(u, d, 1))
+        E = rng.normal(size=(u, m))
+        E[1, 3] = E[1, 9] = E[1].min() - 1.0      # a tie: the first minimum wins
+        if trial % 2:
+            E[2, 11] = np.nan                       # NaN: numpy's argmin takes the first NaN
+            E[3, 0] = np.nan
+        E0 = np.nanmin(E, axis=1) + 0.1
+        E0[0] = -np.inf                             # a user whose samples do not improve
+        runs = []
+        for scale, select in ((kernels._scale_samples_many_numba, kernels._select_many_numba),
+                              (kernels._scale_samples_many_numpy, kernels._select_many_numpy)):
+            Z, ZC, e0 = Z0.copy(), ZC0.copy(), E0.copy()
+            scale(Z, SIG, ZC, d)
+            better = select(E, Z, d, ZC, e0)
+            runs.append((Z, ZC, e0, np.asarray(better)))
+        for a, b in zip(*runs):
+            assert np.array_equal(a, b, equal_nan=True)
+        assert runs[0][3].any() and not runs[0][3].all()
+        assert np.array_equal(runs[0][0][:, d], Z0[:, d])   # the row of ones is left alone
+
+
+def _energy_one_sample_at_a_time(P, ZT, d, const, L, w_k, w_s):
+    # Eq. 15 sample by sample (the kernels' arithmetic before their loops ran over rows outside)
+    n, m = L.shape[0], P.shape[1]
+    K = P.shape[0] - d - 3 * n
+    ck, cs = w_k / n, w_s / NUM_JOINTS
+    e = np.empty(m)
+    for j in range(m):
+        acc = 0.0
+        for i in range(d):
+            acc += P[i, j] * ZT[i, j]
+        ek = 0.0
+        for s in range(n):
+            x, y, z = P[d + s, j], P[d + n + s, j], P[d + 2 * n + s, j]
+            r = np.sqrt(x * x + y * y + z * z) - L[s]
+            ek += r * r
+        best = P[d + 3 * n, j]
+        for k in range(1, K):
+            v = P[d + 3 * n + k, j]
+            if v < best:
+                best = v
+        e[j] = acc + const + ek * ck + best * cs
+    return e
+
+
+def test_energy_kernels_compute_each_sample_in_the_same_order():
+    """The compiled kernels loop over rows outside and samples inside (vectorised); every
+    sample's sums and minimum keep their order: the numbers of one sample at a time, bit for
+    bit (NaN included)."""
+    numba = pytest.importorskip('numba')
+    ref = numba.njit(_energy_one_sample_at_a_time)
+    rng = np.random.default_rng(6)
+    for t in range(40):
+        u, d, k, m = 3, int(rng.integers(1, 25)), int(rng.integers(2, 40)), int(rng.integers(1, 130))
+        P = rng.normal(size=(u, d + 57 + k, m)) * rng.uniform(0.01, 10.0)
+        if t % 4 == 0:
+            P[1, d + 57 + 1, 0] = np.nan
+        ZT = rng.normal(size=(u, d + 1, m))
+        const, L = rng.normal(size=u), rng.uniform(0.05, 0.5, 19)
+        many = kernels._energy_many_numba(P, ZT, d, const, L, 0.7, 8.0)
+        for r in range(u):
+            want = ref(P[r], ZT[r], d, const[r], L, 0.7, 8.0)
+            assert np.array_equal(many[r], want, equal_nan=True)
+            assert np.array_equal(kernels._energy_numba(P[r], ZT[r], d, const[r], L, 0.7, 8.0),
+                                  want, equal_nan=True)

@@ -1,5 +1,7 @@
 """One rigid skeleton per user: the bone-length estimator (bone_lengths.py) and the segment
 output's exact lengths on every output posture."""
+import warnings
+
 import numpy as np
 import pytest
 
@@ -230,3 +232,30 @@ def test_a_steady_sensor_converges_in_min_samples_a_noisy_one_averages_more():
         assert k == want
     # the standard error of the noisy estimate is the tolerance's order, not 2 cm / sqrt(3)
     assert np.abs(est.frozen - TRUE).max() < 0.02
+
+
+def test_median_is_numpys_median():
+    from pose_reconstruction.bone_lengths import median
+    rng = np.random.default_rng(3)
+    for n in range(0, 26):
+        for _ in range(20):
+            x = rng.normal(size=n) * rng.uniform(1e-3, 10.0)
+            if n > 2 and rng.uniform() < 0.2:
+                x[rng.integers(n)] = np.nan
+            if n > 3 and rng.uniform() < 0.2:
+                x[1] = x[2]
+            with np.errstate(all='ignore'), warnings.catch_warnings():
+                warnings.simplefilter('ignore')
+                want = float(np.median(x))
+            got = median(x)
+            assert (np.isnan(want) and np.isnan(got)) or got == want
+    assert median(np.array([1.0, 3.0])) == 2.0 and median(np.array([5.0, 1.0, 2.0])) == 2.0
+
+
+def test_sample_std_is_numpys():
+    from pose_reconstruction.bone_lengths import sample_std
+    rng = np.random.default_rng(5)
+    for n in list(range(2, 60)) + [100, 129, 300]:
+        buf = rng.normal(0.3, 0.01, (n + 3, 4)) * rng.uniform(0.1, 10.0)
+        x = buf[:n, 2]   # a strided column, as the estimator's samples
+        assert sample_std(x) == float(np.std(x, ddof=1))

@@ -36,7 +36,7 @@ built-in *database* clips (not the dev clips used for evaluation): it lowers the
 """
 from __future__ import annotations
 
-from typing import Optional
+from typing import Optional, Sequence
 
 import numpy as np
 
@@ -116,6 +116,10 @@ class HoltFilter:
         self.count[~valid] = 0
         y[~valid] = x[~valid]
         return y
+
+
+# what a filter's update may raise on one user's numbers (update_many: that user's alone)
+_FILTER_ERRORS = (ValueError, ArithmeticError, IndexError)
 
 
 class OneEuroFilter:
@@ -266,6 +270,110 @@ class OneEuroFilter:
             out[cont] += (np.asarray(lead, float)[cont][:, None] * ((1 - a) / a) * dt) * \
                 self._lead_velocity(a, al, dt, cont)
         return out
+
+    def _settings(self) -> tuple:
+        return (self.n, self.min_cutoff, self.beta, self.d_cutoff, self.lead_accel,
+                self.accel_cutoff, self.accel_beta, self.lead_speed, self.default_dt)
+
+    @staticmethod
+    def update_many(filters: Sequence['OneEuroFilter'], positions: Sequence[np.ndarray],
+                    stamps_ns: Sequence[Optional[int]],
+                    cutoff_scales: Sequence[Optional[np.ndarray]],
+                    speed_scales: Sequence[Optional[np.ndarray]],
+                    leads: Sequence[Optional[np.ndarray]]) -> list:
+        """``[f.update(x, None, t, c, s, l) for ...]`` of several distinct filters (several users'
+        frames of one time), the same numbers: those whose every row continues (no tracking
+        state: the unmasked arithmetic of :meth:`update`) with the same settings and the same
+        optional arguments given, as stacked array operations (each element's operations as in
+        :meth:`update`), the others one by one. An element is the exception that filter's update
+        raised (ValueError, ArithmeticError, IndexError; the others go on)."""
+        out: list = [None] * len(filters)
+        groups: dict = {}
+        for i, f in enumerate(filters):
+            if f.all_started:
+                key = (f._settings(), cutoff_scales[i] is None, speed_scales[i] is None,
+                       leads[i] is None)
+                groups.setdefault(key, []).append(i)
+        alone = set(range(len(filters)))
+        for members in groups.values():
+            if len(members) < 2:
+                continue
+            try:   # nothing of the filters changes unless the whole group succeeds
+                res = OneEuroFilter._update_stacked(
+                    [filters[i] for i in members], [positions[i] for i in members],
+                    [stamps_ns[i] for i in members], [cutoff_scales[i] for i in members],
+                    [speed_scales[i] for i in members], [leads[i] for i in members])
+            except _FILTER_ERRORS:
+                continue   # one filter's numbers broke the stack: each alone
+            for i, r in zip(members, res):
+                out[i] = r
+            alone.difference_update(members)
+        for i in sorted(alone):
+            try:
+                out[i] = filters[i].update(positions[i], None, stamps_ns[i], cutoff_scales[i],
+                                           speed_scales[i], leads[i])
+            except _FILTER_ERRORS as e:
+                out[i] = e
+        return out
+
+    @staticmethod
+    def _update_stacked(fs, positions, stamps_ns, cutoff_scales, speed_scales, leads) -> list:
+        f0 = fs[0]
+        dts = []
+        for f, stamp_ns in zip(fs, stamps_ns):   # each filter's step, as update
+            dt = f.default_dt
+            if stamp_ns is not None and f.t_ns is not None and stamp_ns > f.t_ns:
+                dt = (stamp_ns - f.t_ns) * 1e-9
+            dts.append(dt)
+        dt = np.array(dts)
+        dt2, dt3 = dt[:, None], dt[:, None, None]
+        ad = np.array([f0._alpha(f0.d_cutoff, d) for d in dts])[:, None, None]
+        x = np.stack([np.asarray(p, float) for p in positions])
+        fx = np.stack([f.x for f in fs])
+        fdx0 = np.stack([f.fdx for f in fs])
+        edx = ad * ((x - np.stack([f.raw for f in fs])) / dt3) + \
+            (1 - ad) * np.stack([f.dx for f in fs])
+        speed = f0.beta * np.sqrt(np.einsum('ujk,ujk->uj', edx, edx))
+        cutoff = f0._cutoff(speed, None if cutoff_scales[0] is None else np.stack(cutoff_scales),
+                            None if speed_scales[0] is None else np.stack(speed_scales))
+        a = (1.0 / (1.0 + (1.0 / (2 * np.pi * cutoff)) / dt2))[:, :, None]
+        out = a * x + (1 - a) * fx
+        al = ad
+        fdx = al * ((out - fx) / dt3) + (1 - al) * fdx0
+        fdd = fdd2 = None
+        if f0.lead_accel > 0.0:
+            fdd = al * ((fdx - fdx0) / dt3) + (1 - al) * np.stack([f.fdd for f in fs])
+            if f0.accel_cutoff > 0.0:
+                if f0.accel_beta <= 0.0:
+                    aa = np.array([f0._alpha(f0.accel_cutoff, d) for d in dts])[:, None, None]
+                else:
+                    mag = np.sqrt(np.einsum('ujk,ujk->uj', fdd, fdd))
+                    aa = f0._alpha(f0.accel_cutoff + f0.accel_beta * mag, dt2)[:, :, None]
+                fdd2 = aa * fdd + (1 - aa) * np.stack([f.fdd2 for f in fs])
+        state = out.copy()
+        if leads[0] is not None:
+            if f0.lead_accel <= 0.0:
+                v = fdx
+            else:
+                lag = ((1 - a) / a + (1 - al) / al) * dt3
+                v = fdx + (f0.lead_accel * lag) * (fdd2 if f0.accel_cutoff > 0.0 else fdd)
+            if f0.lead_speed > 0.0:
+                m2 = np.einsum('ujk,ujk->uj', v, v)
+                v = v * (m2 / (m2 + f0.lead_speed * f0.lead_speed))[:, :, None]
+            lead = np.stack([np.asarray(ld, float) for ld in leads])
+            out += (lead[:, :, None] * ((1 - a) / a) * dt3) * v
+        for u, (f, stamp_ns) in enumerate(zip(fs, stamps_ns)):   # the state, as update
+            if stamp_ns is not None:
+                f.t_ns = int(stamp_ns)
+            if fdd is not None:
+                f.fdd = fdd[u]
+                if fdd2 is not None:
+                    f.fdd2 = fdd2[u]
+            f.fdx = fdx[u]
+            f.dx = edx[u]
+            f.x = state[u]
+            f.raw = x[u].copy()
+        return list(out)
 
     def _accel_alpha(self, fdd, dt):
         """Smoothing factor of the acceleration's second stage: cutoff ``accel_cutoff +
