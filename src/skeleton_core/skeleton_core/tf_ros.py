@@ -68,6 +68,7 @@ class StaticTfListener:
         self.on_change = on_change
         self.bad = 0
         self._warned = set()
+        self._said_taken = False
         self.sub = node.create_subscription(TFMessage, TF_STATIC_TOPIC, self._on_msg,
                                             STATIC_LISTENER_QOS)
 
@@ -104,9 +105,15 @@ class StaticTfListener:
         try:
             return self.buffer.lookup(target, source)
         except LookupError:
-            if not self.poll():
+            taken = self.poll()
+            if not taken:
                 raise
-        return self.buffer.lookup(target, source)
+        out = self.buffer.lookup(target, source)
+        if not self._said_taken:   # (evidence of a lost wake-up, or of one still on its way)
+            self._said_taken = True
+            self.node.get_logger().info(f'/tf_static: {source} found in {taken} message(s) '
+                                        'waiting on the subscription, not yet delivered')
+        return out
 
     def missing(self, frames: Iterable[str], target: str) -> List[str]:
         """Of ``frames``, those TF cannot map into ``target`` yet (after :meth:`poll`)."""
