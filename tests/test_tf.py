@@ -177,7 +177,7 @@ def test_listener_lookup_takes_what_waits_unannounced_and_a_resend_keeps_every_f
     (depth 1 keeps only the last). A listener made after that, on a node no executor spins (a
     wake-up the middleware lost looks the same: the message waits on the subscription), finds
     both frames through its lookup, which takes the waiting message on a miss; a frame nobody
-    publishes stays a LookupError naming what TF knows."""
+    publishes stays a LookupError naming the publishers met and the messages received."""
     from ros_helpers import wait_until
     from skeleton_core.tf_ros import StaticTfBroadcaster, StaticTfListener
     pub_node = rclpy.create_node('tf_resend_pub', context=rclpy_context)
@@ -196,7 +196,8 @@ def test_listener_lookup_takes_what_waits_unannounced_and_a_resend_keeps_every_f
         assert wait_until(found, 20)
         d, a = found().distance(Transform.from_xyz_ypr(2.5, 2.5, 0.0, -90, 0, 0))
         assert d < 1e-9 and a < 1e-6
-        with pytest.raises(LookupError, match='kinect_3_link'):
+        with pytest.raises(LookupError, match=r"kinect_3_link.*; /tf_static: 1 publisher\(s\) "
+                                              r"matched, 1 message\(s\) received"):
             listener.lookup('world', 'kinect_3_link')
         assert listener.poll() == 0   # nothing more waits
     finally:

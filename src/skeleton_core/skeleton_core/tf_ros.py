@@ -67,12 +67,14 @@ class StaticTfListener:
         self.buffer = buffer if buffer is not None else TfBuffer()
         self.on_change = on_change
         self.bad = 0
+        self.received = 0   # messages applied (delivered or taken by poll)
         self._warned = set()
         self._said_taken = False
         self.sub = node.create_subscription(TFMessage, TF_STATIC_TOPIC, self._on_msg,
                                             STATIC_LISTENER_QOS)
 
     def _on_msg(self, msg) -> None:
+        self.received += 1
         before = self.buffer.version
         for m in msg.transforms:
             try:
@@ -101,14 +103,18 @@ class StaticTfListener:
     def lookup(self, target: str, source: str) -> Transform:
         """``buffer.lookup(target, source)``; on a miss, again after :meth:`poll` (which calls
         ``on_change`` first when it took a message that changed the tree). Raises
-        ``LookupError`` as the buffer does."""
+        ``LookupError`` as the buffer does, with the publishers matched and messages received."""
         try:
             return self.buffer.lookup(target, source)
         except LookupError:
             taken = self.poll()
-            if not taken:
-                raise
-        out = self.buffer.lookup(target, source)
+        try:
+            out = self.buffer.lookup(target, source)
+        except LookupError as e:   # what tells a publisher not (yet) met from a message lost
+            raise LookupError(f'{e}; /tf_static: {self.sub.get_publisher_count()} publisher(s) '
+                              f'matched, {self.received} message(s) received') from None
+        if not taken:
+            return out
         if not self._said_taken:   # (evidence of a lost wake-up, or of one still on its way)
             self._said_taken = True
             self.node.get_logger().info(f'/tf_static: {source} found in {taken} message(s) '
