@@ -199,3 +199,45 @@ def test_reconstruction_and_physics_take_input_in_world():
             sim.advance(1 / 30)
         chars[name] = sim.states()[1].positions
     assert np.abs(chars['world'] - chars['sensor']).max() < 1e-9
+
+
+def test_a_latched_transform_the_executor_was_never_woken_for_is_taken(rclpy_context, peer):
+    """rmw_fastrtps can lose the wake-up of a latched /tf_static message that arrives while the
+    executor installs its callback on the subscription (made in the configure transition): the
+    message then waits on the subscription and no other comes. Here the executor never waits on
+    the subscription at all: the frames that need TF take the waiting message themselves, are
+    fused in world, and none is dropped for want of a transform."""
+    fusion = bring_up(FusionNode(context=rclpy_context, parameter_overrides=[
+        Parameter('input_topics', value=IN), Parameter('output_topic', value=OUT)]))
+    sub = fusion.tf_listener.sub
+    fusion._subscriptions.remove(sub)   # hidden from the executor: no wake-up ever reaches it
+    spinner = Spinner(rclpy_context, fusion, peer)
+    try:
+        StaticTfBroadcaster(peer).send([('world', 'kinect_1_link', FRONT),
+                                        ('world', 'kinect_2_link', SIDE)])
+        assert _wait(lambda: all(p.get_subscription_count() for p in peer.pubs), 10)
+        assert _wait(lambda: fusion.pub.get_subscription_count(), 10)
+        rng = np.random.default_rng(3)
+        truth = person()
+        t0 = time.time_ns()
+        deadline = time.monotonic() + 15
+        i = 0
+        while not peer.got and time.monotonic() < deadline:
+            st = t0 + i * PERIOD_NS
+            peer.pubs[0].publish(frames_to_cdr([seen(truth, FRONT, 'kinect_1_link', st, rng)],
+                                               st, 'kinect_1_link'))
+            peer.pubs[1].publish(frames_to_cdr([seen(truth, SIDE, 'kinect_2_link', st, rng)],
+                                               st, 'kinect_2_link'))
+            i += 1
+            time.sleep(0.033)
+        assert peer.got, "no fused output in 15 s"
+        assert fusion.tf.can_transform('world', 'kinect_1_link')
+        assert fusion.tf.can_transform('world', 'kinect_2_link')
+        stamp, frame_id, frames = frames_from_cdr(peer.got[0])
+        assert frame_id == 'world' and len(frames) == 1
+        assert np.linalg.norm(frames[0].positions - truth, axis=1).max() < 0.05
+        assert 'no transform' not in fusion.health.dropped
+    finally:
+        spinner.stop()
+        fusion._subscriptions.append(sub)   # destroyed with the node
+        fusion.destroy_node()

@@ -447,3 +447,37 @@ def test_activation_waits_for_the_sensor_frame_so_no_target_is_held(rclpy_contex
             spinner.stop()
         node.destroy_node()
         peer.destroy_node()
+
+
+def test_a_latched_transform_the_executor_was_never_woken_for_is_taken(rclpy_context):
+    """The /tf_static message waits on the subscription and the executor is never woken for it
+    (rmw_fastrtps can lose that wake-up when the subscription is made in the configure
+    transition; here the executor never waits on it at all): the targets that need the sensor
+    frame take the waiting message themselves and the character stands in world."""
+    node = bring_up(PhysicsNode(context=rclpy_context, parameter_overrides=[
+        Parameter('input_topic', value='/test_tf_lost/in'), Parameter('body_height', value=1.75)]))
+    sub = node.tf_listener.sub
+    node._subscriptions.remove(sub)   # hidden from the executor: no wake-up ever reaches it
+    peer = rclpy.create_node('tf_lost_peer', context=rclpy_context)
+    spinner = Spinner(rclpy_context, node, peer)
+    got = []
+    try:
+        peer.tf = sensor_on_tf(peer)
+        peer.create_subscription(SkeletonArray, '/character/skeletons', got.append, 50)
+        pub = peer.create_publisher(SkeletonArray, '/test_tf_lost/in', 10)
+        assert _wait(lambda: pub.get_subscription_count() > 0, 10)
+        deadline = time.monotonic() + 15
+        i = 0
+        while not any(m.skeletons for m in got) and time.monotonic() < deadline:
+            pub.publish(_msg(clip(1)[0], 9_000_000_000 + i * 33_333_333))
+            i += 1
+            time.sleep(1 / 30)
+        assert any(m.header.frame_id == 'world' and m.skeletons for m in got), \
+            'no character in 15 s'
+        assert node.tf.can_transform('world', 'kinect_link')
+        assert 'no transform' not in node.health.dropped
+    finally:
+        spinner.stop()
+        node._subscriptions.append(sub)   # destroyed with the node
+        node.destroy_node()
+        peer.destroy_node()

@@ -103,3 +103,29 @@ def test_without_outputs_to_wait_for_the_input_is_subscribed_on_activate(rclpy_c
         spin.stop()
         rec.destroy_node()
         other.destroy_node()
+
+
+def test_a_latched_message_the_executor_was_never_woken_for_is_recorded(rclpy_context, tmp_path):
+    """/tf_static sends its message once: when the executor is never woken for it (the middleware
+    can lose that wake-up for a subscription made in the activation; here the executor never
+    waits on the subscription at all), the recorder still takes it from the subscription."""
+    from skeleton_core.tf import Transform
+    from skeleton_core.tf_ros import StaticTfBroadcaster
+    rec = RecorderNode(context=rclpy_context, parameter_overrides=[
+        Parameter('output', value=str(tmp_path / 'out.mcap')),
+        Parameter('topics', value=['/kinect/skeletons', '/tf_static'])])
+    other = rclpy.create_node('kp_recorder_latched_probe', context=rclpy_context)
+    spin = None
+    bring_up(rec)
+    sub = rec._latched_subs['/tf_static']
+    rec._subscriptions.remove(sub)   # hidden from the executor: no wake-up ever reaches it
+    try:
+        spin = Spinner(rclpy_context, rec, other)
+        StaticTfBroadcaster(other).send([('world', 'kinect_link', Transform())])
+        assert wait_until(lambda: rec.counts['/tf_static'] == 1, 10.0), rec.counts
+    finally:
+        if spin is not None:
+            spin.stop()
+        rec._subscriptions.append(sub)   # destroyed with the node
+        rec.destroy_node()
+        other.destroy_node()

@@ -172,6 +172,39 @@ def test_static_tf_node_latches_every_frame_in_one_message(rclpy_context):
     assert 'kinect_2_link: 2.5 2.5 1 -90 0 0' in out
 
 
+def test_listener_lookup_takes_what_waits_unannounced_and_a_resend_keeps_every_frame(rclpy_context):
+    """A broadcaster that sent its frames in two calls still holds both in its one latched message
+    (depth 1 keeps only the last). A listener made after that, on a node no executor spins (a
+    wake-up the middleware lost looks the same: the message waits on the subscription), finds
+    both frames through its lookup, which takes the waiting message on a miss; a frame nobody
+    publishes stays a LookupError naming the publishers met and the messages received."""
+    from ros_helpers import wait_until
+    from skeleton_core.tf_ros import StaticTfBroadcaster, StaticTfListener
+    pub_node = rclpy.create_node('tf_resend_pub', context=rclpy_context)
+    node = rclpy.create_node('tf_unspun_listener', context=rclpy_context)
+    try:
+        b = StaticTfBroadcaster(pub_node)
+        b.send([('world', 'kinect_1_link', Transform.from_xyz_ypr(0, 0, 0.8))])
+        b.send([('world', 'kinect_2_link', Transform.from_xyz_ypr(2.5, 2.5, 0.8, -90, 0, 0))])
+        listener = StaticTfListener(node)
+
+        def found():
+            try:
+                return listener.lookup('kinect_1_link', 'kinect_2_link')
+            except LookupError:
+                return None
+        assert wait_until(found, 20)
+        d, a = found().distance(Transform.from_xyz_ypr(2.5, 2.5, 0.0, -90, 0, 0))
+        assert d < 1e-9 and a < 1e-6
+        with pytest.raises(LookupError, match=r"kinect_3_link.*; /tf_static: 1 publisher\(s\) "
+                                              r"matched, 1 message\(s\) received"):
+            listener.lookup('world', 'kinect_3_link')
+        assert listener.poll() == 0   # nothing more waits
+    finally:
+        node.destroy_node()
+        pub_node.destroy_node()
+
+
 @pytest.mark.parametrize('args, text', [
     (['--pose', '0 0 high'], 'x y z yaw pitch roll'),
     (['--file', '/nonexistent/extrinsics.yaml'], 'not found'),

@@ -51,6 +51,7 @@ INPUTS_WAIT_S = 5.0        # the input's publishers named in wait_for_publishers
 # the match (module docstring)
 MATCH_SETTLE_S = 0.5
 LATCHED = (TF_STATIC_TOPIC, '/kinect/tracker')   # transient local: nothing lost by joining late
+LATCHED_TAKE_S = 1.0   # how often the latched topics' subscriptions are checked for a message
 
 
 def _msg_class(msgtype: str):
@@ -118,9 +119,11 @@ class RecorderNode(ManagedNode):
         topics = list(self.params['topics'])   # (checked on configure)
         wait = [t for t in self.params['wait_for_publishers'] if t in topics]
         outputs = {t: self._subscribe(t) for t in wait if t not in INPUTS}
-        for topic in LATCHED:
-            if topic in topics and topic not in outputs:
-                self._subscribe(topic)
+        self._latched_subs = {t: outputs.get(t) or self._subscribe(t) for t in LATCHED
+                              if t in topics}
+        # a latched topic sends its message once: one whose executor wake-up was lost (the
+        # middleware can lose it for a subscription made in a transition) is taken by this timer
+        self.timer(LATCHED_TAKE_S, self._take_latched)
         self._inputs = [t for t in topics if t not in outputs and t not in LATCHED]
         self._input_subs = {}
         seen_at = []
@@ -233,6 +236,17 @@ class RecorderNode(ManagedNode):
         self.get_logger().warning(
             f'{d} holds an unfinished recording (a killed recorder\'s): kept as {aside} '
             f'(ros2 run kinect_bringup recover_bag {aside})')
+
+    def _take_latched(self) -> None:
+        """The latched topics' messages waiting on their subscriptions, recorded as if the
+        executor had delivered them (which it does first, when its wake-up came)."""
+        for topic, sub in self._latched_subs.items():
+            while True:
+                with sub.handle:
+                    taken = sub.handle.take_message(sub.msg_type, sub.raw)
+                if taken is None:
+                    break
+                self._on_msg(topic, TOPICS[topic], taken[0])
 
     def _poll(self):
         with self._lock:

@@ -418,15 +418,16 @@ class PhysicsNode(ManagedNode):
         key = (frame, self.tf.version)
         if key == self._pose_key:
             return ''
-        try:
-            pose = self.tf.lookup(WORLD_FRAME, frame)
+        try:   # (the listener's lookup: a /tf_static message the executor was not woken for
+            #       is taken now; the input held meanwhile is released first)
+            pose = self.tf_listener.lookup(WORLD_FRAME, frame)
         except LookupError as e:
             return (f'waiting for TF {WORLD_FRAME} -> {frame} ({e}); the launch files publish it '
                     '(static_tf, launch argument sensor_pose)')
         self.sim.set_sensor_pose(pose)
         if self._pose_key is None or self._pose_key[0] != frame:
             self.get_logger().info(f'sensor frame {frame} in {WORLD_FRAME}: {pose}')
-        self._pose_key = key
+        self._pose_key = (frame, self.tf.version)
         return ''
 
     def _publish(self) -> None:

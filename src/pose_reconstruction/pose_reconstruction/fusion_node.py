@@ -210,15 +210,16 @@ class FusionNode(ManagedNode):
         key = (frame, self.tf.version)
         if self._pose_key.get(sensor) == key:
             return ''
-        try:
-            pose = self.tf.lookup(WORLD_FRAME, frame or '?')
+        try:   # (the listener's lookup: a /tf_static message the executor was not woken for
+            #       is taken now; the frames held meanwhile are released first)
+            pose = self.tf_listener.lookup(WORLD_FRAME, frame or '?')
         except LookupError as e:
             return (f'{sensor}: waiting for TF {WORLD_FRAME} -> {frame} ({e}); the launch files '
                     'publish it (static_tf: sensor_pose, extrinsics)')
         self.fusion.poses[sensor] = pose
         if self._pose_key.get(sensor, ('',))[0] != frame:
             self.get_logger().info(f'{sensor}: frame {frame} in {WORLD_FRAME}: {pose}')
-        self._pose_key[sensor] = key
+        self._pose_key[sensor] = (frame, self.tf.version)
         return ''
 
 

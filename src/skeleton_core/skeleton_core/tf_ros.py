@@ -50,7 +50,15 @@ def from_tf_message(msg) -> List[Tuple[str, str, Transform]]:
 
 class StaticTfListener:
     """Subscribes ``node`` to ``/tf_static`` and fills ``buffer``. ``on_change()`` is called after
-    a message changed the tree; a malformed message is logged once per sender frame and skipped."""
+    a message changed the tree; a malformed message is logged once per sender frame and skipped.
+
+    Look frames up with :meth:`lookup` / :meth:`missing`, not on the buffer alone: a miss first
+    takes the messages waiting on the subscription. The executor delivers a message only when the
+    middleware wakes it, and that wake-up can be lost: rmw_fastrtps counts the unread samples
+    before it installs the executor's new-message callback, so a latched message that arrives in
+    between (a subscription created in a lifecycle transition, matching a publisher that is
+    already up) waits on the subscription unannounced. /tf_static sends nothing more, so the node
+    would wait for its frames for ever ("known: none")."""
 
     def __init__(self, node, buffer: Optional[TfBuffer] = None,
                  on_change: Optional[Callable[[], None]] = None):
@@ -59,11 +67,14 @@ class StaticTfListener:
         self.buffer = buffer if buffer is not None else TfBuffer()
         self.on_change = on_change
         self.bad = 0
+        self.received = 0   # messages applied (delivered or taken by poll)
         self._warned = set()
+        self._said_taken = False
         self.sub = node.create_subscription(TFMessage, TF_STATIC_TOPIC, self._on_msg,
                                             STATIC_LISTENER_QOS)
 
     def _on_msg(self, msg) -> None:
+        self.received += 1
         before = self.buffer.version
         for m in msg.transforms:
             try:
@@ -76,16 +87,39 @@ class StaticTfListener:
         if self.buffer.version != before and self.on_change is not None:
             self.on_change()
 
-    def poll(self) -> None:
-        """Apply the messages waiting on the subscription now: for a node that waits for a
-        frame inside one of its callbacks (its activation), where its executor cannot deliver
-        them."""
+    def poll(self) -> int:
+        """Apply the messages waiting on the subscription now (returns how many): for a node
+        that waits for a frame inside one of its callbacks (its activation), where its executor
+        cannot deliver them, and for a message whose wake-up the executor never got."""
+        n = 0
         while True:
             with self.sub.handle:
                 taken = self.sub.handle.take_message(self.sub.msg_type, self.sub.raw)
             if taken is None:
-                return
+                return n
+            n += 1
             self._on_msg(taken[0])
+
+    def lookup(self, target: str, source: str) -> Transform:
+        """``buffer.lookup(target, source)``; on a miss, again after :meth:`poll` (which calls
+        ``on_change`` first when it took a message that changed the tree). Raises
+        ``LookupError`` as the buffer does, with the publishers matched and messages received."""
+        try:
+            return self.buffer.lookup(target, source)
+        except LookupError:
+            taken = self.poll()
+        try:
+            out = self.buffer.lookup(target, source)
+        except LookupError as e:   # what tells a publisher not (yet) met from a message lost
+            raise LookupError(f'{e}; /tf_static: {self.sub.get_publisher_count()} publisher(s) '
+                              f'matched, {self.received} message(s) received') from None
+        if not taken:
+            return out
+        if not self._said_taken:   # (evidence of a lost wake-up, or of one still on its way)
+            self._said_taken = True
+            self.node.get_logger().info(f'/tf_static: {source} found in {taken} message(s) '
+                                        'waiting on the subscription, not yet delivered')
+        return out
 
     def missing(self, frames: Iterable[str], target: str) -> List[str]:
         """Of ``frames``, those TF cannot map into ``target`` yet (after :meth:`poll`)."""
