@@ -61,7 +61,6 @@ from __future__ import annotations
 
 import bisect
 import collections
-import math
 import dataclasses
 from dataclasses import dataclass
 from typing import Dict, Optional
@@ -74,6 +73,9 @@ from skeleton_core.model import (ANKLE_LEFT, ANKLE_RIGHT, FOOT_LEFT, FOOT_RIGHT,
                                  HIP_RIGHT, LIMB_JOINTS, NUM_JOINTS, NUM_SEGMENTS, PARENTS, ROOT,
                                  SEGMENT_CHILDREN, SEGMENT_PARENTS, SHOULDER_LEFT, SHOULDER_RIGHT,
                                  TRACKED, standard_body)
+
+from .quantile import sorted_quantile
+
 
 @dataclass
 class PlausibilityConfig:
@@ -447,14 +449,7 @@ class PlausibilityCheck:
         interpolation arithmetic, on the sorted window; NaN when the window holds one)."""
         if self._floor_nan:
             return float('nan')
-        v = self._floor_sorted
-        pos = (len(v) - 1) * q
-        lo = int(math.floor(pos))
-        hi = min(lo + 1, len(v) - 1)
-        t = pos - lo
-        a, b = v[lo], v[hi]
-        d = b - a
-        return b - d * (1.0 - t) if t >= 0.5 else a + d * t
+        return sorted_quantile(self._floor_sorted, q)
 
     def _update_compiled(self, p, tracked, seg, seg_len, both, reference_lengths) -> np.ndarray:
         """:meth:`update`'s terms in one compiled call (reliability_kernels.plausibility_step:

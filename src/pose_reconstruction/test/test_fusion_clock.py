@@ -1,6 +1,7 @@
 """When the fusion node publishes (pose_reconstruction.fusion_clock), on a fake wall clock: one
 output per capture of the reference sensor, as soon as the others caught up, at most one frame
 period late, no wait for a sensor that stopped."""
+import numpy as np
 import pytest
 
 from pose_reconstruction.fusion_clock import ABSENT_PERIODS, FRAME_PERIOD_S, FusionClock
@@ -158,3 +159,14 @@ def test_the_expected_lag_is_numpys_percentile_of_the_recent_lags_after_every_fr
                 else float(np.percentile(np.array(c.lags['b']), LAG_QUANTILE)))
         assert c.expected_lag('b') == want
         assert c.expected_lag('b') == want   # asked again: the kept value
+
+
+def test_sorted_quantile_is_numpys_linear_quantile_to_the_bit():
+    """The window quantile the fusion clock and the plausibility floor use equals np.quantile
+    ('linear') bit for bit: odd and even lengths, ties, negative values, q at 0, 1 and between."""
+    from pose_reconstruction.quantile import sorted_quantile
+    rng = np.random.default_rng(3)
+    for n in (1, 2, 3, 7, 30, 31):
+        v = np.sort(np.round(rng.normal(0.0, 0.01, n), 4))   # rounded: ties happen
+        for q in (0.0, 0.05, 0.25, 0.5, 0.9, 0.95, 1.0, rng.uniform()):
+            assert sorted_quantile(list(v), q) == float(np.quantile(v, q))
