@@ -67,18 +67,24 @@ def test_quat_between_maps_vectors():
     np.testing.assert_allclose(quat_rotate(q, a), b, atol=1e-9)
 
 
+def _two_characters(seconds: float):
+    """Two explicit_pd characters 2 m apart in one world, simulated for ``seconds``."""
+    from physics_sim.simulation import SimConfig, Simulation
+    sim = Simulation(SimConfig(controller='explicit_pd', body_height=1.75))
+    base = standard_body().rest_positions() + np.array([2.5, 0.0, -0.8])
+    for uid, dy in ((1, -1.0), (2, 1.0)):
+        sim.set_target(uid, base + [0.0, dy, 0.0])
+    sim.advance(seconds)
+    return sim
+
+
 def test_explicit_pd_kernel_numba_and_numpy_agree():
     """explicit_pd's per-step Eq. 1 (compiled by numba) gives the numpy formulation's wrenches
     (pd_force + apply_at_points, summed per body) on a real MuJoCo state with random targets,
     clamped and unclamped forces, moving and held targets."""
     pytest.importorskip('numba')
     from physics_sim import controller as ctl
-    from physics_sim.simulation import SimConfig, Simulation
-    sim = Simulation(SimConfig(controller='explicit_pd', body_height=1.75))
-    base = standard_body().rest_positions() + np.array([2.5, 0.0, -0.8])
-    for uid, dy in ((1, -1.0), (2, 1.0)):
-        sim.set_target(uid, base + [0.0, dy, 0.0])
-    sim.advance(0.05)
+    sim = _two_characters(0.05)
     w = sim.worlds[0]
     d, ix = w.data, w.ix
     rng = np.random.default_rng(0)
@@ -113,12 +119,7 @@ def test_twist_kernel_numba_and_numpy_agree():
     path)."""
     pytest.importorskip('numba')
     from physics_sim import controller as ctl
-    from physics_sim.simulation import SimConfig, Simulation
-    sim = Simulation(SimConfig(controller='explicit_pd', body_height=1.75))
-    base = standard_body().rest_positions() + np.array([2.5, 0.0, -0.8])
-    for uid, dy in ((1, -1.0), (2, 1.0)):
-        sim.set_target(uid, base + [0.0, dy, 0.0])
-    sim.advance(0.05)
+    sim = _two_characters(0.05)
     w = sim.worlds[0]
     d, ix = w.data, w.ix
     rng = np.random.default_rng(1)
