@@ -41,7 +41,7 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 
 from skeleton_core.bag_split import pieces_dir
 from skeleton_core.rosnode import ManagedNode, ParamSpec, Parameters, run_node
-from skeleton_core.tf_ros import STATIC_LISTENER_QOS, TF_STATIC_TOPIC
+from skeleton_core.tf_ros import STATIC_LISTENER_QOS, TF_STATIC_TOPIC, take_waiting
 
 from .graph import INPUTS, TOPICS
 
@@ -241,12 +241,8 @@ class RecorderNode(ManagedNode):
         """The latched topics' messages waiting on their subscriptions, recorded as if the
         executor had delivered them (which it does first, when its wake-up came)."""
         for topic, sub in self._latched_subs.items():
-            while True:
-                with sub.handle:
-                    taken = sub.handle.take_message(sub.msg_type, sub.raw)
-                if taken is None:
-                    break
-                self._on_msg(topic, TOPICS[topic], taken[0])
+            for msg in take_waiting(sub):
+                self._on_msg(topic, TOPICS[topic], msg)
 
     def _poll(self):
         with self._lock:

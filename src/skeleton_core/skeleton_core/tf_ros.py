@@ -48,6 +48,17 @@ def from_tf_message(msg) -> List[Tuple[str, str, Transform]]:
     return transforms_from_msg(msg)
 
 
+def take_waiting(sub):
+    """The messages waiting on the rclpy subscription ``sub``, taken now, oldest first (what its
+    executor would deliver once woken)."""
+    while True:
+        with sub.handle:
+            taken = sub.handle.take_message(sub.msg_type, sub.raw)
+        if taken is None:
+            return
+        yield taken[0]
+
+
 class StaticTfListener:
     """Subscribes ``node`` to ``/tf_static`` and fills ``buffer``. ``on_change()`` is called after
     a message changed the tree; a malformed message is logged once per sender frame and skipped.
@@ -92,13 +103,10 @@ class StaticTfListener:
         that waits for a frame inside one of its callbacks (its activation), where its executor
         cannot deliver them, and for a message whose wake-up the executor never got."""
         n = 0
-        while True:
-            with self.sub.handle:
-                taken = self.sub.handle.take_message(self.sub.msg_type, self.sub.raw)
-            if taken is None:
-                return n
+        for msg in take_waiting(self.sub):
             n += 1
-            self._on_msg(taken[0])
+            self._on_msg(msg)
+        return n
 
     def lookup(self, target: str, source: str) -> Transform:
         """``buffer.lookup(target, source)``; on a miss, again after :meth:`poll` (which calls
