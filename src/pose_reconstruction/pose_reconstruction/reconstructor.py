@@ -537,12 +537,10 @@ def process_batch(recs, frames) -> list:
     smoothed = smooth_many([step for *_, step in done])   # the users' filters together
     share = 1e3 * (time.perf_counter() - t) / max(len(done), 1)
     for (i, p, res, step), rows in zip(done, smoothed):
-        if isinstance(rows, Exception):
-            outs[i] = rows
-            continue
         recs[i].timings_ms['output'] += share
         try:
-            outs[i] = recs[i]._output_frame(p, res, step, rows)
+            outs[i] = (rows if isinstance(rows, Exception)   # that user's filter raised
+                       else recs[i]._output_frame(p, res, step, rows))
         except USER_ERRORS as e:
             outs[i] = e
     return outs
