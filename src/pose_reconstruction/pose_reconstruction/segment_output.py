@@ -92,10 +92,9 @@ _OFFSET_SIGMA = 0.03
 
 @dataclass
 class SmoothingStep:
-    """One frame of a user's segment output at its smoothing filter
-    (:meth:`SegmentOutput.output_rows`): the 19 segment vectors and the root to smooth
-    (``rows`` (20, 3)), the filter's arguments (``filter`` None without smoothing), and what
-    :meth:`SegmentOutput.output_positions` needs after it."""
+    """A user's segment output at its smoothing filter (:meth:`SegmentOutput.output_rows`): the
+    segment vectors and the root to smooth (``rows`` (20, 3)), the filter's arguments (``filter``
+    None without smoothing) and what :meth:`SegmentOutput.output_positions` needs after it."""
 
     rows: np.ndarray
     lengths: np.ndarray
@@ -108,10 +107,8 @@ class SmoothingStep:
 
     def smooth(self) -> np.ndarray:
         """The rows through the user's filter (the rows themselves without smoothing)."""
-        if self.filter is None:
-            return self.rows
-        return self.filter.update(self.rows, None, self.stamp_ns, self.cutoff_scale,
-                                  self.speed_scale, self.lead)
+        return self.rows if self.filter is None else self.filter.update(
+            self.rows, None, self.stamp_ns, self.cutoff_scale, self.speed_scale, self.lead)
 
 
 def smooth_many(steps) -> list:
