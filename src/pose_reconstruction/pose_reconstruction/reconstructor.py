@@ -124,8 +124,7 @@ from .profile import from_optional as profile_lengths
 from .length_prior import LengthPrior, LengthPriorConfig
 from .reliability import ReliabilityConfig, ReliabilityEstimator
 from .segment_output import (SEG_DIFF, SegmentOutput, SegmentOutputConfig,
-                             neighbour_direction_spread, neighbour_direction_spreads, run_steps,
-                             serve_requests)
+                             neighbour_direction_spread, neighbour_direction_spreads, smooth_many)
 from .trust import SensorTrust, TrustConfig
 
 METHODS = ('A', 'B', 'C')
@@ -325,12 +324,13 @@ class Reconstructor:
         step = self._begin(frame)
         if isinstance(step, SkeletonFrame):
             return step
-        return self._finish(step, self.core.solve(step.query, step.w, step.prev,
-                                                  translate=step.translate))
+        res = self.core.solve(step.query, step.w, step.prev, translate=step.translate)
+        return self._output_frame(step, res, self._output_rows(step, res))
 
     def _begin(self, frame: SkeletonFrame):
         """The frame up to the optimizer: the output frame when it is done without one (method
-        A, a held skeleton), else the :class:`_Pending` solve that :meth:`_finish` completes."""
+        A, a held skeleton), else the :class:`_Pending` solve that :meth:`_output_rows` and
+        :meth:`_output_frame` complete."""
         t0 = time.perf_counter()
         uid = getattr(frame, 'user_id', None)
         if uid != self._user_id:
@@ -390,52 +390,59 @@ class Reconstructor:
         return bool(p.segments and self.segment_output.direction_db_spread
                     and res.neighbours is not None)
 
-    def _finish(self, p: '_Pending', res, spread=None) -> SkeletonFrame:
-        """The frame after the optimizer's result ``res`` for :meth:`_begin`'s ``p``
-        (``spread``: the neighbours' direction spread when already computed)."""
-        return run_steps(self._finish_steps(p, res, spread))
-
-    def _finish_steps(self, p: '_Pending', res, spread=None):
-        """:meth:`_finish` as a generator that yields the segment output's smoothing filter
-        request once (:meth:`~.segment_output.SegmentOutput.output_steps`; None without one)
-        and returns the frame: :func:`process_batch` serves several users' requests at once."""
-        frame, R, obs, w, yaw, prep = p.frame, p.R, p.obs, p.w, p.yaw, p.prep
-        t1, tf = p.t1, time.perf_counter()
+    def _output_rows(self, p: '_Pending', res, spread=None):
+        """The frame after the optimizer's result ``res`` for :meth:`_begin`'s ``p``, up to the
+        segment output's smoothing filter (``spread``: the neighbours' direction spread when
+        already computed): the body fit and the trust updated; the segment output's
+        :class:`~.segment_output.SmoothingStep` (None for the blend output)."""
+        obs, w, yaw, prep = p.obs, p.w, p.yaw, p.prep
+        tf = time.perf_counter()
         self._prev.append((res.positions, yaw))
         self.body_fit.update(prep.query, w, p.height, yaw, p.translate)
         t2 = time.perf_counter()
-        waited = 0.0
+        # the optimizer's own stages are timed by it (in a batch: its share of the batch)
+        prepare = (1e3 * (p.t_solve - p.t1 + t2 - tf) if p.t_solve
+                   else 1e3 * (t2 - p.t1) - sum(res.timings_ms.values()))
+        self.timings_ms = {'reliability': 1e3 * (p.t1 - p.t0), 'prepare': prepare,
+                           **res.timings_ms}
         wsum = float(w.sum())
         rms = float(np.sqrt(res.distances[0] / max(wsum, 1e-6)))
         alpha = self.trust.update(obs, w, rms)
         self.trust_sensor = alpha
         if self.latch_trust:
             self.reliability.plausibility.sensor_trust = alpha
-        root = None
-        if res.shift is not None and alpha < 1.0:
-            # the root towards where the database neighbours place it, as far as the
-            # database is trusted more than the sensor
-            root = obs[ROOT] - ((1.0 - alpha) / prep.scale) * (yaw_matrix(yaw) @ res.shift)
+        step = None
         if p.segments:
+            root = None
+            if res.shift is not None and alpha < 1.0:
+                # the root towards where the database neighbours place it, as far as the
+                # database is trusted more than the sensor
+                root = obs[ROOT] - ((1.0 - alpha) / prep.scale) * (yaw_matrix(yaw) @ res.shift)
             if spread is None and self._wants_spread(p, res):
                 Y = self.db.flat.take(res.neighbours, axis=0).reshape(-1, NUM_JOINTS, 3)
                 spread = neighbour_direction_spread(Y, res.distances)
-            steps = self.segment_output.output_steps(
-                frame, res.positions, w, alpha, yaw=yaw, seg_obs=p.seg_obs, len_obs=p.len_obs,
+            step = self.segment_output.output_rows(
+                p.frame, res.positions, w, alpha, yaw=yaw, seg_obs=p.seg_obs, len_obs=p.len_obs,
                 root=root, db_spread=spread, db_distance=rms)
-            request = next(steps)
-            t_wait = time.perf_counter()
-            filtered = yield request   # (in a batch, the other users' output meanwhile)
-            waited = time.perf_counter() - t_wait
-            positions = run_steps(steps, filtered)
+        self.timings_ms['output'] = 1e3 * (time.perf_counter() - t2)
+        return step
+
+    def _output_frame(self, p: '_Pending', res, step, rows=None) -> SkeletonFrame:
+        """:meth:`_output_rows`' frame from the smoothing filter on: the output frame of
+        :meth:`_output_rows`' ``step`` (None: the blend output), ``rows`` its smoothed rows
+        when already smoothed (else smoothed here)."""
+        t3 = time.perf_counter()
+        frame, yaw = p.frame, p.yaw
+        if step is not None:
+            positions = self.segment_output.output_positions(step, rows)
         else:
-            yield None
             user_bones = user_bone_lengths(self.user_segment_lengths())
             bones = user_bones if self.output_scale == 'user' else None
-            positions = to_sensor_frame(res.positions, prep.transform, bones,
+            positions = to_sensor_frame(res.positions, p.prep.transform, bones,
                                         self._rest_dirs)
+            alpha = self.trust_sensor
             if alpha > 0.0:
-                keep = w >= self.reliable_threshold
+                keep = p.w >= self.reliable_threshold
                 positions[keep] = ((1.0 - alpha) * positions[keep]
                                    + alpha * frame.positions[keep])
         ori = None
@@ -443,13 +450,8 @@ class Reconstructor:
             ori = res.orientations @ yaw_quat_matrix(yaw).T
         elif frame.orientations is not None:
             ori = frame.orientations.copy()
-        # the optimizer's own stages are timed by it (in a batch: its share of the batch)
-        prepare = (1e3 * (p.t_solve - t1 + t2 - tf) if p.t_solve
-                   else 1e3 * (t2 - t1) - sum(res.timings_ms.values()))
-        self.timings_ms = {'reliability': 1e3 * (t1 - p.t0), 'prepare': prepare,
-                           **res.timings_ms,
-                           'output': 1e3 * (time.perf_counter() - t2 - waited)}
-        return self._emit(frame, positions, R, ori, res)
+        self.timings_ms['output'] += 1e3 * (time.perf_counter() - t3)
+        return self._emit(frame, positions, p.R, ori, res)
 
     def _emit(self, frame, positions, R, ori, res) -> SkeletonFrame:
         self.last_result = res
@@ -462,9 +464,9 @@ class Reconstructor:
 
 @dataclass
 class _Pending:
-    """One user's frame between :meth:`Reconstructor._begin` and :meth:`Reconstructor._finish`:
-    the optimizer's inputs (``query`` normalised, ``w``, ``prev`` most recent first,
-    ``translate``) and what the output stage needs."""
+    """One user's frame from :meth:`Reconstructor._begin` to its output frame: the optimizer's
+    inputs (``query`` normalised, ``w``, ``prev`` most recent first, ``translate``) and what
+    the output stage needs."""
     frame: SkeletonFrame
     R: np.ndarray
     obs: np.ndarray
@@ -523,20 +525,22 @@ def process_batch(recs, frames) -> list:
                 len(want), idx.shape[1], NUM_JOINTS, 3)
             sp = neighbour_direction_spreads(Y, np.stack([results[k].distances for k in want]))
             spreads = dict(zip(want, sp))
-    steps, requests = [], []
+    done = []
     for k, (i, p) in enumerate(pend):
         try:
             res = results[k] if results is not None else recs[i].core.solve(
                 p.query, p.w, p.prev, translate=p.translate)
-            g = recs[i]._finish_steps(p, res, spreads.get(k))
-            requests.append(next(g))   # up to the output's smoothing filter
-            steps.append((i, g))
+            done.append((i, p, res, recs[i]._output_rows(p, res, spreads.get(k))))
         except USER_ERRORS as e:
             outs[i] = e
-    filtered = serve_requests(requests)   # the users' smoothing filters updated together
-    for k, (i, g) in enumerate(steps):
+    t = time.perf_counter()
+    smoothed = smooth_many([step for *_, step in done])   # the users' filters together
+    share = 1e3 * (time.perf_counter() - t) / max(len(done), 1)
+    for (i, p, res, step), rows in zip(done, smoothed):
+        recs[i].timings_ms['output'] += share
         try:
-            outs[i] = run_steps(g, filtered[k])
+            outs[i] = (rows if isinstance(rows, Exception)   # that user's filter raised
+                       else recs[i]._output_frame(p, res, step, rows))
         except USER_ERRORS as e:
             outs[i] = e
     return outs

@@ -90,38 +90,38 @@ _DB_DIRECTION_VAR = np.radians(12.0) ** 2
 _OFFSET_SIGMA = 0.03
 
 
-def serve_request(req):
-    """The filtered rows of one :meth:`SegmentOutput.output_steps` filter request (None: none)."""
-    return None if req is None else req[0].update(req[1], None, *req[2:])
+@dataclass
+class SmoothingStep:
+    """A user's segment output at its smoothing filter (:meth:`SegmentOutput.output_rows`): the
+    segment vectors and the root to smooth (``rows`` (20, 3)), the filter's arguments (``filter``
+    None without smoothing) and what :meth:`SegmentOutput.output_positions` needs after it."""
+
+    rows: np.ndarray
+    lengths: np.ndarray
+    directions: np.ndarray
+    filter: Optional[OneEuroFilter] = None
+    stamp_ns: int = 0
+    cutoff_scale: Optional[np.ndarray] = None
+    speed_scale: Optional[np.ndarray] = None
+    lead: Optional[np.ndarray] = None
+
+    def smooth(self) -> np.ndarray:
+        """The rows through the user's filter (the rows themselves without smoothing)."""
+        return self.rows if self.filter is None else self.filter.update(
+            self.rows, None, self.stamp_ns, self.cutoff_scale, self.speed_scale, self.lead)
 
 
-def run_steps(steps, filtered=serve_request):
-    """The value of a generator of :meth:`SegmentOutput.output_steps`' kind (it yields one
-    filter request or None): the request served by its filter's own update, or, for a request
-    already taken with ``next``, ``filtered``: its filtered rows (None for none; an exception is
-    raised)."""
-    if filtered is serve_request:
-        filtered = serve_request(next(steps))
-    if isinstance(filtered, Exception):
-        steps.close()
-        raise filtered
-    try:
-        steps.send(filtered)
-    except StopIteration as done:
-        return done.value
-    raise RuntimeError('an output step yielded more than once')
-
-
-def serve_requests(requests) -> list:
-    """The filtered rows of several users' filter requests (None: none), their One Euro updates
-    stacked (``OneEuroFilter.update_many``: the same numbers as each alone; an element is the
-    exception that user's filter raised)."""
-    idx = [k for k, r in enumerate(requests) if r is not None]
-    out: list = [None] * len(requests)
-    if idx:
-        got = OneEuroFilter.update_many(*zip(*(requests[k] for k in idx)))
-        for k, g in zip(idx, got):
-            out[k] = g
+def smooth_many(steps) -> list:
+    """``[s.smooth() for s in steps]`` of several users' steps (None: None), their One Euro
+    updates stacked (``OneEuroFilter.update_many``: the same numbers); an element is the
+    exception that user's filter raised."""
+    out = [None if s is None else s.rows for s in steps]
+    on = [k for k, s in enumerate(steps) if s is not None and s.filter is not None]
+    if on:
+        args = [(s.filter, s.rows, s.stamp_ns, s.cutoff_scale, s.speed_scale, s.lead)
+                for s in (steps[k] for k in on)]
+        for k, rows in zip(on, OneEuroFilter.update_many(*zip(*args))):
+            out[k] = rows
     return out
 
 
@@ -423,15 +423,14 @@ class SegmentOutput:
         or, with ``yaw``, the normalised solution (only its segment directions matter: they are
         turned by ``yaw``). ``seg_obs`` / ``len_obs``: the observed segment vectors (19, 3) and
         lengths (19,) when already computed."""
-        return run_steps(self.output_steps(frame, solution, w, trust, yaw, seg_obs, len_obs,
-                                           root, db_spread, db_distance))
+        return self.output_positions(self.output_rows(frame, solution, w, trust, yaw, seg_obs,
+                                                      len_obs, root, db_spread, db_distance))
 
-    def output_steps(self, frame, solution, w, trust, yaw=None, seg_obs=None, len_obs=None,
-                     root=None, db_spread=None, db_distance=None):
-        """:meth:`output` as a generator that yields once: the smoothing filter's update it
-        needs, ``(filter, rows, stamp_ns, cutoff_scale, speed_scale, lead)`` (None without
-        smoothing), is sent the filtered rows and returns the output positions (several users'
-        filter updates stacked: :func:`serve_requests`)."""
+    def output_rows(self, frame, solution, w, trust, yaw=None, seg_obs=None, len_obs=None,
+                    root=None, db_spread=None, db_distance=None) -> SmoothingStep:
+        """:meth:`output` up to the smoothing filter (its arguments as :meth:`output`'s):
+        several users' filters are updated together (:func:`smooth_many`) between this and
+        :meth:`output_positions`."""
         obs = np.asarray(frame.positions, float)
         if seg_obs is None:
             seg_obs = SEG_DIFF @ obs
@@ -521,17 +520,25 @@ class SegmentOutput:
                 lead = np.empty(NUM_SEGMENTS + 1)
                 lead[:NUM_SEGMENTS] = self.smooth_lead * rel_frac
                 lead[NUM_SEGMENTS] = self.smooth_lead  # the root is never heavily smoothed
-            vr = yield (self._seg_filter, vr, self._filter_clock_ns, scale, speed, lead)
-            v = vr[:NUM_SEGMENTS]
+            return SmoothingStep(vr, L, u, self._seg_filter, self._filter_clock_ns, scale,
+                                 speed, lead)
+        return SmoothingStep(vr, L, u)
+
+    @staticmethod
+    def output_positions(step: SmoothingStep, rows: Optional[np.ndarray] = None) -> np.ndarray:
+        """:meth:`output` from the smoothing filter on: the output positions (20, 3) of ``step``
+        (:meth:`output_rows`), ``rows`` (20, 3) its smoothed rows when already smoothed (else
+        smoothed here); the segments get their lengths again (a segment smoothed to zero keeps
+        its unsmoothed direction)."""
+        rows = step.smooth() if rows is None else rows
+        v = rows[:NUM_SEGMENTS]
+        if step.filter is not None:
             nv = np.sqrt(np.einsum('sk,sk->s', v, v))
             keep = nv > 1e-9
             v = (v / np.maximum(nv, 1e-9)[:, None]) if keep.all() else \
-                np.where(keep[:, None], v / np.maximum(nv, 1e-9)[:, None], u)
-            v *= L[:, None]
-        else:
-            yield None
-            v = vr[:NUM_SEGMENTS]
-        return vr[NUM_SEGMENTS] + _SEG_CHAIN @ v
+                np.where(keep[:, None], v / np.maximum(nv, 1e-9)[:, None], step.directions)
+            v *= step.lengths[:, None]
+        return rows[NUM_SEGMENTS] + _SEG_CHAIN @ v
 
     def _remembered(self, us: np.ndarray, uo: np.ndarray, seen: np.ndarray,
                     rel_frac: np.ndarray, trust: float, dt: float) -> np.ndarray:

@@ -119,14 +119,14 @@ def test_the_reconstructor_gives_the_output_its_neighbours_spread(on, monkeypatc
     db = random_database(800, seed=5)
     r = Reconstructor(db, method='C', direction_db_spread=on)
     seen, dist = [], []
-    orig = r.segment_output.output_steps   # the reconstructor's way into the output
+    orig = r.segment_output.output_rows   # the reconstructor's way into the output
 
     def spy(*a, **kw):
         seen.append(kw.get('db_spread'))
         dist.append(kw.get('db_distance'))
         return orig(*a, **kw)
 
-    monkeypatch.setattr(r.segment_output, 'output_steps', spy)
+    monkeypatch.setattr(r.segment_output, 'output_rows', spy)
     solve = r.core.solve
     results = []
 

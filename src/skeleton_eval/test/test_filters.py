@@ -265,23 +265,26 @@ def test_lead_speed_fades_the_lead_on_slow_noise_and_bounds_the_lag_it_leaves():
         OneEuroFilter(lead_speed=-0.1)
 
 
-def test_one_euro_update_many_equals_each_filters_update():
+def test_one_euro_update_many_equals_each_filters_update(monkeypatch):
     """Several users' filters updated together (stacked) give each filter's own numbers and
     state, with the lead, the acceleration stage and per-row scales; a filter that has not
     started every row, or has other settings, is updated alone."""
     rng = np.random.default_rng(1)
+    stacks, stack = [], OneEuroFilter._update_stacked
+    monkeypatch.setattr(OneEuroFilter, '_update_stacked',
+                        staticmethod(lambda fs, *a: stacks.append(len(fs)) or stack(fs, *a)))
     for cfg in (dict(lead_accel=1.0, accel_cutoff=2.0, accel_beta=0.5, lead_speed=0.3),
                 dict(lead_accel=1.0, accel_cutoff=2.0), dict(), dict(lead_accel=1.0)):
         alone, many = ([OneEuroFilter(m, 3.0, 2.0, num_joints=20, **cfg)
-                        for m in (1.0, 1.0, 1.0, 0.5)] for _ in range(2))
+                        for m in (1.0, 1.0, 1.0, 1.0, 0.5)] for _ in range(2))
         stacked = 0
         for t in range(40):
-            xs = [rng.normal(size=(20, 3)) * 0.1 + 0.01 * t for _ in range(4)]
-            stamps = [(t + 1) * 33_333_333 + u * (t % 3) * 1_000_000 for u in range(4)]
-            cs = [rng.uniform(0.2, 1.5, 20) for _ in range(4)]
-            ss = [rng.uniform(0.5, 1.5, 20) if t % 2 else None for _ in range(4)]
-            lead = [rng.uniform(0.0, 1.0, 20) for _ in range(4)]
-            stacked += all(f.all_started for f in many[:3])
+            xs = [rng.normal(size=(20, 3)) * 0.1 + 0.01 * t for _ in range(5)]
+            stamps = [(t + 1) * 33_333_333 + u * (t % 3) * 1_000_000 for u in range(5)]
+            cs = [rng.uniform(0.2, 1.5, 20) for _ in range(5)]
+            ss = [rng.uniform(0.5, 1.5, 20) if t % 2 else None for _ in range(5)]
+            lead = [rng.uniform(0.0, 1.0, 20) for _ in range(5)]
+            stacked += all(f.all_started for f in many[:4])
             want = [f.update(x, None, s, c, sp, ld)
                     for f, x, s, c, sp, ld in zip(alone, xs, stamps, cs, ss, lead)]
             got = OneEuroFilter.update_many(many, xs, stamps, cs, ss, lead)
@@ -290,4 +293,5 @@ def test_one_euro_update_many_equals_each_filters_update():
                 for name in ('x', 'raw', 'dx', 'fdx', 'fdd', 'fdd2'):
                     assert np.array_equal(getattr(fa, name), getattr(fb, name))
                 assert fa.t_ns == fb.t_ns
-        assert stacked >= 30
+        assert stacked >= 30 and stacks == [4] * stacked   # the four alike, stacked
+        stacks.clear()
