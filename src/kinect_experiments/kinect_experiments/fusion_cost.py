@@ -22,7 +22,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
-from typing import Dict, List, Sequence
+from typing import Dict, List, Optional, Sequence
 
 STAGES = ('decode', 'add', 'fuse', 'encode')
 
@@ -39,10 +39,11 @@ def load_streams(users: int, sensors: int, seconds: float, frames_file: str = ''
         return pickle.load(f)
 
 
-def replay(data: Dict, frames: int, phase_ms: float = 3.0, warm: int = 30) -> Dict:
+def replay(data: Dict, frames: int, phase_ms: float = 3.0, warm: int = 30,
+           sink: Optional[List[bytes]] = None) -> Dict:
     """Every sensor's messages through decode, the fusion, its clock and encode, as the node
     does. Returns CPU ms per fused frame per stage (after ``warm`` frames), the count, the
-    digest of the fused messages."""
+    digest of the fused messages (appended to ``sink`` when given)."""
     from pose_reconstruction.fusion import MultiSensorFusion
     from pose_reconstruction.fusion_clock import FusionClock
     from skeleton_core.cdr import frames_from_cdr, frames_to_cdr, restamp_cdr
@@ -93,6 +94,8 @@ def replay(data: Dict, frames: int, phase_ms: float = 3.0, warm: int = 30) -> Di
                 t_enc += c4 - c3
                 c2 = c4
                 digest.update(b)
+                if sink is not None:
+                    sink.append(b)
                 published += 1
             if measure:
                 cpu['decode'] += c1 - c0

@@ -223,7 +223,7 @@ class MultiSensorFusion:
         seen = set()
         for f in frames:
             rel = f.reliability
-            if not np.all(np.isfinite(rel)):
+            if not np.isfinite(rel).all():
                 est = self._rel.get((sensor, f.user_id))
                 if est is None:
                     est = self._rel[(sensor, f.user_id)] = ReliabilityEstimator()

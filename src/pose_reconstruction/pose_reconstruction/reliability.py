@@ -67,6 +67,8 @@ from .posture_space import heading_yaw
 K = jit.lazy_module('pose_reconstruction.reliability_kernels')   # (numba: when first used)
 
 REFERENCE_MODES = ('observed', 'standard')
+# the ufunc np.clip calls on arrays with both bounds (numpy 2), without np.clip's Python layers
+_clip = getattr(getattr(getattr(np, '_core', None), 'umath', None), 'clip', np.clip)
 _ONES = [1.0] * NUM_JOINTS   # heading_yaw's weights: the hip and shoulder lines alike
 
 # Joint-segment incidence (20, 19): a joint touches the segment ending at it and those leaving it.
@@ -286,6 +288,10 @@ class ReliabilityEstimator:
     ``reference_lengths``: a known user height / reference lengths (tests, offline tools).
     """
 
+    # compiled path: Eq. 1-8 and the re-acquisition floor in one call (False: two steps, the
+    # floor in numpy; the tests compare the two)
+    _k_reacquired = True
+
     def __init__(self, config: Optional[ReliabilityConfig] = None, *,
                  height: Optional[float] = None,
                  reference_lengths: Optional[np.ndarray] = None, **params):
@@ -343,8 +349,9 @@ class ReliabilityEstimator:
         self._last_n: Optional[np.ndarray] = None
         self._theta: Deque[np.ndarray] = collections.deque(maxlen=self.f_b)
         self._minima: Deque[np.ndarray] = collections.deque(maxlen=self.f_total)
-        # Eq. 8's window of min(R_b, R_k) alone (_reacquired)
-        self._bk: Deque[np.ndarray] = collections.deque(maxlen=self.f_total)
+        # Eq. 8's window of min(R_b, R_k) alone (_reacquired): rows oldest first, _bk_n filled
+        self._bk = np.zeros((self.f_total, NUM_JOINTS))
+        self._bk_n = np.zeros(1, np.int64)
         # the compiled step's state (the same quantities, as rings oldest first)
         self._k_last_p = np.zeros((NUM_JOINTS, 3))
         self._k_last_d = np.zeros((NUM_JOINTS, 3))
@@ -471,11 +478,25 @@ class ReliabilityEstimator:
 
     # -- streaming -------------------------------------------------------------------------------
     def _update_compiled(self, p, ts, tracked, ln, rp) -> np.ndarray:
-        """Eq. 1-8 of :meth:`update` in one compiled call (reliability_kernels.eq18_step)."""
+        """Eq. 1-8 of :meth:`update` in one compiled call (reliability_kernels.eq18_step),
+        with the plausibility stage its re-acquisition floor too (:meth:`_reacquired`:
+        reliability_kernels.eq18_reacquired_step, the same bits)."""
         rb = np.empty(NUM_JOINTS)
         rk = np.empty(NUM_JOINTS)
         rt = self._rt_lut8[ts]
         judge = self.plausibility.enabled
+        if judge and self._k_reacquired:
+            out = np.empty(NUM_JOINTS)
+            K.eq18_reacquired_step(p, ln, self.reference_lengths, tracked, rt,
+                                   rt if rp is None else rp, rp is not None, judge, self.d_min,
+                                   self.theta_floor, self.theta_roof, self._k_last_p,
+                                   self._k_last_d, self._k_last_n, self._k_stage, self._k_theta,
+                                   self._k_theta_n, self._k_minima, self._k_minima_n,
+                                   self._gauss_table, _JUDGED_BY, _INCIDENCE_MEAN, _SEG_PAR,
+                                   _SEG_CHILD, rb, rk, self._bk, self._bk_n, out)
+            self.last_terms = (rb, rk, rt)
+            self.reliability = out
+            return out
         r = K.eq18_step(p, ln, self.reference_lengths, tracked, rt,
                         rt if rp is None else rp, rp is not None, judge, self.d_min,
                         self.theta_floor, self.theta_roof, self._k_last_p, self._k_last_d,
@@ -506,7 +527,8 @@ class ReliabilityEstimator:
             self._observe_reference(p, seg, ln)
         self._observe_lengths(profile, ln)
         if self._jit and ts.dtype == np.uint8:
-            return self._reacquired(self._update_compiled(p, ts, tracked, ln, rp), rp)
+            r = self._update_compiled(p, ts, tracked, ln, rp)
+            return r if self.plausibility.enabled and self._k_reacquired else self._reacquired(r, rp)
         # Eq. 1-4, one new angle per frame (as behaviour_term on the last f_b + 2 positions)
         if self._last_p is not None:
             d = p - self._last_p
@@ -580,12 +602,20 @@ class ReliabilityEstimator:
         if not self.plausibility.enabled or self.last_terms is None:
             return r
         rb, rk, rt = self.last_terms
-        self._bk.append(np.minimum(rb, rk))
-        now = self._gauss[len(self._bk)] @ np.asarray(self._bk)
+        bk = self._bk
+        n = int(self._bk_n[0])
+        if n < len(bk):
+            n += 1
+            self._bk_n[0] = n
+        else:
+            bk[:-1] = bk[1:]
+        np.minimum(rb, rk, out=bk[n - 1])
+        # the window's rows as one contiguous (n, J) block: the product np.asarray(deque) gave
+        now = self._gauss[n] @ bk[:n]
         np.minimum(now, rt, out=now)
         out = np.maximum(r, now)
         if rp is not None:
             np.minimum(out, rp, out=out)
-        np.clip(out, 0.0, 1.0, out=out)
+        _clip(out, 0.0, 1.0, out=out)     # np.clip's ufunc, without its Python wrapper
         self.reliability = out
         return out

@@ -265,6 +265,12 @@ def warm_up() -> float:
               np.zeros((nj, 3)), np.zeros((nj, 3)), np.zeros(nj), np.zeros(1, np.int64),
               np.zeros((3, nj)), np.zeros(1, np.int64), np.zeros((6, nj)), np.zeros(1, np.int64),
               np.ones((7, 6)), inc, inc, par, child, np.empty(nj), np.empty(nj))
+    eq18_reacquired_step(p, ones_s, ones_s, tracked, ones_j, ones_j, True, True, 0.03, 1.5, 2.3,
+                         np.zeros((nj, 3)), np.zeros((nj, 3)), np.zeros(nj),
+                         np.zeros(1, np.int64), np.zeros((3, nj)), np.zeros(1, np.int64),
+                         np.zeros((6, nj)), np.zeros(1, np.int64), np.ones((7, 6)), inc, inc,
+                         par, child, np.empty(nj), np.empty(nj), np.zeros((6, nj)),
+                         np.zeros(1, np.int64), np.empty(nj))
     seg = np.zeros((ns, 3))
     both = np.ones(ns, bool)
     segment_terms(seg, ones_s, both, ones_s, seg, True, both, np.zeros(ns, np.int64),
@@ -454,3 +460,54 @@ _wrap_j = jit.njit(_wrap)
 _nmin = jit.njit(_nmin)
 _nmax = jit.njit(_nmax)
 plausibility_step = jit.njit(_plausibility_step)
+
+
+def _reacquired_step(r, rb, rk, rt, rp, use_rp, bk, bk_n, gauss, out):
+    """ReliabilityEstimator._reacquired on the reliability ``r`` (J,) of Eq. 8: ``min(R_b, R_k)``
+    appended to the window ``bk`` (f_total, J; rows oldest first, ``bk_n[0]`` filled), the
+    reliability at least its Gaussian-weighted sum capped by ``R_t``, at most ``rp`` when
+    ``use_rp``, in [0, 1] -> ``out``. The element-wise steps are np.minimum / np.maximum /
+    np.clip's (NaN propagates) and the weighted sum is np.dot's BLAS product, the one numpy's
+    ``@`` computes: the twin's bits."""
+    nj = r.shape[0]
+    f_total = bk.shape[0]
+    n = bk_n[0]
+    if n < f_total:
+        n += 1
+        bk_n[0] = n
+    else:
+        for q in range(f_total - 1):
+            bk[q, :] = bk[q + 1, :]
+    for j in range(nj):
+        bk[n - 1, j] = _nmin(rb[j], rk[j])
+    w = np.empty(n)
+    for q in range(n):
+        w[q] = gauss[n, q]
+    now = np.dot(w, bk[:n])
+    for j in range(nj):
+        v = _nmax(r[j], _nmin(now[j], rt[j]))
+        if use_rp:
+            v = _nmin(v, rp[j])
+        if v == v:                      # np.clip(v, 0, 1): max then min, NaN kept
+            v = v if v > 0.0 else 0.0
+            v = v if v < 1.0 else 1.0
+        out[j] = v
+
+
+reacquired_step = jit.njit(_reacquired_step)
+
+
+def _eq18_reacquired_step(p, ln, ref, tracked, rt, rp, use_rp, judge_tracked, d_min,
+                          theta_floor, theta_roof, last_p, last_d, last_n, stage, theta, theta_n,
+                          minima, minima_n, gauss, inc, inc_mean, seg_par, seg_child, out_rb,
+                          out_rk, bk, bk_n, out):
+    """:func:`_eq18_step` then :func:`_reacquired_step` on its result, in one call (the
+    reliability with the plausibility stage on): the reliability goes to ``out``, R_b and R_k to
+    ``out_rb`` / ``out_rk``."""
+    r = eq18_step(p, ln, ref, tracked, rt, rp, use_rp, judge_tracked, d_min, theta_floor,
+                  theta_roof, last_p, last_d, last_n, stage, theta, theta_n, minima, minima_n,
+                  gauss, inc, inc_mean, seg_par, seg_child, out_rb, out_rk)
+    reacquired_step(r, out_rb, out_rk, rt, rp, use_rp, bk, bk_n, gauss, out)
+
+
+eq18_reacquired_step = jit.njit(_eq18_reacquired_step)

@@ -356,3 +356,52 @@ def test_compiled_step_agrees_with_numpy(scenario):
         latched += int((est[True].plausibility._latch > 0).any())
     assert outlier >= 3 and latched >= 3       # the stream exercises the jump and the latch
     assert swaps >= 3                          # ... and the left/right swap
+
+
+@pytest.mark.parametrize('scenario', ['c', 'd'])
+def test_reacquired_floor_gives_the_bytes_of_the_deque_of_frames(scenario):
+    """The re-acquisition floor (ReliabilityEstimator._reacquired) with its Eq. 8 window kept as
+    rows of one array, and compiled into the Eq. 1-8 step
+    (reliability_kernels.eq18_reacquired_step): the same reliability, bit for bit, as the floor
+    in numpy with the window kept as a deque of frames stacked every frame, over a stream longer
+    than the window (its rows shifting) with joints lost and re-acquired (c) and confident
+    failures (d); with numba off, the numpy floor alone."""
+    import collections
+    from skeleton_core import jit
+    from skeleton_eval.clips import toy_clip
+    from skeleton_eval.sensor_model import SensorModel
+
+    class DequeWindow(ReliabilityEstimator):
+        _k_reacquired = False     # the compiled Eq. 1-8 step, then the floor below
+
+        raised = 0
+
+        def reset(self):
+            super().reset()
+            self._dq = collections.deque(maxlen=self.f_total)
+
+        def _reacquired(self, r, rp):
+            if not self.plausibility.enabled or self.last_terms is None:
+                return r
+            rb, rk, rt = self.last_terms
+            self._dq.append(np.minimum(rb, rk))
+            now = self._gauss[len(self._dq)] @ np.asarray(self._dq)
+            np.minimum(now, rt, out=now)
+            out = np.maximum(r, now)
+            if rp is not None:
+                np.minimum(out, rp, out=out)
+            np.clip(out, 0.0, 1.0, out=out)
+            self.raised += int((out > r).any())    # the floor held a re-acquired joint up
+            self.reliability = out
+            return out
+
+    s = SensorModel(None, seed=4).corrupt(toy_clip(), scenario, seed=4)
+    assert (s.tracking_state != TRACKED).any(axis=1).sum() >= 10   # joints lost and found
+    for compiled in ((True, False) if jit.enabled() else (False,)):
+        a, b = ReliabilityEstimator(), DequeWindow()
+        a._jit = a.plausibility._jit = b._jit = b.plausibility._jit = compiled
+        for p, ts in zip(s.positions, s.tracking_state):
+            ra, rb_ = a.update(p, ts), b.update(p, ts)
+            assert ra.tobytes() == rb_.tobytes()
+        assert a._bk_n[0] == a.f_total        # the window filled and shifted
+        assert b.raised >= 5                   # ... and the floor mattered
