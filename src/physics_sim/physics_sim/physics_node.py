@@ -92,9 +92,12 @@ class PhysicsNodeConfig:
     output_rate: float = param(30.0, 'simulation tick and output rate (Hz)', range=(1.0, 240.0),
                                read_only=True)
     input_depth: int = param(
-        1, 'input queue depth: 1 = the character always tracks the newest target (when ticks '
-        'fall behind the input, stale targets are skipped, not queued); more = every target is '
-        'applied, at the cost of latency under load', range=(1, 100), read_only=True, public=False)
+        3, 'input queue depth: the targets that bunched up behind a stall (a loaded machine) are '
+        'each simulated for their own frame time and published, up to this many (3: a stall of '
+        '3 frames loses none; each extra one costs a tick\'s overhead, ~1 ms of CPU, beside its '
+        'own frame\'s steps); when ticks fall behind for good, the character lags its input by '
+        'at most this many frames. 1 = only the newest waiting target is taken (stale ones '
+        'skipped)', range=(1, 100), read_only=True, public=False)
     sync_to_input: bool = param(
         True, 'tick as soon as a target arrives (phase-locked to the sensor: the output leaves '
         'right after its input instead of up to one period later); the timer keeps the output '
