@@ -65,7 +65,8 @@ class TickScheduler:
         self.period = 1.0 / rate_hz
         self.sync = bool(sync_to_input)
         self.clock = clock
-        # ticks of each kind and the time they simulated (s), since construction (not reset)
+        # ticks of each kind and the time they simulated (s), since construction (not reset);
+        # timer ticks once an input has ticked (a timer tick beside the input is an extra publish)
         self.ticks = {k: 0 for k in TICK_KINDS}
         self.simulated = {k: 0.0 for k in TICK_KINDS}
         self.reset()
@@ -158,8 +159,9 @@ class TickScheduler:
             dt = self.period
         if self.sync and not self._input_tick and self.last_input_stamp is not None:
             self.timer_time += dt   # a timer tick while input is expected: owed by the next
-        self.ticks[self._kind] += 1
-        self.simulated[self._kind] += dt
+        if self._kind != 'timer' or self.last_input_stamp is not None:   # (not before any input)
+            self.ticks[self._kind] += 1
+            self.simulated[self._kind] += dt
         self._input_tick = False
         self._kind = 'timer'
         self.last_tick = now
