@@ -94,8 +94,8 @@ class PhysicsNodeConfig:
     input_depth: int = param(
         3, 'input queue depth: the targets that bunched up behind a stall (a loaded machine) are '
         'each simulated for their own frame time and published, up to this many (3: a stall of '
-        '3 frames loses none; each extra one costs a tick\'s overhead, ~1 ms of CPU, beside its '
-        'own frame\'s steps); when ticks fall behind for good, the character lags its input by '
+        '3 frames loses none; each costs its own steps plus a tick\'s publish, see docs/physics.md); '
+        'when ticks fall behind for good, the character lags its input by '
         'at most this many frames. 1 = only the newest waiting target is taken (stale ones '
         'skipped)', range=(1, 100), read_only=True, public=False)
     sync_to_input: bool = param(
