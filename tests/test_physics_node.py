@@ -187,7 +187,7 @@ def test_characters_leave_when_the_input_stops_altogether(graph):
         time.sleep(1 / 30)
     assert _wait(lambda: 3 in node.sim.characters, 10)
     # the last target again, and an older one: dropped where they arrive, counted
-    # (input_depth 1 may skip stale messages: one at a time, each waited for)
+    # (one at a time, each waited for: none skipped behind a slow tick)
     time.sleep(0.2)
     last = node._user_stamp[3]
     pub.publish(_msg(clip(10)[-1], last, uid=3))
@@ -224,7 +224,8 @@ def test_ticks_follow_the_input_but_keep_the_output_rate(graph, monkeypatch):
     clock = _Clock()
     import types
     monkeypatch.setattr(pn, 'time', types.SimpleNamespace(monotonic=clock,
-                                                          perf_counter=time.perf_counter))
+                                                          perf_counter=time.perf_counter,
+                                                          thread_time=time.thread_time))
     monkeypatch.setattr(node.scheduler, 'clock', clock)   # the scheduler's injected clock
     ticks = []
     real_tick = node._tick
@@ -248,8 +249,8 @@ def test_ticks_follow_the_input_but_keep_the_output_rate(graph, monkeypatch):
         node._on_input(serialize_message(_msg(clip(1)[0], 6_000_000_000 + i * 16_666_667)))
     assert 28 <= len(ticks) <= 41              # one-shot timer, which fires in real time here)
     del ticks[:]
-    clock.t += period
-    node._on_timer()                           # input stopped: the timer ticks, at the output rate
+    clock.t += 1.5 * period                    # input stopped (for longer than its jitter):
+    node._on_timer()                           # the timer ticks, at the output rate
     node._on_timer()
     assert len(ticks) == 2
     # each tick simulated the clock time since the previous one
@@ -262,13 +263,22 @@ def test_ticks_follow_the_input_but_keep_the_output_rate(graph, monkeypatch):
     assert len(ticks) == 10
 
 
-def test_a_slow_tick_skips_stale_targets_instead_of_queueing_them(graph, monkeypatch):
-    """input_depth 1 (default): targets that arrive while a tick runs are not queued, only the
-    newest one is taken next — the character never lags behind a backlog."""
+def test_targets_bunched_behind_a_stall_are_each_published_up_to_the_input_depth(
+        graph, monkeypatch):
+    """A stall (one tick far slower than the input: a loaded machine) with 8 targets sent
+    meanwhile: the newest input_depth (3, default) of them waited in the queue and each is
+    simulated and published with its stamp; the older ones were skipped (a backlog is never
+    longer than the input depth), and the character ends at the newest."""
     node, peer = graph
-    assert node.params['input_depth'] == 1
+    depth = node.params['input_depth']
+    assert depth == 3
+    got = []
+    peer.create_subscription(SkeletonArray, '/character/skeletons',
+                             lambda m: got.extend(f.stamp_ns for f in frames_from_array_msg(m)),
+                             50)
     pub = peer.create_publisher(SkeletonArray, '/test_physics/in', 10)
     assert _wait(lambda: pub.get_subscription_count() >= 1, 10.0)
+    assert _wait(lambda: node.pub.get_subscription_count() >= 1, 10.0)
     ticks = []
     real_tick = node._tick
 
@@ -284,14 +294,18 @@ def test_a_slow_tick_skips_stale_targets_instead_of_queueing_them(graph, monkeyp
     received = node.health.snapshot().get('received', 0)
     pub.publish(_msg(p, 7_000_000_000))
     assert _wait(lambda: len(ticks) == 1, 5.0)
-    for i in range(1, 9):                 # 8 targets while the first tick is still running
-        pub.publish(_msg(p, 7_000_000_000 + i * 33_333_333))
+    stamps = [7_000_000_000 + i * 33_333_333 for i in range(1, 9)]
+    for st in stamps:                     # 8 targets while the first tick is still running
+        pub.publish(_msg(p, st))
         time.sleep(0.03)
-    time.sleep(1.0)
+    newest = stamps[-depth:]
+    assert _wait(lambda: set(newest) <= set(got), 5.0), (newest, got)
+    time.sleep(0.3)
     taken = node.health.snapshot().get('received', 0) - received
-    assert 2 <= taken <= 3, taken   # the first, the newest (and at most one in flight), not 9
-    st = node.sim.states()[4]
-    assert st.stamp_ns == 7_000_000_000 + 8 * 33_333_333
+    # the first, the newest input_depth (and at most one in flight when the stall began)
+    assert depth + 1 <= taken <= depth + 2, taken
+    assert all(got.count(st) == 1 for st in newest), got   # each published once
+    assert node.sim.states()[4].stamp_ns == stamps[-1]
 
 
 def test_a_frame_arriving_in_a_burst_is_simulated_not_dropped(graph, monkeypatch):

@@ -244,7 +244,9 @@ def _physics_figures(diagnostics: Dict[str, Dict[str, str]]) -> Dict[str, float]
     """The physics node's real-time factor, characters and worlds from its diagnostics."""
     kv = diagnostics.get('physics', {})
     out = {}
-    for key in ('real_time_factor', 'characters', 'worlds', 'sim_regroups'):
+    for key in ('real_time_factor', 'characters', 'worlds', 'sim_regroups', 'ticks_input',
+                'ticks_deferred', 'ticks_timer', 'tick_cpu_ms', 'tick_cpu_ms_outside_steps',
+                'input_cpu_ms'):
         try:
             out[key] = float(kv[key])
         except (KeyError, ValueError):
@@ -603,13 +605,21 @@ def to_markdown(results: List[Dict], bag_speed: Dict, commit: str) -> str:
     if phys:
         lines += ['', 'Physics node (its /diagnostics): real-time factor = simulated s per wall s '
                   'spent stepping (every character advances at that rate); worlds = MuJoCo models '
-                  'the characters were split into at the end; regroups = merges and splits.', '',
-                  '| mode | users | characters | worlds | regroups | real-time factor |',
-                  '|---|---:|---:|---:|---:|---:|']
+                  'the characters were split into at the end; regroups = merges and splits; '
+                  'ticks input/deferred/timer since the start (physics_sim.scheduler: a timer '
+                  'tick beside a steady input is an extra publish); CPU per tick (thread time) '
+                  'and of it outside the physics steps.', '',
+                  '| mode | users | characters | worlds | regroups | real-time factor | '
+                  'ticks input/deferred/timer | tick CPU ms (outside steps) |',
+                  '|---|---:|---:|---:|---:|---:|---|---|']
         for r, p in phys:
             rtf, n = p.get('real_time_factor', float('nan')), p.get('characters', 0)
+            ticks = '/'.join(f"{p[k]:.0f}" if k in p else '-' for k in
+                             ('ticks_input', 'ticks_deferred', 'ticks_timer'))
+            cpu = (f"{p['tick_cpu_ms']:.1f} ({p.get('tick_cpu_ms_outside_steps', 0):.1f})"
+                   if 'tick_cpu_ms' in p else '-')
             lines.append(f"| {_label(r)} | {r['users']} | {n:.0f} | {p.get('worlds', '-')} | "
-                         f"{p.get('sim_regroups', '-')} | {rtf:.1f} |")
+                         f"{p.get('sim_regroups', '-')} | {rtf:.1f} | {ticks} | {cpu} |")
     lines += ['', f"NaN outputs: {sum(r['nan_outputs'] for r in results)}", '']
     for tag, b in (('no physics', bag_speed), ('--physics', (bag_speed or {}).get('physics', {}))):
         if 'x_real_time' in b:

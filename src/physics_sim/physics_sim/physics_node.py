@@ -92,9 +92,12 @@ class PhysicsNodeConfig:
     output_rate: float = param(30.0, 'simulation tick and output rate (Hz)', range=(1.0, 240.0),
                                read_only=True)
     input_depth: int = param(
-        1, 'input queue depth: 1 = the character always tracks the newest target (when ticks '
-        'fall behind the input, stale targets are skipped, not queued); more = every target is '
-        'applied, at the cost of latency under load', range=(1, 100), read_only=True, public=False)
+        3, 'input queue depth: the targets that bunched up behind a stall (a loaded machine) are '
+        'each simulated for their own frame time and published, up to this many (3: a stall of '
+        '3 frames loses none; each costs its own steps plus a tick\'s publish, see docs/physics.md); '
+        'when ticks fall behind for good, the character lags its input by '
+        'at most this many frames. 1 = only the newest waiting target is taken (stale ones '
+        'skipped)', range=(1, 100), read_only=True, public=False)
     sync_to_input: bool = param(
         True, 'tick as soon as a target arrives (phase-locked to the sensor: the output leaves '
         'right after its input instead of up to one period later); the timer keeps the output '
@@ -194,6 +197,9 @@ class PhysicsNode(ManagedNode):
         self._mace_given = False
         self._wall_in_step = 0.0
         self._sim_in_step = 0.0
+        # CPU (this thread's) in the ticks and in their physics steps, and in taking targets (s)
+        self._cpu = {'tick': 0.0, 'step': 0.0, 'input': 0.0}
+        self._inputs_taken = 0
         self.pub = self.publisher(SkeletonArray, v['output_topic'], 10)
         self.obj_pub = self.publisher(MarkerArray, v['objects_topic'], 10)
         self._robots = CharacterRobots()
@@ -271,6 +277,19 @@ class PhysicsNode(ManagedNode):
         out['user_states'] = len(self._user_ids())
         if self._wall_in_step > 0:
             out['real_time_factor'] = self._sim_in_step / self._wall_in_step
+        # ticks by kind (physics_sim.scheduler) with the time they simulated, and the CPU per
+        # tick beside its steps (decoding, publishing: what each extra tick costs)
+        sched = self.scheduler
+        for kind, n in sched.ticks.items():
+            out[f'ticks_{kind}'] = n
+            out[f'simulated_s_{kind}'] = round(sched.simulated[kind], 3)
+        ticks = sum(sched.ticks.values())
+        if ticks:
+            out['tick_cpu_ms'] = round(1e3 * self._cpu['tick'] / ticks, 3)
+            out['tick_cpu_ms_outside_steps'] = round(
+                1e3 * (self._cpu['tick'] - self._cpu['step']) / ticks, 3)
+        if self._inputs_taken:
+            out['input_cpu_ms'] = round(1e3 * self._cpu['input'] / self._inputs_taken, 3)
         return out
 
     def _user_ids(self) -> set:
@@ -288,7 +307,12 @@ class PhysicsNode(ManagedNode):
 
     def _on_input(self, data: bytes) -> None:
         self.health.on_receive()
+        c0 = time.thread_time()
+        tick_cpu = self._cpu['tick']
         self._take_input(data)
+        # the input's own CPU: without the tick it may have run
+        self._cpu['input'] += time.thread_time() - c0 - (self._cpu['tick'] - tick_cpu)
+        self._inputs_taken += 1
 
     def _release_held(self) -> None:
         """TF changed: the input held for want of it, in the order it came."""
@@ -401,17 +425,20 @@ class PhysicsNode(ManagedNode):
     def _tick(self, dt: Optional[float] = None) -> None:
         """Advance and publish; ``dt``: the simulated time (s), else the scheduler's."""
         now = time.monotonic()
+        c0 = time.thread_time()
         dt = self.scheduler.tick_time(dt)
         self._expire(now)
         # whole physics steps; the remainder is carried to the next tick (sim time = wall time)
         ts = self.params['timestep']
         steps = self.scheduler.steps(dt, ts)
         if steps:
-            t0 = time.perf_counter()
+            t0, c1 = time.perf_counter(), time.thread_time()
             self.sim.advance(steps * ts)
             self._wall_in_step = 0.9 * self._wall_in_step + 0.1 * (time.perf_counter() - t0)
             self._sim_in_step = 0.9 * self._sim_in_step + 0.1 * steps * ts
+            self._cpu['step'] += time.thread_time() - c1
         self._publish()
+        self._cpu['tick'] += time.thread_time() - c0
 
     def _sensor_pose(self, frame: str) -> str:
         """Take the sensor's pose (world <- ``frame``) from TF; '' when it did, else why not."""

@@ -14,6 +14,13 @@ fallback that keeps the output rate when the input is slower or stops.
 * A timer tick (no input tick for a period) simulates the wall time since the last tick, bounded
   to [0.5, 1.5] periods: an overloaded machine gets a slower simulation at a kept output rate, not
   ever longer (costlier) ticks. Without ``sync_to_input`` every tick is one period.
+* An input at the output rate (its frames at most ``ON_RATE`` periods apart by their stamps) is
+  waited for ``MAX_TICK`` periods, not one, before the timer ticks: its arrival jitters by a few ms
+  (two sensors fused, the reconstruction's varying time), and a timer firing just over a period
+  after one input tick, a moment before the next input, would tick the simulation twice for one
+  frame (two publishes, the second queued behind the first). A slower input (frames further
+  apart) keeps the one-period wait, so the timer fills in at the output rate; an input that stops
+  is taken over after at most ``MAX_TICK`` periods plus one timer period.
 * The input's time is simulated once: what timer ticks simulated since the last input tick (input
   late, not stopped: a loaded machine) is taken off the next input tick's frame time (down to 0:
   that tick publishes the new target's stamp without stepping). Otherwise a late frame's time
@@ -32,6 +39,9 @@ from typing import Callable, Optional
 MIN_TICK = 0.5      # shorter ticks would publish nearly the same state again
 MAX_TICK = 1.5      # longer ones cost more than a period of compute: the node would fall behind
 DEFER_AFTER = 0.75  # a target closer than this (periods) to the last input tick waits for it
+ON_RATE = 1.25      # frames at most this far apart (periods, by stamp): an input at the output
+#                     rate, whose arrival jitter the timer allows for (it waits MAX_TICK periods)
+TICK_KINDS = ('input', 'deferred', 'timer')
 # a stamp this far (s) before the last input tick's is a bag loop or a restarted sensor: ticked
 STAMP_JUMP_S = 1.0
 
@@ -55,6 +65,10 @@ class TickScheduler:
         self.period = 1.0 / rate_hz
         self.sync = bool(sync_to_input)
         self.clock = clock
+        # ticks of each kind and the time they simulated (s), since construction (not reset);
+        # timer ticks once an input has ticked (a timer tick beside the input is an extra publish)
+        self.ticks = {k: 0 for k in TICK_KINDS}
+        self.simulated = {k: 0.0 for k in TICK_KINDS}
         self.reset()
 
     def reset(self) -> None:
@@ -66,6 +80,8 @@ class TickScheduler:
         self.time_debt = 0.0
         self.timer_time = 0.0       # simulated by timer ticks since the last input tick (s)
         self._input_tick = False    # the next tick_time is an input (or deferred) tick's
+        self._kind = 'timer'        # ... and which (counted)
+        self.input_gap: Optional[float] = None   # stamp gap (s) of the last input tick's frame
 
     def _bounded(self, dt: float) -> float:
         return min(max(dt, MIN_TICK * self.period), MAX_TICK * self.period)
@@ -82,6 +98,8 @@ class TickScheduler:
             self.last_input_tick = now
             self.last_input_stamp = stamp_s
             self._input_tick = True
+            self._kind = 'input'
+            self.input_gap = None if last is None else stamp_s - last
             return InputDecision('tick', None if last is None
                                  else self._input_time(stamp_s - last))
         self.pending_stamp = stamp_s if self.pending_stamp is None else max(self.pending_stamp,
@@ -97,10 +115,12 @@ class TickScheduler:
         deferred; None when there is none: the wall time)."""
         self.deferred = False
         self.last_input_tick = self.clock()
+        self._kind = 'deferred'
         stamp, self.pending_stamp = self.pending_stamp, None
         if stamp is None or self.last_input_stamp is None:
             return None
-        dt = self._input_time(stamp - self.last_input_stamp)
+        self.input_gap = stamp - self.last_input_stamp
+        dt = self._input_time(self.input_gap)
         self.last_input_stamp = stamp
         return dt
 
@@ -120,9 +140,14 @@ class TickScheduler:
         return frame_time - owed
 
     def timer_due(self) -> bool:
-        """The timer fired: tick unless input ticked less than a period ago."""
-        return not (self.sync and self.last_input_tick is not None
-                    and self.clock() - self.last_input_tick < self.period)
+        """The timer fired: tick unless input ticked less than a period ago (``MAX_TICK`` periods
+        for an input at the output rate: its arrival jitter is no reason to tick)."""
+        if not self.sync or self.last_input_tick is None:
+            return True
+        wait = self.period
+        if self.input_gap is not None and 0 <= self.input_gap <= ON_RATE * self.period:
+            wait = MAX_TICK * self.period
+        return self.clock() - self.last_input_tick >= wait - 1e-9
 
     def tick_time(self, dt: Optional[float] = None) -> float:
         """A tick happens now: its simulated time (``dt``, else the bounded wall time since the
@@ -134,7 +159,11 @@ class TickScheduler:
             dt = self.period
         if self.sync and not self._input_tick and self.last_input_stamp is not None:
             self.timer_time += dt   # a timer tick while input is expected: owed by the next
+        if self._kind != 'timer' or self.last_input_stamp is not None:   # (not before any input)
+            self.ticks[self._kind] += 1
+            self.simulated[self._kind] += dt
         self._input_tick = False
+        self._kind = 'timer'
         self.last_tick = now
         return dt
 
