@@ -127,13 +127,17 @@ class TickScheduler:
     def _input_time(self, stamp_gap: float) -> float:
         """An input tick's simulated time: its frame time (bounded) less what timer ticks
         simulated of it; what they simulated beyond it is owed by the next input tick (at most
-        one period). After a gap in the input (stamps more than MAX_TICK periods apart) nothing
-        is owed: the timer simulated the gap."""
+        one period). After a gap in the input (stamps more than MAX_TICK periods apart: frames
+        lost, or the input stopped) the timer simulated the gap: the tick simulates what it did
+        not (at most MAX_TICK periods) and nothing is carried. A stamp going back (a bag loop)
+        simulates one bounded frame time."""
         frame_time = self._bounded(stamp_gap)
         owed, self.timer_time = self.timer_time, 0.0
         self._input_tick = True
-        if stamp_gap > MAX_TICK * self.period or stamp_gap < 0:
+        if stamp_gap < 0:
             return frame_time
+        if stamp_gap > MAX_TICK * self.period:
+            return min(max(stamp_gap - owed, 0.0), MAX_TICK * self.period)
         if owed > frame_time:
             self.timer_time = min(owed - frame_time, self.period)
             return 0.0

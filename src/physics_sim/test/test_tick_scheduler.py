@@ -230,3 +230,18 @@ def test_frames_bunched_after_a_stall_tick_each_for_their_own_frame_time():
         total += s.tick_time(d.dt)
     assert s.ticks == {'input': 6, 'deferred': 0, 'timer': 1}
     assert total == pytest.approx(5 * P)
+
+
+@pytest.mark.parametrize('lost', [1, 2, 5])
+def test_a_lost_frame_is_simulated_once_by_the_timer_or_the_next_frame(lost):
+    """Frames lost upstream (``lost`` in a row): the timer fills the gap, and the next frame's
+    tick simulates only what the timer did not, so the simulated time follows the input's
+    stamps, not the gap twice."""
+    arrivals, stamps = jittered(60, 0.003)
+    keep = np.ones(60, bool)
+    keep[30:30 + lost] = False
+    for phase in np.linspace(0.0, P, 10, endpoint=False):
+        s, ticks = run(arrivals[keep], stamps[keep], phase=phase, end=arrivals[-1])
+        assert s.ticks['input'] == 60 - lost
+        # the first tick simulates one period; then the stamps' span, within the carried part
+        assert sum(s.simulated.values()) == pytest.approx(60 * P, abs=0.5 * P), (phase, lost)
