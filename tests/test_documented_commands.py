@@ -231,7 +231,8 @@ MAKE_RUNS = {
     'lint': ['tests/test_lint.py::test_the_tree_passes_ruff'],
     'params': ['tests/test_param_docs.py::test_check_command_fails_on_a_stale_file'],
     'setup': [('scripts/run-tests.sh', 'scripts/setup.sh'),
-              'tests/test_warm_kernels.py::test_warm_kernels_runs'],
+              'tests/test_warm_kernels.py::test_warm_kernels_runs',
+              'tests/test_bytecode.py::test_workspace_has_no_uncompiled_module_after_compile'],
     'test': [('.ci/run', 'make test')],
     'warm-kernels': ['tests/test_warm_kernels.py::test_warm_kernels_runs'],
 }
