@@ -22,13 +22,9 @@ help:
 	@echo "                docs/launch_arguments.md, docs/commands.md) from the declarations"
 	@echo "make docs       build the documentation site (MkDocs, strict: links, anchors, navigation) into out/site/"
 
-# warm_kernels writes bytecode and numba caches into src/*/*/__pycache__, directories that
-# setup.sh's colcon stamp lists: the second setup.sh records them (a rebuild here, at most once,
-# instead of at the first make demo or ros2 launch through scripts/run.sh)
 setup:
 	@scripts/setup.sh
 	@$(RUN) python -m kinect_bringup.warm_kernels
-	@scripts/setup.sh
 
 # the numba kernels compiled into their on-disk cache (seconds when they already are), so that no
 # node of the graph compiles at its first start

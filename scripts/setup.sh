@@ -105,7 +105,8 @@ src_stamp="$( (cat third_party/hri_msgs/SHA256SUMS; echo "${msg_src[*]}"; \
       find src -type f \( -name package.xml -o -name setup.py -o -name setup.cfg \
       -o -name CMakeLists.txt -o -name '*.msg' -o -name '*.srv' -o -name '*.launch.py' -o -name '*.yaml' \
       -o -name '*.rviz' \) -print0 | sort -z | xargs -0 sha256sum; \
-      find src -maxdepth 3 -type d -print | sort; ls launch config 2>/dev/null; \
+      find src -maxdepth 3 -type d -name __pycache__ -prune -o -type d -print | sort; \
+      ls -I __pycache__ launch config 2>/dev/null; \
       echo "${underlay:-wheels}") | sha256sum | cut -c1-16)"
 if [ ! -f "$_kp_install/.kp-stamp" ] || [ "$(cat "$_kp_install/.kp-stamp")" != "$src_stamp" ]; then
   log "colcon build (${_kp_install#"$root"/})"
