@@ -82,14 +82,13 @@ class Reading:
 
 def measure(runs: int = RUNS, work: Callable[[], int] = workload,
             nominal_ms: float = NOMINAL_MS, checksum: int = None) -> Reading:
-    """Run ``work`` ``runs`` times (after one untimed run that warms caches and imports) and read
-    the median thread CPU time against ``nominal_ms``. ``checksum``: what ``work`` must return
+    """Run ``work`` ``runs`` times and read the median thread CPU time against ``nominal_ms``
+    (the median: a first run slowed by cold caches does not move it). ``checksum``: what ``work`` must return
     (default: the reference workload's own); a different result raises (the work changed)."""
     if runs < 1:
         raise ValueError(f'runs must be >= 1, got {runs}')
     expect = (CHECKSUM if work is workload else None) if checksum is None else checksum
     t0 = time.monotonic()
-    work()
     cpu, wall = [], []
     for _ in range(runs):
         w0, c0 = time.perf_counter(), time.thread_time()
