@@ -138,6 +138,20 @@ def run_figures(bench_json: Dict) -> Dict[str, Dict[str, float]]:
     return out
 
 
+def at_nominal_speed(figures: Dict[str, Dict[str, float]], factor: float
+                     ) -> Dict[str, Dict[str, float]]:
+    """``figures`` with every ``cpu_ms_per_frame.*`` also divided by the machine speed factor of
+    its run (the mean of the gauge before and after it), as ``cpu_ms_per_frame_x1.*``: the CPU
+    time per frame the machine would have spent at its nominal speed. A run in a slow minute
+    then does not read as a regression (the physics' CPU per frame varied with the host's speed
+    by a coefficient of variation of 19 %, 8 % once divided; speed_gauge --beside-physics)."""
+    if not (factor > 0 and factor < float('inf')):
+        return figures
+    return {case: {**fig, **{k.replace('cpu_ms_per_frame.', 'cpu_ms_per_frame_x1.', 1): v / factor
+                             for k, v in fig.items() if k.startswith('cpu_ms_per_frame.')}}
+            for case, fig in figures.items()}
+
+
 @dataclass
 class Comparison:
     """Per case and figure: A's and B's values in run order, and B / A per alternation."""
@@ -471,11 +485,12 @@ def run_ab(root: Path, ref: str, case_args: Sequence[str], alternations: int, ou
             after = gauge()
             fastest = min(fastest, after.factor)
             loads[-1].update(speed_after=after.factor, gauge_after=after.as_dict())
+            speed = (sp.reading.factor + after.factor) / 2
             path = run_out / 'bench.json'
             if res.returncode != 0 or not path.is_file():
                 raise RuntimeError(f'the {"reference" if side == "a" else "new"} bench failed '
                                    f'(exit {res.returncode}): {out / f"{i + 1}{side}.log"}')
-            cmp.add(side, run_figures(json.loads(path.read_text())))
+            cmp.add(side, at_nominal_speed(run_figures(json.loads(path.read_text())), speed))
     md = to_markdown(cmp, ref, sha[:12], head + (' + uncommitted changes' if dirty else ''),
                      loads, valid, max_busy, args_line, max_speed_change)
     bad = regressions(cmp.rows(), fail_ratio) if fail_ratio else []

@@ -194,6 +194,12 @@ def test_a_run_in_a_slower_minute_than_the_comparison_so_far_is_refused(monkeypa
     assert 'NOT VALID' not in md
     loads = json.loads((tmp_path / 'out' / 'ab.json').read_text())['loads']
     assert [ld['speed_before'] for ld in loads] == [1.0, 1.2, 1.1, 1.0]
+    # the CPU per frame at nominal speed: each run's divided by the mean of its two readings
+    row = next(r for r in json.loads((tmp_path / 'out' / 'ab.json').read_text())['rows']
+               if r['figure'] == 'cpu_ms_per_frame_x1.graph')
+    raw = ab.run_figures(_bench_json(10.0, 20.0))['processes 6u 1s']['cpu_ms_per_frame.graph']
+    assert row['a'] == pytest.approx([raw / 1.05, raw / 1.05])
+    assert row['b'] == pytest.approx([raw / 1.2, raw / 1.0])
     # off (0): a slow minute is only reported; the alternation whose A and B differ is named
     gauge = _fake_ab(monkeypatch, tmp_path, [1.0, 1.0, 1.6, 1.6])
     rc = ab.run_ab(tmp_path, 'HEAD^', [], 1, tmp_path / 'out', speed_wait_s=0.0, gauge=gauge,
@@ -208,3 +214,15 @@ def test_uneven_alternations():
              {'speed_before': 1.0, 'speed_after': 1.0}, {'speed_before': 1.5, 'speed_after': 1.4},
              {}, {}]   # an older report without the gauge
     assert [(n, round(s, 2)) for n, s in ab.uneven(loads, 1.25)] == [(2, 1.5)]
+
+
+def test_cpu_per_frame_at_nominal_speed():
+    fig = ab.run_figures(_bench_json(20.0, 30.0, cpu=(30.0, 60.0)))
+    adj = ab.at_nominal_speed(fig, 1.5)['processes 6u 1s']
+    # 30 % of a core at 30 frames/s = 10 ms per frame; read at x1.5: 6.67 ms at nominal speed
+    assert adj['cpu_ms_per_frame_x1.reconstruction'] == pytest.approx(10.0 / 1.5)
+    assert adj['cpu_ms_per_frame.reconstruction'] == pytest.approx(10.0)   # kept as measured
+    assert adj['cpu_ms_per_frame_x1.graph'] == pytest.approx(fig['processes 6u 1s']
+                                                            ['cpu_ms_per_frame.graph'] / 1.5)
+    assert 'cpu_x1.graph' not in adj and 'cpu_ms_per_frame_x1.graph' not in fig['processes 6u 1s']
+    assert ab.at_nominal_speed(fig, float('nan')) == fig   # no reading: nothing added
