@@ -2,7 +2,6 @@
 positive finite reading against the nominal time, twice the work reads about twice as slow, and
 the bench's guard waits for a fast minute then refuses."""
 import math
-import statistics
 
 import pytest
 
@@ -30,12 +29,13 @@ def test_a_reading_is_a_positive_finite_factor_against_the_nominal_time():
 def test_twice_the_work_reads_about_twice_as_slow():
     def twice():
         return sg.workload() + sg.workload()
-    # interleaved, so a slow minute of the shared machine lands on both
+    # interleaved, and the fastest reading of each: this host's speed can change from one second
+    # to the next, and each side's fastest reading is most likely taken at the fast speed
     single, double = [], []
-    for _ in range(3):
-        single.append(sg.measure(1).factor)
-        double.append(sg.measure(1, work=twice, checksum=2 * sg.CHECKSUM).factor)
-    assert 1.5 < statistics.median(double) / statistics.median(single) < 2.7
+    for _ in range(4):
+        single.append(sg.measure(3).factor)
+        double.append(sg.measure(3, work=twice, checksum=2 * sg.CHECKSUM).factor)
+    assert 1.5 < min(double) / min(single) < 2.7
 
 
 def test_the_guard_waits_for_a_fast_minute_then_refuses():
