@@ -7,7 +7,8 @@
 # (kinect_experiments.ab.regressions). Not a timed test: one slow run of a shared machine cannot
 # fail it. It says so and passes when it cannot judge: no HEAD^ in the clone (a shallow clone:
 # fetch with depth >= 2), the same source tree as HEAD^, or a machine busy before a run
-# (the load guard, after waiting up to 60 s). About 2-3 minutes (+ the reference's first build).
+# (the load guard, after waiting up to 60 s) or slower than the runs already taken (the speed
+# guard, likewise). About 2-3 minutes (+ the reference's first build).
 #   scripts/bench-guard.sh            KP_BENCH_REF=<commit> scripts/bench-guard.sh
 set -uo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -23,12 +24,13 @@ if [ "$(git rev-parse "$ref^{tree}")" = "$(git rev-parse 'HEAD^{tree}')" ] && gi
   exit 0
 fi
 scripts/run.sh ros2 run kinect_experiments bench --against "$ref" --users 2 --seconds 5 \
-  --warmup 3 --alternations 3 --fail-ratio 1.5 --load-wait 60 --out "$root/out/bench-guard"
+  --warmup 3 --alternations 3 --fail-ratio 1.5 --load-wait 60 --slow-wait 60 \
+  --out "$root/out/bench-guard"
 rc=$?
 case $rc in
   0) say "passed: no output or CPU regression against $ref (out/bench-guard/ab.md)" ;;
   1) say "FAILED: a regression against $ref in every alternation (out/bench-guard/ab.md)"; exit 1 ;;
-  3) say "skipped: the machine was busy (the load guard refused; nothing judged)" ;;
+  3) say "skipped: the machine was busy or its speed changed (the load or speed guard refused; nothing judged)" ;;
   *) say "not judged: the comparison did not run (exit $rc; out/bench-guard/*.log)" ;;
 esac
 exit 0

@@ -1,7 +1,10 @@
 """``bench --against REF``: the same benchmark case run on this tree (B) and on commit ``REF``
 (A) built beside it, alternated in one invocation (A B A B ...), with the ratio B / A per output
 (p50, p95, dropped) and per process (CPU), and a load guard: a run starts only on a quiet
-machine, else the comparison is refused (or, with ``--ignore-load``, printed as NOT VALID).
+machine, else the comparison is refused (or, with ``--ignore-load``, printed as NOT VALID);
+likewise a speed guard: the machine speed gauge (``speed_gauge``) is read before and after
+every run, and a run starts only while the machine is within ``MAX_SPEED_CHANGE`` of the
+fastest reading of the comparison.
 
     ros2 run kinect_experiments bench --against 819729f --users 6 --sensors 1
     ros2 run kinect_experiments bench --against            # HEAD^ (the previous landed commit)
@@ -26,6 +29,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Dict, List, Optional, Sequence, Tuple
 
+from . import speed_gauge
+
 # The load guard: the share of the machine's CPU (all cores) busy in the seconds before a run,
 # measured from /proc/stat (not the 1-minute load average, which still remembers the previous
 # run of this very comparison for a minute). Above it, other jobs would move the figures more
@@ -43,6 +48,13 @@ METRICS = ('p50_ms', 'p95_ms', 'dropped')
 FAIL_RATIO = 1.5
 FAIL_MIN_MS = 5.0
 FAIL_MIN_CPU = 10.0
+# The speed guard: the machine speed gauge (speed_gauge) read before and after every run. A run
+# starts only while the machine is at most this much slower than the fastest reading of this
+# comparison so far: B / A compares two runs, and is honest only when both ran at about the same
+# speed (this VM's speed swings up to 2x from one minute to the next, unseen by the load guard).
+# Relative, not against the nominal: a steadily slower machine compares its A and B fairly, and
+# an absolute threshold (``--max-slow``, off by default) would refuse it for being itself.
+MAX_SPEED_CHANGE = 1.25
 
 
 # ---------------------------------------------------------------------------- the load guard
@@ -126,6 +138,20 @@ def run_figures(bench_json: Dict) -> Dict[str, Dict[str, float]]:
     return out
 
 
+def at_nominal_speed(figures: Dict[str, Dict[str, float]], factor: float
+                     ) -> Dict[str, Dict[str, float]]:
+    """``figures`` with every ``cpu_ms_per_frame.*`` also divided by the machine speed factor of
+    its run (the mean of the gauge before and after it), as ``cpu_ms_per_frame_x1.*``: the CPU
+    time per frame the machine would have spent at its nominal speed. A run in a slow minute
+    then does not read as a regression (the physics' CPU per frame varied with the host's speed
+    by a coefficient of variation of 19 %, 8 % once divided; speed_gauge --beside-physics)."""
+    if not (factor > 0 and factor < float('inf')):
+        return figures
+    return {case: {**fig, **{k.replace('cpu_ms_per_frame.', 'cpu_ms_per_frame_x1.', 1): v / factor
+                             for k, v in fig.items() if k.startswith('cpu_ms_per_frame.')}}
+            for case, fig in figures.items()}
+
+
 @dataclass
 class Comparison:
     """Per case and figure: A's and B's values in run order, and B / A per alternation."""
@@ -180,8 +206,21 @@ def regressions(rows: List[Dict], fail_ratio: float = FAIL_RATIO, min_ms: float 
     return bad
 
 
+def uneven(loads: List[Dict], max_change: float = MAX_SPEED_CHANGE) -> List[Tuple[int, float]]:
+    """The alternations (1-based) whose A and B runs saw machine speeds (before and after each)
+    more than ``max_change`` apart, with that spread: their ratios compare different speeds."""
+    out = []
+    for i in range(0, len(loads) - 1, 2):
+        f = [ld[k] for ld in loads[i:i + 2] for k in ('speed_before', 'speed_after')
+             if ld.get(k)]
+        if len(f) >= 2 and max(f) / min(f) > max_change:
+            out.append((i // 2 + 1, max(f) / min(f)))
+    return out
+
+
 def to_markdown(cmp: Comparison, ref: str, ref_sha: str, head: str, loads: List[Dict],
-                valid: bool, max_busy: float, args_line: str) -> str:
+                valid: bool, max_busy: float, args_line: str,
+                max_speed_change: float = MAX_SPEED_CHANGE) -> str:
     lines = [f'# A/B benchmark: B = this tree ({head}) against A = {ref} ({ref_sha})', '',
              f'Command: `bench {args_line}`. Runs alternated A B A B ...; each figure lists the '
              'runs in order; ratio = B / A of the medians, and per alternation. CPU in % of one '
@@ -190,13 +229,23 @@ def to_markdown(cmp: Comparison, ref: str, ref_sha: str, head: str, loads: List[
              'other jobs.', '']
     if not valid:
         lines += [f'**NOT VALID**: the machine was busier than {100 * max_busy:.0f} % before '
-                  'a run (`--ignore-load`): other jobs moved these figures; compare CPU time '
-                  'per frame only.', '']
-    lines += ['| run | side | machine busy before | load average | waited s |',
-              '|---:|---|---:|---:|---:|']
+                  'a run, or its speed had changed (`--ignore-load`): other jobs or the host '
+                  'moved these figures; compare CPU time per frame only.', '']
+    lines += ['| run | side | machine busy before | load average | waited s | machine speed '
+              'before / after |', '|---:|---|---:|---:|---:|---|']
     for i, ld in enumerate(loads):
+        def x(k, ld=ld):
+            return f'x{ld[k]:.2f}' if ld.get(k) else '-'
         lines.append(f"| {i + 1} | {ld['side'].upper()} | {100 * ld['busy']:.0f} % | "
-                     f"{ld['loadavg']:.2f} | {ld['waited_s']:.0f} |")
+                     f"{ld['loadavg']:.2f} | {ld['waited_s']:.0f} | {x('speed_before')} / "
+                     f"{x('speed_after')} |")
+    if any(ld.get('speed_before') for ld in loads):
+        lines += ['', 'Machine speed: `kinect_experiments.speed_gauge` (CPU time of a fixed '
+                  'workload; x1.00 = nominal, x1.30 = 30 % slower), read right before and after '
+                  'each run, outside it.'
+                  + ''.join(f' Alternation {n}: A and B ran at speeds {spread:.2f}x apart, its '
+                            'ratios compare different machine speeds.'
+                            for n, spread in uneven(loads, max_speed_change or MAX_SPEED_CHANGE))]
     lines += ['', '| case | figure | A runs | B runs | B / A (medians) | B / A per alternation |',
               '|---|---|---|---|---:|---|']
     for r in cmp.rows():
@@ -370,7 +419,9 @@ def _known_options(tree: Path) -> set:
 
 def run_ab(root: Path, ref: str, case_args: Sequence[str], alternations: int, out: Path,
            max_busy: float = MAX_BUSY, wait_s: float = LOAD_WAIT_S, ignore_load: bool = False,
-           fail_ratio: Optional[float] = None, args_line: str = '', log=print) -> int:
+           fail_ratio: Optional[float] = None, args_line: str = '', log=print,
+           max_slow: Optional[float] = None, max_speed_change: Optional[float] = MAX_SPEED_CHANGE,
+           speed_wait_s: float = LOAD_WAIT_S, gauge: Callable = None) -> int:
     """The comparison; exit code 0 (printed), 1 (the guard found a regression), 3 (refused:
     the machine was not quiet)."""
     out = Path(out).resolve()
@@ -383,11 +434,34 @@ def run_ab(root: Path, ref: str, case_args: Sequence[str], alternations: int, ou
     cmp = Comparison()
     loads: List[Dict] = []
     valid = True
+    gauge = gauge or speed_gauge.measure
+    fastest = float('inf')
     for i in range(alternations):
         for side, tree in (('a', tree_a), ('b', root)):
             chk = wait_for_quiet(max_busy, wait_s)
+            # the speed guard after the load guard: within max_speed_change of the fastest
+            # reading of this comparison (and under max_slow, when given)
+            limit = min(max_slow or float('inf'),
+                        max_speed_change * fastest if max_speed_change else float('inf'))
+            sp = speed_gauge.wait_for_speed(limit, speed_wait_s, gauge)
+            fastest = min(fastest, sp.reading.factor)
             loads.append({'side': side, 'busy': chk.busy, 'loadavg': chk.loadavg,
-                          'waited_s': chk.waited_s})
+                          'waited_s': chk.waited_s + sp.waited_s,
+                          'speed_before': sp.reading.factor, 'gauge_before': sp.reading.as_dict()})
+            if chk.ok and not sp.ok:
+                msg = (f'[ab] the machine speed reads x{sp.reading.factor:.2f} (limit '
+                       f'x{limit:.2f}: ' + (f'{max_speed_change:g} x the fastest reading of '
+                                            f'this comparison, x{fastest:.2f}'
+                                            if limit < (max_slow or float('inf')) else
+                                            '--max-slow') + f') after waiting '
+                       f'{sp.waited_s:.0f} s: the host is in a slower minute than the runs '
+                       'already taken, whose ratios would compare different speeds')
+                if not ignore_load:
+                    log(msg + '; refusing to compare (--ignore-load runs anyway, marked NOT '
+                        'VALID)')
+                    return 3
+                log(msg + '; --ignore-load: running, the report is marked NOT VALID')
+                valid = False
             if not chk.ok:
                 msg = (f'[ab] the machine is {100 * chk.busy:.0f} % busy (threshold '
                        f'{100 * max_busy:.0f} %, load average {chk.loadavg:.2f}) after waiting '
@@ -408,13 +482,17 @@ def run_ab(root: Path, ref: str, case_args: Sequence[str], alternations: int, ou
             env = _clean_env(root) if side == 'a' else None
             res = subprocess.run(cmd, env=env, stdout=subprocess.DEVNULL,
                                  stderr=open(out / f'{i + 1}{side}.log', 'w'))
+            after = gauge()
+            fastest = min(fastest, after.factor)
+            loads[-1].update(speed_after=after.factor, gauge_after=after.as_dict())
+            speed = (sp.reading.factor + after.factor) / 2
             path = run_out / 'bench.json'
             if res.returncode != 0 or not path.is_file():
                 raise RuntimeError(f'the {"reference" if side == "a" else "new"} bench failed '
                                    f'(exit {res.returncode}): {out / f"{i + 1}{side}.log"}')
-            cmp.add(side, run_figures(json.loads(path.read_text())))
+            cmp.add(side, at_nominal_speed(run_figures(json.loads(path.read_text())), speed))
     md = to_markdown(cmp, ref, sha[:12], head + (' + uncommitted changes' if dirty else ''),
-                     loads, valid, max_busy, args_line)
+                     loads, valid, max_busy, args_line, max_speed_change)
     bad = regressions(cmp.rows(), fail_ratio) if fail_ratio else []
     if fail_ratio:
         md += (f'\nGuard (ratio > {fail_ratio:g} and > {FAIL_MIN_MS:g} ms / {FAIL_MIN_CPU:g} CPU '

@@ -60,6 +60,7 @@ from skeleton_core.bagio import bag_topics
 import signal
 from skeleton_data.database import build_default
 
+from . import speed_gauge
 from .remote_drivers import DEFAULT_PHASE_MS
 
 PROCESS_BAG_MODULE = 'kinect_bringup.process_bag'
@@ -456,6 +457,12 @@ def _label(r: Dict) -> str:
             + (', drivers elsewhere' if r.get('drivers_elsewhere') else ''))
 
 
+def _speed_label(r: Dict) -> str:
+    sp = r.get('machine_speed', {})
+    return speed_gauge.label(sp.get('before'), sp.get('after')) + (
+        f" (waited {sp['waited_s']:.0f} s for it)" if sp.get('waited_s', 0) >= 1 else '')
+
+
 def _outputs(r: Dict) -> List[str]:
     """The outputs judged: the fused skeletons too when there are several sensors."""
     return (['input'] if r.get('sensors', 1) > 1 else []) + ['reconstructed', 'character']
@@ -572,6 +579,13 @@ def to_markdown(results: List[Dict], bag_speed: Dict, commit: str) -> str:
                          f"{ms(fl, 'p50_ms')} / {ms(fl, 'p95_ms')} | {over} | "
                          f"{o['p95_ms'] / BUDGET_MS:.2f} | {o.get('dropped', 0)} "
                          f"({100 * o.get('dropped_fraction', 0):.1f} %) |")
+    speeds = [r for r in results if r.get('machine_speed')]
+    if speeds:
+        lines += ['', 'Machine speed (`kinect_experiments.speed_gauge`: the CPU time of a fixed '
+                  f'workload against {speeds[0]["machine_speed"]["before"]["nominal_ms"]:g} ms '
+                  '= x1.00; x1.30 = the same work took 30 % longer), read right before the '
+                  'case\'s processes started and right after they stopped:', '']
+        lines += [f"- {_label(r)}, {r['users']} users: {_speed_label(r)}" for r in speeds]
     lines += ['', 'Where the time goes (p50 / p95 ms): `input` = capture -> /kinect/skeletons at the '
               'probe (driver tick lateness + one DDS hop); the nodes\' own figures from their '
               '/diagnostics: ' + '; '.join(f'{k} = {v}' for k, v in NODE_LATENCY.items()) + '.',
@@ -674,6 +688,14 @@ def main(argv=None) -> int:
                         '(default 3: within the fusion\'s wait bound, waited for on every frame; '
                         'e.g. 16.7: half a frame, not waited for)')
     p.add_argument('--skip-bag', action='store_true')
+    p.add_argument('--max-slow', type=float, default=None, metavar='FACTOR',
+                   help='refuse a case (and the rest; exit 3) while the machine speed gauge '
+                        'before it reads slower than FACTOR (x1.00 = nominal, e.g. 1.3), after '
+                        're-reading it every 10 s for up to --slow-wait s. Default off: every '
+                        'case runs and prints the gauge beside it. With --against: a run of the '
+                        'A/B, see --max-speed-change')
+    p.add_argument('--slow-wait', type=float, default=120.0,
+                   help='seconds to wait for a faster minute before refusing (default 120)')
     p.add_argument('--out', default=str(root / 'out' / 'bench'))
     ab = p.add_argument_group('A/B against another commit (kinect_experiments.ab)')
     ab.add_argument('--against', nargs='?', const='HEAD^', default=None, metavar='COMMIT',
@@ -689,6 +711,11 @@ def main(argv=None) -> int:
     ab.add_argument('--load-wait', type=float, default=120.0)
     ab.add_argument('--ignore-load', action='store_true',
                     help='run on a busy machine anyway; the report is marked NOT VALID')
+    ab.add_argument('--max-speed-change', type=float, default=None, metavar='RATIO',
+                    help='refuse a run while the machine speed gauge reads more than RATIO x '
+                         'slower than the fastest reading of this comparison, after waiting up '
+                         'to --slow-wait s (default 1.25: B / A is honest only between runs at '
+                         'about the same speed; 0 = off). --max-slow applies too when given')
     ab.add_argument('--fail-ratio', type=float, default=None,
                     help='exit 1 when an output p95 or the graph CPU is worse than this ratio '
                          '(and 5 ms / 10 points) on every alternation, or drops appear (CI guard)')
@@ -697,6 +724,13 @@ def main(argv=None) -> int:
         p.error('--phase-ms sets the replayed sensors\' phase: it needs --drivers-elsewhere')
     if args.phase_ms is not None and not 0 <= args.phase_ms < BUDGET_MS:
         p.error(f'--phase-ms must be in [0, {BUDGET_MS:.1f}) ms, got {args.phase_ms:g}')
+    if args.max_slow is not None and not args.max_slow > 0:
+        p.error(f'--max-slow must be a factor > 0 (x1.00 = nominal), got {args.max_slow:g}')
+    if args.slow_wait < 0:
+        p.error(f'--slow-wait must be >= 0 s, got {args.slow_wait:g}')
+    if args.max_speed_change is not None and not (args.max_speed_change == 0
+                                                  or args.max_speed_change >= 1):
+        p.error(f'--max-speed-change must be >= 1 (or 0: off), got {args.max_speed_change:g}')
     if args.against is not None:
         return _run_against(p, args, argv, root)
     for ex in args.executors.split(','):
@@ -720,6 +754,7 @@ def main(argv=None) -> int:
               "this graph's; run with a ROS_DOMAIN_ID of its own", file=sys.stderr)
         return 2
     results = []
+    refused = None
     try:
         for mode in args.modes.split(','):
             for rec in args.reconstruction.split(','):
@@ -734,20 +769,46 @@ def main(argv=None) -> int:
                                   f'), {users} user(s), {n} sensor(s)'
                                   + (', drivers elsewhere' if args.drivers_elsewhere else '')
                                   + ' ...', flush=True)
-                            results.append(run_case(probe, mode, users, args.seconds,
-                                                    args.warmup, not args.no_physics,
-                                                    out / 'logs', rec, n, ex,
-                                                    args.drivers_elsewhere, args.phase_ms))
+                            # the machine's speed right before (the graph not yet started)
+                            # and right after (the graph stopped): outside the measured window
+                            chk = speed_gauge.wait_for_speed(
+                                args.max_slow or float('inf'), args.slow_wait)
+                            if not chk.ok:
+                                refused = (f'machine speed x{chk.reading.factor:.2f} (slower '
+                                           f'than --max-slow x{args.max_slow:.2f}) after waiting '
+                                           f'{chk.waited_s:.0f} s: a figure taken now would '
+                                           'measure the host\'s slow minute, not the graph')
+                                print(f'[bench] {refused}; refusing this case and the rest',
+                                      file=sys.stderr, flush=True)
+                                raise _Refused
+                            res = run_case(probe, mode, users, args.seconds, args.warmup,
+                                           not args.no_physics, out / 'logs', rec, n, ex,
+                                           args.drivers_elsewhere, args.phase_ms)
+                            res['machine_speed'] = {'before': chk.reading.as_dict(),
+                                                    'after': speed_gauge.measure().as_dict(),
+                                                    'waited_s': round(chk.waited_s, 1)}
+                            print(f"[bench] {_speed_label(res)}", flush=True)
+                            results.append(res)
+    except _Refused:
+        pass
     finally:
         probe.close()
-    bag_speed = {} if args.skip_bag else process_bag_speed(out / 'logs')
+    bag_speed = {} if args.skip_bag or refused else process_bag_speed(out / 'logs')
     md = to_markdown(results, bag_speed, commit)
+    if refused:
+        md += f'\n**Refused** after {len(results)} case(s): {refused}.\n'
     (out / 'bench.md').write_text(md)
     (out / 'bench.json').write_text(json.dumps({'commit': commit, 'results': results,
-                                                'process_bag': bag_speed}, indent=2))
+                                                'process_bag': bag_speed, 'refused': refused,
+                                                'speed_nominal_ms': speed_gauge.NOMINAL_MS},
+                                               indent=2))
     print(md)
     print(f'[bench] wrote {out / "bench.md"} and {out / "bench.json"}')
-    return 0
+    return 3 if refused else 0
+
+
+class _Refused(Exception):
+    """The machine stayed slower than --max-slow: no more cases."""
 
 
 def _run_against(p, args, argv, root: Path) -> int:
@@ -774,7 +835,10 @@ def _run_against(p, args, argv, root: Path) -> int:
         return ab.run_ab(root, args.against, case, args.alternations, out,
                          max_busy=ab.MAX_BUSY if args.max_busy is None else args.max_busy,
                          wait_s=args.load_wait, ignore_load=args.ignore_load,
-                         fail_ratio=args.fail_ratio, args_line=line)
+                         fail_ratio=args.fail_ratio, args_line=line, max_slow=args.max_slow,
+                         max_speed_change=(ab.MAX_SPEED_CHANGE if args.max_speed_change is None
+                                           else args.max_speed_change),
+                         speed_wait_s=args.slow_wait)
     except (ValueError, RuntimeError, OSError, subprocess.CalledProcessError) as e:
         print(f'[bench] {e}', file=sys.stderr)
         return 2

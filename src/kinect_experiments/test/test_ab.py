@@ -1,6 +1,7 @@
 """kinect_experiments.ab (``bench --against``): the load guard waits for a quiet machine and
 refuses a busy one; the figures of two benches are paired per alternation; the CI guard fails
 only on a large regression seen on every alternation."""
+import json
 import subprocess
 
 import pytest
@@ -154,3 +155,74 @@ def test_a_reference_whose_kernels_fail_to_compile_is_an_error(tmp_path):
     with pytest.raises(RuntimeError, match='no compiler'):
         warm(tmp_path, tree, log=lambda *_: None)
     assert not (tree / '.ab-warm').exists()
+
+
+def _fake_ab(monkeypatch, tmp_path, factors):
+    """run_ab with the reference, git and the benches faked: each run writes the same figures;
+    the speed gauge reads ``factors`` in turn."""
+    from pathlib import Path
+    from kinect_experiments import speed_gauge as sg
+    monkeypatch.setattr(ab, 'resolve', lambda root, ref: 'a' * 40)
+    monkeypatch.setattr(ab, 'git', lambda root, *a: '')
+    monkeypatch.setattr(ab, 'prepare', lambda root, sha, log: tmp_path)
+    monkeypatch.setattr(ab, 'bench_command', lambda tree, case, out: ['bench', str(out)])
+    monkeypatch.setattr(ab, 'wait_for_quiet', lambda *a: ab.LoadCheck(0.0, 0.5, 0.0, True))
+
+    def run(cmd, **kw):
+        out = Path(cmd[-1])
+        out.mkdir(parents=True, exist_ok=True)
+        (out / 'bench.json').write_text(json.dumps(_bench_json(10.0, 20.0)))
+        return subprocess.CompletedProcess(cmd, 0)
+    monkeypatch.setattr(ab.subprocess, 'run', run)
+    it = iter(factors)
+    return lambda: sg.Reading(next(it), 60.0, 60.0)
+
+
+def test_a_run_in_a_slower_minute_than_the_comparison_so_far_is_refused(monkeypatch, tmp_path):
+    # A at x1.00 before and after, then B's gauge reads x1.40 (> 1.25 x the fastest): refused
+    gauge = _fake_ab(monkeypatch, tmp_path, [1.0, 1.0, 1.4, 1.4])
+    logs = []
+    rc = ab.run_ab(tmp_path, 'HEAD^', [], 2, tmp_path / 'out', speed_wait_s=0.0, gauge=gauge,
+                   log=logs.append)
+    assert rc == 3 and any('x1.40' in m and 'refusing' in m for m in logs)
+    # the same speeds within the allowed change: compared, every run's gauge in the report
+    gauge = _fake_ab(monkeypatch, tmp_path, [1.0, 1.1, 1.2, 1.2, 1.1, 1.0, 1.0, 1.0])
+    rc = ab.run_ab(tmp_path, 'HEAD^', [], 2, tmp_path / 'out', speed_wait_s=0.0, gauge=gauge,
+                   log=logs.append)
+    md = (tmp_path / 'out' / 'ab.md').read_text()
+    assert rc == 0 and '| 2 | B | 0 % | 0.50 | 0 | x1.20 / x1.20 |' in md
+    assert 'NOT VALID' not in md
+    loads = json.loads((tmp_path / 'out' / 'ab.json').read_text())['loads']
+    assert [ld['speed_before'] for ld in loads] == [1.0, 1.2, 1.1, 1.0]
+    # the CPU per frame at nominal speed: each run's divided by the mean of its two readings
+    row = next(r for r in json.loads((tmp_path / 'out' / 'ab.json').read_text())['rows']
+               if r['figure'] == 'cpu_ms_per_frame_x1.graph')
+    raw = ab.run_figures(_bench_json(10.0, 20.0))['processes 6u 1s']['cpu_ms_per_frame.graph']
+    assert row['a'] == pytest.approx([raw / 1.05, raw / 1.05])
+    assert row['b'] == pytest.approx([raw / 1.2, raw / 1.0])
+    # off (0): a slow minute is only reported; the alternation whose A and B differ is named
+    gauge = _fake_ab(monkeypatch, tmp_path, [1.0, 1.0, 1.6, 1.6])
+    rc = ab.run_ab(tmp_path, 'HEAD^', [], 1, tmp_path / 'out', speed_wait_s=0.0, gauge=gauge,
+                   log=logs.append, max_speed_change=0)
+    md = (tmp_path / 'out' / 'ab.md').read_text()
+    assert rc == 0 and '| 2 | B | 0 % | 0.50 | 0 | x1.60 / x1.60 |' in md
+    assert 'Alternation 1: A and B ran at speeds 1.60x apart' in md
+
+
+def test_uneven_alternations():
+    loads = [{'speed_before': 1.0, 'speed_after': 1.1}, {'speed_before': 1.1, 'speed_after': 1.2},
+             {'speed_before': 1.0, 'speed_after': 1.0}, {'speed_before': 1.5, 'speed_after': 1.4},
+             {}, {}]   # an older report without the gauge
+    assert [(n, round(s, 2)) for n, s in ab.uneven(loads, 1.25)] == [(2, 1.5)]
+
+
+def test_cpu_per_frame_at_nominal_speed():
+    fig = ab.run_figures(_bench_json(20.0, 30.0, cpu=(30.0, 60.0)))
+    adj = ab.at_nominal_speed(fig, 1.5)['processes 6u 1s']
+    # 30 % of a core at 30 frames/s = 10 ms per frame; read at x1.5: 6.67 ms at nominal speed
+    assert adj['cpu_ms_per_frame_x1.reconstruction'] == pytest.approx(10.0 / 1.5)
+    assert adj['cpu_ms_per_frame.reconstruction'] == pytest.approx(10.0)   # kept as measured
+    assert adj['cpu_ms_per_frame_x1.graph'] == pytest.approx(fig['processes 6u 1s']
+                                                            ['cpu_ms_per_frame.graph'] / 1.5)
+    assert 'cpu_x1.graph' not in adj and 'cpu_ms_per_frame_x1.graph' not in fig['processes 6u 1s']
+    assert ab.at_nominal_speed(fig, float('nan')) == fig   # no reading: nothing added

@@ -51,3 +51,19 @@ def test_targets_are_judged_against_the_floor_of_the_same_run():
     row = next(line for line in md.splitlines() if line.startswith('| processes (fused) | 2 | character'))
     assert '| 2.0 / 4.0 | +12.5 |' in row
     assert '| **no** |' in md and '| processes (fused) | 6 | **graph** | 160 | |' in md
+
+
+def test_every_case_prints_the_machine_speed_before_and_after_it():
+    res = [_case(2, 8.0, 16.0, 4.0), _case(6, 20.0, 30.0, 4.0)]
+    res[0]['machine_speed'] = {'before': {'factor': 1.0, 'nominal_ms': 48.0},
+                               'after': {'factor': 1.049, 'nominal_ms': 48.0}, 'waited_s': 0.0}
+    res[1]['machine_speed'] = {'before': {'factor': 1.27, 'nominal_ms': 48.0},
+                               'after': {'factor': 1.6, 'nominal_ms': 48.0}, 'waited_s': 35.0}
+    md = to_markdown(res, {}, 'abc1234')
+    assert '- processes (fused), 2 users: machine speed x1.00 before / x1.05 after\n' in md
+    assert ('- processes (fused), 6 users: machine speed x1.27 before / x1.60 after (waited 35 s '
+            'for it)') in md
+    assert 'against 48 ms = x1.00' in md
+    # a result without the gauge (an older bench's JSON): no speed lines
+    del res[0]['machine_speed'], res[1]['machine_speed']
+    assert 'machine speed x' not in to_markdown(res, {}, 'abc1234')
