@@ -12,7 +12,7 @@ import numpy as np
 
 from skeleton_core import jit
 
-from ..controller import explicit_pd_wrenches, wrench_qfrc
+from ..controller import explicit_pd_step, explicit_pd_wrenches, wrench_qfrc
 from .registry import register
 from .base import Controller
 
@@ -29,6 +29,7 @@ class ExplicitPD(Controller):
         # compiled: the wrenches are summed here and handed to MuJoCo as generalized forces
         self._wr = None       # (nbody, 6) like xfrc_applied, or None: xfrc_applied itself
         self._bodies = None   # the bodies that get a wrench
+        self._pushed = True   # xfrc_applied may hold pushes (cleared at the next step)
 
     def bind(self, world) -> None:
         ix = world.ix
@@ -60,6 +61,11 @@ class ExplicitPD(Controller):
     def _control(self, w) -> None:
         d, c = w.data, w.config
         g = c.gains
+        t = w.time
+        tg = w.tg
+        if self._wr is not None and tg is not None:
+            self._control_compiled(w, d, c, g, t, tg)
+            return
         xfrc = d.xfrc_applied
         xfrc[:] = 0.0         # the pushes' (apply_pushes)
         wr = self._wr
@@ -67,28 +73,14 @@ class ExplicitPD(Controller):
             wr = xfrc
         else:
             wr[:] = 0.0
-        t = w.time
-        tg = w.tg
         if tg is not None:
             ix = w.ix
             share = w.share_at(t)
-            if isinstance(share, float):   # one share for all: the kernel takes it per character
-                shares = self._share
-                if shares is None or len(shares) != len(tg['T0']):
-                    shares = self._share = np.zeros(len(tg['T0']))
-                shares.fill(share)
-            else:
-                shares = share
+            shares = self._shares(share, tg)
             explicit_pd_wrenches(wr, d.site_xpos, ix.js, d.cvel, d.subtree_com, d.xipos, ix.jb,
                                  ix.jroot, tg['P0'], tg['dP'], tg['V'], shares,
                                  ix.jchar, g.ke, g.kd, g.max_force, ix.ub, ix.sum_rows)
-            self._count += 1
-            if self._twist is None or self._count >= (c.slow_control_every or 4):
-                self._count = 0
-                p_t, v_t = w.targets_at(t, share)
-                pts = w.joint_points()
-                self._twist = w.twist_torques(t, tg, pts, share=share)
-                w.pins.update(p_t, v_t, pts)
+            self._slow(w, c, t, tg, share)
             wr[ix.sb if self._sb is None else self._sb, 3:] += self._twist
         if self._wr is not None:
             m = w.model
@@ -97,6 +89,48 @@ class ExplicitPD(Controller):
                         d.subtree_com)
         if w.shared.pushes:
             w.apply_pushes(t)
+
+    def _shares(self, share, tg):
+        """Every character's interpolation share (N,): ``share`` itself, or a plain number
+        spread over the characters (the kernels take it per character)."""
+        if not isinstance(share, float):
+            return share
+        shares = self._share
+        if shares is None or len(shares) != len(tg['T0']):
+            shares = self._share = np.zeros(len(tg['T0']))
+        shares.fill(share)
+        return shares
+
+    def _slow(self, w, c, t, tg, share) -> None:
+        """Eq. 2 torques and the foot pins, every ``slow_control_every`` steps (after Eq. 1: the
+        pins see the same state either way)."""
+        self._count += 1
+        if self._twist is None or self._count >= (c.slow_control_every or 4):
+            self._count = 0
+            p_t, v_t = w.targets_at(t, share)
+            pts = w.joint_points()
+            self._twist = w.twist_torques(t, tg, pts, share=share)
+            w.pins.update(p_t, v_t, pts)
+
+    def _control_compiled(self, w, d, c, g, t, tg) -> None:
+        """The compiled step (:func:`physics_sim.controller.explicit_pd_step`): Eq. 2 and the
+        pins first when due (they read the state of this step, which Eq. 1 does not change),
+        then Eq. 1, the torques and the generalized forces in one call."""
+        if self._pushed:      # xfrc_applied holds only the pushes here: cleared after them
+            d.xfrc_applied[:] = 0.0
+            self._pushed = False
+        ix, m = w.ix, w.model
+        share = w.share_at(t)
+        shares = self._shares(share, tg)
+        self._slow(w, c, t, tg, share)
+        explicit_pd_step(d.qfrc_applied, self._wr, d.site_xpos, ix.js, d.cvel, d.subtree_com,
+                         d.xipos, ix.jb, ix.jroot, tg['P0'], tg['dP'], tg['V'], shares, ix.jchar,
+                         g.ke, g.kd, g.max_force, ix.sb, self._twist, self._bodies,
+                         m.body_dofadr, m.body_dofnum, m.body_parentid, m.dof_parentid,
+                         m.body_rootid, d.cdof)
+        if w.shared.pushes:
+            w.apply_pushes(t)
+            self._pushed = True
 
 
 __all__ = ['ExplicitPD']
