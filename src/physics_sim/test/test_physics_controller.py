@@ -238,6 +238,33 @@ def test_explicit_pd_push_acts_for_its_duration_only():
     assert not w.data.xfrc_applied.any()
 
 
+def test_explicit_pd_slow_control_from_the_sites_is_bit_identical():
+    """Eq. 2 and the foot pins computed from MuJoCo's site arrays (the compiled step's path) give
+    exactly the states of the path through World.targets_at / joint_points / twist_torques, with
+    feet pinned and released along the way (three characters side by side, stepping)."""
+    pytest.importorskip('numba')
+    from physics_sim.simulation import SimConfig, Simulation
+    sims = [Simulation(SimConfig(controller='explicit_pd', body_height=1.75)) for _ in range(2)]
+    base = standard_body().rest_positions() + np.array([2.5, 0.0, -0.8])
+    for k in range(40):
+        for sim in sims:
+            for uid in (1, 2, 3):
+                p = base + [0.0, 0.8 * (uid - 2), 0.0]
+                p = p + 0.04 * np.sin(0.3 * k + uid + np.arange(20)[:, None])
+                p[[14, 15, 18, 19], 2] += 0.12 * max(0.0, np.sin(0.25 * k + uid))  # steps
+                sim.set_target(uid, p, None, k * 33_333_333)
+            ctl = sim.worlds[0].controller
+            assert (ctl._sc_site is not None) == (k == 0 or sim is sims[0])
+            if sim is sims[1]:
+                ctl._sc_site = None           # the generic path (no joint sites)
+            sim.advance(1 / 30)
+    assert sims[0].counters['pins'] > 3 and sims[0].counters == sims[1].counters
+    a, b = sims[0].states(), sims[1].states()
+    for uid in a:
+        assert np.array_equal(a[uid].positions, b[uid].positions)
+        assert np.array_equal(a[uid].orientations, b[uid].orientations)
+
+
 def test_segment_quats_numba_and_python_agree():
     """Target orientations from joint positions (one call per target frame and character):
     the numba kernel gives the scalar Python's quaternions on random postures, on a degenerate

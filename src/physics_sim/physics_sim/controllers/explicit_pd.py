@@ -12,7 +12,7 @@ import numpy as np
 
 from skeleton_core import jit
 
-from ..controller import explicit_pd_step, explicit_pd_wrenches, wrench_qfrc
+from ..controller import explicit_pd_step, explicit_pd_wrenches, twist_torques, wrench_qfrc
 from .registry import register
 from .base import Controller
 
@@ -30,6 +30,7 @@ class ExplicitPD(Controller):
         self._wr = None       # (nbody, 6) like xfrc_applied, or None: xfrc_applied itself
         self._bodies = None   # the bodies that get a wrench
         self._pushed = True   # xfrc_applied may hold pushes (cleared at the next step)
+        self._sc_site = self._sp_site = self._foot_sites = None
 
     def bind(self, world) -> None:
         ix = world.ix
@@ -44,6 +45,12 @@ class ExplicitPD(Controller):
             self._bodies = np.union1d(ix.jb, sb).astype(np.int64)
         else:
             self._wr = self._bodies = None
+        # the joint sites of every segment's ends and of the feet (the joint points: Eq. 2's axes
+        # and the pins read them from site_xpos; World.joint_points gathers the same rows)
+        self._sc_site = self._sp_site = self._foot_sites = None
+        if ix.js is not None and ix.axis_site is None:
+            self._sc_site, self._sp_site = ix.js[ix.sc], ix.js[ix.sp]
+            self._foot_sites = ix.js[world.pins.idx]
 
     def targets_changed(self, world) -> None:
         self._twist = None      # recomputed on the next step
@@ -112,6 +119,31 @@ class ExplicitPD(Controller):
             self._twist = w.twist_torques(t, tg, pts, share=share)
             w.pins.update(p_t, v_t, pts)
 
+    def _slow_compiled(self, w, d, c, g, t, tg, share, shares) -> None:
+        """:meth:`_slow` from MuJoCo's arrays: the twist kernel reads the joint points from the
+        sites themselves and the pins get their feet's rows only (the same numbers, without
+        interpolating and gathering every joint's rows)."""
+        self._count += 1
+        if self._twist is not None and self._count < (c.slow_control_every or 4):
+            return
+        self._count = 0
+        ix = w.ix
+        n = len(ix.sb)
+        if self._twist is None or len(self._twist) != n:
+            self._twist = np.empty((n, 3))
+        twist_torques(self._twist, d.xquat, ix.sb, ix.tw_m, tg['Q0w'], tg['dQw'], shares,
+                      ix.schar, d.site_xpos, self._sc_site, self._sp_site, tg['W'], d.cvel,
+                      g.twist_ke * ix.tw_i, g.twist_kd * ix.tw_i, float(g.max_torque))
+        fi = w.pins.idx
+        if fi.size:
+            if isinstance(share, float):
+                xt = tg['P0'][fi] + share * tg['dP'][fi]
+                vt = tg['V'][fi] * (share < 1.0)
+            else:
+                sj = share[ix.jchar[fi]][:, None]
+                xt, vt = tg['P0'][fi] + sj * tg['dP'][fi], tg['V'][fi] * (sj < 1.0)
+            w.pins.update_feet(xt, vt, d.site_xpos[self._foot_sites])
+
     def _control_compiled(self, w, d, c, g, t, tg) -> None:
         """The compiled step (:func:`physics_sim.controller.explicit_pd_step`): Eq. 2 and the
         pins first when due (they read the state of this step, which Eq. 1 does not change),
@@ -122,7 +154,10 @@ class ExplicitPD(Controller):
         ix, m = w.ix, w.model
         share = w.share_at(t)
         shares = self._shares(share, tg)
-        self._slow(w, c, t, tg, share)
+        if self._sc_site is not None:
+            self._slow_compiled(w, d, c, g, t, tg, share, shares)
+        else:
+            self._slow(w, c, t, tg, share)
         explicit_pd_step(d.qfrc_applied, self._wr, d.site_xpos, ix.js, d.cvel, d.subtree_com,
                          d.xipos, ix.jb, ix.jroot, tg['P0'], tg['dP'], tg['V'], shares, ix.jchar,
                          g.ke, g.kd, g.max_force, ix.sb, self._twist, self._bodies,
