@@ -51,6 +51,13 @@ class ExplicitPD(Controller):
         if ix.js is not None and ix.axis_site is None:
             self._sc_site, self._sp_site = ix.js[ix.sc], ix.js[ix.sp]
             self._foot_sites = ix.js[world.pins.idx]
+        # the compiled step's fixed arguments: views of this model's and data's arrays (their
+        # memory lives as long as the data; a rebuild binds again), fetched once, not per step
+        m, d = world.model, world.data
+        self._head = (d.qfrc_applied, self._wr, d.site_xpos, ix.js, d.cvel, d.subtree_com,
+                      d.xipos, ix.jb, ix.jroot)
+        self._tail = (self._bodies, m.body_dofadr, m.body_dofnum, m.body_parentid,
+                      m.dof_parentid, m.body_rootid, d.cdof)
 
     def targets_changed(self, world) -> None:
         self._twist = None      # recomputed on the next step
@@ -151,18 +158,15 @@ class ExplicitPD(Controller):
         if self._pushed:      # xfrc_applied holds only the pushes here: cleared after them
             d.xfrc_applied[:] = 0.0
             self._pushed = False
-        ix, m = w.ix, w.model
+        ix = w.ix
         share = w.share_at(t)
         shares = self._shares(share, tg)
         if self._sc_site is not None:
             self._slow_compiled(w, d, c, g, t, tg, share, shares)
         else:
             self._slow(w, c, t, tg, share)
-        explicit_pd_step(d.qfrc_applied, self._wr, d.site_xpos, ix.js, d.cvel, d.subtree_com,
-                         d.xipos, ix.jb, ix.jroot, tg['P0'], tg['dP'], tg['V'], shares, ix.jchar,
-                         g.ke, g.kd, g.max_force, ix.sb, self._twist, self._bodies,
-                         m.body_dofadr, m.body_dofnum, m.body_parentid, m.dof_parentid,
-                         m.body_rootid, d.cdof)
+        explicit_pd_step(*self._head, tg['P0'], tg['dP'], tg['V'], shares, ix.jchar, g.ke, g.kd,
+                         g.max_force, ix.sb, self._twist, *self._tail)
         if w.shared.pushes:
             w.apply_pushes(t)
             self._pushed = True
