@@ -225,6 +225,9 @@ def test_explicit_pd_step_is_the_separate_calls_bit_for_bit():
 def test_explicit_pd_push_acts_for_its_duration_only():
     """With the compiled step, xfrc_applied holds only the pushes: set while a push lasts,
     cleared at the first step after it ended."""
+    from skeleton_core import jit
+    if not jit.enabled():
+        pytest.skip('without numba explicit_pd writes its own wrenches to xfrc_applied')
     from physics_sim.simulation import SimConfig, Simulation
     sim = Simulation(SimConfig(controller='explicit_pd', body_height=1.75))
     sim.set_target(1, standard_body().rest_positions() + np.array([2.5, 0.0, -0.8]))
@@ -242,7 +245,9 @@ def test_explicit_pd_slow_control_from_the_sites_is_bit_identical():
     """Eq. 2 and the foot pins computed from MuJoCo's site arrays (the compiled step's path) give
     exactly the states of the path through World.targets_at / joint_points / twist_torques, with
     feet pinned and released along the way (three characters side by side, stepping)."""
-    pytest.importorskip('numba')
+    from skeleton_core import jit
+    if not jit.enabled():
+        pytest.skip('the site path is the compiled step\'s')
     from physics_sim.simulation import SimConfig, Simulation
     sims = [Simulation(SimConfig(controller='explicit_pd', body_height=1.75)) for _ in range(2)]
     base = standard_body().rest_positions() + np.array([2.5, 0.0, -0.8])
