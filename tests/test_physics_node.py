@@ -495,3 +495,35 @@ def test_a_latched_transform_the_executor_was_never_woken_for_is_taken(rclpy_con
         node._subscriptions.append(sub)   # destroyed with the node
         node.destroy_node()
         peer.destroy_node()
+
+
+def test_node_takes_a_message_of_many_users_at_once(graph):
+    """A message of seven users (max_characters 6): six characters get their targets, the
+    seventh is dropped and counted; a user twice in one message is dropped by the decoder; the
+    others' later targets are taken."""
+    node, peer = graph
+    pub = peer.create_publisher(SkeletonArray, '/test_physics/in', 10)
+    deadline = time.time() + 10
+    while pub.get_subscription_count() == 0 and time.time() < deadline:
+        time.sleep(0.05)
+    assert node.set_parameters([Parameter('user_timeout_s', value=5.0)])[0].successful
+    base = clip(1)[0]
+
+    def message(stamp, uids):
+        frames = [SkeletonFrame(positions=base + [0.0, 0.8 * (u - 4), 0.0],
+                                tracking_state=np.full(NUM_JOINTS, 2, np.uint8), user_id=u,
+                                stamp_ns=stamp, frame_id='kinect_link') for u in uids]
+        return frames_to_array_msg(frames, stamp, 'kinect_link')
+
+    pub.publish(message(20_000_000_000, range(1, 8)))
+    assert _wait(lambda: len(node.sim.characters) == 6, 10)
+    assert _wait(lambda: node.health.dropped.get('too many users (max_characters 6)') == 1, 5), \
+        node.health.dropped
+    assert 7 not in node.sim.characters and 7 not in node._user_stamp
+    time.sleep(0.2)
+    stamp = 20_000_000_000 + 33_333_333
+    pub.publish(message(stamp, [1, 2, 3, 4, 5, 6, 1]))
+    assert _wait(lambda: node.health.dropped.get('duplicate user id') == 1, 5), \
+        node.health.dropped
+    assert _wait(lambda: all(node._user_stamp.get(u) == stamp for u in range(1, 7)), 5)
+    assert all(node.sim.characters[u].cur.stamp_ns == stamp for u in range(1, 7))

@@ -43,7 +43,7 @@ from typing import Dict, List, Optional
 import numpy as np
 from geometry_msgs.msg import WrenchStamped
 from skeleton_core.cdr import frames_to_cdr
-from skeleton_core.conversions import SkeletonFormatError, ns_to_stamp
+from skeleton_core.conversions import ns_to_stamp
 from skeleton_core.params import ParamSpec, assign, build, param, specs
 from skeleton_core.presence import Presence
 from skeleton_core.rosnode import InputDrops, ManagedNode, Parameters, fill_marker, run_node
@@ -333,25 +333,32 @@ class PhysicsNode(ManagedNode):
         now = time.monotonic()
         self.presence.observe(header_stamp, (), wall=now)   # the input's clock moves on:
         self._expire(now)                                   # who left before this message?
+        take, stamps = [], {}
         for f in frames:
             stamp = f.stamp_ns or header_stamp
-            last = self._user_stamp.get(f.user_id)
+            last = stamps.get(f.user_id, self._user_stamp.get(f.user_id))
             if stamp and last is not None and last - 1_000_000_000 <= stamp <= last:
                 # a target already applied, or an older one (a bigger step back is a bag loop or
                 # a restarted sensor: taken)
                 self._drop('duplicate stamp' if stamp == last else 'out-of-order stamp',
                            f'user {f.user_id}: {(last - stamp) * 1e-6:.1f} ms back')
                 continue
-            try:
-                self.sim.set_target(f.user_id, f.positions, f.orientations, stamp)
-                self._user_stamp[f.user_id] = stamp
-            except (SkeletonFormatError, ValueError) as e:
-                if 'max_characters' in str(e):   # counted per reason, logged once
-                    self._drop(f'too many users (max_characters '
-                               f'{self.sim.config.max_characters})',
-                               f'user {f.user_id} gets no character while {e}')
-                else:
-                    self._drop('bad target', str(e))
+            take.append((f.user_id, f.positions, f.orientations, stamp))
+            stamps[f.user_id] = stamp
+        # every user's target at once: validated by the decoder, moved to the world and
+        # retargeted together (Simulation.set_targets)
+        refused = self.sim.set_targets(take)
+        for uid, e in refused:
+            if 'max_characters' in str(e):   # counted per reason, logged once
+                self._drop(f'too many users (max_characters '
+                           f'{self.sim.config.max_characters})',
+                           f'user {uid} gets no character while {e}')
+            else:
+                self._drop('bad target', str(e))
+        if refused:
+            for uid in {u for u, _ in refused}:
+                stamps.pop(uid, None)
+        self._user_stamp.update(stamps)
         self.presence.observe(header_stamp, [f.user_id for f in frames], wall=now)
         if self.params['mace'] and not self._mace_given and self.sim.characters:
             uid = next(iter(self.sim.characters))

@@ -59,6 +59,13 @@ class FootPins:
         """Pin a foot whose target is on the floor and slow; release it when the target lifts or
         slides away. Scalar code: two feet per character, where numpy's per-call cost would
         dominate."""
+        fi = self.idx
+        if fi.size:
+            self.update_feet(p_t[fi], v_t[fi], pts[fi])
+
+    def update_feet(self, xt, vt, xf) -> None:
+        """:meth:`update` of the feet's rows only (``p_t[idx]``, ``v_t[idx]``, ``pts[idx]``):
+        a caller that has them without the other joints' rows."""
         w = self.world
         c = w.config
         fi = self.idx
@@ -67,9 +74,9 @@ class FootPins:
         floor = w.floor
         act = self.active
         any_act = any(pin.active for _, _, pin in self.feet)
-        xt = p_t[fi].tolist()
+        xt = xt.tolist()
         ht = [x[2] - floor for x in xt]
-        speed2 = [v[0] * v[0] + v[1] * v[1] + v[2] * v[2] for v in v_t[fi].tolist()]
+        speed2 = [v[0] * v[0] + v[1] * v[1] + v[2] * v[2] for v in vt.tolist()]
         slow2 = c.pin_speed * c.pin_speed
         if not any_act and not (c.pin_feet and any(h < c.pin_height and s2 < slow2
                                                    for h, s2 in zip(ht, speed2))):
@@ -77,7 +84,6 @@ class FootPins:
         # the simulated foot must be on the floor and slow too: pinning a flailing foot would
         # stop it dead in one step (an impulse the solver cannot absorb)
         d = w.data
-        xf = pts[fi]
         forces = self.forces(c.pin_max_force).tolist() if any_act else None
         pin_pts = self.points().tolist() if any_act else None
         cv = arm = None

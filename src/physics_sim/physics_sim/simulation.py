@@ -40,13 +40,13 @@ from __future__ import annotations
 from typing import Dict, List, Mapping, Optional, Sequence
 
 import numpy as np
-from skeleton_core.conversions import validate_arrays
+from skeleton_core.conversions import MAX_ABS_COORDINATE, validate_arrays
 from skeleton_core.geometry import quat_rotate, retarget, retarget_by_joint
 from skeleton_core.memory import release_freed_memory
 from skeleton_core.tf import Transform
 from skeleton_core.model import (FOOT_LEFT, FOOT_RIGHT, HAND_LEFT, HAND_RIGHT, HEAD, JOINT_INDEX,
-                                 JOINT_NAMES, SEGMENT_OF_JOINT, SEGMENTS, Body, estimate_height,
-                                 standard_body)
+                                 JOINT_NAMES, NUM_JOINTS, SEGMENT_CHILD_INDEX, SEGMENT_OF_JOINT,
+                                 SEGMENTS, Body, estimate_height, standard_body)
 
 from .character import Character, Target
 from .config import INTEGRATORS, SOLVERS, CharacterState, SimConfig, controllers
@@ -357,6 +357,60 @@ class Simulation:
             self._rebuild()
         else:
             ch.push_target(target, self.config.velocity_smoothing)
+
+    def set_targets(self, targets: Sequence[tuple]) -> List[tuple]:
+        """:meth:`set_target` of several users at once, ``(user_id, positions, orientations,
+        stamp_ns)`` each, as a decoded message holds them (``skeleton_core.cdr`` validated the
+        arrays). Users who have a character are moved to the world, retargeted and given their
+        segment orientations together: the same bits as one by one (row-wise arithmetic;
+        physics_sim/test/test_physics_input.py). A message with a new user, or arrays that are not
+        valid, is taken one by one, in order. Returns ``(user_id, error)`` of the users refused
+        (max_characters, an invalid array); the others' targets were taken."""
+        items = list(targets)
+        if not items:
+            return []
+        if not self.config.retarget or any(int(t[0]) not in self.characters for t in items):
+            return self._one_by_one(items)   # a user arrives (rare): the world rebuilds
+        given = [k for k, t in enumerate(items) if t[2] is not None and len(t[2]) > 0]
+        try:
+            p = np.array([t[1] for t in items], float)
+            q = np.array([items[k][2] for k in given], float) if given else None
+        except (TypeError, ValueError):   # arrays of different shapes
+            return self._one_by_one(items)
+        if p.shape != (len(items), NUM_JOINTS, 3) or not np.abs(p).max() <= MAX_ABS_COORDINATE:
+            return self._one_by_one(items)
+        if given:
+            if q.shape != (len(given), NUM_JOINTS, 4):
+                return self._one_by_one(items)
+            n = np.sqrt(np.einsum('nij,nij->ni', q, q))
+            if not (np.isfinite(n).all() and n.min() >= 1e-9):
+                return self._one_by_one(items)
+            q = q / n[..., None]   # as validate_arrays leaves them (normalized once more)
+        chars = [self.characters[int(t[0])] for t in items]
+        sensor = self._sensor_pose(p[0])
+        pw = retarget_by_joint(sensor.to_world(p), np.array([ch.retarget_bone for ch in chars]),
+                               np.array([ch.retarget_dirs for ch in chars]))
+        seg_q = {}
+        if given:
+            ident = np.all(np.abs(np.abs(q[..., 3]) - 1.0) < 1e-9, axis=-1).tolist()
+            qs = sensor.quat_to_world(q)[:, SEGMENT_CHILD_INDEX]
+            seg_q = {k: qs[i] for i, k in enumerate(given) if not ident[i]}
+        smoothing = self.config.velocity_smoothing
+        for k, (t, ch) in enumerate(zip(items, chars)):
+            sq = seg_q.get(k)
+            if sq is None:
+                sq = Character.default_seg_quats(pw[k], ch.body)
+            ch.push_target(Target(pw[k], sq, self.time, int(t[3])), smoothing)
+        return []
+
+    def _one_by_one(self, items: List[tuple]) -> List[tuple]:
+        refused = []
+        for t in items:
+            try:
+                self.set_target(int(t[0]), t[1], t[2], t[3])
+            except ValueError as e:
+                refused.append((int(t[0]), e))
+        return refused
 
     def remove_character(self, user_id: int) -> bool:
         if int(user_id) not in self.characters:

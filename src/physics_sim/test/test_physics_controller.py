@@ -187,6 +187,89 @@ def test_wrench_qfrc_is_what_mujoco_makes_of_xfrc_applied():
     np.testing.assert_allclose(via_qfrc, d.qacc, rtol=1e-8, atol=1e-6)
 
 
+def test_explicit_pd_step_is_the_separate_calls_bit_for_bit():
+    """explicit_pd's one compiled call per step (Eq. 1, the Eq. 2 torques on the segment bodies,
+    the generalized forces) gives exactly the bits of the separate calls it replaced: Eq. 1 into
+    zeroed wrenches, the torques added to the segment rows, wrench_qfrc -- on a real state with
+    random targets, torques and a stale wrench buffer."""
+    pytest.importorskip('numba')
+    from physics_sim import controller as ctl
+    sim = _two_characters(0.05)
+    w = sim.worlds[0]
+    m, d, ix = w.model, w.data, w.ix
+    rng = np.random.default_rng(3)
+    n = len(ix.jb)
+    p0 = w.joint_points() + rng.normal(0.0, 0.1, (n, 3))
+    dp, v = rng.normal(0.0, 0.05, (n, 3)), rng.normal(0.0, 1.0, (n, 3))
+    share = np.array([0.3, 1.0])
+    twist = rng.normal(0.0, 5.0, (len(ix.sb), 3))
+    bodies = np.union1d(ix.jb, ix.sb).astype(np.int64)
+    ref_wr = np.zeros_like(d.xfrc_applied)
+    ctl.explicit_pd_wrenches(ref_wr, d.site_xpos, ix.js, d.cvel, d.subtree_com, d.xipos, ix.jb,
+                             ix.jroot, p0, dp, v, share, ix.jchar, 4000.0, 100.0, 300.0, ix.ub,
+                             ix.sum_rows)
+    ref_wr[ix.sb, 3:] += twist
+    ref = np.zeros(m.nv)
+    ctl.wrench_qfrc(ref, ref_wr, bodies, m.body_dofadr, m.body_dofnum, m.body_parentid,
+                    m.dof_parentid, m.body_rootid, d.cdof, d.xipos, d.subtree_com)
+    wr = rng.normal(0.0, 9.0, d.xfrc_applied.shape)   # last step's: zeroed by the call
+    qfrc = np.full(m.nv, np.nan)
+    ctl.explicit_pd_step(qfrc, wr, d.site_xpos, ix.js, d.cvel, d.subtree_com, d.xipos, ix.jb,
+                         ix.jroot, p0, dp, v, share, ix.jchar, 4000.0, 100.0, 300.0, ix.sb, twist,
+                         bodies, m.body_dofadr, m.body_dofnum, m.body_parentid, m.dof_parentid,
+                         m.body_rootid, d.cdof)
+    assert np.abs(ref).max() > 10.0
+    assert np.array_equal(wr, ref_wr) and np.array_equal(qfrc, ref)
+
+
+def test_explicit_pd_push_acts_for_its_duration_only():
+    """With the compiled step, xfrc_applied holds only the pushes: set while a push lasts,
+    cleared at the first step after it ended."""
+    from skeleton_core import jit
+    if not jit.enabled():
+        pytest.skip('without numba explicit_pd writes its own wrenches to xfrc_applied')
+    from physics_sim.simulation import SimConfig, Simulation
+    sim = Simulation(SimConfig(controller='explicit_pd', body_height=1.75))
+    sim.set_target(1, standard_body().rest_positions() + np.array([2.5, 0.0, -0.8]))
+    sim.advance(0.1)
+    w = sim.worlds[0]
+    spine = w.chars[0].seg_body[sim.segment_index('Spine')]
+    sim.apply_push(1, 'Spine', (200.0, 0.0, 0.0), 0.05)
+    sim.advance(1 / 30)
+    assert w.data.xfrc_applied[spine, 0] == 200.0
+    sim.advance(0.1)
+    assert not w.data.xfrc_applied.any()
+
+
+def test_explicit_pd_slow_control_from_the_sites_is_bit_identical():
+    """Eq. 2 and the foot pins computed from MuJoCo's site arrays (the compiled step's path) give
+    exactly the states of the path through World.targets_at / joint_points / twist_torques, with
+    feet pinned and released along the way (three characters side by side, stepping)."""
+    from skeleton_core import jit
+    if not jit.enabled():
+        pytest.skip('the site path is the compiled step\'s')
+    from physics_sim.simulation import SimConfig, Simulation
+    sims = [Simulation(SimConfig(controller='explicit_pd', body_height=1.75)) for _ in range(2)]
+    base = standard_body().rest_positions() + np.array([2.5, 0.0, -0.8])
+    for k in range(40):
+        for sim in sims:
+            for uid in (1, 2, 3):
+                p = base + [0.0, 0.8 * (uid - 2), 0.0]
+                p = p + 0.04 * np.sin(0.3 * k + uid + np.arange(20)[:, None])
+                p[[14, 15, 18, 19], 2] += 0.12 * max(0.0, np.sin(0.25 * k + uid))  # steps
+                sim.set_target(uid, p, None, k * 33_333_333)
+            ctl = sim.worlds[0].controller
+            assert (ctl._sc_site is not None) == (k == 0 or sim is sims[0])
+            if sim is sims[1]:
+                ctl._sc_site = None           # the generic path (no joint sites)
+            sim.advance(1 / 30)
+    assert sims[0].counters['pins'] > 3 and sims[0].counters == sims[1].counters
+    a, b = sims[0].states(), sims[1].states()
+    for uid in a:
+        assert np.array_equal(a[uid].positions, b[uid].positions)
+        assert np.array_equal(a[uid].orientations, b[uid].orientations)
+
+
 def test_segment_quats_numba_and_python_agree():
     """Target orientations from joint positions (one call per target frame and character):
     the numba kernel gives the scalar Python's quaternions on random postures, on a degenerate

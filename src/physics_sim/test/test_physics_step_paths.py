@@ -114,7 +114,7 @@ def test_step_cost_prints_the_cost_and_a_digest_of_the_same_outputs(capsys):
     assert step_cost.main(['--users', '2', '--frames', '2']) == 0
     assert step_cost.main(['--users', '2', '--frames', '2']) == 0
     lines = capsys.readouterr().out.strip().splitlines()
-    assert len(lines) == 2 and 'ms per frame' in lines[0]
+    assert len(lines) == 2 and 'ms per frame' in lines[0] and 'medians: input' in lines[0]
     assert lines[0].split('digest ')[1] == lines[1].split('digest ')[1]   # deterministic
     assert step_cost.main(['--users', '7']) == 2
     assert step_cost.main(['--solver', 'dantzig']) == 2

@@ -101,12 +101,13 @@ def retarget(positions: np.ndarray, body: Body,
 def retarget_by_joint(positions: np.ndarray, bone: np.ndarray, rest_dirs: np.ndarray) -> np.ndarray:
     """:func:`retarget` with the lengths given per joint: ``bone`` (20,) the length of the segment
     ending at each joint (0 for the root), ``rest_dirs`` (20, 3) the direction a zero-length
-    segment takes. One posture or a batch (..., 20, 3)."""
+    segment takes. One posture or a batch (..., 20, 3), with one ``bone`` / ``rest_dirs`` for all
+    or one per posture (..., 20) / (..., 20, 3)."""
     p = np.asarray(positions, dtype=float)
     d = p - p[..., _PARENT_OR_SELF, :]
     n = np.sqrt(np.sum(d * d, axis=-1, keepdims=True))
     unit = np.where(n > 1e-9, d / np.maximum(n, 1e-12), rest_dirs)
-    return forward_kinematics(np.asarray(bone, float)[:, None] * unit, p[..., ROOT, :])
+    return forward_kinematics(np.asarray(bone, float)[..., None] * unit, p[..., ROOT, :])
 
 
 # ---------------------------------------------------------------------------------------------
