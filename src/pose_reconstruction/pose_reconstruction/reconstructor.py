@@ -124,7 +124,8 @@ from .profile import from_optional as profile_lengths
 from .length_prior import LengthPrior, LengthPriorConfig
 from .reliability import ReliabilityConfig, ReliabilityEstimator
 from .segment_output import (SEG_DIFF, SegmentOutput, SegmentOutputConfig,
-                             neighbour_direction_spread, neighbour_direction_spreads, smooth_many)
+                             database_segment_units, neighbour_direction_spread,
+                             neighbour_direction_spreads, smooth_many)
 from .trust import SensorTrust, TrustConfig
 
 METHODS = ('A', 'B', 'C')
@@ -419,8 +420,8 @@ class Reconstructor:
                 # database is trusted more than the sensor
                 root = obs[ROOT] - ((1.0 - alpha) / prep.scale) * (yaw_matrix(yaw) @ res.shift)
             if spread is None and self._wants_spread(p, res):
-                Y = self.db.flat.take(res.neighbours, axis=0).reshape(-1, NUM_JOINTS, 3)
-                spread = neighbour_direction_spread(Y, res.distances)
+                units = database_segment_units(self.db).take(res.neighbours, axis=0)
+                spread = neighbour_direction_spread(None, res.distances, units)
             step = self.segment_output.output_rows(
                 p.frame, res.positions, w, alpha, yaw=yaw, seg_obs=p.seg_obs, len_obs=p.len_obs,
                 root=root, db_spread=spread, db_distance=rms)
@@ -521,9 +522,9 @@ def process_batch(recs, frames) -> list:
         want = [k for k, (i, p) in enumerate(pend) if recs[i]._wants_spread(p, results[k])]
         if len(want) > 1 and len({len(results[k].neighbours) for k in want}) == 1:
             idx = np.stack([results[k].neighbours for k in want])
-            Y = recs[pend[want[0]][0]].db.flat.take(idx, axis=0).reshape(
-                len(want), idx.shape[1], NUM_JOINTS, 3)
-            sp = neighbour_direction_spreads(Y, np.stack([results[k].distances for k in want]))
+            units = database_segment_units(recs[pend[want[0]][0]].db).take(idx, axis=0)
+            sp = neighbour_direction_spreads(None, np.stack([results[k].distances for k in want]),
+                                             units)
             spreads = dict(zip(want, sp))
     done = []
     for k, (i, p) in enumerate(pend):

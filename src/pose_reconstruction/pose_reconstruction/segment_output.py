@@ -236,23 +236,40 @@ class SegmentOutputConfig:
         'term, so that the body does not trail the tracked hands and feet', public=False)
 
 
-def neighbour_direction_spread(Y: np.ndarray, dist: np.ndarray) -> np.ndarray:
+def segment_units(Y: np.ndarray) -> np.ndarray:
+    """(..., 19, 3) the unit segment directions of postures ``Y`` (..., 20, 3) (a zero-length
+    segment: zero)."""
+    v = Y[..., SEGMENT_CHILD_INDEX, :] - Y[..., SEGMENT_PARENT_INDEX, :]
+    return v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-9)
+
+
+def database_segment_units(db) -> np.ndarray:
+    """(N, 19, 3) :func:`segment_units` of every posture of ``db`` (a
+    :class:`~.posture_space.DatabaseArrays`), computed once per database (``db.derived``): the
+    neighbours' directions are rows of it (each row the same numbers as computed alone)."""
+    U = db.derived.get('segment_units')
+    if U is None:
+        U = db.derived['segment_units'] = segment_units(db.flat.reshape(-1, NUM_JOINTS, 3))
+        U.setflags(write=False)
+    return U
+
+
+def neighbour_direction_spread(Y: np.ndarray, dist: np.ndarray, units=None) -> np.ndarray:
     """(19,) the spread of the K neighbours' segment directions (rad^2): ``1 - |m|^2`` of the
     mean ``m`` of their unit directions, weighted by the inverse of ``dist`` (K,: the search's
     distances, as the optimizer returns them) (the mean squared chord to the mean direction;
-    ~ the mean squared angle for small spreads). ``Y`` (K, 20, 3)."""
-    v = Y[:, SEGMENT_CHILD_INDEX] - Y[:, SEGMENT_PARENT_INDEX]
-    u = v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-9)
+    ~ the mean squared angle for small spreads). ``Y`` (K, 20, 3); ``units``: their
+    :func:`segment_units` (K, 19, 3) instead (``Y`` then unused)."""
+    u = segment_units(Y) if units is None else units
     wk = 1.0 / np.maximum(np.asarray(dist, float), 1e-9)
     m = np.einsum('k,ksd->sd', wk / wk.sum(), u)
     return 1.0 - np.einsum('sd,sd->s', m, m)
 
 
-def neighbour_direction_spreads(Y: np.ndarray, dist: np.ndarray) -> np.ndarray:
-    """:func:`neighbour_direction_spread` of several users at once: ``Y`` (U, K, 20, 3),
-    ``dist`` (U, K) -> (U, 19)."""
-    v = Y[:, :, SEGMENT_CHILD_INDEX] - Y[:, :, SEGMENT_PARENT_INDEX]
-    u = v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-9)
+def neighbour_direction_spreads(Y: np.ndarray, dist: np.ndarray, units=None) -> np.ndarray:
+    """:func:`neighbour_direction_spread` of several users at once: ``Y`` (U, K, 20, 3) (or
+    ``units`` (U, K, 19, 3)), ``dist`` (U, K) -> (U, 19)."""
+    u = segment_units(Y) if units is None else units
     wk = 1.0 / np.maximum(np.asarray(dist, float), 1e-9)
     m = np.einsum('uk,uksd->usd', wk / wk.sum(axis=1, keepdims=True), u)
     return 1.0 - np.einsum('usd,usd->us', m, m)
