@@ -377,7 +377,8 @@ class Reconstructor:
             return self._emit(frame, res.positions, R, res.orientations, res)
         w = R if self.use_reliability else np.ones(NUM_JOINTS)
         translate = self.float_root and w[ROOT] < self.reliable_threshold
-        yaw_in = self.body_fit.heading_in(obs, w, height, translate)
+        few = self.body_fit.few_reliable(w)   # (the body fit's update takes it again)
+        yaw_in = self.body_fit.heading_in(obs, w, height, translate, few)
         prep = self.preparer.prepare(obs, w, height, yaw=yaw_in)
         yaw = float(prep.transform.yaw)
         prev = []
@@ -385,7 +386,7 @@ class Reconstructor:
             prev.append(x @ yaw_matrix(y - yaw).T)
         return _Pending(frame=frame, R=R, obs=obs, seg_obs=seg_obs, len_obs=len_obs, w=w,
                         translate=translate, prep=prep, yaw=yaw, height=height,
-                        prev=prev[::-1], segments=segments, t0=t0, t1=t1)
+                        prev=prev[::-1], segments=segments, t0=t0, t1=t1, few=few)
 
     def _wants_spread(self, p: '_Pending', res) -> bool:
         return bool(p.segments and self.segment_output.direction_db_spread
@@ -399,7 +400,7 @@ class Reconstructor:
         obs, w, yaw, prep = p.obs, p.w, p.yaw, p.prep
         tf = time.perf_counter()
         self._prev.append((res.positions, yaw))
-        self.body_fit.update(prep.query, w, p.height, yaw, p.translate)
+        self.body_fit.update(prep.query, w, p.height, yaw, p.translate, p.few)
         t2 = time.perf_counter()
         # the optimizer's own stages are timed by it (in a batch: its share of the batch)
         prepare = (1e3 * (p.t_solve - p.t1 + t2 - tf) if p.t_solve
@@ -483,6 +484,7 @@ class _Pending:
     t0: float
     t1: float
     t_solve: float = 0.0
+    few: Optional[tuple] = None   # the body fit's few_reliable(w)
 
     @property
     def query(self) -> np.ndarray:

@@ -335,6 +335,7 @@ class SegmentOutput:
         self._prior_cache: Optional[tuple] = None  # (prior, sides, counts, fused lengths)
         self._estimate_cache: Optional[tuple] = None  # (counts, means, complete, excess)
         self._profile_refused = False  # the profile's lengths were another person's
+        self._var_obs_cache: Optional[tuple] = None  # (lengths, sigma, _fused_weight's var_obs)
         # filled_memory_s: each segment's last reliably observed direction and its age (s)
         self._seen_u = np.zeros((NUM_SEGMENTS, 3))
         self._seen_age = np.full(NUM_SEGMENTS, np.inf)
@@ -507,8 +508,8 @@ class SegmentOutput:
                 fs = self.smooth_filled_scale
                 scale = np.ones(NUM_SEGMENTS + 1)
                 scale[:NUM_SEGMENTS] = fs + (1.0 - fs) * rel_frac
-                if (self.smooth_anchored_speed and torso_weight(w) < thr
-                        and not (wmin >= thr).any()):
+                if (self.smooth_anchored_speed and not reliable.any()
+                        and torso_weight(w) < thr):
                     # few reliable joints: filled segments with a reliable joint hanging from
                     # them keep the speed term too, in proportion (module docstring)
                     anchored = np.minimum((_SEG_BELOW * w).max(axis=1)
@@ -603,7 +604,12 @@ class SegmentOutput:
         segment the sensor sees (a shank, an upper arm: 5-8 deg) follows the sensor; a short one
         (the hips, the shoulders, the feet: 20-30 deg) takes the database's direction."""
         sigma = self.offset_sigma() if self.offset_sigma is not None else _OFFSET_SIGMA
-        var_obs = 4.0 * sigma * sigma / np.maximum(L, 1e-2) ** 2
+        cached = self._var_obs_cache
+        if cached is not None and cached[0] is L and cached[1] == sigma:
+            var_obs = cached[2]   # the frozen lengths (the same array) and the same sigma
+        else:
+            var_obs = 4.0 * sigma * sigma / np.maximum(L, 1e-2) ** 2
+            self._var_obs_cache = (L, sigma, var_obs)
         var_db = _DB_DIRECTION_VAR
         d0 = self.direction_db_distance
         if d0 > 0.0 and db_distance is not None and db_distance > d0:
