@@ -249,7 +249,10 @@ def database_segment_units(db) -> np.ndarray:
     neighbours' directions are rows of it (each row the same numbers as computed alone)."""
     U = db.derived.get('segment_units')
     if U is None:
-        U = db.derived['segment_units'] = segment_units(db.flat.reshape(-1, NUM_JOINTS, 3))
+        # C order: the fancy index leaves the segment axis outermost in memory, and taking
+        # rows of that layout costs ~50x more
+        U = db.derived['segment_units'] = np.ascontiguousarray(
+            segment_units(db.flat.reshape(-1, NUM_JOINTS, 3)))
         U.setflags(write=False)
     return U
 

@@ -198,6 +198,7 @@ def test_database_segment_units_give_the_neighbours_spreads_bit_for_bit(db):
                                                     neighbour_direction_spreads)
     U = database_segment_units(db)
     assert U is database_segment_units(db)           # once per database
+    assert U.flags['C_CONTIGUOUS'] and not U.flags['WRITEABLE']   # rows taken cheaply, shared
     rng = np.random.default_rng(1)
     idx = rng.integers(0, db.size, (3, 30))
     dist = rng.uniform(0.01, 1.0, (3, 30))
