@@ -523,9 +523,9 @@ def process_batch(recs, frames) -> list:
         # the neighbours' segment direction spreads of the users whose output uses them
         want = [k for k, (i, p) in enumerate(pend) if recs[i]._wants_spread(p, results[k])]
         if len(want) > 1 and len({len(results[k].neighbours) for k in want}) == 1:
-            idx = np.stack([results[k].neighbours for k in want])
+            idx = np.array([results[k].neighbours for k in want])
             units = database_segment_units(recs[pend[want[0]][0]].db).take(idx, axis=0)
-            sp = neighbour_direction_spreads(None, np.stack([results[k].distances for k in want]),
+            sp = neighbour_direction_spreads(None, np.array([results[k].distances for k in want]),
                                              units)
             spreads = dict(zip(want, sp))
     done = []
