@@ -404,7 +404,7 @@ class NaturalPostureOptimizer:
         if self.db.orientations is not None:
             inv = 1.0 / (dist + 1e-6)
             Q = self.db.orientations.take(idx, axis=0)        # (K, 20, 4)
-            ori = quat_average(np.swapaxes(Q, 0, 1), np.broadcast_to(inv, (NUM_JOINTS, len(idx))))
+            ori = quat_average(Q.swapaxes(0, 1), np.broadcast_to(inv, (NUM_JOINTS, len(idx))))
         t4 = time.perf_counter()
         zs = z[None]
         return OptimizerResult(
@@ -485,7 +485,7 @@ def solve_batch(opts: Sequence[NaturalPostureOptimizer], queries: Sequence[np.nd
     Y = first._X.take(IDX.ravel(), axis=0).reshape(n, K, -1)
     mu = Y.sum(axis=1) * (1.0 / K)
     Yc = Y - mu[:, None, :]
-    G = Yc @ np.swapaxes(Yc, 1, 2)
+    G = Yc @ Yc.swapaxes(1, 2)
     eig = np.linalg.eigh(G) if K < Y.shape[2] else None
     Ss = _setup_many(opts, Y, mu, Yc, G, eig, qs, ws, conts)
     t2 = time.perf_counter()
@@ -519,7 +519,7 @@ def solve_batch(opts: Sequence[NaturalPostureOptimizer], queries: Sequence[np.nd
         DIST = np.array([knn[i][1] for i in range(n)])
         inv = 1.0 / (DIST + 1e-6)                                            # (n, K)
         Q = first.db.orientations.take(IDX, axis=0)                          # (n, K, 20, 4)
-        avg = quat_average(np.swapaxes(Q, 1, 2),
+        avg = quat_average(Q.swapaxes(1, 2),
                            np.broadcast_to(inv[:, None, :], (n, NUM_JOINTS, K)))
         oris = list(avg)
     t4 = time.perf_counter()
@@ -608,7 +608,7 @@ def _setup_many(opts, Y, mu, Yc, G, eig, qs, ws, conts) -> list:
     d = dims
     s = np.sqrt(lam[f, :d])                                               # (m, d)
     Ud = eig[1][f][:, :, ::-1][:, :, :d]                                   # (m, K, d)
-    V = (np.swapaxes(Ud, 1, 2) @ Yc[f]) / s[:, :, None]                    # (m, d, 60)
+    V = (Ud.swapaxes(1, 2) @ Yc[f]) / s[:, :, None]                    # (m, d, 60)
     zn = Ud * s[:, None, :]                                                # (m, K, d)
     znsq = np.einsum('mkd,mkd->mk', zn, zn)
     res_n = np.maximum(np.diagonal(G[f], axis1=1, axis2=2) - znsq, 0.0)
@@ -618,7 +618,7 @@ def _setup_many(opts, Y, mu, Yc, G, eig, qs, ws, conts) -> list:
     MU = mu[f]
     mq = MU - Q
     Vw = V * W60[:, None, :]
-    A_c = Vw @ np.swapaxes(V, 1, 2)                                        # (m, d, d)
+    A_c = Vw @ V.swapaxes(1, 2)                                        # (m, d, d)
     b_c = 2.0 * np.einsum('mdj,mj->md', Vw, mq)
     c_c = np.einsum('mj,mj->m', mq, W60 * mq)
     zn_sq = znsq + res_n
@@ -638,7 +638,7 @@ def _setup_many(opts, Y, mu, Yc, G, eig, qs, ws, conts) -> list:
     WT[:, diag, diag] += (wsty * inv_j)[:, None]
     WT[:, :d, d] = wc[:, None] * b_c - (2.0 * wm * inv_j)[:, None] * zc
     const = wc * c_c + wm * inv_j * (np.einsum('md,md->m', zc, zc) + res_c)
-    Vt = np.swapaxes(V, 1, 2)
+    Vt = V.swapaxes(1, 2)
     np.subtract(Vt[:, _SEGX_C], Vt[:, _SEGX_P], out=WT[:, d:d + n3, :d])
     np.subtract(MU[:, _SEGX_C], MU[:, _SEGX_P], out=WT[:, d:d + n3, d])
     np.multiply(zn, -2.0, out=WT[:, d + n3:, :d])
