@@ -91,10 +91,11 @@ class BodyFit:
         return few, int(rel.sum()) >= MIN_FIT_JOINTS
 
     def heading_in(self, obs: np.ndarray, w: np.ndarray, height: float,
-                   translate: bool) -> Optional[float]:
+                   translate: bool, few: Optional[tuple] = None) -> Optional[float]:
         """The heading to prepare this frame's query with, in the few-reliable-joints regime:
-        the one kept from earlier frames (searched at the start). None outside that regime."""
-        few, fit_ok = self.few_reliable(w)
+        the one kept from earlier frames (searched at the start). None outside that regime.
+        ``few``: :meth:`few_reliable` of ``w`` when already known."""
+        few, fit_ok = self.few_reliable(w) if few is None else few
         if not few:
             return None
         if self.yaw_state is None and self.yaw_search > 0 and fit_ok:
@@ -102,10 +103,11 @@ class BodyFit:
         return self.yaw_state
 
     def update(self, query: np.ndarray, w: np.ndarray, height: float, yaw: float,
-               translate: bool) -> None:
+               translate: bool, few: Optional[tuple] = None) -> None:
         """After this frame's query (prepared at heading ``yaw``): correct the kept heading from
-        the database, and fit the height while it is not known."""
-        few, fit_ok = self.few_reliable(w)
+        the database, and fit the height while it is not known. ``few``: :meth:`few_reliable`
+        of ``w`` when already known."""
+        few, fit_ok = self.few_reliable(w) if few is None else few
         theta = None
         if few and fit_ok and self.yaw_rate > 0.0:
             theta = self.database_yaw(query, w, translate, scaled=not self.height_settled())

@@ -404,7 +404,7 @@ class NaturalPostureOptimizer:
         if self.db.orientations is not None:
             inv = 1.0 / (dist + 1e-6)
             Q = self.db.orientations.take(idx, axis=0)        # (K, 20, 4)
-            ori = quat_average(np.swapaxes(Q, 0, 1), np.broadcast_to(inv, (NUM_JOINTS, len(idx))))
+            ori = quat_average(Q.swapaxes(0, 1), np.broadcast_to(inv, (NUM_JOINTS, len(idx))))
         t4 = time.perf_counter()
         zs = z[None]
         return OptimizerResult(
@@ -471,8 +471,9 @@ def solve_batch(opts: Sequence[NaturalPostureOptimizer], queries: Sequence[np.nd
             qs[i] = qs[i] + shifts[i]
             knn[i] = (idx, dist)
     if plain:
-        W = np.stack([ws[i] if ws[i].sum() > 1e-6 else np.ones_like(ws[i]) for i in plain])
-        IDX, DIST = first.search.knn_search_many(np.stack([qs[i] for i in plain]), W)
+        # (np.array of a list of equal-shaped arrays: np.stack's array, ~3 us less dispatch)
+        W = np.array([ws[i] if ws[i].sum() > 1e-6 else np.ones_like(ws[i]) for i in plain])
+        IDX, DIST = first.search.knn_search_many(np.array([qs[i] for i in plain]), W)
         for r, i in enumerate(plain):
             knn[i] = (IDX[r], DIST[r])
     t1 = time.perf_counter()
@@ -480,11 +481,11 @@ def solve_batch(opts: Sequence[NaturalPostureOptimizer], queries: Sequence[np.nd
     for p in previous:
         conts.append(2.0 * p[0] - p[1] if len(p) >= 2 else p[0] if len(p) == 1 else None)
     K = first.k
-    IDX = np.stack([knn[i][0] for i in range(n)])
+    IDX = np.array([knn[i][0] for i in range(n)])
     Y = first._X.take(IDX.ravel(), axis=0).reshape(n, K, -1)
     mu = Y.sum(axis=1) * (1.0 / K)
     Yc = Y - mu[:, None, :]
-    G = Yc @ np.swapaxes(Yc, 1, 2)
+    G = Yc @ Yc.swapaxes(1, 2)
     eig = np.linalg.eigh(G) if K < Y.shape[2] else None
     Ss = _setup_many(opts, Y, mu, Yc, G, eig, qs, ws, conts)
     t2 = time.perf_counter()
@@ -500,7 +501,7 @@ def solve_batch(opts: Sequence[NaturalPostureOptimizer], queries: Sequence[np.nd
         ZT = np.ones((len(members), d + 1, len(starts[members[0]])))
         for r, i in enumerate(members):
             ZT[r, :d] = starts[i].T
-        P = np.matmul(np.stack([Ss[i]['WT'] for i in members]), ZT)
+        P = np.matmul(np.array([Ss[i]['WT'] for i in members]), ZT)
         E = kernels.energy_many(P, ZT, d, np.array([Ss[i]['const'] for i in members]),
                                 first.L, first.w_kinematics, first.w_style)
         for r, i in enumerate(members):
@@ -515,10 +516,10 @@ def solve_batch(opts: Sequence[NaturalPostureOptimizer], queries: Sequence[np.nd
     X = [(S['mu'] + z @ S['V']).reshape(NUM_JOINTS, 3) for S, z in zip(Ss, zs)]
     oris = [None] * n
     if first.db.orientations is not None:
-        DIST = np.stack([knn[i][1] for i in range(n)])
+        DIST = np.array([knn[i][1] for i in range(n)])
         inv = 1.0 / (DIST + 1e-6)                                            # (n, K)
         Q = first.db.orientations.take(IDX, axis=0)                          # (n, K, 20, 4)
-        avg = quat_average(np.swapaxes(Q, 1, 2),
+        avg = quat_average(Q.swapaxes(1, 2),
                            np.broadcast_to(inv[:, None, :], (n, NUM_JOINTS, K)))
         oris = list(avg)
     t4 = time.perf_counter()
@@ -550,9 +551,9 @@ def _stochastic_many(opts, Ss, members, zs, es, steps) -> None:
     u = len(act)
     Z = np.empty((u, d + 1, M))
     Z[:, d] = 1.0
-    WT = np.stack([Ss[i]['WT'] for i in act])
-    SIG = np.stack([opts[i].step_scale * np.maximum(Ss[i]['sd'], 1e-6) for i in act])[:, :, None]
-    ZC = np.stack([np.asarray(zs[i], float) for i in act])[:, :, None]
+    WT = np.array([Ss[i]['WT'] for i in act])
+    SIG = np.array([opts[i].step_scale * np.maximum(Ss[i]['sd'], 1e-6) for i in act])[:, :, None]
+    ZC = np.array([np.asarray(zs[i], float) for i in act])[:, :, None]
     const = np.array([Ss[i]['const'] for i in act])
     E0 = np.array([es[i] for i in act])
     P = np.empty((u, WT.shape[1], M))
@@ -607,21 +608,21 @@ def _setup_many(opts, Y, mu, Yc, G, eig, qs, ws, conts) -> list:
     d = dims
     s = np.sqrt(lam[f, :d])                                               # (m, d)
     Ud = eig[1][f][:, :, ::-1][:, :, :d]                                   # (m, K, d)
-    V = (np.swapaxes(Ud, 1, 2) @ Yc[f]) / s[:, :, None]                    # (m, d, 60)
+    V = (Ud.swapaxes(1, 2) @ Yc[f]) / s[:, :, None]                    # (m, d, 60)
     zn = Ud * s[:, None, :]                                                # (m, K, d)
     znsq = np.einsum('mkd,mkd->mk', zn, zn)
     res_n = np.maximum(np.diagonal(G[f], axis1=1, axis2=2) - znsq, 0.0)
     sd = s * (1.0 / np.sqrt(max(K - 1, 1)))
-    Q = np.stack([np.asarray(qs[i], float).ravel() for i in full])         # (m, 60)
-    W60 = np.repeat(np.stack([ws[i] for i in full]), 3, axis=1)            # (m, 60)
+    Q = np.array([np.asarray(qs[i], float).ravel() for i in full])         # (m, 60)
+    W60 = np.repeat(np.array([ws[i] for i in full]), 3, axis=1)            # (m, 60)
     MU = mu[f]
     mq = MU - Q
     Vw = V * W60[:, None, :]
-    A_c = Vw @ np.swapaxes(V, 1, 2)                                        # (m, d, d)
+    A_c = Vw @ V.swapaxes(1, 2)                                        # (m, d, d)
     b_c = 2.0 * np.einsum('mdj,mj->md', Vw, mq)
     c_c = np.einsum('mj,mj->m', mq, W60 * mq)
     zn_sq = znsq + res_n
-    C = np.stack([conts[i].ravel() for i in full])
+    C = np.array([conts[i].ravel() for i in full])
     cm = C - MU
     zc = np.einsum('mdj,mj->md', V, cm)
     res_c = np.maximum(np.einsum('mj,mj->m', cm, cm) - np.einsum('md,md->m', zc, zc), 0.0)
@@ -637,7 +638,7 @@ def _setup_many(opts, Y, mu, Yc, G, eig, qs, ws, conts) -> list:
     WT[:, diag, diag] += (wsty * inv_j)[:, None]
     WT[:, :d, d] = wc[:, None] * b_c - (2.0 * wm * inv_j)[:, None] * zc
     const = wc * c_c + wm * inv_j * (np.einsum('md,md->m', zc, zc) + res_c)
-    Vt = np.swapaxes(V, 1, 2)
+    Vt = V.swapaxes(1, 2)
     np.subtract(Vt[:, _SEGX_C], Vt[:, _SEGX_P], out=WT[:, d:d + n3, :d])
     np.subtract(MU[:, _SEGX_C], MU[:, _SEGX_P], out=WT[:, d:d + n3, d])
     np.multiply(zn, -2.0, out=WT[:, d + n3:, :d])

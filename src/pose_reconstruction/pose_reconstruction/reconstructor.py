@@ -124,7 +124,8 @@ from .profile import from_optional as profile_lengths
 from .length_prior import LengthPrior, LengthPriorConfig
 from .reliability import ReliabilityConfig, ReliabilityEstimator
 from .segment_output import (SEG_DIFF, SegmentOutput, SegmentOutputConfig,
-                             neighbour_direction_spread, neighbour_direction_spreads, smooth_many)
+                             database_segment_units, neighbour_direction_spread,
+                             neighbour_direction_spreads, smooth_many)
 from .trust import SensorTrust, TrustConfig
 
 METHODS = ('A', 'B', 'C')
@@ -376,7 +377,8 @@ class Reconstructor:
             return self._emit(frame, res.positions, R, res.orientations, res)
         w = R if self.use_reliability else np.ones(NUM_JOINTS)
         translate = self.float_root and w[ROOT] < self.reliable_threshold
-        yaw_in = self.body_fit.heading_in(obs, w, height, translate)
+        few = self.body_fit.few_reliable(w)   # (the body fit's update takes it again)
+        yaw_in = self.body_fit.heading_in(obs, w, height, translate, few)
         prep = self.preparer.prepare(obs, w, height, yaw=yaw_in)
         yaw = float(prep.transform.yaw)
         prev = []
@@ -384,7 +386,7 @@ class Reconstructor:
             prev.append(x @ yaw_matrix(y - yaw).T)
         return _Pending(frame=frame, R=R, obs=obs, seg_obs=seg_obs, len_obs=len_obs, w=w,
                         translate=translate, prep=prep, yaw=yaw, height=height,
-                        prev=prev[::-1], segments=segments, t0=t0, t1=t1)
+                        prev=prev[::-1], segments=segments, t0=t0, t1=t1, few=few)
 
     def _wants_spread(self, p: '_Pending', res) -> bool:
         return bool(p.segments and self.segment_output.direction_db_spread
@@ -398,7 +400,7 @@ class Reconstructor:
         obs, w, yaw, prep = p.obs, p.w, p.yaw, p.prep
         tf = time.perf_counter()
         self._prev.append((res.positions, yaw))
-        self.body_fit.update(prep.query, w, p.height, yaw, p.translate)
+        self.body_fit.update(prep.query, w, p.height, yaw, p.translate, p.few)
         t2 = time.perf_counter()
         # the optimizer's own stages are timed by it (in a batch: its share of the batch)
         prepare = (1e3 * (p.t_solve - p.t1 + t2 - tf) if p.t_solve
@@ -419,8 +421,8 @@ class Reconstructor:
                 # database is trusted more than the sensor
                 root = obs[ROOT] - ((1.0 - alpha) / prep.scale) * (yaw_matrix(yaw) @ res.shift)
             if spread is None and self._wants_spread(p, res):
-                Y = self.db.flat.take(res.neighbours, axis=0).reshape(-1, NUM_JOINTS, 3)
-                spread = neighbour_direction_spread(Y, res.distances)
+                units = database_segment_units(self.db).take(res.neighbours, axis=0)
+                spread = neighbour_direction_spread(None, res.distances, units)
             step = self.segment_output.output_rows(
                 p.frame, res.positions, w, alpha, yaw=yaw, seg_obs=p.seg_obs, len_obs=p.len_obs,
                 root=root, db_spread=spread, db_distance=rms)
@@ -482,6 +484,7 @@ class _Pending:
     t0: float
     t1: float
     t_solve: float = 0.0
+    few: Optional[tuple] = None   # the body fit's few_reliable(w)
 
     @property
     def query(self) -> np.ndarray:
@@ -520,10 +523,10 @@ def process_batch(recs, frames) -> list:
         # the neighbours' segment direction spreads of the users whose output uses them
         want = [k for k, (i, p) in enumerate(pend) if recs[i]._wants_spread(p, results[k])]
         if len(want) > 1 and len({len(results[k].neighbours) for k in want}) == 1:
-            idx = np.stack([results[k].neighbours for k in want])
-            Y = recs[pend[want[0]][0]].db.flat.take(idx, axis=0).reshape(
-                len(want), idx.shape[1], NUM_JOINTS, 3)
-            sp = neighbour_direction_spreads(Y, np.stack([results[k].distances for k in want]))
+            idx = np.array([results[k].neighbours for k in want])
+            units = database_segment_units(recs[pend[want[0]][0]].db).take(idx, axis=0)
+            sp = neighbour_direction_spreads(None, np.array([results[k].distances for k in want]),
+                                             units)
             spreads = dict(zip(want, sp))
     done = []
     for k, (i, p) in enumerate(pend):

@@ -236,23 +236,43 @@ class SegmentOutputConfig:
         'term, so that the body does not trail the tracked hands and feet', public=False)
 
 
-def neighbour_direction_spread(Y: np.ndarray, dist: np.ndarray) -> np.ndarray:
+def segment_units(Y: np.ndarray) -> np.ndarray:
+    """(..., 19, 3) the unit segment directions of postures ``Y`` (..., 20, 3) (a zero-length
+    segment: zero)."""
+    v = Y[..., SEGMENT_CHILD_INDEX, :] - Y[..., SEGMENT_PARENT_INDEX, :]
+    return v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-9)
+
+
+def database_segment_units(db) -> np.ndarray:
+    """(N, 19, 3) :func:`segment_units` of every posture of ``db`` (a
+    :class:`~.posture_space.DatabaseArrays`), computed once per database (``db.derived``): the
+    neighbours' directions are rows of it (each row the same numbers as computed alone)."""
+    U = db.derived.get('segment_units')
+    if U is None:
+        # C order: the fancy index leaves the segment axis outermost in memory, and taking
+        # rows of that layout costs ~50x more
+        U = db.derived['segment_units'] = np.ascontiguousarray(
+            segment_units(db.flat.reshape(-1, NUM_JOINTS, 3)))
+        U.setflags(write=False)
+    return U
+
+
+def neighbour_direction_spread(Y: np.ndarray, dist: np.ndarray, units=None) -> np.ndarray:
     """(19,) the spread of the K neighbours' segment directions (rad^2): ``1 - |m|^2`` of the
     mean ``m`` of their unit directions, weighted by the inverse of ``dist`` (K,: the search's
     distances, as the optimizer returns them) (the mean squared chord to the mean direction;
-    ~ the mean squared angle for small spreads). ``Y`` (K, 20, 3)."""
-    v = Y[:, SEGMENT_CHILD_INDEX] - Y[:, SEGMENT_PARENT_INDEX]
-    u = v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-9)
+    ~ the mean squared angle for small spreads). ``Y`` (K, 20, 3); ``units``: their
+    :func:`segment_units` (K, 19, 3) instead (``Y`` then unused)."""
+    u = segment_units(Y) if units is None else units
     wk = 1.0 / np.maximum(np.asarray(dist, float), 1e-9)
     m = np.einsum('k,ksd->sd', wk / wk.sum(), u)
     return 1.0 - np.einsum('sd,sd->s', m, m)
 
 
-def neighbour_direction_spreads(Y: np.ndarray, dist: np.ndarray) -> np.ndarray:
-    """:func:`neighbour_direction_spread` of several users at once: ``Y`` (U, K, 20, 3),
-    ``dist`` (U, K) -> (U, 19)."""
-    v = Y[:, :, SEGMENT_CHILD_INDEX] - Y[:, :, SEGMENT_PARENT_INDEX]
-    u = v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-9)
+def neighbour_direction_spreads(Y: np.ndarray, dist: np.ndarray, units=None) -> np.ndarray:
+    """:func:`neighbour_direction_spread` of several users at once: ``Y`` (U, K, 20, 3) (or
+    ``units`` (U, K, 19, 3)), ``dist`` (U, K) -> (U, 19)."""
+    u = segment_units(Y) if units is None else units
     wk = 1.0 / np.maximum(np.asarray(dist, float), 1e-9)
     m = np.einsum('uk,uksd->usd', wk / wk.sum(axis=1, keepdims=True), u)
     return 1.0 - np.einsum('usd,usd->us', m, m)
@@ -318,6 +338,7 @@ class SegmentOutput:
         self._prior_cache: Optional[tuple] = None  # (prior, sides, counts, fused lengths)
         self._estimate_cache: Optional[tuple] = None  # (counts, means, complete, excess)
         self._profile_refused = False  # the profile's lengths were another person's
+        self._var_obs_cache: Optional[tuple] = None  # (lengths, sigma, _fused_weight's var_obs)
         # filled_memory_s: each segment's last reliably observed direction and its age (s)
         self._seen_u = np.zeros((NUM_SEGMENTS, 3))
         self._seen_age = np.full(NUM_SEGMENTS, np.inf)
@@ -490,8 +511,8 @@ class SegmentOutput:
                 fs = self.smooth_filled_scale
                 scale = np.ones(NUM_SEGMENTS + 1)
                 scale[:NUM_SEGMENTS] = fs + (1.0 - fs) * rel_frac
-                if (self.smooth_anchored_speed and torso_weight(w) < thr
-                        and not (wmin >= thr).any()):
+                if (self.smooth_anchored_speed and not reliable.any()
+                        and torso_weight(w) < thr):
                     # few reliable joints: filled segments with a reliable joint hanging from
                     # them keep the speed term too, in proportion (module docstring)
                     anchored = np.minimum((_SEG_BELOW * w).max(axis=1)
@@ -586,7 +607,12 @@ class SegmentOutput:
         segment the sensor sees (a shank, an upper arm: 5-8 deg) follows the sensor; a short one
         (the hips, the shoulders, the feet: 20-30 deg) takes the database's direction."""
         sigma = self.offset_sigma() if self.offset_sigma is not None else _OFFSET_SIGMA
-        var_obs = 4.0 * sigma * sigma / np.maximum(L, 1e-2) ** 2
+        cached = self._var_obs_cache
+        if cached is not None and cached[0] is L and cached[1] == sigma:
+            var_obs = cached[2]   # the frozen lengths (the same array) and the same sigma
+        else:
+            var_obs = 4.0 * sigma * sigma / np.maximum(L, 1e-2) ** 2
+            self._var_obs_cache = (L, sigma, var_obs)
         var_db = _DB_DIRECTION_VAR
         d0 = self.direction_db_distance
         if d0 > 0.0 and db_distance is not None and db_distance > d0:

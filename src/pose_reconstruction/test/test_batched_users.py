@@ -189,6 +189,28 @@ def test_direction_spreads_of_several_users_equal_each_users():
         np.testing.assert_allclose(m, neighbour_direction_spread(y, d), rtol=0, atol=1e-12)
 
 
+def test_database_segment_units_give_the_neighbours_spreads_bit_for_bit(db):
+    """The neighbours' unit segment directions taken from the database's table (computed once)
+    are the numbers computed from the neighbours' postures: the same spreads to the bit, one
+    user and several."""
+    from pose_reconstruction.segment_output import (database_segment_units,
+                                                    neighbour_direction_spread,
+                                                    neighbour_direction_spreads)
+    U = database_segment_units(db)
+    assert U is database_segment_units(db)           # once per database
+    assert U.flags['C_CONTIGUOUS'] and not U.flags['WRITEABLE']   # rows taken cheaply, shared
+    rng = np.random.default_rng(1)
+    idx = rng.integers(0, db.size, (3, 30))
+    dist = rng.uniform(0.01, 1.0, (3, 30))
+    Y = db.flat.take(idx, axis=0).reshape(3, 30, NUM_JOINTS, 3)
+    many = neighbour_direction_spreads(Y, dist)
+    assert np.array_equal(neighbour_direction_spreads(None, dist, U.take(idx, axis=0)), many)
+    for r in range(3):
+        one = neighbour_direction_spread(Y[r], dist[r])
+        assert np.array_equal(neighbour_direction_spread(None, dist[r], U.take(idx[r], axis=0)),
+                              one)
+
+
 def test_stochastic_step_kernels_numba_and_numpy_agree():
     pytest.importorskip('numba')
     rng = np.random.default_rng(4)

@@ -168,3 +168,28 @@ def test_far_from_the_database_the_sensor_weighs_more():
     assert (far > b0 + 1e-3).all()
     off = _weight(*_run(L, sigma, db_distance=0.18, direction_db_distance=0.0))
     assert np.allclose(off, b0, atol=1e-9)
+
+
+def test_the_observed_variance_kept_for_frozen_lengths_follows_a_new_sigma_or_lengths():
+    """The observation's direction variance is kept between frames while the lengths are the
+    frozen ones (the same array) and the offset scale is the same; another scale or other
+    lengths give their own weight, as computed afresh."""
+    so = SegmentOutput(None, np.full(NUM_SEGMENTS, 0.3), lambda: True, 0.5, 'user',
+                       SegmentOutputConfig(smooth_min_cutoff=0.0))
+    L = np.linspace(0.05, 0.45, NUM_SEGMENTS)
+    sigma = [0.03]
+    so.offset_sigma = lambda: sigma[0]
+
+    def fresh(lengths, s):
+        other = SegmentOutput(None, np.full(NUM_SEGMENTS, 0.3), lambda: True, 0.5, 'user',
+                              SegmentOutputConfig(smooth_min_cutoff=0.0))
+        other.offset_sigma = lambda: s
+        return other._fused_weight(lengths)
+
+    w0 = so._fused_weight(L)
+    assert np.array_equal(so._fused_weight(L), w0)            # kept: the same numbers
+    sigma[0] = 0.05
+    w1 = so._fused_weight(L)
+    assert np.array_equal(w1, fresh(L, 0.05)) and (w1 < w0).all()
+    L2 = L * 1.5
+    assert np.array_equal(so._fused_weight(L2), fresh(L2, 0.05))

@@ -336,14 +336,15 @@ class OneEuroFilter:
             if stamp_ns is not None and f.t_ns is not None and stamp_ns > f.t_ns:
                 dt = (stamp_ns - f.t_ns) * 1e-9
             dts.append(dt)
-        x = np.stack([np.asarray(p, float) for p in positions])
-        raw, dx, fx, fdx, fdd, fdd2 = (np.stack([getattr(f, k) for f in fs])
+        # (np.array of a list of equal-shaped arrays: np.stack's array with less dispatch)
+        x = np.array([np.asarray(p, float) for p in positions])
+        raw, dx, fx, fdx, fdd, fdd2 = (np.array([getattr(f, k) for f in fs])
                                        for k in ('raw', 'dx', 'x', 'fdx', 'fdd', 'fdd2'))
         out, state = fs[0]._advance(
             x, raw, dx, fx, fdx, fdd, fdd2, np.array(dts)[:, None],
-            None if cutoff_scales[0] is None else np.stack(cutoff_scales),
-            None if speed_scales[0] is None else np.stack(speed_scales),
-            None if leads[0] is None else np.stack([np.asarray(ld, float) for ld in leads]))
+            None if cutoff_scales[0] is None else np.array(cutoff_scales),
+            None if speed_scales[0] is None else np.array(speed_scales),
+            None if leads[0] is None else np.array([np.asarray(ld, float) for ld in leads]))
         for u, (f, stamp_ns) in enumerate(zip(fs, stamps_ns)):   # the state, as update
             if stamp_ns is not None:
                 f.t_ns = int(stamp_ns)

@@ -34,7 +34,7 @@ def yaw_matrix(yaw) -> np.ndarray:
     """Rotation matrices about +z by ``yaw`` (rad): (3, 3) for a scalar, (..., 3, 3) for an
     array. ``x @ R.T`` turns rows of ``x`` by ``yaw``, ``x @ R`` by ``-yaw``. A scalar's is built
     from a flat list (a nested one, or the batched stacking, costs several times as much)."""
-    if np.ndim(yaw) == 0:
+    if isinstance(yaw, float) or np.ndim(yaw) == 0:   # (a float, np.float64 too: no dispatch)
         c, s = math.cos(yaw), math.sin(yaw)
         return np.array([c, -s, 0.0, s, c, 0.0, 0.0, 0.0, 1.0]).reshape(3, 3)
     c, s = np.cos(yaw), np.sin(yaw)
