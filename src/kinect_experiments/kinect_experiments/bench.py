@@ -29,6 +29,10 @@ with the drivers elsewhere, the replayed phase of the last sensor when the fusio
 2 users with 0 dropped frames; 6 users, every output p95 <= 33 ms with 0 dropped frames and the
 graph's CPU <= 150 % (of the 2 cores' 200 %).
 
+The probe is this process (raw subscriptions to every topic, read with ``skeleton_core.cdr_scan``:
+stamps, ids and NaN skeletons without building frames; rclpy's events executor where it exists);
+its CPU in the same seconds is listed as "probe (not in the graph)", apart from the graph's.
+
 Each case starts its processes, waits until every output has delivered (the start-up -- imports,
 kernels loading, DDS discovery -- is not measured; its seconds are printed), then ``--warmup`` s,
 then measures ``--seconds``: every frame lost in that window counts.
@@ -55,7 +59,7 @@ import numpy as np
 from kinect_bringup.graph import RECONSTRUCTION, graph_nodes, repo_root
 from kinect_bringup.pipeline import EXECUTORS
 from kinect_bringup.processes import Graph
-from skeleton_core.cdr import frames_from_cdr
+from skeleton_core.cdr_scan import scan_cdr
 from skeleton_core.bagio import bag_topics
 import signal
 from skeleton_data.database import build_default
@@ -70,6 +74,7 @@ FLOOR_TOPIC = '/bench/passthrough'
 SENSOR1_TOPIC = '/kinect_1/skeletons'
 TOPICS = {'/kinect/skeletons': 'input', '/posture/reconstructed': 'reconstructed',
           '/character/skeletons': 'character', FLOOR_TOPIC: 'floor', SENSOR1_TOPIC: 'sensor1'}
+INPUTS = ('/kinect/skeletons', FLOOR_TOPIC, SENSOR1_TOPIC)   # not outputs: no NaN count
 # the latency targets: (users, output) -> ms over the floor's p95; 6 users: absolute
 OVER_FLOOR_MS = {(2, 'reconstructed'): 5.0, (2, 'character'): 12.0}
 SIX_USERS_P95_MS, SIX_USERS_CPU_PCT = 33.0, 150.0
@@ -78,21 +83,35 @@ FUSED_OVER_FLOOR_MS = 5.0   # several sensors: the fused input p95 over the raw 
 FUSION_MAX_WAIT_MS = 5.0    # the fusion node's default max_wait_ms (a later sensor waited for)
 STARTUP_TIMEOUT_S = 90.0    # the longest a case waits for every output to deliver
 REMOTE_MARGIN_S = 30.0      # drivers elsewhere: frames generated beyond warm-up + window
+PROBE = 'probe (not in the graph)'   # this process: the probe's subscriptions, its CPU apart
 LINGER_S = 25.0             # publishers found before the first case: time to go away (a killed
 #                             process's participant stays until its DDS lease ends, ~20 s)
+
+
+def probe_executor(context):
+    """The probe's executor: rclpy's events executor where it exists (Jazzy and newer: it waits
+    in C++ and runs only what is ready; the single-threaded one rebuilds its wait set in Python
+    on every wake-up, a cost the probe would add to the machine it measures), else the
+    single-threaded one."""
+    from skeleton_core.compat import events_executor
+    try:
+        return events_executor(context=context)
+    except RuntimeError:   # (Humble)
+        from rclpy.executors import SingleThreadedExecutor
+        return SingleThreadedExecutor(context=context)
 
 
 class LatencyProbe:
     def __init__(self):
         import rclpy
-        from rclpy.executors import SingleThreadedExecutor
         from rclpy.node import Node
         from rclpy.qos import QoSProfile, ReliabilityPolicy
         from skeleton_msgs.msg import SkeletonArray
         self.rclpy = rclpy
         self.ctx = rclpy.Context()
         rclpy.init(context=self.ctx)
-        self.node = Node('bench_probe', context=self.ctx)
+        # (no parameter services: fewer entities for the executor to wait on)
+        self.node = Node('bench_probe', context=self.ctx, start_parameter_services=False)
         self.lock = threading.Lock()
         self.recording = False
         self.stamps: Dict[str, set] = {t: set() for t in TOPICS}
@@ -109,7 +128,7 @@ class LatencyProbe:
                                           raw=True)
         from diagnostic_msgs.msg import DiagnosticArray
         self.node.create_subscription(DiagnosticArray, '/diagnostics', self._on_diag, 50)
-        self.ex = SingleThreadedExecutor(context=self.ctx)
+        self.ex = probe_executor(self.ctx)
         self.ex.add_node(self.node)
         self.running = True
         self.th = threading.Thread(target=self._spin, daemon=True)
@@ -125,19 +144,23 @@ class LatencyProbe:
             self.first[topic] = time.monotonic()
         if not self.recording:
             return
-        errors = []
-        frames = frames_from_cdr(data, errors)[2]   # a NaN skeleton comes back as an error
+        # the stamps, ids and validity without decoding frames (the skeletons frames_from_cdr
+        # returns; a NaN skeleton is one it rejects as non-finite)
+        skeletons = scan_cdr(data).skeletons
         with self.lock:
             self.count[topic] += 1
-            for f in frames:
-                key = (f.user_id, f.stamp_ns)
-                if key in self.stamps[topic]:   # the physics node's timer republishing the
+            stamps, lat = self.stamps[topic], self.lat[topic]
+            for uid, stamp, cause in skeletons:
+                if cause is not None:
+                    if cause.startswith('non-finite') and topic not in INPUTS:
+                        self.nan += 1
+                    continue
+                key = (uid, stamp)
+                if key in stamps:               # the physics node's timer republishing the
                     self.repeats[topic] += 1     # newest target's state: not a later delivery
                     continue
-                self.stamps[topic].add(key)
-                self.lat[topic].append((now - f.stamp_ns) / 1e6)
-            if topic not in ('/kinect/skeletons', FLOOR_TOPIC, SENSOR1_TOPIC):
-                self.nan += sum(e.cause.startswith('non-finite') for e in errors)
+                stamps.add(key)
+                lat.append((now - stamp) / 1e6)
 
     def _on_diag(self, msg):
         if not self.recording:
@@ -202,12 +225,15 @@ class LatencyProbe:
 def _proc_stats(graph: Graph, seconds: float, outside: Dict[str, subprocess.Popen] = None
                 ) -> Dict[str, Dict[str, float]]:
     """CPU % and RSS of the graph's processes over ``seconds`` (and of the ``outside`` ones,
-    measured in the same seconds, under their own names: the caller keeps them apart)."""
+    measured in the same seconds, under their own names: the caller keeps them apart; and of
+    this process, the probe's, as PROBE)."""
+    import os
     import psutil
     procs = {}
-    for name, p in {**graph.procs, **(outside or {})}.items():
+    pids = {name: p.pid for name, p in {**graph.procs, **(outside or {})}.items()}
+    for name, pid in {**pids, PROBE: os.getpid()}.items():
         try:
-            ps = psutil.Process(p.pid)
+            ps = psutil.Process(pid)
             ps.cpu_percent(None)
             procs[name] = ps
         except psutil.NoSuchProcess:
@@ -342,8 +368,9 @@ def run_case(probe: LatencyProbe, mode: str, users: int, seconds: float, warmup:
         res = {'mode': mode, 'reconstruction': reconstruction, 'users': users, 'sensors': sensors,
                'executor': executor if mode == 'pipeline' else None,
                'drivers_elsewhere': drivers_elsewhere, 'seconds': seconds,
-               'processes': {k: v for k, v in stats.items() if k not in outside},
+               'processes': {k: v for k, v in stats.items() if k not in outside and k != PROBE},
                'outside': {k: v for k, v in stats.items() if k in outside},
+               'probe': stats.get(PROBE, {}),
                'first_output_s': first,
                'nan_outputs': probe.nan, 'nodes': _node_latencies(probe.diagnostics),
                'physics': _physics_figures(probe.diagnostics)}
@@ -608,6 +635,9 @@ def to_markdown(results: List[Dict], bag_speed: Dict, commit: str) -> str:
             apart = f'; sensors {phase:g} ms apart' if phase is not None else ''
             lines.append(f"| {_label(r)} | {r['users']} | {name} (not the graph's{apart}) | "
                          f"{s['cpu_percent']:.0f} | {s['rss_mb']:.0f} |")
+        if r.get('probe'):
+            lines.append(f"| {_label(r)} | {r['users']} | {PROBE} | "
+                         f"{r['probe']['cpu_percent']:.0f} | {r['probe']['rss_mb']:.0f} |")
     firsts = [r for r in results if r.get('first_output_s')]
     if firsts:
         lines += ['', 'First output, s after the graph\'s processes started: '

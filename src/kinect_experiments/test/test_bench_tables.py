@@ -67,3 +67,17 @@ def test_every_case_prints_the_machine_speed_before_and_after_it():
     # a result without the gauge (an older bench's JSON): no speed lines
     del res[0]['machine_speed'], res[1]['machine_speed']
     assert 'machine speed x' not in to_markdown(res, {}, 'abc1234')
+
+
+def test_the_probe_cpu_is_printed_apart_from_the_graph():
+    """The probe's own process (its subscriptions to every output) is listed under its own name
+    in the process table and is not in the graph's CPU; a result without it (an older bench's
+    JSON) has no such row."""
+    from kinect_experiments.bench import PROBE, graph_cpu
+    r = _case(6, 20.0, 30.0, 4.0, cpu=(100.0, 40.0))
+    r['probe'] = {'cpu_percent': 4.4, 'rss_mb': 180.0}
+    md = to_markdown([r], {}, 'abc1234')
+    assert f'| processes (fused) | 6 | {PROBE} | 4 | 180 |' in md
+    assert '| processes (fused) | 6 | **graph** | 140 | |' in md and graph_cpu(r) == 140.0
+    del r['probe']
+    assert PROBE not in to_markdown([r], {}, 'abc1234')
