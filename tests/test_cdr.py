@@ -114,9 +114,10 @@ def test_restamp_rewrites_every_stamp_as_rclpy_reads_it():
 
 @pytest.mark.parametrize('seed', [0, 1, 2])
 def test_skeletons_checked_together_decode_as_one_by_one(seed, monkeypatch):
-    """A message whose skeletons are all valid is checked in one pass: the frames are bit for
-    bit those of the one-by-one path (frame_from_arrays), orientations (zero quaternions ->
-    identity, normalised), missing and NaN reliabilities and duplicate ids alike."""
+    """A message whose skeletons are all valid is read in blocks and checked in one pass: the
+    frames are bit for bit those of the field-by-field reader, checked together and one by one
+    (frame_from_arrays), orientations (zero quaternions -> identity, normalised), missing and
+    NaN reliabilities and duplicate ids alike."""
     import skeleton_core.cdr as cdr
     rng = np.random.default_rng(seed)
     frames = _frames(rng, 5)
@@ -126,24 +127,32 @@ def test_skeletons_checked_together_decode_as_one_by_one(seed, monkeypatch):
     msg.skeletons[1].orientations = [zero] * 20
     msg.skeletons[2].orientations = [Quaternion(x=3.0, y=-40.0, z=0.5, w=1e3)] * 19 + [zero]
     msg.skeletons.append(msg.skeletons[0])               # a duplicate id
-    data = serialize_message(msg)
-    calls = []
-    together = cdr._checked_together
-    monkeypatch.setattr(cdr, '_checked_together', lambda p: calls.append(1) or together(p))
-    e1, e2 = [], []
-    got = frames_from_cdr(data, e1)[2]
-    assert calls and together([(a.positions, a.tracking_state, a.reliability, a.orientations,
-                                a.user_id, a.stamp_ns, a.frame_id) for a in got]) is not None
-    monkeypatch.setattr(cdr, '_checked_together', lambda p: None)
-    ref = frames_from_cdr(data, e2)[2]
-    assert [e.cause for e in e1] == [e.cause for e in e2] == ['duplicate user id']
-    assert len(got) == len(ref) == 5
-    for x, y in zip(got, ref):
-        for a, b in ((x.positions, y.positions), (x.tracking_state, y.tracking_state),
-                     (x.reliability, y.reliability), (x.orientations, y.orientations)):
-            assert a.dtype == b.dtype and a.shape == b.shape
-            assert a.tobytes() == b.tobytes()
-        assert (x.user_id, x.stamp_ns, x.frame_id) == (y.user_id, y.stamp_ns, y.frame_id)
+    full = serialize_message(msg)
+    msg.skeletons[3].reliability = [float('nan')] * 20   # every skeleton complete
+    for data in (full, serialize_message(msg)):
+        blocks = cdr._decode_blocks(data)
+        assert blocks is not None and blocks[3] is not None   # read in blocks, checked at once
+        results = []
+        for blocks_on, together_on in ((True, True), (False, True), (False, False)):
+            monkeypatch.setattr(cdr, '_decode_blocks',
+                                cdr.__dict__['_decode_blocks'] if blocks_on else lambda d: None)
+            if not together_on:
+                monkeypatch.setattr(cdr, '_checked_together', lambda p: None)
+            errors = []
+            got = frames_from_cdr(data, errors)[2]
+            results.append(got)
+            assert [e.cause for e in errors] == ['duplicate user id']
+            monkeypatch.undo()
+        ref = results[-1]
+        assert len(ref) == 5
+        for got in results[:-1]:
+            assert len(got) == len(ref)
+            for x, y in zip(got, ref):
+                for a, b in ((x.positions, y.positions), (x.tracking_state, y.tracking_state),
+                             (x.reliability, y.reliability), (x.orientations, y.orientations)):
+                    assert a.dtype == b.dtype and a.shape == b.shape
+                    assert a.tobytes() == b.tobytes()
+                assert (x.user_id, x.stamp_ns, x.frame_id) == (y.user_id, y.stamp_ns, y.frame_id)
 
 
 def test_one_invalid_skeleton_sends_the_message_one_by_one():
