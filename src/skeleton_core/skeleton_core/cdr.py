@@ -383,10 +383,19 @@ def frames_to_cdr(frames: Iterable[SkeletonFrame], stamp_ns: int, frame_id: str,
     """Serialized SkeletonArray of ``frames`` (validated first, like ``frames_to_array_msg``;
     ``validated``: the frames' arrays are already what ``validate_arrays`` returns for them,
     e.g. a node checked every result, so they are written as they are)."""
+    frames = list(frames)
+    out = _encode_blocks(frames, stamp_ns, frame_id, validated)
+    return out if out is not None else _frames_to_cdr_general(frames, stamp_ns, frame_id,
+                                                               validated)
+
+
+def _frames_to_cdr_general(frames: List[SkeletonFrame], stamp_ns: int, frame_id: str,
+                           validated: bool) -> bytes:
+    """Field by field: what :func:`frames_to_cdr` falls back to when :func:`_encode_blocks`
+    declines (arrays not of the usual shapes and types, an invalid skeleton: the error)."""
     w = _Writer()
     w.stamp(stamp_ns)
     w.string(frame_id)
-    frames = list(frames)
     w.u32(len(frames))
     for f in frames:
         if validated:
@@ -402,6 +411,98 @@ def frames_to_cdr(frames: Iterable[SkeletonFrame], stamp_ns: int, frame_id: str,
         w.array(t, 'u1')
         w.array(rel, 'f4')
     return w.bytes()
+
+
+# A complete skeleton's fields from its positions on (the layout _decode_blocks reads), rows
+# of a multiple of 8 bytes: the counts preset, the arrays assigned for all skeletons at once.
+_BLOCK_DT = np.dtype({'names': ['p', 'oc', 'q', 'tc', 't', 'rc', 'r'],
+                      'formats': [('<f8', (3 * _J,)), '<u4', ('<f8', (4 * _J,)), '<u4',
+                                  ('u1', (_J,)), '<u4', ('<f4', (_J,))],
+                      'offsets': [0, 24 * _J, _ORI_AT, _TS_AT - 4, _TS_AT, _REL_AT - 4,
+                                  _REL_AT],
+                      'itemsize': len(_BLOCK_AT)})
+_BLOCK_TEMPLATE = np.zeros(1, _BLOCK_DT)
+for _name in ('oc', 'tc', 'rc'):
+    _BLOCK_TEMPLATE[_name] = _J
+_HEAD_W = struct.Struct('<iII')   # stamp, then a string's length
+_UU_W = struct.Struct('<II')
+_PADS = [b'\x00' * k for k in range(8)]
+
+
+def _encode_blocks(frames: List[SkeletonFrame], stamp_ns: int, frame_id: str,
+                   validated: bool) -> Optional[bytes]:
+    """The bytes :func:`_frames_to_cdr_general` writes, for frames of the usual arrays (float64
+    positions, uint8 states, float32 reliabilities of NUM_JOINTS, float64 or no orientations),
+    valid (or ``validated``): every skeleton's arrays written in one block array, the rest
+    packed in one pass. None for anything else (the general writer then says what is wrong)."""
+    k = len(frames)
+    if not _BLOCKS_OK or k < 2:   # (one skeleton: the general writer is as cheap)
+        return None
+    try:
+        parts = [b'\x00\x01\x00\x00']
+        fid = frame_id.encode('utf-8') + b'\x00'
+        parts.append(_HEAD_W.pack(int(stamp_ns // 1_000_000_000), int(stamp_ns % 1_000_000_000),
+                                  len(fid)))
+        parts.append(fid)
+        p = 16 + len(fid)
+        pad = (-p) & 3
+        parts.append(_PADS[pad] + _U_L.pack(k))
+        p += pad + 4
+        if not k:
+            return b''.join(parts)
+        heads = []
+        for f in frames:
+            ns = f.stamp_ns
+            sk_fid = f.frame_id.encode('utf-8') + b'\x00'
+            pad = (-p) & 3
+            p += pad + 12 + len(sk_fid)
+            pad2 = (-p) & 3
+            p += pad2 + 8
+            pad3 = (-(p - 4)) & 7
+            p += pad3 + _BLOCK
+            heads.append(b''.join((_PADS[pad], _HEAD_W.pack(int(ns // 1_000_000_000),
+                                                           int(ns % 1_000_000_000),
+                                                           len(sk_fid)),
+                                   sk_fid, _PADS[pad2], _UU_W.pack(int(f.user_id), _J),
+                                   _PADS[pad3])))
+        P = np.array([f.positions for f in frames])
+        T = np.array([f.tracking_state for f in frames])
+        R = np.array([f.reliability for f in frames])
+        oris = [f.orientations for f in frames]
+        some = [q for q in oris if q is not None]
+        Q = np.array(some) if some else None
+    except (struct.error, ValueError, TypeError, AttributeError, UnicodeError, OverflowError):
+        return None
+    if (P.dtype != np.float64 or P.shape != (k, _J, 3) or T.dtype != np.uint8
+            or T.shape != (k, _J) or R.dtype != np.float32 or R.shape != (k, _J)
+            or (Q is not None and (Q.dtype != np.float64 or Q.shape != (len(some), _J, 4)))):
+        return None
+    if not validated:
+        Qn = _blocks_valid(P, T, R, Q)
+        if Qn is None:
+            return None
+        Q = Qn if Q is not None else None
+    B = _BLOCK_TEMPLATE.repeat(k)
+    B['p'] = P.reshape(k, 3 * _J)
+    B['t'] = T
+    B['r'] = R
+    if Q is None:
+        B['q'] = _IDENTITY_ROW
+    elif len(some) == k:
+        B['q'] = Q.reshape(k, 4 * _J)
+    else:
+        has = np.array([q is not None for q in oris])
+        B['q'] = _IDENTITY_ROW
+        B['q'][has] = Q.reshape(-1, 4 * _J)
+    rows = B.tobytes()
+    step = _BLOCK_DT.itemsize
+    for i, h in enumerate(heads):
+        parts.append(h)
+        parts.append(rows[i * step:i * step + _BLOCK])
+    return b''.join(parts)
+
+
+_IDENTITY_ROW = _IDENTITY.reshape(-1)
 
 
 def stamp_offsets(data: bytes) -> List[int]:
@@ -424,6 +525,13 @@ def stamp_offsets(data: bytes) -> List[int]:
     return out
 
 
+def header_stamp_ns(data: bytes) -> int:
+    """The header stamp of a serialized SkeletonArray, the rest not read (:class:`CdrError`
+    when the buffer is not CDR or too short for it)."""
+    r = _Reader(data)
+    return r.stamp_ns()
+
+
 def restamp_cdr(data: bytes, offsets: Sequence[int], stamp_ns: int) -> bytes:
     """``data`` with every stamp at ``offsets`` (:func:`stamp_offsets`) set to ``stamp_ns``."""
     out = bytearray(data)
@@ -433,5 +541,5 @@ def restamp_cdr(data: bytes, offsets: Sequence[int], stamp_ns: int) -> bytes:
     return bytes(out)
 
 
-__all__ = ['CdrError', 'SKELETON_ARRAY', 'frames_from_cdr', 'frames_to_cdr', 'restamp_cdr',
-           'stamp_offsets']
+__all__ = ['CdrError', 'SKELETON_ARRAY', 'frames_from_cdr', 'frames_to_cdr', 'header_stamp_ns',
+           'restamp_cdr', 'stamp_offsets']
