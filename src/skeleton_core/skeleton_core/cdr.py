@@ -421,9 +421,10 @@ _BLOCK_DT = np.dtype({'names': ['p', 'oc', 'q', 'tc', 't', 'rc', 'r'],
                       'offsets': [0, 24 * _J, _ORI_AT, _TS_AT - 4, _TS_AT, _REL_AT - 4,
                                   _REL_AT],
                       'itemsize': len(_BLOCK_AT)})
-_BLOCK_TEMPLATE = np.zeros(1, _BLOCK_DT)
+_template = np.zeros(1, _BLOCK_DT)
 for _name in ('oc', 'tc', 'rc'):
-    _BLOCK_TEMPLATE[_name] = _J
+    _template[_name] = _J
+_BLOCK_TEMPLATE = _template.tobytes()   # one skeleton's block: the counts, zero padding
 _HEAD_W = struct.Struct('<iII')   # stamp, then a string's length
 _UU_W = struct.Struct('<II')
 _PADS = [b'\x00' * k for k in range(8)]
@@ -482,7 +483,7 @@ def _encode_blocks(frames: List[SkeletonFrame], stamp_ns: int, frame_id: str,
         if Qn is None:
             return None
         Q = Qn if Q is not None else None
-    B = _BLOCK_TEMPLATE.repeat(k)
+    B = np.frombuffer(bytearray(_BLOCK_TEMPLATE * k), _BLOCK_DT)
     B['p'] = P.reshape(k, 3 * _J)
     B['t'] = T
     B['r'] = R
