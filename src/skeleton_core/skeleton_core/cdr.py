@@ -12,6 +12,13 @@ elements, strings as a uint32 length including the terminating NUL.
 returns (same validation, same skipped skeletons and reasons); ``frames_to_cdr(...)`` gives bytes
 rclpy deserializes to the message ``frames_to_array_msg(...)`` builds. A truncated or inconsistent
 buffer raises :class:`CdrError` (a ``ValueError``).
+
+The usual message (little endian, every skeleton with NUM_JOINTS of each array) is read and written
+in blocks: one Python pass over the skeletons' headers, every skeleton's arrays gathered from (or
+written into) one numpy array, checked across skeletons at once (``_decode_blocks``,
+``_encode_blocks``); anything else goes field by field (``_frames_from_cdr_general``,
+``_frames_to_cdr_general``), which also says what is wrong. Both give the same bytes, frames and
+errors (tests/test_cdr.py compares them).
 """
 from __future__ import annotations
 
