@@ -199,8 +199,8 @@ class FusionNode(ManagedNode):
     @staticmethod
     def _stamp_of(data: bytes) -> Optional[int]:
         try:
-            from skeleton_core.cdr import frames_from_cdr
-            return frames_from_cdr(data)[0]
+            from skeleton_core.cdr import header_stamp_ns
+            return header_stamp_ns(data)
         except Exception:  # noqa: BLE001 - passed through as it came: the stamp is only a figure
             return None
 

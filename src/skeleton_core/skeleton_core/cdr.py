@@ -12,10 +12,18 @@ elements, strings as a uint32 length including the terminating NUL.
 returns (same validation, same skipped skeletons and reasons); ``frames_to_cdr(...)`` gives bytes
 rclpy deserializes to the message ``frames_to_array_msg(...)`` builds. A truncated or inconsistent
 buffer raises :class:`CdrError` (a ``ValueError``).
+
+The usual message (little endian, every skeleton with NUM_JOINTS of each array) is read and written
+in blocks: one Python pass over the skeletons' headers, every skeleton's arrays gathered from (or
+written into) one numpy array, checked across skeletons at once (``_decode_blocks``,
+``_encode_blocks``); anything else goes field by field (``_frames_from_cdr_general``,
+``_frames_to_cdr_general``), which also says what is wrong. Both give the same bytes, frames and
+errors (tests/test_cdr.py compares them).
 """
 from __future__ import annotations
 
 import struct
+import sys
 from typing import Iterable, List, Optional, Sequence, Tuple
 
 import numpy as np
@@ -93,6 +101,21 @@ class _Reader:
 def frames_from_cdr(data: bytes, errors: Optional[List[SkeletonFormatError]] = None
                     ) -> Tuple[int, str, List[SkeletonFrame]]:
     """(header stamp ns, header frame_id, valid frames) of a serialized SkeletonArray."""
+    fast = _decode_blocks(data)
+    if fast is not None:
+        stamp, frame_id, parsed, checked = fast
+        if checked is not None:
+            return stamp, frame_id, collect_frames(checked, lambda a: SkeletonFrame(*a),
+                                                   frame_id, errors)
+        return stamp, frame_id, collect_frames(parsed, lambda a: frame_from_arrays(*a),
+                                               frame_id, errors)
+    return _frames_from_cdr_general(data, errors)
+
+
+def _frames_from_cdr_general(data: bytes, errors: Optional[List[SkeletonFormatError]] = None
+                             ) -> Tuple[int, str, List[SkeletonFrame]]:
+    """Any buffer field by field (big endian, unusual joint counts, malformed): what
+    :func:`frames_from_cdr` falls back to when :func:`_decode_blocks` declines."""
     r = _Reader(data)
     stamp = r.stamp_ns()
     frame_id = r.string()
@@ -115,6 +138,169 @@ def frames_from_cdr(data: bytes, errors: Optional[List[SkeletonFormatError]] = N
                                                errors)
     return stamp, frame_id, collect_frames(parsed, lambda a: frame_from_arrays(*a), frame_id,
                                            errors)
+
+
+# The usual message read in blocks: a little-endian buffer (what Fast DDS and this module write on
+# x86 / ARM hosts) whose skeletons all have NUM_JOINTS positions and tracking states and NUM_JOINTS
+# or no orientations and reliabilities. One Python pass finds the offsets of every skeleton's
+# fields; each kind of array is then gathered for all skeletons at once from one numpy view of
+# the buffer (positions, orientations, tracking states, reliabilities: four gathers a message) and
+# checked at once. Anything else (or any inconsistency: a count that does not fit, a truncated
+# buffer) is left to the field-by-field reader, which says what is wrong.
+_BLOCKS_OK = sys.byteorder == 'little'
+_HEAD_L = struct.Struct('<iII')      # stamp sec, nanosec, then a string's length
+_UU_L = struct.Struct('<II')
+_U_L = struct.Struct('<I')
+_J = NUM_JOINTS
+_J3, _J4 = np.arange(3 * _J), np.arange(4 * _J)
+_J1 = np.arange(_J)
+# a complete skeleton from its positions on: positions, orientation count (+4 to align),
+# orientations, tracking state count, states, reliability count, reliabilities; its byte
+# offsets then 4 repeated bytes (rows of a multiple of 8 bytes, never past the buffer's end)
+_ORI_AT = 24 * _J + 8
+_TS_AT = _ORI_AT + 32 * _J + 4
+_REL_AT = _TS_AT + _J + (-_J) % 4 + 4
+_BLOCK = _REL_AT + 4 * _J
+_BLOCK_AT = np.concatenate([np.arange(_BLOCK), np.arange(_BLOCK - 8 + _BLOCK % 8, _BLOCK)]
+                           if _BLOCK % 8 else [np.arange(_BLOCK)])
+
+
+def _decode_blocks(data) -> Optional[tuple]:
+    """(stamp, frame_id, per-skeleton arguments of ``frame_from_arrays``, the same checked as
+    :func:`_checked_together` checks them or None) of the usual message; None: not the usual
+    message (the caller reads it field by field)."""
+    if not _BLOCKS_OK or type(data) is not bytes:
+        return None
+    n = len(data)
+    if n < 20 or data[0] != 0 or data[1] != 1:
+        return None
+    unpack_head, unpack_uu, unpack_u = _HEAD_L.unpack_from, _UU_L.unpack_from, _U_L.unpack_from
+    try:
+        sec, nsec, slen = unpack_head(data, 4)
+        p = 16 + slen
+        if p > n:
+            return None
+        frame_id = data[16:p - 1].decode('utf-8', 'replace') if slen else ''
+        p += (-p) & 3   # (alignment counts from the 4-byte header: p % 4 == (p - 4) % 4)
+        count, = unpack_u(data, p)
+        p += 4
+        if count > n:
+            return None
+        heads = []
+        pos_at, ts_at, ori_at, rel_at = [], [], [], []
+        for _ in range(count):
+            p += (-p) & 3
+            s_sec, s_nsec, slen = unpack_head(data, p)
+            s0 = p + 12
+            p = s0 + slen
+            if p > n:
+                return None
+            sk_frame = data[s0:p - 1].decode('utf-8', 'replace') if slen else ''
+            p += (-p) & 3
+            uid, pc = unpack_uu(data, p)
+            if pc != _J:
+                return None
+            p += 8
+            p += (-(p - 4)) & 7
+            pos_at.append(p)
+            p += 24 * _J
+            oc, = unpack_u(data, p)   # (p - 4) % 8 == 0 after an f8 block
+            p += 4
+            if oc == _J:
+                p += 4   # to the next 8
+                ori_at.append(p)
+                p += 32 * _J
+            elif oc:
+                return None
+            else:
+                ori_at.append(-1)
+            tc, = unpack_u(data, p)
+            if tc != _J:
+                return None
+            ts_at.append(p + 4)
+            p += 4 + _J
+            p += (-p) & 3
+            rc, = unpack_u(data, p)
+            p += 4
+            if rc == _J:
+                rel_at.append(p)
+                p += 4 * _J
+            elif rc:
+                return None
+            else:
+                rel_at.append(-1)
+            heads.append((uid, s_sec * 1_000_000_000 + s_nsec, sk_frame))
+    except struct.error:   # a count or string read past the end
+        return None
+    if p > n:
+        return None
+    stamp = sec * 1_000_000_000 + nsec
+    if not count:
+        return stamp, frame_id, [], None
+    has_q = [a >= 0 for a in ori_at]
+    has_r = [a >= 0 for a in rel_at]
+    if all(has_q) and all(has_r):
+        # every skeleton complete: its fields a fixed layout of _BLOCK bytes from the positions
+        # on, all of them gathered at once (rows padded to a multiple of 8: aligned views)
+        B = np.frombuffer(data, np.uint8)[np.array(pos_at)[:, None] + _BLOCK_AT]
+        P = B[:, :24 * _J].view(np.float64).reshape(count, _J, 3)
+        Q = B[:, _ORI_AT:_ORI_AT + 32 * _J].view(np.float64).reshape(count, _J, 4)
+        T = B[:, _TS_AT:_TS_AT + _J]
+        R = B[:, _REL_AT:_REL_AT + 4 * _J].view(np.float32)
+    else:
+        f8 = np.frombuffer(data, np.float64, (n - 4) // 8, 4)
+        P = f8[((np.array(pos_at) - 4) >> 3)[:, None] + _J3].reshape(count, _J, 3)
+        T = np.frombuffer(data, np.uint8)[np.array(ts_at)[:, None] + _J1]
+        q_at = [a for a in ori_at if a >= 0]
+        r_at = [a for a in rel_at if a >= 0]
+        Q = (f8[((np.array(q_at) - 4) >> 3)[:, None] + _J4].reshape(len(q_at), _J, 4)
+             if q_at else None)
+        R = (np.frombuffer(data, np.float32, (n - 4) // 4, 4)[
+            ((np.array(r_at) - 4) >> 2)[:, None] + _J1] if r_at else None)
+    Qn = _blocks_valid(P, T, R, Q)
+    ri = iter(R) if R is not None else iter(())
+    if Qn is None:   # one of them not valid: one by one, which says why
+        qi = iter(Q) if Q is not None else iter(())
+        parsed = [(P[k], T[k], next(ri) if has_r[k] else _EMPTY_F4,
+                   next(qi) if has_q[k] else None, uid, sk_stamp, sk_frame)
+                  for k, (uid, sk_stamp, sk_frame) in enumerate(heads)]
+        return stamp, frame_id, parsed, None
+    qi = iter(Qn)
+    checked = [(P[k], T[k], next(ri) if has_r[k] else _NAN_RELIABILITY.copy(),
+                next(qi) if has_q[k] else None, uid, sk_stamp, sk_frame)
+               for k, (uid, sk_stamp, sk_frame) in enumerate(heads)]
+    return stamp, frame_id, None, checked
+
+
+def _blocks_valid(P, T, R, Q):
+    """What :func:`validate_arrays` checks, for the stacked arrays of a message's skeletons:
+    None when one of them is not valid, else the unit orientations (an empty block when there
+    are none),
+    as ``validate_arrays`` normalises them."""
+    if not np.abs(P).max() <= MAX_ABS_COORDINATE:   # also False for NaN
+        return None
+    if T.max() > _MAX_STATE:
+        return None
+    if R is not None and not (R.min() >= 0.0 and R.max() <= 1.0) \
+            and np.logical_or(R < 0.0, R > 1.0).any():
+        return None   # (NaN: unknown, allowed)
+    if Q is None:
+        return _NO_Q
+    q = Q.reshape(-1, 4)
+    norm = np.sqrt(np.einsum('ij,ij->i', q, q))
+    if not np.isfinite(norm).all():
+        return None
+    zero = norm < 1e-9   # a default-constructed message: identity
+    if zero.any():
+        q = q.copy()
+        q[zero] = (0.0, 0.0, 0.0, 1.0)
+        norm[zero] = 1.0
+    return (q / norm[:, None]).reshape(Q.shape)
+
+
+_MAX_STATE = max(TRACKING_STATES)
+_EMPTY_F4 = np.zeros(0, np.float32)
+_NO_Q = np.zeros((0, NUM_JOINTS, 4))
 
 
 _NAN_RELIABILITY = np.full(NUM_JOINTS, np.nan, np.float32)
@@ -204,10 +390,19 @@ def frames_to_cdr(frames: Iterable[SkeletonFrame], stamp_ns: int, frame_id: str,
     """Serialized SkeletonArray of ``frames`` (validated first, like ``frames_to_array_msg``;
     ``validated``: the frames' arrays are already what ``validate_arrays`` returns for them,
     e.g. a node checked every result, so they are written as they are)."""
+    frames = list(frames)
+    out = _encode_blocks(frames, stamp_ns, frame_id, validated)
+    return out if out is not None else _frames_to_cdr_general(frames, stamp_ns, frame_id,
+                                                               validated)
+
+
+def _frames_to_cdr_general(frames: List[SkeletonFrame], stamp_ns: int, frame_id: str,
+                           validated: bool) -> bytes:
+    """Field by field: what :func:`frames_to_cdr` falls back to when :func:`_encode_blocks`
+    declines (arrays not of the usual shapes and types, an invalid skeleton: the error)."""
     w = _Writer()
     w.stamp(stamp_ns)
     w.string(frame_id)
-    frames = list(frames)
     w.u32(len(frames))
     for f in frames:
         if validated:
@@ -223,6 +418,99 @@ def frames_to_cdr(frames: Iterable[SkeletonFrame], stamp_ns: int, frame_id: str,
         w.array(t, 'u1')
         w.array(rel, 'f4')
     return w.bytes()
+
+
+# A complete skeleton's fields from its positions on (the layout _decode_blocks reads), rows
+# of a multiple of 8 bytes: the counts preset, the arrays assigned for all skeletons at once.
+_BLOCK_DT = np.dtype({'names': ['p', 'oc', 'q', 'tc', 't', 'rc', 'r'],
+                      'formats': [('<f8', (3 * _J,)), '<u4', ('<f8', (4 * _J,)), '<u4',
+                                  ('u1', (_J,)), '<u4', ('<f4', (_J,))],
+                      'offsets': [0, 24 * _J, _ORI_AT, _TS_AT - 4, _TS_AT, _REL_AT - 4,
+                                  _REL_AT],
+                      'itemsize': len(_BLOCK_AT)})
+_template = np.zeros(1, _BLOCK_DT)
+for _name in ('oc', 'tc', 'rc'):
+    _template[_name] = _J
+_BLOCK_TEMPLATE = _template.tobytes()   # one skeleton's block: the counts, zero padding
+_HEAD_W = struct.Struct('<iII')   # stamp, then a string's length
+_UU_W = struct.Struct('<II')
+_PADS = [b'\x00' * k for k in range(8)]
+
+
+def _encode_blocks(frames: List[SkeletonFrame], stamp_ns: int, frame_id: str,
+                   validated: bool) -> Optional[bytes]:
+    """The bytes :func:`_frames_to_cdr_general` writes, for frames of the usual arrays (float64
+    positions, uint8 states, float32 reliabilities of NUM_JOINTS, float64 or no orientations),
+    valid (or ``validated``): every skeleton's arrays written in one block array, the rest
+    packed in one pass. None for anything else (the general writer then says what is wrong)."""
+    k = len(frames)
+    if not _BLOCKS_OK or k < 2:   # (one skeleton: the general writer is as cheap)
+        return None
+    try:
+        parts = [b'\x00\x01\x00\x00']
+        fid = frame_id.encode('utf-8') + b'\x00'
+        parts.append(_HEAD_W.pack(int(stamp_ns // 1_000_000_000), int(stamp_ns % 1_000_000_000),
+                                  len(fid)))
+        parts.append(fid)
+        p = 16 + len(fid)
+        pad = (-p) & 3
+        parts.append(_PADS[pad] + _U_L.pack(k))
+        p += pad + 4
+        if not k:
+            return b''.join(parts)
+        heads = []
+        for f in frames:
+            ns = f.stamp_ns
+            sk_fid = f.frame_id.encode('utf-8') + b'\x00'
+            pad = (-p) & 3
+            p += pad + 12 + len(sk_fid)
+            pad2 = (-p) & 3
+            p += pad2 + 8
+            pad3 = (-(p - 4)) & 7
+            p += pad3 + _BLOCK
+            heads.append(b''.join((_PADS[pad], _HEAD_W.pack(int(ns // 1_000_000_000),
+                                                           int(ns % 1_000_000_000),
+                                                           len(sk_fid)),
+                                   sk_fid, _PADS[pad2], _UU_W.pack(int(f.user_id), _J),
+                                   _PADS[pad3])))
+        P = np.array([f.positions for f in frames])
+        T = np.array([f.tracking_state for f in frames])
+        R = np.array([f.reliability for f in frames])
+        oris = [f.orientations for f in frames]
+        some = [q for q in oris if q is not None]
+        Q = np.array(some) if some else None
+    except (struct.error, ValueError, TypeError, AttributeError, UnicodeError, OverflowError):
+        return None
+    if (P.dtype != np.float64 or P.shape != (k, _J, 3) or T.dtype != np.uint8
+            or T.shape != (k, _J) or R.dtype != np.float32 or R.shape != (k, _J)
+            or (Q is not None and (Q.dtype != np.float64 or Q.shape != (len(some), _J, 4)))):
+        return None
+    if not validated:
+        Qn = _blocks_valid(P, T, R, Q)
+        if Qn is None:
+            return None
+        Q = Qn if Q is not None else None
+    B = np.frombuffer(bytearray(_BLOCK_TEMPLATE * k), _BLOCK_DT)
+    B['p'] = P.reshape(k, 3 * _J)
+    B['t'] = T
+    B['r'] = R
+    if Q is None:
+        B['q'] = _IDENTITY_ROW
+    elif len(some) == k:
+        B['q'] = Q.reshape(k, 4 * _J)
+    else:
+        has = np.array([q is not None for q in oris])
+        B['q'] = _IDENTITY_ROW
+        B['q'][has] = Q.reshape(-1, 4 * _J)
+    rows = B.tobytes()
+    step = _BLOCK_DT.itemsize
+    for i, h in enumerate(heads):
+        parts.append(h)
+        parts.append(rows[i * step:i * step + _BLOCK])
+    return b''.join(parts)
+
+
+_IDENTITY_ROW = _IDENTITY.reshape(-1)
 
 
 def stamp_offsets(data: bytes) -> List[int]:
@@ -245,6 +533,13 @@ def stamp_offsets(data: bytes) -> List[int]:
     return out
 
 
+def header_stamp_ns(data: bytes) -> int:
+    """The header stamp of a serialized SkeletonArray, the rest not read (:class:`CdrError`
+    when the buffer is not CDR or too short for it)."""
+    r = _Reader(data)
+    return r.stamp_ns()
+
+
 def restamp_cdr(data: bytes, offsets: Sequence[int], stamp_ns: int) -> bytes:
     """``data`` with every stamp at ``offsets`` (:func:`stamp_offsets`) set to ``stamp_ns``."""
     out = bytearray(data)
@@ -254,5 +549,5 @@ def restamp_cdr(data: bytes, offsets: Sequence[int], stamp_ns: int) -> bytes:
     return bytes(out)
 
 
-__all__ = ['CdrError', 'SKELETON_ARRAY', 'frames_from_cdr', 'frames_to_cdr', 'restamp_cdr',
-           'stamp_offsets']
+__all__ = ['CdrError', 'SKELETON_ARRAY', 'frames_from_cdr', 'frames_to_cdr', 'header_stamp_ns',
+           'restamp_cdr', 'stamp_offsets']
