@@ -321,6 +321,8 @@ class SegmentOutput:
         self.filled_memory_s = float(config.filled_memory_s)
         # output_rows' arithmetic compiled (segment_output_kernels) when numba is on
         self.compiled = jit.enabled()
+        if self.compiled:
+            _kernels.warm_up()   # once per process: not on a user's first frame
         # the user's profile lengths (19,), used from the first frame when set (Reconstructor)
         self.profile_lengths: Optional[np.ndarray] = None
         # the body proportions ((19,) or (k, 19), any scale) the expected final lengths are

@@ -18,8 +18,8 @@ import math
 import numpy as np
 
 from skeleton_core import jit
-from skeleton_core.model import (HIP_LEFT, HIP_RIGHT, NUM_JOINTS, NUM_SEGMENTS, ROOT,
-                                 SEGMENT_CHILD_INDEX, SEGMENT_PARENT_INDEX, SHOULDER_LEFT,
+from skeleton_core.model import (HIP_LEFT, HIP_RIGHT, ROOT, SEGMENT_CHILD_INDEX,
+                                 SEGMENT_PARENT_INDEX, SHOULDER_LEFT,
                                  SHOULDER_RIGHT)
 
 CHILD_I = np.asarray(SEGMENT_CHILD_INDEX, np.int64)
@@ -218,7 +218,6 @@ def _fit_positions(vr, obs, pull, L, rel_frac, beta, iterations, chain, half_inv
         if ok[j]:
             for k in range(3):
                 p[j, k] += pull[j] * (obs[j, k] - p[j, k])
-    d = np.empty((ns_, 3))
     corr = np.empty((nj, 3))
     for _ in range(iterations):
         corr[:] = 0.0
@@ -305,6 +304,34 @@ def _fit_positions(vr, obs, pull, L, rel_frac, beta, iterations, chain, half_inv
 
 _fit_positions_j = jit.njit(_fit_positions)
 output_core = jit.njit(_output_core)
+_warm = [False]
 
 
-__all__ = ['CHILD_I', 'PARENT_I', 'TORSO_I', 'HAS_SCALE', 'HAS_SPEED', 'HAS_LEAD', 'output_core']
+def warm_up() -> float:
+    """Compile (or load from numba's cache) the kernel now, with the argument types of the real
+    calls (a segment output's frames with and without a yaw and a root), rather than on a user's
+    first frame; once per process, nothing without numba. Returns the time taken (s)."""
+    if _warm[0] or not jit.enabled():
+        return 0.0
+    _warm[0] = True
+    import time
+
+    from skeleton_core.conversions import SkeletonFrame
+    from skeleton_core.model import NUM_JOINTS, NUM_SEGMENTS, TRACKED
+
+    from .segment_output import SegmentOutput, SegmentOutputConfig
+    t0 = time.perf_counter()
+    so = SegmentOutput(None, np.full(NUM_SEGMENTS, 0.3), lambda: True, 0.5, 'user',
+                       SegmentOutputConfig())
+    so.profile_lengths = np.full(NUM_SEGMENTS, 0.3)
+    p = np.zeros((NUM_JOINTS, 3))
+    p[:, 1] = np.arange(NUM_JOINTS) * 0.1
+    f = SkeletonFrame(positions=p, tracking_state=np.full(NUM_JOINTS, TRACKED, np.uint8),
+                      stamp_ns=1)
+    so.output_rows(f, p, np.ones(NUM_JOINTS), 0.5)
+    so.output_rows(f, p, np.ones(NUM_JOINTS), 0.5, yaw=0.1, root=p[0] + 0.0)
+    return time.perf_counter() - t0
+
+
+__all__ = ['CHILD_I', 'PARENT_I', 'TORSO_I', 'HAS_SCALE', 'HAS_SPEED', 'HAS_LEAD', 'output_core',
+           'warm_up']
