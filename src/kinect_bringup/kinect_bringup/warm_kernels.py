@@ -19,6 +19,7 @@ from physics_sim.simulation import warm_up as warm_physics
 from pose_reconstruction.fusion_kernels import warm_up as warm_fusion
 from pose_reconstruction.kernels import warm_up as warm_optimizer
 from pose_reconstruction.reliability_kernels import warm_up as warm_reliability
+from pose_reconstruction.segment_output_kernels import warm_up as warm_segment_output
 from skeleton_core import jit
 
 from kinect_bringup.bytecode import compile_workspace
@@ -38,7 +39,8 @@ def main(argv=None) -> int:
     t0 = time.perf_counter()
     for name, warm in (('reliability (Eq. 1-8)', warm_reliability),
                        ('optimizer (Eq. 15)', warm_optimizer), ('physics (Eq. 1)', warm_physics),
-                       ('multi-sensor fusion', warm_fusion)):
+                       ('multi-sensor fusion', warm_fusion),
+                       ('segment output', warm_segment_output)):
         t = time.perf_counter()
         warm()
         print(f'warm_kernels: {name} {time.perf_counter() - t:.1f} s')

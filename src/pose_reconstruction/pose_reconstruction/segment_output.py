@@ -59,6 +59,7 @@ from typing import Callable, Optional
 
 import numpy as np
 
+from skeleton_core import jit
 from skeleton_core.conversions import SkeletonFrame
 from skeleton_core.filters import OneEuroFilter
 from skeleton_core.geometry import yaw_matrix
@@ -69,6 +70,13 @@ from skeleton_core.params import check, param
 from .body_fit import torso_weight
 from .bone_lengths import BoneLengthEstimator
 from .posture_space import ANCESTORS
+
+# the compiled per-user arithmetic of output_rows (numba: when first used; the numpy code here is
+# its twin, run when numba is off)
+_kernels = jit.lazy_module('pose_reconstruction.segment_output_kernels')
+_EYE3 = np.eye(3)
+_ZERO3 = np.zeros(3)
+_NO_WEIGHTS = np.zeros(NUM_SEGMENTS)
 
 _MIRROR_SEG = np.array([SEGMENT_CHILDREN.index(MIRROR[c]) for c in SEGMENT_CHILDREN])
 # (19, 20): positions -> segment vectors (child - parent); (20, 19): segment vectors -> positions
@@ -81,6 +89,8 @@ _SEG_CHAIN = ANCESTORS[:, SEGMENT_CHILD_INDEX]
 _SEG_BELOW = np.ascontiguousarray(_SEG_CHAIN.T)
 # (20,) 1 / number of segments at each joint (position_fit's averaged corrections)
 _INV_DEGREE = 1.0 / np.abs(SEG_DIFF).sum(axis=0)
+_HALF_INV_DEGREE = 0.5 * _INV_DEGREE
+_SEG_CHAIN_C = np.ascontiguousarray(_SEG_CHAIN)   # (the compiled kernel's layout)
 # direction_fusion: the direction error of the database solution on a segment (deg): C's mean
 # direction error on the TRACKED, fault-free segment-frames of the dev clips is 10-11 deg (no-harm
 # table, sensor seed 0); 8, 10, 12 and 16 were tried on seed 0, 12 harmed fewest segments
@@ -309,6 +319,10 @@ class SegmentOutput:
         self.direction_db_spread = bool(config.direction_db_spread)
         self.direction_db_distance = float(config.direction_db_distance)
         self.filled_memory_s = float(config.filled_memory_s)
+        # output_rows' arithmetic compiled (segment_output_kernels) when numba is on
+        self.compiled = jit.enabled()
+        if self.compiled:
+            _kernels.warm_up()   # once per process: not on a user's first frame
         # the user's profile lengths (19,), used from the first frame when set (Reconstructor)
         self.profile_lengths: Optional[np.ndarray] = None
         # the body proportions ((19,) or (k, 19), any scale) the expected final lengths are
@@ -463,6 +477,9 @@ class SegmentOutput:
             dt = (stamp - self._last_stamp) * 1e-9
         self._last_stamp = stamp
         L = self.lengths(obs, w, len_obs, dt)
+        if self.compiled and w.dtype == np.float64:
+            return self._output_rows_compiled(obs, solution, w, trust, yaw, seg_obs, len_obs,
+                                              root, db_spread, db_distance, L, dt)
         vs = SEG_DIFF @ solution
         if yaw is not None:
             vs = vs @ yaw_matrix(yaw).T
@@ -544,6 +561,37 @@ class SegmentOutput:
             return SmoothingStep(vr, L, u, self._seg_filter, self._filter_clock_ns, scale,
                                  speed, lead)
         return SmoothingStep(vr, L, u)
+
+    def _output_rows_compiled(self, obs, solution, w, trust, yaw, seg_obs, len_obs, root,
+                              db_spread, db_distance, L, dt) -> SmoothingStep:
+        """:meth:`output_rows` after the lengths ``L``, in one compiled call
+        (:func:`.segment_output_kernels.output_core`: the same arithmetic as the numpy code)."""
+        K = _kernels
+        fusion = self.direction_fusion
+        fw = self._fused_weight(L, db_spread, db_distance) if fusion else _NO_WEIGHTS
+        mode = 1 if fusion else (2 if self.observation_weight > 0.0 else 0)
+        vr = np.empty((NUM_SEGMENTS + 1, 3))
+        u = np.empty((NUM_SEGMENTS, 3))
+        scale = np.empty(NUM_SEGMENTS + 1)
+        speed = np.empty(NUM_SEGMENTS + 1)
+        lead = np.empty(NUM_SEGMENTS + 1)
+        filt = self._seg_filter
+        flags = K.output_core(
+            np.asarray(solution, float), _EYE3 if yaw is None else yaw_matrix(yaw),
+            yaw is not None, obs, seg_obs, len_obs, w, L, float(trust), self.reliable_threshold,
+            fw, mode, self.observation_weight, self.filled_memory_s, self._seen_u,
+            self._seen_age, float(dt), _ZERO3 if root is None else np.asarray(root, float),
+            root is not None, self.position_fit, self.position_fit_iterations, _SEG_CHAIN_C,
+            _HALF_INV_DEGREE, K.CHILD_I, K.PARENT_I, filt is not None,
+            self.smooth_filled_scale, self.smooth_anchored_speed, _SEG_BELOW, K.TORSO_I,
+            self.smooth_trusted_scale, self.smooth_lead, vr, u, scale, speed, lead)
+        if filt is None:
+            return SmoothingStep(vr, L, u)
+        self._filter_clock_ns += int(round(dt * 1e9))
+        return SmoothingStep(vr, L, u, filt, self._filter_clock_ns,
+                             scale if flags & K.HAS_SCALE else None,
+                             speed if flags & K.HAS_SPEED else None,
+                             lead if flags & K.HAS_LEAD else None)
 
     @staticmethod
     def output_positions(step: SmoothingStep, rows: Optional[np.ndarray] = None) -> np.ndarray:
@@ -640,7 +688,7 @@ class SegmentOutput:
             d = SEG_DIFF @ p
             n = np.sqrt(np.einsum('sk,sk->s', d, d))
             e = ((n - L) / np.maximum(n, 1e-9))[:, None] * d   # (19, 3) length error vectors
-            p -= (0.5 * _INV_DEGREE)[:, None] * (SEG_DIFF.T @ e)
+            p -= _HALF_INV_DEGREE[:, None] * (SEG_DIFF.T @ e)
         d = SEG_DIFF @ p
         n = np.sqrt(np.einsum('sk,sk->s', d, d))
         good = n > 1e-9
