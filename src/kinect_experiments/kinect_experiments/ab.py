@@ -417,6 +417,16 @@ def _known_options(tree: Path) -> set:
     return set(re.findall(r"add_argument\('(--[a-z-]+)'", text))
 
 
+def _guard_overridden(msg: str, ignore_load: bool, log) -> bool:
+    """Log a load or speed guard's refusal; True when the run goes on anyway (--ignore-load: the
+    report is then marked NOT VALID), False when the comparison must stop."""
+    if not ignore_load:
+        log(msg + '; refusing to compare (--ignore-load runs anyway, marked NOT VALID)')
+        return False
+    log(msg + '; --ignore-load: running, the report is marked NOT VALID')
+    return True
+
+
 def run_ab(root: Path, ref: str, case_args: Sequence[str], alternations: int, out: Path,
            max_busy: float = MAX_BUSY, wait_s: float = LOAD_WAIT_S, ignore_load: bool = False,
            fail_ratio: Optional[float] = None, args_line: str = '', log=print,
@@ -456,22 +466,16 @@ def run_ab(root: Path, ref: str, case_args: Sequence[str], alternations: int, ou
                                             '--max-slow') + f') after waiting '
                        f'{sp.waited_s:.0f} s: the host is in a slower minute than the runs '
                        'already taken, whose ratios would compare different speeds')
-                if not ignore_load:
-                    log(msg + '; refusing to compare (--ignore-load runs anyway, marked NOT '
-                        'VALID)')
+                if not _guard_overridden(msg, ignore_load, log):
                     return 3
-                log(msg + '; --ignore-load: running, the report is marked NOT VALID')
                 valid = False
             if not chk.ok:
                 msg = (f'[ab] the machine is {100 * chk.busy:.0f} % busy (threshold '
                        f'{100 * max_busy:.0f} %, load average {chk.loadavg:.2f}) after waiting '
                        f'{chk.waited_s:.0f} s: other jobs would move the figures more than the '
                        'change being compared')
-                if not ignore_load:
-                    log(msg + '; refusing to compare (--ignore-load runs anyway, marked NOT '
-                        'VALID)')
+                if not _guard_overridden(msg, ignore_load, log):
                     return 3
-                log(msg + '; --ignore-load: running, the report is marked NOT VALID')
                 valid = False
             run_out = out / f'{i + 1}{side}'
             cmd = bench_command(tree, case_args, run_out) if side == 'a' else \
