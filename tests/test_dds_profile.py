@@ -85,10 +85,11 @@ _PARTICIPANT = ('import rclpy; c = rclpy.Context(); rclpy.init(context=c); '
 
 def _xml_errors(profile) -> str:
     pytest.importorskip('rclpy')
-    env = domains.env_with(domains.claim(int(os.environ.get('ROS_DOMAIN_ID', '0')) + 23))
-    env[profile_var(env)] = str(profile)   # as the launch sets it
-    p = subprocess.run([sys.executable, '-c', _PARTICIPANT], env=env, capture_output=True,
-                       text=True, timeout=60)
+    with domains.claimed(int(os.environ.get('ROS_DOMAIN_ID', '0')) + 23) as domain:
+        env = domains.env_with(domain)
+        env[profile_var(env)] = str(profile)   # as the launch sets it
+        p = subprocess.run([sys.executable, '-c', _PARTICIPANT], env=env, capture_output=True,
+                           text=True, timeout=60)
     assert p.returncode == 0, p.stderr[-2000:]
     return '\n'.join(line for line in (p.stdout + p.stderr).splitlines()
                      if 'XMLPARSER' in line or 'PROFILES_FILE' in line)
@@ -108,8 +109,8 @@ def test_the_matching_experiment_reports_every_case(monkeypatch, capsys):
     """kinect_experiments.discovery_match (docs/startup.md's measure of the matching wait): a
     publisher and a subscriber process per run, with and without the profile, each matched."""
     from kinect_experiments import discovery_match
-    monkeypatch.setenv('ROS_DOMAIN_ID', str(domains.claim(
-        int(os.environ.get('ROS_DOMAIN_ID', '0')) + 29)))
-    assert discovery_match.main(['--runs', '1', '--gap', '0.3']) == 0
+    with domains.claimed(int(os.environ.get('ROS_DOMAIN_ID', '0')) + 29) as domain:
+        monkeypatch.setenv('ROS_DOMAIN_ID', str(domain))
+        assert discovery_match.main(['--runs', '1', '--gap', '0.3']) == 0
     rows = [line for line in capsys.readouterr().out.splitlines() if ' first: ' in line]
     assert len(rows) == 4 and not any('never' in r for r in rows), rows

@@ -24,12 +24,12 @@ INPUT_TOPICS = ('/kinect/skeletons', '/kinect/ground_truth')   # the driver's
 
 def test_demo_writes_bag_animation_and_plots(tmp_path):
     out = tmp_path / 'out'
-    proc = subprocess.run([sys.executable, '-m', 'kinect_bringup.demo', '--out', str(out),
-                           '--duration', '5', '--num-users', '2'],
-                          capture_output=True, text=True, timeout=400,
-                          # a DDS domain of its own: nothing of this graph can reach later tests
-                          env=domains.env_with(domains.claim(
-                              int(os.environ.get('ROS_DOMAIN_ID', '0')) + 17)))
+    # a DDS domain of its own while the graph runs: nothing of it can reach later tests
+    with domains.claimed(int(os.environ.get('ROS_DOMAIN_ID', '0')) + 17) as domain:
+        proc = subprocess.run([sys.executable, '-m', 'kinect_bringup.demo', '--out', str(out),
+                               '--duration', '5', '--num-users', '2'],
+                              capture_output=True, text=True, timeout=400,
+                              env=domains.env_with(domain))
     log = proc.stdout[-3000:] + proc.stderr[-3000:]
     assert proc.returncode == 0, log
     for name in ('demo.mcap', 'demo_animation.gif', 'demo_frame.png', 'demo_errors.png',

@@ -72,7 +72,11 @@ def _workspace(work: Path) -> Path:
 
 
 def _run(line: str, work: Path):
-    domain = domains.claim(40 + abs(hash(line)) % 50)
+    with domains.claimed(40 + abs(hash(line)) % 50) as domain:
+        return _run_on(line, work, domain)
+
+
+def _run_on(line: str, work: Path, domain: int):
     env = dict(os.environ, ROS_DOMAIN_ID=str(domain), PYTHONUNBUFFERED='1',
                KINECT_POSTURE_CACHE=str(ROOT / 'cache'))
     log = work / f'launch_{abs(hash(line))}.log'

@@ -39,3 +39,9 @@ def test_claims_wrap_within_1_to_101():
         assert 1 <= d <= 101
     finally:
         domains.release(d)
+
+
+def test_a_domain_claimed_for_a_block_is_given_back_when_it_ends():
+    with domains.claimed(77) as d:
+        assert d in domains.held() and _claim_elsewhere(d) != d
+    assert d not in domains.held() and _claim_elsewhere(d) == d

@@ -47,6 +47,7 @@ def _params_of_running_graph(cmd, probe_name, domain):
         except subprocess.TimeoutExpired:
             os.killpg(proc.pid, signal.SIGKILL)
             out, _ = proc.communicate()
+        domains.release(domain)   # the graph is gone: the domain is free for others
     text = out.decode(errors='replace')
     assert ok, f'not every output flowed from {cmd} ({counts}):\n' + text[-3000:]
     return params, proc.returncode, text
