@@ -74,6 +74,8 @@ def test_offsets_are_the_field_by_field_readers_on_random_messages(seed):
         data = serialize_message(_random_message(rng))
         end, stamp, frame_id, heads, pos_at, ori_at, ts_at, rel_at, usual = walk_cdr(data)
         assert (end, stamp, frame_id, heads, pos_at, ori_at, ts_at, rel_at) == _reader_walk(data)
+        for other in (bytearray(data), memoryview(data)):   # any buffer, as the reader takes
+            assert walk_cdr(other) == walk_cdr(data)
         assert usual == all(p == 60 and t == 20 and q in (0, 80) and r in (0, 20)
                             for _, _, _, p, q, t, r in heads)
 

@@ -186,7 +186,7 @@ def walk_cdr(data) -> tuple:
       (``ori_at``, ``rel_at``: -1 for an empty one);
     - ``usual``: every skeleton has NUM_JOINTS positions and tracking states and NUM_JOINTS or
       no orientations and reliabilities."""
-    out = _walk(data)
+    out = _walk(data if isinstance(data, (bytes, bytearray)) else bytes(data))   # (str slices)
     if out is None:
         _frames_from_cdr_general(data)   # raises the reader's CdrError
         raise CdrError('inconsistent CDR buffer')   # (not reached: the reader finds it)
