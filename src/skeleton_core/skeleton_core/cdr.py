@@ -142,14 +142,12 @@ def _frames_from_cdr_general(data: bytes, errors: Optional[List[SkeletonFormatEr
 
 # The usual message read in blocks: a little-endian buffer (what Fast DDS and this module write on
 # x86 / ARM hosts) whose skeletons all have NUM_JOINTS positions and tracking states and NUM_JOINTS
-# or no orientations and reliabilities. One Python pass finds the offsets of every skeleton's
+# or no orientations and reliabilities. walk_cdr finds the offsets of every skeleton's
 # fields; each kind of array is then gathered for all skeletons at once from one numpy view of
 # the buffer (positions, orientations, tracking states, reliabilities: four gathers a message) and
 # checked at once. Anything else (or any inconsistency: a count that does not fit, a truncated
 # buffer) is left to the field-by-field reader, which says what is wrong.
 _BLOCKS_OK = sys.byteorder == 'little'
-_HEAD_L = struct.Struct('<iII')      # stamp sec, nanosec, then a string's length
-_UU_L = struct.Struct('<II')
 _U_L = struct.Struct('<I')
 _J = NUM_JOINTS
 _J3, _J4 = np.arange(3 * _J), np.arange(4 * _J)
@@ -165,6 +163,105 @@ _BLOCK_AT = np.concatenate([np.arange(_BLOCK), np.arange(_BLOCK - 8 + _BLOCK % 8
                            if _BLOCK % 8 else [np.arange(_BLOCK)])
 
 
+# One walk of a buffer's offsets (any byte order, any counts), for the block decoder below and
+# the light scan (cdr_scan). It checks no bound on the way (a read past the end is a struct.error,
+# a sequence past the end puts the next read or the end past it): on any of them the buffer is
+# left to the field-by-field reader, which raises the error frames_from_cdr raises.
+_HEAD_AT = {e: struct.Struct(e + 'iII').unpack_from for e in '<>'}   # stamp, a string's length
+_U_AT = {e: struct.Struct(e + 'I').unpack_from for e in '<>'}
+_UU_AT = {e: struct.Struct(e + 'II').unpack_from for e in '<>'}
+_NP, _NQ = 3 * NUM_JOINTS, 4 * NUM_JOINTS
+
+
+def walk_cdr(data) -> tuple:
+    """Where the fields of a serialized SkeletonArray are, nothing decoded but the counts, ids,
+    stamps and frame ids; :class:`CdrError`, as :func:`frames_from_cdr` raises it, when the
+    buffer is not one. A tuple ``(end, stamp_ns, frame_id, heads, pos_at, ori_at, ts_at, rel_at,
+    usual)``:
+
+    - ``end``: the byte order, ``'<'`` or ``'>'``; ``stamp_ns``, ``frame_id``: the header's;
+    - ``heads``: per skeleton ``(user id, stamp ns, frame_id, then the counts of positions and
+      orientations (float64 values), tracking states and reliabilities)``;
+    - ``pos_at``, ``ori_at``, ``ts_at``, ``rel_at``: per skeleton the offset of each sequence
+      (``ori_at``, ``rel_at``: -1 for an empty one);
+    - ``usual``: every skeleton has NUM_JOINTS positions and tracking states and NUM_JOINTS or
+      no orientations and reliabilities."""
+    out = _walk(data if isinstance(data, (bytes, bytearray)) else bytes(data))   # (str slices)
+    if out is None:
+        _frames_from_cdr_general(data)   # raises the reader's CdrError
+        raise CdrError('inconsistent CDR buffer')   # (not reached: the reader finds it)
+    return out
+
+
+def _walk(data) -> Optional[tuple]:
+    """:func:`walk_cdr`'s tuple, None where the field-by-field reader raises."""
+    n = len(data)
+    if n < 4 or data[0] != 0 or data[1] not in (0, 1):
+        return None
+    end = '<' if data[1] == 1 else '>'
+    head, u32, two = _HEAD_AT[end], _U_AT[end], _UU_AT[end]
+    heads, pos_at, ori_at, ts_at, rel_at = [], [], [], [], []
+    usual = True
+    try:
+        sec, nsec, flen = head(data, 4)
+        pos = 16 + flen                          # after the frame_id
+        frame_id = data[16:pos - 1].decode('utf-8', 'replace') if flen else ''
+        pos += (-pos) & 3   # (alignment counts from the 4-byte header: pos % 4 == (pos - 4) % 4)
+        count, = u32(data, pos)
+        pos += 4
+        if count > n:
+            return None
+        for _ in range(count):
+            pos += (-pos) & 3
+            s, ns, slen = head(data, pos)
+            s0 = pos + 12
+            pos = s0 + slen                      # after the frame_id
+            sk_frame = data[s0:pos - 1].decode('utf-8', 'replace') if slen else ''
+            pos += (-pos) & 3
+            uid, kp = two(data, pos)             # positions: float64 triples
+            pos += 8
+            if kp != _J:
+                usual = False
+            if kp:
+                kp *= 3
+                pos += (4 - pos) & 7
+            pos_at.append(pos)
+            pos += 8 * kp
+            kq, = u32(data, pos)                 # orientations: float64 quadruples
+            pos += 4
+            if kq:
+                if kq != _J:
+                    usual = False
+                kq *= 4
+                pos += (4 - pos) & 7
+                ori_at.append(pos)
+                pos += 8 * kq
+            else:                                # (none: unknown)
+                ori_at.append(-1)
+            kt, = u32(data, pos)                 # tracking states: uint8
+            if kt != _J:
+                usual = False
+            pos += 4
+            ts_at.append(pos)
+            pos += kt
+            pos += (-pos) & 3
+            kr, = u32(data, pos)                 # reliabilities: float32 (none: unknown)
+            pos += 4
+            if kr:
+                if kr != _J:
+                    usual = False
+                rel_at.append(pos)
+                pos += 4 * kr
+            else:
+                rel_at.append(-1)
+            heads.append((uid, s * 1_000_000_000 + ns, sk_frame, kp, kq, kt, kr))
+    except struct.error:   # a read past the end
+        return None
+    if pos > n:            # the last sequence past the end
+        return None
+    return end, sec * 1_000_000_000 + nsec, frame_id, heads, pos_at, ori_at, ts_at, rel_at, usual
+
+
 def _decode_blocks(data) -> Optional[tuple]:
     """(stamp, frame_id, per-skeleton arguments of ``frame_from_arrays``, the same checked as
     :func:`_checked_together` checks them or None) of the usual message; None: not the usual
@@ -174,67 +271,11 @@ def _decode_blocks(data) -> Optional[tuple]:
     n = len(data)
     if n < 20 or data[0] != 0 or data[1] != 1:
         return None
-    unpack_head, unpack_uu, unpack_u = _HEAD_L.unpack_from, _UU_L.unpack_from, _U_L.unpack_from
-    try:
-        sec, nsec, slen = unpack_head(data, 4)
-        p = 16 + slen
-        if p > n:
-            return None
-        frame_id = data[16:p - 1].decode('utf-8', 'replace') if slen else ''
-        p += (-p) & 3   # (alignment counts from the 4-byte header: p % 4 == (p - 4) % 4)
-        count, = unpack_u(data, p)
-        p += 4
-        if count > n:
-            return None
-        heads = []
-        pos_at, ts_at, ori_at, rel_at = [], [], [], []
-        for _ in range(count):
-            p += (-p) & 3
-            s_sec, s_nsec, slen = unpack_head(data, p)
-            s0 = p + 12
-            p = s0 + slen
-            if p > n:
-                return None
-            sk_frame = data[s0:p - 1].decode('utf-8', 'replace') if slen else ''
-            p += (-p) & 3
-            uid, pc = unpack_uu(data, p)
-            if pc != _J:
-                return None
-            p += 8
-            p += (-(p - 4)) & 7
-            pos_at.append(p)
-            p += 24 * _J
-            oc, = unpack_u(data, p)   # (p - 4) % 8 == 0 after an f8 block
-            p += 4
-            if oc == _J:
-                p += 4   # to the next 8
-                ori_at.append(p)
-                p += 32 * _J
-            elif oc:
-                return None
-            else:
-                ori_at.append(-1)
-            tc, = unpack_u(data, p)
-            if tc != _J:
-                return None
-            ts_at.append(p + 4)
-            p += 4 + _J
-            p += (-p) & 3
-            rc, = unpack_u(data, p)
-            p += 4
-            if rc == _J:
-                rel_at.append(p)
-                p += 4 * _J
-            elif rc:
-                return None
-            else:
-                rel_at.append(-1)
-            heads.append((uid, s_sec * 1_000_000_000 + s_nsec, sk_frame))
-    except struct.error:   # a count or string read past the end
+    walk = _walk(data)
+    if walk is None or not walk[-1]:   # (the field-by-field reader says what is wrong)
         return None
-    if p > n:
-        return None
-    stamp = sec * 1_000_000_000 + nsec
+    _, stamp, frame_id, heads, pos_at, ori_at, ts_at, rel_at, _ = walk
+    count = len(heads)
     if not count:
         return stamp, frame_id, [], None
     has_q = [a >= 0 for a in ori_at]
@@ -263,12 +304,12 @@ def _decode_blocks(data) -> Optional[tuple]:
         qi = iter(Q) if Q is not None else iter(())
         parsed = [(P[k], T[k], next(ri) if has_r[k] else _EMPTY_F4,
                    next(qi) if has_q[k] else None, uid, sk_stamp, sk_frame)
-                  for k, (uid, sk_stamp, sk_frame) in enumerate(heads)]
+                  for k, (uid, sk_stamp, sk_frame, _, _, _, _) in enumerate(heads)]
         return stamp, frame_id, parsed, None
     qi = iter(Qn)
     checked = [(P[k], T[k], next(ri) if has_r[k] else _NAN_RELIABILITY.copy(),
                 next(qi) if has_q[k] else None, uid, sk_stamp, sk_frame)
-               for k, (uid, sk_stamp, sk_frame) in enumerate(heads)]
+               for k, (uid, sk_stamp, sk_frame, _, _, _, _) in enumerate(heads)]
     return stamp, frame_id, None, checked
 
 
@@ -549,5 +590,5 @@ def restamp_cdr(data: bytes, offsets: Sequence[int], stamp_ns: int) -> bytes:
     return bytes(out)
 
 
-__all__ = ['CdrError', 'SKELETON_ARRAY', 'frames_from_cdr', 'frames_to_cdr', 'header_stamp_ns',
-           'restamp_cdr', 'stamp_offsets']
+__all__ = ['CdrError', 'SKELETON_ARRAY', 'frames_from_cdr', 'frames_to_cdr',
+           'header_stamp_ns', 'restamp_cdr', 'stamp_offsets', 'walk_cdr']
