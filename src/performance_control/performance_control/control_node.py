@@ -105,7 +105,8 @@ class ControlNode(ManagedNode):
 
     def activate(self) -> None:
         v = self.params.values
-        self.subscription(SkeletonArray, v['input_topic'], self._on_input, 1, raw=True)
+        self.subscription(SkeletonArray, v['input_topic'], self._on_input, 1, raw=True,
+                          watch=True)   # a stream: told when matched but silent
         self.timer(1.0, self._publish_features)
         self.get_logger().info(
             f'control: world {self.world.name} ({", ".join(self.world.features)}), '

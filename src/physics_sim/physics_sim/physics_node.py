@@ -230,7 +230,7 @@ class PhysicsNode(ManagedNode):
         self.scheduler.reset()
         # serialized in and out (skeleton_core.cdr): no rclpy message objects per joint
         self.subscription(SkeletonArray, v['input_topic'], self._on_input, v['input_depth'],
-                          raw=True)
+                          raw=True, watch=True)   # a stream: told when matched but silent
         self.subscription(WrenchStamped, '~/push', self._on_push_topic, 10)
         if v['feature_world']:
             self.subscription(Intention, v['intention_topic'], self._on_intention, 10)

@@ -110,7 +110,7 @@ class FusionNode(ManagedNode):
         self._new_state()
         for s in self.sensors:   # serialized: decoded straight to arrays (skeleton_core.cdr)
             self.subscription(SkeletonArray, s, lambda data, s=s: self._on_input(s, data),
-                              QoSProfile(depth=QOS_DEPTH), raw=True)
+                              QoSProfile(depth=QOS_DEPTH), raw=True, watch=True)
         self._deadline = self.timer(FRAME_PERIOD_S, self._on_deadline)
         self._deadline.cancel()   # armed while a stamp waits for a late sensor
         self.get_logger().info(

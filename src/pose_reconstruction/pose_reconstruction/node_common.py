@@ -128,7 +128,7 @@ class SkeletonArrayNode(ManagedNode):
         # queue's depth may be overridden the ROS way (qos_overrides.<topic>.subscription.depth):
         # the launch files queue a replayed recording (kinect_bringup.graph.replay_overrides)
         self.subscription(SkeletonArray, self.params['input_topic'], self._on_msg,
-                          QoSProfile(depth=self.params['qos_depth']), raw=True,
+                          QoSProfile(depth=self.params['qos_depth']), raw=True, watch=True,
                           qos_overriding_options=QoSOverridingOptions.with_default_policies())
         self.get_logger().info(f"{self.params['input_topic']} -> "
                                + ', '.join(p.topic_name for p in self._pubs))

@@ -21,6 +21,8 @@ class Health:
         self._latency_ms = collections.deque(maxlen=window)
         self._pub_times = collections.deque(maxlen=window)
         self._logged = set()
+        # stream inputs matched but receiving nothing (skeleton_core.input_watch): topic -> text
+        self.silent_inputs: Dict[str, str] = {}
 
     def on_receive(self) -> None:
         with self._lock:
@@ -40,6 +42,15 @@ class Health:
             first = cause not in self._logged
             self._logged.add(cause)
             return first
+
+    def set_silent(self, topic: str, text: Optional[str]) -> None:
+        """Mark ``topic`` as a matched input receiving nothing (``text``: what is seen), or clear
+        it (``None``)."""
+        with self._lock:
+            if text is None:
+                self.silent_inputs.pop(topic, None)
+            else:
+                self.silent_inputs[topic] = text
 
     def rate_hz(self, now: Optional[float] = None) -> float:
         with self._lock:
@@ -65,4 +76,8 @@ class Health:
         out.update(self.latency_percentiles())
         for k, v in sorted(self.dropped.items()):
             out[f'dropped[{k}]'] = v
+        with self._lock:
+            silent = sorted(self.silent_inputs.items())
+        for k, v in silent:
+            out[f'silent_input[{k}]'] = v
         return out

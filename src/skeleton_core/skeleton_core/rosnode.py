@@ -23,6 +23,7 @@ from rclpy.signals import SignalHandlerOptions
 
 from .cdr import CdrError, frames_from_cdr
 from .health import Health
+from .input_watch import InputWatch
 from .memory import open_files, rss_mb
 from .params import ParamSpec  # noqa: F401 (declared in params, re-exported for the nodes)
 
@@ -212,9 +213,13 @@ class DiagnosticsPublisher:
         st.hardware_id = 'kinect_posture'
         dropped = snap.get('dropped_total', 0)
         state = self._state() if self._state is not None else 'active'
+        silent = [k[len('silent_input['):-1] for k in snap if k.startswith('silent_input[')]
         if state != 'active':
             snap['state'] = state
             st.level, st.message = DiagnosticStatus.OK, state
+        elif silent:   # (skeleton_core.input_watch; docs/recovery.md)
+            st.level = DiagnosticStatus.WARN
+            st.message = f'input {", ".join(silent)}: publisher matched, nothing received'
         elif snap.get('received', 0) > 0 and snap.get('rate_hz', 0.0) == 0.0:
             st.level, st.message = DiagnosticStatus.WARN, 'no output for > 2 s'
         elif dropped:
@@ -254,6 +259,8 @@ SPIN_SLICE_S = 0.25
 # ManagedNode.reach_subscribers: how long a publish waits, once per change of the graph's count,
 # for a subscriber the graph knows and the publisher has not reached yet
 REACH_WAIT_S = 0.5
+# ManagedNode.subscription(watch=True): how often the watched inputs are looked at (s)
+WATCH_PERIOD_S = 1.0
 
 
 def spin_until_shutdown(executor, context=None, stop=None) -> None:
@@ -330,6 +337,9 @@ class ManagedNode(LifecycleNode):
         self.health = Health()
         # reach_subscribers: per topic, the graph's subscriber count it last gave up waiting at
         self._reach_gave_up: Dict[str, int] = {}
+        # subscription(watch=True): (subscription, InputWatch) while active, and their timer
+        self._watched: list = []
+        self._watch_timer = None
 
     # -- hooks -----------------------------------------------------------------------------------
     def configure(self) -> None:
@@ -360,10 +370,46 @@ class ManagedNode(LifecycleNode):
         self._configured.append(('diagnostics', d))
         return d
 
-    def subscription(self, *args, **kwargs):
-        sub = self.create_subscription(*args, **kwargs)
+    def subscription(self, msg_type, topic: str, callback, *args, watch: bool = False, **kwargs):
+        """A subscription, destroyed on deactivate. ``watch``: a STREAM input (never a latched
+        one, silent by design) whose messages are counted (one integer increment each) and
+        looked at every :data:`WATCH_PERIOD_S` while active: matched with a publisher for
+        ``input_watch.SILENT_AFTER_S`` with nothing received is one warning and a WARN on
+        /diagnostics (a restarted node that DDS does not deliver to, docs/recovery.md), the
+        first message after it one info line."""
+        w = InputWatch(topic) if watch else None
+        if w is not None:
+            def counted(msg, _w=w, _callback=callback):
+                _w.count += 1
+                return _callback(msg)
+        sub = self.create_subscription(msg_type, topic, counted if w is not None else callback,
+                                       *args, **kwargs)
         self._active.append(('subscription', sub))
+        if w is not None:
+            w.topic = sub.topic_name
+            self._watched.append((sub, w))
+            self._active.append(('input_watch', w))
+            if self._watch_timer is None:
+                self._watch_timer = self.create_timer(WATCH_PERIOD_S, self._check_inputs)
         return sub
+
+    def _check_inputs(self) -> None:
+        from .input_watch import SILENT
+        now = time.monotonic()
+        for sub, w in list(self._watched):
+            try:
+                publishers = sub.get_publisher_count()
+            except Exception:   # (destroyed meanwhile: released with its watch)
+                continue
+            event = w.check(now, publishers)
+            if event is None:
+                continue
+            if event == SILENT:
+                self.get_logger().warning(w.message(event, now))
+                self.health.set_silent(w.topic, w.status())
+            else:   # a message came, or the publishers went (a new match: a new episode)
+                self.get_logger().info(w.message(event, now))
+                self.health.set_silent(w.topic, None)
 
     def timer(self, period_s: float, callback):
         t = self.create_timer(period_s, callback)
@@ -438,6 +484,13 @@ class ManagedNode(LifecycleNode):
                 self.destroy_lifecycle_publisher(e)
             elif kind == 'diagnostics':
                 e.destroy()
+            elif kind == 'input_watch':
+                self._watched = [(s, w) for s, w in self._watched if w is not e]
+                self.health.set_silent(e.topic, None)
+                if not self._watched and self._watch_timer is not None:
+                    self._watch_timer.cancel()
+                    self.destroy_timer(self._watch_timer)
+                    self._watch_timer = None
 
     # -- transitions ---------------------------------------------------------------------------
     def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
