@@ -23,7 +23,7 @@ from rclpy.signals import SignalHandlerOptions
 
 from .cdr import CdrError, frames_from_cdr
 from .health import Health
-from .input_watch import InputWatch
+from .input_watch import SILENT, InputWatch
 from .memory import open_files, rss_mb
 from .params import ParamSpec  # noqa: F401 (declared in params, re-exported for the nodes)
 
@@ -394,7 +394,6 @@ class ManagedNode(LifecycleNode):
         return sub
 
     def _check_inputs(self) -> None:
-        from .input_watch import SILENT
         now = time.monotonic()
         for sub, w in list(self._watched):
             try:
